@@ -1,0 +1,30 @@
+#pragma once
+// Pinhole intrinsics of the (registered) depth + colour camera.
+#include <array>
+#include <string>
+
+#include <mrpt/img/TCamera.h>
+
+namespace vofusion {
+
+struct CameraIntrinsics {
+  int width = 640, height = 480;     // pixels
+  double fx = 525.0, fy = 525.0;     // pixels
+  double cx = 319.5, cy = 239.5;     // pixels
+  std::array<double, 5> dist{};      // k1 k2 p1 p2 k3 (informative: TUM depth is already registered)
+
+  // "fr1", "fr2", "fr3", "ros" (fx=fy=525) or "fx,fy,cx,cy". Throws InputError(origin, ...) if unknown.
+  static CameraIntrinsics parse(const std::string& spec, const std::string& origin = "--intrinsics");
+  // The TUM preset matching a folder name containing "freiburg1/2/3", else the ROS default.
+  static CameraIntrinsics forTumFolder(const std::string& folder);
+
+  // Scaled to another resolution (pyramids, reduced-resolution detectors).
+  CameraIntrinsics scaled(double s) const;
+  // Sanity check (positive focal lengths, principal point inside the image); throws InputError.
+  void validate(const std::string& origin) const;
+
+  mrpt::img::TCamera toMrpt() const;
+  static CameraIntrinsics fromMrpt(const mrpt::img::TCamera& c);
+};
+
+}  // namespace vofusion

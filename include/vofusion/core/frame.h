@@ -1,0 +1,24 @@
+#pragma once
+// The unit that flows through the pipeline: one associated colour + depth pair.
+#include <cstddef>
+#include <optional>
+
+#include <mrpt/poses/CPose3D.h>
+#include <opencv2/core.hpp>
+
+#include "vofusion/core/camera.h"
+
+namespace vofusion {
+
+struct Frame {
+  std::size_t index = 0;      // 0-based position in its source
+  double timestamp = 0.0;     // seconds (UNIX time for real data)
+  cv::Mat rgb;                // CV_8UC3, BGR order (OpenCV convention), registered to depth
+  cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
+  CameraIntrinsics camera;
+  std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
+
+  bool valid() const { return !rgb.empty() && !depth.empty(); }
+};
+
+}  // namespace vofusion

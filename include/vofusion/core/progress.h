@@ -1,0 +1,26 @@
+#pragma once
+// A one-line progress report for long jobs: "label 120/300 frames  28.4 fps  ETA 6s  <extra>".
+#include <chrono>
+#include <cstddef>
+#include <string>
+
+namespace vofusion {
+
+class Progress {
+ public:
+  // total = 0 when unknown (no ETA). Output goes to stderr, redrawn at most every 0.2 s
+  // (on a terminal with '\r', otherwise one line per ~2 s so logs stay short).
+  Progress(std::string label, std::size_t total);
+  void update(std::size_t done, const std::string& extra = "");
+  void finish(const std::string& extra = "");
+  double elapsedSeconds() const;
+  double fps() const;
+
+ private:
+  std::string label_;
+  std::size_t total_, done_ = 0;
+  std::chrono::steady_clock::time_point start_, last_print_;
+  bool tty_;
+};
+
+}  // namespace vofusion

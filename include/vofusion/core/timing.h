@@ -1,0 +1,35 @@
+#pragma once
+// Wall-clock time per pipeline stage, for the per-stage breakdowns apps print and summary.json holds.
+#include <chrono>
+#include <map>
+#include <string>
+
+namespace vofusion {
+
+struct StageTimes {
+  std::map<std::string, double> seconds;  // stage name -> accumulated wall time (s)
+  std::map<std::string, long> calls;      // stage name -> how many times it ran
+
+  void add(const std::string& stage, double s) { seconds[stage] += s; ++calls[stage]; }
+  void merge(const StageTimes& o) {
+    for (const auto& [k, v] : o.seconds) seconds[k] += v;
+    for (const auto& [k, v] : o.calls) calls[k] += v;
+  }
+};
+
+// Adds the lifetime of this object to times[stage].
+class ScopedStageTimer {
+ public:
+  ScopedStageTimer(StageTimes& times, std::string stage)
+      : times_(times), stage_(std::move(stage)), start_(std::chrono::steady_clock::now()) {}
+  ~ScopedStageTimer() {
+    times_.add(stage_, std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count());
+  }
+
+ private:
+  StageTimes& times_;
+  std::string stage_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+}  // namespace vofusion

@@ -1,0 +1,36 @@
+#pragma once
+// Where frames come from: a TUM folder, an MRPT rawlog, a synthetic scene, or a live sensor.
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "vofusion/core/camera.h"
+#include "vofusion/core/frame.h"
+
+namespace vofusion {
+
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  // Fills the next frame; false at the end. Throws InputError on unreadable data.
+  virtual bool next(Frame& frame) = 0;
+  // Number of frames if known in advance, else 0.
+  virtual std::size_t size() const = 0;
+  // Back to the first frame (replays, forward/backward long runs).
+  virtual void rewind() = 0;
+  // Human-readable origin, e.g. the folder or file.
+  virtual std::string name() const = 0;
+};
+
+struct SourceOptions {
+  std::optional<std::string> intrinsics;  // preset or "fx,fy,cx,cy"; overrides what the data says
+  std::size_t max_frames = 0;             // 0 = all
+  double max_time_diff = 0.02;            // s, colour<->depth association (TUM benchmark tolerance)
+};
+
+// Detects the kind of input: a directory with rgb.txt/depth.txt (TUM), a *.rawlog file, or the
+// word "synthetic[:scene]". Throws InputError naming the path when it is none of these.
+std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts = {});
+
+}  // namespace vofusion

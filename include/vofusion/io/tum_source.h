@@ -1,0 +1,53 @@
+#pragma once
+// A TUM RGB-D benchmark folder: rgb.txt, depth.txt, rgb/, depth/ (16-bit PNG, value/5000 = m),
+// optional groundtruth.txt. Colour frames are associated with the nearest depth frame.
+#include <string>
+#include <vector>
+
+#include "vofusion/core/trajectory.h"
+#include "vofusion/io/frame_source.h"
+
+namespace vofusion {
+
+struct TumEntry {
+  double timestamp = 0.0;
+  std::string file;  // relative to the folder
+};
+// Parses rgb.txt/depth.txt ("timestamp filename", '#' comments). Throws InputError(path, "line N: ...").
+std::vector<TumEntry> readTumList(const std::string& path);
+std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin);
+
+struct TumAssociation {
+  TumEntry rgb, depth;
+};
+// Greedy nearest-timestamp association as the benchmark's associate.py: pairs sorted by |dt|,
+// each stamp used once, |dt| <= max_diff; result in colour-time order.
+std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb,
+                                      const std::vector<TumEntry>& depth, double max_diff);
+
+class TumFolderSource : public FrameSource {
+ public:
+  TumFolderSource(const std::string& folder, const SourceOptions& opts);
+  bool next(Frame& frame) override;
+  std::size_t size() const override { return pairs_.size(); }
+  void rewind() override { pos_ = 0; }
+  std::string name() const override { return folder_; }
+
+  const Trajectory& groundTruth() const { return gt_; }
+  const std::vector<TumAssociation>& pairs() const { return pairs_; }
+  // Reads frame i without moving the cursor.
+  Frame read(std::size_t i) const;
+
+ private:
+  std::string folder_;
+  CameraIntrinsics camera_;
+  std::vector<TumAssociation> pairs_;
+  Trajectory gt_;
+  std::size_t pos_ = 0;
+};
+
+// Loads a TUM depth PNG (16-bit, scale 5000/m) as CV_32F metres; throws InputError on any problem.
+cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h);
+cv::Mat loadColour(const std::string& path, int expect_w, int expect_h);
+
+}  // namespace vofusion

@@ -1,0 +1,88 @@
+#include "vofusion/core/camera.h"
+
+#include <sstream>
+#include <vector>
+
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+namespace {
+CameraIntrinsics make(double fx, double fy, double cx, double cy, std::array<double, 5> d = {}) {
+  CameraIntrinsics c;
+  c.fx = fx; c.fy = fy; c.cx = cx; c.cy = cy; c.dist = d;
+  return c;
+}
+}  // namespace
+
+CameraIntrinsics CameraIntrinsics::parse(const std::string& spec, const std::string& origin) {
+  // Calibrations published with the TUM RGB-D benchmark (depth registered to colour).
+  if (spec == "fr1") return make(517.3, 516.5, 318.6, 255.3, {0.2624, -0.9531, -0.0054, 0.0026, 1.1633});
+  if (spec == "fr2") return make(520.9, 521.0, 325.1, 249.7, {0.2312, -0.7849, -0.0033, -0.0001, 0.9172});
+  if (spec == "fr3") return make(535.4, 539.2, 320.1, 247.6);
+  if (spec == "ros" || spec == "default") return make(525.0, 525.0, 319.5, 239.5);
+  std::vector<double> v;
+  std::stringstream ss(spec);
+  std::string tok;
+  while (std::getline(ss, tok, ',')) {
+    try {
+      std::size_t used = 0;
+      v.push_back(std::stod(tok, &used));
+      if (used != tok.size()) v.clear(), v.resize(99);
+    } catch (const std::exception&) {
+      v.resize(99);
+      break;
+    }
+  }
+  if (v.size() != 4)
+    throw InputError(origin, "unknown intrinsics '" + spec + "' (expected fr1, fr2, fr3, ros or fx,fy,cx,cy)");
+  CameraIntrinsics c = make(v[0], v[1], v[2], v[3]);
+  c.validate(origin);
+  return c;
+}
+
+CameraIntrinsics CameraIntrinsics::forTumFolder(const std::string& folder) {
+  for (const char* fr : {"freiburg1", "freiburg2", "freiburg3"}) {
+    if (folder.find(fr) != std::string::npos) return parse(std::string("fr") + fr[8]);
+  }
+  return parse("ros");
+}
+
+CameraIntrinsics CameraIntrinsics::scaled(double s) const {
+  CameraIntrinsics c = *this;
+  c.width = static_cast<int>(width * s + 0.5);
+  c.height = static_cast<int>(height * s + 0.5);
+  // Pixel centres: a pixel at u in the full image maps to (u + 0.5) * s - 0.5.
+  c.fx = fx * s; c.fy = fy * s;
+  c.cx = (cx + 0.5) * s - 0.5; c.cy = (cy + 0.5) * s - 0.5;
+  return c;
+}
+
+void CameraIntrinsics::validate(const std::string& origin) const {
+  std::ostringstream why;
+  if (!(fx > 0 && fy > 0)) why << "focal length must be positive (fx=" << fx << ", fy=" << fy << ")";
+  else if (width <= 0 || height <= 0) why << "image size must be positive (" << width << "x" << height << ")";
+  else if (!(cx >= 0 && cx < width && cy >= 0 && cy < height))
+    why << "principal point (" << cx << ", " << cy << ") lies outside the " << width << "x" << height << " image";
+  else if (fx / fy > 1.5 || fy / fx > 1.5) why << "fx/fy ratio is implausible (fx=" << fx << ", fy=" << fy << ")";
+  if (!why.str().empty()) throw InputError(origin, "inconsistent intrinsics: " + why.str());
+}
+
+mrpt::img::TCamera CameraIntrinsics::toMrpt() const {
+  mrpt::img::TCamera c;
+  c.ncols = static_cast<uint32_t>(width);
+  c.nrows = static_cast<uint32_t>(height);
+  c.fx(fx); c.fy(fy); c.cx(cx); c.cy(cy);
+  for (int i = 0; i < 5; ++i) c.dist[i] = dist[i];
+  return c;
+}
+
+CameraIntrinsics CameraIntrinsics::fromMrpt(const mrpt::img::TCamera& m) {
+  CameraIntrinsics c = make(m.fx(), m.fy(), m.cx(), m.cy());
+  c.width = static_cast<int>(m.ncols);
+  c.height = static_cast<int>(m.nrows);
+  for (int i = 0; i < 5; ++i) c.dist[i] = m.dist[i];
+  return c;
+}
+
+}  // namespace vofusion

@@ -1,0 +1,53 @@
+#include "vofusion/core/progress.h"
+
+#include <unistd.h>
+
+#include <cstdio>
+
+namespace vofusion {
+
+Progress::Progress(std::string label, std::size_t total)
+    : label_(std::move(label)), total_(total), start_(std::chrono::steady_clock::now()),
+      last_print_(start_ - std::chrono::hours(1)), tty_(::isatty(STDERR_FILENO) != 0) {}
+
+double Progress::elapsedSeconds() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+}
+
+double Progress::fps() const {
+  const double t = elapsedSeconds();
+  return t > 0 ? done_ / t : 0.0;
+}
+
+static std::string formatDuration(double s) {
+  char buf[32];
+  if (s >= 3600) std::snprintf(buf, sizeof buf, "%dh%02dm", int(s / 3600), int(s / 60) % 60);
+  else if (s >= 60) std::snprintf(buf, sizeof buf, "%dm%02ds", int(s / 60), int(s) % 60);
+  else std::snprintf(buf, sizeof buf, "%.0fs", s);
+  return buf;
+}
+
+void Progress::update(std::size_t done, const std::string& extra) {
+  done_ = done;
+  const auto now = std::chrono::steady_clock::now();
+  const double since = std::chrono::duration<double>(now - last_print_).count();
+  if (since < (tty_ ? 0.2 : 2.0) && done != total_) return;
+  last_print_ = now;
+  const double rate = fps();
+  std::string eta = "?";
+  if (total_ > 0 && rate > 0) eta = formatDuration((total_ - std::min(done, total_)) / rate);
+  if (total_ > 0)
+    std::fprintf(stderr, "%s%s %zu/%zu frames  %.1f fps  ETA %s  %s%s", tty_ ? "\r\033[K" : "",
+                 label_.c_str(), done, total_, rate, eta.c_str(), extra.c_str(), tty_ ? "" : "\n");
+  else
+    std::fprintf(stderr, "%s%s %zu frames  %.1f fps  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done,
+                 rate, extra.c_str(), tty_ ? "" : "\n");
+  std::fflush(stderr);
+}
+
+void Progress::finish(const std::string& extra) {
+  std::fprintf(stderr, "%s%s %zu frames in %s (%.1f fps)  %s\n", tty_ ? "\r\033[K" : "", label_.c_str(), done_,
+               formatDuration(elapsedSeconds()).c_str(), fps(), extra.c_str());
+}
+
+}  // namespace vofusion

@@ -1,0 +1,93 @@
+#include "vofusion/core/trajectory.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <Eigen/Dense>
+#include <mrpt/math/CQuaternion.h>
+#include <mrpt/poses/CPose3DQuat.h>
+#include <mrpt/poses/Lie/SE.h>
+
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+static std::string slurp(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path, "cannot open file");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+Trajectory parseTumTrajectory(const std::string& text, const std::string& origin) {
+  Trajectory traj;
+  std::istringstream in(text);
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    std::istringstream ls(line);
+    double v[8];
+    for (double& x : v)
+      if (!(ls >> x) || !std::isfinite(x))
+        throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp tx ty tz qx qy qz qw'");
+    std::string extra;
+    if (ls >> extra) throw InputError(origin, "line " + std::to_string(n) + ": unexpected extra field '" + extra + "'");
+    const double qn = std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]);
+    if (std::abs(qn - 1.0) > 1e-2)
+      throw InputError(origin, "line " + std::to_string(n) + ": quaternion is not unit length");
+    mrpt::math::CQuaternionDouble q(v[7] / qn, v[4] / qn, v[5] / qn, v[6] / qn);  // (w, x, y, z)
+    traj.push_back({v[0], mrpt::poses::CPose3D(mrpt::poses::CPose3DQuat(v[1], v[2], v[3], q))});
+  }
+  for (std::size_t i = 1; i < traj.size(); ++i)
+    if (traj[i].timestamp <= traj[i - 1].timestamp)
+      throw InputError(origin, "timestamps are not strictly increasing (" + std::to_string(traj[i].timestamp) + ")");
+  return traj;
+}
+
+Trajectory readTumTrajectory(const std::string& path) { return parseTumTrajectory(slurp(path), path); }
+
+void writeTumTrajectory(const std::string& path, const Trajectory& traj) {
+  std::string out = "# timestamp tx ty tz qx qy qz qw (camera-to-world)\n";
+  char buf[256];
+  for (const auto& p : traj) {
+    const mrpt::poses::CPose3DQuat q(p.pose);
+    std::snprintf(buf, sizeof buf, "%.6f %.6f %.6f %.6f %.6f %.6f %.6f %.6f\n", p.timestamp, q.x(), q.y(), q.z(),
+                  q.quat().x(), q.quat().y(), q.quat().z(), q.quat().r());
+    out += buf;
+  }
+  writeFileAtomically(path, out);
+}
+
+bool interpolatePose(const Trajectory& traj, double t, double max_gap, mrpt::poses::CPose3D& out) {
+  if (traj.empty()) return false;
+  auto it = std::lower_bound(traj.begin(), traj.end(), t,
+                             [](const StampedPose& p, double v) { return p.timestamp < v; });
+  if (it == traj.begin()) {
+    if (it->timestamp - t > max_gap) return false;
+    out = it->pose;
+    return true;
+  }
+  if (it == traj.end()) {
+    if (t - traj.back().timestamp > max_gap) return false;
+    out = traj.back().pose;
+    return true;
+  }
+  const StampedPose& a = *(it - 1);
+  const StampedPose& b = *it;
+  if (b.timestamp - a.timestamp > 2 * max_gap && std::min(t - a.timestamp, b.timestamp - t) > max_gap) return false;
+  const double s = (t - a.timestamp) / (b.timestamp - a.timestamp);
+  // Interpolate on the manifold: a * exp(s * log(a^-1 b)).
+  const mrpt::poses::CPose3D rel = b.pose - a.pose;
+  auto twist = mrpt::poses::Lie::SE<3>::log(rel);
+  twist *= s;
+  out = a.pose + mrpt::poses::Lie::SE<3>::exp(twist);
+  return true;
+}
+
+}  // namespace vofusion

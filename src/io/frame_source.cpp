@@ -1,0 +1,21 @@
+#include "vofusion/io/frame_source.h"
+
+#include <filesystem>
+
+#include "vofusion/core/errors.h"
+#include "vofusion/io/tum_source.h"
+
+namespace fs = std::filesystem;
+
+namespace vofusion {
+
+std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts) {
+  if (fs::is_directory(path)) {
+    if (fs::exists(fs::path(path) / "rgb.txt")) return std::make_unique<TumFolderSource>(path, opts);
+    throw InputError(path, "folder is not a TUM RGB-D sequence (no rgb.txt)");
+  }
+  if (!fs::exists(path)) throw InputError(path, "no such file or folder");
+  throw InputError(path, "unknown input type (expected a TUM folder, a .rawlog file or 'synthetic')");
+}
+
+}  // namespace vofusion

@@ -1,0 +1,142 @@
+#include "vofusion/io/tum_source.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "vofusion/core/errors.h"
+
+namespace fs = std::filesystem;
+
+namespace vofusion {
+
+std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin) {
+  std::vector<TumEntry> out;
+  std::istringstream in(text);
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    std::istringstream ls(line);
+    TumEntry e;
+    if (!(ls >> e.timestamp) || !std::isfinite(e.timestamp) || !(ls >> e.file))
+      throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp filename'");
+    std::string extra;
+    if (ls >> extra) throw InputError(origin, "line " + std::to_string(n) + ": unexpected extra field '" + extra + "'");
+    if (!out.empty() && e.timestamp <= out.back().timestamp)
+      throw InputError(origin, "line " + std::to_string(n) + ": timestamp " + std::to_string(e.timestamp) +
+                                   " is out of order or duplicated");
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+std::vector<TumEntry> readTumList(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw InputError(path, "cannot open file");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return parseTumList(ss.str(), path);
+}
+
+std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const std::vector<TumEntry>& depth,
+                                      double max_diff) {
+  // Candidate pairs within max_diff, best first; each stamp used once (as associate.py does).
+  struct Cand { double dt; std::size_t i, j; };
+  std::vector<Cand> cands;
+  for (std::size_t i = 0; i < rgb.size(); ++i) {
+    auto lo = std::lower_bound(depth.begin(), depth.end(), rgb[i].timestamp - max_diff,
+                               [](const TumEntry& e, double t) { return e.timestamp < t; });
+    for (auto it = lo; it != depth.end() && it->timestamp <= rgb[i].timestamp + max_diff; ++it)
+      cands.push_back({std::abs(it->timestamp - rgb[i].timestamp), i, std::size_t(it - depth.begin())});
+  }
+  std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.dt < b.dt; });
+  std::vector<char> used_rgb(rgb.size(), 0), used_depth(depth.size(), 0);
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;
+  for (const Cand& c : cands) {
+    if (used_rgb[c.i] || used_depth[c.j]) continue;
+    used_rgb[c.i] = used_depth[c.j] = 1;
+    pairs.emplace_back(c.i, c.j);
+  }
+  std::sort(pairs.begin(), pairs.end());
+  std::vector<TumAssociation> out;
+  out.reserve(pairs.size());
+  for (auto [i, j] : pairs) out.push_back({rgb[i], depth[j]});
+  return out;
+}
+
+cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h) {
+  if (!fs::exists(path)) throw InputError(path, "depth image is missing");
+  cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
+  if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel");
+  if (raw.cols != expect_w || raw.rows != expect_h)
+    throw InputError(path, "depth image is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
+                               ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h));
+  cv::Mat depth;
+  raw.convertTo(depth, CV_32F, 1.0 / 5000.0);  // TUM: 5000 units per metre, 0 = no reading
+  return depth;
+}
+
+cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
+  if (!fs::exists(path)) throw InputError(path, "colour image is missing");
+  cv::Mat img = cv::imread(path, cv::IMREAD_COLOR);
+  if (img.empty()) throw InputError(path, "cannot decode colour image (corrupt or truncated?)");
+  if (img.cols != expect_w || img.rows != expect_h)
+    throw InputError(path, "colour image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
+                               ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h));
+  return img;
+}
+
+TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
+  if (!fs::is_directory(folder)) throw InputError(folder, "no such folder");
+  const std::string rgb_list = (fs::path(folder) / "rgb.txt").string();
+  const std::string depth_list = (fs::path(folder) / "depth.txt").string();
+  for (const auto& f : {rgb_list, depth_list})
+    if (!fs::exists(f)) throw InputError(f, "missing (not a TUM RGB-D folder?)");
+  const auto rgb = readTumList(rgb_list);
+  const auto depth = readTumList(depth_list);
+  if (rgb.empty()) throw InputError(rgb_list, "lists no frames");
+  if (depth.empty()) throw InputError(depth_list, "lists no frames");
+  pairs_ = associate(rgb, depth, opts.max_time_diff);
+  if (pairs_.empty())
+    throw InputError(folder, "no colour frame has a depth frame within " + std::to_string(opts.max_time_diff) + " s");
+  if (opts.max_frames > 0 && pairs_.size() > opts.max_frames) pairs_.resize(opts.max_frames);
+
+  camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : CameraIntrinsics::forTumFolder(folder);
+  // Image size comes from the data itself; the first colour frame sets it for the whole sequence.
+  const cv::Mat first = cv::imread((fs::path(folder) / pairs_[0].rgb.file).string(), cv::IMREAD_COLOR);
+  if (!first.empty()) {
+    camera_.width = first.cols;
+    camera_.height = first.rows;
+  }
+  camera_.validate(opts.intrinsics ? "--intrinsics" : folder);
+
+  const std::string gt = (fs::path(folder) / "groundtruth.txt").string();
+  if (fs::exists(gt)) gt_ = readTumTrajectory(gt);
+}
+
+Frame TumFolderSource::read(std::size_t i) const {
+  const TumAssociation& a = pairs_.at(i);
+  Frame f;
+  f.index = i;
+  f.timestamp = a.rgb.timestamp;
+  f.camera = camera_;
+  f.rgb = loadColour((fs::path(folder_) / a.rgb.file).string(), camera_.width, camera_.height);
+  f.depth = loadTumDepth((fs::path(folder_) / a.depth.file).string(), camera_.width, camera_.height);
+  mrpt::poses::CPose3D gt;
+  if (interpolatePose(gt_, f.timestamp, 0.05, gt)) f.groundTruth = gt;
+  return f;
+}
+
+bool TumFolderSource::next(Frame& frame) {
+  if (pos_ >= pairs_.size()) return false;
+  frame = read(pos_++);
+  return true;
+}
+
+}  // namespace vofusion

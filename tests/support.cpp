@@ -1,0 +1,48 @@
+#include "support.h"
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+
+namespace fs = std::filesystem;
+
+namespace vofusion::test {
+
+std::string tumFirst300() {
+  return (fs::path(VOFUSION_SOURCE_DIR) / ".." / "shared" / "data" / "tum" / "rgbd_dataset_freiburg1_xyz_first300")
+      .lexically_normal()
+      .string();
+}
+
+bool dataPresent(const std::string& path) { return fs::exists(path); }
+
+bool inCi() {
+  const char* ci = std::getenv("CI");
+  return ci && std::string(ci) == "true";
+}
+
+std::string tempDir(const std::string& name) {
+  const fs::path p = fs::path(VOFUSION_BIN_DIR) / ".." / "test-tmp" / name;
+  fs::remove_all(p);
+  fs::create_directories(p);
+  return p.lexically_normal().string();
+}
+
+std::string app(const std::string& name) { return (fs::path(VOFUSION_BIN_DIR) / name).string(); }
+
+int run(const std::string& cmd, std::string* output) {
+  std::FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
+  if (!p) return -1;
+  std::array<char, 4096> buf;
+  std::string out;
+  std::size_t n;
+  while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
+  const int status = ::pclose(p);
+  if (output) *output = out;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+}  // namespace vofusion::test

@@ -1,0 +1,29 @@
+#pragma once
+// Shared helpers for the test suite.
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace vofusion::test {
+
+// The real TUM sequence shipped beside the project (../shared/data/tum/...).
+std::string tumFirst300();
+// Skips the test when shared data is missing; fails with a clear message under CI (CI=true).
+#define VOFUSION_REQUIRE_DATA(path)                                                          \
+  do {                                                                                       \
+    if (!vofusion::test::dataPresent(path)) {                                                \
+      if (vofusion::test::inCi()) FAIL() << "shared test data missing in CI: " << (path);     \
+      GTEST_SKIP() << "shared test data missing: " << (path);                                \
+    }                                                                                        \
+  } while (0)
+bool dataPresent(const std::string& path);
+bool inCi();
+
+// A fresh empty directory under the build tree, removed at process exit is not promised.
+std::string tempDir(const std::string& name);
+// Path of an app built by this project (build/bin/<name>).
+std::string app(const std::string& name);
+// Runs a shell command; returns its exit code and fills output (stdout+stderr).
+int run(const std::string& cmd, std::string* output = nullptr);
+
+}  // namespace vofusion::test

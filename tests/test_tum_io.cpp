@@ -1,0 +1,90 @@
+#include <Eigen/Dense>
+// TUM lists, association, trajectories and the TUM folder source.
+#include <filesystem>
+#include <fstream>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/core/trajectory.h"
+#include "vofusion/io/tum_source.h"
+
+using namespace vofusion;
+
+TEST(TumList, ParsesCommentsAndEntries) {
+  const auto l = parseTumList("# comment\n1.0 rgb/a.png\n\n2.5 rgb/b.png\n", "x");
+  ASSERT_EQ(l.size(), 2u);
+  EXPECT_DOUBLE_EQ(l[1].timestamp, 2.5);
+  EXPECT_EQ(l[1].file, "rgb/b.png");
+}
+
+TEST(TumList, MalformedLineNamesFileAndLine) {
+  try {
+    parseTumList("1.0 a.png\nnot-a-number b.png\n", "rgb.txt");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("rgb.txt: line 2"), std::string::npos) << e.what();
+  }
+}
+
+TEST(TumList, DuplicateTimestampRejected) {
+  EXPECT_THROW(parseTumList("1.0 a.png\n1.0 b.png\n", "rgb.txt"), InputError);
+}
+
+TEST(Associate, NearestWithinToleranceEachUsedOnce) {
+  std::vector<TumEntry> rgb{{1.00, "a"}, {1.10, "b"}, {1.20, "c"}};
+  std::vector<TumEntry> depth{{1.005, "da"}, {1.115, "db"}, {1.50, "dc"}};
+  const auto a = associate(rgb, depth, 0.02);
+  ASSERT_EQ(a.size(), 2u);
+  EXPECT_EQ(a[0].depth.file, "da");
+  EXPECT_EQ(a[1].depth.file, "db");
+}
+
+TEST(Trajectory, WriteReadRoundTrip) {
+  Trajectory t{{1.0, mrpt::poses::CPose3D(1, 2, 3, 0.1, -0.2, 0.3)}, {2.0, mrpt::poses::CPose3D(-1, 0, 0.5, 1.0, 0.2, -0.1)}};
+  const std::string dir = test::tempDir("traj");
+  writeTumTrajectory(dir + "/t.txt", t);
+  const auto r = readTumTrajectory(dir + "/t.txt");
+  ASSERT_EQ(r.size(), 2u);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_NEAR(r[i].timestamp, t[i].timestamp, 1e-9);
+    EXPECT_LT((r[i].pose.asVectorVal() - t[i].pose.asVectorVal()).norm(), 1e-5);
+  }
+}
+
+TEST(Trajectory, InterpolatesMidway) {
+  Trajectory t{{0.0, mrpt::poses::CPose3D(0, 0, 0, 0, 0, 0)}, {1.0, mrpt::poses::CPose3D(2, 0, 0, 0.2, 0, 0)}};
+  mrpt::poses::CPose3D p;
+  ASSERT_TRUE(interpolatePose(t, 0.5, 0.6, p));
+  EXPECT_NEAR(p.yaw(), 0.1, 1e-9);
+  EXPECT_FALSE(interpolatePose(t, 3.0, 0.5, p));
+}
+
+TEST(TumFolder, ReadsSharedFirst300) {
+  const std::string dir = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(dir);
+  TumFolderSource src(dir, {});
+  EXPECT_GE(src.size(), 290u);
+  Frame f;
+  ASSERT_TRUE(src.next(f));
+  EXPECT_EQ(f.rgb.type(), CV_8UC3);
+  EXPECT_EQ(f.depth.type(), CV_32FC1);
+  EXPECT_EQ(f.depth.cols, 640);
+  EXPECT_NEAR(f.camera.fx, 517.3, 1e-9);
+  ASSERT_TRUE(f.groundTruth.has_value());
+  double sum = 0; int n = 0;
+  for (int v = 0; v < f.depth.rows; ++v)
+    for (int u = 0; u < f.depth.cols; ++u)
+      if (f.depth.at<float>(v, u) > 0) sum += f.depth.at<float>(v, u), ++n;
+  EXPECT_GT(n, 100000);
+  EXPECT_GT(sum / n, 0.5);
+  EXPECT_LT(sum / n, 3.0);
+}
+
+TEST(TumFolder, MissingFolderIsClearError) {
+  try {
+    TumFolderSource src("/nonexistent/seq", {});
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "/nonexistent/seq: no such folder");
+  }
+}
