@@ -1,0 +1,29 @@
+#pragma once
+// INI configuration the MRPT way: each stage's parameters are a CLoadableOptions reading its own
+// section. What a stage's saveToConfigFile() writes is, by definition, the set of keys it knows, so
+// a user's file can be checked for typos ("unknown key") against the defaults themselves.
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <mrpt/config/CConfigFileMemory.h>
+#include <mrpt/config/CLoadableOptions.h>
+
+namespace vofusion {
+
+// One stage's parameters and the section they live in.
+using ConfigSection = std::pair<std::string, const mrpt::config::CLoadableOptions*>;
+
+// Reads an INI file into memory; throws InputError(path, ...) when missing or unreadable.
+// An empty path gives an empty configuration (all defaults).
+mrpt::config::CConfigFileMemory loadConfig(const std::string& path);
+
+// Throws InputError(origin, "unknown key 'x' in section [s]" / "unknown section [s]") for the first
+// key or section of `user` that none of `known` writes.
+void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
+                     const std::vector<ConfigSection>& known);
+
+// The defaults of all given stages as INI text (for --dump-config and the documented share/ file).
+std::string dumpConfig(const std::vector<ConfigSection>& known);
+
+}  // namespace vofusion
