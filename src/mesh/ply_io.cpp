@@ -1,0 +1,303 @@
+// PLY reading (ASCII, binary little/big endian) and binary little-endian writing for TriangleMesh.
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/mesh/triangle_mesh.h"
+
+namespace vofusion {
+namespace {
+
+enum class Scalar { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
+
+bool parseScalar(const std::string& s, Scalar& out) {
+  static const std::pair<const char*, Scalar> names[] = {
+      {"char", Scalar::Int8},     {"int8", Scalar::Int8},      {"uchar", Scalar::UInt8},   {"uint8", Scalar::UInt8},
+      {"short", Scalar::Int16},   {"int16", Scalar::Int16},    {"ushort", Scalar::UInt16}, {"uint16", Scalar::UInt16},
+      {"int", Scalar::Int32},     {"int32", Scalar::Int32},    {"uint", Scalar::UInt32},   {"uint32", Scalar::UInt32},
+      {"float", Scalar::Float32}, {"float32", Scalar::Float32}, {"double", Scalar::Float64}, {"float64", Scalar::Float64}};
+  for (const auto& [n, t] : names)
+    if (s == n) { out = t; return true; }
+  return false;
+}
+
+std::size_t scalarSize(Scalar t) {
+  switch (t) {
+    case Scalar::Int8: case Scalar::UInt8: return 1;
+    case Scalar::Int16: case Scalar::UInt16: return 2;
+    case Scalar::Int32: case Scalar::UInt32: case Scalar::Float32: return 4;
+    case Scalar::Float64: return 8;
+  }
+  return 0;
+}
+
+struct Property {
+  std::string name;
+  bool is_list = false;
+  Scalar count_type = Scalar::UInt8, type = Scalar::Float32;
+};
+
+struct Element {
+  std::string name;
+  std::size_t count = 0;
+  std::vector<Property> props;
+};
+
+enum class Format { Ascii, BinaryLE, BinaryBE };
+
+// Sequential reader of scalar values over the body of the file, in either encoding.
+class BodyReader {
+ public:
+  BodyReader(const std::string& path, const std::string& data, std::size_t pos, Format fmt)
+      : path_(path), data_(data), pos_(pos), fmt_(fmt) {}
+
+  double read(Scalar t, const char* what) {
+    if (fmt_ == Format::Ascii) return readAscii(what);
+    const std::size_t n = scalarSize(t);
+    if (pos_ + n > data_.size()) throw InputError(path_, std::string("file is truncated (while reading ") + what + ")");
+    unsigned char b[8];
+    std::memcpy(b, data_.data() + pos_, n);
+    pos_ += n;
+    if (fmt_ == Format::BinaryBE)
+      for (std::size_t i = 0; i < n / 2; ++i) std::swap(b[i], b[n - 1 - i]);
+    switch (t) {
+      case Scalar::Int8: { std::int8_t v; std::memcpy(&v, b, 1); return v; }
+      case Scalar::UInt8: return b[0];
+      case Scalar::Int16: { std::int16_t v; std::memcpy(&v, b, 2); return v; }
+      case Scalar::UInt16: { std::uint16_t v; std::memcpy(&v, b, 2); return v; }
+      case Scalar::Int32: { std::int32_t v; std::memcpy(&v, b, 4); return v; }
+      case Scalar::UInt32: { std::uint32_t v; std::memcpy(&v, b, 4); return v; }
+      case Scalar::Float32: { float v; std::memcpy(&v, b, 4); return v; }
+      case Scalar::Float64: { double v; std::memcpy(&v, b, 8); return v; }
+    }
+    return 0;
+  }
+
+ private:
+  double readAscii(const char* what) {
+    while (pos_ < data_.size() && std::isspace(static_cast<unsigned char>(data_[pos_]))) ++pos_;
+    if (pos_ >= data_.size()) throw InputError(path_, std::string("file is truncated (while reading ") + what + ")");
+    std::size_t end = pos_;
+    while (end < data_.size() && !std::isspace(static_cast<unsigned char>(data_[end]))) ++end;
+    const std::string tok = data_.substr(pos_, end - pos_);
+    pos_ = end;
+    char* stop = nullptr;
+    const double v = std::strtod(tok.c_str(), &stop);
+    if (stop == tok.c_str() || *stop != '\0')
+      throw InputError(path_, std::string("bad number '") + tok + "' (while reading " + what + ")");
+    return v;
+  }
+
+  const std::string& path_;
+  const std::string& data_;
+  std::size_t pos_;
+  Format fmt_;
+};
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path, "cannot open file");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  if (f.bad()) throw InputError(path, "read error");
+  return ss.str();
+}
+
+int indexOf(const Element& e, const std::string& name) {
+  for (std::size_t i = 0; i < e.props.size(); ++i)
+    if (e.props[i].name == name) return static_cast<int>(i);
+  return -1;
+}
+
+}  // namespace
+
+TriangleMesh readPly(const std::string& path) {
+  const std::string data = slurp(path);
+  if (data.compare(0, 3, "ply") != 0 || data.size() < 4 || (data[3] != '\n' && data[3] != '\r'))
+    throw InputError(path, "not a PLY file (missing 'ply' magic)");
+
+  // Header: line by line up to "end_header".
+  std::size_t pos = 0;
+  Format fmt = Format::Ascii;
+  bool have_format = false, ended = false;
+  std::vector<Element> elements;
+  for (int line_no = 1; pos < data.size(); ++line_no) {
+    std::size_t eol = data.find('\n', pos);
+    if (eol == std::string::npos) eol = data.size();
+    std::string line = data.substr(pos, eol - pos);
+    pos = eol + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ls(line);
+    std::string kw;
+    ls >> kw;
+    const auto bad = [&](const std::string& what) {
+      return InputError(path, "header line " + std::to_string(line_no) + ": " + what);
+    };
+    if (kw == "ply" || kw == "comment" || kw == "obj_info" || kw.empty()) continue;
+    if (kw == "end_header") { ended = true; break; }
+    if (kw == "format") {
+      std::string f, ver;
+      ls >> f >> ver;
+      if (f == "ascii") fmt = Format::Ascii;
+      else if (f == "binary_little_endian") fmt = Format::BinaryLE;
+      else if (f == "binary_big_endian") fmt = Format::BinaryBE;
+      else throw bad("unknown format '" + f + "'");
+      have_format = true;
+    } else if (kw == "element") {
+      Element e;
+      long long n = -1;
+      if (!(ls >> e.name >> n) || n < 0) throw bad("expected 'element <name> <count>'");
+      e.count = static_cast<std::size_t>(n);
+      elements.push_back(e);
+    } else if (kw == "property") {
+      if (elements.empty()) throw bad("property before any element");
+      Property p;
+      std::string t;
+      ls >> t;
+      if (t == "list") {
+        std::string ct, vt;
+        ls >> ct >> vt >> p.name;
+        if (!parseScalar(ct, p.count_type) || !parseScalar(vt, p.type)) throw bad("unknown list type");
+        p.is_list = true;
+      } else {
+        if (!parseScalar(t, p.type)) throw bad("unknown property type '" + t + "'");
+        ls >> p.name;
+      }
+      if (p.name.empty()) throw bad("property without a name");
+      elements.back().props.push_back(p);
+    } else {
+      throw bad("unknown keyword '" + kw + "'");
+    }
+  }
+  if (!ended) throw InputError(path, "PLY header has no end_header");
+  if (!have_format) throw InputError(path, "PLY header has no format line");
+
+  TriangleMesh mesh;
+  BodyReader body(path, data, pos, fmt);
+  bool have_vertices = false;
+  for (const Element& e : elements) {
+    if (e.name == "vertex") {
+      const int ix = indexOf(e, "x"), iy = indexOf(e, "y"), iz = indexOf(e, "z");
+      if (ix < 0 || iy < 0 || iz < 0) throw InputError(path, "vertex element lacks x, y or z");
+      const int inx = indexOf(e, "nx"), iny = indexOf(e, "ny"), inz = indexOf(e, "nz");
+      int ir = indexOf(e, "red"), ig = indexOf(e, "green"), ib = indexOf(e, "blue");
+      if (ir < 0) { ir = indexOf(e, "r"); ig = indexOf(e, "g"); ib = indexOf(e, "b"); }
+      const bool normals = inx >= 0 && iny >= 0 && inz >= 0;
+      const bool colors = ir >= 0 && ig >= 0 && ib >= 0;
+      // Guard against absurd counts before reserving memory: each vertex needs >= 1 byte.
+      if (e.count > data.size()) throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " vertices)");
+      mesh.vertices.resize(e.count);
+      if (normals) mesh.normals.resize(e.count);
+      if (colors) mesh.colors.resize(e.count);
+      std::vector<double> v(e.props.size());
+      for (std::size_t i = 0; i < e.count; ++i) {
+        for (std::size_t k = 0; k < e.props.size(); ++k) {
+          const Property& p = e.props[k];
+          if (p.is_list) {  // unusual on vertices, but skip it properly
+            const auto n = static_cast<long long>(body.read(p.count_type, "vertex list"));
+            for (long long j = 0; j < n; ++j) body.read(p.type, "vertex list");
+            v[k] = 0;
+          } else {
+            v[k] = body.read(p.type, "vertices");
+          }
+        }
+        mesh.vertices[i] = Eigen::Vector3f(float(v[ix]), float(v[iy]), float(v[iz]));
+        if (!mesh.vertices[i].allFinite())
+          throw InputError(path, "vertex " + std::to_string(i) + " has a non-finite coordinate");
+        if (normals) mesh.normals[i] = Eigen::Vector3f(float(v[inx]), float(v[iny]), float(v[inz]));
+        if (colors) {
+          const bool unit = e.props[ir].type == Scalar::Float32 || e.props[ir].type == Scalar::Float64;
+          const auto to8 = [&](double c) {
+            const double s = unit ? c * 255.0 : c;
+            return static_cast<std::uint8_t>(std::lround(std::min(255.0, std::max(0.0, s))));
+          };
+          mesh.colors[i] = {to8(v[ir]), to8(v[ig]), to8(v[ib])};
+        }
+      }
+      have_vertices = true;
+    } else if (e.name == "face") {
+      int il = indexOf(e, "vertex_indices");
+      if (il < 0) il = indexOf(e, "vertex_index");
+      if (il < 0 || !e.props[il].is_list) throw InputError(path, "face element lacks a vertex_indices list");
+      if (e.count > data.size()) throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " faces)");
+      mesh.faces.reserve(e.count);
+      std::vector<std::uint32_t> poly;
+      for (std::size_t i = 0; i < e.count; ++i) {
+        for (std::size_t k = 0; k < e.props.size(); ++k) {
+          const Property& p = e.props[k];
+          if (!p.is_list) { body.read(p.type, "faces"); continue; }
+          const double nd = body.read(p.count_type, "faces");
+          if (nd < 0 || nd > 1e6) throw InputError(path, "face " + std::to_string(i) + " has a bad vertex count");
+          const auto n = static_cast<std::size_t>(nd);
+          poly.clear();
+          for (std::size_t j = 0; j < n; ++j) {
+            const double idx = body.read(p.type, "faces");
+            if (static_cast<int>(k) != il) continue;
+            if (idx < 0 || idx >= static_cast<double>(mesh.vertices.size()) || !have_vertices)
+              throw InputError(path, "face " + std::to_string(i) + " references vertex " +
+                                         std::to_string(static_cast<long long>(idx)) + " out of range");
+            poly.push_back(static_cast<std::uint32_t>(idx));
+          }
+          if (static_cast<int>(k) != il) continue;
+          if (n < 3) throw InputError(path, "face " + std::to_string(i) + " has fewer than 3 vertices");
+          for (std::size_t j = 1; j + 1 < n; ++j) mesh.faces.push_back({poly[0], poly[j], poly[j + 1]});  // fan
+        }
+      }
+    } else {
+      // Unknown element (edges, materials...): read and discard.
+      for (std::size_t i = 0; i < e.count; ++i)
+        for (const Property& p : e.props) {
+          if (!p.is_list) { body.read(p.type, e.name.c_str()); continue; }
+          const auto n = static_cast<long long>(body.read(p.count_type, e.name.c_str()));
+          for (long long j = 0; j < n; ++j) body.read(p.type, e.name.c_str());
+        }
+    }
+  }
+  if (!have_vertices) throw InputError(path, "PLY has no vertex element");
+  return mesh;
+}
+
+void writePly(const std::string& path, const TriangleMesh& mesh) {
+  const std::size_t nv = mesh.vertices.size();
+  const bool normals = !mesh.normals.empty();
+  const bool colors = !mesh.colors.empty();
+  if (normals && mesh.normals.size() != nv) throw InputError(path, "mesh has a normal count different from its vertex count");
+  if (colors && mesh.colors.size() != nv) throw InputError(path, "mesh has a colour count different from its vertex count");
+
+  std::string out = "ply\nformat binary_little_endian 1.0\ncomment written by vofusion\n";
+  out += "element vertex " + std::to_string(nv) + "\nproperty float x\nproperty float y\nproperty float z\n";
+  if (normals) out += "property float nx\nproperty float ny\nproperty float nz\n";
+  if (colors) out += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+  out += "element face " + std::to_string(mesh.faces.size()) + "\nproperty list uchar int vertex_indices\nend_header\n";
+
+  static_assert(sizeof(float) == 4, "PLY float is 32 bit");
+  const auto put = [&out](const void* p, std::size_t n) { out.append(static_cast<const char*>(p), n); };
+  const std::size_t header = out.size();
+  out.reserve(header + nv * (12 + (normals ? 12 : 0) + (colors ? 3 : 0)) + mesh.faces.size() * 13);
+  // Little-endian hosts only (x86/ARM): the bytes of float/int32 go out as they are in memory.
+  for (std::size_t i = 0; i < nv; ++i) {
+    put(mesh.vertices[i].data(), 12);
+    if (normals) put(mesh.normals[i].data(), 12);
+    if (colors) put(mesh.colors[i].data(), 3);
+  }
+  for (const auto& f : mesh.faces) {
+    const std::uint8_t three = 3;
+    put(&three, 1);
+    for (std::uint32_t idx : f) {
+      if (idx >= nv) throw InputError(path, "mesh face references vertex " + std::to_string(idx) + " out of range");
+      const std::int32_t i32 = static_cast<std::int32_t>(idx);
+      put(&i32, 4);
+    }
+  }
+  writeFileAtomically(path, out);
+}
+
+}  // namespace vofusion

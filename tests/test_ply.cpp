@@ -1,0 +1,152 @@
+// PLY reading/writing: binary round trip, ASCII input, polygons, malformed and truncated files.
+#include <filesystem>
+#include <fstream>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/mesh/triangle_mesh.h"
+
+using namespace vofusion;
+
+namespace {
+
+TriangleMesh tetrahedron(bool normals, bool colors) {
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  m.faces = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  if (normals)
+    for (const auto& v : m.vertices) m.normals.push_back((v - Eigen::Vector3f(0.25f, 0.25f, 0.25f)).normalized());
+  if (colors) m.colors = {{255, 0, 0}, {0, 255, 0}, {0, 0, 255}, {10, 20, 30}};
+  return m;
+}
+
+void writeText(const std::string& path, const std::string& s) {
+  std::ofstream f(path, std::ios::binary);
+  f << s;
+}
+
+std::string readBytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+}  // namespace
+
+TEST(Ply, BinaryRoundTripKeepsEverything) {
+  const std::string dir = test::tempDir("ply_roundtrip");
+  for (int variant = 0; variant < 4; ++variant) {
+    const TriangleMesh m = tetrahedron(variant & 1, variant & 2);
+    writePly(dir + "/t.ply", m);
+    const TriangleMesh r = readPly(dir + "/t.ply");
+    ASSERT_EQ(r.vertices.size(), m.vertices.size());
+    ASSERT_EQ(r.faces, m.faces);
+    ASSERT_EQ(r.normals.size(), m.normals.size());
+    ASSERT_EQ(r.colors, m.colors);
+    for (std::size_t i = 0; i < m.vertices.size(); ++i) {
+      EXPECT_EQ(r.vertices[i], m.vertices[i]);
+      if (!m.normals.empty()) { EXPECT_EQ(r.normals[i], m.normals[i]); }
+    }
+  }
+  // Only the final file is left: no temporaries.
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
+}
+
+TEST(Ply, WritesBinaryLittleEndianHeader) {
+  const std::string dir = test::tempDir("ply_header");
+  writePly(dir + "/t.ply", tetrahedron(false, true));
+  const std::string s = readBytes(dir + "/t.ply");
+  EXPECT_EQ(s.rfind("ply\nformat binary_little_endian 1.0\n", 0), 0u);
+  EXPECT_NE(s.find("element vertex 4\n"), std::string::npos);
+  EXPECT_NE(s.find("property uchar red\n"), std::string::npos);
+  EXPECT_NE(s.find("element face 4\n"), std::string::npos);
+  // Body size by hand: 4 vertices * (12 + 3) + 4 faces * (1 + 12).
+  EXPECT_EQ(s.size() - (s.find("end_header\n") + 11), 4u * 15 + 4u * 13);
+}
+
+TEST(Ply, ReadsAsciiWithQuadsFloatColoursAndExtraElements) {
+  const std::string dir = test::tempDir("ply_ascii");
+  writeText(dir + "/q.ply",
+            "ply\r\nformat ascii 1.0\r\ncomment a quad\r\nelement vertex 4\r\nproperty double x\r\nproperty double y\r\n"
+            "property double z\r\nproperty float red\r\nproperty float green\r\nproperty float blue\r\n"
+            "property int extra\r\nelement face 1\r\nproperty uchar flags\r\nproperty list uchar uint vertex_index\r\n"
+            "element edge 1\r\nproperty int vertex1\r\nproperty int vertex2\r\nend_header\r\n"
+            "0 0 0 1 0 0 7\r\n1 0 0 0 1 0 7\r\n1 1 0 0 0 0.5 7\r\n0 1 0 1 1 1 7\r\n5 4 0 1 2 3\r\n0 1\r\n");
+  const TriangleMesh m = readPly(dir + "/q.ply");
+  ASSERT_EQ(m.vertices.size(), 4u);
+  ASSERT_EQ(m.faces.size(), 2u);  // quad -> fan of 2 triangles
+  EXPECT_EQ(m.faces[0], (std::array<std::uint32_t, 3>{0, 1, 2}));
+  EXPECT_EQ(m.faces[1], (std::array<std::uint32_t, 3>{0, 2, 3}));
+  ASSERT_EQ(m.colors.size(), 4u);
+  EXPECT_EQ(m.colors[0], (std::array<std::uint8_t, 3>{255, 0, 0}));
+  EXPECT_EQ(m.colors[2], (std::array<std::uint8_t, 3>{0, 0, 128}));
+  EXPECT_TRUE(m.normals.empty());
+  EXPECT_EQ(m.vertices[2], Eigen::Vector3f(1, 1, 0));
+}
+
+TEST(Ply, ReadsBigEndian) {
+  const std::string dir = test::tempDir("ply_be");
+  std::string s = "ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                  "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  const auto putBE = [&s](const void* p) {
+    const char* c = static_cast<const char*>(p);
+    for (int i = 3; i >= 0; --i) s += c[i];
+  };
+  const float coords[9] = {0, 0, 0, 2, 0, 0, 0, 3, 0};
+  for (float f : coords) putBE(&f);
+  s += char(3);
+  for (std::int32_t i : {0, 1, 2}) putBE(&i);
+  writeText(dir + "/be.ply", s);
+  const TriangleMesh m = readPly(dir + "/be.ply");
+  ASSERT_EQ(m.faces.size(), 1u);
+  EXPECT_EQ(m.vertices[1], Eigen::Vector3f(2, 0, 0));
+  EXPECT_EQ(m.vertices[2], Eigen::Vector3f(0, 3, 0));
+}
+
+TEST(Ply, TruncatedBinaryIsAnInputErrorNamingTheFile) {
+  const std::string dir = test::tempDir("ply_trunc");
+  writePly(dir + "/t.ply", tetrahedron(true, true));
+  const std::string full = readBytes(dir + "/t.ply");
+  writeText(dir + "/cut.ply", full.substr(0, full.size() - 5));
+  try {
+    readPly(dir + "/cut.ply");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("cut.ply: "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Ply, MalformedFilesAreInputErrors) {
+  const std::string dir = test::tempDir("ply_bad");
+  const std::string head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                           "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  const std::pair<const char*, std::string> cases[] = {
+      {"magic", "plx\nformat ascii 1.0\nend_header\n"},
+      {"noend", "ply\nformat ascii 1.0\nelement vertex 0\n"},
+      {"format", "ply\nformat foo 1.0\nend_header\n"},
+      {"type", "ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n"},
+      {"range", head + "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n"},
+      {"number", head + "0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n"},
+      {"short", head + "0 0 0\n1 0 0\n0 1 0\n3 0 1\n"},
+      {"nan", head + "0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n"},
+      {"novertex", "ply\nformat ascii 1.0\nend_header\n"},
+      {"huge", "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
+               "property float z\nend_header\n"},
+  };
+  for (const auto& [name, text] : cases) {
+    const std::string p = dir + "/" + name + ".ply";
+    writeText(p, text);
+    EXPECT_THROW(readPly(p), InputError) << name;
+  }
+  EXPECT_THROW(readPly(dir + "/missing.ply"), InputError);
+}
+
+TEST(Ply, FailedWriteKeepsEarlierFile) {
+  const std::string dir = test::tempDir("ply_atomic");
+  writePly(dir + "/t.ply", tetrahedron(false, false));
+  TriangleMesh bad = tetrahedron(false, false);
+  bad.faces.push_back({0, 1, 99});
+  EXPECT_THROW(writePly(dir + "/t.ply", bad), InputError);
+  EXPECT_EQ(readPly(dir + "/t.ply").faces.size(), 4u);
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
+}
