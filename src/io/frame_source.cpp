@@ -4,12 +4,15 @@
 
 #include "vofusion/core/errors.h"
 #include "vofusion/io/tum_source.h"
+#include "vofusion/sim/synthetic_source.h"
 
 namespace fs = std::filesystem;
 
 namespace vofusion {
 
 std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts) {
+  if (path.rfind("synthetic", 0) == 0 && !fs::exists(path))
+    return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));
   if (fs::is_directory(path)) {
     if (fs::exists(fs::path(path) / "rgb.txt")) return std::make_unique<TumFolderSource>(path, opts);
     throw InputError(path, "folder is not a TUM RGB-D sequence (no rgb.txt)");

@@ -1,6 +1,20 @@
 #pragma once
 // A synthetic RGB-D sequence of a textured indoor scene with exact ground truth (rgbd-simulate).
 // CONTRACT used by the tests of every stage; implemented in src/sim/.
+//
+// World frame: z up, metres. Camera poses are camera-to-world with the usual optical axes
+// (x right, y down, z forward), as in TUM ground truth. Scenes (all surfaces carry a procedural,
+// view-independent texture of rectangles, discs and checker patches at several scales):
+//   room      5 x 4 x 3 m box x in [-2.5, 2.5], y in [-2, 2], z in [0, 3], five boxes on the floor;
+//             the camera hovers near (0, 0, 1.4) sweeping its gaze around +x.
+//   corridor  x in [-1, 12], y in [-1.1, 1.1], z in [0, 2.6], boxes along both walls; the camera
+//             travels along +x (about 0.4 m/s, at most ~10 m over the whole sequence).
+//   bare_wall one infinite plane y = kBareWallY facing the camera, which slides along x at ~1.5 m.
+// Depth (noise=true) follows a Kinect v1 model: Gaussian noise sigma(z) = 0.0012 + 0.0019 (z-0.4)^2 m,
+// then disparity quantisation to 1/8 px with baseline 0.075 m (focal length normalised to a 640 px
+// wide sensor), random dropout (~2 %), holes on the far side of depth discontinuities and at grazing
+// angles, nothing nearer than 0.4 m or beyond max_range. noise=false gives exact depth (still 0
+// beyond max_range / nearer than 0.4 m). Everything is a pure function of (options, frame index).
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -12,6 +26,14 @@
 #include "vofusion/core/frame.h"
 
 namespace vofusion::sim {
+
+constexpr double kBareWallY = 1.5;     // m, the bare_wall scene's plane (normal -y, towards the camera)
+constexpr double kKinectMinRange = 0.4;  // m
+constexpr double kKinectBaseline = 0.075;  // m
+constexpr double kDisparitySubpixel = 8.0;  // steps per pixel
+
+// Standard deviation of the simulated depth noise at range z (before quantisation), m.
+inline double kinectNoiseSigma(double z) { return 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4); }
 
 struct SimOptions {
   std::string scene = "room";   // "room" (walls, floor, boxes), "corridor" (long, for volume shifting),
@@ -27,11 +49,15 @@ struct SimOptions {
 
 class SyntheticSequence {
  public:
+  // Throws InputError("--scene", ...) for an unknown scene, InputError("--intrinsics", ...) for a bad camera.
   explicit SyntheticSequence(const SimOptions& opts);
   std::size_t size() const;
   Frame render(std::size_t i) const;                   // rgb, depth and groundTruth filled
   mrpt::poses::CPose3D groundTruth(std::size_t i) const;  // camera-to-world
   const SimOptions& options() const;
+  // Exact depth (m, 0 = nothing hit) along pixel (u, v) of a camera at `pose`: the analytic value
+  // without noise or range limits (tests and stage checks).
+  double exactDepth(const mrpt::poses::CPose3D& pose, double u, double v) const;
  private:
   struct Impl;
   std::shared_ptr<const Impl> impl_;

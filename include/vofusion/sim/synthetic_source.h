@@ -1,0 +1,26 @@
+#pragma once
+// A FrameSource over a SyntheticSequence: openFrameSource("synthetic") or "synthetic:<scene>".
+#include "vofusion/io/frame_source.h"
+#include "vofusion/sim/synthetic_sequence.h"
+
+namespace vofusion::sim {
+
+class SyntheticSource : public FrameSource {
+ public:
+  explicit SyntheticSource(const SimOptions& opts) : seq_(opts) {}
+  // "synthetic" (room) or "synthetic:<scene>"; SourceOptions::max_frames sets the length (default
+  // SimOptions::frames) and SourceOptions::intrinsics the camera. Throws InputError(spec, ...).
+  static SimOptions optionsFromSpec(const std::string& spec, const SourceOptions& opts);
+
+  bool next(Frame& frame) override;
+  std::size_t size() const override { return seq_.size(); }
+  void rewind() override { pos_ = 0; }
+  std::string name() const override { return "synthetic:" + seq_.options().scene; }
+  const SyntheticSequence& sequence() const { return seq_; }
+
+ private:
+  SyntheticSequence seq_;
+  std::size_t pos_ = 0;
+};
+
+}  // namespace vofusion::sim

@@ -1,0 +1,334 @@
+#include "vofusion/sim/synthetic_sequence.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include <Eigen/Dense>
+#include <opencv2/imgproc.hpp>
+
+#include "vofusion/core/errors.h"
+
+namespace vofusion::sim {
+
+namespace {
+
+// ---- Counter-based randomness: every value is a hash of its coordinates, so frames render
+// identically whatever the thread count or the order frames are requested in.
+inline std::uint64_t mix(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+inline std::uint64_t hash(std::uint64_t a, std::uint64_t b, std::uint64_t c = 0, std::uint64_t d = 0,
+                          std::uint64_t e = 0) {
+  return mix(mix(mix(mix(mix(a) ^ b) ^ c) ^ d) ^ e);
+}
+inline double unit(std::uint64_t h) { return double(h >> 11) * (1.0 / 9007199254740992.0); }  // [0,1)
+inline double gaussian(std::uint64_t h) {
+  const double u1 = std::max(unit(mix(h)), 1e-300), u2 = unit(mix(h ^ 0x5bd1e995ull));
+  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+}
+
+using Vec3 = Eigen::Vector3d;
+
+struct Hit {
+  double s = std::numeric_limits<double>::infinity();  // ray parameter = depth (ray has unit z in camera)
+  int surface = -1;                                     // texture id
+  double tu = 0, tv = 0;                                // texture coordinates on the surface, m
+  Vec3 n = Vec3::Zero();                                // surface normal, facing the camera
+};
+
+struct Box {
+  Vec3 lo, hi;
+  bool inside;  // true: the camera is inside (room walls), false: a solid box seen from outside
+};
+
+struct Plane {
+  Vec3 n;  // unit normal; plane n.x = d
+  double d;
+  Vec3 u, v;  // texture axes
+};
+
+// Smooth hand-held motion: per coordinate c0 + rate*t + sum of two sinusoids.
+struct Wave {
+  double c0 = 0, rate = 0;
+  std::array<double, 2> amp{}, freq{}, phase{};
+  double at(double t) const {
+    return c0 + rate * t + amp[0] * std::sin(freq[0] * t + phase[0]) + amp[1] * std::sin(freq[1] * t + phase[1]);
+  }
+};
+
+// BGR colour from hue, saturation, value in [0,1].
+std::array<double, 3> hsvToBgr(double h, double s, double v) {
+  const double c = v * s, hp = std::fmod(h, 1.0) * 6.0, x = c * (1 - std::abs(std::fmod(hp, 2.0) - 1));
+  double r = 0, g = 0, b = 0;
+  if (hp < 1) r = c, g = x;
+  else if (hp < 2) r = x, g = c;
+  else if (hp < 3) g = c, b = x;
+  else if (hp < 4) g = x, b = c;
+  else if (hp < 5) r = x, b = c;
+  else r = c, b = x;
+  const double m = v - c;
+  return {b + m, g + m, r + m};
+}
+
+}  // namespace
+
+struct SyntheticSequence::Impl {
+  SimOptions opts;
+  std::vector<Box> boxes;
+  std::vector<Plane> planes;
+  Wave x, y, z, yaw, pitch, roll;
+
+  mrpt::poses::CPose3D pose(double t) const {
+    // Body frame (x forward, y left, z up) then the optical frame (z forward, x right, y down).
+    const mrpt::poses::CPose3D body(x.at(t), y.at(t), z.at(t), yaw.at(t), pitch.at(t), roll.at(t));
+    static const mrpt::poses::CPose3D optical(0, 0, 0, -M_PI / 2, 0, -M_PI / 2);
+    return body + optical;
+  }
+
+  Hit cast(const Vec3& o, const Vec3& d) const {
+    Hit best;
+    for (std::size_t b = 0; b < boxes.size(); ++b) {
+      const Box& bx = boxes[b];
+      double tnear = -std::numeric_limits<double>::infinity(), tfar = std::numeric_limits<double>::infinity();
+      int anear = -1, afar = -1;
+      for (int a = 0; a < 3; ++a) {
+        if (std::abs(d[a]) < 1e-12) {
+          if (o[a] < bx.lo[a] || o[a] > bx.hi[a]) { tnear = 1; tfar = 0; break; }
+          continue;
+        }
+        double t0 = (bx.lo[a] - o[a]) / d[a], t1 = (bx.hi[a] - o[a]) / d[a];
+        if (t0 > t1) std::swap(t0, t1);
+        if (t0 > tnear) tnear = t0, anear = a;
+        if (t1 < tfar) tfar = t1, afar = a;
+      }
+      if (tnear > tfar) continue;
+      const double s = bx.inside ? tfar : tnear;
+      const int axis = bx.inside ? afar : anear;
+      if (axis < 0 || !(s > 1e-9) || s >= best.s) continue;
+      best.s = s;
+      const Vec3 p = o + s * d;
+      Vec3 n = Vec3::Zero();
+      n[axis] = d[axis] > 0 ? -1 : 1;  // facing the ray
+      const int side = (std::abs(p[axis] - bx.lo[axis]) < std::abs(p[axis] - bx.hi[axis])) ? 0 : 1;
+      best.surface = int(b) * 6 + axis * 2 + side;
+      best.n = n;
+      best.tu = p[(axis + 1) % 3];
+      best.tv = p[(axis + 2) % 3];
+    }
+    for (std::size_t k = 0; k < planes.size(); ++k) {
+      const Plane& pl = planes[k];
+      const double den = pl.n.dot(d);
+      if (std::abs(den) < 1e-12) continue;
+      const double s = (pl.d - pl.n.dot(o)) / den;
+      if (!(s > 1e-9) || s >= best.s) continue;
+      best.s = s;
+      const Vec3 p = o + s * d;
+      best.surface = 1000 + int(k);
+      best.n = den < 0 ? pl.n : Vec3(-pl.n);
+      best.tu = pl.u.dot(p);
+      best.tv = pl.v.dot(p);
+    }
+    return best;
+  }
+
+  // Layered procedural texture: at each scale the surface is tiled in cells, a hashed share of which
+  // hold a rectangle, a disc or a checker patch of a random colour; finer layers paint over coarser.
+  std::array<double, 3> texture(int surface, double tu, double tv) const {
+    const std::uint64_t sid = hash(opts.seed, 77, std::uint64_t(surface));
+    std::array<double, 3> col = hsvToBgr(unit(mix(sid)), 0.25 + 0.3 * unit(mix(sid + 1)), 0.45 + 0.3 * unit(mix(sid + 2)));
+    static const double kCell[] = {0.9, 0.42, 0.2, 0.09};
+    for (int level = 0; level < 4; ++level) {
+      const double cell = kCell[level];
+      const double fu = tu / cell, fv = tv / cell;
+      const double iu = std::floor(fu), iv = std::floor(fv);
+      const double lu = fu - iu, lv = fv - iv;  // position inside the cell, [0,1)
+      const std::uint64_t h = hash(sid, std::uint64_t(level), std::uint64_t(std::int64_t(iu)), std::uint64_t(std::int64_t(iv)));
+      if (unit(h) > 0.55) continue;  // empty cell
+      const double r1 = unit(mix(h + 11)), r2 = unit(mix(h + 12)), r3 = unit(mix(h + 13)), r4 = unit(mix(h + 14));
+      const int kind = int(unit(mix(h + 15)) * 3);
+      bool inside = false, alt = false;
+      if (kind == 0) {  // rectangle
+        const double w = 0.3 + 0.55 * r1, hgt = 0.3 + 0.55 * r2;
+        const double u0 = r3 * (1 - w), v0 = r4 * (1 - hgt);
+        inside = lu >= u0 && lu < u0 + w && lv >= v0 && lv < v0 + hgt;
+      } else if (kind == 1) {  // disc
+        const double rad = 0.18 + 0.27 * r1;
+        const double cu = rad + r2 * (1 - 2 * rad), cv = rad + r3 * (1 - 2 * rad);
+        inside = (lu - cu) * (lu - cu) + (lv - cv) * (lv - cv) < rad * rad;
+      } else {  // checker patch, 2..4 squares a side, in an inset square
+        const int n = 2 + int(r1 * 3);
+        const double m = 0.1 + 0.1 * r2;
+        inside = lu >= m && lu < 1 - m && lv >= m && lv < 1 - m;
+        if (inside) alt = ((int((lu - m) / (1 - 2 * m) * n) + int((lv - m) / (1 - 2 * m) * n)) & 1) != 0;
+      }
+      if (!inside) continue;
+      const double hue = unit(mix(h + 16)), sat = 0.5 + 0.5 * unit(mix(h + 17));
+      const double val = alt ? 0.1 + 0.15 * unit(mix(h + 18)) : 0.55 + 0.45 * unit(mix(h + 19));
+      col = hsvToBgr(hue, alt ? 0.2 : sat, val);
+    }
+    return col;
+  }
+};
+
+static Wave wave(double c0, double rate, double a0, double f0, double a1, double f1, std::uint32_t seed, int k) {
+  Wave w;
+  w.c0 = c0;
+  w.rate = rate;
+  w.amp = {a0, a1};
+  w.freq = {f0, f1};
+  w.phase = {2 * M_PI * unit(hash(seed, 500, k, 0)), 2 * M_PI * unit(hash(seed, 500, k, 1))};
+  return w;
+}
+
+SyntheticSequence::SyntheticSequence(const SimOptions& o) {
+  auto impl = std::make_shared<Impl>();
+  impl->opts = o;
+  o.camera.validate("--intrinsics");
+  if (!(o.fps > 0)) throw InputError("--fps", "must be positive");
+  if (!(o.max_range > kKinectMinRange)) throw InputError("--max-range", "must exceed 0.4 m");
+  const std::uint32_t s = o.seed;
+  const double duration = std::max(1.0, double(o.frames) / o.fps);
+  // Velocity bounds (sum of amp*freq per axis) keep speed <= ~0.45 m/s and turn rate <= ~30 deg/s.
+  if (o.scene == "room") {
+    impl->boxes = {{{-2.5, -2.0, 0.0}, {2.5, 2.0, 3.0}, true},
+                   {{1.2, -1.5, 0.0}, {2.2, -0.6, 0.8}, false},
+                   {{1.6, 0.5, 0.0}, {2.5, 1.4, 1.2}, false},
+                   {{-0.5, 1.3, 0.0}, {0.3, 2.0, 0.6}, false},
+                   {{0.9, -0.3, 0.0}, {1.4, 0.3, 0.45}, false},
+                   {{-2.5, -1.0, 0.0}, {-1.8, 0.0, 1.8}, false}};
+    impl->x = wave(-0.2, 0, 0.5, 0.45, 0.1, 1.1, s, 0);
+    impl->y = wave(0, 0, 0.35, 0.35, 0.08, 1.3, s, 1);
+    impl->z = wave(1.4, 0, 0.1, 0.6, 0.03, 1.7, s, 2);
+    impl->yaw = wave(0, 0, 0.9, 0.25, 0.08, 1.2, s, 3);
+    impl->pitch = wave(-0.12, 0, 0.12, 0.4, 0.04, 1.5, s, 4);
+    impl->roll = wave(0, 0, 0.06, 0.5, 0.03, 1.9, s, 5);
+  } else if (o.scene == "corridor") {
+    impl->boxes = {{{-1.0, -1.1, 0.0}, {12.0, 1.1, 2.6}, true},
+                   {{2.0, 0.6, 0.0}, {2.6, 1.1, 1.0}, false},
+                   {{4.0, -1.1, 0.0}, {4.5, -0.5, 1.4}, false},
+                   {{6.5, 0.5, 0.0}, {7.2, 1.1, 0.7}, false},
+                   {{8.5, -1.1, 0.0}, {9.0, -0.6, 1.8}, false},
+                   {{10.5, 0.7, 0.0}, {11.0, 1.1, 1.2}, false}};
+    const double speed = std::min(0.4, 9.5 / duration);
+    impl->x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
+    impl->y = wave(0, 0, 0.2, 0.4, 0.04, 1.3, s, 1);
+    impl->z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+    impl->yaw = wave(0, 0, 0.35, 0.3, 0.06, 1.1, s, 3);
+    impl->pitch = wave(-0.05, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
+    impl->roll = wave(0, 0, 0.05, 0.5, 0.02, 1.8, s, 5);
+  } else if (o.scene == "bare_wall") {
+    impl->planes = {{Vec3(0, 1, 0), kBareWallY, Vec3(1, 0, 0), Vec3(0, 0, 1)}};
+    impl->x = wave(0, 0.2, 0.3, 0.5, 0.03, 1.3, s, 0);
+    impl->y = wave(0, 0, 0.1, 0.4, 0.02, 1.1, s, 1);
+    impl->z = wave(1.4, 0, 0.15, 0.45, 0.02, 1.5, s, 2);
+    impl->yaw = wave(M_PI / 2, 0, 0.1, 0.35, 0.02, 1.2, s, 3);
+    impl->pitch = wave(0, 0, 0.06, 0.5, 0.02, 1.4, s, 4);
+    impl->roll = wave(0, 0, 0.04, 0.6, 0.02, 1.7, s, 5);
+  } else {
+    throw InputError("--scene", "unknown scene '" + o.scene + "' (expected room, corridor or bare_wall)");
+  }
+  impl_ = impl;
+}
+
+std::size_t SyntheticSequence::size() const { return impl_->opts.frames; }
+const SimOptions& SyntheticSequence::options() const { return impl_->opts; }
+
+mrpt::poses::CPose3D SyntheticSequence::groundTruth(std::size_t i) const {
+  return impl_->pose(double(i) / impl_->opts.fps);
+}
+
+double SyntheticSequence::exactDepth(const mrpt::poses::CPose3D& pose, double u, double v) const {
+  const CameraIntrinsics& c = impl_->opts.camera;
+  const Eigen::Matrix3d R = pose.getRotationMatrix().asEigen();
+  const Vec3 o(pose.x(), pose.y(), pose.z());
+  const Hit h = impl_->cast(o, R * Vec3((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0));
+  return std::isfinite(h.s) ? h.s : 0.0;
+}
+
+Frame SyntheticSequence::render(std::size_t i) const {
+  const Impl& m = *impl_;
+  const SimOptions& o = m.opts;
+  const CameraIntrinsics& c = o.camera;
+  Frame f;
+  f.index = i;
+  f.timestamp = double(i) / o.fps;
+  f.camera = c;
+  const mrpt::poses::CPose3D pose = m.pose(f.timestamp);
+  f.groundTruth = pose;
+  const Eigen::Matrix3d R = pose.getRotationMatrix().asEigen();
+  const Vec3 org(pose.x(), pose.y(), pose.z());
+  const Vec3 light = Vec3(0.3, 0.5, 0.8).normalized();
+
+  cv::Mat truth(c.height, c.width, CV_64F);
+  cv::Mat grazing(c.height, c.width, CV_8U);
+  f.rgb.create(c.height, c.width, CV_8UC3);
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int v = 0; v < c.height; ++v) {
+    double* zrow = truth.ptr<double>(v);
+    unsigned char* grow = grazing.ptr<unsigned char>(v);
+    cv::Vec3b* crow = f.rgb.ptr<cv::Vec3b>(v);
+    for (int u = 0; u < c.width; ++u) {
+      const Vec3 dc((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0);
+      const Vec3 dw = R * dc;
+      const Hit h = m.cast(org, dw);
+      if (!std::isfinite(h.s)) {
+        zrow[u] = 0;
+        grow[u] = 1;
+        crow[u] = cv::Vec3b(0, 0, 0);
+        continue;
+      }
+      zrow[u] = h.s;
+      grow[u] = std::abs(h.n.dot(dw.normalized())) < 0.12;
+      // Lambert-like shading with a fixed light: depends on the surface only, not on the view.
+      const double shade = 0.72 + 0.28 * std::abs(h.n.dot(light));
+      const auto col = m.texture(h.surface, h.tu, h.tv);
+      for (int k = 0; k < 3; ++k) crow[u][k] = cv::saturate_cast<unsigned char>(255.0 * col[k] * shade);
+    }
+  }
+  // Slight optical blur as a real lens has; also tames aliasing of the sharp texture edges.
+  cv::GaussianBlur(f.rgb, f.rgb, cv::Size(3, 3), 0.6);
+
+  f.depth.create(c.height, c.width, CV_32F);
+  const double kinect_f = c.fx * 640.0 / c.width;  // disparity measured on a 640 px wide sensor
+  const std::uint64_t frame_key = hash(o.seed, 901, i);
+#pragma omp parallel for schedule(static)
+  for (int v = 0; v < c.height; ++v) {
+    const double* zrow = truth.ptr<double>(v);
+    float* out = f.depth.ptr<float>(v);
+    for (int u = 0; u < c.width; ++u) {
+      const double z = zrow[u];
+      out[u] = 0.f;
+      if (z < kKinectMinRange || z > o.max_range) continue;
+      if (!o.noise) {
+        out[u] = float(z);
+        continue;
+      }
+      const std::uint64_t key = hash(frame_key, std::uint64_t(v), std::uint64_t(u));
+      if (unit(key) < 0.02 || grazing.at<unsigned char>(v, u)) continue;  // random dropout, grazing angles
+      // Shadow of a depth discontinuity: the far side loses its reading (projector/camera parallax).
+      bool edge = false;
+      for (int dv = -1; dv <= 1 && !edge; ++dv)
+        for (int du = -1; du <= 1; ++du) {
+          const int uu = u + du, vv = v + dv;
+          if (uu < 0 || vv < 0 || uu >= c.width || vv >= c.height) continue;
+          const double zn = truth.at<double>(vv, uu);
+          if (zn <= 0 || z - zn > 0.03 * z) { edge = true; break; }
+        }
+      if (edge) continue;
+      const double noisy = z + kinectNoiseSigma(z) * gaussian(key);
+      const double disparity = kinect_f * kKinectBaseline / noisy;
+      const double quantised = std::round(disparity * kDisparitySubpixel) / kDisparitySubpixel;
+      const double zq = kinect_f * kKinectBaseline / quantised;
+      if (zq >= kKinectMinRange && zq <= o.max_range) out[u] = float(zq);
+    }
+  }
+  return f;
+}
+
+}  // namespace vofusion::sim

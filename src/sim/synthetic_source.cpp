@@ -1,0 +1,32 @@
+#include "vofusion/sim/synthetic_source.h"
+
+#include "vofusion/core/errors.h"
+
+namespace vofusion::sim {
+
+SimOptions SyntheticSource::optionsFromSpec(const std::string& spec, const SourceOptions& opts) {
+  SimOptions s;
+  if (spec.rfind("synthetic", 0) != 0) throw InputError(spec, "not a synthetic source");
+  const std::string rest = spec.substr(9);
+  if (!rest.empty()) {
+    if (rest[0] != ':' || rest.size() == 1) throw InputError(spec, "expected 'synthetic' or 'synthetic:<scene>'");
+    s.scene = rest.substr(1);
+  }
+  if (s.scene != "room" && s.scene != "corridor" && s.scene != "bare_wall")
+    throw InputError(spec, "unknown synthetic scene '" + s.scene + "' (expected room, corridor or bare_wall)");
+  if (opts.max_frames > 0) s.frames = opts.max_frames;
+  if (opts.intrinsics) {
+    const CameraIntrinsics c = CameraIntrinsics::parse(*opts.intrinsics);
+    s.camera.fx = c.fx; s.camera.fy = c.fy; s.camera.cx = c.cx; s.camera.cy = c.cy;
+    s.camera.validate("--intrinsics");
+  }
+  return s;
+}
+
+bool SyntheticSource::next(Frame& frame) {
+  if (pos_ >= seq_.size()) return false;
+  frame = seq_.render(pos_++);
+  return true;
+}
+
+}  // namespace vofusion::sim

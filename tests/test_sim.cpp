@@ -1,0 +1,190 @@
+#include <Eigen/Dense>
+// The synthetic sequence: exact geometry, Kinect noise statistics, determinism, smooth trajectories.
+#include <cmath>
+
+#include <mrpt/poses/Lie/SO.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/io/frame_source.h"
+#include "vofusion/sim/synthetic_sequence.h"
+
+using namespace vofusion;
+using namespace vofusion::sim;
+
+namespace {
+SimOptions small(const std::string& scene, bool noise) {
+  SimOptions o;
+  o.scene = scene;
+  o.frames = 20;
+  o.noise = noise;
+  o.camera = o.camera.scaled(0.5);  // 320x240 keeps the tests quick
+  return o;
+}
+
+// Depth of the plane y = Y seen through pixel (u, v) of a camera at pose, computed by hand.
+double planeDepth(const mrpt::poses::CPose3D& pose, const CameraIntrinsics& c, double u, double v, double Y) {
+  const Eigen::Matrix3d R = pose.getRotationMatrix().asEigen();
+  const Eigen::Vector3d d = R * Eigen::Vector3d((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0);
+  return (Y - pose.y()) / d.y();
+}
+}  // namespace
+
+TEST(Sim, ExactDepthOfBareWallMatchesAnalyticPlane) {
+  const SimOptions o = small("bare_wall", false);
+  SyntheticSequence seq(o);
+  for (std::size_t i : {0u, 7u, 19u}) {
+    const Frame f = seq.render(i);
+    ASSERT_TRUE(f.groundTruth.has_value());
+    EXPECT_EQ(f.depth.cols, 320);
+    double max_err = 0;
+    int valid = 0;
+    for (int v = 0; v < f.depth.rows; v += 3)
+      for (int u = 0; u < f.depth.cols; u += 3) {
+        const double expect = planeDepth(*f.groundTruth, f.camera, u, v, kBareWallY);
+        ASSERT_GT(expect, 0.4);
+        ASSERT_GT(f.depth.at<float>(v, u), 0.f) << u << "," << v;
+        max_err = std::max(max_err, std::abs(f.depth.at<float>(v, u) - expect));
+        ++valid;
+      }
+    EXPECT_LT(max_err, 1e-5) << "frame " << i;  // float storage only
+    EXPECT_GT(valid, 8000);
+    // The camera keeps about 1.5 m from the wall.
+    EXPECT_NEAR(f.groundTruth->y(), 0.0, 0.2);
+  }
+}
+
+TEST(Sim, RoomDepthOfFloorMatchesAnalyticPlane) {
+  // Look straight down at the floor (z = 0) from 1.2 m: depth = 1.2 / cos(angle) for every pixel.
+  SimOptions o = small("room", false);
+  SyntheticSequence seq(o);
+  const mrpt::poses::CPose3D down(-1.0, -1.0, 1.2, 0, M_PI / 2, 0);  // body looking down (pitch 90deg)
+  const mrpt::poses::CPose3D cam = down + mrpt::poses::CPose3D(0, 0, 0, -M_PI / 2, 0, -M_PI / 2);
+  for (double u : {0.0, 160.0, 319.0})
+    for (double v : {0.0, 120.0, 239.0}) {
+      // Optical axis points straight down, so depth along it equals the height for every pixel.
+      EXPECT_NEAR(seq.exactDepth(cam, u, v), 1.2, 1e-9) << u << "," << v;
+    }
+}
+
+TEST(Sim, NoiseMatchesKinectModel) {
+  SimOptions exact = small("bare_wall", false), noisy = small("bare_wall", true);
+  SyntheticSequence a(exact), b(noisy);
+  double sum = 0, sum2 = 0;
+  long n = 0, holes = 0, total = 0;
+  for (std::size_t i : {0u, 10u}) {
+    const Frame fa = a.render(i), fb = b.render(i);
+    const double kf = fa.camera.fx * 640.0 / fa.camera.width;
+    for (int v = 0; v < fa.depth.rows; ++v)
+      for (int u = 0; u < fa.depth.cols; ++u) {
+        const double z = fa.depth.at<float>(v, u), zn = fb.depth.at<float>(v, u);
+        ++total;
+        if (zn == 0) { ++holes; continue; }
+        // Expected spread: Gaussian noise plus uniform disparity quantisation (step in depth = z^2/(f b 8)).
+        const double q = z * z / (kf * kKinectBaseline * kDisparitySubpixel);
+        const double sigma = std::sqrt(kinectNoiseSigma(z) * kinectNoiseSigma(z) + q * q / 12.0);
+        const double r = (zn - z) / sigma;
+        sum += r; sum2 += r * r; ++n;
+      }
+  }
+  const double mean = sum / n, sd = std::sqrt(sum2 / n - mean * mean);
+  EXPECT_NEAR(mean, 0.0, 0.05);
+  EXPECT_NEAR(sd, 1.0, 0.15);
+  const double hole_share = double(holes) / total;
+  EXPECT_GT(hole_share, 0.01);
+  EXPECT_LT(hole_share, 0.06);
+}
+
+TEST(Sim, HolesAtDiscontinuitiesAndRangeLimits) {
+  SimOptions o = small("room", true);
+  o.max_range = 2.0;
+  SyntheticSequence seq(o);
+  const Frame f = seq.render(3);
+  SimOptions oe = small("room", false);
+  oe.max_range = 100;
+  const Frame fe = SyntheticSequence(oe).render(3);
+  long far = 0, far_read = 0;
+  for (int v = 0; v < f.depth.rows; ++v)
+    for (int u = 0; u < f.depth.cols; ++u) {
+      const float z = f.depth.at<float>(v, u);
+      EXPECT_TRUE(z == 0 || (z >= 0.4f && z <= 2.0f));
+      if (fe.depth.at<float>(v, u) > 2.1f) { ++far; far_read += z > 0; }
+    }
+  EXPECT_GT(far, 1000);  // the room has walls beyond 2 m
+  EXPECT_EQ(far_read, 0);
+}
+
+TEST(Sim, DeterministicForSeedAndDifferentAcrossSeeds) {
+  SimOptions o = small("room", true);
+  const Frame a = SyntheticSequence(o).render(5), b = SyntheticSequence(o).render(5);
+  EXPECT_EQ(cv::norm(a.rgb, b.rgb, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(a.depth, b.depth, cv::NORM_INF), 0.0);
+  o.seed = 2;
+  const Frame c = SyntheticSequence(o).render(5);
+  EXPECT_GT(cv::norm(a.rgb, c.rgb, cv::NORM_L1), 0.0);
+}
+
+TEST(Sim, ColourIsTexturedEverywhere) {
+  // Plenty of structure for keypoints: strong gradients over most of the image.
+  for (const char* scene : {"room", "corridor", "bare_wall"}) {
+    const Frame f = SyntheticSequence(small(scene, true)).render(0);
+    cv::Mat gray, gx, gy;
+    cv::cvtColor(f.rgb, gray, cv::COLOR_BGR2GRAY);
+    cv::Sobel(gray, gx, CV_32F, 1, 0);
+    cv::Sobel(gray, gy, CV_32F, 0, 1);
+    cv::Mat mag = cv::abs(gx) + cv::abs(gy);
+    const double strong = cv::countNonZero(mag > 80) / double(mag.total());
+    EXPECT_GT(strong, 0.04) << scene;
+    const double valid = cv::countNonZero(f.depth > 0) / double(f.depth.total());
+    EXPECT_GT(valid, std::string(scene) == "corridor" ? 0.6 : 0.8) << scene;  // corridor end lies beyond range
+  }
+}
+
+TEST(Sim, TrajectoriesAreSmoothAndHandHeld) {
+  for (const char* scene : {"room", "corridor", "bare_wall"}) {
+    SimOptions o;
+    o.scene = scene;
+    o.frames = 900;
+    SyntheticSequence seq(o);
+    double max_v = 0, max_w = 0, max_acc = 0;
+    for (std::size_t i = 1; i + 1 < seq.size(); ++i) {
+      const auto p0 = seq.groundTruth(i - 1), p1 = seq.groundTruth(i), p2 = seq.groundTruth(i + 1);
+      const auto t = [](const mrpt::poses::CPose3D& p) { return Eigen::Vector3d(p.x(), p.y(), p.z()); };
+      const double v01 = (t(p1) - t(p0)).norm() * o.fps;
+      const auto rel = p1 - p0;
+      const double w = mrpt::poses::Lie::SO<3>::log(rel.getRotationMatrix()).norm() * o.fps;
+      const auto acc = (t(p2) - 2 * t(p1) + t(p0)) * (o.fps * o.fps);
+      max_v = std::max(max_v, v01);
+      max_w = std::max(max_w, w);
+      max_acc = std::max(max_acc, acc.norm());
+    }
+    EXPECT_LE(max_v, 0.5) << scene;
+    EXPECT_LE(max_w, 30.0 * M_PI / 180.0) << scene;
+    EXPECT_LE(max_acc, 1.0) << scene;  // m/s^2: no jumps
+    EXPECT_GT(max_v, 0.1) << scene;    // it does move
+  }
+  // The corridor is travelled along +x.
+  SimOptions o;
+  o.scene = "corridor";
+  SyntheticSequence c(o);
+  EXPECT_GT(c.groundTruth(299).x() - c.groundTruth(0).x(), 3.0);
+}
+
+TEST(Sim, SourceAndBadOptions) {
+  SourceOptions so;
+  so.max_frames = 3;
+  auto src = openFrameSource("synthetic:bare_wall", so);
+  EXPECT_EQ(src->size(), 3u);
+  Frame f;
+  int n = 0;
+  while (src->next(f)) ++n;
+  EXPECT_EQ(n, 3);
+  EXPECT_TRUE(f.groundTruth.has_value());
+  EXPECT_NEAR(f.timestamp, 2 / 30.0, 1e-12);
+  EXPECT_THROW(openFrameSource("synthetic:moon", so), InputError);
+  SimOptions bad;
+  bad.scene = "moon";
+  EXPECT_THROW(SyntheticSequence{bad}, InputError);
+}
