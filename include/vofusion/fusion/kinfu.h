@@ -1,0 +1,102 @@
+#pragma once
+// KinectFusion on the CPU (Figueroa et al. §3.2, after Newcombe et al. 2011 and KinFu Large Scale):
+// depth preprocessing, frame-to-model ICP seeded by the 6D RGB-D odometry, weighted TSDF with a
+// weight cap and colour, ray casting, a cyclic volume that follows the camera, marching cubes.
+//
+//   KinFu kf(params, TrackingMode::Paper);
+//   for each frame: FusionResult r = kf.process(frame, odometry_ok ? &odom_result : nullptr);
+//   TriangleMesh m = kf.extractMesh();
+#include <memory>
+#include <string>
+
+#include <mrpt/config/CLoadableOptions.h>
+#include <mrpt/poses/CPose3D.h>
+#include <opencv2/core.hpp>
+
+#include "vofusion/core/frame.h"
+#include "vofusion/core/timing.h"
+#include "vofusion/fusion/preprocess.h"
+#include "vofusion/fusion/projective_icp.h"
+#include "vofusion/fusion/tsdf_volume.h"
+#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/odometry/rgbd_odometry.h"
+
+namespace vofusion {
+
+// INI section [kinfu]; every key in share/kinfu.ini.
+struct KinFuParams : public mrpt::config::CLoadableOptions {
+  fusion::TsdfParams tsdf;            // volume_voxels, voxel_size, truncation, max_weight,
+                                      // integrate_min_depth/max_depth, mark_step
+  fusion::PreprocessParams preprocess;  // bilateral_*, min_depth, max_depth, max_normal_jump
+  fusion::IcpParams icp;              // icp_iterations_l0..l2, icp_max_distance, icp_max_angle
+
+  float shift_threshold = 0.3f;       // m, distance focus point <-> volume centre that triggers a shift
+  float focus_distance = 1.2f;        // m, the volume follows the point this far along the optical axis
+  // Tracking failure (divergence, degeneracy) detection:
+  float min_inlier_ratio = 0.10f;     // inliers / valid pixels at full resolution
+  double min_condition = 1e-4;        // smallest/largest eigenvalue of the ICP normal matrix
+  float max_jump_translation = 0.05f; // m, ICP pose vs odometry prediction (mode paper)
+  float max_jump_rotation = 5.0f;     // degrees, same
+  bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback
+  bool integrate_filtered = false;    // fuse the bilateral-filtered depth instead of the raw one
+
+  void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
+  void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
+};
+
+enum class TrackingMode {
+  Paper,     // ICP seeded by the odometry; odometry pose when ICP fails
+  KinFu,     // ICP alone from the previous pose (KinFu LS); a failure is a lost frame
+  Odometry,  // no ICP: pose = previous pose composed with the odometry motion
+};
+// "paper", "kinfu", "odometry"; throws InputError(origin, ...) otherwise.
+TrackingMode parseTrackingMode(const std::string& s, const std::string& origin = "--mode");
+std::string toString(TrackingMode m);
+
+struct FusionResult {
+  bool tracked = false;       // a pose was obtained for this frame (ICP, or the odometry fallback)
+  bool fell_back = false;     // ICP rejected, pose taken from the odometry prediction
+  bool integrated = false;    // the frame was fused into the TSDF
+  std::string reason;         // why ICP was rejected / tracking lost ("" when ICP was accepted)
+  mrpt::poses::CPose3D pose;  // camera-to-world after this frame (unchanged when lost)
+  int icp_inliers = 0;
+  double icp_rms = 0.0;       // m
+  double condition = 0.0;     // of the ICP normal matrix (0 when no ICP ran)
+  bool shifted = false;       // the volume moved this frame
+  StageTimes times;           // preprocess, icp, integrate, raycast, shift
+};
+
+struct KinFuStats {
+  std::size_t frames = 0, tracked = 0, fell_back = 0, lost = 0, shifts = 0;
+  std::size_t bricks_in_volume = 0, bricks_in_world_model = 0;
+  std::size_t memory_bytes = 0;  // TSDF storage
+  StageTimes times;              // accumulated over all frames
+};
+
+class KinFu {
+ public:
+  // initial_pose: camera-to-world of the first frame (world = first camera frame by default).
+  KinFu(const KinFuParams& params, TrackingMode mode,
+        const mrpt::poses::CPose3D& initial_pose = mrpt::poses::CPose3D());
+  ~KinFu();
+
+  // odom: the odometry's motion from the previous frame to this one, nullptr when there is none.
+  FusionResult process(const Frame& frame, const OdometryResult* odom);
+
+  mrpt::poses::CPose3D pose() const;
+  // Whole world model + current volume.
+  TriangleMesh extractMesh() const;
+  // Shaded (Lambert, light at the camera) ray-cast image of the model from a pose (BGR).
+  cv::Mat renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam,
+                     bool coloured = false) const;
+  KinFuStats stats() const;
+  const fusion::TsdfVolume& volume() const;
+  const KinFuParams& params() const;
+  TrackingMode mode() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace vofusion

@@ -1,0 +1,229 @@
+#include "vofusion/fusion/kinfu.h"
+
+#include <chrono>
+#include <cmath>
+
+#include <Eigen/Dense>
+#include <mrpt/math/CMatrixFixed.h>
+#include <opencv2/imgproc.hpp>
+
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+using namespace fusion;
+
+TrackingMode parseTrackingMode(const std::string& s, const std::string& origin) {
+  if (s == "paper") return TrackingMode::Paper;
+  if (s == "kinfu") return TrackingMode::KinFu;
+  if (s == "odometry") return TrackingMode::Odometry;
+  throw InputError(origin, "unknown mode '" + s + "' (expected paper, kinfu or odometry)");
+}
+
+std::string toString(TrackingMode m) {
+  switch (m) {
+    case TrackingMode::Paper: return "paper";
+    case TrackingMode::KinFu: return "kinfu";
+    case TrackingMode::Odometry: return "odometry";
+  }
+  return "?";
+}
+
+namespace {
+
+Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = p.getRotationMatrix().asEigen();
+  T.translation() = Eigen::Vector3d(p.x(), p.y(), p.z());
+  return T;
+}
+
+mrpt::poses::CPose3D toMrpt(const Eigen::Isometry3d& T) {
+  mrpt::math::CMatrixDouble44 M;
+  M.asEigen() = T.matrix();
+  return mrpt::poses::CPose3D(M);
+}
+
+double seconds(std::chrono::steady_clock::time_point a) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();
+}
+
+}  // namespace
+
+struct KinFu::Impl {
+  KinFuParams params;
+  TrackingMode mode;
+  Eigen::Isometry3d pose;             // camera-to-world of the last frame
+  std::unique_ptr<TsdfVolume> volume;
+  // Model ray-cast from `model_pose` after the last integration, one map per pyramid level.
+  std::vector<cv::Mat> model_vertices, model_normals;
+  Eigen::Isometry3d model_pose = Eigen::Isometry3d::Identity();
+  bool have_model = false;
+  KinFuStats stats;
+
+  Eigen::Vector3f focusPoint(const Eigen::Isometry3d& T) const {
+    return (T.translation() + T.linear().col(2) * params.focus_distance).cast<float>();
+  }
+
+  void raycastModel(const cv::Mat& hint, const CameraIntrinsics& cam, StageTimes& times) {
+    const auto t0 = std::chrono::steady_clock::now();
+    RaycastMaps maps = volume->raycast(pose.cast<float>(), cam, &hint, false);
+    const int levels = std::max(1, params.preprocess.levels);
+    model_vertices.assign(levels, cv::Mat());
+    model_normals.assign(levels, cv::Mat());
+    model_vertices[0] = maps.vertices;
+    model_normals[0] = maps.normals;
+    for (int l = 1; l < levels; ++l)
+      downsampleMaps(model_vertices[l - 1], model_normals[l - 1], model_vertices[l], model_normals[l]);
+    model_pose = pose;
+    have_model = true;
+    times.add("raycast", seconds(t0));
+  }
+};
+
+KinFu::KinFu(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->params = params;
+  impl_->mode = mode;
+  impl_->pose = toEigen(initial_pose);
+  impl_->volume = std::make_unique<TsdfVolume>(params.tsdf, impl_->focusPoint(impl_->pose));
+}
+
+KinFu::~KinFu() = default;
+
+FusionResult KinFu::process(const Frame& frame, const OdometryResult* odom) {
+  Impl& s = *impl_;
+  const KinFuParams& P = s.params;
+  FusionResult res;
+  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) {
+    res.reason = "no depth image";
+    res.pose = toMrpt(s.pose);
+    ++s.stats.frames;
+    ++s.stats.lost;
+    return res;
+  }
+  CameraIntrinsics cam = frame.camera;
+  cam.width = frame.depth.cols;
+  cam.height = frame.depth.rows;
+
+  auto t0 = std::chrono::steady_clock::now();
+  const std::vector<DepthLevel> levels = preprocessDepth(frame.depth, cam, P.preprocess);
+  res.times.add("preprocess", seconds(t0));
+
+  const bool odom_ok = odom && odom->success;
+  const Eigen::Isometry3d predicted = odom_ok ? s.pose * toEigen(odom->motion) : s.pose;
+  Eigen::Isometry3d new_pose = s.pose;
+
+  if (!s.have_model) {
+    res.tracked = true;  // the first frame defines the map
+  } else if (s.mode == TrackingMode::Odometry) {
+    res.tracked = odom_ok;
+    if (odom_ok) new_pose = predicted;
+    else res.reason = odom ? "odometry failed: " + odom->failure : "no odometry";
+  } else {
+    const bool seeded = s.mode == TrackingMode::Paper && odom_ok;
+    t0 = std::chrono::steady_clock::now();
+    const IcpResult icp = projectiveIcp(levels, s.model_vertices, s.model_normals, s.model_pose,
+                                        seeded ? predicted : s.pose, P.icp);
+    res.times.add("icp", seconds(t0));
+    res.icp_inliers = icp.inliers;
+    res.icp_rms = icp.rms;
+    res.condition = icp.condition;
+    // Divergence / degeneracy tests.
+    if (!icp.solved) res.reason = "ICP system not solvable";
+    else if (icp.inliers < P.min_inlier_ratio * std::max(1, icp.valid_pixels))
+      res.reason = "too few ICP inliers (" + std::to_string(icp.inliers) + " of " + std::to_string(icp.valid_pixels) + ")";
+    else if (icp.condition < P.min_condition)
+      res.reason = "ill-conditioned ICP (eigenvalue ratio " + std::to_string(icp.condition) + ")";
+    else if (seeded) {
+      const Eigen::Isometry3d d = predicted.inverse() * icp.pose;
+      const double dt = d.translation().norm();
+      const double da = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
+      if (dt > P.max_jump_translation || da > P.max_jump_rotation)
+        res.reason = "ICP jumped " + std::to_string(dt) + " m / " + std::to_string(da) + " deg from the odometry";
+    }
+    if (res.reason.empty()) {
+      res.tracked = true;
+      new_pose = icp.pose;
+    } else if (s.mode == TrackingMode::Paper && odom_ok) {
+      res.tracked = true;
+      res.fell_back = true;
+      new_pose = predicted;
+    }
+  }
+
+  if (res.tracked) s.pose = new_pose;
+  res.pose = toMrpt(s.pose);
+
+  // Fuse, move the volume with the camera, and predict the surface for the next frame.
+  if (res.tracked && (!res.fell_back || P.integrate_on_fallback)) {
+    t0 = std::chrono::steady_clock::now();
+    s.stats.shifts += 0;
+    if (s.volume->shiftIfNeeded(s.focusPoint(s.pose), P.shift_threshold)) {
+      res.shifted = true;
+      ++s.stats.shifts;
+    }
+    res.times.add("shift", seconds(t0));
+    t0 = std::chrono::steady_clock::now();
+    const cv::Mat fuse_depth = P.integrate_filtered ? levels[0].depth : frame.depth;
+    s.volume->integrate(fuse_depth, frame.rgb, cam, s.pose.cast<float>());
+    res.times.add("integrate", seconds(t0));
+    res.integrated = true;
+    s.raycastModel(levels[0].depth, cam, res.times);
+  } else if (res.tracked) {
+    // Not fused (fallback pose): re-predict the model from the new pose so ICP keeps up.
+    s.raycastModel(cv::Mat(), cam, res.times);
+  }
+
+  ++s.stats.frames;
+  if (res.tracked) ++s.stats.tracked;
+  if (res.fell_back) ++s.stats.fell_back;
+  if (!res.tracked) ++s.stats.lost;
+  s.stats.times.merge(res.times);
+  return res;
+}
+
+mrpt::poses::CPose3D KinFu::pose() const { return toMrpt(impl_->pose); }
+
+TriangleMesh KinFu::extractMesh() const { return impl_->volume->extractMesh(); }
+
+cv::Mat KinFu::renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam, bool coloured) const {
+  const Eigen::Isometry3f T = toEigen(cam_to_world).cast<float>();
+  const RaycastMaps maps = impl_->volume->raycast(T, cam, nullptr, coloured);
+  cv::Mat img(cam.height, cam.width, CV_8UC3, cv::Scalar(0, 0, 0));
+  const Eigen::Vector3f c = T.translation();
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      const cv::Vec3f& v = maps.vertices.ptr<cv::Vec3f>(y)[x];
+      const cv::Vec3f& n = maps.normals.ptr<cv::Vec3f>(y)[x];
+      if (std::isnan(v[0]) || std::isnan(n[0])) continue;
+      const Eigen::Vector3f to_cam = (c - Eigen::Vector3f(v[0], v[1], v[2])).normalized();
+      const float lambert = std::max(0.f, to_cam.dot(Eigen::Vector3f(n[0], n[1], n[2])));
+      const float shade = 0.2f + 0.8f * lambert;
+      if (coloured) {
+        const cv::Vec3b& col = maps.colours.ptr<cv::Vec3b>(y)[x];
+        img.ptr<cv::Vec3b>(y)[x] = cv::Vec3b(cv::saturate_cast<uchar>(col[0] * shade), cv::saturate_cast<uchar>(col[1] * shade),
+                                             cv::saturate_cast<uchar>(col[2] * shade));
+      } else {
+        const uchar g = cv::saturate_cast<uchar>(255.f * shade);
+        img.ptr<cv::Vec3b>(y)[x] = cv::Vec3b(g, g, g);
+      }
+    }
+  }
+  return img;
+}
+
+KinFuStats KinFu::stats() const {
+  KinFuStats st = impl_->stats;
+  st.bricks_in_volume = impl_->volume->bricksInVolume();
+  st.bricks_in_world_model = impl_->volume->bricksInWorldModel();
+  st.memory_bytes = impl_->volume->memoryBytes();
+  return st;
+}
+
+const TsdfVolume& KinFu::volume() const { return *impl_->volume; }
+const KinFuParams& KinFu::params() const { return impl_->params; }
+TrackingMode KinFu::mode() const { return impl_->mode; }
+
+}  // namespace vofusion

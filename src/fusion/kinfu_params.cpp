@@ -1,0 +1,86 @@
+// [kinfu] INI section. One table lists every key, so loading and saving can never disagree.
+#include <functional>
+#include <variant>
+
+#include <mrpt/config/CConfigFileBase.h>
+
+#include "vofusion/core/errors.h"
+#include "vofusion/fusion/kinfu.h"
+
+namespace vofusion {
+
+namespace {
+
+struct Key {
+  const char* name;
+  std::variant<float*, int*, double*, bool*> value;
+  const char* comment;  // unit and meaning, written next to the value
+};
+
+std::vector<Key> keys(KinFuParams& p) {
+  return {
+      {"volume_voxels", &p.tsdf.volume_voxels, "voxels per volume edge (multiple of 8)"},
+      {"voxel_size", &p.tsdf.voxel_size, "m"},
+      {"truncation", &p.tsdf.truncation, "m, TSDF band half width"},
+      {"max_weight", &p.tsdf.max_weight, "frames, weight cap of the running average (<= 255)"},
+      {"integrate_min_depth", &p.tsdf.min_depth, "m, depth readings fused"},
+      {"integrate_max_depth", &p.tsdf.max_depth, "m"},
+      {"mark_step", &p.tsdf.mark_step, "pixels between readings that mark touched bricks"},
+      {"bilateral_sigma_depth", &p.preprocess.sigma_depth, "m"},
+      {"bilateral_sigma_spatial", &p.preprocess.sigma_spatial, "pixels"},
+      {"bilateral_kernel", &p.preprocess.kernel, "pixels (window edge; 0 = no filter)"},
+      {"min_depth", &p.preprocess.min_depth, "m, readings used for tracking"},
+      {"max_depth", &p.preprocess.max_depth, "m"},
+      {"max_normal_jump", &p.preprocess.max_normal_jump, "fraction of depth: larger neighbour jumps give no normal"},
+      {"icp_iterations_l0", &p.icp.iterations[0], "ICP iterations at full resolution"},
+      {"icp_iterations_l1", &p.icp.iterations[1], "ICP iterations at 1/2 resolution"},
+      {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 resolution"},
+      {"icp_max_distance", &p.icp.max_distance, "m, correspondence distance threshold"},
+      {"icp_max_angle", &p.icp.max_angle, "degrees, correspondence normal angle threshold"},
+      {"shift_threshold", &p.shift_threshold, "m, focus point to volume centre distance that shifts the volume"},
+      {"focus_distance", &p.focus_distance, "m, the volume follows the point this far along the optical axis"},
+      {"min_inlier_ratio", &p.min_inlier_ratio, "ICP inliers / valid pixels below which ICP is rejected"},
+      {"min_condition", &p.min_condition, "smallest/largest eigenvalue of the ICP system below which it is degenerate"},
+      {"max_jump_translation", &p.max_jump_translation, "m, ICP vs odometry prediction beyond which ICP is rejected"},
+      {"max_jump_rotation", &p.max_jump_rotation, "degrees, same for rotation"},
+      {"integrate_on_fallback", &p.integrate_on_fallback, "fuse frames posed by the odometry fallback"},
+      {"integrate_filtered", &p.integrate_filtered, "fuse bilateral-filtered instead of raw depth"},
+  };
+}
+
+}  // namespace
+
+void KinFuParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) {
+  for (const Key& k : keys(*this)) {
+    std::visit(
+        [&](auto* v) {
+          using T = std::remove_pointer_t<decltype(v)>;
+          if constexpr (std::is_same_v<T, float>) *v = cfg.read_float(section, k.name, *v);
+          else if constexpr (std::is_same_v<T, int>) *v = cfg.read_int(section, k.name, *v);
+          else if constexpr (std::is_same_v<T, double>) *v = cfg.read_double(section, k.name, *v);
+          else *v = cfg.read_bool(section, k.name, *v);
+        },
+        k.value);
+  }
+  const std::string where = "[" + section + "]";
+  if (tsdf.volume_voxels < 8 || tsdf.volume_voxels % 8 != 0)
+    throw InputError(where, "volume_voxels must be a positive multiple of 8");
+  if (!(tsdf.voxel_size > 0.f) || !(tsdf.truncation > tsdf.voxel_size))
+    throw InputError(where, "voxel_size must be positive and truncation larger than it");
+  if (tsdf.max_weight < 1 || tsdf.max_weight > 255) throw InputError(where, "max_weight must be in 1..255");
+}
+
+void KinFuParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const {
+  for (const Key& k : keys(const_cast<KinFuParams&>(*this))) {
+    std::visit(
+        [&](auto* v) {
+          using T = std::remove_pointer_t<decltype(v)>;
+          if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), 24, 12, k.comment);
+          else if constexpr (std::is_same_v<T, int>) cfg.write(section, k.name, *v, 24, 12, k.comment);
+          else cfg.write(section, k.name, static_cast<double>(*v), 24, 12, k.comment);
+        },
+        k.value);
+  }
+}
+
+}  // namespace vofusion

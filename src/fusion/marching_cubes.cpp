@@ -1,0 +1,195 @@
+// Marching cubes over sparse TSDF bricks. Every grid edge belongs to the voxel at its lower end, so
+// each surface crossing is computed once (pass 1, per brick, in parallel), numbered globally, and the
+// triangles of each cell (pass 2) refer to those shared vertices.
+#include "vofusion/fusion/marching_cubes.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <unordered_map>
+
+// Lorensen & Cline lookup tables (Bourke's edgeTable/triTable), as shipped by PCL.
+#include <pcl/surface/marching_cubes.h>
+
+namespace vofusion::fusion {
+
+namespace {
+
+std::uint64_t brickKey(const Eigen::Vector3i& c) {
+  const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::uint32_t>(v + (1 << 20)) & 0x1fffff); };
+  return u(c.x()) | (u(c.y()) << 21) | (u(c.z()) << 42);
+}
+
+// Cube corners in PCL's order (its tables are written for it) and, per cube edge, the corner that
+// owns it and the axis it runs along.
+const int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}};
+const int kEdgeCorners[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+
+struct BrickVertices {
+  std::vector<std::uint16_t> edges;  // owned edge ids (voxel index * 3 + axis), ascending
+  std::vector<Eigen::Vector3f> points;
+  std::vector<std::array<std::uint8_t, 3>> colours;
+  std::uint32_t base = 0;            // global index of the first vertex
+};
+
+class Grid {
+ public:
+  Grid(const std::vector<BrickRef>& bricks) : bricks_(bricks) {
+    map_.reserve(bricks.size() * 2);
+    for (std::size_t i = 0; i < bricks.size(); ++i) map_[brickKey(bricks[i].coord)] = static_cast<int>(i);
+  }
+  int find(const Eigen::Vector3i& c) const {
+    const auto it = map_.find(brickKey(c));
+    return it == map_.end() ? -1 : it->second;
+  }
+  // Voxel at local coordinates of brick i that may spill into the +1 neighbours (0..8 per axis).
+  const Voxel* voxel(const int nb[8], int x, int y, int z) const {
+    const int which = (x >> 3) | ((y >> 3) << 1) | ((z >> 3) << 2);
+    const int bi = nb[which];
+    if (bi < 0) return nullptr;
+    return &bricks_[bi].brick->voxels[Brick::index(x & 7, y & 7, z & 7)];
+  }
+  void neighbours(std::size_t i, int nb[8]) const {
+    for (int k = 0; k < 8; ++k)
+      nb[k] = k == 0 ? static_cast<int>(i) : find(bricks_[i].coord + Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1));
+  }
+
+ private:
+  const std::vector<BrickRef>& bricks_;
+  std::unordered_map<std::uint64_t, int> map_;
+};
+
+inline bool usable(const Voxel* v, int min_weight) {
+  // Fully truncated values carry no surface position (occlusion boundaries, unobserved backs).
+  return v && v->weight >= min_weight && std::abs(v->tsdf) < 32440;  // |tsdf| < 0.99
+}
+
+}  // namespace
+
+TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight) {
+  TriangleMesh mesh;
+  if (bricks.empty()) return mesh;
+  min_weight = std::max(1, min_weight);
+  const Grid grid(bricks);
+  std::vector<BrickVertices> verts(bricks.size());
+  std::vector<std::array<int, 8>> nbs(bricks.size());
+
+  // Pass 1: the vertices on the edges each brick owns.
+#pragma omp parallel for schedule(dynamic, 8)
+  for (std::size_t i = 0; i < bricks.size(); ++i) {
+    int* nb = nbs[i].data();
+    grid.neighbours(i, nb);
+    BrickVertices& bv = verts[i];
+    const Eigen::Vector3i o = bricks[i].coord * kBrickEdge;
+    for (int z = 0; z < kBrickEdge; ++z)
+      for (int y = 0; y < kBrickEdge; ++y)
+        for (int x = 0; x < kBrickEdge; ++x) {
+          const Voxel* a = grid.voxel(nb, x, y, z);
+          if (!usable(a, min_weight)) continue;
+          for (int axis = 0; axis < 3; ++axis) {
+            const Voxel* b = grid.voxel(nb, x + (axis == 0), y + (axis == 1), z + (axis == 2));
+            if (!usable(b, min_weight) || ((a->tsdf < 0) == (b->tsdf < 0))) continue;
+            const float fa = a->tsdf, fb = b->tsdf;
+            const float t = fa / (fa - fb);
+            Eigen::Vector3f p((o.x() + x) * voxel_size, (o.y() + y) * voxel_size, (o.z() + z) * voxel_size);
+            p[axis] += t * voxel_size;
+            bv.edges.push_back(static_cast<std::uint16_t>(Brick::index(x, y, z) * 3 + axis));
+            bv.points.push_back(p);
+            const auto mix = [t](std::uint8_t u, std::uint8_t v) {
+              return static_cast<std::uint8_t>(std::lround(u + t * (static_cast<float>(v) - u)));
+            };
+            bv.colours.push_back({mix(a->r, b->r), mix(a->g, b->g), mix(a->b, b->b)});
+          }
+        }
+  }
+  std::uint32_t total = 0;
+  for (auto& bv : verts) bv.base = total, total += static_cast<std::uint32_t>(bv.points.size());
+  mesh.vertices.reserve(total);
+  mesh.colors.reserve(total);
+  for (const auto& bv : verts) {
+    mesh.vertices.insert(mesh.vertices.end(), bv.points.begin(), bv.points.end());
+    mesh.colors.insert(mesh.colors.end(), bv.colours.begin(), bv.colours.end());
+  }
+
+  // Pass 2: triangles of every cell whose 8 corners are usable.
+  std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(bricks.size());
+#pragma omp parallel for schedule(dynamic, 8)
+  for (std::size_t i = 0; i < bricks.size(); ++i) {
+    const int* nb = nbs[i].data();
+    auto vertexOf = [&](int cx, int cy, int cz, int axis) -> std::int64_t {
+      const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
+      const int bi = nb[which];
+      if (bi < 0) return -1;
+      const auto& e = verts[bi].edges;
+      const auto id = static_cast<std::uint16_t>(Brick::index(cx & 7, cy & 7, cz & 7) * 3 + axis);
+      const auto it = std::lower_bound(e.begin(), e.end(), id);
+      if (it == e.end() || *it != id) return -1;
+      return verts[bi].base + static_cast<std::uint32_t>(it - e.begin());
+    };
+    for (int z = 0; z < kBrickEdge; ++z)
+      for (int y = 0; y < kBrickEdge; ++y)
+        for (int x = 0; x < kBrickEdge; ++x) {
+          const Voxel* c[8];
+          int cube = 0;
+          bool ok = true;
+          for (int k = 0; k < 8 && ok; ++k) {
+            c[k] = grid.voxel(nb, x + kCorner[k][0], y + kCorner[k][1], z + kCorner[k][2]);
+            ok = usable(c[k], min_weight);
+            if (ok && c[k]->tsdf < 0) cube |= 1 << k;
+          }
+          if (!ok || pcl::edgeTable[cube] == 0) continue;
+          std::int64_t ev[12];
+          for (int e = 0; e < 12; ++e) {
+            ev[e] = -1;
+            if (!(pcl::edgeTable[cube] & (1 << e))) continue;
+            const int* a = kCorner[kEdgeCorners[e][0]];
+            const int* b = kCorner[kEdgeCorners[e][1]];
+            const int lx = std::min(a[0], b[0]), ly = std::min(a[1], b[1]), lz = std::min(a[2], b[2]);
+            const int axis = a[0] != b[0] ? 0 : (a[1] != b[1] ? 1 : 2);
+            ev[e] = vertexOf(x + lx, y + ly, z + lz, axis);
+          }
+          for (int k = 0; pcl::triTable[cube][k] != -1; k += 3) {
+            const std::int64_t i0 = ev[pcl::triTable[cube][k]], i1 = ev[pcl::triTable[cube][k + 1]],
+                               i2 = ev[pcl::triTable[cube][k + 2]];
+            if (i0 < 0 || i1 < 0 || i2 < 0 || i0 == i1 || i1 == i2 || i0 == i2) continue;
+            faces[i].push_back({static_cast<std::uint32_t>(i0), static_cast<std::uint32_t>(i1),
+                                static_cast<std::uint32_t>(i2)});
+          }
+        }
+  }
+  std::size_t nf = 0;
+  for (const auto& f : faces) nf += f.size();
+  mesh.faces.reserve(nf);
+  for (const auto& f : faces) mesh.faces.insert(mesh.faces.end(), f.begin(), f.end());
+
+  // Drop crossings no triangle uses (edges whose cells touch unobserved voxels).
+  std::vector<std::uint32_t> remap(mesh.vertices.size(), UINT32_MAX);
+  for (const auto& f : mesh.faces)
+    for (std::uint32_t v : f) remap[v] = 0;
+  std::uint32_t kept = 0;
+  for (std::size_t v = 0; v < remap.size(); ++v) {
+    if (remap[v] == UINT32_MAX) continue;
+    remap[v] = kept;
+    mesh.vertices[kept] = mesh.vertices[v];
+    mesh.colors[kept] = mesh.colors[v];
+    ++kept;
+  }
+  mesh.vertices.resize(kept);
+  mesh.colors.resize(kept);
+  for (auto& f : mesh.faces)
+    for (auto& v : f) v = remap[v];
+
+  // Area-weighted vertex normals, oriented like the faces.
+  mesh.normals.assign(mesh.vertices.size(), Eigen::Vector3f::Zero());
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3f n = (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]);
+    for (int k = 0; k < 3; ++k) mesh.normals[f[k]] += n;
+  }
+  for (auto& n : mesh.normals) {
+    const float len = n.norm();
+    n = len > 0.f ? Eigen::Vector3f(n / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
+  }
+  return mesh;
+}
+
+}  // namespace vofusion::fusion

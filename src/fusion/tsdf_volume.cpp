@@ -1,0 +1,267 @@
+#include "vofusion/fusion/tsdf_volume.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "vofusion/fusion/marching_cubes.h"
+
+namespace vofusion::fusion {
+
+namespace {
+inline int floorDiv8(int v) { return v >> 3; }  // arithmetic shift = floor for negatives too
+inline int modPos(int a, int n) {
+  const int m = a % n;
+  return m < 0 ? m + n : m;
+}
+}  // namespace
+
+TsdfVolume::TsdfVolume(const TsdfParams& params, const Eigen::Vector3f& centre) : params_(params) {
+  if (params_.volume_voxels < kBrickEdge || params_.volume_voxels % kBrickEdge != 0)
+    throw std::invalid_argument("TSDF volume_voxels must be a positive multiple of 8");
+  if (!(params_.voxel_size > 0.f) || !(params_.truncation > 0.f))
+    throw std::invalid_argument("TSDF voxel_size and truncation must be positive");
+  params_.max_weight = std::clamp(params_.max_weight, 1, 255);
+  n_ = params_.volume_voxels / kBrickEdge;
+  slots_.assign(static_cast<std::size_t>(n_) * n_ * n_, -1);
+  marks_.assign(slots_.size(), 0);
+  const float brick = kBrickEdge * params_.voxel_size;
+  for (int i = 0; i < 3; ++i) origin_[i] = static_cast<int>(std::lround(centre[i] / brick)) - n_ / 2;
+}
+
+std::uint64_t TsdfVolume::key(int bx, int by, int bz) {
+  const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::uint32_t>(v + (1 << 20)) & 0x1fffff); };
+  return u(bx) | (u(by) << 21) | (u(bz) << 42);
+}
+
+int TsdfVolume::slotOf(int bx, int by, int bz) const {
+  if (static_cast<unsigned>(bx - origin_.x()) >= static_cast<unsigned>(n_) ||
+      static_cast<unsigned>(by - origin_.y()) >= static_cast<unsigned>(n_) ||
+      static_cast<unsigned>(bz - origin_.z()) >= static_cast<unsigned>(n_))
+    return -1;
+  return modPos(bx, n_) + n_ * (modPos(by, n_) + n_ * modPos(bz, n_));
+}
+
+const Brick* TsdfVolume::brickAt(int bx, int by, int bz) const {
+  const int s = slotOf(bx, by, bz);
+  if (s < 0) return nullptr;
+  const std::int32_t id = slots_[s];
+  return id < 0 ? nullptr : pool_[id].get();
+}
+
+std::int32_t TsdfVolume::allocate(int bx, int by, int bz) {
+  auto b = std::make_unique<Brick>();
+  b->coord = Eigen::Vector3i(bx, by, bz);
+  pool_.push_back(std::move(b));
+  return static_cast<std::int32_t>(pool_.size() - 1);
+}
+
+Eigen::Vector3f TsdfVolume::minCorner() const {
+  return (origin_ * kBrickEdge).cast<float>() * params_.voxel_size;
+}
+
+Eigen::Vector3f TsdfVolume::centre() const {
+  return minCorner() + Eigen::Vector3f::Constant(0.5f * (params_.volume_voxels - 1) * params_.voxel_size);
+}
+
+std::size_t TsdfVolume::bricksInVolume() const {
+  return static_cast<std::size_t>(std::count_if(slots_.begin(), slots_.end(), [](std::int32_t id) { return id >= 0; }));
+}
+
+std::size_t TsdfVolume::memoryBytes() const {
+  return pool_.size() * (sizeof(Brick) + sizeof(void*)) + slots_.size() * (sizeof(std::int32_t) + 1) +
+         world_.size() * 32;
+}
+
+std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, const CameraIntrinsics& cam,
+                                  const Eigen::Isometry3f& cam_to_world) {
+  CV_Assert(depth.type() == CV_32FC1);
+  const bool colour = !bgr.empty() && bgr.type() == CV_8UC3 && bgr.size() == depth.size();
+  const float vs = params_.voxel_size, trunc = params_.truncation;
+  const float zmin = params_.min_depth, zmax = params_.max_depth;
+  const float fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
+  const Eigen::Matrix3f R = cam_to_world.linear();
+  const Eigen::Vector3f t = cam_to_world.translation();
+  const float inv_brick = 1.f / (kBrickEdge * vs);
+  const int w = depth.cols, h = depth.rows, step = std::max(1, params_.mark_step);
+
+  // 1. Bricks touched by the truncation band [z - trunc, z + trunc] of (a subsample of) the readings.
+  std::fill(marks_.begin(), marks_.end(), 0);
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < h; y += step) {
+    const float* row = depth.ptr<float>(y);
+    for (int x = 0; x < w; x += step) {
+      const float z = row[x];
+      if (!(z >= zmin && z <= zmax)) continue;
+      const Eigen::Vector3f ray((x - cx) / fx, (y - cy) / fy, 1.f);
+      for (int k = -2; k <= 2; ++k) {
+        const Eigen::Vector3f p = (R * (ray * (z + 0.5f * k * trunc)) + t) * inv_brick;
+        const int s = slotOf(static_cast<int>(std::floor(p.x())), static_cast<int>(std::floor(p.y())),
+                             static_cast<int>(std::floor(p.z())));
+        if (s >= 0) {
+#pragma omp atomic write
+          marks_[s] = 1;
+        }
+      }
+    }
+  }
+
+  // 2. Allocate the touched bricks that are new (serial: the pool grows).
+  std::vector<std::int32_t> touched;
+  for (std::size_t s = 0; s < marks_.size(); ++s) {
+    if (!marks_[s]) continue;
+    if (slots_[s] < 0) {
+      const int sx = static_cast<int>(s % n_), sy = static_cast<int>((s / n_) % n_), sz = static_cast<int>(s / (n_ * n_));
+      const int bx = origin_.x() + modPos(sx - origin_.x(), n_);
+      const int by = origin_.y() + modPos(sy - origin_.y(), n_);
+      const int bz = origin_.z() + modPos(sz - origin_.z(), n_);
+      slots_[s] = allocate(bx, by, bz);
+    }
+    touched.push_back(slots_[s]);
+  }
+
+  // 3. Update the voxels of those bricks: projective signed distance, weighted running average.
+  const Eigen::Matrix3f Rt = R.transpose();
+  const Eigen::Vector3f tc = -Rt * t;
+  const Eigen::Vector3f dx = Rt.col(0) * vs, dy = Rt.col(1) * vs, dz = Rt.col(2) * vs;
+  const int max_w = params_.max_weight;
+  const float inv_trunc = 1.f / trunc;
+  std::size_t updated = 0;
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : updated)
+  for (std::size_t i = 0; i < touched.size(); ++i) {
+    Brick& b = *pool_[touched[i]];
+    const Eigen::Vector3f p0 = Rt * ((b.coord * kBrickEdge).cast<float>() * vs) + tc;
+    for (int z = 0; z < kBrickEdge; ++z) {
+      for (int y = 0; y < kBrickEdge; ++y) {
+        Eigen::Vector3f pc = p0 + dy * static_cast<float>(y) + dz * static_cast<float>(z);
+        Voxel* vox = &b.voxels[Brick::index(0, y, z)];
+        for (int x = 0; x < kBrickEdge; ++x, pc += dx) {
+          if (pc.z() <= 0.f) continue;
+          const float iz = 1.f / pc.z();
+          const float uf = fx * pc.x() * iz + cx, vf = fy * pc.y() * iz + cy;
+          if (!(uf > -0.5f && vf > -0.5f && uf < w - 0.5f && vf < h - 0.5f)) continue;
+          const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
+          const float d = depth.ptr<float>(v)[u];
+          if (!(d >= zmin && d <= zmax)) continue;
+          const float sdf = d - pc.z();
+          if (sdf < -trunc) continue;
+          const float f = std::min(1.f, sdf * inv_trunc);
+          Voxel& vx = vox[x];
+          const int wold = vx.weight;
+          const float fold = vx.tsdf * (1.f / kTsdfScale);
+          const float fnew = (fold * wold + f) / (wold + 1);
+          vx.tsdf = static_cast<std::int16_t>(std::lround(fnew * kTsdfScale));
+          vx.weight = static_cast<std::uint8_t>(std::min(wold + 1, max_w));
+          if (colour && sdf < trunc) {
+            const cv::Vec3b& c = bgr.ptr<cv::Vec3b>(v)[u];
+            vx.r = static_cast<std::uint8_t>((vx.r * wold + c[2]) / (wold + 1));
+            vx.g = static_cast<std::uint8_t>((vx.g * wold + c[1]) / (wold + 1));
+            vx.b = static_cast<std::uint8_t>((vx.b * wold + c[0]) / (wold + 1));
+          }
+          ++updated;
+        }
+      }
+    }
+  }
+  return updated;
+}
+
+bool TsdfVolume::trilinear(const Eigen::Vector3f& q, float& f) const {
+  const float fx0 = std::floor(q.x()), fy0 = std::floor(q.y()), fz0 = std::floor(q.z());
+  const int x0 = static_cast<int>(fx0), y0 = static_cast<int>(fy0), z0 = static_cast<int>(fz0);
+  const float a = q.x() - fx0, b = q.y() - fy0, c = q.z() - fz0;
+  const Voxel* v[8];
+  if ((x0 & 7) != 7 && (y0 & 7) != 7 && (z0 & 7) != 7) {
+    const Brick* br = brickAt(floorDiv8(x0), floorDiv8(y0), floorDiv8(z0));
+    if (!br) return false;
+    const Voxel* base = &br->voxels[Brick::index(x0 & 7, y0 & 7, z0 & 7)];
+    constexpr int X = 1, Y = kBrickEdge, Z = kBrickEdge * kBrickEdge;
+    v[0] = base; v[1] = base + X; v[2] = base + Y; v[3] = base + X + Y;
+    v[4] = base + Z; v[5] = base + X + Z; v[6] = base + Y + Z; v[7] = base + X + Y + Z;
+  } else {
+    for (int i = 0; i < 8; ++i) {
+      const int x = x0 + (i & 1), y = y0 + ((i >> 1) & 1), z = z0 + ((i >> 2) & 1);
+      const Brick* br = brickAt(floorDiv8(x), floorDiv8(y), floorDiv8(z));
+      if (!br) return false;
+      v[i] = &br->voxels[Brick::index(x & 7, y & 7, z & 7)];
+    }
+  }
+  for (const Voxel* p : v)
+    if (p->weight == 0) return false;
+  const float c00 = v[0]->tsdf + a * (v[1]->tsdf - v[0]->tsdf);
+  const float c10 = v[2]->tsdf + a * (v[3]->tsdf - v[2]->tsdf);
+  const float c01 = v[4]->tsdf + a * (v[5]->tsdf - v[4]->tsdf);
+  const float c11 = v[6]->tsdf + a * (v[7]->tsdf - v[6]->tsdf);
+  const float c0 = c00 + b * (c10 - c00), c1 = c01 + b * (c11 - c01);
+  f = (c0 + c * (c1 - c0)) * (1.f / kTsdfScale);
+  return true;
+}
+
+bool TsdfVolume::gradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const {
+  for (int i = 0; i < 3; ++i) {
+    Eigen::Vector3f a = q, b = q;
+    a[i] += 1.f;
+    b[i] -= 1.f;
+    float fa, fb;
+    if (!trilinear(a, fa) || !trilinear(b, fb)) return false;
+    g[i] = fa - fb;
+  }
+  return true;
+}
+
+bool TsdfVolume::sdfAt(const Eigen::Vector3f& p, float& sdf_m) const {
+  float f;
+  if (!trilinear(p / params_.voxel_size, f)) return false;
+  sdf_m = f * params_.truncation;
+  return true;
+}
+
+void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
+  const float brick = kBrickEdge * params_.voxel_size;
+  Eigen::Vector3i o;
+  for (int i = 0; i < 3; ++i) o[i] = static_cast<int>(std::lround(point[i] / brick)) - n_ / 2;
+  if (o == origin_) return;
+  const auto inside = [&](const Eigen::Vector3i& c) {
+    return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all();
+  };
+  // Bricks leaving the volume go to the world model...
+  for (auto& id : slots_) {
+    if (id < 0) continue;
+    const Eigen::Vector3i& c = pool_[id]->coord;
+    if (!inside(c)) {
+      world_[key(c.x(), c.y(), c.z())] = id;
+      id = -1;
+    }
+  }
+  origin_ = o;
+  // ...and world-model bricks the volume now covers come back (camera revisiting a place).
+  for (auto it = world_.begin(); it != world_.end();) {
+    const Eigen::Vector3i& c = pool_[it->second]->coord;
+    if (inside(c)) {
+      slots_[slotOf(c.x(), c.y(), c.z())] = it->second;
+      it = world_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+}
+
+bool TsdfVolume::shiftIfNeeded(const Eigen::Vector3f& point, float threshold) {
+  if ((point - centre()).norm() <= threshold) return false;
+  const Eigen::Vector3i before = origin_;
+  shiftTo(point);
+  return origin_ != before;
+}
+
+std::vector<BrickRef> TsdfVolume::allBricks() const {
+  std::vector<BrickRef> out;
+  out.reserve(pool_.size());
+  for (std::int32_t id : slots_)
+    if (id >= 0) out.push_back({pool_[id]->coord, pool_[id].get()});
+  for (const auto& [k, id] : world_) out.push_back({pool_[id]->coord, pool_[id].get()});
+  return out;
+}
+
+TriangleMesh TsdfVolume::extractMesh() const { return marchingCubes(allBricks(), params_.voxel_size, 1); }
+
+}  // namespace vofusion::fusion
