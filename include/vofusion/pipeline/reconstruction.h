@@ -1,49 +1,59 @@
 #pragma once
-// The whole per-frame pipeline (odometry -> KinectFusion) behind one call, shared by the offline
-// app (vofusion) and the live one (vofusion-grab --live).
-// CONTRACT: implemented by the lead in src/pipeline/.
+// The whole per-frame pipeline (6D RGB-D odometry -> KinectFusion) behind one call, shared by the
+// offline app (vofusion) and the live one (vofusion-grab --live).
+//
+//   Reconstruction rec(cfg, TrackingMode::Paper);
+//   for each frame: FrameReport r = rec.process(frame);
+//   TriangleMesh mesh = rec.extractMesh();
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <mrpt/config/CConfigFileBase.h>
 #include <opencv2/core.hpp>
 
+#include "vofusion/core/config.h"
 #include "vofusion/core/frame.h"
 #include "vofusion/core/timing.h"
 #include "vofusion/core/trajectory.h"
+#include "vofusion/fusion/kinfu.h"
 #include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/odometry/rgbd_odometry.h"
 
 namespace vofusion {
-
-enum class Mode { Paper, KinFu, Odometry };  // odometry-seeded ICP | ICP alone | odometry alone
-Mode parseMode(const std::string& s);          // throws InputError("--mode", ...) when unknown
-std::string modeName(Mode m);
 
 struct FrameReport {
   std::size_t index = 0;
   double timestamp = 0.0;
   bool tracked = false;       // a pose was estimated for this frame (false: lost, pose held)
   bool fell_back = false;     // ICP rejected, odometry pose used instead (mode paper)
-  bool odometry_ok = false;
-  std::string note;           // why tracking failed or fell back, empty when all went well
+  std::string note;           // why ICP was rejected or tracking lost; empty when all went well
   mrpt::poses::CPose3D pose;  // camera-to-world after this frame
-  StageTimes times;           // this frame's per-stage wall time
+  OdometryResult odometry;    // success=false when not run (mode kinfu) or failed
+  StageTimes times;           // this frame's wall time: odometry, preprocess, icp, integrate, raycast, ...
 };
+
+// The sections every stage reads ([odometry...], [kinfu]), with the stages' defaults: for
+// checkConfigKeys() and dumpConfig().
+std::vector<ConfigSection> reconstructionConfigSections();
 
 class Reconstruction {
  public:
-  // Reads every stage's section of cfg (already checked for unknown keys by the caller).
-  Reconstruction(const mrpt::config::CConfigFileBase& cfg, Mode mode);
+  // Reads every stage's section of cfg (the caller checks for unknown keys first).
+  Reconstruction(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode);
   ~Reconstruction();
   FrameReport process(const Frame& frame);
 
-  const Trajectory& trajectory() const;  // one pose per processed frame
-  TriangleMesh extractMesh();            // raw marching-cubes mesh of the whole world model
-  cv::Mat renderView();                  // shaded ray-cast of the model from the current pose (BGR)
-  const StageTimes& totalTimes() const;
+  TrackingMode mode() const;
+  const Trajectory& trajectory() const;  // one pose per processed frame (held pose when lost)
+  TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model
+  cv::Mat renderView(const CameraIntrinsics& cam) const;  // shaded ray-cast from the current pose
+  const StageTimes& totalTimes() const;  // accumulated over all frames, plus "total"
   std::size_t framesProcessed() const;
-  std::size_t fallbacks() const;
+  std::size_t fallbacks() const;         // frames whose pose came from the odometry fallback
   std::size_t lostFrames() const;
+  std::size_t odometryFailures() const;
+  KinFuStats fusionStats() const;
 
  private:
   struct Impl;
