@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/io/rawlog.h"
 #include "vofusion/io/tum_source.h"
 #include "vofusion/sim/synthetic_source.h"
 
@@ -18,6 +19,7 @@ std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const Sour
     throw InputError(path, "folder is not a TUM RGB-D sequence (no rgb.txt)");
   }
   if (!fs::exists(path)) throw InputError(path, "no such file or folder");
+  if (fs::path(path).extension() == ".rawlog") return std::make_unique<RawlogSource>(path, opts);
   throw InputError(path, "unknown input type (expected a TUM folder, a .rawlog file or 'synthetic')");
 }
 

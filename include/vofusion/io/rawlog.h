@@ -1,0 +1,113 @@
+#pragma once
+// MRPT rawlogs of mrpt::obs::CObservation3DRangeScan: a FrameSource and a writer.
+//
+// Layout written by RawlogWriter for "<dir>/<name>.rawlog":
+//   <name>.rawlog            gz-compressed MRPT archive, either observations-only (default) or
+//                            (CActionCollection, CSensoryFrame) pairs (needed for odometry actions)
+//   <name>_Images/           external storage (MRPT's usual folder): per frame
+//                            <label>_<index>_<time>_INTENSITY.png (8-bit BGR) and ..._DEPTH.bin
+//                            (MRPT's external range-image matrix)
+//   <name>.groundtruth.txt   TUM trajectory (camera-to-world, optical axes), when ground truth is known
+// Ground truth also goes into the rawlog as one mrpt::obs::CObservationRobotPose per frame
+// (sensorLabel "GROUND_TRUTH", same timestamp as the frame, pose = camera-to-world in the optical
+// convention of Frame::groundTruth). The range image is depth along the optical axis
+// (range_is_depth = true) in units of rangeUnits metres; depth and colour are registered, so
+// cameraParams == cameraParamsIntensity and relativePoseIntensityWRTDepth is MRPT's "cameras
+// coincide" pose (0,0,0,-90deg,0,-90deg). Everything goes to temporary names and appears on commit().
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <mrpt/obs/CAction.h>
+#include <mrpt/obs/CActionRobotMovement3D.h>
+#include <mrpt/obs/CObservation.h>
+#include <mrpt/obs/CObservation3DRangeScan.h>
+
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/trajectory.h"
+#include "vofusion/io/frame_source.h"
+
+namespace vofusion {
+
+// Reads every CObservation3DRangeScan of a rawlog in either format (standalone observations or inside
+// sensory frames), with embedded or external ("<name>_Images") images and range images in any
+// rangeUnits. Colour: the intensity image as BGR (grey images are expanded; a missing one becomes
+// mid-grey). Intrinsics: cameraParams (depth camera), unless SourceOptions::intrinsics overrides.
+// Ground truth: "<name>.groundtruth.txt" if present, else CObservationRobotPose "GROUND_TRUTH" entries.
+class RawlogSource : public FrameSource {
+ public:
+  RawlogSource(const std::string& path, const SourceOptions& opts);
+  ~RawlogSource() override;
+  bool next(Frame& frame) override;
+  std::size_t size() const override { return count_; }
+  void rewind() override;
+  std::string name() const override { return path_; }
+  const Trajectory& groundTruth() const { return gt_; }
+  const std::string& imagesDirectory() const { return images_dir_; }
+
+ private:
+  struct Reader;
+  std::string path_, images_dir_;
+  SourceOptions opts_;
+  std::size_t count_ = 0, pos_ = 0;
+  Trajectory gt_;
+  std::unique_ptr<Reader> reader_;
+};
+
+// Converts one observation to a Frame (loads external data first). `origin` names the rawlog in errors.
+Frame frameFromObservation(const mrpt::obs::CObservation3DRangeScan& obs, const std::string& origin,
+                           const std::optional<CameraIntrinsics>& override_camera = std::nullopt);
+// Builds an observation (images embedded) from a Frame; depth quantised to range_units metres.
+mrpt::obs::CObservation3DRangeScan::Ptr observationFromFrame(const Frame& frame, double range_units = 2e-4,
+                                                             const std::string& sensor_label = "KINECT");
+// An odometry action for the action/sensory-frame format: pose change between consecutive frames
+// (camera-to-camera, optical axes), covariance 6x6 (x y z yaw pitch roll; zero = unknown).
+mrpt::obs::CActionRobotMovement3D makeOdometryAction(const mrpt::poses::CPose3D& delta, double timestamp,
+                                                     const mrpt::math::CMatrixDouble66* cov = nullptr);
+
+struct RawlogWriterOptions {
+  enum class Format { Observations, ActionsSensoryFrames };
+  Format format = Format::Observations;  // ActionsSensoryFrames is required for writeAction()
+  bool external_images = true;           // images in "<name>_Images" (what RawLogViewer expects for big logs)
+  double range_units = 2e-4;             // m per range unit: 2e-4 keeps TUM depth exact (5000/m), max 13.1 m
+  std::string sensor_label = "KINECT";
+  bool ground_truth_observations = true; // CObservationRobotPose "GROUND_TRUTH" for frames with groundTruth
+  int png_compression = 1;               // 0..9, external colour PNGs (1 = fast)
+};
+
+class RawlogWriter {
+ public:
+  // Throws InputError(path, ...) if the output cannot be created.
+  explicit RawlogWriter(const std::string& path, const RawlogWriterOptions& opts = {});
+  ~RawlogWriter();  // without commit(): temporaries removed, an earlier output left untouched
+  RawlogWriter(const RawlogWriter&) = delete;
+  RawlogWriter& operator=(const RawlogWriter&) = delete;
+
+  // One CObservation3DRangeScan (+ ground-truth observation). Action/SF format: written as the
+  // pending actions followed by a sensory frame holding the observation(s).
+  void write(const Frame& frame);
+  // Action/SF format only (std::logic_error otherwise): goes into the action collection preceding the
+  // next frame's sensory frame.
+  void writeAction(const mrpt::obs::CAction& action);
+  // Any other observation: observations format: written now; action/SF format: joins the next frame's SF.
+  void writeObservation(const mrpt::obs::CObservation& obs);
+  // Companion "<name>.groundtruth.txt" (TUM format), written on commit().
+  void writeGroundTruth(const Trajectory& gt);
+  // Flushes, closes and renames everything into place.
+  void commit();
+
+  std::size_t framesWritten() const { return frames_; }
+  const std::string& path() const { return path_; }
+  // "<dir>/<name>_Images" and "<dir>/<name>.groundtruth.txt" for a rawlog path.
+  static std::string imagesDirFor(const std::string& rawlog_path);
+  static std::string groundTruthPathFor(const std::string& rawlog_path);
+
+ private:
+  struct Impl;
+  std::string path_;
+  RawlogWriterOptions opts_;
+  std::size_t frames_ = 0;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace vofusion

@@ -1,0 +1,407 @@
+#include "vofusion/io/rawlog.h"
+
+#include <cmath>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <stdexcept>
+
+#include <mrpt/core/Clock.h>
+#include <mrpt/img/CImage.h>
+#include <mrpt/io/CFileGZInputStream.h>
+#include <mrpt/io/CFileGZOutputStream.h>
+#include <mrpt/obs/CActionCollection.h>
+#include <mrpt/obs/CObservationRobotPose.h>
+#include <mrpt/obs/CSensoryFrame.h>
+#include <mrpt/serialization/CArchive.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "vofusion/core/errors.h"
+
+namespace fs = std::filesystem;
+using mrpt::obs::CObservation3DRangeScan;
+
+namespace vofusion {
+
+namespace {
+
+constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
+
+// Counts delivered bytes, so a clean end of file (EOF before an object starts) can be told apart
+// from a truncated one (EOF inside an object).
+class CountingStream : public mrpt::io::CStream {
+ public:
+  explicit CountingStream(mrpt::io::CStream& in) : in_(in) {}
+  size_t Read(void* buf, size_t n) override {
+    const size_t got = in_.Read(buf, n);
+    count_ += got;
+    return got;
+  }
+  size_t Write(const void*, size_t) override { throw std::logic_error("read-only stream"); }
+  uint64_t Seek(int64_t, TSeekOrigin) override { throw std::logic_error("stream cannot seek"); }
+  uint64_t getTotalBytesCount() const override { return in_.getTotalBytesCount(); }
+  uint64_t getPosition() const override { return count_; }
+
+ private:
+  mrpt::io::CStream& in_;
+  uint64_t count_ = 0;
+};
+
+// "<scale> metres per unit" made exact for the usual decimal units (1e-3, 2e-4 = 1/5000): the float
+// stored in the rawlog is not exactly 2e-4, but TUM depth read back must equal the TUM loader's.
+double exactUnits(float units) {
+  const double inv = 1.0 / double(units);
+  const double r = std::round(inv);
+  return (r >= 1 && std::abs(inv - r) < 1e-3 * r) ? 1.0 / r : double(units);
+}
+
+std::string stripRawlogExtension(const std::string& path) {
+  const fs::path p(path);
+  return p.extension() == ".rawlog" ? (p.parent_path() / p.stem()).string() : path;
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+// Reading
+
+Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string& origin,
+                           const std::optional<CameraIntrinsics>& override_camera) {
+  try {
+    obs.load();
+  } catch (const std::exception& e) {
+    throw InputError(obs.rangeImage_isExternallyStored() ? obs.rangeImage_getExternalStorageFileAbsolutePath("")
+                                                         : origin,
+                     "cannot load external range image (missing or corrupt)");
+  }
+  if (!obs.hasRangeImage || obs.rangeImage.rows() == 0)
+    throw InputError(origin, "3D observation without a range image");
+  const int rows = int(obs.rangeImage.rows()), cols = int(obs.rangeImage.cols());
+
+  Frame f;
+  f.timestamp = mrpt::Clock::toDouble(obs.timestamp);
+  f.camera = override_camera ? *override_camera : CameraIntrinsics::fromMrpt(obs.cameraParams);
+  f.camera.width = cols;
+  f.camera.height = rows;
+  f.camera.validate(override_camera ? "--intrinsics" : origin);
+
+  f.depth.create(rows, cols, CV_32F);
+  const double units = exactUnits(obs.rangeUnits);
+  for (int r = 0; r < rows; ++r) {
+    float* out = f.depth.ptr<float>(r);
+    for (int c = 0; c < cols; ++c) out[c] = float(obs.rangeImage(r, c) * units);
+  }
+  if (!obs.range_is_depth) {
+    // Ranges along the pixel ray -> depth along the optical axis.
+    const CameraIntrinsics& k = f.camera;
+    for (int r = 0; r < rows; ++r) {
+      float* out = f.depth.ptr<float>(r);
+      for (int c = 0; c < cols; ++c) {
+        const double x = (c - k.cx) / k.fx, y = (r - k.cy) / k.fy;
+        out[c] = float(out[c] / std::sqrt(1 + x * x + y * y));
+      }
+    }
+  }
+
+  if (obs.hasIntensityImage) {
+    cv::Mat img;
+    try {
+      img = obs.intensityImage.asCvMat<cv::Mat>(mrpt::img::SHALLOW_COPY);
+    } catch (const std::exception&) {
+      throw InputError(obs.intensityImage.isExternallyStored()
+                           ? obs.intensityImage.getExternalStorageFileAbsolutePath()
+                           : origin,
+                       "cannot load intensity image (missing or corrupt)");
+    }
+    if (img.empty())
+      throw InputError(obs.intensityImage.isExternallyStored()
+                           ? obs.intensityImage.getExternalStorageFileAbsolutePath()
+                           : origin,
+                       "cannot load intensity image (missing or corrupt)");
+    if (img.depth() != CV_8U) img.convertTo(img, CV_8U, img.depth() == CV_16U ? 1.0 / 256 : 255.0);
+    if (img.channels() == 1) cv::cvtColor(img, f.rgb, cv::COLOR_GRAY2BGR);
+    else if (img.channels() == 4) cv::cvtColor(img, f.rgb, cv::COLOR_BGRA2BGR);
+    else f.rgb = img.clone();
+    // Registered sensors may deliver colour at another resolution (e.g. 1280x1024 over 640x480 depth).
+    if (f.rgb.cols != cols || f.rgb.rows != rows) cv::resize(f.rgb, f.rgb, cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
+    obs.intensityImage.unload();
+  } else {
+    f.rgb = cv::Mat(rows, cols, CV_8UC3, cv::Scalar(128, 128, 128));
+  }
+  obs.unload();
+  return f;
+}
+
+struct RawlogSource::Reader {
+  mrpt::io::CFileGZInputStream gz;
+  std::unique_ptr<CountingStream> counter;
+  std::unique_ptr<mrpt::serialization::CArchive> arch;
+  std::deque<mrpt::obs::CObservation::Ptr> pending;  // observations of the current sensory frame
+  std::size_t objects = 0;
+  std::string path;
+
+  explicit Reader(const std::string& p) : path(p) {
+    std::string err;
+    if (!gz.open(p, err)) throw InputError(p, "cannot open rawlog: " + err);
+    counter = std::make_unique<CountingStream>(gz);
+    arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<CountingStream>>(*counter);
+  }
+
+  // Next observation of any kind; nullptr at a clean end. Throws InputError when truncated/corrupt.
+  mrpt::obs::CObservation::Ptr nextObservation() {
+    while (pending.empty()) {
+      const uint64_t before = counter->getPosition();
+      mrpt::serialization::CSerializable::Ptr obj;
+      try {
+        *arch >> obj;
+      } catch (const mrpt::serialization::CExceptionEOF&) {
+        if (counter->getPosition() == before) return nullptr;
+        throw InputError(path, "truncated rawlog (ends inside entry " + std::to_string(objects + 1) + ")");
+      } catch (const std::exception& e) {
+        std::string why = e.what();
+        const auto nl = why.find('\n');
+        if (nl != std::string::npos) why = why.substr(0, nl);
+        throw InputError(path, "corrupt or truncated rawlog at entry " + std::to_string(objects + 1) +
+                                   (objects == 0 ? " (not an MRPT rawlog?)" : ""));
+      }
+      ++objects;
+      if (!obj) continue;
+      if (auto o = std::dynamic_pointer_cast<mrpt::obs::CObservation>(obj)) return o;
+      if (auto sf = std::dynamic_pointer_cast<mrpt::obs::CSensoryFrame>(obj))
+        for (const auto& o : *sf)
+          if (o) pending.push_back(o);
+      // CActionCollection and anything else: not needed for frames.
+    }
+    auto o = pending.front();
+    pending.pop_front();
+    return o;
+  }
+
+  CObservation3DRangeScan::Ptr next3D(Trajectory* gt) {
+    while (auto o = nextObservation()) {
+      if (auto s = std::dynamic_pointer_cast<CObservation3DRangeScan>(o)) {
+        if (s->hasRangeImage) return s;
+      } else if (gt && o->sensorLabel == kGroundTruthLabel) {
+        if (auto rp = std::dynamic_pointer_cast<mrpt::obs::CObservationRobotPose>(o))
+          gt->push_back({mrpt::Clock::toDouble(rp->timestamp), rp->pose.mean});
+      }
+    }
+    return nullptr;
+  }
+};
+
+RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) : path_(path), opts_(opts) {
+  if (!fs::exists(path)) throw InputError(path, "no such file");
+  if (fs::is_directory(path)) throw InputError(path, "is a folder, expected a .rawlog file");
+  images_dir_ = RawlogWriter::imagesDirFor(path);
+  if (!fs::is_directory(images_dir_)) {
+    // MRPT also accepts "_images" / "_IMAGES".
+    for (const char* alt : {"_images", "_IMAGES"})
+      if (fs::is_directory(stripRawlogExtension(path) + alt)) images_dir_ = stripRawlogExtension(path) + alt;
+  }
+  if (opts.intrinsics) CameraIntrinsics::parse(*opts.intrinsics);  // fail early on a bad preset
+
+  // One pass to count the frames and collect embedded ground truth (no image decoding needed).
+  Reader scan(path);
+  Trajectory embedded_gt;
+  while (scan.next3D(&embedded_gt)) {
+    ++count_;
+    if (opts.max_frames > 0 && count_ >= opts.max_frames) break;
+  }
+  if (count_ == 0)
+    throw InputError(path, "contains no CObservation3DRangeScan with a range image (" +
+                               std::to_string(scan.objects) + " entries read)");
+  const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
+  if (fs::exists(gt_file)) {
+    gt_ = readTumTrajectory(gt_file);
+  } else {
+    std::sort(embedded_gt.begin(), embedded_gt.end(),
+              [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
+    gt_ = std::move(embedded_gt);
+  }
+  rewind();
+}
+
+RawlogSource::~RawlogSource() = default;
+
+void RawlogSource::rewind() {
+  reader_ = std::make_unique<Reader>(path_);
+  pos_ = 0;
+}
+
+bool RawlogSource::next(Frame& frame) {
+  if (pos_ >= count_) return false;
+  auto obs = reader_->next3D(nullptr);
+  if (!obs) return false;
+  // External images and range matrices are relative to the rawlog's "_Images" folder.
+  mrpt::img::CImage::setImagesPathBase(images_dir_);
+  std::optional<CameraIntrinsics> cam;
+  if (opts_.intrinsics) cam = CameraIntrinsics::parse(*opts_.intrinsics);
+  frame = frameFromObservation(*obs, path_, cam);
+  frame.index = pos_++;
+  mrpt::poses::CPose3D gt;
+  if (interpolatePose(gt_, frame.timestamp, 0.05, gt)) frame.groundTruth = gt;
+  return true;
+}
+
+// ------------------------------------------------------------------------------------------------
+// Writing
+
+CObservation3DRangeScan::Ptr observationFromFrame(const Frame& f, double range_units,
+                                                  const std::string& sensor_label) {
+  if (!f.valid()) throw std::invalid_argument("observationFromFrame: frame without colour or depth");
+  if (!(range_units > 0)) throw std::invalid_argument("observationFromFrame: range_units must be positive");
+  auto obs = std::make_shared<CObservation3DRangeScan>();
+  obs->sensorLabel = sensor_label;
+  obs->timestamp = mrpt::Clock::fromDouble(f.timestamp);
+  obs->hasRangeImage = true;
+  obs->range_is_depth = true;
+  obs->rangeUnits = float(range_units);
+  const double scale = 1.0 / exactUnits(float(range_units));
+  obs->rangeImage_setSize(f.depth.rows, f.depth.cols);
+  double max_z = 0;
+  for (int r = 0; r < f.depth.rows; ++r) {
+    const float* in = f.depth.ptr<float>(r);
+    for (int c = 0; c < f.depth.cols; ++c) {
+      const double z = in[c];
+      const double v = (std::isfinite(z) && z > 0) ? std::round(z * scale) : 0.0;
+      obs->rangeImage(r, c) = static_cast<uint16_t>(std::min(v, 65535.0));
+      max_z = std::max(max_z, z);
+    }
+  }
+  obs->maxRange = float(65535.0 / scale);
+  obs->hasIntensityImage = true;
+  obs->intensityImageChannel = CObservation3DRangeScan::CH_VISIBLE;
+  obs->intensityImage = mrpt::img::CImage(f.rgb, mrpt::img::DEEP_COPY);
+  CameraIntrinsics cam = f.camera;
+  cam.width = f.depth.cols;
+  cam.height = f.depth.rows;
+  obs->cameraParams = cam.toMrpt();
+  obs->cameraParamsIntensity = obs->cameraParams;  // registered: one camera
+  obs->relativePoseIntensityWRTDepth = mrpt::poses::CPose3D(0, 0, 0, -M_PI / 2, 0, -M_PI / 2);  // coincide
+  return obs;
+}
+
+mrpt::obs::CActionRobotMovement3D makeOdometryAction(const mrpt::poses::CPose3D& delta, double timestamp,
+                                                     const mrpt::math::CMatrixDouble66* cov) {
+  mrpt::obs::CActionRobotMovement3D a;
+  a.estimationMethod = mrpt::obs::CActionRobotMovement3D::emVisualOdometry;
+  a.poseChange.mean = delta;
+  if (cov) a.poseChange.cov = *cov;
+  else a.poseChange.cov.setZero();
+  a.rawOdometryIncrementReading = delta;
+  a.timestamp = mrpt::Clock::fromDouble(timestamp);
+  return a;
+}
+
+std::string RawlogWriter::imagesDirFor(const std::string& rawlog_path) {
+  return stripRawlogExtension(rawlog_path) + "_Images";
+}
+std::string RawlogWriter::groundTruthPathFor(const std::string& rawlog_path) {
+  return stripRawlogExtension(rawlog_path) + ".groundtruth.txt";
+}
+
+struct RawlogWriter::Impl {
+  AtomicPath rawlog, images;
+  mrpt::io::CFileGZOutputStream gz;
+  std::unique_ptr<mrpt::serialization::CArchive> arch;
+  mrpt::obs::CActionCollection pending_actions;
+  std::vector<mrpt::obs::CObservation::Ptr> pending_obs;
+  std::optional<Trajectory> gt;
+  bool images_used = false;
+
+  Impl(const std::string& path) : rawlog(path), images(imagesDirFor(path)) {}
+};
+
+RawlogWriter::RawlogWriter(const std::string& path, const RawlogWriterOptions& opts) : path_(path), opts_(opts) {
+  const fs::path parent = fs::absolute(path).parent_path();
+  ensureWritableDirectory(parent.string());
+  if (fs::is_directory(path)) throw InputError(path, "output path is a folder, expected a .rawlog file name");
+  impl_ = std::make_unique<Impl>(path);
+  std::string err;
+  if (!impl_->gz.open(impl_->rawlog.tmp(), 1, err)) throw InputError(path, "cannot write: " + err);
+  impl_->arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<mrpt::io::CFileGZOutputStream>>(impl_->gz);
+  if (opts.external_images) {
+    std::error_code ec;
+    fs::create_directories(impl_->images.tmp(), ec);
+    if (ec) throw InputError(impl_->images.path(), "cannot create: " + ec.message());
+  }
+}
+
+RawlogWriter::~RawlogWriter() {
+  if (impl_) impl_->gz.close();  // before AtomicPath removes the temporary
+}
+
+void RawlogWriter::writeAction(const mrpt::obs::CAction& action) {
+  if (opts_.format != RawlogWriterOptions::Format::ActionsSensoryFrames)
+    throw std::logic_error("RawlogWriter::writeAction needs the ActionsSensoryFrames format");
+  impl_->pending_actions.insert(const_cast<mrpt::obs::CAction&>(action));
+}
+
+void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
+  auto copy = std::dynamic_pointer_cast<mrpt::obs::CObservation>(obs.duplicateGetSmartPtr());
+  if (opts_.format == RawlogWriterOptions::Format::Observations) *impl_->arch << *copy;
+  else impl_->pending_obs.push_back(copy);
+}
+
+void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
+
+void RawlogWriter::write(const Frame& frame) {
+  auto obs = observationFromFrame(frame, opts_.range_units, opts_.sensor_label);
+  if (opts_.external_images) {
+    char stem[128];
+    std::snprintf(stem, sizeof stem, "%s_%06zu_%.6f", opts_.sensor_label.c_str(), frames_, frame.timestamp);
+    const std::string png = std::string(stem) + "_INTENSITY.png";
+    const std::string dir = impl_->images.tmp();
+    if (!cv::imwrite(dir + "/" + png, frame.rgb, {cv::IMWRITE_PNG_COMPRESSION, opts_.png_compression}))
+      throw InputError(impl_->images.path() + "/" + png, "cannot write image");
+    obs->intensityImage.setExternalStorage(png);
+    try {
+      obs->rangeImage_convertToExternalStorage(std::string(stem) + "_DEPTH.bin", dir + "/");
+    } catch (const std::exception&) {
+      throw InputError(impl_->images.path(), "cannot write range image");
+    }
+    impl_->images_used = true;
+  }
+  std::vector<mrpt::obs::CObservation::Ptr> obs_list{obs};
+  if (frame.groundTruth && opts_.ground_truth_observations) {
+    auto gt = std::make_shared<mrpt::obs::CObservationRobotPose>();
+    gt->sensorLabel = kGroundTruthLabel;
+    gt->timestamp = obs->timestamp;
+    gt->pose.mean = *frame.groundTruth;
+    gt->pose.cov.setZero();
+    obs_list.push_back(gt);
+  }
+  try {
+    if (opts_.format == RawlogWriterOptions::Format::Observations) {
+      for (const auto& o : obs_list) *impl_->arch << *o;
+    } else {
+      mrpt::obs::CSensoryFrame sf;
+      for (const auto& o : obs_list) sf.insert(o);
+      for (const auto& o : impl_->pending_obs) sf.insert(o);
+      *impl_->arch << impl_->pending_actions << sf;
+      impl_->pending_actions.clear();
+      impl_->pending_obs.clear();
+    }
+  } catch (const std::exception& e) {
+    throw InputError(path_, "write failed (disk full?)");
+  }
+  ++frames_;
+}
+
+void RawlogWriter::commit() {
+  if (opts_.format == RawlogWriterOptions::Format::ActionsSensoryFrames &&
+      (impl_->pending_actions.size() > 0 || !impl_->pending_obs.empty())) {
+    // Trailing actions/observations still need their pair.
+    mrpt::obs::CSensoryFrame sf;
+    for (const auto& o : impl_->pending_obs) sf.insert(o);
+    *impl_->arch << impl_->pending_actions << sf;
+  }
+  impl_->gz.close();
+  if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
+  if (opts_.external_images) impl_->images.commit();
+  impl_->rawlog.commit();
+}
+
+}  // namespace vofusion

@@ -1,0 +1,257 @@
+#include <Eigen/Dense>
+// MRPT rawlog reading and writing: a real OpenNI2 capture, round trips in both formats, bad input.
+#include <filesystem>
+#include <fstream>
+
+#include <mrpt/core/Clock.h>
+#include <mrpt/io/CFileGZOutputStream.h>
+#include <mrpt/obs/CObservationOdometry.h>
+#include <mrpt/obs/CRawlog.h>
+#include <mrpt/serialization/CArchive.h>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/io/rawlog.h"
+#include "vofusion/sim/synthetic_sequence.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+const char* kMrptRgbd = "/usr/share/mrpt/datasets/tests_rgbd.rawlog";
+
+std::vector<Frame> simFrames(std::size_t n) {
+  sim::SimOptions o;
+  o.frames = n;
+  o.camera = o.camera.scaled(0.5);
+  sim::SyntheticSequence seq(o);
+  std::vector<Frame> out;
+  for (std::size_t i = 0; i < n; ++i) out.push_back(seq.render(i));
+  return out;
+}
+
+std::string writeRawlog(const std::string& path, const std::vector<Frame>& frames, const RawlogWriterOptions& o) {
+  RawlogWriter w(path, o);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    if (o.format == RawlogWriterOptions::Format::ActionsSensoryFrames && i > 0)
+      w.writeAction(makeOdometryAction(*frames[i].groundTruth - *frames[i - 1].groundTruth, frames[i].timestamp));
+    w.write(frames[i]);
+  }
+  w.commit();
+  return path;
+}
+
+void expectSameFrames(const std::vector<Frame>& a, FrameSource& src, double depth_tol) {
+  ASSERT_EQ(src.size(), a.size());
+  Frame f;
+  for (const Frame& e : a) {
+    ASSERT_TRUE(src.next(f));
+    EXPECT_NEAR(f.timestamp, e.timestamp, 1e-6);
+    EXPECT_EQ(cv::norm(f.rgb, e.rgb, cv::NORM_INF), 0.0);
+    EXPECT_LE(cv::norm(f.depth, e.depth, cv::NORM_INF), depth_tol);
+    EXPECT_EQ(cv::countNonZero(f.depth > 0), cv::countNonZero(e.depth > 0));
+    EXPECT_DOUBLE_EQ(f.camera.fx, e.camera.fx);
+    EXPECT_DOUBLE_EQ(f.camera.cy, e.camera.cy);
+    EXPECT_EQ(f.camera.width, e.camera.width);
+    ASSERT_TRUE(f.groundTruth.has_value());
+    EXPECT_LT((f.groundTruth->asVectorVal() - e.groundTruth->asVectorVal()).norm(), 1e-5);
+  }
+  EXPECT_FALSE(src.next(f));
+}
+}  // namespace
+
+TEST(Rawlog, ReadsRealOpenNI2Capture) {
+  VOFUSION_REQUIRE_DATA(kMrptRgbd);
+  auto src = openFrameSource(kMrptRgbd);
+  ASSERT_EQ(src->size(), 1u);
+  Frame f;
+  ASSERT_TRUE(src->next(f));
+  EXPECT_FALSE(src->next(f) && false);
+  EXPECT_EQ(f.rgb.type(), CV_8UC3);
+  EXPECT_EQ(f.depth.type(), CV_32FC1);
+  EXPECT_EQ(f.rgb.size(), f.depth.size());
+  EXPECT_EQ(f.camera.width, f.depth.cols);
+  EXPECT_NEAR(f.timestamp, 1462879443.617188, 1e-3);  // as rawlog-edit --info reports
+  EXPECT_GT(f.camera.fx, 100.0);
+  const double valid = cv::countNonZero(f.depth > 0) / double(f.depth.total());
+  EXPECT_GT(valid, 0.3);
+  const double mean = cv::mean(f.depth, f.depth > 0)[0];
+  EXPECT_GT(mean, 0.3);  // metres, an indoor scene
+  EXPECT_LT(mean, 8.0);
+  cv::Scalar m, sd;
+  cv::meanStdDev(f.rgb, m, sd);
+  EXPECT_GT(sd[0], 5.0);  // a real image, not a blank
+  src->rewind();
+  Frame g;
+  ASSERT_TRUE(src->next(g));
+  EXPECT_EQ(cv::norm(f.depth, g.depth, cv::NORM_INF), 0.0);
+}
+
+TEST(Rawlog, RoundTripObservationsExternalImages) {
+  const auto frames = simFrames(4);
+  const std::string dir = test::tempDir("rawlog_obs");
+  const std::string path = writeRawlog(dir + "/seq.rawlog", frames, {});
+  EXPECT_TRUE(fs::is_directory(dir + "/seq_Images"));
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir + "/seq_Images"), fs::directory_iterator{}), 8);
+  RawlogSource src(path, {});
+  expectSameFrames(frames, src, 1e-4 + 1e-6);  // 2e-4 m units: half a unit
+  src.rewind();
+  expectSameFrames(frames, src, 1e-4 + 1e-6);
+  // Nothing temporary left behind.
+  for (const auto& e : fs::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
+TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {
+  const auto frames = simFrames(3);
+  const std::string dir = test::tempDir("rawlog_sf");
+  RawlogWriterOptions o;
+  o.format = RawlogWriterOptions::Format::ActionsSensoryFrames;
+  o.external_images = false;
+  o.range_units = 1e-3;
+  const std::string path = writeRawlog(dir + "/sf.rawlog", frames, o);
+  EXPECT_FALSE(fs::exists(dir + "/sf_Images"));
+  RawlogSource src(path, {});
+  expectSameFrames(frames, src, 5e-4 + 1e-6);
+  // MRPT itself sees the action/sensory-frame pairs with our odometry.
+  mrpt::obs::CRawlog log;
+  ASSERT_TRUE(log.loadFromRawLogFile(path));
+  ASSERT_EQ(log.size(), 6u);
+  auto acts = log.getAsAction(2);
+  ASSERT_EQ(acts->size(), 1u);
+  const auto delta = *frames[1].groundTruth - *frames[0].groundTruth;
+  auto mv = std::dynamic_pointer_cast<mrpt::obs::CActionRobotMovement3D>(acts->get(0));
+  ASSERT_TRUE(mv);
+  EXPECT_EQ(mv->estimationMethod, mrpt::obs::CActionRobotMovement3D::emVisualOdometry);
+  EXPECT_LT((mv->poseChange.mean.asVectorVal() - delta.asVectorVal()).norm(), 1e-12);
+}
+
+TEST(Rawlog, GroundTruthCompanionFile) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_gt");
+  RawlogWriterOptions o;
+  o.ground_truth_observations = false;
+  RawlogWriter w(dir + "/g.rawlog", o);
+  Trajectory gt;
+  for (const auto& f : frames) {
+    w.write(f);
+    gt.push_back({f.timestamp, *f.groundTruth});
+  }
+  w.writeGroundTruth(gt);
+  w.commit();
+  ASSERT_TRUE(fs::exists(dir + "/g.groundtruth.txt"));
+  RawlogSource src(dir + "/g.rawlog", {});
+  ASSERT_EQ(src.groundTruth().size(), 2u);
+  Frame f;
+  ASSERT_TRUE(src.next(f));
+  ASSERT_TRUE(f.groundTruth.has_value());
+  EXPECT_LT((f.groundTruth->asVectorVal() - frames[0].groundTruth->asVectorVal()).norm(), 1e-5);
+}
+
+TEST(Rawlog, IntrinsicsOverrideAndMaxFrames) {
+  const auto frames = simFrames(3);
+  const std::string dir = test::tempDir("rawlog_intr");
+  const std::string path = writeRawlog(dir + "/i.rawlog", frames, {});
+  SourceOptions so;
+  so.intrinsics = "300,301,160,120";
+  so.max_frames = 2;
+  auto src = openFrameSource(path, so);
+  EXPECT_EQ(src->size(), 2u);
+  Frame f;
+  ASSERT_TRUE(src->next(f));
+  EXPECT_DOUBLE_EQ(f.camera.fy, 301.0);
+  so.intrinsics = "fr9";
+  try {
+    openFrameSource(path, so);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("fr9"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Rawlog, UncommittedWriterLeavesNothingAndKeepsOldOutput) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_atomic");
+  {
+    RawlogWriter w(dir + "/a.rawlog");
+    w.write(frames[0]);
+  }
+  EXPECT_TRUE(fs::is_empty(dir));
+  writeRawlog(dir + "/a.rawlog", {frames[0]}, {});
+  const auto size_before = fs::file_size(dir + "/a.rawlog");
+  {
+    RawlogWriter w(dir + "/a.rawlog");
+    w.write(frames[0]);
+    w.write(frames[1]);
+  }
+  EXPECT_EQ(fs::file_size(dir + "/a.rawlog"), size_before);
+  EXPECT_EQ(RawlogSource(dir + "/a.rawlog", {}).size(), 1u);
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator{}), 2);  // .rawlog + _Images
+}
+
+TEST(Rawlog, ObservationsFormatRejectsActions) {
+  const std::string dir = test::tempDir("rawlog_noact");
+  RawlogWriter w(dir + "/x.rawlog");
+  EXPECT_THROW(w.writeAction(makeOdometryAction({}, 0.0)), std::logic_error);
+}
+
+namespace {
+void expectInputError(const std::string& path, const std::string& needle, const SourceOptions& so = {}) {
+  try {
+    RawlogSource src(path, so);
+    Frame f;
+    while (src.next(f)) {
+    }
+    FAIL() << "no error for " << path;
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(needle), std::string::npos) << msg;
+    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+  }
+}
+}  // namespace
+
+TEST(RawlogBadInput, NoThreeDObservations) {
+  const std::string dir = test::tempDir("rawlog_bad_empty");
+  const std::string path = dir + "/odo.rawlog";
+  {
+    mrpt::io::CFileGZOutputStream out(path);
+    auto arch = mrpt::serialization::archiveFrom(out);
+    mrpt::obs::CObservationOdometry odo;
+    odo.timestamp = mrpt::Clock::fromDouble(1.0);
+    arch << odo << odo;
+  }
+  expectInputError(path, path + ": contains no CObservation3DRangeScan");
+}
+
+TEST(RawlogBadInput, TruncatedAndGarbage) {
+  const auto frames = simFrames(3);
+  const std::string dir = test::tempDir("rawlog_bad_trunc");
+  RawlogWriterOptions o;
+  o.external_images = false;
+  const std::string full = writeRawlog(dir + "/full.rawlog", frames, o);
+  std::ifstream in(full, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string cut = dir + "/cut.rawlog";
+  std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() * 2 / 3);
+  expectInputError(cut, cut + ": ");
+  const std::string junk = dir + "/junk.rawlog";
+  std::ofstream(junk) << "this is not a rawlog\n";
+  expectInputError(junk, junk + ": ");
+  const std::string empty = dir + "/empty.rawlog";
+  std::ofstream(empty).flush();
+  expectInputError(empty, empty + ": contains no");
+  expectInputError(dir + "/missing.rawlog", "missing.rawlog: no such file");
+}
+
+TEST(RawlogBadInput, MissingExternalImageNamesTheImage) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_bad_ext");
+  const std::string path = writeRawlog(dir + "/e.rawlog", frames, {});
+  std::string victim;
+  for (const auto& e : fs::directory_iterator(dir + "/e_Images"))
+    if (e.path().string().find("000001") != std::string::npos && e.path().extension() == ".png") victim = e.path();
+  ASSERT_FALSE(victim.empty());
+  fs::remove(victim);
+  expectInputError(path, fs::path(victim).filename().string());
+}
