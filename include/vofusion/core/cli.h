@@ -1,0 +1,33 @@
+#pragma once
+// Minimal command-line parsing for the thin apps: "--name value", "--flag", positionals.
+// Every problem is an InputError("usage", ...) so apps report it as one line and exit 2.
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+namespace vofusion {
+
+class CommandLine {
+ public:
+  // value_options: options that take a value (e.g. "--out"); flag_options: options that don't.
+  CommandLine(int argc, char** argv, std::set<std::string> value_options, std::set<std::string> flag_options);
+
+  std::optional<std::string> value(const std::string& name) const;
+  std::string value(const std::string& name, const std::string& fallback) const;
+  std::size_t count(const std::string& name, std::size_t fallback) const;  // non-negative integer
+  double number(const std::string& name, double fallback) const;
+  bool flag(const std::string& name) const;
+  const std::vector<std::string>& positional() const { return positional_; }
+
+ private:
+  std::vector<std::pair<std::string, std::string>> values_;
+  std::set<std::string> flags_;
+  std::vector<std::string> positional_;
+};
+
+// Runs an app's body, turning any exception into one line on stderr and exit code 2
+// (InputError: bad input or usage) or 1 (anything else).
+int runApp(const char* app_name, int (*body)(int, char**), int argc, char** argv);
+
+}  // namespace vofusion

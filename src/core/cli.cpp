@@ -1,0 +1,88 @@
+#include "vofusion/core/cli.h"
+
+#include <cstdio>
+#include <exception>
+
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+CommandLine::CommandLine(int argc, char** argv, std::set<std::string> value_options,
+                         std::set<std::string> flag_options) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a.size() > 2 && a.rfind("--", 0) == 0) {
+      std::string name = a, val;
+      const auto eq = a.find('=');
+      const bool inline_value = eq != std::string::npos;
+      if (inline_value) name = a.substr(0, eq), val = a.substr(eq + 1);
+      if (value_options.count(name)) {
+        if (!inline_value) {
+          if (i + 1 >= argc) throw InputError("usage", "option " + name + " needs a value");
+          val = argv[++i];
+        }
+        values_.emplace_back(name, val);
+      } else if (flag_options.count(name) && !inline_value) {
+        flags_.insert(name);
+      } else {
+        throw InputError("usage", "unknown option " + name);
+      }
+    } else {
+      positional_.push_back(a);
+    }
+  }
+}
+
+std::optional<std::string> CommandLine::value(const std::string& name) const {
+  std::optional<std::string> v;
+  for (const auto& [k, x] : values_)
+    if (k == name) v = x;  // the last occurrence wins, as usual
+  return v;
+}
+
+std::string CommandLine::value(const std::string& name, const std::string& fallback) const {
+  return value(name).value_or(fallback);
+}
+
+std::size_t CommandLine::count(const std::string& name, std::size_t fallback) const {
+  const auto v = value(name);
+  if (!v) return fallback;
+  std::size_t used = 0;
+  long long n = -1;
+  try {
+    n = std::stoll(*v, &used);
+  } catch (const std::exception&) {
+  }
+  if (n < 0 || used != v->size()) throw InputError("usage", name + " expects a non-negative integer, got '" + *v + "'");
+  return static_cast<std::size_t>(n);
+}
+
+double CommandLine::number(const std::string& name, double fallback) const {
+  const auto v = value(name);
+  if (!v) return fallback;
+  std::size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(*v, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != v->size()) throw InputError("usage", name + " expects a number, got '" + *v + "'");
+  return x;
+}
+
+bool CommandLine::flag(const std::string& name) const { return flags_.count(name) > 0; }
+
+int runApp(const char* app_name, int (*body)(int, char**), int argc, char** argv) {
+  try {
+    return body(argc, argv);
+  } catch (const InputError& e) {
+    std::fprintf(stderr, "%s: error: %s\n", app_name, e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: error: %s\n", app_name, e.what());
+    return 1;
+  }
+}
+
+}  // namespace vofusion
