@@ -1,0 +1,69 @@
+#pragma once
+// Mesh post-processing with CGAL Polygon Mesh Processing: repair, drop small fragments, fill small
+// holes, optionally simplify and smooth. Vertex colours survive every step (new vertices take the
+// colours of their neighbours). INI section [mesh]; defaults documented in share/mesh.ini.
+#include <string>
+#include <vector>
+
+#include <mrpt/config/CLoadableOptions.h>
+
+#include "vofusion/mesh/triangle_mesh.h"
+
+namespace vofusion {
+
+struct MeshCleanParams : public mrpt::config::CLoadableOptions {
+  // Repair: weld vertices, drop degenerate/duplicate faces, stitch borders, make it manifold.
+  bool repair = true;
+  double weld_distance = 0.0;          // m; vertices closer than this are merged (0: exact duplicates only)
+  // Connected components smaller than EITHER threshold are removed (0 disables that test).
+  int min_component_faces = 50;        // faces
+  double min_component_area = 0.0;     // m^2
+  // Holes whose border is at most this long AND has at most this many edges are filled.
+  double max_hole_perimeter = 0.3;     // m (0: fill no holes)
+  int max_hole_edges = 200;            // edges
+  bool hole_fairing = true;            // smooth (fair) the patch; falls back to a flat refined patch
+  // Simplification by edge collapse (0 disables each stop criterion; both 0: no simplification).
+  int target_faces = 0;                // faces
+  double target_edge_length = 0.0;     // m; stop when no edge is shorter than this
+  // Smoothing: curvature-flow shape smoothing, then tangential relaxation (triangle quality).
+  int smooth_iterations = 0;           // iterations of PMP::smooth_shape (0: off)
+  double smooth_time = 1e-4;           // s-like step of the mean-curvature flow per iteration
+  int relax_iterations = 0;            // iterations of PMP::tangential_relaxation (0: off)
+  bool orient_closed_outward = true;   // if the result is closed, orient every component outward
+  bool recompute_normals = true;       // write fresh area-weighted vertex normals
+
+  void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
+  void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
+};
+
+struct MeshCleanStep {
+  std::string name;                    // "repair", "components", "holes", "simplify", "smooth"
+  std::size_t vertices_before = 0, faces_before = 0;
+  std::size_t vertices_after = 0, faces_after = 0;
+  double seconds = 0.0;                // wall time
+};
+
+struct MeshCleanReport {
+  bool success = false;
+  std::string failure;                 // why, when !success (the mesh is then left as it was given)
+  std::vector<MeshCleanStep> steps;
+  std::size_t duplicate_vertices_merged = 0;
+  std::size_t degenerate_faces_removed = 0;  // combinatorial (repeated vertex) + geometric (zero area)
+  std::size_t duplicate_faces_removed = 0;
+  std::size_t border_edges_stitched = 0;
+  std::size_t non_manifold_vertices_split = 0;
+  std::size_t components_removed = 0, components_kept = 0;
+  std::size_t holes_filled = 0, holes_left = 0;  // left: larger than the bounds (or filling failed)
+  std::size_t border_cycles_after = 0;           // remaining boundary loops (0: closed)
+  bool closed = false;                 // watertight (no border edges)
+  bool manifold = false;               // no non-manifold vertex
+  double area = 0.0;                   // m^2, final surface area
+
+  std::string toJson() const;          // one JSON object
+};
+
+// Cleans `mesh` in place. On failure (e.g. an internal CGAL error) returns success=false and leaves
+// `mesh` unchanged.
+MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params);
+
+}  // namespace vofusion

@@ -1,0 +1,383 @@
+// Mesh post-processing with CGAL PMP. All CGAL code of the project's mesh stage lives in this one
+// unit (CGAL headers compile slowly).
+#ifndef CGAL_EIGEN3_ENABLED
+#define CGAL_EIGEN3_ENABLED 1  // Eigen sparse solvers for hole fairing and shape smoothing
+#endif
+#include "vofusion/mesh/mesh_clean.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_mesh_processing/border.h>
+#include <CGAL/Polygon_mesh_processing/compute_normal.h>
+#include <CGAL/Polygon_mesh_processing/connected_components.h>
+#include <CGAL/Polygon_mesh_processing/manifoldness.h>
+#include <CGAL/Polygon_mesh_processing/measure.h>
+#include <CGAL/Polygon_mesh_processing/orient_polygon_soup.h>
+#include <CGAL/Polygon_mesh_processing/orientation.h>
+#include <CGAL/Polygon_mesh_processing/polygon_soup_to_polygon_mesh.h>
+#include <CGAL/Polygon_mesh_processing/repair.h>
+#include <CGAL/Polygon_mesh_processing/repair_degeneracies.h>
+#include <CGAL/Polygon_mesh_processing/repair_polygon_soup.h>
+#include <CGAL/Polygon_mesh_processing/smooth_shape.h>
+#include <CGAL/Polygon_mesh_processing/stitch_borders.h>
+#include <CGAL/Polygon_mesh_processing/tangential_relaxation.h>
+#include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_placement.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Edge_length_cost.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/LindstromTurk_placement.h>
+#include <CGAL/Surface_mesh_simplification/Edge_collapse_visitor_base.h>
+#include <CGAL/Surface_mesh_simplification/edge_collapse.h>
+#include <CGAL/boost/graph/helpers.h>
+
+namespace PMP = CGAL::Polygon_mesh_processing;
+namespace SMS = CGAL::Surface_mesh_simplification;
+
+namespace vofusion {
+namespace {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point = Kernel::Point_3;
+using Mesh = CGAL::Surface_mesh<Point>;
+using VD = Mesh::Vertex_index;
+using FD = Mesh::Face_index;
+using HD = Mesh::Halfedge_index;
+using Rgb = std::array<std::uint8_t, 3>;
+
+struct PointHash {
+  std::size_t operator()(const Point& p) const {
+    std::size_t h = 1469598103934665603ull;
+    for (int i = 0; i < 3; ++i) {
+      const double d = p[i];
+      std::uint64_t b;
+      std::memcpy(&b, &d, 8);
+      h = (h ^ b) * 1099511628211ull;
+    }
+    return h;
+  }
+};
+
+// Greedy welding of vertices closer than `dist`: each vertex maps to the first earlier
+// representative within reach (hash grid with cell size `dist`, 27 neighbouring cells searched).
+std::size_t weldSoup(std::vector<Point>& points, std::vector<std::vector<std::size_t>>& polys, double dist) {
+  struct CellHash {
+    std::size_t operator()(const std::array<long long, 3>& c) const {
+      return std::size_t(c[0] * 73856093ll ^ c[1] * 19349663ll ^ c[2] * 83492791ll);
+    }
+  };
+  std::unordered_map<std::array<long long, 3>, std::vector<std::size_t>, CellHash> grid;
+  std::vector<std::size_t> rep(points.size());
+  const double d2 = dist * dist;
+  std::size_t merged = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const std::array<long long, 3> c{(long long)std::floor(points[i].x() / dist), (long long)std::floor(points[i].y() / dist),
+                                     (long long)std::floor(points[i].z() / dist)};
+    rep[i] = i;
+    for (int dx = -1; dx <= 1 && rep[i] == i; ++dx)
+      for (int dy = -1; dy <= 1 && rep[i] == i; ++dy)
+        for (int dz = -1; dz <= 1 && rep[i] == i; ++dz) {
+          auto it = grid.find({c[0] + dx, c[1] + dy, c[2] + dz});
+          if (it == grid.end()) continue;
+          for (std::size_t j : it->second)
+            if (CGAL::squared_distance(points[i], points[j]) <= d2) { rep[i] = j; break; }
+        }
+    if (rep[i] == i) grid[c].push_back(i);
+    else ++merged;
+  }
+  for (auto& poly : polys)
+    for (auto& v : poly) v = rep[v];
+  return merged;  // welded points are left unreferenced; repair_polygon_soup drops them
+}
+
+// Vertices created by a step (hole patches) carry no colour yet: give each the mean colour of its
+// coloured neighbours, layer by layer inwards from the patch border.
+void propagateColours(Mesh& m, Mesh::Property_map<VD, Rgb> col, Mesh::Property_map<VD, bool> known) {
+  for (bool changed = true; changed;) {
+    changed = false;
+    std::vector<std::pair<VD, Rgb>> layer;
+    for (VD v : m.vertices()) {
+      if (known[v]) continue;
+      int sum[3] = {0, 0, 0}, n = 0;
+      for (VD w : CGAL::vertices_around_target(m.halfedge(v), m))
+        if (known[w]) {
+          for (int k = 0; k < 3; ++k) sum[k] += col[w][k];
+          ++n;
+        }
+      if (n) layer.push_back({v, Rgb{std::uint8_t(sum[0] / n), std::uint8_t(sum[1] / n), std::uint8_t(sum[2] / n)}});
+    }
+    for (const auto& [v, c] : layer) {
+      col[v] = c;
+      known[v] = true;
+      changed = true;
+    }
+  }
+}
+
+std::size_t nonManifoldVertexCount(const Mesh& m) {
+  std::size_t n = 0;
+  for (VD v : m.vertices())
+    if (PMP::is_non_manifold_vertex(v, m)) ++n;
+  return n;
+}
+
+std::size_t borderCycleCount(const Mesh& m) {
+  std::vector<HD> cycles;
+  PMP::extract_boundary_cycles(m, std::back_inserter(cycles));
+  return cycles.size();
+}
+
+// Stops edge collapse at a face budget or once the shortest remaining edge reaches a length.
+struct StopAtTarget {
+  std::size_t target_edges = 0;  // 0: unused
+  double min_sq_length = 0.0;    // m^2, 0: unused
+  template <typename F, typename Profile>
+  bool operator()(const F&, const Profile& profile, std::size_t, std::size_t current_edges) const {
+    if (target_edges && current_edges <= target_edges) return true;
+    return min_sq_length > 0 && CGAL::squared_distance(profile.p0(), profile.p1()) >= min_sq_length;
+  }
+};
+
+// Gives the vertex that survives an edge collapse the mean colour of the edge's two ends.
+struct BlendColoursOnCollapse : SMS::Edge_collapse_visitor_base<Mesh> {
+  Mesh::Property_map<VD, Rgb> col;
+  Rgb pending{};
+  explicit BlendColoursOnCollapse(Mesh::Property_map<VD, Rgb> c) : col(c) {}
+  template <typename Profile, typename Placement>
+  void OnCollapsing(const Profile& prof, const Placement&) {
+    for (int k = 0; k < 3; ++k) pending[k] = std::uint8_t((int(col[prof.v0()][k]) + int(col[prof.v1()][k]) + 1) / 2);
+  }
+  template <typename Profile>
+  void OnCollapsed(const Profile&, VD kept) { col[kept] = pending; }
+};
+
+class Cleaner {
+ public:
+  Cleaner(const MeshCleanParams& p, MeshCleanReport& r) : p_(p), r_(r) {}
+
+  void run(TriangleMesh& in) {
+    has_colours_ = !in.colors.empty();
+    step("repair", [&] { buildRepaired(in); });
+    if (p_.min_component_faces > 0 || p_.min_component_area > 0) step("components", [&] { removeSmallComponents(); });
+    if (p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) step("holes", [&] { fillHoles(); });
+    if (p_.target_faces > 0 || p_.target_edge_length > 0) step("simplify", [&] { simplify(); });
+    if (p_.smooth_iterations > 0 || p_.relax_iterations > 0) step("smooth", [&] { smooth(); });
+    m_.collect_garbage();
+    if (p_.orient_closed_outward && !m_.is_empty() && CGAL::is_closed(m_)) PMP::orient(m_);
+    r_.border_cycles_after = borderCycleCount(m_);
+    {
+      auto fcc = m_.add_property_map<FD, std::size_t>("f:cc_final", 0).first;
+      r_.components_kept = m_.is_empty() ? 0 : PMP::connected_components(m_, fcc);
+      m_.remove_property_map(fcc);
+    }
+    r_.closed = r_.border_cycles_after == 0 && !m_.is_empty();
+    r_.manifold = nonManifoldVertexCount(m_) == 0;
+    r_.area = m_.is_empty() ? 0.0 : PMP::area(m_);
+    in = toTriangleMesh();
+  }
+
+ private:
+  template <typename F>
+  void step(const char* name, F&& f) {
+    MeshCleanStep s;
+    s.name = name;
+    if (!r_.steps.empty()) {
+      s.vertices_before = m_.number_of_vertices();
+      s.faces_before = m_.number_of_faces();
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    s.vertices_after = m_.number_of_vertices();
+    s.faces_after = m_.number_of_faces();
+    if (r_.steps.empty()) {
+      s.vertices_before = input_vertices_;
+      s.faces_before = input_faces_;
+    }
+    r_.steps.push_back(s);
+  }
+
+  void buildRepaired(const TriangleMesh& in) {
+    input_vertices_ = in.vertices.size();
+    input_faces_ = in.faces.size();
+    std::vector<Point> pts;
+    pts.reserve(in.vertices.size());
+    for (const auto& v : in.vertices) pts.emplace_back(v.x(), v.y(), v.z());
+    std::vector<std::vector<std::size_t>> polys;
+    polys.reserve(in.faces.size());
+    for (const auto& f : in.faces) polys.push_back({f[0], f[1], f[2]});
+    // Colours travel by position: the soup functions renumber points but keep their coordinates.
+    std::unordered_map<Point, Rgb, PointHash> colour_at;
+    if (has_colours_)
+      for (std::size_t i = 0; i < pts.size(); ++i) colour_at.emplace(pts[i], in.colors[i]);
+
+    if (p_.repair) {
+      const std::size_t n_points = pts.size();
+      if (p_.weld_distance > 0) r_.duplicate_vertices_merged += weldSoup(pts, polys, p_.weld_distance);
+      r_.duplicate_vertices_merged += PMP::merge_duplicate_points_in_polygon_soup(pts, polys);
+      (void)n_points;
+      // Faces that repeat a vertex (e.g. after welding) are degenerate.
+      const std::size_t n_polys = polys.size();
+      polys.erase(std::remove_if(polys.begin(), polys.end(),
+                                 [](const auto& f) { return f[0] == f[1] || f[1] == f[2] || f[0] == f[2]; }),
+                  polys.end());
+      r_.degenerate_faces_removed += n_polys - polys.size();
+      r_.duplicate_faces_removed += PMP::merge_duplicate_polygons_in_polygon_soup(pts, polys);
+      PMP::repair_polygon_soup(pts, polys);  // drops isolated points and anything left invalid
+      // Consistent orientation; points at non-manifold spots are duplicated so the result is manifold.
+      const std::size_t before = pts.size();
+      PMP::orient_polygon_soup(pts, polys);
+      r_.non_manifold_vertices_split += pts.size() - before;
+    }
+    PMP::polygon_soup_to_polygon_mesh(pts, polys, m_);
+    col_ = m_.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
+    known_ = m_.add_property_map<VD, bool>("v:rgb_known", false).first;
+    for (VD v : m_.vertices()) {
+      auto it = colour_at.find(m_.point(v));
+      if (it != colour_at.end()) col_[v] = it->second;
+      known_[v] = true;
+    }
+    if (!p_.repair) return;
+    r_.border_edges_stitched += PMP::stitch_borders(m_);
+    const std::size_t faces_before = m_.number_of_faces();
+    PMP::remove_degenerate_faces(m_);  // zero-area triangles (collinear or coincident corners)
+    m_.collect_garbage();
+    r_.degenerate_faces_removed += faces_before - m_.number_of_faces();
+    r_.non_manifold_vertices_split += PMP::duplicate_non_manifold_vertices(m_);
+    PMP::remove_isolated_vertices(m_);
+    m_.collect_garbage();
+  }
+
+  void removeSmallComponents() {
+    auto fcc = m_.add_property_map<FD, std::size_t>("f:cc", 0).first;
+    const std::size_t n = PMP::connected_components(m_, fcc);
+    std::vector<std::size_t> faces(n, 0);
+    std::vector<double> area(n, 0.0);
+    for (FD f : m_.faces()) {
+      ++faces[fcc[f]];
+      area[fcc[f]] += PMP::face_area(f, m_);
+    }
+    std::vector<std::size_t> drop;
+    for (std::size_t c = 0; c < n; ++c)
+      if ((p_.min_component_faces > 0 && faces[c] < std::size_t(p_.min_component_faces)) ||
+          (p_.min_component_area > 0 && area[c] < p_.min_component_area))
+        drop.push_back(c);
+    if (!drop.empty()) PMP::remove_connected_components(m_, drop, fcc);
+    m_.remove_property_map(fcc);
+    PMP::remove_isolated_vertices(m_);
+    m_.collect_garbage();
+    r_.components_removed += drop.size();
+  }
+
+  void fillHoles() {
+    std::vector<HD> cycles;
+    PMP::extract_boundary_cycles(m_, std::back_inserter(cycles));
+    for (HD start : cycles) {
+      double perimeter = 0.0;
+      std::size_t edges = 0;
+      HD h = start;
+      do {
+        perimeter += std::sqrt(CGAL::squared_distance(m_.point(m_.source(h)), m_.point(m_.target(h))));
+        ++edges;
+        h = m_.next(h);
+      } while (h != start && edges <= std::size_t(p_.max_hole_edges));
+      if (edges > std::size_t(p_.max_hole_edges) || perimeter > p_.max_hole_perimeter) {
+        ++r_.holes_left;
+        continue;
+      }
+      std::vector<FD> new_faces;
+      std::vector<VD> new_vertices;
+      if (p_.hole_fairing)
+        PMP::triangulate_refine_and_fair_hole(m_, start, std::back_inserter(new_faces), std::back_inserter(new_vertices));
+      else
+        PMP::triangulate_and_refine_hole(m_, start, std::back_inserter(new_faces), std::back_inserter(new_vertices));
+      if (new_faces.empty()) ++r_.holes_left;
+      else ++r_.holes_filled;
+    }
+    propagateColours(m_, col_, known_);
+  }
+
+  void simplify() {
+    if (!CGAL::is_triangle_mesh(m_) || m_.is_empty()) return;
+    StopAtTarget stop;
+    if (p_.target_faces > 0 && m_.number_of_faces() > std::size_t(p_.target_faces))
+      // Edges per face is nearly constant under collapse (3/2 on a closed surface).
+      stop.target_edges = std::size_t(double(p_.target_faces) * m_.number_of_edges() / m_.number_of_faces());
+    stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
+    if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
+    // Shortest edges first, placed by Lindstrom-Turk, refusing collapses that flip normals. The
+    // surviving vertex of a collapse keeps its colour.
+    SMS::Bounded_normal_change_placement<SMS::LindstromTurk_placement<Mesh>> placement;
+    SMS::edge_collapse(m_, stop,
+                       CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
+                           .get_placement(placement)
+                           .visitor(BlendColoursOnCollapse(col_)));
+    m_.collect_garbage();
+  }
+
+  void smooth() {
+    auto fixed = m_.add_property_map<VD, bool>("v:fixed", false).first;
+    for (HD h : m_.halfedges())
+      if (m_.is_border(h)) fixed[m_.target(h)] = true;  // keep open borders where they are
+    if (p_.smooth_iterations > 0)
+      PMP::smooth_shape(m_, p_.smooth_time,
+                        CGAL::parameters::number_of_iterations(p_.smooth_iterations).vertex_is_constrained_map(fixed));
+    if (p_.relax_iterations > 0)
+      PMP::tangential_relaxation(m_, CGAL::parameters::number_of_iterations(p_.relax_iterations).vertex_is_constrained_map(fixed));
+    m_.remove_property_map(fixed);
+  }
+
+  TriangleMesh toTriangleMesh() {
+    TriangleMesh out;
+    m_.collect_garbage();  // indices are now 0..n-1
+    out.vertices.reserve(m_.number_of_vertices());
+    for (VD v : m_.vertices()) {
+      const Point& p = m_.point(v);
+      out.vertices.emplace_back(float(p.x()), float(p.y()), float(p.z()));
+      if (has_colours_) out.colors.push_back(col_[v]);
+    }
+    for (FD f : m_.faces()) {
+      std::array<std::uint32_t, 3> tri{};
+      int k = 0;
+      for (VD v : CGAL::vertices_around_face(m_.halfedge(f), m_))
+        if (k < 3) tri[k++] = std::uint32_t(v.idx());
+      out.faces.push_back(tri);
+    }
+    if (p_.recompute_normals && !m_.is_empty()) {
+      auto vn = m_.add_property_map<VD, Kernel::Vector_3>("v:n", CGAL::NULL_VECTOR).first;
+      PMP::compute_vertex_normals(m_, vn);
+      for (VD v : m_.vertices()) out.normals.emplace_back(float(vn[v].x()), float(vn[v].y()), float(vn[v].z()));
+    }
+    return out;
+  }
+
+  const MeshCleanParams& p_;
+  MeshCleanReport& r_;
+  Mesh m_;
+  Mesh::Property_map<VD, Rgb> col_;
+  Mesh::Property_map<VD, bool> known_;
+  bool has_colours_ = false;
+  std::size_t input_vertices_ = 0, input_faces_ = 0;
+};
+
+}  // namespace
+
+MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params) {
+  MeshCleanReport report;
+  TriangleMesh work = mesh;
+  try {
+    Cleaner(params, report).run(work);
+  } catch (const std::exception& e) {
+    report.success = false;
+    report.failure = e.what();
+    return report;
+  }
+  mesh = std::move(work);
+  report.success = true;
+  return report;
+}
+
+}  // namespace vofusion

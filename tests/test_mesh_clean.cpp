@@ -1,0 +1,283 @@
+// CGAL mesh post-processing on synthetic meshes with known defects.
+#include <Eigen/Dense>
+#include <cmath>
+#include <fstream>
+
+#include <mrpt/config/CConfigFileMemory.h>
+
+#include "support.h"
+#include "test_mesh_fixtures.h"
+#include "vofusion/mesh/mesh_clean.h"
+
+using namespace vofusion;
+using test::colourAt;
+using test::icosphere;
+
+namespace {
+
+double triangleArea(const TriangleMesh& m, const std::array<std::uint32_t, 3>& f) {
+  return 0.5 * double((m.vertices[f[1]] - m.vertices[f[0]]).cross(m.vertices[f[2]] - m.vertices[f[0]]).norm());
+}
+
+double totalArea(const TriangleMesh& m) {
+  double a = 0;
+  for (const auto& f : m.faces) a += triangleArea(m, f);
+  return a;
+}
+
+// Signed volume (divergence theorem): positive when faces are oriented outward.
+double signedVolume(const TriangleMesh& m) {
+  double v = 0;
+  for (const auto& f : m.faces)
+    v += double(m.vertices[f[0]].dot(m.vertices[f[1]].cross(m.vertices[f[2]]))) / 6.0;
+  return v;
+}
+
+// Every undirected edge used by exactly two faces, in opposite directions: closed and consistently oriented.
+bool closedAndOriented(const TriangleMesh& m) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> directed;
+  for (const auto& f : m.faces)
+    for (int k = 0; k < 3; ++k) ++directed[{f[k], f[(k + 1) % 3]}];
+  for (const auto& [e, n] : directed) {
+    if (n != 1) return false;
+    auto it = directed.find({e.second, e.first});
+    if (it == directed.end() || it->second != 1) return false;
+  }
+  return !m.faces.empty();
+}
+
+// Each face with its own three vertex copies: a "polygon soup" as naive marching cubes writes it.
+TriangleMesh explode(const TriangleMesh& m) {
+  TriangleMesh s;
+  for (const auto& f : m.faces) {
+    const auto base = std::uint32_t(s.vertices.size());
+    for (auto i : f) {
+      s.vertices.push_back(m.vertices[i]);
+      s.colors.push_back(m.colors[i]);
+    }
+    s.faces.push_back({base, base + 1, base + 2});
+  }
+  return s;
+}
+
+MeshCleanParams testParams() {
+  MeshCleanParams p;
+  p.min_component_faces = 30;  // the 20-face fragment goes
+  p.max_hole_perimeter = 2.0;  // m: the punched cap (~1.3 m around) is filled
+  p.max_hole_edges = 100;
+  return p;
+}
+
+}  // namespace
+
+TEST(MeshClean, RepairsSphereWithHoleFragmentDegeneratesAndDuplicates) {
+  const TriangleMesh ref = icosphere(3);  // 1280 faces, r = 1
+  TriangleMesh m = ref;
+  // Punch a hole: drop the cap z > 0.97 (a ring of radius ~0.24 m).
+  std::size_t cap_faces = 0;
+  m.faces.erase(std::remove_if(m.faces.begin(), m.faces.end(),
+                               [&](const auto& f) {
+                                 const bool cap = (m.vertices[f[0]] + m.vertices[f[1]] + m.vertices[f[2]]).z() / 3 > 0.97f;
+                                 cap_faces += cap;
+                                 return cap;
+                               }),
+                m.faces.end());
+  ASSERT_GT(cap_faces, 5u);
+  m = explode(m);  // every vertex duplicated
+  // A floating fragment: a small closed sphere 4 m away.
+  const TriangleMesh frag = icosphere(0, 0.1f, {4, 0, 0});
+  const auto off = std::uint32_t(m.vertices.size());
+  m.vertices.insert(m.vertices.end(), frag.vertices.begin(), frag.vertices.end());
+  m.colors.insert(m.colors.end(), frag.colors.begin(), frag.colors.end());
+  for (auto f : frag.faces) m.faces.push_back({f[0] + off, f[1] + off, f[2] + off});
+  // Degenerate faces: a repeated vertex, and a zero-area sliver glued onto the sphere (collinear corners).
+  m.faces.push_back({0, 0, 1});
+  m.vertices.push_back((m.vertices[m.faces[5][0]] + m.vertices[m.faces[5][1]]) / 2);
+  m.colors.push_back({0, 0, 0});
+  m.faces.push_back({m.faces[5][0], m.faces[5][1], std::uint32_t(m.vertices.size() - 1)});
+  // An exactly collinear (zero-area) triangle.
+  const auto c0 = std::uint32_t(m.vertices.size());
+  for (float x : {0.f, 0.25f, 0.5f}) {
+    m.vertices.push_back({x, 0, 0});
+    m.colors.push_back({0, 0, 0});
+  }
+  m.faces.push_back({c0, c0 + 1, c0 + 2});
+  // A duplicated face.
+  m.faces.push_back(m.faces[10]);
+
+  const MeshCleanReport r = cleanMesh(m, testParams());
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_GE(r.duplicate_vertices_merged, ref.vertices.size());  // the soup had ~6 copies per vertex
+  EXPECT_GE(r.degenerate_faces_removed, 2u);
+  EXPECT_GE(r.duplicate_faces_removed, 1u);
+  EXPECT_GE(r.components_removed, 1u);
+  EXPECT_EQ(r.components_kept, 1u);
+  EXPECT_EQ(r.holes_filled, 1u);
+  EXPECT_EQ(r.holes_left, 0u);
+  EXPECT_TRUE(r.closed);
+  EXPECT_TRUE(r.manifold);
+  EXPECT_EQ(r.border_cycles_after, 0u);
+  ASSERT_EQ(r.steps.size(), 3u);
+  EXPECT_EQ(r.steps[0].name, "repair");
+  EXPECT_EQ(r.steps[2].name, "holes");
+  EXPECT_GT(r.steps[2].faces_after, r.steps[2].faces_before);
+
+  // The result: a closed, consistently outward-oriented sphere with no degenerate triangle.
+  EXPECT_TRUE(closedAndOriented(m));
+  for (const auto& f : m.faces) {
+    EXPECT_TRUE(f[0] != f[1] && f[1] != f[2] && f[0] != f[2]);
+    EXPECT_GT(triangleArea(m, f), 1e-8);
+  }
+  for (const auto& v : m.vertices) EXPECT_LT(v.norm(), 1.01f) << "fragment vertex left: " << v.transpose();
+  const double ref_area = totalArea(ref), ref_vol = signedVolume(ref);
+  EXPECT_NEAR(totalArea(m), ref_area, 0.02 * ref_area);
+  EXPECT_NEAR(signedVolume(m), ref_vol, 0.03 * ref_vol);
+  EXPECT_NEAR(r.area, totalArea(m), 1e-3 * ref_area);
+  // Fresh unit normals pointing outward.
+  ASSERT_EQ(m.normals.size(), m.vertices.size());
+  for (std::size_t i = 0; i < m.vertices.size(); ++i) EXPECT_GT(m.normals[i].dot(m.vertices[i].normalized()), 0.9f);
+
+  // Colours: original vertices keep theirs exactly; patch vertices get the colour of their surroundings.
+  ASSERT_EQ(m.colors.size(), m.vertices.size());
+  std::size_t patch_vertices = 0;
+  for (std::size_t i = 0; i < m.vertices.size(); ++i) {
+    const auto expected = colourAt(m.vertices[i]);
+    const bool original = std::abs(m.vertices[i].norm() - 1.f) < 1e-6f;
+    for (int k = 0; k < 3; ++k) {
+      if (original) EXPECT_EQ(m.colors[i][k], expected[k]);
+      else EXPECT_NEAR(m.colors[i][k], expected[k], 20);
+    }
+    patch_vertices += !original;
+  }
+  EXPECT_GT(patch_vertices, 0u);  // the patch was refined
+}
+
+TEST(MeshClean, LargeOpeningsStayOpenSmallHolesClose) {
+  TriangleMesh m = test::boxRoom(4, 3, 2.5, 8);  // walls meet along shared positions, not indices
+  const double ref_area = totalArea(m);
+  // A small hole in the floor: drop the two triangles of one grid cell (0.5 x 0.375 m).
+  m.faces.erase(m.faces.begin() + 2 * (3 * 8 + 3), m.faces.begin() + 2 * (3 * 8 + 3) + 2);
+  MeshCleanParams p;
+  p.max_hole_perimeter = 2.0;
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_GT(r.border_edges_stitched + r.duplicate_vertices_merged, 0u);
+  EXPECT_EQ(r.holes_filled, 1u);
+  EXPECT_EQ(r.holes_left, 1u);           // the missing ceiling (14 m around) is no hole to fill
+  EXPECT_EQ(r.border_cycles_after, 1u);
+  EXPECT_FALSE(r.closed);
+  EXPECT_TRUE(r.manifold);
+  EXPECT_EQ(r.components_kept, 1u);      // the five walls were stitched into one surface
+  EXPECT_NEAR(totalArea(m), ref_area, 0.01 * ref_area);
+}
+
+TEST(MeshClean, NonManifoldVertexIsSplit) {
+  // Two tetrahedra touching at one vertex (a bow-tie vertex).
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
+  m.faces = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}, {0, 5, 4}, {0, 4, 6}, {0, 6, 5}, {4, 5, 6}};
+  MeshCleanParams p;
+  p.min_component_faces = 0;
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_EQ(r.non_manifold_vertices_split, 1u);
+  EXPECT_EQ(m.vertices.size(), 8u);
+  EXPECT_EQ(m.faces.size(), 8u);
+  EXPECT_TRUE(r.manifold);
+  EXPECT_TRUE(r.closed);
+  EXPECT_EQ(r.components_kept, 2u);
+  EXPECT_TRUE(m.colors.empty());  // none given, none invented
+}
+
+TEST(MeshClean, SimplifiesToFaceBudgetKeepingShapeAndColours) {
+  TriangleMesh m = icosphere(4);  // 5120 faces
+  const double ref_vol = signedVolume(m);
+  MeshCleanParams p;
+  p.target_faces = 1000;
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_LE(m.faces.size(), 1050u);
+  EXPECT_GE(m.faces.size(), 900u);
+  EXPECT_TRUE(closedAndOriented(m));
+  EXPECT_NEAR(signedVolume(m), ref_vol, 0.03 * ref_vol);
+  for (std::size_t i = 0; i < m.vertices.size(); ++i)
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(m.colors[i][k], colourAt(m.vertices[i])[k], 12);
+}
+
+TEST(MeshClean, SimplifiesToEdgeLength) {
+  TriangleMesh m = icosphere(4);  // edges ~0.08 m
+  MeshCleanParams p;
+  p.target_edge_length = 0.2;
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_LT(m.faces.size(), 1500u);
+  EXPECT_TRUE(closedAndOriented(m));
+}
+
+TEST(MeshClean, SmoothingReducesNoise) {
+  TriangleMesh m = icosphere(3);
+  // Deterministic radial noise of +-3 %.
+  for (std::size_t i = 0; i < m.vertices.size(); ++i) m.vertices[i] *= 1.f + 0.03f * std::sin(float(i) * 12.9898f) ;
+  const auto radialSpread = [](const TriangleMesh& mm) {
+    double s = 0, s2 = 0;
+    for (const auto& v : mm.vertices) { s += v.norm(); s2 += v.squaredNorm(); }
+    const double n = double(mm.vertices.size());
+    return std::sqrt(std::max(0.0, s2 / n - (s / n) * (s / n)));
+  };
+  const double before = radialSpread(m);
+  MeshCleanParams p;
+  p.smooth_iterations = 3;
+  p.smooth_time = 1e-3;
+  p.relax_iterations = 2;
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_LT(radialSpread(m), 0.5 * before);
+  EXPECT_TRUE(closedAndOriented(m));
+  EXPECT_EQ(r.steps.back().name, "smooth");
+}
+
+TEST(MeshClean, ParamsRoundTripThroughIni) {
+  MeshCleanParams a;
+  a.repair = false;
+  a.weld_distance = 0.001;
+  a.min_component_faces = 7;
+  a.min_component_area = 0.25;
+  a.max_hole_perimeter = 0.7;
+  a.max_hole_edges = 33;
+  a.hole_fairing = false;
+  a.target_faces = 1234;
+  a.target_edge_length = 0.02;
+  a.smooth_iterations = 4;
+  a.smooth_time = 2e-4;
+  a.relax_iterations = 5;
+  a.orient_closed_outward = false;
+  a.recompute_normals = false;
+  mrpt::config::CConfigFileMemory ini;
+  a.saveToConfigFile(ini, "mesh");
+  MeshCleanParams b;
+  b.loadFromConfigFile(ini, "mesh");
+  EXPECT_EQ(b.repair, a.repair);
+  EXPECT_DOUBLE_EQ(b.weld_distance, a.weld_distance);
+  EXPECT_EQ(b.min_component_faces, a.min_component_faces);
+  EXPECT_DOUBLE_EQ(b.min_component_area, a.min_component_area);
+  EXPECT_DOUBLE_EQ(b.max_hole_perimeter, a.max_hole_perimeter);
+  EXPECT_EQ(b.max_hole_edges, a.max_hole_edges);
+  EXPECT_EQ(b.hole_fairing, a.hole_fairing);
+  EXPECT_EQ(b.target_faces, a.target_faces);
+  EXPECT_DOUBLE_EQ(b.target_edge_length, a.target_edge_length);
+  EXPECT_EQ(b.smooth_iterations, a.smooth_iterations);
+  EXPECT_DOUBLE_EQ(b.smooth_time, a.smooth_time);
+  EXPECT_EQ(b.relax_iterations, a.relax_iterations);
+  EXPECT_EQ(b.orient_closed_outward, a.orient_closed_outward);
+  EXPECT_EQ(b.recompute_normals, a.recompute_normals);
+}
+
+TEST(MeshClean, ReportJsonHasSteps) {
+  TriangleMesh m = icosphere(1);
+  const std::string j = cleanMesh(m, MeshCleanParams()).toJson();
+  EXPECT_EQ(j.front(), '{');
+  EXPECT_EQ(j.back(), '}');
+  EXPECT_NE(j.find("\"success\": true"), std::string::npos) << j;
+  EXPECT_NE(j.find("\"name\": \"repair\""), std::string::npos) << j;
+  EXPECT_NE(j.find("\"closed\": true"), std::string::npos) << j;
+}
