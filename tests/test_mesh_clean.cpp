@@ -2,6 +2,7 @@
 #include <Eigen/Dense>
 #include <cmath>
 #include <fstream>
+#include <iterator>
 
 #include <mrpt/config/CConfigFileMemory.h>
 
@@ -280,4 +281,54 @@ TEST(MeshClean, ReportJsonHasSteps) {
   EXPECT_NE(j.find("\"success\": true"), std::string::npos) << j;
   EXPECT_NE(j.find("\"name\": \"repair\""), std::string::npos) << j;
   EXPECT_NE(j.find("\"closed\": true"), std::string::npos) << j;
+}
+
+TEST(MeshClean, SharedIniDocumentsEveryKeyWithItsDefault) {
+  mrpt::config::CConfigFileMemory shipped;
+  {
+    std::ifstream f(std::string(VOFUSION_SHARE_DIR) + "/mesh.ini");
+    ASSERT_TRUE(f.good());
+    shipped.setContent(std::string(std::istreambuf_iterator<char>(f), {}));
+  }
+  const MeshCleanParams defaults;
+  mrpt::config::CConfigFileMemory dumped;
+  defaults.saveToConfigFile(dumped, "mesh");
+  std::vector<std::string> want, have;
+  dumped.getAllKeys("mesh", want);
+  shipped.getAllKeys("mesh", have);
+  std::sort(want.begin(), want.end());
+  std::sort(have.begin(), have.end());
+  EXPECT_EQ(have, want);
+  for (const auto& k : want)
+    EXPECT_DOUBLE_EQ(shipped.read_double("mesh", k, -12345), dumped.read_double("mesh", k, -54321)) << k;
+}
+
+TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
+  const std::string dir = test::tempDir("mesh_app");
+  TriangleMesh m = icosphere(2, 0.2f);
+  m.faces.erase(m.faces.begin());  // a one-triangle hole, ~0.19 m around: within the default bound
+  writePly(dir + "/in.ply", m);
+  std::string out;
+  ASSERT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.ply --report " + dir +
+                          "/r.json",
+                      &out),
+            0)
+      << out;
+  const TriangleMesh r = readPly(dir + "/out.ply");
+  EXPECT_EQ(r.faces.size(), icosphere(2).faces.size());
+  EXPECT_TRUE(closedAndOriented(r));
+  EXPECT_EQ(r.colors.size(), r.vertices.size());
+  std::ifstream j(dir + "/r.json");
+  const std::string json((std::istreambuf_iterator<char>(j)), {});
+  EXPECT_NE(json.find("\"holes_filled\": 1"), std::string::npos) << json;
+
+  // Usage and input errors: exit 2 with a one-line message naming the file.
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply", &out), 2);
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/missing.ply " + dir + "/o.ply", &out), 2);
+  EXPECT_NE(out.find("missing.ply: "), std::string::npos) << out;
+  std::ofstream(dir + "/bad.ini") << "[mesh]\nmax_hole_perimetre = 1\n";
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/o.ply --config " + dir + "/bad.ini",
+                      &out),
+            2);
+  EXPECT_NE(out.find("max_hole_perimetre"), std::string::npos) << out;
 }
