@@ -10,12 +10,37 @@
 
 #include "vofusion/core/frame.h"
 #include "vofusion/core/timing.h"
+#include "vofusion/features/brand.h"
+#include "vofusion/features/narf_detector.h"
+#include "vofusion/features/star_detector.h"
+#include "vofusion/odometry/rigid_motion.h"
 
 namespace vofusion {
 
 struct OdometryParams : public mrpt::config::CLoadableOptions {
-  // Filled in by the odometry stage: keypoint, descriptor, matching, RANSAC and motion parameters,
-  // each with its unit in a comment, read from INI sections [odometry], [star], [narf], [brand] ...
+  // Read from the given section (normally [odometry]) plus the fixed sections [star], [narf], [brand],
+  // [matching], [motion]; share/odometry.ini documents every key.
+  // [odometry]
+  std::string keypoints = "union";  // "union" (STAR + NARF, the paper), "star" or "narf"
+  std::string motion_method = "robust";  // "paper" (Algorithm 1) or "robust" (RANSAC + LS + Gauss-Newton)
+  bool narf_concurrent = true;      // NARF on a second thread while STAR, normals and smoothing run
+  double union_radius = 3.0;        // pixels; a NARF keypoint this close to a STAR one is a duplicate
+  // [matching]
+  int max_hamming = 80;             // bits of 256; matches farther apart are dropped (256 = no limit)
+  bool use_homography = true;       // RANSAC homography between matched pixels (the paper's filter)
+  double homography_threshold = 10.0;  // pixels; RANSAC reprojection threshold
+  int min_matches = 10;             // matches needed after the homography filter, else "too few matches"
+  // [motion]
+  PaperFitOptions paper;            // hypotheses (N), sample_size (s), paper_inlier_threshold (m)
+  RobustFitOptions robust;          // ransac_iterations, inlier_threshold (m at 1 m), gauss_newton_iterations
+  int min_inliers = 8;              // 3D inliers needed, else "too few inliers"
+  double min_extent = 0.03;         // m; inliers spread less (second axis) = "degenerate geometry"
+  double max_rms = 0.04;            // m; inlier RMS above this = "inconsistent matches"
+  // Stage parameters.
+  StarParams star;
+  NarfParams narf;
+  BrandParams brand;
+
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
 };
@@ -28,6 +53,11 @@ struct OdometryResult {
   int keypoints = 0, matches = 0, inliers = 0;
   double rms_error = 0.0;              // m, over the inlier 3D correspondences
   StageTimes times;                    // this frame's per-stage wall time
+  // Additions: which frame `motion` is relative to. Usually the previous frame; when that frame was
+  // unusable itself (empty, textureless) the odometry keeps the last good frame as the reference.
+  std::size_t reference_index = 0;     // Frame::index of the reference
+  double reference_timestamp = 0.0;    // s
+  int star_keypoints = 0, narf_keypoints = 0;  // before the union and the depth check
 };
 
 class RgbdOdometry {

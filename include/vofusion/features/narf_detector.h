@@ -1,0 +1,35 @@
+#pragma once
+// NARF interest points (Steder et al., ICRA 2011) on the depth image: pcl::NarfKeypoint on a
+// pcl::RangeImagePlanar built from the depth map and the intrinsics. NARF costs seconds per frame at
+// 640x480, so it runs on a depth image reduced by `downsample` and keypoints are mapped back.
+#include <string>
+#include <vector>
+
+#include <mrpt/config/CLoadableOptions.h>
+#include <opencv2/core.hpp>
+
+#include "vofusion/core/camera.h"
+
+namespace vofusion {
+
+struct NarfParams : public mrpt::config::CLoadableOptions {
+  double support_size = 0.2;        // m; area covered by an interest point (the NARF paper's value)
+  int downsample = 4;               // factor; 1 = full resolution (seconds per frame)
+  int max_points = 0;               // keypoints kept, strongest first; 0 = all
+  double min_interest_value = 0.45; // [0, 1]; PCL default
+  int threads = 1;                  // OpenMP threads PCL may use inside NARF
+
+  void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
+  void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
+};
+
+// depth: CV_32F metres (0 = no reading), camera: its intrinsics. Keypoint positions are in full
+// resolution pixels; size = support size in pixels at the point's depth, response = interest value.
+std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsics& camera,
+                                     const NarfParams& params = {});
+
+// Depth image reduced by an integer factor, each output pixel the nearest valid reading of its block
+// (not an average: averaging across an occlusion boundary invents surfaces).
+cv::Mat downsampleDepth(const cv::Mat& depth, int factor);
+
+}  // namespace vofusion

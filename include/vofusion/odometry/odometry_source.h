@@ -1,0 +1,51 @@
+#pragma once
+// The 6D RGB-D odometry as an MRPT odometry source: feed it CObservation3DRangeScans (or Frames), get
+// the incremental motion, the accumulated camera pose, and the motion as the action MRPT tools expect
+// (CActionRobotMovement3D, estimationMethod = emVisualOdometry, pose change as CPose3DPDFGaussian).
+#include <cstddef>
+#include <map>
+#include <optional>
+
+#include <mrpt/obs/CActionRobotMovement3D.h>
+#include <mrpt/obs/CObservation3DRangeScan.h>
+#include <mrpt/poses/CPose3D.h>
+
+#include "vofusion/odometry/rgbd_odometry.h"
+
+namespace vofusion {
+
+class OdometrySource {
+ public:
+  // initial_pose: camera-to-world of the first frame (optical axes).
+  explicit OdometrySource(const OdometryParams& params = {}, const mrpt::poses::CPose3D& initial_pose = {});
+
+  // Frames are numbered by this object in arrival order (Frame::index is not trusted).
+  OdometryResult process(const Frame& frame);
+  // Converts with the io stage's frameFromObservation (throws InputError on unusable observations).
+  OdometryResult process(const mrpt::obs::CObservation3DRangeScan& obs);
+
+  // Camera-to-world of the last frame processed. A frame whose motion failed keeps the pose of the
+  // frame before it (constant position), flagged by hasIncrement() == false.
+  const mrpt::poses::CPose3D& pose() const { return pose_; }
+  // Pose change from the previous frame to the last one (camera-to-camera); valid if hasIncrement().
+  const mrpt::poses::CPose3D& increment() const { return increment_; }
+  bool hasIncrement() const { return has_increment_; }
+  // The increment as an MRPT action with the odometry's covariance; nullopt if !hasIncrement().
+  std::optional<mrpt::obs::CActionRobotMovement3D> action() const;
+
+  const StageTimes& times() const { return times_; }  // accumulated over all frames
+  std::size_t frames() const { return count_; }
+  std::size_t failures() const { return failures_; }  // frames after the first without a motion
+
+ private:
+  RgbdOdometry odometry_;
+  mrpt::poses::CPose3D pose_, increment_;
+  mrpt::math::CMatrixDouble66 covariance_;
+  double timestamp_ = 0.0;
+  bool has_increment_ = false;
+  std::size_t count_ = 0, failures_ = 0;
+  std::map<std::size_t, mrpt::poses::CPose3D> recent_poses_;  // frame number -> pose (references)
+  StageTimes times_;
+};
+
+}  // namespace vofusion

@@ -1,0 +1,205 @@
+#include "vofusion/features/brand.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include <mrpt/config/CConfigFileBase.h>
+#include <opencv2/imgproc.hpp>
+
+namespace vofusion {
+
+void BrandParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
+  patch_size = cfg.read_int(s, "patch_size", patch_size);
+  smoothing_sigma = cfg.read_double(s, "smoothing_sigma", smoothing_sigma);
+  normal_angle = cfg.read_double(s, "normal_angle", normal_angle);
+  normal_window = cfg.read_int(s, "normal_window", normal_window);
+  max_depth_step = cfg.read_double(s, "max_depth_step", max_depth_step);
+  use_intensity = cfg.read_bool(s, "use_intensity", use_intensity);
+  use_geometry = cfg.read_bool(s, "use_geometry", use_geometry);
+  oriented = cfg.read_bool(s, "oriented", oriented);
+}
+
+void BrandParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
+  cfg.write(s, "patch_size", patch_size, 30, 40, "pixels at depth <= 2 m");
+  cfg.write(s, "smoothing_sigma", smoothing_sigma, 30, 40, "pixels, Gaussian on intensity");
+  cfg.write(s, "normal_angle", normal_angle, 30, 40, "degrees, geometric test threshold");
+  cfg.write(s, "normal_window", normal_window, 30, 40, "pixels, half-size of normal boxes");
+  cfg.write(s, "max_depth_step", max_depth_step, 30, 40, "m, no normals across larger jumps");
+  cfg.write(s, "use_intensity", use_intensity, 30, 40, "intensity tests on/off");
+  cfg.write(s, "use_geometry", use_geometry, 30, 40, "normal/convexity tests on/off");
+  cfg.write(s, "oriented", oriented, 30, 40, "rotate to canonical orientation");
+}
+
+cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& c) {
+  CV_Assert(depth.type() == CV_32FC1);
+  cv::Mat pts(depth.size(), CV_32FC3);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float ifx = float(1.0 / c.fx), ify = float(1.0 / c.fy), cx = float(c.cx), cy = float(c.cy);
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < depth.rows; ++y) {
+    const float* d = depth.ptr<float>(y);
+    cv::Vec3f* p = pts.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < depth.cols; ++x) {
+      const float z = d[x];
+      p[x] = z > 0.f ? cv::Vec3f((x - cx) * z * ifx, (y - cy) * z * ify, z) : cv::Vec3f(nan, nan, nan);
+    }
+  }
+  return pts;
+}
+
+cv::Mat computeNormalMap(const cv::Mat& points, int w, float max_depth_step) {
+  CV_Assert(points.type() == CV_32FC3 && w >= 1);
+  const int rows = points.rows, cols = points.cols;
+  // Integral images of the valid points and of their count.
+  cv::Mat clean(points.size(), CV_32FC3), valid(points.size(), CV_8U);
+  for (int y = 0; y < rows; ++y) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
+    cv::Vec3f* q = clean.ptr<cv::Vec3f>(y);
+    uint8_t* v = valid.ptr<uint8_t>(y);
+    for (int x = 0; x < cols; ++x) {
+      const bool ok = std::isfinite(p[x][2]);
+      q[x] = ok ? p[x] : cv::Vec3f(0, 0, 0);
+      v[x] = ok;
+    }
+  }
+  cv::Mat sum, cnt;
+  cv::integral(clean, sum, CV_64F);
+  cv::integral(valid, cnt, CV_32S);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  cv::Mat normals(points.size(), CV_32FC3, cv::Scalar::all(nan));
+  const int min_count = (w * (2 * w + 1)) / 2;
+  // Mean point of the box [x0, x1) x [y0, y1); false if too few readings.
+  auto mean = [&](int x0, int y0, int x1, int y1, cv::Vec3d& m) {
+    const int n = cnt.at<int>(y1, x1) - cnt.at<int>(y0, x1) - cnt.at<int>(y1, x0) + cnt.at<int>(y0, x0);
+    if (n < min_count) return false;
+    m = (sum.at<cv::Vec3d>(y1, x1) - sum.at<cv::Vec3d>(y0, x1) - sum.at<cv::Vec3d>(y1, x0) + sum.at<cv::Vec3d>(y0, x0)) /
+        double(n);
+    return true;
+  };
+#pragma omp parallel for schedule(static)
+  for (int y = w; y < rows - w; ++y) {
+    cv::Vec3f* out = normals.ptr<cv::Vec3f>(y);
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
+    for (int x = w; x < cols - w; ++x) {
+      if (!std::isfinite(p[x][2])) continue;
+      cv::Vec3d l, r, t, b;
+      if (!mean(x - w, y - w, x, y + w + 1, l) || !mean(x + 1, y - w, x + w + 1, y + w + 1, r) ||
+          !mean(x - w, y - w, x + w + 1, y, t) || !mean(x - w, y + 1, x + w + 1, y + w + 1, b))
+        continue;
+      if (std::abs(r[2] - l[2]) > max_depth_step || std::abs(b[2] - t[2]) > max_depth_step) continue;
+      cv::Vec3d n = (r - l).cross(b - t);
+      const double len = cv::norm(n);
+      if (len <= 0) continue;
+      n /= len;
+      if (n.dot(cv::Vec3d(p[x])) > 0) n = -n;  // face the camera
+      out[x] = cv::Vec3f(n);
+    }
+  }
+  return normals;
+}
+
+BrandExtractor::BrandExtractor(const BrandParams& params) : params_(params) {
+  // BRIEF's best sampling (isotropic Gaussian, sigma = S/5) for 256 pairs, fixed seed so every
+  // descriptor uses the same tests.
+  std::mt19937 rng(0x42a4d);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  pattern_.reserve(512);
+  while (pattern_.size() < 512) {
+    const double r = std::sqrt(-2.0 * std::log(std::max(1e-12, uni(rng)))), a = 2 * M_PI * uni(rng);
+    const double px = 0.2 * r * std::cos(a), py = 0.2 * r * std::sin(a);
+    if (std::abs(px) > 0.5 || std::abs(py) > 0.5) continue;
+    pattern_.emplace_back(float(px), float(py));
+  }
+}
+
+double BrandExtractor::scaleForDepth(double d) { return std::max(0.2, (3.8 - 0.4 * std::max(2.0, d)) / 3.0); }
+
+cv::Mat BrandExtractor::smooth(const cv::Mat& gray) const {
+  cv::Mat out;
+  cv::GaussianBlur(gray, out, cv::Size(0, 0), params_.smoothing_sigma);
+  return out;
+}
+
+void BrandExtractor::compute(const cv::Mat& gray, const cv::Mat& points, const cv::Mat& normals,
+                             std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors) const {
+  computeSmoothed(smooth(gray), points, normals, keypoints, descriptors);
+}
+
+void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, const cv::Mat& normals,
+                                     std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors) const {
+  CV_Assert(img.type() == CV_8UC1 && points.type() == CV_32FC3 && normals.type() == CV_32FC3);
+  const int rows = img.rows, cols = img.cols;
+  const float cos_thr = float(std::cos(params_.normal_angle * M_PI / 180.0));
+  std::vector<cv::KeyPoint> kept(keypoints.size());
+  std::vector<char> ok(keypoints.size(), 0);
+  cv::Mat desc(int(keypoints.size()), 32, CV_8U, cv::Scalar(0));
+
+#pragma omp parallel for schedule(dynamic, 16)
+  for (int k = 0; k < int(keypoints.size()); ++k) {
+    cv::KeyPoint kp = keypoints[k];
+    const int kx = cvRound(kp.pt.x), ky = cvRound(kp.pt.y);
+    if (kx < 0 || ky < 0 || kx >= cols || ky >= rows) continue;
+    const float z = points.at<cv::Vec3f>(ky, kx)[2];
+    if (!std::isfinite(z)) continue;
+    const float S = float(params_.patch_size * scaleForDepth(z));
+    const float reach = S * 0.5f * 1.4143f + 1.f;  // rotated patch corner
+    if (kx - reach < 1 || ky - reach < 1 || kx + reach > cols - 2 || ky + reach > rows - 2) continue;
+
+    float angle = 0.f;
+    if (params_.oriented) {
+      // Canonical orientation: direction of the Gaussian-weighted sum of intensity gradients.
+      const int R = std::max(2, int(S * 0.5f));
+      const int step = std::max(1, R / 8);
+      const float inv2s2 = 1.f / (2.f * (0.5f * R) * (0.5f * R));
+      double gx = 0, gy = 0;
+      for (int dy = -R; dy <= R; dy += step) {
+        const uint8_t* r0 = img.ptr<uint8_t>(ky + dy);
+        const uint8_t* ru = img.ptr<uint8_t>(ky + dy - 1);
+        const uint8_t* rd = img.ptr<uint8_t>(ky + dy + 1);
+        for (int dx = -R; dx <= R; dx += step) {
+          if (dx * dx + dy * dy > R * R) continue;
+          const float wgt = std::exp(-(dx * dx + dy * dy) * inv2s2);
+          gx += wgt * (int(r0[kx + dx + 1]) - int(r0[kx + dx - 1]));
+          gy += wgt * (int(rd[kx + dx]) - int(ru[kx + dx]));
+        }
+      }
+      angle = float(std::atan2(gy, gx));
+    }
+    const float ca = std::cos(angle) * S, sa = std::sin(angle) * S;
+    uint8_t* d = desc.ptr<uint8_t>(k);
+    for (int i = 0; i < 256; ++i) {
+      const cv::Point2f& a = pattern_[2 * i];
+      const cv::Point2f& b = pattern_[2 * i + 1];
+      const int ax = kx + cvRound(ca * a.x - sa * a.y), ay = ky + cvRound(sa * a.x + ca * a.y);
+      const int bx = kx + cvRound(ca * b.x - sa * b.y), by = ky + cvRound(sa * b.x + ca * b.y);
+      bool bit = params_.use_intensity && img.at<uint8_t>(ay, ax) < img.at<uint8_t>(by, bx);
+      if (!bit && params_.use_geometry) {
+        const cv::Vec3f& na = normals.at<cv::Vec3f>(ay, ax);
+        const cv::Vec3f& nb = normals.at<cv::Vec3f>(by, bx);
+        if (std::isfinite(na[0]) && std::isfinite(nb[0]) && na.dot(nb) < cos_thr) {
+          const cv::Vec3f dp = points.at<cv::Vec3f>(ay, ax) - points.at<cv::Vec3f>(by, bx);
+          bit = dp.dot(na - nb) > 0.f;  // convex between the two samples
+        }
+      }
+      if (bit) d[i >> 3] |= uint8_t(1u << (i & 7));
+    }
+    kp.angle = float(angle * 180.0 / M_PI);
+    if (kp.angle < 0) kp.angle += 360.f;
+    kept[k] = kp;
+    ok[k] = 1;
+  }
+  std::vector<cv::KeyPoint> out;
+  cv::Mat out_desc(0, 32, CV_8U);
+  out.reserve(keypoints.size());
+  for (std::size_t k = 0; k < keypoints.size(); ++k)
+    if (ok[k]) {
+      out.push_back(kept[k]);
+      out_desc.push_back(desc.row(int(k)));
+    }
+  keypoints.swap(out);
+  descriptors = out_desc;
+}
+
+}  // namespace vofusion

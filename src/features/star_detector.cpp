@@ -1,0 +1,237 @@
+#include "vofusion/features/star_detector.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include <mrpt/config/CConfigFileBase.h>
+#include <opencv2/imgproc.hpp>
+
+namespace vofusion {
+
+void StarParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
+  max_size = cfg.read_int(s, "max_size", max_size);
+  response_threshold = cfg.read_int(s, "response_threshold", response_threshold);
+  line_threshold_projected = cfg.read_int(s, "line_threshold_projected", line_threshold_projected);
+  line_threshold_binarized = cfg.read_int(s, "line_threshold_binarized", line_threshold_binarized);
+  suppress_nonmax_size = cfg.read_int(s, "suppress_nonmax_size", suppress_nonmax_size);
+}
+
+void StarParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
+  cfg.write(s, "max_size", max_size, 30, 40, "largest filter size, pixels");
+  cfg.write(s, "response_threshold", response_threshold, 30, 40, "minimum |response|, grey levels");
+  cfg.write(s, "line_threshold_projected", line_threshold_projected, 30, 40, "Harris trace^2/det limit");
+  cfg.write(s, "line_threshold_binarized", line_threshold_binarized, 30, 40, "same, on the scale map");
+  cfg.write(s, "suppress_nonmax_size", suppress_nonmax_size, 30, 40, "non-max window, pixels");
+}
+
+namespace {
+
+// Filter half-sizes n: the upright box is (2n+1)^2, the 45-degree box ("diamond") |dx|+|dy| <= n + n/2.
+// Patterns pair an outer and an inner filter (indices into kSizes), as OpenCV's StarDetector.
+constexpr int kSizes[] = {1, 2, 3, 4, 6, 8, 11, 12, 16, 22, 23, 32, 45, 46, 64, 90, 128};
+constexpr int kPairs[][2] = {{1, 0}, {3, 1}, {4, 2}, {5, 3}, {7, 4}, {8, 5}, {9, 6},
+                             {11, 8}, {13, 10}, {14, 11}, {15, 12}, {16, 14}};
+constexpr int kNumPairs = sizeof(kPairs) / sizeof(kPairs[0]);
+constexpr int kMaxFilters = sizeof(kSizes) / sizeof(kSizes[0]);
+
+// Integral images in 45-degree coordinates u = x + y, v = y - x. With Q(a, b) = sum of pixels having
+// u <= a and v <= b, a diamond is Q(box) by inclusion-exclusion. Q(a, b) with a - b even is the
+// upward cone with apex pixel (x, y): T(x, y) = Q(x + y, y - x); with a - b odd the apex is a pixel
+// pair: F(x, y) = Q(x + y, y - x + 1) (apex pixels x-1 and x of row y). Both are stored padded
+// horizontally by `pad` columns and vertically by 2 rows so the recurrences need no special cases.
+struct TiltedIntegrals {
+  int pad = 0, stride = 0;
+  std::vector<int32_t> t, f;
+  const int32_t* T(int x, int y) const { return &t[(y + 2) * stride + x + pad]; }
+  const int32_t* F(int x, int y) const { return &f[(y + 2) * stride + x + pad]; }
+};
+
+void computeTilted(const cv::Mat& img, TiltedIntegrals& ti) {
+  const int rows = img.rows, cols = img.cols;
+  ti.pad = rows + 2;
+  ti.stride = cols + 2 * ti.pad;
+  ti.t.assign(std::size_t(rows + 2) * ti.stride, 0);
+  ti.f.assign(std::size_t(rows + 2) * ti.stride, 0);
+  const int s = ti.stride;
+  for (int y = 0; y < rows; ++y) {
+    const uint8_t* I = img.ptr<uint8_t>(y);
+    const uint8_t* Iup = y > 0 ? img.ptr<uint8_t>(y - 1) : nullptr;
+    int32_t* T = &ti.t[(y + 2) * s + ti.pad];
+    int32_t* F = &ti.f[(y + 2) * s + ti.pad];
+    // The cones reach at most y+1 columns sideways of the image.
+    const int x0 = -(y + 2), x1 = cols + y + 1;
+    for (int x = x0; x <= x1; ++x) {
+      const bool in = x >= 0 && x < cols;
+      const int ixy = in ? I[x] : 0;
+      const int ixy_up = (in && Iup) ? Iup[x] : 0;
+      const int ixm = (x - 1 >= 0 && x - 1 < cols) ? I[x - 1] : 0;
+      T[x] = T[x - 1 - s] + T[x + 1 - s] - T[x - 2 * s] + ixy + ixy_up;
+      F[x] = F[x - 1 - s] + F[x + 1 - s] - F[x - 2 * s] + ixy + ixm;
+    }
+    // Beyond the reach, cones hold the whole rows above (constant on each side): extend by copy.
+    for (int x = -ti.pad; x < x0; ++x) T[x] = T[x0], F[x] = F[x0];
+    for (int x = x1 + 1; x < cols + ti.pad; ++x) T[x] = T[x1], F[x] = F[x1];
+  }
+}
+
+// Per-pixel strongest response across scales and the (signed, see below) scale that gave it.
+int computeResponses(const cv::Mat& img, int max_size, cv::Mat& responses, cv::Mat& sizes) {
+  const int rows = img.rows, cols = img.cols;
+  int npatterns = 0;
+  while (npatterns < kNumPairs - 1 && !(kSizes[kPairs[npatterns][0]] >= max_size ||
+                                        kSizes[kPairs[npatterns + 1][0]] + kSizes[kPairs[npatterns + 1][0]] / 2 >=
+                                            std::min(rows, cols)))
+    ++npatterns;
+  npatterns += 1;  // the pattern that reaches max_size is included
+  const int max_idx = kPairs[npatterns - 1][0];
+  const int border = kSizes[max_idx] + kSizes[max_idx] / 2;
+
+  responses = cv::Mat::zeros(rows, cols, CV_32F);
+  sizes = cv::Mat::zeros(rows, cols, CV_16S);
+  if (rows <= 2 * border || cols <= 2 * border) return border;
+
+  cv::Mat sum;
+  cv::integral(img, sum, CV_32S);
+  TiltedIntegrals ti;
+  computeTilted(img, ti);
+
+  int area[kMaxFilters], size_tag[kMaxFilters];
+  for (int i = 0; i <= max_idx; ++i) {
+    const int n = kSizes[i], t = n + n / 2;
+    area[i] = (2 * n + 1) * (2 * n + 1) + t * t + (t + 1) * (t + 1);
+    size_tag[i] = n;
+  }
+  // Scales at the ends of the range are tagged negative: their extrema are not localised in scale.
+  size_tag[0] = -size_tag[0];
+  size_tag[1] = -size_tag[1];
+  size_tag[max_idx] = -size_tag[max_idx];
+  float inv_outer[kNumPairs], inv_inner[kNumPairs];
+  for (int p = 0; p < npatterns; ++p) {
+    const int inner = area[kPairs[p][1]], outer = area[kPairs[p][0]] - inner;
+    inv_outer[p] = 1.f / outer;
+    inv_inner[p] = 1.f / inner;
+  }
+
+#pragma omp parallel for schedule(static)
+  for (int y = border; y < rows - border; ++y) {
+    float* r = responses.ptr<float>(y);
+    short* sz = sizes.ptr<short>(y);
+    // Row pointers for every filter's 8 corners.
+    const int32_t *b0[kMaxFilters], *b1[kMaxFilters], *b2[kMaxFilters], *b3[kMaxFilters];
+    const int32_t *t0[kMaxFilters], *t1[kMaxFilters], *f0[kMaxFilters], *f1[kMaxFilters];
+    for (int i = 0; i <= max_idx; ++i) {
+      const int n = kSizes[i], t = n + n / 2;
+      b0[i] = sum.ptr<int32_t>(y + n + 1) + n + 1;
+      b1[i] = sum.ptr<int32_t>(y - n) + n + 1;
+      b2[i] = sum.ptr<int32_t>(y + n + 1) - n;
+      b3[i] = sum.ptr<int32_t>(y - n) - n;
+      t0[i] = ti.T(0, y + t);
+      t1[i] = ti.T(0, y - t - 1);
+      f0[i] = ti.F(-t, y - 1);
+      f1[i] = ti.F(t + 1, y - 1);
+    }
+    for (int x = border; x < cols - border; ++x) {
+      int vals[kMaxFilters];
+      for (int i = 0; i <= max_idx; ++i)
+        vals[i] = b0[i][x] - b1[i][x] - b2[i][x] + b3[i][x] + t0[i][x] + t1[i][x] - f0[i][x] - f1[i][x];
+      float best = 0.f;
+      int best_size = 0;
+      for (int p = 0; p < npatterns; ++p) {
+        const int inner = vals[kPairs[p][1]], outer = vals[kPairs[p][0]] - inner;
+        const float resp = inner * inv_inner[p] - outer * inv_outer[p];
+        if (std::fabs(resp) > std::fabs(best)) {
+          best = resp;
+          best_size = size_tag[kPairs[p][0]];
+        }
+      }
+      r[x] = best;
+      sz[x] = static_cast<short>(best_size);
+    }
+  }
+  return border;
+}
+
+// Scale-adapted Harris test on the response map and on the binarised scale map: a line (edge)
+// has one dominant gradient direction, i.e. a large trace^2/det.
+bool isLineLike(const cv::Mat& responses, const cv::Mat& sizes, cv::Point pt, int thr_projected, int thr_binarized) {
+  const int sz = sizes.at<short>(pt);
+  const int delta = sz / 4, radius = delta * 4;
+  float lxx = 0, lyy = 0, lxy = 0;
+  for (int y = pt.y - radius; y <= pt.y + radius; y += delta) {
+    const float* r = responses.ptr<float>(y);
+    const float* ru = responses.ptr<float>(y - 1);
+    const float* rd = responses.ptr<float>(y + 1);
+    for (int x = pt.x - radius; x <= pt.x + radius; x += delta) {
+      const float lx = r[x + 1] - r[x - 1], ly = rd[x] - ru[x];
+      lxx += lx * lx; lyy += ly * ly; lxy += lx * ly;
+    }
+  }
+  if ((lxx + lyy) * (lxx + lyy) >= thr_projected * (lxx * lyy - lxy * lxy)) return true;
+  int bxx = 0, byy = 0, bxy = 0;
+  for (int y = pt.y - radius; y <= pt.y + radius; y += delta) {
+    const short* s = sizes.ptr<short>(y);
+    const short* su = sizes.ptr<short>(y - 1);
+    const short* sd = sizes.ptr<short>(y + 1);
+    for (int x = pt.x - radius; x <= pt.x + radius; x += delta) {
+      const int lx = (s[x + 1] == sz) - (s[x - 1] == sz), ly = (sd[x] == sz) - (su[x] == sz);
+      bxx += lx * lx; byy += ly * ly; bxy += lx * ly;
+    }
+  }
+  return (bxx + byy) * (bxx + byy) >= thr_binarized * (bxx * byy - bxy * bxy);
+}
+
+// Is `pt` the strict extremum (max if sign>0, min if sign<0) of its (2d+1)^2 neighbourhood?
+bool isExtremum(const cv::Mat& responses, cv::Point pt, int d, float value, int sign) {
+  for (int y = pt.y - d; y <= pt.y + d; ++y) {
+    const float* r = responses.ptr<float>(y);
+    for (int x = pt.x - d; x <= pt.x + d; ++x) {
+      if (x == pt.x && y == pt.y) continue;
+      if (sign > 0 ? r[x] >= value : r[x] <= value) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<cv::KeyPoint> detectStar(const cv::Mat& gray, const StarParams& p) {
+  CV_Assert(gray.type() == CV_8UC1);
+  cv::Mat responses, sizes;
+  const int border = computeResponses(gray, p.max_size, responses, sizes);
+  const int rows = gray.rows, cols = gray.cols, d = p.suppress_nonmax_size / 2;
+
+  // Tiles of (d+1)^2 pixels: each proposes its strongest positive and negative response, kept if
+  // it is the extremum of the (2d+1)^2 window around it, at an interior scale and not line-like.
+  std::vector<std::vector<cv::KeyPoint>> per_row(std::max(0, rows));
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int y = border; y < rows - border; y += d + 1) {
+    auto& out = per_row[y];
+    for (int x = border; x < cols - border; x += d + 1) {
+      float max_r = float(p.response_threshold), min_r = -float(p.response_threshold);
+      cv::Point max_pt(-1, -1), min_pt(-1, -1);
+      const int ye = std::min(y + d, rows - border - 1), xe = std::min(x + d, cols - border - 1);
+      for (int y1 = y; y1 <= ye; ++y1) {
+        const float* r = responses.ptr<float>(y1);
+        for (int x1 = x; x1 <= xe; ++x1) {
+          if (r[x1] > max_r) max_r = r[x1], max_pt = {x1, y1};
+          else if (r[x1] < min_r) min_r = r[x1], min_pt = {x1, y1};
+        }
+      }
+      for (int sign : {1, -1}) {
+        const cv::Point pt = sign > 0 ? max_pt : min_pt;
+        const float val = sign > 0 ? max_r : min_r;
+        if (pt.x < 0 || !isExtremum(responses, pt, d, val, sign)) continue;
+        const int size = sizes.at<short>(pt);
+        if (size < 4) continue;
+        if (isLineLike(responses, sizes, pt, p.line_threshold_projected, p.line_threshold_binarized)) continue;
+        out.emplace_back(float(pt.x), float(pt.y), float(size), -1.f, val);
+      }
+    }
+  }
+  std::vector<cv::KeyPoint> keypoints;
+  for (auto& r : per_row) keypoints.insert(keypoints.end(), r.begin(), r.end());
+  return keypoints;
+}
+
+}  // namespace vofusion

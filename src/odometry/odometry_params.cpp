@@ -1,0 +1,66 @@
+#include <mrpt/config/CConfigFileBase.h>
+
+#include "vofusion/core/errors.h"
+#include "vofusion/odometry/rgbd_odometry.h"
+
+namespace vofusion {
+
+void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, const std::string& s) {
+  keypoints = c.read_string(s, "keypoints", keypoints);
+  motion_method = c.read_string(s, "motion_method", motion_method);
+  narf_concurrent = c.read_bool(s, "narf_concurrent", narf_concurrent);
+  union_radius = c.read_double(s, "union_radius", union_radius);
+  if (keypoints != "union" && keypoints != "star" && keypoints != "narf")
+    throw InputError("[" + s + "] keypoints", "must be union, star or narf (got '" + keypoints + "')");
+  if (motion_method != "paper" && motion_method != "robust")
+    throw InputError("[" + s + "] motion_method", "must be paper or robust (got '" + motion_method + "')");
+
+  const std::string m = "matching";
+  max_hamming = c.read_int(m, "max_hamming", max_hamming);
+  use_homography = c.read_bool(m, "use_homography", use_homography);
+  homography_threshold = c.read_double(m, "homography_threshold", homography_threshold);
+  min_matches = c.read_int(m, "min_matches", min_matches);
+
+  const std::string mo = "motion";
+  paper.hypotheses = c.read_int(mo, "hypotheses", paper.hypotheses);
+  paper.sample_size = c.read_int(mo, "sample_size", paper.sample_size);
+  paper.inlier_threshold = c.read_double(mo, "paper_inlier_threshold", paper.inlier_threshold);
+  robust.iterations = c.read_int(mo, "ransac_iterations", robust.iterations);
+  robust.inlier_threshold = c.read_double(mo, "inlier_threshold", robust.inlier_threshold);
+  robust.gauss_newton_iterations = c.read_int(mo, "gauss_newton_iterations", robust.gauss_newton_iterations);
+  min_inliers = c.read_int(mo, "min_inliers", min_inliers);
+  min_extent = c.read_double(mo, "min_extent", min_extent);
+  max_rms = c.read_double(mo, "max_rms", max_rms);
+  if (paper.sample_size < 3) throw InputError("[motion] sample_size", "must be at least 3");
+
+  star.loadFromConfigFile(c, "star");
+  narf.loadFromConfigFile(c, "narf");
+  brand.loadFromConfigFile(c, "brand");
+}
+
+void OdometryParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
+  c.write(s, "keypoints", keypoints, 30, 40, "union | star | narf");
+  c.write(s, "motion_method", motion_method, 30, 40, "paper (Algorithm 1) | robust");
+  c.write(s, "narf_concurrent", narf_concurrent, 30, 40, "NARF on a second thread");
+  c.write(s, "union_radius", union_radius, 30, 40, "pixels, duplicate radius");
+  const std::string m = "matching";
+  c.write(m, "max_hamming", max_hamming, 30, 40, "bits of 256, 256 = no limit");
+  c.write(m, "use_homography", use_homography, 30, 40, "RANSAC homography filter");
+  c.write(m, "homography_threshold", homography_threshold, 30, 40, "pixels");
+  c.write(m, "min_matches", min_matches, 30, 40, "after the homography filter");
+  const std::string mo = "motion";
+  c.write(mo, "hypotheses", paper.hypotheses, 30, 40, "paper: N");
+  c.write(mo, "sample_size", paper.sample_size, 30, 40, "paper: s correspondences");
+  c.write(mo, "paper_inlier_threshold", paper.inlier_threshold, 30, 40, "m, paper: inlier report");
+  c.write(mo, "ransac_iterations", robust.iterations, 30, 40, "robust: max hypotheses");
+  c.write(mo, "inlier_threshold", robust.inlier_threshold, 30, 40, "m at <= 1 m depth, grows with z^2");
+  c.write(mo, "gauss_newton_iterations", robust.gauss_newton_iterations, 30, 40, "robust: refinement steps");
+  c.write(mo, "min_inliers", min_inliers, 30, 40, "3D inliers needed");
+  c.write(mo, "min_extent", min_extent, 30, 40, "m, inlier spread needed");
+  c.write(mo, "max_rms", max_rms, 30, 40, "m, inlier RMS accepted");
+  star.saveToConfigFile(c, "star");
+  narf.saveToConfigFile(c, "narf");
+  brand.saveToConfigFile(c, "brand");
+}
+
+}  // namespace vofusion

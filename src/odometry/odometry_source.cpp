@@ -1,0 +1,47 @@
+#include "vofusion/odometry/odometry_source.h"
+
+#include "vofusion/io/rawlog.h"
+
+namespace vofusion {
+
+OdometrySource::OdometrySource(const OdometryParams& params, const mrpt::poses::CPose3D& initial_pose)
+    : odometry_(params), pose_(initial_pose) {
+  covariance_.setZero();
+}
+
+OdometryResult OdometrySource::process(const mrpt::obs::CObservation3DRangeScan& obs) {
+  return process(frameFromObservation(obs, obs.sensorLabel.empty() ? "observation" : obs.sensorLabel));
+}
+
+OdometryResult OdometrySource::process(const Frame& input) {
+  Frame frame = input;  // shallow: images are shared
+  frame.index = count_;
+  OdometryResult r = odometry_.process(frame);
+  times_.merge(r.times);
+  timestamp_ = frame.timestamp;
+  const mrpt::poses::CPose3D previous = pose_;
+  has_increment_ = false;
+  if (r.success) {
+    // The motion is relative to the odometry's reference, usually (not always) the previous frame.
+    const auto ref = recent_poses_.find(r.reference_index);
+    const mrpt::poses::CPose3D ref_pose = ref != recent_poses_.end() ? ref->second : previous;
+    pose_ = ref_pose + r.motion;
+    increment_ = pose_ - previous;
+    covariance_ = r.covariance;
+    has_increment_ = count_ > 0;
+  } else if (count_ > 0) {
+    ++failures_;
+  }
+  recent_poses_[count_] = pose_;
+  // References older than a few dozen frames are never used again.
+  while (!recent_poses_.empty() && recent_poses_.begin()->first + 64 < count_) recent_poses_.erase(recent_poses_.begin());
+  ++count_;
+  return r;
+}
+
+std::optional<mrpt::obs::CActionRobotMovement3D> OdometrySource::action() const {
+  if (!has_increment_) return std::nullopt;
+  return makeOdometryAction(increment_, timestamp_, &covariance_);
+}
+
+}  // namespace vofusion

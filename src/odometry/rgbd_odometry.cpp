@@ -1,0 +1,201 @@
+#include "vofusion/odometry/rgbd_odometry.h"
+
+#include <chrono>
+#include <cmath>
+#include <future>
+#include <optional>
+
+#include <Eigen/Dense>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "vofusion/features/keypoint_union.h"
+
+namespace vofusion {
+
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// What a frame contributes to matching: described keypoints with their 3D points.
+struct FrameFeatures {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;  // CV_8U, 32 bytes per keypoint
+  Points3 points;       // camera frame, m
+  std::size_t index = 0;
+  double timestamp = 0.0;
+  int star = 0, narf = 0;
+};
+
+}  // namespace
+
+struct RgbdOdometry::Impl {
+  OdometryParams params;
+  BrandExtractor brand;
+  std::optional<FrameFeatures> reference;
+  explicit Impl(const OdometryParams& p) : params(p), brand(p.brand) {}
+
+  FrameFeatures extract(const Frame& frame, StageTimes& times) const;
+};
+
+FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, StageTimes& times) const {
+  FrameFeatures f;
+  f.index = frame.index;
+  f.timestamp = frame.timestamp;
+  const bool want_star = params.keypoints != "narf", want_narf = params.keypoints != "star";
+
+  // NARF is the slow part: start it first, on its own thread, when asked to.
+  std::vector<cv::KeyPoint> narf_kps;
+  std::future<std::pair<std::vector<cv::KeyPoint>, double>> narf_job;
+  auto runNarf = [&frame, this] {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto k = detectNarf(frame.depth, frame.camera, params.narf);
+    return std::make_pair(std::move(k), secondsSince(t0));
+  };
+  if (want_narf && params.narf_concurrent) narf_job = std::async(std::launch::async, runNarf);
+
+  cv::Mat gray;
+  {
+    ScopedStageTimer t(times, "grey");
+    if (frame.rgb.channels() == 3) cv::cvtColor(frame.rgb, gray, cv::COLOR_BGR2GRAY);
+    else gray = frame.rgb;
+  }
+  std::vector<cv::KeyPoint> star_kps;
+  if (want_star) {
+    ScopedStageTimer t(times, "star");
+    star_kps = detectStar(gray, params.star);
+  }
+  cv::Mat points, normals, smoothed;
+  {
+    ScopedStageTimer t(times, "normals");
+    points = depthToPointMap(frame.depth, frame.camera);
+    if (params.brand.use_geometry)
+      normals = computeNormalMap(points, params.brand.normal_window, float(params.brand.max_depth_step));
+    else
+      normals = cv::Mat(points.size(), CV_32FC3, cv::Scalar::all(std::nan("")));
+    smoothed = brand.smooth(gray);
+  }
+  if (want_narf) {
+    if (params.narf_concurrent) {
+      const auto t0 = std::chrono::steady_clock::now();
+      auto [k, secs] = narf_job.get();
+      narf_kps = std::move(k);
+      times.add("narf", secs);
+      times.add("narf_wait", secondsSince(t0));
+    } else {
+      ScopedStageTimer t(times, "narf");
+      narf_kps = detectNarf(frame.depth, frame.camera, params.narf);
+    }
+  }
+  f.star = int(star_kps.size());
+  f.narf = int(narf_kps.size());
+  {
+    ScopedStageTimer t(times, "brand");
+    f.keypoints = mergeKeypoints(star_kps, narf_kps, float(params.union_radius));
+    brand.computeSmoothed(smoothed, points, normals, f.keypoints, f.descriptors);
+    f.points.reserve(f.keypoints.size());
+    for (const auto& k : f.keypoints) {
+      const cv::Vec3f& p = points.at<cv::Vec3f>(cvRound(k.pt.y), cvRound(k.pt.x));
+      f.points.emplace_back(p[0], p[1], p[2]);
+    }
+  }
+  return f;
+}
+
+RgbdOdometry::RgbdOdometry(const OdometryParams& params) : impl_(std::make_unique<Impl>(params)) {}
+RgbdOdometry::~RgbdOdometry() = default;
+void RgbdOdometry::reset() { impl_->reference.reset(); }
+
+OdometryResult RgbdOdometry::process(const Frame& frame) {
+  OdometryResult r;
+  r.covariance.setIdentity();
+  const OdometryParams& P = impl_->params;
+  auto fail = [&r](const std::string& why) {
+    r.success = false;
+    r.failure = why;
+    return r;
+  };
+  if (!frame.valid()) return fail("empty frame");
+
+  FrameFeatures cur = impl_->extract(frame, r.times);
+  r.keypoints = int(cur.keypoints.size());
+  r.star_keypoints = cur.star;
+  r.narf_keypoints = cur.narf;
+  if (!impl_->reference) {
+    impl_->reference = std::move(cur);
+    r.reference_index = frame.index;
+    r.reference_timestamp = frame.timestamp;
+    return fail("first frame");
+  }
+  const FrameFeatures& ref = *impl_->reference;
+  r.reference_index = ref.index;
+  r.reference_timestamp = ref.timestamp;
+  // A frame with almost nothing to match (textureless, no depth) cannot be anyone's reference:
+  // keep the last good one so the next frame can bridge the gap.
+  if (int(cur.keypoints.size()) < P.min_matches) return fail("too few keypoints (textureless or no depth)");
+  // Any other failure below is about the pair: the current frame becomes the reference.
+  struct Advance {
+    std::optional<FrameFeatures>& ref;
+    FrameFeatures& cur;
+    ~Advance() { ref = std::move(cur); }
+  } advance{impl_->reference, cur};
+
+  // Brute-force Hamming matching with cross-check (query = current, train = reference).
+  std::vector<cv::DMatch> matches;
+  {
+    ScopedStageTimer t(r.times, "matching");
+    if (!ref.descriptors.empty()) cv::BFMatcher(cv::NORM_HAMMING, true).match(cur.descriptors, ref.descriptors, matches);
+    std::vector<cv::DMatch> close;
+    for (const auto& m : matches)
+      if (m.distance <= P.max_hamming) close.push_back(m);
+    matches.swap(close);
+  }
+  if (int(matches.size()) < std::max(P.min_matches, 4)) {
+    r.matches = int(matches.size());
+    return fail("too few matches");
+  }
+  if (P.use_homography) {
+    ScopedStageTimer t(r.times, "homography");
+    std::vector<cv::Point2f> a, b;
+    for (const auto& m : matches) a.push_back(cur.keypoints[m.queryIdx].pt), b.push_back(ref.keypoints[m.trainIdx].pt);
+    std::vector<uchar> mask;
+    const cv::Mat H = cv::findHomography(a, b, cv::RANSAC, P.homography_threshold, mask, 2000, 0.995);
+    if (H.empty()) return fail("degenerate geometry (no homography)");
+    std::vector<cv::DMatch> kept;
+    for (std::size_t i = 0; i < matches.size(); ++i)
+      if (mask[i]) kept.push_back(matches[i]);
+    matches.swap(kept);
+  }
+  r.matches = int(matches.size());
+  if (r.matches < P.min_matches) return fail("too few matches");
+
+  // T_ref_cur maps current-frame points onto the reference frame's.
+  Points3 src, dst;
+  for (const auto& m : matches) src.push_back(cur.points[m.queryIdx]), dst.push_back(ref.points[m.trainIdx]);
+  RigidFit fit;
+  {
+    ScopedStageTimer t(r.times, "motion");
+    fit = P.motion_method == "paper" ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust);
+  }
+  r.inliers = int(fit.inliers.size());
+  r.rms_error = fit.rms;
+  if (!fit.ok) return fail(fit.failure);
+  if (r.inliers < P.min_inliers) return fail("too few inliers");
+  if (secondaryExtent(src, fit.inliers) < P.min_extent) return fail("degenerate geometry (inliers nearly collinear)");
+  if (fit.rms > P.max_rms) return fail("inconsistent matches (inlier RMS too large)");
+
+  Eigen::Matrix4d M = fit.T.matrix();
+  mrpt::math::CMatrixDouble44 Mm;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) Mm(i, j) = M(i, j);
+  r.motion = mrpt::poses::CPose3D(Mm);
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) r.covariance(i, j) = fit.covariance(i, j);
+  r.success = true;
+  return r;
+}
+
+}  // namespace vofusion

@@ -1,0 +1,243 @@
+#include "vofusion/odometry/rigid_motion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <random>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+
+namespace vofusion {
+
+namespace {
+
+// Kinect-like noise of a correspondence (m): both points' depth noise grows with z^2.
+double pointSigma(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return 0.002 + 0.0015 * (a.z() * a.z() + b.z() * b.z());
+}
+
+// MRPT's CPose3D convention: R = Rz(yaw) Ry(pitch) Rx(roll).
+Eigen::Isometry3d fromVector(const Eigen::Matrix<double, 6, 1>& p) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = (Eigen::AngleAxisd(p[3], Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(p[4], Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(p[5], Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  T.translation() = p.head<3>();
+  return T;
+}
+
+Eigen::Matrix<double, 6, 1> toVector(const Eigen::Isometry3d& T) {
+  const Eigen::Matrix3d R = T.linear();
+  Eigen::Matrix<double, 6, 1> p;
+  p.head<3>() = T.translation();
+  // yaw, pitch, roll as mrpt::poses::CPose3D::getYawPitchRoll.
+  const double pitch = std::atan2(-R(2, 0), std::hypot(R(0, 0), R(1, 0)));
+  double yaw, roll;
+  if (std::abs(R(2, 0)) < 1.0 - 1e-9) {
+    yaw = std::atan2(R(1, 0), R(0, 0));
+    roll = std::atan2(R(2, 1), R(2, 2));
+  } else {  // gimbal lock
+    yaw = std::atan2(-R(0, 1), R(1, 1));
+    roll = 0;
+  }
+  p[3] = yaw; p[4] = pitch; p[5] = roll;
+  return p;
+}
+
+std::vector<int> allIndices(std::size_t n) {
+  std::vector<int> v(n);
+  std::iota(v.begin(), v.end(), 0);
+  return v;
+}
+
+double squaredError(const Eigen::Isometry3d& T, const Eigen::Vector3d& s, const Eigen::Vector3d& d) {
+  return (T * s - d).squaredNorm();
+}
+
+// A random sample of k distinct indices that are not (nearly) collinear.
+bool drawSample(std::size_t n, int k, std::mt19937& rng, const Points3& src, std::vector<int>& sample) {
+  std::uniform_int_distribution<int> pick(0, int(n) - 1);
+  for (int attempt = 0; attempt < 20; ++attempt) {
+    sample.clear();
+    while (int(sample.size()) < k) {
+      const int i = pick(rng);
+      if (std::find(sample.begin(), sample.end(), i) == sample.end()) sample.push_back(i);
+    }
+    const Eigen::Vector3d a = src[sample[1]] - src[sample[0]], b = src[sample[2]] - src[sample[0]];
+    if (a.cross(b).norm() > 1e-4) return true;  // triangle area > 0.5 cm^2
+  }
+  return false;
+}
+
+}  // namespace
+
+Eigen::Isometry3d umeyamaRigid(const Points3& src, const Points3& dst, const std::vector<int>& subset) {
+  const std::vector<int> idx = subset.empty() ? allIndices(src.size()) : subset;
+  Eigen::Matrix3Xd a(3, idx.size()), b(3, idx.size());
+  for (std::size_t i = 0; i < idx.size(); ++i) {
+    a.col(i) = src[idx[i]];
+    b.col(i) = dst[idx[i]];
+  }
+  Eigen::Isometry3d T;
+  T.matrix() = Eigen::umeyama(a, b, false);
+  return T;
+}
+
+double secondaryExtent(const Points3& pts, const std::vector<int>& subset) {
+  const std::vector<int> idx = subset.empty() ? allIndices(pts.size()) : subset;
+  if (idx.size() < 3) return 0.0;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (int i : idx) mean += pts[i];
+  mean /= double(idx.size());
+  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+  for (int i : idx) C += (pts[i] - mean) * (pts[i] - mean).transpose();
+  C /= double(idx.size());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+  return std::sqrt(std::max(0.0, es.eigenvalues()[1]));  // ascending: [1] is the middle one
+}
+
+Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
+                                    const Eigen::Isometry3d& T0, int iterations,
+                                    Eigen::Matrix<double, 6, 6>* covariance) {
+  const std::vector<int> idx = subset.empty() ? allIndices(src.size()) : subset;
+  Eigen::Matrix<double, 6, 1> p = toVector(T0);
+  std::vector<double> w(idx.size());
+  for (std::size_t k = 0; k < idx.size(); ++k) w[k] = 1.0 / pointSigma(src[idx[k]], dst[idx[k]]);
+  auto residuals = [&](const Eigen::Matrix<double, 6, 1>& q, Eigen::VectorXd& r) {
+    const Eigen::Isometry3d T = fromVector(q);
+    r.resize(3 * idx.size());
+    for (std::size_t k = 0; k < idx.size(); ++k) r.segment<3>(3 * k) = w[k] * (T * src[idx[k]] - dst[idx[k]]);
+  };
+  Eigen::VectorXd r, rp, rm;
+  Eigen::MatrixXd J(3 * idx.size(), 6);
+  Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Identity();
+  double chi2 = 0;
+  for (int it = 0; it <= iterations; ++it) {
+    residuals(p, r);
+    chi2 = r.squaredNorm();
+    // Central-difference Jacobian: 12 cheap evaluations, exact enough for 6 parameters.
+    for (int j = 0; j < 6; ++j) {
+      const double h = j < 3 ? 1e-6 : 1e-7;
+      Eigen::Matrix<double, 6, 1> q = p;
+      q[j] += h; residuals(q, rp);
+      q[j] -= 2 * h; residuals(q, rm);
+      J.col(j) = (rp - rm) / (2 * h);
+    }
+    H = J.transpose() * J;
+    if (it == iterations) break;  // last pass only evaluates H at the solution
+    const Eigen::Matrix<double, 6, 1> step = H.ldlt().solve(-J.transpose() * r);
+    if (!step.allFinite()) break;
+    Eigen::VectorXd rn;
+    residuals(p + step, rn);
+    if (rn.squaredNorm() > chi2) break;  // no improvement: keep p
+    p += step;
+    if (step.norm() < 1e-10) { iterations = it + 1; }
+  }
+  if (covariance) {
+    const double dof = std::max(1.0, 3.0 * idx.size() - 6.0);
+    Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(H);
+    *covariance = lu.isInvertible() ? Eigen::Matrix<double, 6, 6>(lu.inverse() * (chi2 / dof))
+                                    : Eigen::Matrix<double, 6, 6>(Eigen::Matrix<double, 6, 6>::Identity() * 1e3);
+  }
+  return fromVector(p);
+}
+
+RigidFit fitPaper(const Points3& src, const Points3& dst, const PaperFitOptions& o) {
+  RigidFit fit;
+  const int n = int(src.size()), s = std::max(3, o.sample_size);
+  if (n < s) {
+    fit.failure = "too few correspondences";
+    return fit;
+  }
+  std::mt19937 rng(o.seed);
+  std::vector<int> sample;
+  double best = std::numeric_limits<double>::infinity();
+  for (int h = 0; h < o.hypotheses; ++h) {
+    if (!drawSample(src.size(), s, rng, src, sample)) continue;
+    const Eigen::Isometry3d T = umeyamaRigid(src, dst, sample);
+    double sum = 0;
+    for (int i = 0; i < n; ++i) sum += squaredError(T, src[i], dst[i]);
+    const double rms = std::sqrt(sum / n);
+    if (rms < best) best = rms, fit.T = T;
+  }
+  if (!std::isfinite(best)) {
+    fit.failure = "degenerate geometry";
+    return fit;
+  }
+  fit.rms_all = best;
+  double sum_in = 0;
+  const double thr2 = o.inlier_threshold * o.inlier_threshold;
+  for (int i = 0; i < n; ++i) {
+    const double e = squaredError(fit.T, src[i], dst[i]);
+    if (e <= thr2) fit.inliers.push_back(i), sum_in += e;
+  }
+  fit.rms = fit.inliers.empty() ? best : std::sqrt(sum_in / fit.inliers.size());
+  refineGaussNewton(src, dst, {}, fit.T, 0, &fit.covariance);  // covariance only, T unchanged
+  fit.ok = true;
+  return fit;
+}
+
+RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& o) {
+  RigidFit fit;
+  const int n = int(src.size());
+  if (n < 3) {
+    fit.failure = "too few correspondences";
+    return fit;
+  }
+  auto threshold2 = [&](int i) {
+    const double z = std::max(1.0, 0.5 * (src[i].z() + dst[i].z()));
+    const double t = o.inlier_threshold * z * z;
+    return t * t;
+  };
+  std::vector<double> thr2(n);
+  for (int i = 0; i < n; ++i) thr2[i] = threshold2(i);
+  auto inliersOf = [&](const Eigen::Isometry3d& T, std::vector<int>& in) {
+    in.clear();
+    for (int i = 0; i < n; ++i)
+      if (squaredError(T, src[i], dst[i]) <= thr2[i]) in.push_back(i);
+  };
+
+  std::mt19937 rng(o.seed);
+  std::vector<int> sample, in, best_in;
+  int needed = o.iterations;
+  for (int h = 0; h < std::min(needed, o.iterations); ++h) {
+    if (!drawSample(src.size(), 3, rng, src, sample)) continue;
+    inliersOf(umeyamaRigid(src, dst, sample), in);
+    if (in.size() > best_in.size()) {
+      best_in = in;
+      // Adaptive stop: enough draws for 99.9 % probability of one all-inlier sample.
+      const double ratio = double(best_in.size()) / n;
+      const double p_good = ratio * ratio * ratio;
+      if (p_good > 0.999999) needed = h + 1;
+      else if (p_good > 0) needed = std::min(o.iterations, int(std::ceil(std::log(1e-3) / std::log(1 - p_good))) + 1);
+    }
+  }
+  if (best_in.size() < 3) {
+    fit.failure = "degenerate geometry";
+    return fit;
+  }
+  // Least squares on the inliers, re-selecting them with the better model twice.
+  Eigen::Isometry3d T = umeyamaRigid(src, dst, best_in);
+  for (int r = 0; r < 2; ++r) {
+    inliersOf(T, in);
+    if (in.size() < 3) break;
+    best_in = in;
+    T = umeyamaRigid(src, dst, best_in);
+  }
+  T = refineGaussNewton(src, dst, best_in, T, o.gauss_newton_iterations, &fit.covariance);
+  inliersOf(T, in);
+  if (in.size() >= 3) best_in = in;
+  fit.T = T;
+  fit.inliers = best_in;
+  double sum_in = 0, sum_all = 0;
+  for (int i = 0; i < n; ++i) sum_all += squaredError(T, src[i], dst[i]);
+  for (int i : best_in) sum_in += squaredError(T, src[i], dst[i]);
+  fit.rms = std::sqrt(sum_in / best_in.size());
+  fit.rms_all = std::sqrt(sum_all / n);
+  fit.ok = true;
+  return fit;
+}
+
+}  // namespace vofusion
