@@ -1,0 +1,64 @@
+#pragma once
+// Everything a reconstruction run leaves in its output folder, each file whole or not at all:
+//   trajectory.txt   TUM format, one pose per processed frame
+//   poses.rawlog     input observations + odometry actions (CActionRobotMovement3D, emVisualOdometry)
+//                    + fused poses (CObservationRobotPose "VOFUSION_POSE"), for RawLogViewer / MRPT tools
+//   mesh.ply         CGAL post-processed coloured mesh (mesh_raw.ply too when asked)
+//   scene.3Dscene    mesh, camera path, frustums, grid for SceneViewer3D
+//   trajectory.png   path (and ground truth + error when known); mesh.png an off-screen rendering
+//   summary.json     frames, failures, fps per stage, peak memory, mesh statistics, ATE/RPE
+// Used by the offline app and the live one alike.
+#include <memory>
+#include <string>
+
+#include <mrpt/config/CLoadableOptions.h>
+#include <nlohmann/json.hpp>
+
+#include "vofusion/mesh/mesh_clean.h"
+#include "vofusion/pipeline/reconstruction.h"
+
+namespace vofusion {
+
+// INI section [output].
+struct OutputParams : public mrpt::config::CLoadableOptions {
+  bool write_rawlog = true;      // poses.rawlog (costs PNG encoding per frame, on a writer thread)
+  bool save_raw_mesh = false;    // also mesh_raw.ply, the marching-cubes mesh before post-processing
+  bool clean_mesh = true;        // CGAL post-processing with the [mesh] parameters
+  int frustum_every = 30;        // frames between camera frustums drawn in scene.3Dscene
+  int image_width = 1280;        // px, mesh.png and trajectory.png
+  int image_height = 960;        // px
+  double rpe_delta = 1.0;        // s, pose-pair spacing of the relative pose error
+
+  void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
+  void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
+};
+
+struct RunInfo {
+  std::string input;           // what was reconstructed
+  std::string config;          // the config file used ("" = defaults)
+  bool interrupted = false;    // stopped early (Ctrl-C, sensor lost): outputs hold what was built
+  double seconds = 0.0;        // wall time of the frame loop
+  nlohmann::json extra;        // caller-specific facts (e.g. live: played/dropped), merged into summary
+};
+
+class RunRecorder {
+ public:
+  // Throws InputError(dir, ...) when the folder cannot be created or written.
+  RunRecorder(const std::string& dir, const OutputParams& params, const MeshCleanParams& mesh_params);
+  ~RunRecorder();  // without finish(): poses.rawlog is discarded, earlier outputs stay as they were
+
+  // Queues the frame for poses.rawlog (written by a background thread) and keeps its ground truth.
+  void add(const Frame& frame, const FrameReport& report);
+  // Writes every output and returns the summary that went into summary.json. `log` gets one line
+  // per file written (may be null).
+  nlohmann::json finish(const Reconstruction& rec, const RunInfo& info, std::FILE* log = stderr);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Peak resident memory of this process so far, in MiB.
+double peakMemoryMiB();
+
+}  // namespace vofusion
