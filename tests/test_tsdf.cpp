@@ -1,0 +1,195 @@
+// TSDF integration, ray casting, volume shifting and marching cubes on analytic scenes.
+#include <cmath>
+#include <map>
+#include <set>
+
+#include <Eigen/Geometry>
+
+#include "support.h"
+#include "vofusion/fusion/marching_cubes.h"
+#include "vofusion/fusion/tsdf_volume.h"
+
+using namespace vofusion;
+using namespace vofusion::fusion;
+
+namespace {
+
+// A camera at `eye` looking at `target` (world z up), camera-to-world.
+Eigen::Isometry3f lookAt(const Eigen::Vector3f& eye, const Eigen::Vector3f& target) {
+  const Eigen::Vector3f z = (target - eye).normalized();
+  Eigen::Vector3f x = z.cross(Eigen::Vector3f::UnitZ());
+  if (x.norm() < 1e-3f) x = Eigen::Vector3f::UnitX();
+  x.normalize();
+  const Eigen::Vector3f y = z.cross(x);
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
+  T.linear().col(0) = x;
+  T.linear().col(1) = y;
+  T.linear().col(2) = z;
+  T.translation() = eye;
+  return T;
+}
+
+CameraIntrinsics smallCam() { return CameraIntrinsics{}.scaled(0.5); }  // 320x240
+
+// Depth (z in the camera) of a world sphere and/or the world plane z = plane_z, seen from T.
+cv::Mat renderDepth(const CameraIntrinsics& c, const Eigen::Isometry3f& T, const Eigen::Vector3f* centre, float r,
+                    const float* plane_z) {
+  cv::Mat z(c.height, c.width, CV_32F, cv::Scalar(0));
+  const Eigen::Vector3f o = T.translation();
+  for (int v = 0; v < c.height; ++v)
+    for (int u = 0; u < c.width; ++u) {
+      const Eigen::Vector3f rc((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.f);
+      const Eigen::Vector3f d = T.linear() * rc;  // per unit camera z
+      float best = 1e9f;
+      if (centre) {
+        const Eigen::Vector3f oc = o - *centre;
+        const float a = d.dot(d), b = 2 * d.dot(oc), cc = oc.dot(oc) - r * r, disc = b * b - 4 * a * cc;
+        if (disc >= 0) {
+          const float t = (-b - std::sqrt(disc)) / (2 * a);
+          if (t > 0) best = std::min(best, t);
+        }
+      }
+      if (plane_z && std::fabs(d.z()) > 1e-6f) {
+        const float t = (*plane_z - o.z()) / d.z();
+        if (t > 0) best = std::min(best, t);
+      }
+      if (best < 1e8f) z.at<float>(v, u) = best;
+    }
+  return z;
+}
+
+TsdfParams smallParams() {
+  TsdfParams p;
+  p.volume_voxels = 256;
+  p.voxel_size = 0.01f;
+  p.truncation = 0.04f;
+  p.mark_step = 2;
+  return p;
+}
+
+}  // namespace
+
+TEST(Tsdf, SphereMeshWithinOneVoxelClosedAndOutwardOriented) {
+  const TsdfParams p = smallParams();
+  const Eigen::Vector3f centre(0.03f, -0.02f, 1.0f);
+  const float r = 0.3f;
+  TsdfVolume vol(p, centre);
+  const CameraIntrinsics c = smallCam();
+  for (int k = 0; k < 12; ++k) {  // orbit around the sphere, above and below the equator
+    const float a = k * float(M_PI) / 6.f, e = (k % 2 ? 0.5f : -0.5f);
+    const Eigen::Vector3f eye = centre + 1.0f * Eigen::Vector3f(std::cos(a) * std::cos(e), std::sin(a) * std::cos(e), std::sin(e));
+    const Eigen::Isometry3f T = lookAt(eye, centre);
+    vol.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
+  }
+  // Only bricks near the surface exist.
+  EXPECT_LT(vol.bricksInVolume(), 0.05 * std::pow(p.volume_voxels / 8, 3));
+  const TriangleMesh m = vol.extractMesh();
+  ASSERT_GT(m.faces.size(), 5000u);
+  ASSERT_EQ(m.normals.size(), m.vertices.size());
+  ASSERT_EQ(m.colors.size(), m.vertices.size());
+  double worst = 0;
+  for (const auto& v : m.vertices) worst = std::max(worst, double(std::fabs((v - centre).norm() - r)));
+  EXPECT_LT(worst, p.voxel_size);
+  // Shared vertices: no two vertices at the same place; a closed surface: every edge in 2 faces.
+  std::set<std::tuple<long, long, long>> pos;
+  for (const auto& v : m.vertices) pos.insert({std::lround(v.x() * 1e5), std::lround(v.y() * 1e5), std::lround(v.z() * 1e5)});
+  EXPECT_EQ(pos.size(), m.vertices.size());
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
+  int outward = 0;
+  for (const auto& f : m.faces) {
+    for (int k = 0; k < 3; ++k) ++edges[{std::min(f[k], f[(k + 1) % 3]), std::max(f[k], f[(k + 1) % 3])}];
+    const Eigen::Vector3f n = (m.vertices[f[1]] - m.vertices[f[0]]).cross(m.vertices[f[2]] - m.vertices[f[0]]);
+    outward += n.dot(m.vertices[f[0]] - centre) > 0;
+  }
+  int boundary = 0;
+  for (const auto& [e, n] : edges) boundary += n != 2;
+  EXPECT_LT(boundary, 0.01 * edges.size());
+  EXPECT_GT(outward, 0.99 * m.faces.size());  // counter-clockwise seen from outside
+  int good_normals = 0;
+  for (std::size_t i = 0; i < m.vertices.size(); ++i)
+    good_normals += m.normals[i].dot((m.vertices[i] - centre).normalized()) > 0.95f;
+  EXPECT_GT(good_normals, 0.98 * m.vertices.size());
+}
+
+TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
+  const TsdfParams p = smallParams();
+  const float plane_z = 0.0f;
+  TsdfVolume vol(p, Eigen::Vector3f(0, 0, 0));
+  const CameraIntrinsics c = smallCam();
+  cv::Mat rgb(c.height, c.width, CV_8UC3, cv::Scalar(10, 100, 200));  // BGR
+  for (int k = 0; k < 5; ++k) {
+    const Eigen::Isometry3f T = lookAt(Eigen::Vector3f(-0.3f + 0.15f * k, 0.1f, 1.1f), Eigen::Vector3f(0.05f * k, 0, 0));
+    vol.integrate(renderDepth(c, T, nullptr, 0, &plane_z), rgb, c, T);
+  }
+  const TriangleMesh m = vol.extractMesh();
+  ASSERT_GT(m.faces.size(), 1000u);
+  for (std::size_t i = 0; i < m.vertices.size(); ++i) {
+    ASSERT_LT(std::fabs(m.vertices[i].z() - plane_z), p.voxel_size);
+    ASSERT_GT(m.normals[i].z(), 0.9f);  // towards the side the cameras saw
+    ASSERT_EQ(m.colors[i][0], 200);
+    ASSERT_EQ(m.colors[i][2], 10);
+  }
+  // Ray cast from a new view: vertices on the plane where the depth says, normals +z.
+  const Eigen::Isometry3f view = lookAt(Eigen::Vector3f(0.1f, -0.1f, 0.9f), Eigen::Vector3f(0, 0.05f, 0));
+  const cv::Mat truth = renderDepth(c, view, nullptr, 0, &plane_z);
+  const RaycastMaps maps = vol.raycast(view, c, nullptr, true);
+  const cv::Mat hinted = vol.raycast(view, c, &truth).vertices;
+  int hits = 0;
+  for (int v = 0; v < c.height; v += 2)
+    for (int u = 0; u < c.width; u += 2) {
+      const cv::Vec3f pv = maps.vertices.at<cv::Vec3f>(v, u);
+      if (std::isnan(pv[0])) continue;
+      ++hits;
+      const Eigen::Vector3f pw(pv[0], pv[1], pv[2]);
+      const float z_cam = (view.inverse() * pw).z();
+      ASSERT_NEAR(z_cam, truth.at<float>(v, u), 0.5f * p.voxel_size);
+      ASSERT_GT(maps.normals.at<cv::Vec3f>(v, u)[2], 0.999f);
+      ASSERT_EQ(maps.colours.at<cv::Vec3b>(v, u), cv::Vec3b(10, 100, 200));
+      const cv::Vec3f ph = hinted.at<cv::Vec3f>(v, u);
+      ASSERT_LT(cv::norm(ph - pv), 0.25 * p.voxel_size);  // the depth hint only saves time
+    }
+  EXPECT_GT(hits, 0.8 * c.width * c.height / 4);
+}
+
+TEST(Tsdf, ShiftMovesBricksToWorldModelAndBackWithoutLoss) {
+  const TsdfParams p = smallParams();
+  const Eigen::Vector3f centre(0, 0, 1.0f);
+  const float r = 0.3f;
+  TsdfVolume vol(p, centre);
+  const CameraIntrinsics c = smallCam();
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(k * 1.5f), std::sin(k * 1.5f), 0.2f), centre);
+    vol.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
+  }
+  const TriangleMesh before = vol.extractMesh();
+  const std::size_t bricks = vol.bricksInVolume();
+  ASSERT_GT(bricks, 0u);
+  EXPECT_FALSE(vol.shiftIfNeeded(centre + Eigen::Vector3f(0.1f, 0, 0), 0.3f));
+  EXPECT_TRUE(vol.shiftIfNeeded(centre + Eigen::Vector3f(10.f, 0, 0), 0.3f));  // far away: all leave
+  EXPECT_EQ(vol.bricksInVolume(), 0u);
+  EXPECT_EQ(vol.bricksInWorldModel(), bricks);
+  float sdf;
+  EXPECT_FALSE(vol.sdfAt(centre + Eigen::Vector3f(r, 0, 0), sdf));  // no longer in the volume
+  const TriangleMesh away = vol.extractMesh();
+  EXPECT_EQ(away.vertices.size(), before.vertices.size());
+  EXPECT_EQ(away.faces.size(), before.faces.size());
+  // Half a volume away: part of the sphere stays, the rest is in the world model; same mesh.
+  vol.shiftTo(centre + Eigen::Vector3f(0.3f + p.volume_voxels * p.voxel_size / 2, 0, 0));
+  EXPECT_GT(vol.bricksInVolume(), 0u);
+  EXPECT_GT(vol.bricksInWorldModel(), 0u);
+  const TriangleMesh split = vol.extractMesh();
+  EXPECT_EQ(split.faces.size(), before.faces.size());
+  vol.shiftTo(centre);
+  EXPECT_EQ(vol.bricksInWorldModel(), 0u);
+  EXPECT_EQ(vol.bricksInVolume(), bricks);
+  ASSERT_TRUE(vol.sdfAt(centre + Eigen::Vector3f(r, 0, 0), sdf));
+  EXPECT_LT(std::fabs(sdf), p.voxel_size);
+}
+
+TEST(MarchingCubes, EmptyAndUnobservedGiveNoTriangles) {
+  EXPECT_TRUE(marchingCubes({}, 0.01f).empty());
+  Brick b;  // all weights 0: unobserved
+  for (auto& v : b.voxels) v.tsdf = -100;
+  b.voxels[0].tsdf = 100;
+  EXPECT_TRUE(marchingCubes({{Eigen::Vector3i(0, 0, 0), &b}}, 0.01f).empty());
+}
