@@ -1,0 +1,139 @@
+#include "vofusion/eval/trajectory_eval.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+
+namespace vofusion {
+
+namespace {
+Eigen::Vector3d position(const mrpt::poses::CPose3D& p) { return {p.x(), p.y(), p.z()}; }
+
+double rotationAngle(const mrpt::poses::CPose3D& p) {
+  const double c = (p.getRotationMatrix().asEigen().trace() - 1.0) / 2.0;
+  return std::acos(std::clamp(c, -1.0, 1.0));
+}
+
+// Index of the stamp in `stamps` (sorted) nearest to t.
+std::size_t nearest(const std::vector<double>& stamps, double t) {
+  auto it = std::lower_bound(stamps.begin(), stamps.end(), t);
+  if (it == stamps.begin()) return 0;
+  if (it == stamps.end()) return stamps.size() - 1;
+  const std::size_t j = std::size_t(it - stamps.begin());
+  return (t - stamps[j - 1] <= stamps[j] - t) ? j - 1 : j;
+}
+
+std::vector<double> stampsOf(const Trajectory& t) {
+  std::vector<double> s;
+  s.reserve(t.size());
+  for (const auto& p : t) s.push_back(p.timestamp);
+  return s;
+}
+}  // namespace
+
+ErrorStats computeStats(const std::vector<double>& e) {
+  ErrorStats s;
+  s.count = e.size();
+  if (e.empty()) return s;
+  double sum = 0, sum2 = 0;
+  for (double v : e) sum += v, sum2 += v * v;
+  s.mean = sum / e.size();
+  s.rmse = std::sqrt(sum2 / e.size());
+  s.std = std::sqrt(std::max(0.0, sum2 / e.size() - s.mean * s.mean));
+  std::vector<double> sorted = e;
+  std::sort(sorted.begin(), sorted.end());
+  const std::size_t n = sorted.size();
+  s.median = n % 2 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+  s.min = sorted.front();
+  s.max = sorted.back();
+  return s;
+}
+
+std::vector<std::pair<std::size_t, std::size_t>> associateTrajectories(const Trajectory& gt, const Trajectory& est,
+                                                                       double max_dt) {
+  struct Cand { double dt; std::size_t i, j; };
+  std::vector<Cand> cands;
+  const std::vector<double> es = stampsOf(est);
+  for (std::size_t i = 0; i < gt.size(); ++i) {
+    auto lo = std::lower_bound(es.begin(), es.end(), gt[i].timestamp - max_dt);
+    for (auto it = lo; it != es.end() && *it <= gt[i].timestamp + max_dt; ++it)
+      cands.push_back({std::abs(*it - gt[i].timestamp), i, std::size_t(it - es.begin())});
+  }
+  std::stable_sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.dt < b.dt; });
+  std::vector<char> used_g(gt.size(), 0), used_e(est.size(), 0);
+  std::vector<std::pair<std::size_t, std::size_t>> out;
+  for (const Cand& c : cands) {
+    if (used_g[c.i] || used_e[c.j]) continue;
+    used_g[c.i] = used_e[c.j] = 1;
+    out.emplace_back(c.i, c.j);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt) {
+  AteResult r;
+  const auto pairs = associateTrajectories(gt, est, max_dt);
+  if (pairs.size() < 3) {
+    r.message = "only " + std::to_string(pairs.size()) + " poses associated within " + std::to_string(max_dt) +
+                " s (need 3; do the timestamps match?)";
+    return r;
+  }
+  Eigen::Matrix3Xd src(3, pairs.size()), dst(3, pairs.size());
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    src.col(k) = position(est[pairs[k].second].pose);
+    dst.col(k) = position(gt[pairs[k].first].pose);
+  }
+  // Rigid alignment without scale (Horn's closed form; Umeyama's equals it with scaling off).
+  const Eigen::Matrix4d T = Eigen::umeyama(src, dst, false);
+  mrpt::math::CMatrixDouble44 M;
+  M.asEigen() = T;
+  r.alignment = mrpt::poses::CPose3D(M);
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    const StampedPose& g = gt[pairs[k].first];
+    const mrpt::poses::CPose3D aligned = r.alignment + est[pairs[k].second].pose;
+    r.gt.push_back(g);
+    r.est_aligned.push_back({est[pairs[k].second].timestamp, aligned});
+    r.times.push_back(g.timestamp);
+    r.errors.push_back((position(aligned) - position(g.pose)).norm());
+  }
+  r.trans = computeStats(r.errors);
+  r.success = true;
+  return r;
+}
+
+RpeResult computeRpe(const Trajectory& gt, const Trajectory& est, double delta, double max_dt) {
+  RpeResult r;
+  r.delta = delta;
+  if (est.size() < 2 || gt.empty()) {
+    r.message = "need at least 2 estimated and 1 ground-truth pose";
+    return r;
+  }
+  const std::vector<double> es = stampsOf(est), gs = stampsOf(gt);
+  for (std::size_t i = 0; i < est.size(); ++i) {
+    const std::size_t j = nearest(es, es[i] + delta);
+    if (j == est.size() - 1) continue;  // as evaluate_rpe.py: the partner ran off the end
+    const std::size_t g0 = nearest(gs, es[i]), g1 = nearest(gs, es[j]);
+    if (std::abs(gs[g0] - es[i]) > max_dt || std::abs(gs[g1] - es[j]) > max_dt) continue;
+    const mrpt::poses::CPose3D est_rel = est[j].pose - est[i].pose;  // est_i^-1 est_j
+    const mrpt::poses::CPose3D gt_rel = gt[g1].pose - gt[g0].pose;
+    mrpt::poses::CPose3D gt_rel_inv = gt_rel;
+    gt_rel_inv.inverse();
+    const mrpt::poses::CPose3D err = est_rel + gt_rel_inv;            // est_rel * gt_rel^-1, as the benchmark
+    r.times.push_back(es[i]);
+    r.trans_errors.push_back(position(err).norm());
+    r.rot_errors_deg.push_back(rotationAngle(err) * 180.0 / M_PI);
+  }
+  if (r.trans_errors.empty()) {
+    r.message = "no pose pairs " + std::to_string(delta) + " s apart with ground truth (sequence too short?)";
+    return r;
+  }
+  r.trans = computeStats(r.trans_errors);
+  r.rot_deg = computeStats(r.rot_errors_deg);
+  r.success = true;
+  return r;
+}
+
+}  // namespace vofusion
