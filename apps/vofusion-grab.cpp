@@ -1,0 +1,253 @@
+// vofusion-grab: record an RGB-D sensor (MRPT hwdrivers, e.g. COpenNI2Sensor) into a rawlog, and
+// optionally reconstruct live. --replay plays a TUM folder or rawlog through the same live path.
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/config.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
+#include "vofusion/io/frame_source.h"
+#include "vofusion/io/rawlog.h"
+#include "vofusion/live/live_loop.h"
+#include "vofusion/live/live_source.h"
+#include "vofusion/live/live_viewer.h"
+#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/pipeline/reconstruction.h"
+
+namespace fs = std::filesystem;
+using namespace vofusion;
+
+namespace {
+
+const char* kSection = "vofusion-grab";  // our own keys; sensor sections belong to MRPT
+
+const char* kUsage =
+    "usage: vofusion-grab [--config grab.ini] [--sensor SECTION] [--out DIR] [--live] [--no-gui]\n"
+    "                     [--replay TUM_DIR|FILE.rawlog] [--max-frames N] [--queue N] [--speed X]\n"
+    "                     [--mode paper|kinfu|odometry] [--no-record] [--simulate-work-ms MS]\n"
+    "                     [--verbose] [--dump-config]\n"
+    "  Records the sensor of --config (default share/grab-openni2.ini) to DIR/grab.rawlog until\n"
+    "  Ctrl-C or --max-frames. --live also reconstructs online (window unless --no-gui) and writes\n"
+    "  DIR/trajectory.txt and DIR/mesh.ply. --replay plays a recording at its recorded rate instead\n"
+    "  of a sensor. Frames the processing cannot keep up with are dropped (oldest first) and counted;\n"
+    "  the recording itself never drops. DIR/grab-summary.txt holds the counts.\n";
+
+std::atomic<bool> g_stop{false};
+
+void onSignal(int) {
+  g_stop = true;
+  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C kills at once
+}
+
+struct Args {
+  std::string config, sensor, out = "grab", replay, mode = "paper";
+  bool live = false, gui = true, record = true, verbose = false, dump = false;
+  std::optional<std::size_t> max_frames, queue;
+  std::optional<double> speed;
+  int work_ms = 0;
+};
+
+std::size_t parseCount(const std::string& flag, const std::string& v) {
+  try {
+    std::size_t pos = 0;
+    const long long n = std::stoll(v, &pos);
+    if (pos == v.size() && n >= 0) return std::size_t(n);
+  } catch (const std::exception&) {
+  }
+  throw InputError(flag, "expected a non-negative integer, got '" + v + "'");
+}
+
+double parseNumber(const std::string& flag, const std::string& v) {
+  try {
+    std::size_t pos = 0;
+    const double x = std::stod(v, &pos);
+    if (pos == v.size() && x >= 0) return x;
+  } catch (const std::exception&) {
+  }
+  throw InputError(flag, "expected a non-negative number, got '" + v + "'");
+}
+
+Args parseArgs(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string f = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw InputError(f, "needs a value");
+      return argv[++i];
+    };
+    if (f == "--config") a.config = value();
+    else if (f == "--sensor") a.sensor = value();
+    else if (f == "--out") a.out = value();
+    else if (f == "--replay") a.replay = value();
+    else if (f == "--mode") a.mode = value();
+    else if (f == "--live") a.live = true;
+    else if (f == "--no-gui") a.gui = false;
+    else if (f == "--no-record") a.record = false;
+    else if (f == "--verbose") a.verbose = true;
+    else if (f == "--dump-config") a.dump = true;
+    else if (f == "--max-frames") a.max_frames = parseCount(f, value());
+    else if (f == "--queue") a.queue = parseCount(f, value());
+    else if (f == "--speed") a.speed = parseNumber(f, value());
+    else if (f == "--simulate-work-ms") a.work_ms = int(parseCount(f, value()));
+    else if (f == "-h" || f == "--help") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else throw InputError(f, "unknown option (see --help)");
+  }
+  if (a.queue && *a.queue < 1) throw InputError("--queue", "must be at least 1");
+  if (!a.live && !a.record) throw InputError("--no-record", "without --live there is nothing left to do");
+  return a;
+}
+
+// Only our own section is checked for typos: sensor sections are read by MRPT's drivers.
+void checkOwnSection(const mrpt::config::CConfigFileBase& cfg, const std::string& origin, const LiveOptions& defaults) {
+  mrpt::config::CConfigFileMemory own;
+  std::vector<std::string> keys;
+  cfg.getAllKeys(kSection, keys);
+  for (const auto& k : keys)
+    if (k != "rawlog-grabber-ignore") own.write(kSection, k, cfg.read_string(kSection, k, ""));
+  checkConfigKeys(own, origin, {{kSection, &defaults}});
+}
+
+std::string summaryText(const LiveStats& s, const std::string& source, std::size_t recorded, std::size_t queue) {
+  std::ostringstream o;
+  o << "source: " << source << "\n"
+    << "frames_played: " << s.played << "\n"
+    << "frames_processed: " << s.processed << "\n"
+    << "frames_dropped: " << s.dropped << "\n"
+    << "frames_recorded: " << recorded << "\n"
+    << "queue_capacity: " << queue << "\n"
+    << "max_queue: " << s.max_queue << "\n"
+    << "seconds: " << s.seconds << "\n"
+    << "played_fps: " << s.playedFps() << "\n"
+    << "processed_fps: " << s.processedFps() << "\n"
+    << "stop: " << stopReasonName(s.stop) << "\n"
+    << "error: " << s.error << "\n";
+  return o.str();
+}
+
+int run(const Args& args) {
+  // Configuration: the sensor's file (rawlog-grabber format) plus our [vofusion-grab] section.
+  std::string config = args.config;
+  if (config.empty() && args.replay.empty()) config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
+  const auto cfg = loadConfig(config);
+  LiveOptions opts;
+  if (args.dump) {
+    std::fputs(dumpConfig({{kSection, &opts}}).c_str(), stdout);
+    return 0;
+  }
+  checkOwnSection(cfg, config, opts);
+  opts.loadFromConfigFile(cfg, kSection);
+  if (args.max_frames) opts.max_frames = *args.max_frames;
+  if (args.queue) opts.queue_capacity = *args.queue;
+  if (args.speed) opts.replay_speed = *args.speed;
+
+  // Reconstruction settings come from the same file; mistakes there fail now, not mid-run.
+  std::optional<TrackingMode> mode;
+  if (args.live) mode = parseTrackingMode(args.mode, "--mode");
+
+  ensureWritableDirectory(args.out);
+
+  // The source: a replay, or the sensor (fails here, in one line, when none can be opened).
+  std::unique_ptr<LiveSource> source;
+  std::string label = "KINECT";
+  if (!args.replay.empty()) {
+    source = std::make_unique<ReplaySource>(openFrameSource(args.replay), opts.replay_speed);
+  } else {
+    const std::string section = findSensorSection(cfg, args.sensor, config);
+    label = cfg.read_string(section, "sensorLabel", label);
+    source = std::make_unique<SensorSource>(cfg, section, opts.sensor_timeout, config, args.verbose);
+  }
+
+  std::unique_ptr<RawlogWriter> writer;
+  if (args.record) {
+    RawlogWriterOptions wopts;
+    wopts.sensor_label = label;
+    writer = std::make_unique<RawlogWriter>((fs::path(args.out) / "grab.rawlog").string(), wopts);
+  }
+
+  std::unique_ptr<Reconstruction> rec;
+  if (args.live) rec = std::make_unique<Reconstruction>(cfg, *mode);
+  std::unique_ptr<LiveViewer> viewer;
+  if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source->name());
+
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  // The consumer: the reconstruction when --live, else nothing (recording happens on the grab
+  // thread). --simulate-work-ms adds a fixed cost per frame (tests force drops with it).
+  LiveStats latest;
+  std::size_t lost_in_a_row = 0;
+  FrameConsumer consumer = [&](const Frame& frame) {
+    if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
+    if (!rec) return;
+    const FrameReport r = rec->process(frame);
+    lost_in_a_row = r.tracked ? 0 : lost_in_a_row + 1;
+    if (viewer) {
+      LiveView view;
+      view.image = rec->renderView(frame.camera);
+      view.pose = r.pose;
+      view.tracking = r.tracked ? (r.fell_back ? "tracking (odometry fallback)" : "tracking")
+                                : "LOST" + (r.note.empty() ? std::string() : ": " + r.note);
+      viewer->show(view, latest);
+      if (!viewer->isOpen()) g_stop = true;  // closing the window ends the run
+    }
+  };
+
+  LiveHooks hooks;
+  hooks.stop = &g_stop;
+  if (writer) hooks.on_grabbed = [&](const Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { writer->write(f); };
+  std::size_t total = source->size();
+  if (opts.max_frames > 0 && (total == 0 || total > opts.max_frames)) total = opts.max_frames;
+  Progress progress(args.live ? "live" : "recording", total);
+  hooks.on_tick = [&](const LiveStats& s) {
+    latest = s;
+    progress.update(s.played, "processed " + std::to_string(s.processed) + "  dropped " + std::to_string(s.dropped));
+    if (viewer) viewer->status(s);
+  };
+
+  std::fprintf(stderr, "vofusion-grab: %s from %s (queue %zu, Ctrl-C to stop)\n",
+               args.live ? "reconstructing" : "recording", source->name().c_str(), opts.queue_capacity);
+  const LiveStats stats = runLive(*source, consumer, opts, hooks);
+  progress.finish("processed " + std::to_string(stats.processed) + "  dropped " + std::to_string(stats.dropped) +
+                  "  (" + stopReasonName(stats.stop) + ")");
+
+  // Everything recorded so far is written, whatever stopped the run.
+  const std::size_t recorded = writer ? writer->framesWritten() : 0;
+  if (writer) writer->commit();
+  if (rec && rec->framesProcessed() > 0) {
+    writeTumTrajectory((fs::path(args.out) / "trajectory.txt").string(), rec->trajectory());
+    writePly((fs::path(args.out) / "mesh.ply").string(), rec->extractMesh());
+  }
+  writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
+                      summaryText(stats, source->name(), recorded, opts.queue_capacity));
+  std::fprintf(stderr, "vofusion-grab: %zu played, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,
+               stats.processed, stats.dropped, recorded, args.out.c_str());
+  if (!stats.ok()) {
+    std::fprintf(stderr, "vofusion-grab: stopped: %s (everything recorded so far was written)\n", stats.error.c_str());
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(parseArgs(argc, argv));
+  } catch (const InputError& e) {
+    std::fprintf(stderr, "vofusion-grab: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "vofusion-grab: %s\n", oneLineMessage(e).c_str());
+    return 1;
+  }
+}

@@ -1,0 +1,85 @@
+#include "vofusion/live/live_viewer.h"
+
+#include <cstdio>
+#include <cstdlib>
+
+#include <mrpt/img/CImage.h>
+#include <mrpt/opengl/CGridPlaneXY.h>
+#include <mrpt/opengl/COpenGLScene.h>
+#include <mrpt/opengl/stock_objects.h>
+
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+LiveViewer::LiveViewer(const std::string& title) {
+  const char* display = std::getenv("DISPLAY");
+  const char* wayland = std::getenv("WAYLAND_DISPLAY");
+  if ((!display || !*display) && (!wayland || !*wayland))
+    throw InputError("--live", "no display for the live window (DISPLAY is not set): add --no-gui");
+  win_ = mrpt::gui::CDisplayWindow3D::Create(title, 1024, 768);
+  path_ = mrpt::opengl::CSetOfLines::Create();
+  path_->setColor(0.9f, 0.2f, 0.2f);
+  path_->setLineWidth(2.0f);
+  camera_ = mrpt::opengl::stock_objects::CornerXYZSimple(0.15f, 2.0f);
+  {
+    auto& scene = win_->get3DSceneAndLock();
+    scene->insert(mrpt::opengl::CGridPlaneXY::Create(-3, 3, -3, 3, 0, 0.5f));
+    scene->insert(path_);
+    scene->insert(camera_);
+    // Inset at the top left: the current view.
+    auto inset = scene->createViewport("view");
+    inset->setViewportPosition(0.0, 0.6, 0.4, 0.4);
+    win_->unlockAccess3DScene();
+  }
+  win_->setCameraZoom(4.0f);
+  win_->repaint();
+}
+
+LiveViewer::~LiveViewer() = default;
+
+bool LiveViewer::isOpen() { return win_ && win_->isOpen(); }
+
+void LiveViewer::drawText(const LiveStats& s) {
+  char line[256];
+  std::snprintf(line, sizeof line, "%zu frames  %.1f fps processed  %.1f fps sensor  dropped %zu  |  %s",
+                s.processed, s.processedFps(), s.playedFps(), s.dropped, tracking_.c_str());
+  mrpt::opengl::TFontParams font;
+  font.color = mrpt::img::TColorf(1, 1, 1);
+  win_->addTextMessage(5, 5, line, 0, font);
+}
+
+void LiveViewer::status(const LiveStats& stats) {
+  if (!isOpen()) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_draw_ < std::chrono::milliseconds(500)) return;
+  last_draw_ = now;
+  win_->get3DSceneAndLock();
+  drawText(stats);
+  win_->unlockAccess3DScene();
+  win_->repaint();
+}
+
+void LiveViewer::show(const LiveView& view, const LiveStats& stats) {
+  if (!isOpen()) return;
+  tracking_ = view.tracking;
+  // The path grows every frame; the heavy part (image upload, repaint) at most ~10 Hz.
+  auto& scene = win_->get3DSceneAndLock();
+  if (view.pose) {
+    if (last_pose_)
+      path_->appendLine(last_pose_->x(), last_pose_->y(), last_pose_->z(), view.pose->x(), view.pose->y(), view.pose->z());
+    last_pose_ = view.pose;
+    camera_->setPose(*view.pose);
+  }
+  const auto now = std::chrono::steady_clock::now();
+  const bool redraw = now - last_draw_ >= std::chrono::milliseconds(100);
+  if (redraw) {
+    last_draw_ = now;
+    if (!view.image.empty()) scene->getViewport("view")->setImageView(mrpt::img::CImage(view.image, mrpt::img::DEEP_COPY));
+    drawText(stats);
+  }
+  win_->unlockAccess3DScene();
+  if (redraw) win_->repaint();
+}
+
+}  // namespace vofusion

@@ -1,0 +1,243 @@
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <cmath>
+#include <iostream>
+#include <thread>
+#include <vector>
+
+#include <mrpt/hwdrivers/COpenNI2Generic.h>
+#include <mrpt/hwdrivers/registerAllClasses.h>
+
+#include "vofusion/core/errors.h"
+#include "vofusion/live/live_source.h"
+#include "vofusion/io/rawlog.h"
+
+namespace fs = std::filesystem;
+
+namespace vofusion {
+
+namespace {
+
+// MRPT drivers chat on stdout/stderr while loading and opening (config dumps, backtraces of
+// ignored calibration warnings): silenced, since we report what went wrong ourselves in one line.
+class QuietStdio {
+ public:
+  explicit QuietStdio(bool active) : active_(active) {
+    if (!active_) return;
+    std::cout.flush();
+    std::cerr.flush();
+    std::fflush(nullptr);
+    out_ = ::dup(1);
+    err_ = ::dup(2);
+    const int null = ::open("/dev/null", O_WRONLY);
+    if (null >= 0) {
+      ::dup2(null, 1);
+      ::dup2(null, 2);
+      ::close(null);
+    }
+  }
+  ~QuietStdio() {
+    if (!active_) return;
+    std::cout.flush();
+    std::cerr.flush();
+    std::fflush(nullptr);
+    if (out_ >= 0) ::dup2(out_, 1), ::close(out_);
+    if (err_ >= 0) ::dup2(err_, 2), ::close(err_);
+  }
+
+ private:
+  bool active_;
+  int out_ = -1, err_ = -1;
+};
+
+std::string readSmall(const fs::path& p) {
+  std::ifstream f(p);
+  std::string s;
+  f >> s;
+  return s;
+}
+
+struct UsbId {
+  std::string vendor, product;
+};
+
+std::vector<UsbId> usbDevices() {
+  std::vector<UsbId> ids;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator("/sys/bus/usb/devices", ec)) {
+    const auto v = readSmall(e.path() / "idVendor"), p = readSmall(e.path() / "idProduct");
+    if (!v.empty()) ids.push_back({v, p});
+  }
+  return ids;
+}
+
+std::vector<std::string> openni2Drivers(std::string* dir_out) {
+  std::vector<std::string> libs;
+  std::error_code ec;
+  for (const auto& lib : fs::directory_iterator("/usr/lib", ec)) {
+    const fs::path d = lib.path() / "OpenNI2" / "Drivers";
+    if (!fs::is_directory(d, ec)) continue;
+    *dir_out = d.string();
+    for (const auto& f : fs::directory_iterator(d, ec)) libs.push_back(f.path().filename().string());
+  }
+  return libs;
+}
+
+// ~COpenNI2Sensor() throws when no device was found (it closes a device that does not exist),
+// which would terminate the program: a sensor in that state is never destroyed.
+void abandonSensor(mrpt::hwdrivers::CGenericSensor::Ptr sensor) {
+  static auto* never_destroyed = new std::vector<mrpt::hwdrivers::CGenericSensor::Ptr>();
+  never_destroyed->push_back(std::move(sensor));
+}
+
+}  // namespace
+
+Frame sensorObservationToFrame(const mrpt::obs::CObservation3DRangeScan& obs, const std::string& origin) {
+  if (!obs.hasRangeImage) throw SensorError(origin + ": no depth image (set grab_depth = true)");
+  if (!obs.hasIntensityImage) throw SensorError(origin + ": no colour image (set grab_image = true)");
+  // The pipeline needs depth registered to colour (OpenNI2 registers in hardware): then the colour
+  // camera's intrinsics describe the depth image too, whatever the depth camera's own are.
+  const auto& t = obs.relativePoseIntensityWRTDepth;
+  if (std::sqrt(t.x() * t.x() + t.y() * t.y() + t.z() * t.z()) > 1e-3)
+    throw SensorError(origin + ": depth is not registered to colour (relative pose has a translation)");
+  std::optional<CameraIntrinsics> camera;
+  if (obs.cameraParamsIntensity.fx() > 0) camera = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
+  try {
+    return frameFromObservation(obs, origin, camera);
+  } catch (const std::exception& e) {
+    throw SensorError(oneLineMessage(e));
+  }
+}
+
+std::string oneLineMessage(const std::exception& e) {
+  std::string s = e.what();
+  const auto m = s.find("Message:");
+  if (m != std::string::npos) {
+    s = s.substr(m + 8);
+    const auto end = s.find('\n');
+    if (end != std::string::npos) s = s.substr(0, end);
+  }
+  for (char& c : s)
+    if (c == '\n' || c == '\r') c = ' ';
+  const auto a = s.find_first_not_of(' '), b = s.find_last_not_of(' ');
+  return a == std::string::npos ? "unknown error" : s.substr(a, b - a + 1);
+}
+
+std::string diagnoseOpenNI2() {
+  bool kinect1 = false, primesense = false;
+  for (const auto& id : usbDevices()) {
+    if (id.vendor == "045e" && (id.product == "02ae" || id.product == "02bf" || id.product == "02c2")) kinect1 = true;
+    if (id.vendor == "1d27") primesense = true;
+  }
+  std::string dir = "/usr/lib/<arch>/OpenNI2/Drivers";
+  const auto drivers = openni2Drivers(&dir);
+  auto has = [&](const std::string& stem) {
+    for (const auto& d : drivers)
+      if (d.rfind(stem, 0) == 0) return true;
+    return false;
+  };
+  if (drivers.empty()) return "no OpenNI2 drivers in " + dir + " (install the Debian package libopenni2-0)";
+  if (!kinect1 && !primesense)
+    return "no RGB-D sensor found on USB (no Kinect 045e:02ae, no PrimeSense/Xtion 1d27:*): is it plugged in and powered?";
+  if (kinect1 && !primesense && !has("libFreenectDriver"))
+    return "a Kinect v1 is connected but OpenNI2 has no driver for it: install libFreenectDriver.so (libfreenect's "
+           "OpenNI2 driver) into " + dir;
+  if (primesense && !has("libPS1080"))
+    return "a PrimeSense/Xtion sensor is connected but " + dir + " lacks libPS1080.so (reinstall libopenni2-0)";
+  return "the sensor is on USB but OpenNI2 cannot open it: check permissions (udev rules, log out and in after "
+         "joining group plugdev/video) and that no other program uses it";
+}
+
+std::string findSensorSection(const mrpt::config::CConfigFileBase& cfg, const std::string& wanted,
+                              const std::string& origin) {
+  if (!wanted.empty()) {
+    if (cfg.read_string(wanted, "driver", "").empty())
+      throw InputError(origin, "section [" + wanted + "] has no 'driver' key (e.g. driver = COpenNI2Sensor)");
+    return wanted;
+  }
+  std::vector<std::string> sections, found;
+  cfg.getAllSections(sections);
+  for (const auto& s : sections)
+    if (!cfg.read_string(s, "driver", "").empty()) found.push_back(s);
+  if (found.empty()) throw InputError(origin, "no sensor section (a section with 'driver = COpenNI2Sensor')");
+  if (found.size() > 1)
+    throw InputError(origin, "several sensor sections ([" + found[0] + "], [" + found[1] + "], ...): choose one with --sensor");
+  return found[0];
+}
+
+SensorSource::SensorSource(const mrpt::config::CConfigFileBase& cfg, const std::string& section, double timeout_s,
+                           const std::string& origin, bool verbose)
+    : section_(section), origin_(origin), timeout_s_(timeout_s) {
+  static const bool registered = [] {
+    mrpt::hwdrivers::registerAllClasses_mrpt_hwdrivers();
+    return true;
+  }();
+  (void)registered;
+  driver_ = cfg.read_string(section, "driver", "");
+  const std::string where = origin + " [" + section + "]";
+  try {
+    QuietStdio quiet(!verbose);
+    sensor_ = mrpt::hwdrivers::CGenericSensor::createSensorPtr(driver_);
+    if (!sensor_) throw InputError(where, "unknown sensor driver '" + driver_ + "' (not a class of mrpt::hwdrivers)");
+    sensor_->loadConfig(cfg, section);
+    sensor_->initialize();
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw InputError(where, driver_ + ": " + oneLineMessage(e));
+  }
+  // COpenNI2Sensor::initialize() returns quietly when no device is found (and its doProcess()
+  // then aborts the program on an assertion): check here and say why.
+  if (auto* oni = dynamic_cast<mrpt::hwdrivers::COpenNI2Generic*>(sensor_.get())) {
+    const int device = cfg.read_int(section, "device_number", 0);
+    if (oni->getNumDevices() <= 0) {
+      abandonSensor(std::move(sensor_));
+      throw InputError(where, "OpenNI2 found no device: " + diagnoseOpenNI2());
+    }
+    if (!oni->isOpen(unsigned(device))) {
+      const int n = oni->getNumDevices();
+      abandonSensor(std::move(sensor_));
+      throw InputError(where, "cannot open OpenNI2 device " + std::to_string(device) + " of " + std::to_string(n) +
+                                  ": " + diagnoseOpenNI2());
+    }
+  }
+  if (sensor_->getState() == mrpt::hwdrivers::CGenericSensor::ssError)
+    throw InputError(where, driver_ + " reported an error while initialising");
+}
+
+SensorSource::~SensorSource() = default;
+
+bool SensorSource::grab(Frame& frame, mrpt::obs::CObservation3DRangeScan::Ptr& raw, const std::atomic<bool>& stop) {
+  const auto start = std::chrono::steady_clock::now();
+  while (!stop) {
+    while (!pending_.empty()) {
+      auto obj = pending_.begin()->second;
+      pending_.erase(pending_.begin());
+      auto obs = std::dynamic_pointer_cast<mrpt::obs::CObservation3DRangeScan>(obj);
+      if (!obs) continue;  // IMU and other side observations
+      frame = sensorObservationToFrame(*obs, name());
+      raw = obs;
+      return true;
+    }
+    try {
+      sensor_->doProcess();
+    } catch (const std::exception& e) {
+      throw SensorError(name() + ": " + oneLineMessage(e) + " (unplugged?)");
+    }
+    if (sensor_->getState() == mrpt::hwdrivers::CGenericSensor::ssError)
+      throw SensorError(name() + ": the sensor reported an error (unplugged?)");
+    sensor_->getObservations(pending_);
+    if (!pending_.empty()) continue;
+    const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (waited > timeout_s_)
+      throw SensorError(name() + ": no frame for " + std::to_string(int(timeout_s_)) + " s (sensor unplugged?)");
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return false;
+}
+
+}  // namespace vofusion
