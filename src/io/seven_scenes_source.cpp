@@ -1,0 +1,152 @@
+#include "vofusion/io/seven_scenes_source.h"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+
+#include <mrpt/math/CMatrixFixed.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "vofusion/core/errors.h"
+#include "vofusion/io/tum_source.h"
+
+namespace fs = std::filesystem;
+
+namespace vofusion {
+
+namespace {
+
+const std::regex kDepthName(R"(frame-(\d+)\.depth\.png)");
+
+// Colour image beside a frame stem: PNG first, then JPEG (both occur in 7-Scenes mirrors).
+std::string colourFor(const std::string& stem) {
+  for (const char* ext : {".color.png", ".color.jpg"})
+    if (fs::exists(stem + ext)) return stem + ext;
+  return {};
+}
+
+cv::Mat loadMillimetreDepth(const std::string& path, int w, int h) {
+  if (!fs::exists(path)) throw InputError(path, "depth image is missing");
+  cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
+  if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel (millimetres)");
+  if (raw.cols != w || raw.rows != h)
+    throw InputError(path, "depth image is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
+                               ", expected " + std::to_string(w) + "x" + std::to_string(h));
+  raw.setTo(0, raw == 65535);  // the dataset's "no reading" marker
+  cv::Mat depth;
+  raw.convertTo(depth, CV_32F, 1e-3);
+  return depth;
+}
+
+}  // namespace
+
+CameraIntrinsics SevenScenesSource::defaultIntrinsics() {
+  CameraIntrinsics c;
+  c.fx = c.fy = 585.0;
+  c.cx = 320.0;
+  c.cy = 240.0;
+  return c;
+}
+
+bool SevenScenesSource::looksLike(const std::string& folder) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(folder, ec)) {
+    const std::string n = e.path().filename().string();
+    if (std::regex_match(n, kDepthName) && !colourFor((e.path().parent_path() / n.substr(0, n.find('.'))).string()).empty())
+      return true;
+  }
+  return false;
+}
+
+bool parseSevenScenesPose(const std::string& text, const std::string& origin, mrpt::poses::CPose3D& pose) {
+  std::istringstream in(text);
+  std::vector<double> v;
+  std::string tok;
+  while (in >> tok) {
+    if (v.size() == 16) throw InputError(origin, "more than 16 numbers (expected a 4x4 matrix)");
+    char* end = nullptr;
+    const double d = std::strtod(tok.c_str(), &end);
+    if (end == tok.c_str() || *end) throw InputError(origin, "'" + tok + "' is not a number (expected a 4x4 matrix)");
+    v.push_back(d);
+  }
+  if (v.size() != 16) throw InputError(origin, "holds " + std::to_string(v.size()) + " numbers, expected 16 (4x4 matrix)");
+  if (!std::all_of(v.begin(), v.end(), [](double d) { return std::isfinite(d); })) return false;
+  Eigen::Matrix4d m;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) m(r, c) = v[std::size_t(4 * r + c)];
+  const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
+  if ((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() > 1e-2 || std::abs(R.determinant() - 1.0) > 1e-2 ||
+      (m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).norm() > 1e-6)
+    throw InputError(origin, "not a rigid camera-to-world transform");
+  // Re-orthonormalise the rotation (the files carry 6-7 significant digits).
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix4d clean = m;
+  clean.topLeftCorner<3, 3>() = svd.matrixU() * svd.matrixV().transpose();
+  pose = mrpt::poses::CPose3D(mrpt::math::CMatrixDouble44(clean));
+  return true;
+}
+
+SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
+  if (!fs::is_directory(folder)) throw InputError(folder, "no such folder");
+  for (const auto& e : fs::directory_iterator(folder)) {
+    const std::string n = e.path().filename().string();
+    std::smatch m;
+    if (!std::regex_match(n, m, kDepthName)) continue;
+    Entry en;
+    en.stem = (fs::path(folder) / n.substr(0, n.find('.'))).string();
+    en.number = std::stoi(m[1].str());
+    en.colour = colourFor(en.stem);
+    if (en.colour.empty()) throw InputError(en.stem + ".color.png", "colour image is missing");
+    frames_.push_back(std::move(en));
+  }
+  if (frames_.empty()) throw InputError(folder, "folder holds no 7-Scenes frames (frame-XXXXXX.depth.png)");
+  std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });
+  if (opts.max_frames > 0 && frames_.size() > opts.max_frames) frames_.resize(opts.max_frames);
+
+  const cv::Mat first = cv::imread(frames_[0].colour, cv::IMREAD_COLOR);
+  if (first.empty()) throw InputError(frames_[0].colour, "cannot decode colour image (corrupt or truncated?)");
+  // The published intrinsics are for 640x480; resized copies of the dataset get them scaled.
+  camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : defaultIntrinsics().scaled(first.cols / 640.0);
+  camera_.width = first.cols;
+  camera_.height = first.rows;
+  camera_.validate(opts.intrinsics ? "--intrinsics" : folder);
+
+  gt_index_.assign(frames_.size(), -1);
+  for (std::size_t i = 0; i < frames_.size(); ++i) {
+    const std::string pose_file = frames_[i].stem + ".pose.txt";
+    std::ifstream f(pose_file);
+    if (!f) continue;  // no pose: the frame is simply not evaluated
+    std::ostringstream ss;
+    ss << f.rdbuf();
+    mrpt::poses::CPose3D p;
+    if (!parseSevenScenesPose(ss.str(), pose_file, p)) continue;
+    gt_index_[i] = int(gt_.size());
+    gt_.push_back({frames_[i].number / kFps, p});
+  }
+}
+
+Frame SevenScenesSource::read(std::size_t i) const {
+  const Entry& e = frames_.at(i);
+  Frame f;
+  f.index = i;
+  f.timestamp = e.number / kFps;
+  f.camera = camera_;
+  f.rgb = loadColour(e.colour, camera_.width, camera_.height);
+  f.depth = loadMillimetreDepth(e.stem + ".depth.png", camera_.width, camera_.height);
+  if (gt_index_[i] >= 0) f.groundTruth = gt_[std::size_t(gt_index_[i])].pose;
+  return f;
+}
+
+bool SevenScenesSource::next(Frame& frame) {
+  if (pos_ >= frames_.size()) return false;
+  frame = read(pos_++);
+  return true;
+}
+
+}  // namespace vofusion
