@@ -22,14 +22,14 @@ void BrandParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
 }
 
 void BrandParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
-  cfg.write(s, "patch_size", patch_size, 30, 40, "pixels at depth <= 2 m");
-  cfg.write(s, "smoothing_sigma", smoothing_sigma, 30, 40, "pixels, Gaussian on intensity");
-  cfg.write(s, "normal_angle", normal_angle, 30, 40, "degrees, geometric test threshold");
-  cfg.write(s, "normal_window", normal_window, 30, 40, "pixels, half-size of normal boxes");
-  cfg.write(s, "max_depth_step", max_depth_step, 30, 40, "m, no normals across larger jumps");
-  cfg.write(s, "use_intensity", use_intensity, 30, 40, "intensity tests on/off");
-  cfg.write(s, "use_geometry", use_geometry, 30, 40, "normal/convexity tests on/off");
-  cfg.write(s, "oriented", oriented, 30, 40, "rotate to canonical orientation");
+  cfg.write(s, "patch_size", patch_size, -1, -1, "pixels at depth <= 2 m");
+  cfg.write(s, "smoothing_sigma", smoothing_sigma, -1, -1, "pixels, Gaussian on intensity");
+  cfg.write(s, "normal_angle", normal_angle, -1, -1, "degrees, geometric test threshold");
+  cfg.write(s, "normal_window", normal_window, -1, -1, "pixels, half-size of normal boxes");
+  cfg.write(s, "max_depth_step", max_depth_step, -1, -1, "m, no normals across larger jumps");
+  cfg.write(s, "use_intensity", use_intensity, -1, -1, "intensity tests on/off");
+  cfg.write(s, "use_geometry", use_geometry, -1, -1, "normal/convexity tests on/off");
+  cfg.write(s, "oriented", oriented, -1, -1, "rotate to canonical orientation");
 }
 
 cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& c) {

@@ -20,11 +20,11 @@ void NarfParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, co
 }
 
 void NarfParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
-  cfg.write(s, "support_size", support_size, 30, 40, "m, area covered by a keypoint");
-  cfg.write(s, "downsample", downsample, 30, 40, "factor on the depth image (1 = full res)");
-  cfg.write(s, "max_points", max_points, 30, 40, "strongest kept, 0 = all");
-  cfg.write(s, "min_interest_value", min_interest_value, 30, 40, "[0,1]");
-  cfg.write(s, "threads", threads, 30, 40, "OpenMP threads inside PCL's NARF");
+  cfg.write(s, "support_size", support_size, -1, -1, "m, area covered by a keypoint");
+  cfg.write(s, "downsample", downsample, -1, -1, "factor on the depth image (1 = full res)");
+  cfg.write(s, "max_points", max_points, -1, -1, "strongest kept, 0 = all");
+  cfg.write(s, "min_interest_value", min_interest_value, -1, -1, "[0,1]");
+  cfg.write(s, "threads", threads, -1, -1, "OpenMP threads inside PCL's NARF");
 }
 
 cv::Mat downsampleDepth(const cv::Mat& depth, int factor) {

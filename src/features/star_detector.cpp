@@ -18,11 +18,11 @@ void StarParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, co
 }
 
 void StarParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
-  cfg.write(s, "max_size", max_size, 30, 40, "largest filter size, pixels");
-  cfg.write(s, "response_threshold", response_threshold, 30, 40, "minimum |response|, grey levels");
-  cfg.write(s, "line_threshold_projected", line_threshold_projected, 30, 40, "Harris trace^2/det limit");
-  cfg.write(s, "line_threshold_binarized", line_threshold_binarized, 30, 40, "same, on the scale map");
-  cfg.write(s, "suppress_nonmax_size", suppress_nonmax_size, 30, 40, "non-max window, pixels");
+  cfg.write(s, "max_size", max_size, -1, -1, "largest filter size, pixels");
+  cfg.write(s, "response_threshold", response_threshold, -1, -1, "minimum |response|, grey levels");
+  cfg.write(s, "line_threshold_projected", line_threshold_projected, -1, -1, "Harris trace^2/det limit");
+  cfg.write(s, "line_threshold_binarized", line_threshold_binarized, -1, -1, "same, on the scale map");
+  cfg.write(s, "suppress_nonmax_size", suppress_nonmax_size, -1, -1, "non-max window, pixels");
 }
 
 namespace {

@@ -39,25 +39,25 @@ void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, 
 }
 
 void OdometryParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
-  c.write(s, "keypoints", keypoints, 30, 40, "union | star | narf");
-  c.write(s, "motion_method", motion_method, 30, 40, "paper (Algorithm 1) | robust");
-  c.write(s, "narf_concurrent", narf_concurrent, 30, 40, "NARF on a second thread");
-  c.write(s, "union_radius", union_radius, 30, 40, "pixels, duplicate radius");
+  c.write(s, "keypoints", keypoints, -1, -1, "union | star | narf");
+  c.write(s, "motion_method", motion_method, -1, -1, "paper (Algorithm 1) | robust");
+  c.write(s, "narf_concurrent", narf_concurrent, -1, -1, "NARF on a second thread");
+  c.write(s, "union_radius", union_radius, -1, -1, "pixels, duplicate radius");
   const std::string m = "matching";
-  c.write(m, "max_hamming", max_hamming, 30, 40, "bits of 256, 256 = no limit");
-  c.write(m, "use_homography", use_homography, 30, 40, "RANSAC homography filter");
-  c.write(m, "homography_threshold", homography_threshold, 30, 40, "pixels");
-  c.write(m, "min_matches", min_matches, 30, 40, "after the homography filter");
+  c.write(m, "max_hamming", max_hamming, -1, -1, "bits of 256, 256 = no limit");
+  c.write(m, "use_homography", use_homography, -1, -1, "RANSAC homography filter");
+  c.write(m, "homography_threshold", homography_threshold, -1, -1, "pixels");
+  c.write(m, "min_matches", min_matches, -1, -1, "after the homography filter");
   const std::string mo = "motion";
-  c.write(mo, "hypotheses", paper.hypotheses, 30, 40, "paper: N");
-  c.write(mo, "sample_size", paper.sample_size, 30, 40, "paper: s correspondences");
-  c.write(mo, "paper_inlier_threshold", paper.inlier_threshold, 30, 40, "m, paper: inlier report");
-  c.write(mo, "ransac_iterations", robust.iterations, 30, 40, "robust: max hypotheses");
-  c.write(mo, "inlier_threshold", robust.inlier_threshold, 30, 40, "m at <= 1 m depth, grows with z^2");
-  c.write(mo, "gauss_newton_iterations", robust.gauss_newton_iterations, 30, 40, "robust: refinement steps");
-  c.write(mo, "min_inliers", min_inliers, 30, 40, "3D inliers needed");
-  c.write(mo, "min_extent", min_extent, 30, 40, "m, inlier spread needed");
-  c.write(mo, "max_rms", max_rms, 30, 40, "m, inlier RMS accepted");
+  c.write(mo, "hypotheses", paper.hypotheses, -1, -1, "paper: N");
+  c.write(mo, "sample_size", paper.sample_size, -1, -1, "paper: s correspondences");
+  c.write(mo, "paper_inlier_threshold", paper.inlier_threshold, -1, -1, "m, paper: inlier report");
+  c.write(mo, "ransac_iterations", robust.iterations, -1, -1, "robust: max hypotheses");
+  c.write(mo, "inlier_threshold", robust.inlier_threshold, -1, -1, "m at <= 1 m depth, grows with z^2");
+  c.write(mo, "gauss_newton_iterations", robust.gauss_newton_iterations, -1, -1, "robust: refinement steps");
+  c.write(mo, "min_inliers", min_inliers, -1, -1, "3D inliers needed");
+  c.write(mo, "min_extent", min_extent, -1, -1, "m, inlier spread needed");
+  c.write(mo, "max_rms", max_rms, -1, -1, "m, inlier RMS accepted");
   star.saveToConfigFile(c, "star");
   narf.saveToConfigFile(c, "narf");
   brand.saveToConfigFile(c, "brand");

@@ -1,0 +1,99 @@
+// Closed-form rigid fits (Umeyama), the paper's Algorithm 1 and the robust variant, against known
+// transforms with noise and outliers.
+#include <random>
+
+#include <Eigen/Dense>
+
+#include "support.h"
+#include "vofusion/odometry/rigid_motion.h"
+
+using namespace vofusion;
+
+namespace {
+Eigen::Isometry3d knownMotion() {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(0.12, Eigen::Vector3d(0.3, -1.0, 0.4).normalized()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(0.05, -0.03, 0.08);
+  return T;
+}
+// Points spread like a Kinect view (x, y in +-1 m, z in 1..3 m); dst = T src (+ noise, + outliers).
+void makeCorrespondences(int n, double noise, double outlier_ratio, Points3& src, Points3& dst, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1), z(1, 3);
+  std::normal_distribution<double> g(0, noise);
+  const Eigen::Isometry3d T = knownMotion();
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d p(u(rng), u(rng), z(rng));
+    src.push_back(p);
+    if (i < outlier_ratio * n) dst.push_back(Eigen::Vector3d(u(rng), u(rng), z(rng)));  // wrong match
+    else dst.push_back(T * p + Eigen::Vector3d(g(rng), g(rng), g(rng)));
+  }
+}
+double rotationErrorDeg(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
+}
+}  // namespace
+
+TEST(RigidMotion, UmeyamaExactWithoutNoise) {
+  Points3 s, d;
+  makeCorrespondences(20, 0.0, 0.0, s, d, 1);
+  const Eigen::Isometry3d T = umeyamaRigid(s, d);
+  EXPECT_LT((T.translation() - knownMotion().translation()).norm(), 1e-9);
+  EXPECT_LT(rotationErrorDeg(T, knownMotion()), 1e-7);
+}
+
+TEST(RigidMotion, PaperAlgorithmWithNoise) {
+  Points3 s, d;
+  makeCorrespondences(200, 0.003, 0.0, s, d, 2);
+  PaperFitOptions o;
+  const RigidFit f = fitPaper(s, d, o);
+  ASSERT_TRUE(f.ok) << f.failure;
+  // Best of 100 minimal-ish samples: within a few mm / a few tenths of a degree.
+  EXPECT_LT((f.T.translation() - knownMotion().translation()).norm(), 0.01);
+  EXPECT_LT(rotationErrorDeg(f.T, knownMotion()), 0.5);
+  EXPECT_NEAR(f.rms_all, 0.003 * std::sqrt(3.0), 0.004);
+}
+
+TEST(RigidMotion, RobustRejectsThirtyPercentOutliers) {
+  Points3 s, d;
+  makeCorrespondences(300, 0.002, 0.3, s, d, 3);
+  RobustFitOptions o;
+  const RigidFit f = fitRobust(s, d, o);
+  ASSERT_TRUE(f.ok) << f.failure;
+  EXPECT_LT((f.T.translation() - knownMotion().translation()).norm(), 0.003);
+  EXPECT_LT(rotationErrorDeg(f.T, knownMotion()), 0.15);
+  // The 90 outliers are (almost all) excluded, the 210 true matches (almost all) kept.
+  EXPECT_GT(f.inliers.size(), 195u);
+  EXPECT_LT(f.inliers.size(), 215u);
+  // Covariance: symmetric positive definite, translation sigma in the mm range.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(f.covariance);
+  EXPECT_GT(es.eigenvalues().minCoeff(), 0.0);
+  EXPECT_LT(std::sqrt(f.covariance(0, 0)), 0.005);
+  EXPECT_GT(std::sqrt(f.covariance(0, 0)), 1e-5);
+}
+
+TEST(RigidMotion, PaperAlgorithmIsHurtByOutliersRobustIsNot) {
+  // Why the robust variant exists: least RMS over all correspondences lets outliers pull the fit.
+  Points3 s, d;
+  makeCorrespondences(200, 0.002, 0.3, s, d, 4);
+  const RigidFit p = fitPaper(s, d, PaperFitOptions{});
+  const RigidFit r = fitRobust(s, d, RobustFitOptions{});
+  ASSERT_TRUE(p.ok && r.ok);
+  const double ep = (p.T.translation() - knownMotion().translation()).norm();
+  const double er = (r.T.translation() - knownMotion().translation()).norm();
+  EXPECT_LT(er, ep);
+}
+
+TEST(RigidMotion, CollinearPointsAreDegenerate) {
+  Points3 s, d;
+  for (int i = 0; i < 30; ++i) s.emplace_back(0.1 * i, 0.05 * i, 2.0), d.push_back(knownMotion() * s.back());
+  EXPECT_LT(secondaryExtent(s), 1e-9);
+  const RigidFit f = fitRobust(s, d, RobustFitOptions{});
+  EXPECT_FALSE(f.ok);  // no non-collinear minimal sample exists
+}
+
+TEST(RigidMotion, TooFewCorrespondencesFail) {
+  Points3 s{{0, 0, 1}, {1, 0, 1}}, d = s;
+  EXPECT_FALSE(fitRobust(s, d, {}).ok);
+  EXPECT_FALSE(fitPaper(s, d, {}).ok);
+}
