@@ -1,0 +1,97 @@
+// Projective point-to-plane ICP on synthetic frames with exact ground truth.
+#include <Eigen/Dense>
+
+#include "support.h"
+#include "vofusion/fusion/preprocess.h"
+#include "vofusion/fusion/projective_icp.h"
+#include "vofusion/sim/synthetic_sequence.h"
+
+using namespace vofusion;
+using namespace vofusion::fusion;
+
+namespace {
+
+Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = p.getRotationMatrix().asEigen();
+  T.translation() = Eigen::Vector3d(p.x(), p.y(), p.z());
+  return T;
+}
+
+// The model maps a perfect ray cast would give: frame a's vertices/normals in the world frame.
+void modelFromFrame(const std::vector<DepthLevel>& lv, const Eigen::Isometry3d& pose, std::vector<cv::Mat>& mv,
+                    std::vector<cv::Mat>& mn) {
+  const Eigen::Isometry3f T = pose.cast<float>();
+  for (const auto& l : lv) {
+    cv::Mat v = l.vertices.clone(), n = l.normals.clone();
+    for (int y = 0; y < v.rows; ++y)
+      for (int x = 0; x < v.cols; ++x) {
+        cv::Vec3f& p = v.at<cv::Vec3f>(y, x);
+        cv::Vec3f& q = n.at<cv::Vec3f>(y, x);
+        if (std::isnan(p[0]) || std::isnan(q[0])) continue;
+        const Eigen::Vector3f pw = T * Eigen::Vector3f(p[0], p[1], p[2]);
+        const Eigen::Vector3f nw = T.linear() * Eigen::Vector3f(q[0], q[1], q[2]);
+        p = cv::Vec3f(pw.x(), pw.y(), pw.z());
+        q = cv::Vec3f(nw.x(), nw.y(), nw.z());
+      }
+    mv.push_back(v);
+    mn.push_back(n);
+  }
+}
+
+struct Errors {
+  double t, r_deg;
+};
+Errors poseError(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  const Eigen::Isometry3d d = a.inverse() * b;
+  return {d.translation().norm(), Eigen::AngleAxisd(d.linear()).angle() * 180 / M_PI};
+}
+
+}  // namespace
+
+TEST(Icp, RecoversKnownMotionInRoom) {
+  sim::SimOptions o;
+  o.scene = "room";
+  o.frames = 30;
+  o.noise = false;  // the model: as smooth as a fused TSDF
+  const sim::SyntheticSequence seq(o);
+  o.noise = true;   // the frame: Kinect-like noise, quantisation and holes
+  const sim::SyntheticSequence noisy(o);
+  const Frame a = seq.render(0), b = noisy.render(6);  // 0.2 s apart: a few cm and degrees
+  const PreprocessParams pp;
+  const auto la = preprocessDepth(a.depth, a.camera, pp), lb = preprocessDepth(b.depth, b.camera, pp);
+  std::vector<cv::Mat> mv, mn;
+  const Eigen::Isometry3d Ta = toEigen(seq.groundTruth(0)), Tb = toEigen(seq.groundTruth(6));
+  modelFromFrame(la, Ta, mv, mn);
+  const Errors start = poseError(Ta, Tb);
+  ASSERT_GT(start.t + start.r_deg * 0.01, 0.02) << "the motion to recover is too small to test anything";
+  IcpParams ip;
+  ip.iterations = {10, 6, 6};
+  const IcpResult r = projectiveIcp(lb, mv, mn, Ta, Ta, ip);
+  ASSERT_TRUE(r.solved);
+  const Errors e = poseError(r.pose, Tb);
+  EXPECT_LT(e.t, 0.005) << "start error " << start.t << " m";
+  EXPECT_LT(e.r_deg, 0.3) << "start error " << start.r_deg << " deg";
+  EXPECT_GT(r.inliers, 0.5 * r.valid_pixels);
+  EXPECT_GT(r.condition, 1e-3);
+  EXPECT_LT(r.rms, 0.01);
+}
+
+TEST(Icp, BareWallIsDetectedAsDegenerate) {
+  sim::SimOptions o;
+  o.scene = "bare_wall";
+  o.frames = 30;
+  o.noise = false;  // the model: as smooth as a fused TSDF
+  const sim::SyntheticSequence seq(o);
+  o.noise = true;
+  const sim::SyntheticSequence noisy(o);
+  const Frame a = seq.render(0), b = noisy.render(3);
+  const PreprocessParams pp;
+  const auto la = preprocessDepth(a.depth, a.camera, pp), lb = preprocessDepth(b.depth, b.camera, pp);
+  std::vector<cv::Mat> mv, mn;
+  const Eigen::Isometry3d Ta = toEigen(seq.groundTruth(0));
+  modelFromFrame(la, Ta, mv, mn);
+  const IcpResult r = projectiveIcp(lb, mv, mn, Ta, Ta, IcpParams{});
+  // A plane constrains 3 of 6 degrees of freedom: the normal matrix is (nearly) rank 3.
+  EXPECT_LT(r.condition, 1e-4);
+}
