@@ -1,0 +1,59 @@
+#pragma once
+// Results as an MRPT 3D scene (.3Dscene, opened by SceneViewer3D) and as an off-screen rendered PNG.
+//
+// The scene is shown z-up: everything sits in one CSetOfObjects named "world" whose pose rotates the
+// reconstruction's frame so that its "up" direction becomes +z. Children of "world", by name:
+//   "mesh"          CSetOfTriangles, per-vertex colours (grey if the mesh has none)
+//   "path"          CSetOfLines, the estimated camera centres joined in order (blue)
+//   "ground_truth"  CSetOfLines, the ground-truth camera centres (green), when given
+//   "frustums"      CSetOfObjects of CFrustum, one every k frames of the estimated path
+//   "grid"          CGridPlaneXY under the reconstruction (a child of the scene, outside "world")
+#include <memory>
+#include <string>
+
+#include <mrpt/opengl/COpenGLScene.h>
+#include <mrpt/poses/CPose3D.h>
+
+#include "vofusion/core/camera.h"
+#include "vofusion/core/trajectory.h"
+#include "vofusion/mesh/triangle_mesh.h"
+
+namespace vofusion {
+
+struct SceneOptions {
+  enum class Up { Auto, PlusZ, MinusY };
+  // Auto: -y (the camera's "up") when the path starts at the identity, as an odometry-only run does
+  // in the first camera's optical frame (y down); +z otherwise (TUM ground truth, mocap frame).
+  Up up = Up::Auto;
+  int frustum_every_k = 30;          // frames; 0: no frustums
+  double frustum_depth = 0.15;       // m, distance of the frustum's far plane
+  // With a path given: draw only the side of the surface that faces the cameras (decided by an
+  // area-weighted vote of the faces), so a room scanned from inside can be seen into from outside.
+  bool cull_hidden_side = true;
+  bool grid = true;
+  double grid_spacing = 0.5;         // m
+};
+
+// The rotation (a pure rotation CPose3D) applied to the reconstruction so that its up axis is +z.
+mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, SceneOptions::Up up);
+
+// The camera frustum pose for a camera-to-world optical pose (x right, y down, z forward):
+// CFrustum looks along +x with z up, so this is pose * (optical <- MRPT body) rotation.
+mrpt::poses::CPose3D frustumPose(const mrpt::poses::CPose3D& camera_to_world);
+
+std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh, const Trajectory& path_est,
+                                                        const Trajectory* ground_truth, const CameraIntrinsics& cam,
+                                                        const SceneOptions& opt = {});
+
+// Writes the scene (COpenGLScene::saveToFile, gzip-compressed .3Dscene) whole or not at all;
+// throws InputError(path, ...) when it cannot be written.
+void exportScene(const std::string& path, const TriangleMesh& mesh, const Trajectory& path_est,
+                 const Trajectory* ground_truth, const CameraIntrinsics& cam, const SceneOptions& opt = {});
+
+// Off-screen rendering (mrpt::opengl::CFBORender, EGL; no display needed) of the mesh and, when
+// given, the camera path, seen from above and behind the cameras, looking at the mesh's centre.
+// Written atomically as PNG; throws InputError(png, ...) on failure (including no EGL device).
+void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width = 1024,
+                   int height = 768);
+
+}  // namespace vofusion

@@ -1,0 +1,79 @@
+// Off-screen rendering of the mesh with MRPT's CFBORender (EGL; works without a display).
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include <Eigen/Dense>
+#include <mrpt/img/CImage.h>
+#include <mrpt/opengl/CFBORender.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/scene/scene_export.h"
+
+namespace vofusion {
+
+void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width, int height) {
+  if (width < 16 || height < 16 || width > 8192 || height > 8192)
+    throw InputError(png, "unreasonable image size " + std::to_string(width) + "x" + std::to_string(height));
+  const Trajectory empty;
+  const Trajectory& traj = path ? *path : empty;
+  SceneOptions opt;
+  opt.frustum_every_k = 0;
+  const auto scene = buildScene(mesh, traj, nullptr, CameraIntrinsics{}, opt);
+  scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
+
+  // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
+  // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
+  const mrpt::poses::CPose3D up = sceneUpRotation(traj, opt.up);
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e30), hi = -lo;
+  const auto grow = [&](double x, double y, double z) {
+    double gx, gy, gz;
+    up.composePoint(x, y, z, gx, gy, gz);
+    lo = lo.cwiseMin(Eigen::Vector3d(gx, gy, gz));
+    hi = hi.cwiseMax(Eigen::Vector3d(gx, gy, gz));
+  };
+  for (const auto& v : mesh.vertices) grow(v.x(), v.y(), v.z());
+  if (mesh.vertices.empty())
+    for (const auto& p : traj) grow(p.pose.x(), p.pose.y(), p.pose.z());
+  if (lo.x() > hi.x()) lo = hi = Eigen::Vector3d::Zero();
+  Eigen::Vector2d forward(1, 1);
+  if (!traj.empty()) {
+    Eigen::Vector3d f = Eigen::Vector3d::Zero();
+    for (const auto& p : traj) {
+      const auto R = (up + p.pose).getRotationMatrix();
+      f += Eigen::Vector3d(R(0, 2), R(1, 2), R(2, 2));  // optical axis in the display frame
+    }
+    if (f.head<2>().norm() > 1e-6) forward = f.head<2>();
+  }
+  forward.normalize();
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  const double radius = std::max(0.05, 0.5 * (hi - lo).norm());
+  const float fov_deg = 45.f;
+  auto& cam = scene->getViewport()->getCamera();
+  cam.setProjectiveFOVdeg(fov_deg);
+  cam.setPointingAt(float(centre.x()), float(centre.y()), float(centre.z()));
+  // The eye sits opposite to where the cameras look (azimuth is measured from the target to the eye).
+  cam.setAzimuthDegrees(float(std::atan2(-forward.y(), -forward.x()) * 180 / M_PI));
+  cam.setElevationDegrees(40.f);
+  const double aspect = std::min(1.0, double(width) / height);
+  cam.setZoomDistance(float(1.1 * radius / std::sin(0.5 * fov_deg * M_PI / 180) / aspect));
+
+  mrpt::img::CImage img;
+  try {
+    mrpt::opengl::CFBORender fbo(static_cast<unsigned>(width), static_cast<unsigned>(height));
+    fbo.setCamera(*scene, cam);
+    fbo.render_RGB(*scene, img);
+  } catch (const std::exception& e) {
+    std::string msg = e.what();
+    msg = msg.substr(0, msg.find('\n'));
+    throw InputError(png, "off-screen rendering failed: " + msg);
+  }
+  cv::Mat m = img.asCvMat<cv::Mat>(mrpt::img::SHALLOW_COPY);
+  std::vector<uchar> bytes;
+  if (m.empty() || !cv::imencode(".png", m, bytes)) throw InputError(png, "cannot encode the rendered image");
+  writeFileAtomically(png, std::string(bytes.begin(), bytes.end()));
+}
+
+}  // namespace vofusion

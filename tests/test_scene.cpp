@@ -1,0 +1,174 @@
+// MRPT 3D scene export (.3Dscene round trip) and the off-screen mesh rendering.
+#include <Eigen/Dense>
+#include <cmath>
+#include <filesystem>
+
+#include <mrpt/img/CImage.h>
+#include <mrpt/opengl/CFrustum.h>
+#include <mrpt/opengl/CGridPlaneXY.h>
+#include <mrpt/opengl/COpenGLScene.h>
+#include <mrpt/opengl/CSetOfLines.h>
+#include <mrpt/opengl/CSetOfObjects.h>
+#include <mrpt/opengl/CSetOfTriangles.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "support.h"
+#include "test_mesh_fixtures.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/scene/scene_export.h"
+
+using namespace vofusion;
+using mrpt::poses::CPose3D;
+
+namespace {
+
+// A camera walking along +x inside the room at 1.4 m height, looking at the wall y = -1.5
+// (optical z along -y world, y down along -z world: a z-up world as in TUM ground truth).
+Trajectory roomPath(int n) {
+  Trajectory t;
+  for (int i = 0; i < n; ++i) {
+    mrpt::math::CMatrixDouble44 T;
+    T.setIdentity();
+    // Columns: optical x, y, z axes in world.
+    const Eigen::Matrix3d R = (Eigen::Matrix3d() << -1, 0, 0, 0, 0, -1, 0, -1, 0).finished();
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) T(r, c) = R(r, c);
+    T(0, 3) = -1.0 + 2.0 * i / std::max(1, n - 1);
+    T(1, 3) = 0.5;
+    T(2, 3) = 1.4;
+    t.push_back({1000.0 + 0.033 * i, CPose3D::FromHomogeneousMatrix(T)});
+  }
+  return t;
+}
+
+template <typename T>
+typename T::Ptr child(const mrpt::opengl::CSetOfObjects::Ptr& set, const std::string& name) {
+  return std::dynamic_pointer_cast<T>(set->getByName(name));
+}
+
+}  // namespace
+
+TEST(Scene, FrustumLooksAlongTheOpticalAxis) {
+  const Trajectory t = roomPath(2);
+  const CPose3D fp = frustumPose(t[0].pose);
+  // The frustum's +x (its viewing direction) must be the camera's +z, its +z the camera's -y.
+  double x, y, z;
+  fp.composePoint(1, 0, 0, x, y, z);
+  double ex, ey, ez;
+  t[0].pose.composePoint(0, 0, 1, ex, ey, ez);
+  EXPECT_NEAR(x, ex, 1e-9);
+  EXPECT_NEAR(y, ey, 1e-9);
+  EXPECT_NEAR(z, ez, 1e-9);
+  fp.composePoint(0, 0, 1, x, y, z);
+  t[0].pose.composePoint(0, -1, 0, ex, ey, ez);
+  EXPECT_NEAR(x, ex, 1e-9);
+  EXPECT_NEAR(y, ey, 1e-9);
+  EXPECT_NEAR(z, ez, 1e-9);
+  EXPECT_NEAR(z - t[0].pose.z(), 1.0, 1e-9);  // the camera's up is world up here
+}
+
+TEST(Scene, UpAxisFollowsThePath) {
+  // An odometry path starting at the identity lives in the first optical frame: -y is up.
+  Trajectory odo{{0.0, CPose3D()}, {1.0, CPose3D(0.1, 0, 0, 0, 0, 0)}};
+  double x, y, z;
+  sceneUpRotation(odo, SceneOptions::Up::Auto).composePoint(0, -1, 0, x, y, z);
+  EXPECT_NEAR(z, 1.0, 1e-9);
+  sceneUpRotation(roomPath(3), SceneOptions::Up::Auto).composePoint(0, 0, 1, x, y, z);
+  EXPECT_NEAR(z, 1.0, 1e-9);
+}
+
+TEST(Scene, SavedSceneLoadsBackWithMeshPathsFrustumsAndGrid) {
+  const TriangleMesh mesh = test::boxRoom(4, 3, 2.5, 6);
+  const Trajectory est = roomPath(95);
+  Trajectory gt = est;
+  for (auto& p : gt) p.pose.x_incr(0.05);
+  const std::string dir = test::tempDir("scene_export");
+  const std::string file = dir + "/scene.3Dscene";
+  SceneOptions opt;
+  opt.frustum_every_k = 30;
+  exportScene(file, mesh, est, &gt, CameraIntrinsics{}, opt);
+  ASSERT_TRUE(std::filesystem::exists(file));
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);  // no temporaries left
+
+  mrpt::opengl::COpenGLScene loaded;
+  ASSERT_TRUE(loaded.loadFromFile(file));
+  auto world = std::dynamic_pointer_cast<mrpt::opengl::CSetOfObjects>(loaded.getByName("world"));
+  ASSERT_TRUE(world);
+  auto tris = child<mrpt::opengl::CSetOfTriangles>(world, "mesh");
+  ASSERT_TRUE(tris);
+  ASSERT_EQ(tris->getTrianglesCount(), mesh.faces.size());
+  // Geometry and per-vertex colour of a triangle survive.
+  mrpt::opengl::TTriangle t;
+  tris->getTriangle(7, t);
+  for (int k = 0; k < 3; ++k) {
+    const auto& v = mesh.vertices[mesh.faces[7][k]];
+    EXPECT_NEAR(t.x(k), v.x(), 1e-6);
+    EXPECT_NEAR(t.z(k), v.z(), 1e-6);
+    EXPECT_EQ(t.r(k), mesh.colors[mesh.faces[7][k]][0]);
+    EXPECT_EQ(t.b(k), mesh.colors[mesh.faces[7][k]][2]);
+  }
+  auto path = child<mrpt::opengl::CSetOfLines>(world, "path");
+  ASSERT_TRUE(path);
+  ASSERT_EQ(path->getLineCount(), est.size() - 1);
+  double x0, y0, z0, x1, y1, z1;
+  path->getLineByIndex(10, x0, y0, z0, x1, y1, z1);
+  EXPECT_NEAR(x0, est[10].pose.x(), 1e-5);
+  EXPECT_NEAR(x1, est[11].pose.x(), 1e-5);
+  EXPECT_NEAR(z1, est[11].pose.z(), 1e-5);
+  auto gtl = child<mrpt::opengl::CSetOfLines>(world, "ground_truth");
+  ASSERT_TRUE(gtl);
+  EXPECT_EQ(gtl->getLineCount(), gt.size() - 1);
+  auto frustums = child<mrpt::opengl::CSetOfObjects>(world, "frustums");
+  ASSERT_TRUE(frustums);
+  EXPECT_EQ(std::distance(frustums->begin(), frustums->end()), 4);  // frames 0, 30, 60, 90
+  auto f0 = std::dynamic_pointer_cast<mrpt::opengl::CFrustum>(*frustums->begin());
+  ASSERT_TRUE(f0);
+  EXPECT_NEAR(f0->getPose().x, est[0].pose.x(), 1e-6);
+  auto grid = std::dynamic_pointer_cast<mrpt::opengl::CGridPlaneXY>(loaded.getByName("grid"));
+  ASSERT_TRUE(grid);
+}
+
+TEST(Scene, CullsTheSideFacingAwayFromTheCameras) {
+  TriangleMesh mesh = test::boxRoom(4, 3, 2.5, 6);  // faces point inwards, where the cameras are
+  const auto cull = [](const TriangleMesh& m, const Trajectory& t) {
+    auto scene = buildScene(m, t, nullptr, CameraIntrinsics{});
+    auto world = std::dynamic_pointer_cast<mrpt::opengl::CSetOfObjects>(scene->getByName("world"));
+    return child<mrpt::opengl::CSetOfTriangles>(world, "mesh")->cullFaces();
+  };
+  EXPECT_EQ(cull(mesh, roomPath(20)), mrpt::opengl::TCullFace::BACK);
+  for (auto& f : mesh.faces) std::swap(f[1], f[2]);
+  EXPECT_EQ(cull(mesh, roomPath(20)), mrpt::opengl::TCullFace::FRONT);
+  EXPECT_EQ(cull(mesh, Trajectory{}), mrpt::opengl::TCullFace::NONE);
+}
+
+TEST(Scene, UnwritablePathIsAnInputError) {
+  EXPECT_THROW(exportScene("/nonexistent-dir/x/scene.3Dscene", test::boxRoom(), roomPath(3), nullptr, CameraIntrinsics{}),
+               InputError);
+}
+
+TEST(Scene, RendersMeshToANonBlankPng) {
+  const TriangleMesh mesh = test::boxRoom(4, 3, 2.5, 6);
+  const Trajectory est = roomPath(40);
+  const std::string dir = test::tempDir("scene_png");
+  const std::string png = dir + "/mesh.png";
+  renderMeshPng(png, mesh, &est, 320, 240);
+  const cv::Mat img = cv::imread(png, cv::IMREAD_COLOR);
+  ASSERT_FALSE(img.empty());
+  EXPECT_EQ(img.cols, 320);
+  EXPECT_EQ(img.rows, 240);
+  // Background is white; the room must cover a good part of the picture, in several colours.
+  int covered = 0;
+  cv::Vec3i sum(0, 0, 0);
+  for (int r = 0; r < img.rows; ++r)
+    for (int c = 0; c < img.cols; ++c) {
+      const cv::Vec3b p = img.at<cv::Vec3b>(r, c);
+      if (p[0] < 235 || p[1] < 235 || p[2] < 235) {
+        ++covered;
+        for (int k = 0; k < 3; ++k) sum[k] += p[k];
+      }
+    }
+  EXPECT_GT(covered, img.rows * img.cols / 5);
+  double mn, mx;
+  cv::minMaxLoc(img.reshape(1), &mn, &mx);
+  EXPECT_LT(mn, 150);  // not a flat image
+}
