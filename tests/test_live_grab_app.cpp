@@ -1,0 +1,105 @@
+// vofusion-grab end to end: replay through the live path, outputs written and readable, and the
+// no-sensor failure is one line, quick and non-zero (no hardware on the test machines).
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "support.h"
+#include "vofusion/io/frame_source.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::map<std::string, std::string> readSummary(const std::string& path) {
+  std::map<std::string, std::string> kv;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    const auto c = line.find(": ");
+    if (c != std::string::npos) kv[line.substr(0, c)] = line.substr(c + 2);
+  }
+  return kv;
+}
+
+std::size_t countLines(const std::string& s) {
+  std::size_t n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
+}
+
+}  // namespace
+
+TEST(GrabApp, ReplayWithSlowProcessingDropsAndRecordsEverything) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string out = test::tempDir("grab_app_replay");
+  std::string log;
+  const int rc = test::run(test::app("vofusion-grab") + " --replay " + tum + " --out " + out +
+                               " --max-frames 40 --queue 2 --simulate-work-ms 500",
+                           &log);
+  ASSERT_EQ(rc, 0) << log;
+  auto kv = readSummary(out + "/grab-summary.txt");
+  ASSERT_FALSE(kv.empty()) << log;
+  const long played = std::stol(kv["frames_played"]), processed = std::stol(kv["frames_processed"]),
+             dropped = std::stol(kv["frames_dropped"]);
+  EXPECT_EQ(played, 40);
+  EXPECT_GT(dropped, 0);
+  EXPECT_EQ(processed + dropped, played);
+  EXPECT_EQ(kv["frames_recorded"], "40");
+  EXPECT_EQ(kv["stop"], "max frames reached");
+  // The rawlog is a valid input for vofusion's own reader.
+  auto back = openFrameSource(out + "/grab.rawlog");
+  std::size_t n = 0;
+  Frame f;
+  while (back->next(f)) {
+    EXPECT_TRUE(f.valid());
+    ++n;
+  }
+  EXPECT_EQ(n, 40u);
+}
+
+TEST(GrabApp, NoSensorFailsInOneLineQuicklyWithNonZeroExit) {
+  const std::string out = test::tempDir("grab_app_nosensor");
+  std::string log;
+  const auto t0 = std::chrono::steady_clock::now();
+  // timeout(1) guards against a hang: it would exit 124.
+  const int rc = test::run("timeout 60 " + test::app("vofusion-grab") + " --config " + VOFUSION_SHARE_DIR +
+                               "/grab-openni2.ini --out " + out + " --no-gui",
+                           &log);
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(rc, 2) << log;
+  EXPECT_EQ(countLines(log), 1u) << log;
+  EXPECT_NE(log.find("OpenNI2"), std::string::npos) << log;
+  EXPECT_LT(secs, 60.0);
+  EXPECT_FALSE(fs::exists(out + "/grab.rawlog"));  // nothing half-written
+}
+
+TEST(GrabApp, UsageErrorsExitTwo) {
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --bogus", &log), 2);
+  EXPECT_EQ(countLines(log), 1u) << log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay /nonexistent/folder --out " +
+                          test::tempDir("grab_app_usage"),
+                      &log),
+            2);
+  EXPECT_NE(log.find("/nonexistent/folder"), std::string::npos) << log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --max-frames abc", &log), 2);
+}
+
+TEST(GrabApp, UnknownKeyInOwnSectionIsReported) {
+  const std::string dir = test::tempDir("grab_app_badkey");
+  {
+    std::ofstream f(dir + "/bad.ini");
+    f << "[vofusion-grab]\nqueue_capacty = 3\n";
+  }
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --config " + dir + "/bad.ini --replay " + test::tumFirst300() +
+                          " --out " + dir + "/out",
+                      &log),
+            2);
+  EXPECT_NE(log.find("queue_capacty"), std::string::npos) << log;
+}
