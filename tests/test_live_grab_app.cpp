@@ -103,3 +103,27 @@ TEST(GrabApp, UnknownKeyInOwnSectionIsReported) {
             2);
   EXPECT_NE(log.find("queue_capacty"), std::string::npos) << log;
 }
+
+TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string out = test::tempDir("grab_app_sigint");
+  std::string log;
+  // The whole 300-frame sequence would take 10 s; SIGINT after 3 s stops it.
+  const int rc = test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out +
+                               " & pid=$!; sleep 3; kill -INT $pid; wait $pid'",
+                           &log);
+  ASSERT_EQ(rc, 0) << log;
+  auto kv = readSummary(out + "/grab-summary.txt");
+  ASSERT_FALSE(kv.empty()) << log;
+  EXPECT_EQ(kv["stop"], "interrupted");
+  const long played = std::stol(kv["frames_played"]);
+  EXPECT_GT(played, 0);
+  EXPECT_LT(played, 300);
+  EXPECT_EQ(std::stol(kv["frames_processed"]) + std::stol(kv["frames_dropped"]), played);
+  auto back = openFrameSource(out + "/grab.rawlog");
+  std::size_t n = 0;
+  Frame f;
+  while (back->next(f)) ++n;
+  EXPECT_EQ(long(n), played);
+}
