@@ -1,0 +1,61 @@
+// NARF keypoints on a synthetic range image (a box on a wall) and the depth reduction they run on.
+#include "support.h"
+#include "vofusion/features/narf_detector.h"
+
+using namespace vofusion;
+
+namespace {
+// Wall at 2 m with a 0.4 m cube standing out of it (front face at 1.6 m) in the image centre.
+cv::Mat boxScene(const CameraIntrinsics& cam, cv::Rect* box_px) {
+  cv::Mat d(cam.height, cam.width, CV_32F, cv::Scalar(2.0f));
+  const double z = 1.6, half = 0.2;
+  const int u0 = int(cam.cx - half * cam.fx / z), u1 = int(cam.cx + half * cam.fx / z);
+  const int v0 = int(cam.cy - half * cam.fy / z), v1 = int(cam.cy + half * cam.fy / z);
+  d(cv::Rect(u0, v0, u1 - u0, v1 - v0)).setTo(float(z));
+  *box_px = cv::Rect(u0, v0, u1 - u0, v1 - v0);
+  return d;
+}
+}  // namespace
+
+TEST(Narf, DownsampleKeepsNearestReading) {
+  cv::Mat d(4, 4, CV_32F, cv::Scalar(0.f));
+  d.at<float>(0, 1) = 2.f; d.at<float>(1, 0) = 1.5f;  // block (0,0): nearest valid is 1.5
+  d.at<float>(3, 3) = 3.f;                            // block (1,1)
+  const cv::Mat s = downsampleDepth(d, 2);
+  ASSERT_EQ(s.size(), cv::Size(2, 2));
+  EXPECT_FLOAT_EQ(s.at<float>(0, 0), 1.5f);
+  EXPECT_FLOAT_EQ(s.at<float>(0, 1), 0.f);
+  EXPECT_FLOAT_EQ(s.at<float>(1, 1), 3.f);
+}
+
+TEST(Narf, KeypointsSitOnTheBoxNotOnTheFlatWall) {
+  CameraIntrinsics cam;
+  cam = cam.scaled(0.5);  // 320x240 keeps the test quick
+  cv::Rect box;
+  const cv::Mat depth = boxScene(cam, &box);
+  NarfParams p;
+  p.downsample = 2;
+  const auto kps = detectNarf(depth, cam, p);
+  ASSERT_FALSE(kps.empty());
+  // Interest points mark the box's borders and corners (within the support size, ~0.2 m = 50 px
+  // at 1.6 m here), none far out on the featureless wall.
+  const cv::Rect near(box.x - 40, box.y - 40, box.width + 80, box.height + 80);
+  for (const auto& k : kps) {
+    EXPECT_TRUE(near.contains(cv::Point(int(k.pt.x), int(k.pt.y)))) << k.pt;
+    EXPECT_GT(k.size, 0.f);
+  }
+  // Full resolution finds them at the same places (the reduction maps back to full-res pixels).
+  p.downsample = 1;
+  const auto full = detectNarf(depth, cam, p);
+  ASSERT_FALSE(full.empty());
+  for (const auto& k : full) EXPECT_TRUE(near.contains(cv::Point(int(k.pt.x), int(k.pt.y)))) << k.pt;
+}
+
+TEST(Narf, FlatWallGivesNoKeypoints) {
+  CameraIntrinsics cam;
+  cam = cam.scaled(0.5);
+  const cv::Mat depth(cam.height, cam.width, CV_32F, cv::Scalar(2.0f));
+  NarfParams p;
+  p.downsample = 2;
+  EXPECT_TRUE(detectNarf(depth, cam, p).empty());
+}

@@ -1,0 +1,146 @@
+// The whole 6D RGB-D odometry against exact synthetic ground truth, its failure modes, the MRPT
+// odometry source and the rgbd-odometry app.
+#include <filesystem>
+#include <fstream>
+
+#include <mrpt/poses/CPose3DPDFGaussian.h>
+
+#include "support.h"
+#include "vofusion/core/trajectory.h"
+#include "vofusion/odometry/odometry_source.h"
+#include "vofusion/odometry/rgbd_odometry.h"
+#include "vofusion/sim/synthetic_sequence.h"
+
+using namespace vofusion;
+
+namespace {
+sim::SyntheticSequence room(bool noise) {
+  sim::SimOptions o;
+  o.scene = "room";
+  o.frames = 40;
+  o.noise = noise;
+  return sim::SyntheticSequence(o);
+}
+double rotDeg(const mrpt::poses::CPose3D& e) {
+  return Eigen::AngleAxisd(e.getRotationMatrix().asEigen()).angle() * 180.0 / M_PI;
+}
+}  // namespace
+
+TEST(Odometry, RecoversSyntheticMotionWithin2mmAnd02deg) {
+  const auto seq = room(false);
+  for (const std::string method : {"robust", "paper"}) {
+    OdometryParams p;
+    p.motion_method = method;
+    p.narf.downsample = 2;
+    RgbdOdometry odo(p);
+    for (std::size_t i : {10u, 11u, 13u}) {  // one and two frame steps
+      const Frame f = seq.render(i);
+      const OdometryResult r = odo.process(f);
+      if (i == 10) {
+        EXPECT_FALSE(r.success);
+        EXPECT_EQ(r.failure, "first frame");
+        continue;
+      }
+      ASSERT_TRUE(r.success) << method << " frame " << i << ": " << r.failure;
+      const std::size_t prev = i == 11 ? 10 : 11;
+      const mrpt::poses::CPose3D truth = seq.groundTruth(i) - seq.groundTruth(prev);
+      const mrpt::poses::CPose3D err = r.motion - truth;
+      // The robust variant meets 2 mm / 0.2 deg. The paper's Algorithm 1 keeps the best minimal-sample
+      // hypothesis (no least squares over the inliers) and measures ~7-10 mm here: a looser bound.
+      const double tol_t = method == "robust" ? 0.002 : 0.015, tol_r = method == "robust" ? 0.2 : 0.5;
+      EXPECT_LT(err.translation().norm(), tol_t) << method << " frame " << i << " truth " << truth;
+      EXPECT_LT(rotDeg(err), tol_r) << method << " frame " << i;
+      EXPECT_GT(r.inliers, 20);
+      EXPECT_GT(r.star_keypoints, 0);
+      EXPECT_GT(r.narf_keypoints, 0);
+    }
+  }
+}
+
+TEST(Odometry, NoisyDepthStillCloseAndCovarianceSensible) {
+  const auto seq = room(true);
+  RgbdOdometry odo;
+  odo.process(seq.render(20));
+  const OdometryResult r = odo.process(seq.render(21));
+  ASSERT_TRUE(r.success) << r.failure;
+  const mrpt::poses::CPose3D err = r.motion - (seq.groundTruth(21) - seq.groundTruth(20));
+  EXPECT_LT(err.translation().norm(), 0.01);
+  EXPECT_LT(rotDeg(err), 0.5);
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_GT(r.covariance(i, i), 0.0);
+    EXPECT_LT(r.covariance(i, i), 1e-3);  // sigma below ~3 cm / 1.8 deg
+  }
+}
+
+TEST(Odometry, TexturelessAndEmptyFramesFail) {
+  const auto seq = room(false);
+  RgbdOdometry odo;
+  odo.process(seq.render(5));
+  Frame flat = seq.render(6);
+  flat.rgb.setTo(cv::Scalar(128, 128, 128));
+  flat.depth.setTo(0.f);  // no colour texture and no depth: nothing to match
+  OdometryResult r = odo.process(flat);
+  EXPECT_FALSE(r.success);
+  EXPECT_NE(r.failure.find("too few keypoints"), std::string::npos) << r.failure;
+  Frame empty;
+  r = odo.process(empty);
+  EXPECT_FALSE(r.success);
+  EXPECT_EQ(r.failure, "empty frame");
+  // The last good frame stays the reference: the next real frame bridges the gap.
+  r = odo.process(seq.render(7));
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_EQ(r.reference_index, seq.render(5).index);
+  const mrpt::poses::CPose3D err = r.motion - (seq.groundTruth(7) - seq.groundTruth(5));
+  EXPECT_LT(err.translation().norm(), 0.005);
+}
+
+TEST(Odometry, TexturelessColourWithFlatDepthFails) {
+  // A grey image of a flat wall: neither STAR nor NARF finds anything.
+  CameraIntrinsics cam;
+  Frame f;
+  f.camera = cam;
+  f.rgb = cv::Mat(480, 640, CV_8UC3, cv::Scalar(90, 90, 90));
+  f.depth = cv::Mat(480, 640, CV_32F, cv::Scalar(1.8f));
+  RgbdOdometry odo;
+  odo.process(f);
+  f.index = 1;
+  const OdometryResult r = odo.process(f);
+  EXPECT_FALSE(r.success);
+  EXPECT_EQ(r.keypoints, 0);
+}
+
+TEST(OdometrySource, AccumulatesPoseAndEmitsVisualOdometryActions) {
+  const auto seq = room(false);
+  OdometrySource src(OdometryParams{}, seq.groundTruth(0));
+  for (std::size_t i = 0; i < 4; ++i) src.process(seq.render(i));
+  EXPECT_EQ(src.failures(), 0u);
+  const mrpt::poses::CPose3D err = src.pose() - seq.groundTruth(3);
+  EXPECT_LT(err.translation().norm(), 0.005);
+  ASSERT_TRUE(src.action().has_value());
+  const auto a = *src.action();
+  EXPECT_EQ(a.estimationMethod, mrpt::obs::CActionRobotMovement3D::emVisualOdometry);
+  const mrpt::poses::CPose3D inc = a.poseChange.mean - (seq.groundTruth(3) - seq.groundTruth(2));
+  EXPECT_LT(inc.translation().norm(), 0.003);
+  EXPECT_GT(a.poseChange.cov(0, 0), 0.0);
+}
+
+TEST(RgbdOdometryApp, WritesTrajectoryAndRawlog) {
+  const std::string out = test::tempDir("rgbd-odometry");
+  std::string log;
+  const int rc = test::run(test::app("rgbd-odometry") + " synthetic --max-frames 6 --out " + out, &log);
+  ASSERT_EQ(rc, 0) << log;
+  const Trajectory t = readTumTrajectory(out + "/trajectory.txt");
+  EXPECT_EQ(t.size(), 6u);
+  EXPECT_TRUE(std::filesystem::exists(out + "/odometry.rawlog"));
+  EXPECT_NE(log.find("ATE rmse"), std::string::npos) << log;
+  EXPECT_NE(log.find("per-stage time"), std::string::npos) << log;
+}
+
+TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
+  std::string log;
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " /nonexistent --out " + test::tempDir("odo-bad"), &log), 2);
+  EXPECT_EQ(log, "/nonexistent: no such file or folder\n");
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + test::tempDir("odo-bad2") +
+                          " --set motion.typo_key=3", &log), 2);
+  EXPECT_NE(log.find("unknown key 'typo_key'"), std::string::npos) << log;
+}
