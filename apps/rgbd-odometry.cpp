@@ -81,7 +81,11 @@ int main(int argc, char** argv) {
     }
     checkConfigKeys(cfg, config.empty() ? "--set" : config, known);
     OdometryParams params;
-    params.loadFromConfigFile(cfg, "odometry");
+    try {
+      params.loadFromConfigFile(cfg, "odometry");
+    } catch (const InputError& e) {  // name the file the bad value came from
+      throw InputError(config.empty() ? "--set" : config, e.what());
+    }
 
     SourceOptions so;
     so.max_frames = max_frames;
@@ -101,12 +105,14 @@ int main(int argc, char** argv) {
     Frame frame;
     StageTimes io_times;
     double odo_seconds = 0;
+    std::size_t frames_with_depth = 0;
     while (true) {
       {
         ScopedStageTimer t(io_times, "read");
         if (!source->next(frame)) break;
       }
       const auto t0 = std::chrono::steady_clock::now();
+      if (cv::countNonZero(frame.depth > 0) > 0) ++frames_with_depth;
       const OdometryResult r = odo.process(frame);
       odo_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       est.push_back({frame.timestamp, odo.pose()});
@@ -123,6 +129,7 @@ int main(int argc, char** argv) {
     }
     progress.finish();
     if (est.empty()) throw InputError(input, "no frames");
+    if (frames_with_depth == 0) throw InputError(input, "no depth readings in any frame (all depth images are zero)");
     writeTumTrajectory(traj_path, est);
     if (writer) {
       if (!gt.empty()) writer->writeGroundTruth(gt);

@@ -1,7 +1,9 @@
 #include "vofusion/io/rawlog.h"
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <deque>
 #include <filesystem>
 #include <stdexcept>
@@ -354,8 +356,15 @@ void RawlogWriter::write(const Frame& frame) {
     std::snprintf(stem, sizeof stem, "%s_%06zu_%.6f", opts_.sensor_label.c_str(), frames_, frame.timestamp);
     const std::string png = std::string(stem) + "_INTENSITY.png";
     const std::string dir = impl_->images.tmp();
-    if (!cv::imwrite(dir + "/" + png, frame.rgb, {cv::IMWRITE_PNG_COMPRESSION, opts_.png_compression}))
-      throw InputError(impl_->images.path() + "/" + png, "cannot write image");
+    // Encoded in memory and written here: on a full disk libpng would print its own error line.
+    std::vector<uchar> bytes;
+    if (!cv::imencode(".png", frame.rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, opts_.png_compression}))
+      throw InputError(impl_->images.path() + "/" + png, "cannot encode image");
+    std::FILE* f = std::fopen((dir + "/" + png).c_str(), "wb");
+    const bool ok = f && std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+    const int err = errno;
+    if (!f || std::fclose(f) != 0 || !ok)
+      throw InputError(impl_->images.path() + "/" + png, std::string("cannot write image: ") + std::strerror(f && ok ? errno : err));
     obs->intensityImage.setExternalStorage(png);
     try {
       obs->rangeImage_convertToExternalStorage(std::string(stem) + "_DEPTH.bin", dir + "/");

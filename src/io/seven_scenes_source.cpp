@@ -30,8 +30,22 @@ std::string colourFor(const std::string& stem) {
   return {};
 }
 
+// Same check as the TUM loader: libpng would print its own line for a truncated file.
+bool truncatedPng(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  char sig[8] = {};
+  if (!f.read(sig, 8) || std::string(sig, 8) != "\x89PNG\r\n\x1a\n") return false;
+  f.seekg(0, std::ios::end);
+  const auto size = static_cast<long long>(f.tellg());
+  if (size < 8 + 12) return true;
+  char tail[8] = {};
+  f.seekg(size - 8);
+  return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
+}
+
 cv::Mat loadMillimetreDepth(const std::string& path, int w, int h) {
   if (!fs::exists(path)) throw InputError(path, "depth image is missing");
+  if (truncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
   cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
   if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel (millimetres)");

@@ -14,6 +14,22 @@ namespace fs = std::filesystem;
 
 namespace vofusion {
 
+namespace {
+// A PNG that does not end with its IEND chunk is truncated. Caught before OpenCV sees the file,
+// because libpng prints its own "libpng error" line to stderr before OpenCV gives up.
+bool truncatedPng(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  char sig[8] = {};
+  if (!f.read(sig, 8) || std::string(sig, 8) != "\x89PNG\r\n\x1a\n") return false;  // not a PNG: OpenCV decides
+  f.seekg(0, std::ios::end);
+  const auto size = static_cast<long long>(f.tellg());
+  if (size < 8 + 12) return true;
+  char tail[8] = {};
+  f.seekg(size - 8);
+  return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
+}
+}  // namespace
+
 std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin) {
   std::vector<TumEntry> out;
   std::istringstream in(text);
@@ -71,6 +87,7 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
 
 cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h) {
   if (!fs::exists(path)) throw InputError(path, "depth image is missing");
+  if (truncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
   cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
   if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel");
@@ -84,12 +101,32 @@ cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h) {
 
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   if (!fs::exists(path)) throw InputError(path, "colour image is missing");
+  if (truncatedPng(path)) throw InputError(path, "cannot decode colour image (truncated PNG)");
   cv::Mat img = cv::imread(path, cv::IMREAD_COLOR);
   if (img.empty()) throw InputError(path, "cannot decode colour image (corrupt or truncated?)");
   if (img.cols != expect_w || img.rows != expect_h)
     throw InputError(path, "colour image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
                                ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h));
   return img;
+}
+
+CameraIntrinsics readIntrinsicsFile(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw InputError(path, "cannot open file");
+  std::string line;
+  for (int n = 1; std::getline(f, line); ++n) {
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    std::istringstream ls(line);
+    double v[4];
+    std::string extra;
+    if (!(ls >> v[0] >> v[1] >> v[2] >> v[3]) || (ls >> extra))
+      throw InputError(path, "line " + std::to_string(n) + ": expected 'fx fy cx cy'");
+    CameraIntrinsics c;
+    c.fx = v[0]; c.fy = v[1]; c.cx = v[2]; c.cy = v[3];
+    return c;
+  }
+  throw InputError(path, "no 'fx fy cx cy' line");
 }
 
 TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
@@ -107,14 +144,18 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
     throw InputError(folder, "no colour frame has a depth frame within " + std::to_string(opts.max_time_diff) + " s");
   if (opts.max_frames > 0 && pairs_.size() > opts.max_frames) pairs_.resize(opts.max_frames);
 
-  camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : CameraIntrinsics::forTumFolder(folder);
+  const std::string intrinsics_file = (fs::path(folder) / "intrinsics.txt").string();
+  if (opts.intrinsics) camera_ = CameraIntrinsics::parse(*opts.intrinsics);
+  else if (fs::exists(intrinsics_file)) camera_ = readIntrinsicsFile(intrinsics_file);
+  else camera_ = CameraIntrinsics::forTumFolder(folder);
   // Image size comes from the data itself; the first colour frame sets it for the whole sequence.
-  const cv::Mat first = cv::imread((fs::path(folder) / pairs_[0].rgb.file).string(), cv::IMREAD_COLOR);
+  const std::string first_path = (fs::path(folder) / pairs_[0].rgb.file).string();
+  const cv::Mat first = truncatedPng(first_path) ? cv::Mat() : cv::imread(first_path, cv::IMREAD_COLOR);
   if (!first.empty()) {
     camera_.width = first.cols;
     camera_.height = first.rows;
   }
-  camera_.validate(opts.intrinsics ? "--intrinsics" : folder);
+  camera_.validate(opts.intrinsics ? "--intrinsics" : fs::exists(intrinsics_file) ? intrinsics_file : folder);
 
   const std::string gt = (fs::path(folder) / "groundtruth.txt").string();
   if (fs::exists(gt)) gt_ = readTumTrajectory(gt);
