@@ -1,0 +1,259 @@
+#include "vofusion/pipeline/run_outputs.h"
+
+#include <sys/resource.h>
+
+#include <condition_variable>
+#include <deque>
+#include <filesystem>
+#include <mutex>
+#include <thread>
+
+#include <mrpt/obs/CObservationRobotPose.h>
+#include <mrpt/config/CConfigFileBase.h>
+
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/eval/trajectory_eval.h"
+#include "vofusion/io/rawlog.h"
+#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/scene/scene_export.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace vofusion {
+
+void OutputParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, const std::string& s) {
+  MRPT_LOAD_CONFIG_VAR(write_rawlog, bool, c, s);
+  MRPT_LOAD_CONFIG_VAR(save_raw_mesh, bool, c, s);
+  MRPT_LOAD_CONFIG_VAR(clean_mesh, bool, c, s);
+  MRPT_LOAD_CONFIG_VAR(frustum_every, int, c, s);
+  MRPT_LOAD_CONFIG_VAR(image_width, int, c, s);
+  MRPT_LOAD_CONFIG_VAR(image_height, int, c, s);
+  MRPT_LOAD_CONFIG_VAR(rpe_delta, double, c, s);
+  if (frustum_every < 1 || image_width < 64 || image_height < 64 || !(rpe_delta > 0))
+    throw InputError("[" + s + "]", "out-of-range value (frustum_every >= 1, image size >= 64 px, rpe_delta > 0)");
+}
+
+void OutputParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
+  MRPT_SAVE_CONFIG_VAR_COMMENT(write_rawlog, "poses.rawlog: observations + odometry actions + fused poses");
+  MRPT_SAVE_CONFIG_VAR_COMMENT(save_raw_mesh, "also mesh_raw.ply (marching cubes before CGAL post-processing)");
+  MRPT_SAVE_CONFIG_VAR_COMMENT(clean_mesh, "CGAL post-processing with the [mesh] parameters");
+  MRPT_SAVE_CONFIG_VAR_COMMENT(frustum_every, "frames between camera frustums in scene.3Dscene");
+  MRPT_SAVE_CONFIG_VAR_COMMENT(image_width, "px, mesh.png and trajectory.png");
+  MRPT_SAVE_CONFIG_VAR_COMMENT(image_height, "px");
+  MRPT_SAVE_CONFIG_VAR_COMMENT(rpe_delta, "s, pose-pair spacing of the relative pose error in summary.json");
+}
+
+double peakMemoryMiB() {
+  rusage u{};
+  ::getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;  // Linux reports KiB
+}
+
+namespace {
+
+// poses.rawlog is written on its own thread: PNG encoding must not slow the frame loop down.
+class RawlogThread {
+ public:
+  explicit RawlogThread(const std::string& path)
+      : writer_(path, rawlogOptions()), thread_([this] { loop(); }) {}
+  ~RawlogThread() { stop(); }
+
+  void push(const Frame& f, const FrameReport& r) {
+    std::unique_lock<std::mutex> lock(mu_);
+    // Bounded: the offline loop waits rather than piling frames up in memory.
+    space_.wait(lock, [&] { return queue_.size() < 8 || !error_.empty(); });
+    if (!error_.empty()) return;
+    queue_.push_back({f, r});
+    ready_.notify_one();
+  }
+  // Waits for the queue to drain; returns the writer's error, if any.
+  std::string stop() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      done_ = true;
+    }
+    ready_.notify_all();
+    if (thread_.joinable()) thread_.join();
+    return error_;
+  }
+  RawlogWriter& writer() { return writer_; }
+
+ private:
+  static RawlogWriterOptions rawlogOptions() {
+    RawlogWriterOptions o;
+    o.format = RawlogWriterOptions::Format::ActionsSensoryFrames;  // odometry actions need it
+    return o;
+  }
+  void loop() {
+    for (;;) {
+      std::pair<Frame, FrameReport> item;
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        ready_.wait(lock, [&] { return !queue_.empty() || done_; });
+        if (queue_.empty()) return;
+        item = std::move(queue_.front());
+        queue_.pop_front();
+      }
+      space_.notify_one();
+      try {
+        write(item.first, item.second);
+      } catch (const std::exception& e) {
+        std::lock_guard<std::mutex> lock(mu_);
+        error_ = e.what();
+        queue_.clear();
+        space_.notify_all();
+        return;
+      }
+    }
+  }
+  void write(const Frame& f, const FrameReport& r) {
+    if (r.odometry.success)
+      writer_.writeAction(makeOdometryAction(r.odometry.motion, f.timestamp, &r.odometry.covariance));
+    mrpt::obs::CObservationRobotPose pose;
+    pose.sensorLabel = "VOFUSION_POSE";
+    pose.timestamp = mrpt::Clock::fromDouble(f.timestamp);
+    pose.pose.mean = r.pose;
+    writer_.writeObservation(pose);
+    writer_.write(f);
+  }
+
+  RawlogWriter writer_;
+  std::mutex mu_;
+  std::condition_variable ready_, space_;
+  std::deque<std::pair<Frame, FrameReport>> queue_;
+  bool done_ = false;
+  std::string error_;
+  std::thread thread_;
+};
+
+json statsJson(const ErrorStats& s) {
+  return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std}, {"max", s.max}, {"count", s.count}};
+}
+
+json timesJson(const StageTimes& t, std::size_t frames) {
+  json j = json::object();
+  for (const auto& [stage, sec] : t.seconds) {
+    const double per_frame = frames ? sec / frames : 0.0;
+    j[stage] = {{"total_s", sec}, {"ms_per_frame", per_frame * 1e3}, {"fps", per_frame > 0 ? 1.0 / per_frame : 0.0}};
+  }
+  return j;
+}
+
+json meshJson(const TriangleMesh& m) { return {{"vertices", m.vertices.size()}, {"faces", m.faces.size()}}; }
+
+}  // namespace
+
+struct RunRecorder::Impl {
+  std::string dir;
+  OutputParams params;
+  MeshCleanParams mesh_params;
+  std::unique_ptr<RawlogThread> rawlog;
+  Trajectory ground_truth;
+  CameraIntrinsics camera;
+  bool have_camera = false;
+
+  std::string file(const std::string& name) const { return (fs::path(dir) / name).string(); }
+};
+
+RunRecorder::RunRecorder(const std::string& dir, const OutputParams& params, const MeshCleanParams& mesh_params)
+    : impl_(std::make_unique<Impl>()) {
+  ensureWritableDirectory(dir);
+  impl_->dir = dir;
+  impl_->params = params;
+  impl_->mesh_params = mesh_params;
+  if (params.write_rawlog) impl_->rawlog = std::make_unique<RawlogThread>(impl_->file("poses.rawlog"));
+}
+
+RunRecorder::~RunRecorder() = default;
+
+void RunRecorder::add(const Frame& frame, const FrameReport& report) {
+  if (!impl_->have_camera) impl_->camera = frame.camera, impl_->have_camera = true;
+  if (frame.groundTruth) impl_->ground_truth.push_back({frame.timestamp, *frame.groundTruth});
+  if (impl_->rawlog) impl_->rawlog->push(frame, report);
+}
+
+json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FILE* log) {
+  Impl& m = *impl_;
+  const OutputParams& p = m.params;
+  auto wrote = [&](const std::string& name, const std::string& what) {
+    if (log) std::fprintf(log, "  wrote %s  (%s)\n", m.file(name).c_str(), what.c_str());
+  };
+  const std::size_t frames = rec.framesProcessed();
+  json s;
+  s["input"] = info.input;
+  s["config"] = info.config;
+  s["mode"] = toString(rec.mode());
+  s["interrupted"] = info.interrupted;
+  s["frames"] = frames;
+  s["lost_frames"] = rec.lostFrames();
+  s["icp_fallbacks_to_odometry"] = rec.fallbacks();
+  s["odometry_failures"] = rec.odometryFailures();
+  s["seconds"] = info.seconds;
+  s["fps"] = info.seconds > 0 ? frames / info.seconds : 0.0;
+  s["stages"] = timesJson(rec.totalTimes(), frames);
+  const KinFuStats ks = rec.fusionStats();
+  s["fusion"] = {{"volume_shifts", ks.shifts}, {"bricks_in_volume", ks.bricks_in_volume},
+                 {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0}};
+  if (!info.extra.is_null()) s.update(info.extra);
+
+  if (m.rawlog) {
+    const std::string err = m.rawlog->stop();
+    if (!err.empty()) throw InputError(m.file("poses.rawlog"), err);
+    if (!m.ground_truth.empty()) m.rawlog->writer().writeGroundTruth(m.ground_truth);
+    m.rawlog->writer().commit();
+    wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames");
+  }
+
+  writeTumTrajectory(m.file("trajectory.txt"), rec.trajectory());
+  wrote("trajectory.txt", std::to_string(rec.trajectory().size()) + " poses");
+
+  if (!m.ground_truth.empty()) {
+    const AteResult ate = computeAte(m.ground_truth, rec.trajectory());
+    const RpeResult rpe = computeRpe(m.ground_truth, rec.trajectory(), p.rpe_delta);
+    if (ate.success) s["ate"] = statsJson(ate.trans);
+    if (rpe.success) s["rpe"] = {{"delta_s", rpe.delta}, {"trans_m", statsJson(rpe.trans)}, {"rot_deg", statsJson(rpe.rot_deg)}};
+    if (ate.success) {
+      plotAteReport(m.file("trajectory.png"), ate, "vofusion " + toString(rec.mode()) + ": " + info.input);
+      wrote("trajectory.png", "ATE RMSE " + std::to_string(ate.trans.rmse) + " m");
+    }
+  }
+  if (m.ground_truth.empty() && !rec.trajectory().empty()) {
+    plotTrajectoriesOverlay(m.file("trajectory.png"), {}, {{"estimate", rec.trajectory()}},
+                            "vofusion " + toString(rec.mode()) + ": " + info.input);
+    wrote("trajectory.png", "camera path");
+  }
+
+  TriangleMesh mesh = rec.extractMesh();
+  s["mesh_raw"] = meshJson(mesh);
+  if (p.save_raw_mesh) {
+    writePly(m.file("mesh_raw.ply"), mesh);
+    wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
+  }
+  if (p.clean_mesh && !mesh.empty()) {
+    const MeshCleanReport report = cleanMesh(mesh, m.mesh_params);
+    s["mesh_clean"] = json::parse(report.toJson());
+  }
+  s["mesh"] = meshJson(mesh);
+  writePly(m.file("mesh.ply"), mesh);
+  wrote("mesh.ply", std::to_string(mesh.faces.size()) + " faces");
+
+  const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
+  SceneOptions scene_opts;
+  scene_opts.frustum_every_k = p.frustum_every;
+  exportScene(m.file("scene.3Dscene"), mesh, rec.trajectory(), m.ground_truth.empty() ? nullptr : &m.ground_truth,
+              cam, scene_opts);
+  wrote("scene.3Dscene", "open with SceneViewer3D");
+  if (!mesh.empty()) {
+    renderMeshPng(m.file("mesh.png"), mesh, &rec.trajectory(), p.image_width, p.image_height);
+    wrote("mesh.png", std::to_string(p.image_width) + "x" + std::to_string(p.image_height));
+  }
+
+  s["peak_memory_mib"] = peakMemoryMiB();
+  writeFileAtomically(m.file("summary.json"), s.dump(2) + "\n");
+  wrote("summary.json", "run statistics");
+  return s;
+}
+
+}  // namespace vofusion
