@@ -78,11 +78,14 @@ cv::Mat computeNormalMap(const cv::Mat& points, int w, float max_depth_step) {
         double(n);
     return true;
   };
+  // Evaluated on every second pixel and copied to its 2x2 block: the boxes are 2w+1 wide, so
+  // neighbouring normals are nearly equal anyway, and this is 4x cheaper.
 #pragma omp parallel for schedule(static)
-  for (int y = w; y < rows - w; ++y) {
+  for (int y = w; y < rows - w - 1; y += 2) {
     cv::Vec3f* out = normals.ptr<cv::Vec3f>(y);
+    cv::Vec3f* out2 = normals.ptr<cv::Vec3f>(y + 1);
     const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
-    for (int x = w; x < cols - w; ++x) {
+    for (int x = w; x < cols - w - 1; x += 2) {
       if (!std::isfinite(p[x][2])) continue;
       cv::Vec3d l, r, t, b;
       if (!mean(x - w, y - w, x, y + w + 1, l) || !mean(x + 1, y - w, x + w + 1, y + w + 1, r) ||
@@ -94,7 +97,7 @@ cv::Mat computeNormalMap(const cv::Mat& points, int w, float max_depth_step) {
       if (len <= 0) continue;
       n /= len;
       if (n.dot(cv::Vec3d(p[x])) > 0) n = -n;  // face the camera
-      out[x] = cv::Vec3f(n);
+      out[x] = out[x + 1] = out2[x] = out2[x + 1] = cv::Vec3f(n);
     }
   }
   return normals;
