@@ -1,7 +1,7 @@
 // rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall] [--frames N] [--fps F]
 //               [--no-noise] [--seed S] [--size WxH]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
-// rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt) or as an MRPT rawlog.
+// rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -66,6 +66,12 @@ void writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
   writeFileAtomically((fs::path(out.tmp()) / "rgb.txt").string(), rgb_txt);
   writeFileAtomically((fs::path(out.tmp()) / "depth.txt").string(), depth_txt);
   writeTumTrajectory((fs::path(out.tmp()) / "groundtruth.txt").string(), gt);
+  // The TUM layout has no place for intrinsics; TumFolderSource reads this file when present.
+  const CameraIntrinsics& c = seq.options().camera;
+  char intr[160];
+  std::snprintf(intr, sizeof intr, "# fx fy cx cy (pixels, %dx%d, depth registered to colour)\n%.6f %.6f %.6f %.6f\n", c.width,
+                c.height, c.fx, c.fy, c.cx, c.cy);
+  writeFileAtomically((fs::path(out.tmp()) / "intrinsics.txt").string(), intr);
   out.commit();
   progress.finish("-> " + dir);
 }

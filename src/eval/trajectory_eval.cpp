@@ -12,8 +12,11 @@ namespace {
 Eigen::Vector3d position(const mrpt::poses::CPose3D& p) { return {p.x(), p.y(), p.z()}; }
 
 double rotationAngle(const mrpt::poses::CPose3D& p) {
-  const double c = (p.getRotationMatrix().asEigen().trace() - 1.0) / 2.0;
-  return std::acos(std::clamp(c, -1.0, 1.0));
+  // atan2 keeps precision near zero, where acos((trace-1)/2) loses half the digits.
+  const Eigen::Matrix3d R = p.getRotationMatrix().asEigen();
+  const double c = (R.trace() - 1.0) / 2.0;
+  const double s = 0.5 * Eigen::Vector3d(R(2, 1) - R(1, 2), R(0, 2) - R(2, 0), R(1, 0) - R(0, 1)).norm();
+  return std::atan2(s, c);
 }
 
 // Index of the stamp in `stamps` (sorted) nearest to t.

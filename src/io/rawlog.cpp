@@ -88,12 +88,14 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   f.camera.height = rows;
   f.camera.validate(override_camera ? "--intrinsics" : origin);
 
-  f.depth.create(rows, cols, CV_32F);
-  const double units = exactUnits(obs.rangeUnits);
+  // Same conversion as the TUM loader (16-bit -> float by cv::convertTo), so converted data reads back
+  // bit-identical.
+  cv::Mat raw(rows, cols, CV_16U);
   for (int r = 0; r < rows; ++r) {
-    float* out = f.depth.ptr<float>(r);
-    for (int c = 0; c < cols; ++c) out[c] = float(obs.rangeImage(r, c) * units);
+    uint16_t* out = raw.ptr<uint16_t>(r);
+    for (int c = 0; c < cols; ++c) out[c] = obs.rangeImage(r, c);
   }
+  raw.convertTo(f.depth, CV_32F, exactUnits(obs.rangeUnits));
   if (!obs.range_is_depth) {
     // Ranges along the pixel ray -> depth along the optical axis.
     const CameraIntrinsics& k = f.camera;

@@ -1,6 +1,8 @@
 #pragma once
 // A TUM RGB-D benchmark folder: rgb.txt, depth.txt, rgb/, depth/ (16-bit PNG, value/5000 = m),
 // optional groundtruth.txt. Colour frames are associated with the nearest depth frame.
+// Intrinsics: SourceOptions::intrinsics, else an optional intrinsics.txt in the folder (one line
+// "fx fy cx cy", '#' comments; written by rgbd-simulate), else the preset from the folder name.
 #include <string>
 #include <vector>
 
@@ -48,6 +50,8 @@ class TumFolderSource : public FrameSource {
 
 // Loads a TUM depth PNG (16-bit, scale 5000/m) as CV_32F metres; throws InputError on any problem.
 cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h);
+// Reads "fx fy cx cy" (first non-comment line); throws InputError(path, ...).
+CameraIntrinsics readIntrinsicsFile(const std::string& path);
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h);
 
 }  // namespace vofusion
