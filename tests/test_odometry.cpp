@@ -6,6 +6,8 @@
 #include <mrpt/poses/CPose3DPDFGaussian.h>
 
 #include "support.h"
+#include "vofusion/core/config.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/odometry/odometry_source.h"
 #include "vofusion/odometry/rgbd_odometry.h"
@@ -143,4 +145,26 @@ TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + test::tempDir("odo-bad2") +
                           " --set motion.typo_key=3", &log), 2);
   EXPECT_NE(log.find("unknown key 'typo_key'"), std::string::npos) << log;
+}
+
+TEST(OdometryParams, ShareIniHoldsEveryKeyWithTheDefaults) {
+  const std::string ini = std::string(VOFUSION_SHARE_DIR) + "/odometry.ini";
+  auto cfg = loadConfig(ini);
+  const OdometryParams defaults;
+  checkConfigKeys(cfg, ini, {{"odometry", &defaults}});  // no unknown keys
+  OdometryParams p;
+  p.motion_method = "paper";  // must be overwritten by the file
+  p.star.max_size = 1;
+  p.loadFromConfigFile(cfg, "odometry");
+  mrpt::config::CConfigFileMemory a, b;
+  p.saveToConfigFile(a, "odometry");
+  defaults.saveToConfigFile(b, "odometry");
+  EXPECT_EQ(a.getContent(), b.getContent());
+}
+
+TEST(OdometryParams, RejectsUnknownMethod) {
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.write("odometry", "motion_method", "magic");
+  OdometryParams p;
+  EXPECT_THROW(p.loadFromConfigFile(cfg, "odometry"), InputError);
 }
