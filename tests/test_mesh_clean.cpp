@@ -332,3 +332,19 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
             2);
   EXPECT_NE(out.find("max_hole_perimetre"), std::string::npos) << out;
 }
+
+TEST(MeshClean, EmptyAndInvalidMeshes) {
+  TriangleMesh empty;
+  const MeshCleanReport r = cleanMesh(empty, MeshCleanParams());
+  EXPECT_TRUE(r.success) << r.failure;
+  EXPECT_TRUE(empty.faces.empty());
+  EXPECT_FALSE(r.closed);
+
+  TriangleMesh bad = icosphere(1);
+  bad.faces.push_back({0, 1, 9999});
+  const TriangleMesh before = bad;
+  const MeshCleanReport rb = cleanMesh(bad, MeshCleanParams());
+  EXPECT_FALSE(rb.success);
+  EXPECT_NE(rb.failure.find("9999"), std::string::npos) << rb.failure;
+  EXPECT_EQ(bad.faces, before.faces);  // left as given
+}

@@ -159,7 +159,11 @@ class Cleaner {
   Cleaner(const MeshCleanParams& p, MeshCleanReport& r) : p_(p), r_(r) {}
 
   void run(TriangleMesh& in) {
-    has_colours_ = !in.colors.empty();
+    has_colours_ = !in.colors.empty() && in.colors.size() == in.vertices.size();
+    for (const auto& f : in.faces)
+      for (std::uint32_t i : f)
+        if (i >= in.vertices.size()) throw std::invalid_argument("a face references vertex " + std::to_string(i) + " of " +
+                                                                 std::to_string(in.vertices.size()));
     step("repair", [&] { buildRepaired(in); });
     if (p_.min_component_faces > 0 || p_.min_component_area > 0) step("components", [&] { removeSmallComponents(); });
     if (p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) step("holes", [&] { fillHoles(); });
