@@ -75,9 +75,9 @@ void KinFuParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std
     std::visit(
         [&](auto* v) {
           using T = std::remove_pointer_t<decltype(v)>;
-          if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), 24, 12, k.comment);
-          else if constexpr (std::is_same_v<T, int>) cfg.write(section, k.name, *v, 24, 12, k.comment);
-          else cfg.write(section, k.name, static_cast<double>(*v), 24, 12, k.comment);
+          if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), -1, 12, k.comment);
+          else if constexpr (std::is_same_v<T, int>) cfg.write(section, k.name, *v, -1, 12, k.comment);
+          else cfg.write(section, k.name, static_cast<double>(*v), -1, 12, k.comment);
         },
         k.value);
   }

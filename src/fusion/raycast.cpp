@@ -81,17 +81,28 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
             if (first && need_free_start) return -1;
             prev_f = nan;
             first = false;
-            z += 0.5f * trunc / len;
+            z += vs / len;  // unobserved voxel next to observed ones: do not jump over the band
             continue;
           }
           const float f = v.tsdf * (1.f / kTsdfScale);
           if (f < 0.f) {
             if (first || std::isnan(prev_f)) return need_free_start && first ? -1 : 0;  // back face / unobserved
-            float fp, fc;
-            if (trilinear(oq + dq * prev_z, fp) && trilinear(q, fc) && fp > 0.f && fc < 0.f)
-              zs = prev_z + (z - prev_z) * fp / (fp - fc);
-            else
-              zs = prev_z + (z - prev_z) * prev_f / (prev_f - f);
+            // Nearest voxels bracket the surface; locate it on the trilinear field with half-voxel
+            // steps so the crossing is interpolated between two close, continuous samples.
+            float fa;
+            if (trilinear(oq + dq * prev_z, fa) && fa > 0.f) {
+              const float dz = 0.5f * vs / len, zlimit = z + 2.f * vs / len;
+              for (float za = prev_z; za < zlimit; za += dz) {
+                float fb;
+                if (!trilinear(oq + dq * (za + dz), fb)) break;
+                if (fb < 0.f) {
+                  zs = za + dz * fa / (fa - fb);
+                  return 1;
+                }
+                fa = fb;
+              }
+            }
+            zs = prev_z + (z - prev_z) * prev_f / (prev_f - f);
             return 1;
           }
           prev_f = f;

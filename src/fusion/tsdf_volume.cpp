@@ -83,7 +83,10 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
   const Eigen::Matrix3f R = cam_to_world.linear();
   const Eigen::Vector3f t = cam_to_world.translation();
   const float inv_brick = 1.f / (kBrickEdge * vs);
-  const int w = depth.cols, h = depth.rows, step = std::max(1, params_.mark_step);
+  const int w = depth.cols, h = depth.rows;
+  // Sampled readings must lie closer than half a brick apart even at the far end of the range.
+  const int step = std::max(1, std::min(params_.mark_step,
+                                        static_cast<int>(0.5f * kBrickEdge * vs * std::min(fx, fy) / zmax)));
 
   // 1. Bricks touched by the truncation band [z - trunc, z + trunc] of (a subsample of) the readings.
   std::fill(marks_.begin(), marks_.end(), 0);
@@ -141,8 +144,22 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
           const float uf = fx * pc.x() * iz + cx, vf = fy * pc.y() * iz + cy;
           if (!(uf > -0.5f && vf > -0.5f && uf < w - 0.5f && vf < h - 0.5f)) continue;
           const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
-          const float d = depth.ptr<float>(v)[u];
+          float d = depth.ptr<float>(v)[u];
           if (!(d >= zmin && d <= zmax)) continue;
+          // Bilinear depth where the 4 neighbours agree: with voxels about as small as a pixel's
+          // footprint, the nearest reading alone fuses a staircase into the TSDF (noisy normals).
+          const int u0 = static_cast<int>(uf), v0 = static_cast<int>(vf);
+          if (uf >= 0.f && vf >= 0.f && u0 + 1 < w && v0 + 1 < h) {
+            const float* r0 = depth.ptr<float>(v0);
+            const float* r1 = depth.ptr<float>(v0 + 1);
+            const float d00 = r0[u0], d01 = r0[u0 + 1], d10 = r1[u0], d11 = r1[u0 + 1];
+            const float lo = std::min(std::min(d00, d01), std::min(d10, d11));
+            const float hi = std::max(std::max(d00, d01), std::max(d10, d11));
+            if (lo > 0.f && hi - lo < 0.5f * trunc) {
+              const float a = uf - u0, b = vf - v0;
+              d = (d00 * (1 - a) + d01 * a) * (1 - b) + (d10 * (1 - a) + d11 * a) * b;
+            }
+          }
           const float sdf = d - pc.z();
           if (sdf < -trunc) continue;
           const float f = std::min(1.f, sdf * inv_trunc);
