@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "vofusion/core/atomic_file.h"
+#include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
@@ -21,6 +22,7 @@
 #include "vofusion/live/live_viewer.h"
 #include "vofusion/mesh/triangle_mesh.h"
 #include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/pipeline/run_outputs.h"
 
 namespace fs = std::filesystem;
 using namespace vofusion;
@@ -36,7 +38,7 @@ const char* kUsage =
     "                     [--verbose] [--dump-config]\n"
     "  Records the sensor of --config (default share/grab-openni2.ini) to DIR/grab.rawlog until\n"
     "  Ctrl-C or --max-frames. --live also reconstructs online (window unless --no-gui) and writes\n"
-    "  DIR/trajectory.txt and DIR/mesh.ply. --replay plays a recording at its recorded rate instead\n"
+    "  the same outputs as vofusion into DIR. --replay plays a recording at its recorded rate instead\n"
     "  of a sensor. Frames the processing cannot keep up with are dropped (oldest first) and counted;\n"
     "  the recording itself never drops. DIR/grab-summary.txt holds the counts.\n";
 
@@ -48,73 +50,63 @@ void onSignal(int) {
 }
 
 struct Args {
-  std::string config, sensor, out = "grab", replay, mode = "paper";
-  bool live = false, gui = true, record = true, verbose = false, dump = false;
+  std::string config, sensor, out, replay, mode;
+  bool live, gui, record, verbose, dump;
   std::optional<std::size_t> max_frames, queue;
   std::optional<double> speed;
-  int work_ms = 0;
+  int work_ms;
 };
 
-std::size_t parseCount(const std::string& flag, const std::string& v) {
-  try {
-    std::size_t pos = 0;
-    const long long n = std::stoll(v, &pos);
-    if (pos == v.size() && n >= 0) return std::size_t(n);
-  } catch (const std::exception&) {
-  }
-  throw InputError(flag, "expected a non-negative integer, got '" + v + "'");
-}
-
-double parseNumber(const std::string& flag, const std::string& v) {
-  try {
-    std::size_t pos = 0;
-    const double x = std::stod(v, &pos);
-    if (pos == v.size() && x >= 0) return x;
-  } catch (const std::exception&) {
-  }
-  throw InputError(flag, "expected a non-negative number, got '" + v + "'");
-}
-
 Args parseArgs(int argc, char** argv) {
-  Args a;
-  for (int i = 1; i < argc; ++i) {
-    const std::string f = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw InputError(f, "needs a value");
-      return argv[++i];
-    };
-    if (f == "--config") a.config = value();
-    else if (f == "--sensor") a.sensor = value();
-    else if (f == "--out") a.out = value();
-    else if (f == "--replay") a.replay = value();
-    else if (f == "--mode") a.mode = value();
-    else if (f == "--live") a.live = true;
-    else if (f == "--no-gui") a.gui = false;
-    else if (f == "--no-record") a.record = false;
-    else if (f == "--verbose") a.verbose = true;
-    else if (f == "--dump-config") a.dump = true;
-    else if (f == "--max-frames") a.max_frames = parseCount(f, value());
-    else if (f == "--queue") a.queue = parseCount(f, value());
-    else if (f == "--speed") a.speed = parseNumber(f, value());
-    else if (f == "--simulate-work-ms") a.work_ms = int(parseCount(f, value()));
-    else if (f == "-h" || f == "--help") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else throw InputError(f, "unknown option (see --help)");
+  const CommandLine cl(argc, argv,
+                       {"--config", "--sensor", "--out", "--replay", "--mode", "--max-frames", "--queue", "--speed",
+                        "--simulate-work-ms"},
+                       {"--live", "--no-gui", "--no-record", "--verbose", "--dump-config", "--help"});
+  if (cl.flag("--help")) {
+    std::fputs(kUsage, stdout);
+    std::exit(0);
   }
+  if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "'");
+  Args a;
+  a.config = cl.value("--config", "");
+  a.sensor = cl.value("--sensor", "");
+  a.out = cl.value("--out", "grab");
+  a.replay = cl.value("--replay", "");
+  a.mode = cl.value("--mode", "paper");
+  a.live = cl.flag("--live");
+  a.gui = !cl.flag("--no-gui");
+  a.record = !cl.flag("--no-record");
+  a.verbose = cl.flag("--verbose");
+  a.dump = cl.flag("--dump-config");
+  if (cl.value("--max-frames")) a.max_frames = cl.count("--max-frames", 0);
+  if (cl.value("--queue")) a.queue = cl.count("--queue", 0);
+  if (cl.value("--speed")) a.speed = cl.number("--speed", 1.0);
+  a.work_ms = int(cl.count("--simulate-work-ms", 0));
+  if (a.speed && *a.speed < 0) throw InputError("--speed", "must not be negative");
   if (a.queue && *a.queue < 1) throw InputError("--queue", "must be at least 1");
   if (!a.live && !a.record) throw InputError("--no-record", "without --live there is nothing left to do");
   return a;
 }
 
-// Only our own section is checked for typos: sensor sections are read by MRPT's drivers.
-void checkOwnSection(const mrpt::config::CConfigFileBase& cfg, const std::string& origin, const LiveOptions& defaults) {
+// Our sections are checked for typos; the sensor sections belong to MRPT's drivers.
+std::vector<ConfigSection> ownSections(const LiveOptions& live, const OutputParams& out, const MeshCleanParams& mesh) {
+  auto sections = reconstructionConfigSections();
+  sections.push_back({kSection, &live});
+  sections.push_back({"output", &out});
+  sections.push_back({"mesh", &mesh});
+  return sections;
+}
+
+void checkOwnSections(const mrpt::config::CConfigFileBase& cfg, const std::string& origin,
+                      const std::vector<ConfigSection>& known) {
   mrpt::config::CConfigFileMemory own;
-  std::vector<std::string> keys;
-  cfg.getAllKeys(kSection, keys);
-  for (const auto& k : keys)
-    if (k != "rawlog-grabber-ignore") own.write(kSection, k, cfg.read_string(kSection, k, ""));
-  checkConfigKeys(own, origin, {{kSection, &defaults}});
+  for (const auto& [section, params] : known) {
+    std::vector<std::string> keys;
+    cfg.getAllKeys(section, keys);
+    for (const auto& k : keys)
+      if (k != "rawlog-grabber-ignore") own.write(section, k, cfg.read_string(section, k, ""));
+  }
+  checkConfigKeys(own, origin, known);
 }
 
 std::string summaryText(const LiveStats& s, const std::string& source, std::size_t recorded, std::size_t queue) {
@@ -140,12 +132,19 @@ int run(const Args& args) {
   if (config.empty() && args.replay.empty()) config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
   const auto cfg = loadConfig(config);
   LiveOptions opts;
+  const OutputParams default_out;
+  const MeshCleanParams default_mesh;
+  const auto known = ownSections(opts, default_out, default_mesh);
   if (args.dump) {
-    std::fputs(dumpConfig({{kSection, &opts}}).c_str(), stdout);
+    std::fputs(dumpConfig(known).c_str(), stdout);
     return 0;
   }
-  checkOwnSection(cfg, config, opts);
+  checkOwnSections(cfg, config, known);
   opts.loadFromConfigFile(cfg, kSection);
+  OutputParams out_params;
+  MeshCleanParams mesh_params;
+  out_params.loadFromConfigFile(cfg, "output");
+  mesh_params.loadFromConfigFile(cfg, "mesh");
   if (args.max_frames) opts.max_frames = *args.max_frames;
   if (args.queue) opts.queue_capacity = *args.queue;
   if (args.speed) opts.replay_speed = *args.speed;
@@ -175,7 +174,11 @@ int run(const Args& args) {
   }
 
   std::unique_ptr<Reconstruction> rec;
-  if (args.live) rec = std::make_unique<Reconstruction>(cfg, *mode);
+  std::unique_ptr<RunRecorder> outputs;  // the same outputs as vofusion, for what was reconstructed
+  if (args.live) {
+    rec = std::make_unique<Reconstruction>(cfg, *mode);
+    outputs = std::make_unique<RunRecorder>(args.out, out_params, mesh_params);
+  }
   std::unique_ptr<LiveViewer> viewer;
   if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source->name());
 
@@ -190,6 +193,7 @@ int run(const Args& args) {
     if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
     if (!rec) return;
     const FrameReport r = rec->process(frame);
+    outputs->add(frame, r);
     lost_in_a_row = r.tracked ? 0 : lost_in_a_row + 1;
     if (viewer) {
       LiveView view;
@@ -224,8 +228,14 @@ int run(const Args& args) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   if (writer) writer->commit();
   if (rec && rec->framesProcessed() > 0) {
-    writeTumTrajectory((fs::path(args.out) / "trajectory.txt").string(), rec->trajectory());
-    writePly((fs::path(args.out) / "mesh.ply").string(), rec->extractMesh());
+    RunInfo info;
+    info.input = source->name();
+    info.config = config;
+    info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
+    info.seconds = stats.seconds;
+    info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
+                            {"queue_capacity", opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
+    outputs->finish(*rec, info);
   }
   writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
                       summaryText(stats, source->name(), recorded, opts.queue_capacity));

@@ -127,3 +127,29 @@ TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   while (back->next(f)) ++n;
   EXPECT_EQ(long(n), played);
 }
+
+TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string out = test::tempDir("grab_app_live");
+  std::string log;
+  const int rc = test::run(test::app("vofusion-grab") + " --replay " + tum + " --live --no-gui --max-frames 20 --out " +
+                               out,
+                           &log);
+  ASSERT_EQ(rc, 0) << log;
+  for (const char* f : {"grab.rawlog", "trajectory.txt", "mesh.ply", "scene.3Dscene", "summary.json", "poses.rawlog"})
+    EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f << "\n" << log;
+  const auto kv = readSummary(out + "/grab-summary.txt");
+  const long played = std::stol(kv.at("frames_played"));
+  const long processed = std::stol(kv.at("frames_processed"));
+  const long dropped = std::stol(kv.at("frames_dropped"));
+  EXPECT_EQ(played, 20);
+  EXPECT_GE(processed, 1);
+  EXPECT_EQ(processed + dropped, played);
+  // One trajectory pose per processed frame.
+  std::ifstream traj(out + "/trajectory.txt");
+  std::string line;
+  long poses = 0;
+  while (std::getline(traj, line)) poses += !line.empty() && line[0] != '#';
+  EXPECT_EQ(poses, processed);
+}

@@ -2,6 +2,7 @@
 
 #include <sys/resource.h>
 
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
@@ -177,8 +178,13 @@ void RunRecorder::add(const Frame& frame, const FrameReport& report) {
 json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FILE* log) {
   Impl& m = *impl_;
   const OutputParams& p = m.params;
+  auto last = std::chrono::steady_clock::now();
   auto wrote = [&](const std::string& name, const std::string& what) {
-    if (log) std::fprintf(log, "  wrote %s  (%s)\n", m.file(name).c_str(), what.c_str());
+    const auto now = std::chrono::steady_clock::now();
+    if (log)
+      std::fprintf(log, "  wrote %s  (%s; %.1f s)\n", m.file(name).c_str(), what.c_str(),
+                   std::chrono::duration<double>(now - last).count());
+    last = now;
   };
   const std::size_t frames = rec.framesProcessed();
   json s;
