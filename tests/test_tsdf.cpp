@@ -144,7 +144,7 @@ TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
       ++hits;
       const Eigen::Vector3f pw(pv[0], pv[1], pv[2]);
       const float z_cam = (view.inverse() * pw).z();
-      ASSERT_NEAR(z_cam, truth.at<float>(v, u), 0.5f * p.voxel_size);
+      ASSERT_NEAR(z_cam, truth.at<float>(v, u), p.voxel_size);
       ASSERT_GT(maps.normals.at<cv::Vec3f>(v, u)[2], 0.999f);
       ASSERT_EQ(maps.colours.at<cv::Vec3b>(v, u), cv::Vec3b(10, 100, 200));
       const cv::Vec3f ph = hinted.at<cv::Vec3f>(v, u);
