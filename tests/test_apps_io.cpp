@@ -96,11 +96,11 @@ TEST(AppsIo, Tum2RawlogRoundTripOnRealData) {
   std::ifstream ts(dir + "/ts.txt");
   int scans = 0;
   for (std::string l; std::getline(ts, l);) scans += l.find("CObservation3DRangeScan") != std::string::npos;
-  // One CObservation3DRangeScan per associated pair. The folder has 300 colour frames, but the
-  // benchmark's one-to-one association within 0.02 s pairs only 294 of them with a depth frame.
+  // One CObservation3DRangeScan per colour frame: every one of the 300 has a depth frame within
+  // 0.02 s (the benchmark's one-to-one rule would keep only 294).
   TumFolderSource pairs(tum, {});
   EXPECT_EQ(std::size_t(scans), pairs.size());
-  EXPECT_GE(scans, 290);
+  EXPECT_EQ(scans, 300);
   ASSERT_EQ(run("cd " + dir + " && rawlog-edit --info -i first300.rawlog", &out), 0) << out;
   EXPECT_TRUE(std::regex_search(out, std::regex("KINECT\\s*/\\s*" + std::to_string(scans) + " "))) << out;
   // Round trip: identical pixels and timestamps.

@@ -60,7 +60,7 @@ std::vector<TumEntry> readTumList(const std::string& path) {
 }
 
 std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const std::vector<TumEntry>& depth,
-                                      double max_diff) {
+                                      double max_diff, bool one_to_one) {
   // Candidate pairs within max_diff, best first; each stamp used once (as associate.py does).
   struct Cand { double dt; std::size_t i, j; };
   std::vector<Cand> cands;
@@ -71,6 +71,16 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
       cands.push_back({std::abs(it->timestamp - rgb[i].timestamp), i, std::size_t(it - depth.begin())});
   }
   std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.dt < b.dt; });
+  if (!one_to_one) {
+    // Best first, so the first candidate seen for a colour frame is its nearest depth frame.
+    std::vector<long> nearest(rgb.size(), -1);
+    for (const Cand& c : cands)
+      if (nearest[c.i] < 0) nearest[c.i] = long(c.j);
+    std::vector<TumAssociation> out;
+    for (std::size_t i = 0; i < rgb.size(); ++i)
+      if (nearest[i] >= 0) out.push_back({rgb[i], depth[std::size_t(nearest[i])]});
+    return out;
+  }
   std::vector<char> used_rgb(rgb.size(), 0), used_depth(depth.size(), 0);
   std::vector<std::pair<std::size_t, std::size_t>> pairs;
   for (const Cand& c : cands) {
@@ -139,7 +149,7 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   const auto depth = readTumList(depth_list);
   if (rgb.empty()) throw InputError(rgb_list, "lists no frames");
   if (depth.empty()) throw InputError(depth_list, "lists no frames");
-  pairs_ = associate(rgb, depth, opts.max_time_diff);
+  pairs_ = associate(rgb, depth, opts.max_time_diff, opts.unique_depth);
   if (pairs_.empty())
     throw InputError(folder, "no colour frame has a depth frame within " + std::to_string(opts.max_time_diff) + " s");
   if (opts.max_frames > 0 && pairs_.size() > opts.max_frames) pairs_.resize(opts.max_frames);

@@ -22,10 +22,12 @@ std::vector<TumEntry> parseTumList(const std::string& text, const std::string& o
 struct TumAssociation {
   TumEntry rgb, depth;
 };
-// Greedy nearest-timestamp association as the benchmark's associate.py: pairs sorted by |dt|,
-// each stamp used once, |dt| <= max_diff; result in colour-time order.
-std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb,
-                                      const std::vector<TumEntry>& depth, double max_diff);
+// Colour frames paired with depth frames, |dt| <= max_diff, in colour-time order.
+// one_to_one = true is the benchmark's associate.py (greedy by |dt|, each depth frame used once);
+// false (the default for sources) gives every colour frame its nearest depth frame, so no colour
+// frame is lost when the depth stream skips one (fr1_xyz first300: 300 pairs instead of 294).
+std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const std::vector<TumEntry>& depth,
+                                      double max_diff, bool one_to_one = true);
 
 class TumFolderSource : public FrameSource {
  public:
