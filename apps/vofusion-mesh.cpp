@@ -10,8 +10,10 @@
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/trajectory.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/scene/scene_export.h"
 
 using namespace vofusion;
 
@@ -19,12 +21,15 @@ namespace {
 
 const char* kUsage =
     "usage: vofusion-mesh <in.ply> <out.ply> [--config f.ini] [--report r.json]\n"
+    "                     [--png view.png] [--scene view.3Dscene] [--trajectory traj.txt]\n"
     "       vofusion-mesh --dump-config      (print the [mesh] defaults)\n"
     "Repairs the mesh, removes small fragments, fills small holes and optionally simplifies and\n"
-    "smooths it (CGAL), keeping vertex colours. Parameters: section [mesh] (see share/mesh.ini).\n";
+    "smooths it (CGAL), keeping vertex colours. Parameters: section [mesh] (see share/mesh.ini).\n"
+    "--png renders the result off-screen, --scene writes an MRPT scene for SceneViewer3D; both show\n"
+    "the camera path of --trajectory (TUM format, camera-to-world) when given.\n";
 
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--config", "--report"}, {"--dump-config", "--help"});
+  const CommandLine cl(argc, argv, {"--config", "--report", "--png", "--scene", "--trajectory"}, {"--dump-config", "--help"});
   MeshCleanParams params;
   if (cl.flag("--help")) { std::cout << kUsage; return 0; }
   if (cl.flag("--dump-config")) { std::cout << dumpConfig({{"mesh", &params}}); return 0; }
@@ -42,12 +47,17 @@ int body(int argc, char** argv) {
     params.loadFromConfigFile(cfg, "mesh");
   }
 
+  Trajectory traj;
+  if (const auto t = cl.value("--trajectory")) traj = readTumTrajectory(*t);
+
   TriangleMesh mesh = readPly(in);
   const std::size_t v0 = mesh.vertices.size(), f0 = mesh.faces.size();
   const MeshCleanReport report = cleanMesh(mesh, params);
   if (const auto rp = cl.value("--report")) writeFileAtomically(*rp, report.toJson() + "\n");
   if (!report.success) throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
   writePly(out, mesh);
+  if (const auto png = cl.value("--png")) renderMeshPng(*png, mesh, traj.empty() ? nullptr : &traj);
+  if (const auto scene = cl.value("--scene")) exportScene(*scene, mesh, traj, nullptr, CameraIntrinsics{});
   double seconds = 0;
   for (const auto& s : report.steps) seconds += s.seconds;
   std::fprintf(stderr,

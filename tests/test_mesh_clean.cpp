@@ -1,6 +1,7 @@
 // CGAL mesh post-processing on synthetic meshes with known defects.
 #include <Eigen/Dense>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 
@@ -310,10 +311,12 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   writePly(dir + "/in.ply", m);
   std::string out;
   ASSERT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.ply --report " + dir +
-                          "/r.json",
+                          "/r.json --scene " + dir + "/s.3Dscene --png " + dir + "/m.png",
                       &out),
             0)
       << out;
+  EXPECT_GT(std::filesystem::file_size(dir + "/s.3Dscene"), 1000u);
+  EXPECT_GT(std::filesystem::file_size(dir + "/m.png"), 1000u);
   const TriangleMesh r = readPly(dir + "/out.ply");
   EXPECT_EQ(r.faces.size(), icosphere(2).faces.size());
   EXPECT_TRUE(closedAndOriented(r));

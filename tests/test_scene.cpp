@@ -71,10 +71,19 @@ TEST(Scene, UpAxisFollowsThePath) {
   // An odometry path starting at the identity lives in the first optical frame: -y is up.
   Trajectory odo{{0.0, CPose3D()}, {1.0, CPose3D(0.1, 0, 0, 0, 0, 0)}};
   double x, y, z;
-  sceneUpRotation(odo, SceneOptions::Up::Auto).composePoint(0, -1, 0, x, y, z);
+  sceneUpRotation(odo, nullptr, SceneOptions::Up::Auto).composePoint(0, -1, 0, x, y, z);
   EXPECT_NEAR(z, 1.0, 1e-9);
-  sceneUpRotation(roomPath(3), SceneOptions::Up::Auto).composePoint(0, 0, 1, x, y, z);
+  sceneUpRotation(roomPath(3), nullptr, SceneOptions::Up::Auto).composePoint(0, 0, 1, x, y, z);
   EXPECT_NEAR(z, 1.0, 1e-9);
+  // With a mesh, the floor decides: a room whose up is the first camera's (0, -cos 40, -sin 40)
+  // (a camera pitched 40 deg down at the floor) is put upright.
+  TriangleMesh room = test::boxRoom(4, 3, 2.5, 6);
+  const Eigen::Vector3f true_up(0.f, -std::cos(0.698f), -std::sin(0.698f));
+  const Eigen::Matrix3f R = Eigen::Quaternionf::FromTwoVectors(Eigen::Vector3f::UnitZ(), true_up).toRotationMatrix();
+  for (auto& v : room.vertices) v = R * v;
+  const CPose3D upr = sceneUpRotation(odo, &room, SceneOptions::Up::Auto);
+  upr.composePoint(true_up.x(), true_up.y(), true_up.z(), x, y, z);
+  EXPECT_NEAR(z, 1.0, 1e-4);
 }
 
 TEST(Scene, SavedSceneLoadsBackWithMeshPathsFrustumsAndGrid) {

@@ -117,10 +117,21 @@ void propagateColours(Mesh& m, Mesh::Property_map<VD, Rgb> col, Mesh::Property_m
   }
 }
 
+// A vertex is non-manifold when the halfedges pointing at it form more than one umbrella.
+// (PMP::is_non_manifold_vertex scans every halfedge of the mesh per call: quadratic over a mesh.)
 std::size_t nonManifoldVertexCount(const Mesh& m) {
+  std::vector<std::size_t> incoming(m.num_vertices(), 0);
+  for (HD h : m.halfedges()) ++incoming[m.target(h)];
   std::size_t n = 0;
-  for (VD v : m.vertices())
-    if (PMP::is_non_manifold_vertex(v, m)) ++n;
+  for (VD v : m.vertices()) {
+    std::size_t umbrella = 0, borders = 0;
+    for (HD h : CGAL::halfedges_around_target(m.halfedge(v), m)) {
+      ++umbrella;
+      borders += m.is_border(h);
+    }
+    // Two border halfedges in one umbrella: two fans pinched at v.
+    if (umbrella != incoming[v] || borders > 1) ++n;
+  }
   return n;
 }
 

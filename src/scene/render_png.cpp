@@ -26,18 +26,35 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
 
   // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
   // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
-  const mrpt::poses::CPose3D up = sceneUpRotation(traj, opt.up);
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e30), hi = -lo;
-  const auto grow = [&](double x, double y, double z) {
-    double gx, gy, gz;
-    up.composePoint(x, y, z, gx, gy, gz);
-    lo = lo.cwiseMin(Eigen::Vector3d(gx, gy, gz));
-    hi = hi.cwiseMax(Eigen::Vector3d(gx, gy, gz));
+  const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up);
+  // Frame the bulk of the mesh (2nd to 98th percentile per axis), not its stray fragments.
+  std::vector<double> axis[3];
+  const auto add = [&](double x, double y, double z) {
+    double g[3];
+    up.composePoint(x, y, z, g[0], g[1], g[2]);
+    for (int k = 0; k < 3; ++k) axis[k].push_back(g[k]);
   };
-  for (const auto& v : mesh.vertices) grow(v.x(), v.y(), v.z());
+  for (const auto& v : mesh.vertices) add(v.x(), v.y(), v.z());
   if (mesh.vertices.empty())
-    for (const auto& p : traj) grow(p.pose.x(), p.pose.y(), p.pose.z());
-  if (lo.x() > hi.x()) lo = hi = Eigen::Vector3d::Zero();
+    for (const auto& p : traj) add(p.pose.x(), p.pose.y(), p.pose.z());
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 3 && !axis[k].empty(); ++k) {
+    auto& a = axis[k];
+    const auto at = [&a](double q) {
+      auto it = a.begin() + std::ptrdiff_t(q * double(a.size() - 1));
+      std::nth_element(a.begin(), it, a.end());
+      return *it;
+    };
+    lo[k] = at(0.02);
+    hi[k] = at(0.98);
+  }
+  if (!mesh.vertices.empty())  // keep the camera path in the picture too
+    for (const auto& p : traj) {
+      double g[3];
+      up.composePoint(p.pose.x(), p.pose.y(), p.pose.z(), g[0], g[1], g[2]);
+      lo = lo.cwiseMin(Eigen::Vector3d(g[0], g[1], g[2]));
+      hi = hi.cwiseMax(Eigen::Vector3d(g[0], g[1], g[2]));
+    }
   Eigen::Vector2d forward(1, 1);
   if (!traj.empty()) {
     Eigen::Vector3d f = Eigen::Vector3d::Zero();
@@ -58,7 +75,7 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   cam.setAzimuthDegrees(float(std::atan2(-forward.y(), -forward.x()) * 180 / M_PI));
   cam.setElevationDegrees(40.f);
   const double aspect = std::min(1.0, double(width) / height);
-  cam.setZoomDistance(float(1.1 * radius / std::sin(0.5 * fov_deg * M_PI / 180) / aspect));
+  cam.setZoomDistance(float(0.85 * radius / std::sin(0.5 * fov_deg * M_PI / 180) / aspect));
 
   mrpt::img::CImage img;
   try {

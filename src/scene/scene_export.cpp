@@ -19,16 +19,67 @@ namespace vofusion {
 
 using mrpt::poses::CPose3D;
 
-mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, SceneOptions::Up up) {
-  if (up == SceneOptions::Up::Auto) {
-    up = SceneOptions::Up::PlusZ;
-    if (!path.empty()) {
-      const auto v = path.front().pose.asVectorVal();  // x y z yaw pitch roll
-      if (v.norm() < 1e-6) up = SceneOptions::Up::MinusY;
-    }
+// The normal of the largest surface facing within 60 deg of `up` (faces face the cameras, so a
+// floor's or table's normal points up): among a sample of face normals, the one with the most face
+// area within 10 deg of it, then refined by the area-weighted mean of all normals within 10 deg.
+static Eigen::Vector3d dominantPlaneNormal(const TriangleMesh& mesh, const Eigen::Vector3d& up) {
+  struct Sample {
+    Eigen::Vector3d n;  // unit
+    double area;
+  };
+  const auto normalOf = [&mesh](std::size_t f) {
+    const auto& a = mesh.vertices[mesh.faces[f][0]];
+    return Eigen::Vector3d(
+        (mesh.vertices[mesh.faces[f][1]] - a).cross(mesh.vertices[mesh.faces[f][2]] - a).cast<double>());
+  };
+  const double cos_cone = std::cos(60.0 * M_PI / 180), cos_near = std::cos(10.0 * M_PI / 180);
+  std::vector<Sample> samples;
+  const std::size_t step = std::max<std::size_t>(1, mesh.faces.size() / 4000);
+  for (std::size_t f = 0; f < mesh.faces.size(); f += step) {
+    const Eigen::Vector3d n = normalOf(f);
+    const double len = n.norm();
+    if (len > 0 && n.dot(up) > cos_cone * len) samples.push_back({n / len, 0.5 * len});
   }
-  // A roll of -90 deg about x takes -y to +z (and the camera's forward z to +y).
-  return up == SceneOptions::Up::MinusY ? CPose3D(0, 0, 0, 0, 0, -M_PI / 2) : CPose3D();
+  if (samples.empty()) return up;
+  std::vector<double> score(samples.size(), 0.0);
+#pragma omp parallel for schedule(dynamic, 64)
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(samples.size()); ++i)
+    for (const auto& s : samples)
+      if (s.n.dot(samples[i].n) > cos_near) score[i] += s.area;
+  Eigen::Vector3d best = samples[std::max_element(score.begin(), score.end()) - score.begin()].n;
+  for (int it = 0; it < 3; ++it) {
+    double sx = 0, sy = 0, sz = 0;
+#pragma omp parallel for reduction(+ : sx, sy, sz) schedule(static)
+    for (std::ptrdiff_t f = 0; f < std::ptrdiff_t(mesh.faces.size()); ++f) {
+      const Eigen::Vector3d n = normalOf(std::size_t(f));  // length = 2 * area: area-weighted
+      if (n.dot(best) > cos_near * n.norm()) {
+        sx += n.x();
+        sy += n.y();
+        sz += n.z();
+      }
+    }
+    const Eigen::Vector3d m(sx, sy, sz);
+    if (m.norm() > 0) best = m.normalized();
+  }
+  return best;
+}
+
+mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh* mesh, SceneOptions::Up up) {
+  bool camera_frame = up == SceneOptions::Up::MinusY;
+  if (up == SceneOptions::Up::Auto) camera_frame = !path.empty() && path.front().pose.asVectorVal().norm() < 1e-6;
+  if (!camera_frame) return CPose3D();
+  Eigen::Vector3d u(0, -1, 0);
+  if (up == SceneOptions::Up::Auto && mesh && !mesh->faces.empty()) {
+    u = dominantPlaneNormal(*mesh, u);
+  }
+  // The smallest rotation taking u to +z.
+  const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(u, Eigen::Vector3d::UnitZ());
+  mrpt::math::CMatrixDouble44 T;
+  T.setIdentity();
+  const Eigen::Matrix3d R = q.toRotationMatrix();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) T(r, c) = R(r, c);
+  return CPose3D::FromHomogeneousMatrix(T);
 }
 
 mrpt::poses::CPose3D frustumPose(const mrpt::poses::CPose3D& camera_to_world) {
@@ -115,7 +166,7 @@ std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh,
                                                         const Trajectory* ground_truth, const CameraIntrinsics& cam,
                                                         const SceneOptions& opt) {
   auto scene = std::make_shared<mrpt::opengl::COpenGLScene>();
-  const CPose3D up = sceneUpRotation(path_est.empty() && ground_truth ? *ground_truth : path_est, opt.up);
+  const CPose3D up = sceneUpRotation(path_est.empty() && ground_truth ? *ground_truth : path_est, &mesh, opt.up);
 
   auto world = mrpt::opengl::CSetOfObjects::Create();
   world->setName("world");

@@ -22,8 +22,9 @@ namespace vofusion {
 
 struct SceneOptions {
   enum class Up { Auto, PlusZ, MinusY };
-  // Auto: -y (the camera's "up") when the path starts at the identity, as an odometry-only run does
-  // in the first camera's optical frame (y down); +z otherwise (TUM ground truth, mocap frame).
+  // Auto: when the path starts at the identity (a run in the first camera's optical frame, y down),
+  // the normal of the mesh's dominant roughly-horizontal surface (floor, table) found near the
+  // camera's -y, or -y itself without a mesh; +z otherwise (TUM ground truth, mocap frame).
   Up up = Up::Auto;
   int frustum_every_k = 30;          // frames; 0: no frustums
   double frustum_depth = 0.15;       // m, distance of the frustum's far plane
@@ -35,7 +36,7 @@ struct SceneOptions {
 };
 
 // The rotation (a pure rotation CPose3D) applied to the reconstruction so that its up axis is +z.
-mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, SceneOptions::Up up);
+mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh* mesh, SceneOptions::Up up);
 
 // The camera frustum pose for a camera-to-world optical pose (x right, y down, z forward):
 // CFrustum looks along +x with z up, so this is pose * (optical <- MRPT body) rotation.
