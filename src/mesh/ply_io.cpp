@@ -191,7 +191,12 @@ TriangleMesh readPly(const std::string& path) {
       int ir = indexOf(e, "red"), ig = indexOf(e, "green"), ib = indexOf(e, "blue");
       if (ir < 0) { ir = indexOf(e, "r"); ig = indexOf(e, "g"); ib = indexOf(e, "b"); }
       const bool normals = inx >= 0 && iny >= 0 && inz >= 0;
-      const bool colors = ir >= 0 && ig >= 0 && ib >= 0;
+      // PCL-style packed colour: "rgb" (float or uint bits 0x00RRGGBB) or "rgba" (uint 0xAARRGGBB).
+      int ipacked = indexOf(e, "rgb");
+      if (ipacked < 0) ipacked = indexOf(e, "rgba");
+      const bool packed = ir < 0 && ipacked >= 0 && !e.props[ipacked].is_list &&
+                          scalarSize(e.props[ipacked].type) == 4;
+      const bool colors = (ir >= 0 && ig >= 0 && ib >= 0) || packed;
       // Guard against absurd counts before reserving memory: each vertex needs >= 1 byte.
       if (e.count > data.size()) throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " vertices)");
       mesh.vertices.resize(e.count);
@@ -214,12 +219,23 @@ TriangleMesh readPly(const std::string& path) {
           throw InputError(path, "vertex " + std::to_string(i) + " has a non-finite coordinate");
         if (normals) mesh.normals[i] = Eigen::Vector3f(float(v[inx]), float(v[iny]), float(v[inz]));
         if (colors) {
-          const bool unit = e.props[ir].type == Scalar::Float32 || e.props[ir].type == Scalar::Float64;
+          const bool unit = !packed && (e.props[ir].type == Scalar::Float32 || e.props[ir].type == Scalar::Float64);
           const auto to8 = [&](double c) {
             const double s = unit ? c * 255.0 : c;
             return static_cast<std::uint8_t>(std::lround(std::min(255.0, std::max(0.0, s))));
           };
-          mesh.colors[i] = {to8(v[ir]), to8(v[ig]), to8(v[ib])};
+          if (packed) {
+            std::uint32_t bits;
+            if (e.props[ipacked].type == Scalar::Float32) {
+              const float f = static_cast<float>(v[ipacked]);
+              std::memcpy(&bits, &f, 4);
+            } else {
+              bits = static_cast<std::uint32_t>(static_cast<std::int64_t>(v[ipacked]));
+            }
+            mesh.colors[i] = {std::uint8_t(bits >> 16), std::uint8_t(bits >> 8), std::uint8_t(bits)};
+          } else {
+            mesh.colors[i] = {to8(v[ir]), to8(v[ig]), to8(v[ib])};
+          }
         }
       }
       have_vertices = true;
