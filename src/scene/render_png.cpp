@@ -75,7 +75,11 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   cam.setAzimuthDegrees(float(std::atan2(-forward.y(), -forward.x()) * 180 / M_PI));
   cam.setElevationDegrees(40.f);
   const double aspect = std::min(1.0, double(width) / height);
-  cam.setZoomDistance(float(0.85 * radius / std::sin(0.5 * fov_deg * M_PI / 180) / aspect));
+  const double distance = 0.85 * radius / std::sin(0.5 * fov_deg * M_PI / 180) / aspect;
+  cam.setZoomDistance(float(distance));
+  // Tight clip planes: the default near plane (1 cm) leaves too little depth resolution at a few
+  // metres and lets the grid under the floor show through it.
+  scene->getViewport()->setViewportClipDistances(float(std::max(0.05, 0.1 * distance)), float(distance + 20 * radius));
 
   mrpt::img::CImage img;
   try {
