@@ -21,6 +21,13 @@ mrpt::config::CConfigFileMemory loadConfig(const std::string& path) {
   return cfg;
 }
 
+// MRPT pads key names when writing aligned INI text; compare names, not layout.
+static std::string trimmed(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t");
+  const auto e = s.find_last_not_of(" \t");
+  return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
+}
+
 static mrpt::config::CConfigFileMemory defaultsOf(const std::vector<ConfigSection>& known) {
   mrpt::config::CConfigFileMemory mem;
   for (const auto& [section, params] : known) params->saveToConfigFile(mem, section);
@@ -39,9 +46,12 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
     if (!defaults.sectionExists(s)) throw InputError(origin, "unknown section [" + s + "]");
     std::vector<std::string> valid;
     defaults.getAllKeys(s, valid);
-    for (const auto& k : keys)
+    for (auto& v : valid) v = trimmed(v);
+    for (const auto& key : keys) {
+      const std::string k = trimmed(key);
       if (std::find(valid.begin(), valid.end(), k) == valid.end())
         throw InputError(origin, "unknown key '" + k + "' in section [" + s + "]");
+    }
   }
 }
 

@@ -1,0 +1,133 @@
+// The vofusion app end to end: every output written and loadable, Ctrl-C keeps what was built,
+// a failing run leaves earlier results alone.
+#include <Eigen/Dense>
+#include <filesystem>
+#include <fstream>
+
+#include <mrpt/opengl/COpenGLScene.h>
+#include <mrpt/opengl/CSetOfLines.h>
+#include <mrpt/opengl/CSetOfObjects.h>
+#include <mrpt/opengl/CSetOfTriangles.h>
+#include <nlohmann/json.hpp>
+
+#include "support.h"
+#include "vofusion/core/trajectory.h"
+#include "vofusion/io/rawlog.h"
+#include "vofusion/mesh/triangle_mesh.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+
+// A smaller volume keeps the test quick; everything else is the shipped default.
+std::string smallConfig(const std::string& dir) {
+  const std::string path = dir + "/small.ini";
+  std::ofstream(path) << "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
+                         "[output]\nimage_width = 320\nimage_height = 240\nframe_stride_hint_unused_is_an_error = 1\n";
+  return path;
+}
+
+std::string validConfig(const std::string& dir) {
+  const std::string path = dir + "/small.ini";
+  std::ofstream(path) << "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
+                         "[output]\nimage_width = 320\nimage_height = 240\n";
+  return path;
+}
+
+nlohmann::json readJson(const std::string& path) {
+  std::ifstream f(path);
+  return nlohmann::json::parse(f);
+}
+
+}  // namespace
+
+TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
+  const std::string dir = test::tempDir("vofusion_app_synth");
+  const std::string out = dir + "/out";
+  std::string log;
+  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 12 --raw-mesh --config " +
+                          validConfig(dir) + " --out " + out,
+                      &log),
+            0)
+      << log;
+  for (const char* f : {"trajectory.txt", "poses.rawlog", "mesh.ply", "mesh_raw.ply", "scene.3Dscene", "summary.json",
+                        "trajectory.png", "mesh.png"})
+    EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f << "\n" << log;
+  for (const auto& e : fs::directory_iterator(out))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+
+  const auto summary = readJson(out + "/summary.json");
+  EXPECT_EQ(summary["frames"].get<int>(), 12);
+  EXPECT_EQ(summary["mode"].get<std::string>(), "paper");
+  ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
+  EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.05);
+  EXPECT_GT(summary["mesh"]["faces"].get<int>(), 1000);
+  EXPECT_TRUE(summary["stages"].contains("odometry"));
+  EXPECT_TRUE(summary["stages"].contains("integrate"));
+
+  EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), 12u);
+  const TriangleMesh mesh = readPly(out + "/mesh.ply");
+  EXPECT_EQ(mesh.faces.size(), summary["mesh"]["faces"].get<std::size_t>());
+  EXPECT_EQ(mesh.colors.size(), mesh.vertices.size());
+
+  // poses.rawlog: the input frames back, readable by the rawlog source.
+  RawlogSource rawlog(out + "/poses.rawlog", {});
+  EXPECT_EQ(rawlog.size(), 12u);
+
+  // scene.3Dscene loads back with MRPT and holds the mesh and the camera path.
+  mrpt::opengl::COpenGLScene scene;
+  ASSERT_TRUE(scene.loadFromFile(out + "/scene.3Dscene"));
+  auto world = std::dynamic_pointer_cast<mrpt::opengl::CSetOfObjects>(scene.getByName("world"));
+  ASSERT_TRUE(world);
+  auto tris = std::dynamic_pointer_cast<mrpt::opengl::CSetOfTriangles>(world->getByName("mesh"));
+  ASSERT_TRUE(tris);
+  EXPECT_EQ(tris->getTrianglesCount(), mesh.faces.size());
+  auto path = std::dynamic_pointer_cast<mrpt::opengl::CSetOfLines>(world->getByName("path"));
+  ASSERT_TRUE(path);
+  EXPECT_EQ(path->getLineCount(), 11u);
+}
+
+TEST(VofusionApp, UnknownConfigKeyFailsInOneLineAndKeepsEarlierResults) {
+  const std::string dir = test::tempDir("vofusion_app_badcfg");
+  const std::string out = dir + "/out";
+  fs::create_directories(out);
+  std::ofstream(out + "/trajectory.txt") << "earlier result\n";
+  std::string log;
+  // Only stderr is captured: the error must be exactly one line there.
+  const int rc = test::run("{ " + test::app("vofusion") + " synthetic:room --max-frames 3 --config " + smallConfig(dir) +
+                               " --out " + out + " 2>&1 >/dev/null; }",
+                           &log);
+  EXPECT_EQ(rc, 2);
+  EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;
+  EXPECT_NE(log.find("small.ini: unknown key 'frame_stride_hint_unused_is_an_error' in section [output]"),
+            std::string::npos)
+      << log;
+  std::ifstream f(out + "/trajectory.txt");
+  std::string line;
+  std::getline(f, line);
+  EXPECT_EQ(line, "earlier result");
+}
+
+TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string dir = test::tempDir("vofusion_app_sigint");
+  const std::string out = dir + "/out";
+  // Interrupt once a few frames are done (the progress line shows them), then wait for the exit code.
+  const std::string cmd = "(" + test::app("vofusion") + " " + tum + " --config " + validConfig(dir) + " --out " + out +
+                          " > " + dir + "/log.txt 2>&1 & pid=$!; "
+                          "for i in $(seq 1 600); do grep -q ' [3-9]/300 frames\\| [1-9][0-9]/300 frames' " +
+                          dir + "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -INT $pid; wait $pid; echo rc=$?)";
+  std::string log;
+  test::run(cmd, &log);
+  EXPECT_NE(log.find("rc=130"), std::string::npos) << log;
+  const auto summary = readJson(out + "/summary.json");
+  EXPECT_TRUE(summary["interrupted"].get<bool>());
+  const int frames = summary["frames"].get<int>();
+  EXPECT_GE(frames, 3);
+  EXPECT_LT(frames, 300);
+  EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), std::size_t(frames));
+  EXPECT_TRUE(fs::exists(out + "/mesh.ply"));
+  EXPECT_TRUE(fs::exists(out + "/scene.3Dscene"));
+}
