@@ -27,20 +27,20 @@ void MeshCleanParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c,
 }
 
 void MeshCleanParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
-  c.write(s, "repair", repair, -1, -1, "merge duplicates, drop degenerate/duplicate faces, orient, make manifold, stitch");
-  c.write(s, "weld_distance", weld_distance, -1, -1, "m, also merge vertices closer than this (0: exact duplicates only)");
-  c.write(s, "min_component_faces", min_component_faces, -1, -1, "faces, smaller connected components are removed (0: off)");
-  c.write(s, "min_component_area", min_component_area, -1, -1, "m^2, smaller connected components are removed (0: off)");
-  c.write(s, "max_hole_perimeter", max_hole_perimeter, -1, -1, "m, longer hole borders stay open (0: fill no holes)");
-  c.write(s, "max_hole_edges", max_hole_edges, -1, -1, "edges, hole borders with more edges stay open");
-  c.write(s, "hole_fairing", hole_fairing, -1, -1, "fair (smooth) hole patches; false: flat refined patch");
-  c.write(s, "target_faces", target_faces, -1, -1, "faces, edge-collapse simplification target (0: off)");
-  c.write(s, "target_edge_length", target_edge_length, -1, -1, "m, simplify until no shorter edge is left (0: off)");
-  c.write(s, "smooth_iterations", smooth_iterations, -1, -1, "iterations of curvature-flow shape smoothing (0: off)");
-  c.write(s, "smooth_time", smooth_time, -1, -1, "time step of the curvature flow per iteration");
-  c.write(s, "relax_iterations", relax_iterations, -1, -1, "iterations of tangential relaxation (0: off)");
-  c.write(s, "orient_closed_outward", orient_closed_outward, -1, -1, "orient closed results with normals outward");
-  c.write(s, "recompute_normals", recompute_normals, -1, -1, "write fresh vertex normals (false: none written)");
+  c.write(s, "repair", repair, -1, 1, "merge duplicates, drop degenerate/duplicate faces, orient, make manifold, stitch");
+  c.write(s, "weld_distance", weld_distance, -1, 1, "m, also merge vertices closer than this (0: exact duplicates only)");
+  c.write(s, "min_component_faces", min_component_faces, -1, 1, "faces, smaller connected components are removed (0: off)");
+  c.write(s, "min_component_area", min_component_area, -1, 1, "m^2, smaller connected components are removed (0: off)");
+  c.write(s, "max_hole_perimeter", max_hole_perimeter, -1, 1, "m, longer hole borders stay open (0: fill no holes)");
+  c.write(s, "max_hole_edges", max_hole_edges, -1, 1, "edges, hole borders with more edges stay open");
+  c.write(s, "hole_fairing", hole_fairing, -1, 1, "fair (smooth) hole patches; false: flat refined patch");
+  c.write(s, "target_faces", target_faces, -1, 1, "faces, edge-collapse simplification target (0: off)");
+  c.write(s, "target_edge_length", target_edge_length, -1, 1, "m, simplify until no shorter edge is left (0: off)");
+  c.write(s, "smooth_iterations", smooth_iterations, -1, 1, "iterations of curvature-flow shape smoothing (0: off)");
+  c.write(s, "smooth_time", smooth_time, -1, 1, "time step of the curvature flow per iteration");
+  c.write(s, "relax_iterations", relax_iterations, -1, 1, "iterations of tangential relaxation (0: off)");
+  c.write(s, "orient_closed_outward", orient_closed_outward, -1, 1, "orient closed results with normals outward");
+  c.write(s, "recompute_normals", recompute_normals, -1, 1, "write fresh vertex normals (false: none written)");
 }
 
 static std::string jsonString(const std::string& s) {
