@@ -60,8 +60,15 @@ int body(int argc, char** argv) {
   const TrackingMode mode = parseTrackingMode(cl.value("--mode", "paper"));
   OutputParams out_params;
   MeshCleanParams mesh_params;
-  out_params.loadFromConfigFile(cfg, "output");
-  mesh_params.loadFromConfigFile(cfg, "mesh");
+  try {  // out-of-range values: name the file they came from
+    out_params.loadFromConfigFile(cfg, "output");
+    mesh_params.loadFromConfigFile(cfg, "mesh");
+    OdometryParams().loadFromConfigFile(cfg, "odometry");
+    KinFuParams().loadFromConfigFile(cfg, "kinfu");
+  } catch (const InputError& e) {
+    if (config_path.empty()) throw;
+    throw InputError(config_path, e.what());
+  }
   if (cl.flag("--raw-mesh")) out_params.save_raw_mesh = true;
 
   SourceOptions src_opts;
@@ -77,8 +84,9 @@ int body(int argc, char** argv) {
                source->size(), out_dir->c_str());
   Progress progress("vofusion [" + toString(mode) + "]", source->size());
   Frame frame;
-  std::size_t done = 0;
+  std::size_t done = 0, frames_with_depth = 0;
   while (!g_stop && source->next(frame)) {
+    if (cv::countNonZero(frame.depth > 0) > 0) ++frames_with_depth;
     const FrameReport report = rec.process(frame);
     recorder.add(frame, report);
     ++done;
@@ -88,6 +96,8 @@ int body(int argc, char** argv) {
   std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C while writing outputs kills as usual
   progress.finish(interrupted ? "(interrupted: writing what was built so far)" : "");
   if (done == 0) throw InputError(source->name(), "no frames to process");
+  if (frames_with_depth == 0 && !interrupted)
+    throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
 
   RunInfo info;
   info.input = source->name();

@@ -178,12 +178,20 @@ void RunRecorder::add(const Frame& frame, const FrameReport& report) {
 json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FILE* log) {
   Impl& m = *impl_;
   const OutputParams& p = m.params;
+  // All or nothing across files: everything is written into a staging folder and moved into place
+  // only when all of it was written, so a failure (disk full) leaves an earlier run's outputs intact.
+  AtomicPath staging(m.file(".staging"));
+  std::filesystem::create_directories(staging.tmp());
+  auto staged = [&](const std::string& name) { return (std::filesystem::path(staging.tmp()) / name).string(); };
+  std::vector<std::string> written, log_lines;
   auto last = std::chrono::steady_clock::now();
   auto wrote = [&](const std::string& name, const std::string& what) {
     const auto now = std::chrono::steady_clock::now();
-    if (log)
-      std::fprintf(log, "  wrote %s  (%s; %.1f s)\n", m.file(name).c_str(), what.c_str(),
-                   std::chrono::duration<double>(now - last).count());
+    char line[1024];
+    std::snprintf(line, sizeof line, "  wrote %s  (%s; %.1f s)\n", m.file(name).c_str(), what.c_str(),
+                  std::chrono::duration<double>(now - last).count());
+    log_lines.push_back(line);
+    if (name != "poses.rawlog") written.push_back(name);
     last = now;
   };
   const std::size_t frames = rec.framesProcessed();
@@ -208,11 +216,9 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     const std::string err = m.rawlog->stop();
     if (!err.empty()) throw InputError(m.file("poses.rawlog"), err);
     if (!m.ground_truth.empty()) m.rawlog->writer().writeGroundTruth(m.ground_truth);
-    m.rawlog->writer().commit();
-    wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames");
   }
 
-  writeTumTrajectory(m.file("trajectory.txt"), rec.trajectory());
+  writeTumTrajectory(staged("trajectory.txt"), rec.trajectory());
   wrote("trajectory.txt", std::to_string(rec.trajectory().size()) + " poses");
 
   if (!m.ground_truth.empty()) {
@@ -221,12 +227,12 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     if (ate.success) s["ate"] = statsJson(ate.trans);
     if (rpe.success) s["rpe"] = {{"delta_s", rpe.delta}, {"trans_m", statsJson(rpe.trans)}, {"rot_deg", statsJson(rpe.rot_deg)}};
     if (ate.success) {
-      plotAteReport(m.file("trajectory.png"), ate, "vofusion " + toString(rec.mode()) + ": " + info.input);
+      plotAteReport(staged("trajectory.png"), ate, "vofusion " + toString(rec.mode()) + ": " + info.input);
       wrote("trajectory.png", "ATE RMSE " + std::to_string(ate.trans.rmse) + " m");
     }
   }
   if (m.ground_truth.empty() && !rec.trajectory().empty()) {
-    plotTrajectoriesOverlay(m.file("trajectory.png"), {}, {{"estimate", rec.trajectory()}},
+    plotTrajectoriesOverlay(staged("trajectory.png"), {}, {{"estimate", rec.trajectory()}},
                             "vofusion " + toString(rec.mode()) + ": " + info.input);
     wrote("trajectory.png", "camera path");
   }
@@ -234,7 +240,7 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   TriangleMesh mesh = rec.extractMesh();
   s["mesh_raw"] = meshJson(mesh);
   if (p.save_raw_mesh) {
-    writePly(m.file("mesh_raw.ply"), mesh);
+    writePly(staged("mesh_raw.ply"), mesh);
     wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
   }
   if (p.clean_mesh && !mesh.empty()) {
@@ -242,23 +248,34 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     s["mesh_clean"] = json::parse(report.toJson());
   }
   s["mesh"] = meshJson(mesh);
-  writePly(m.file("mesh.ply"), mesh);
+  writePly(staged("mesh.ply"), mesh);
   wrote("mesh.ply", std::to_string(mesh.faces.size()) + " faces");
 
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
   SceneOptions scene_opts;
   scene_opts.frustum_every_k = p.frustum_every;
-  exportScene(m.file("scene.3Dscene"), mesh, rec.trajectory(), m.ground_truth.empty() ? nullptr : &m.ground_truth,
+  exportScene(staged("scene.3Dscene"), mesh, rec.trajectory(), m.ground_truth.empty() ? nullptr : &m.ground_truth,
               cam, scene_opts);
   wrote("scene.3Dscene", "open with SceneViewer3D");
   if (!mesh.empty()) {
-    renderMeshPng(m.file("mesh.png"), mesh, &rec.trajectory(), p.image_width, p.image_height);
+    renderMeshPng(staged("mesh.png"), mesh, &rec.trajectory(), p.image_width, p.image_height);
     wrote("mesh.png", std::to_string(p.image_width) + "x" + std::to_string(p.image_height));
   }
 
   s["peak_memory_mib"] = peakMemoryMiB();
-  writeFileAtomically(m.file("summary.json"), s.dump(2) + "\n");
+  writeFileAtomically(staged("summary.json"), s.dump(2) + "\n");
   wrote("summary.json", "run statistics");
+  if (m.rawlog) {
+    m.rawlog->writer().commit();
+    wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames");
+  }
+  for (const std::string& name : written) {
+    std::error_code ec;
+    std::filesystem::rename(staged(name), m.file(name), ec);
+    if (ec) throw InputError(m.file(name), "cannot write: " + ec.message());
+  }
+  if (log)
+    for (const std::string& l : log_lines) std::fputs(l.c_str(), log);
   return s;
 }
 
