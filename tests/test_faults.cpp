@@ -332,8 +332,10 @@ TEST(FaultsImages, WrongSizeOrBitDepth) {
   for (const auto& app : trackers()) {
     for (const Case& c : cases) {
       TumFixture f = makeTum("faults_png_size");
-      const std::string png =
-          replaceImage(f, c.depth ? 0 : 1, c.depth,  // colour frame 0 sets the sequence's image size [&](const std::string& dst, const std::string&) { cv::imwrite(dst, c.img); });
+      // Colour frame 0 sets the sequence's image size, so a wrong colour size is tested on frame 1.
+      const std::string png = replaceImage(f, c.depth ? 0 : 1, c.depth, [&](const std::string& dst, const std::string&) {
+        cv::imwrite(dst, c.img);
+      });
       const std::string out = outWithEarlierResult("faults_png_size_out");
       expectCleanFailure(trackCmd(app, f.dir, out), png, c.problem, out);
     }
