@@ -17,6 +17,7 @@ void NarfParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, co
   max_points = cfg.read_int(s, "max_points", max_points);
   min_interest_value = cfg.read_double(s, "min_interest_value", min_interest_value);
   threads = std::max(1, cfg.read_int(s, "threads", threads));
+  recursive_scale_reduction = cfg.read_bool(s, "recursive_scale_reduction", recursive_scale_reduction);
 }
 
 void NarfParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
@@ -25,6 +26,7 @@ void NarfParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std:
   cfg.write(s, "max_points", max_points, -1, -1, "strongest kept, 0 = all");
   cfg.write(s, "min_interest_value", min_interest_value, -1, -1, "[0,1]");
   cfg.write(s, "threads", threads, -1, -1, "OpenMP threads inside PCL's NARF");
+  cfg.write(s, "recursive_scale_reduction", recursive_scale_reduction, -1, -1, "PCL speed-up on near surfaces");
 }
 
 cv::Mat downsampleDepth(const cv::Mat& depth, int factor) {
@@ -61,6 +63,7 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
   np.support_size = float(p.support_size);
   np.min_interest_value = float(p.min_interest_value);
   np.max_no_of_threads = p.threads;
+  np.use_recursive_scale_reduction = p.recursive_scale_reduction;
   np.max_no_of_interest_points = p.max_points > 0 ? p.max_points : -1;
   pcl::PointCloud<int> indices;
   narf.compute(indices);

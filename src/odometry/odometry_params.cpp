@@ -10,6 +10,12 @@ void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, 
   motion_method = c.read_string(s, "motion_method", motion_method);
   narf_concurrent = c.read_bool(s, "narf_concurrent", narf_concurrent);
   union_radius = c.read_double(s, "union_radius", union_radius);
+  undistort = c.read_bool(s, "undistort", undistort);
+  depth_window = c.read_int(s, "depth_window", depth_window);
+  depth_mode = c.read_string(s, "depth_mode", depth_mode);
+  if (depth_window < 0 || depth_window > 10) throw InputError("[" + s + "] depth_window", "must be 0..10 pixels");
+  if (depth_mode != "median" && depth_mode != "min")
+    throw InputError("[" + s + "] depth_mode", "must be median or min (got '" + depth_mode + "')");
   if (keypoints != "union" && keypoints != "star" && keypoints != "narf")
     throw InputError("[" + s + "] keypoints", "must be union, star or narf (got '" + keypoints + "')");
   if (motion_method != "paper" && motion_method != "robust")
@@ -43,6 +49,9 @@ void OdometryParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const st
   c.write(s, "motion_method", motion_method, -1, -1, "paper (Algorithm 1) | robust");
   c.write(s, "narf_concurrent", narf_concurrent, -1, -1, "NARF on a second thread");
   c.write(s, "union_radius", union_radius, -1, -1, "pixels, duplicate radius");
+  c.write(s, "undistort", undistort, -1, -1, "undistort keypoints before 3D/homography");
+  c.write(s, "depth_window", depth_window, -1, -1, "pixels, half-size of the keypoint depth window");
+  c.write(s, "depth_mode", depth_mode, -1, -1, "median | min of that window");
   const std::string m = "matching";
   c.write(m, "max_hamming", max_hamming, -1, -1, "bits of 256, 256 = no limit");
   c.write(m, "use_homography", use_homography, -1, -1, "RANSAC homography filter");

@@ -1,5 +1,6 @@
 #include "vofusion/odometry/rgbd_odometry.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <future>
@@ -23,12 +24,30 @@ double secondsSince(std::chrono::steady_clock::time_point t0) {
 // What a frame contributes to matching: described keypoints with their 3D points.
 struct FrameFeatures {
   std::vector<cv::KeyPoint> keypoints;
+  std::vector<cv::Point2f> pixels;  // keypoint positions, undistorted when asked to (homography input)
   cv::Mat descriptors;  // CV_8U, 32 bytes per keypoint
   Points3 points;       // camera frame, m
   std::size_t index = 0;
   double timestamp = 0.0;
   int star = 0, narf = 0;
 };
+
+// Depth of a keypoint: the median or nearest valid reading of the (2r+1)^2 window (the centre reading
+// alone is noisy at the edges where keypoints like to sit); 0 if the window has no reading.
+float keypointDepth(const cv::Mat& depth, int x, int y, int r, bool nearest) {
+  if (r <= 0) return depth.at<float>(y, x);
+  float v[21 * 21];
+  int n = 0;
+  for (int yy = std::max(0, y - r); yy <= std::min(depth.rows - 1, y + r); ++yy) {
+    const float* d = depth.ptr<float>(yy);
+    for (int xx = std::max(0, x - r); xx <= std::min(depth.cols - 1, x + r); ++xx)
+      if (d[xx] > 0.f) v[n++] = d[xx];
+  }
+  if (n == 0) return 0.f;
+  if (nearest) return *std::min_element(v, v + n);
+  std::nth_element(v, v + n / 2, v + n);
+  return v[n / 2];
+}
 
 }  // namespace
 
@@ -96,11 +115,37 @@ FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, StageTimes& times)
     ScopedStageTimer t(times, "brand");
     f.keypoints = mergeKeypoints(star_kps, narf_kps, float(params.union_radius));
     brand.computeSmoothed(smoothed, points, normals, f.keypoints, f.descriptors);
-    f.points.reserve(f.keypoints.size());
-    for (const auto& k : f.keypoints) {
-      const cv::Vec3f& p = points.at<cv::Vec3f>(cvRound(k.pt.y), cvRound(k.pt.x));
-      f.points.emplace_back(p[0], p[1], p[2]);
+  }
+  {
+    ScopedStageTimer t(times, "points");
+    // Pixels to 3D: the depth image is registered to the distorted colour image, so the reading is
+    // taken at the keypoint's own pixel and the ray through its undistorted position.
+    std::vector<cv::Point2f> px(f.keypoints.size());
+    for (std::size_t i = 0; i < px.size(); ++i) px[i] = f.keypoints[i].pt;
+    const auto& dist = frame.camera.dist;
+    const bool distorted = std::any_of(dist.begin(), dist.end(), [](double d) { return d != 0.0; });
+    const CameraIntrinsics& c = frame.camera;
+    if (params.undistort && distorted && !px.empty()) {
+      const cv::Matx33d K(c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
+      cv::undistortPoints(px, px, K, std::vector<double>(dist.begin(), dist.end()), cv::noArray(), K);
     }
+    const bool nearest = params.depth_mode == "min";
+    f.points.reserve(px.size());
+    f.pixels.reserve(px.size());
+    std::vector<cv::KeyPoint> kept;
+    cv::Mat kept_desc(0, f.descriptors.cols, f.descriptors.type());
+    kept.reserve(px.size());
+    for (std::size_t i = 0; i < px.size(); ++i) {
+      const auto& k = f.keypoints[i];
+      const float z = keypointDepth(frame.depth, cvRound(k.pt.x), cvRound(k.pt.y), params.depth_window, nearest);
+      if (!(z > 0.f)) continue;
+      f.points.emplace_back((px[i].x - c.cx) * z / c.fx, (px[i].y - c.cy) * z / c.fy, z);
+      f.pixels.push_back(px[i]);
+      kept.push_back(k);
+      kept_desc.push_back(f.descriptors.row(int(i)));
+    }
+    f.keypoints.swap(kept);
+    f.descriptors = kept_desc;
   }
   return f;
 }
@@ -160,7 +205,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   if (P.use_homography) {
     ScopedStageTimer t(r.times, "homography");
     std::vector<cv::Point2f> a, b;
-    for (const auto& m : matches) a.push_back(cur.keypoints[m.queryIdx].pt), b.push_back(ref.keypoints[m.trainIdx].pt);
+    for (const auto& m : matches) a.push_back(cur.pixels[m.queryIdx]), b.push_back(ref.pixels[m.trainIdx]);
     std::vector<uchar> mask;
     const cv::Mat H = cv::findHomography(a, b, cv::RANSAC, P.homography_threshold, mask, 2000, 0.995);
     if (H.empty()) return fail("degenerate geometry (no homography)");

@@ -18,6 +18,7 @@ struct NarfParams : public mrpt::config::CLoadableOptions {
   int max_points = 0;               // keypoints kept, strongest first; 0 = all
   double min_interest_value = 0.45; // [0, 1]; PCL default
   int threads = 1;                  // OpenMP threads PCL may use inside NARF
+  bool recursive_scale_reduction = false;  // PCL: interest values of near (large) surfaces on a coarser scale
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;

@@ -25,6 +25,9 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   std::string motion_method = "robust";  // "paper" (Algorithm 1) or "robust" (RANSAC + LS + Gauss-Newton)
   bool narf_concurrent = true;      // NARF on a second thread while STAR, normals and smoothing run
   double union_radius = 3.0;        // pixels; a NARF keypoint this close to a STAR one is a duplicate
+  bool undistort = true;            // undistort keypoint pixels (CameraIntrinsics::dist) before 3D and homography
+  int depth_window = 0;             // pixels; half-size of the window the keypoint's depth comes from (0 = centre)
+  std::string depth_mode = "median";  // "median" or "min" (nearest) valid reading of that window
   // [matching]
   int max_hamming = 80;             // bits of 256; matches farther apart are dropped (256 = no limit)
   bool use_homography = true;       // RANSAC homography between matched pixels (the paper's filter)
