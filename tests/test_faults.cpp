@@ -161,7 +161,7 @@ struct TumFixture {
   }
 };
 
-TumFixture makeTum(const std::string& name, std::size_t n = 4) {
+TumFixture makeTum(const std::string& name, std::size_t n = 3) {
   const std::string tum = test::tumFirst300();
   TumFixture f;
   f.dir = test::tempDir(name);
