@@ -1,11 +1,10 @@
 // rgbd-eval <groundtruth.txt> <estimate.txt> [--delta 1.0] [--max-dt 0.02] [--json] [--plot out.png]
 // The TUM benchmark's ATE and RPE, printed as the rows of the paper's Table 1.
 #include <cstdio>
-#include <cstdlib>
 #include <iostream>
 #include <string>
-#include <vector>
 
+#include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/eval/trajectory_eval.h"
@@ -21,13 +20,6 @@ const char* kUsage =
     "  --json       machine-readable output\n"
     "  --plot P     PNG: top view with error vectors (left), translational error over time (right)\n";
 
-double number(const std::string& flag, const char* v) {
-  char* end = nullptr;
-  const double d = std::strtod(v, &end);
-  if (!*v || *end || !(d > 0)) throw InputError(flag, std::string("expected a positive number, got '") + v + "'");
-  return d;
-}
-
 std::string statsJson(const ErrorStats& s) {
   char b[400];
   std::snprintf(b, sizeof b,
@@ -36,72 +28,55 @@ std::string statsJson(const ErrorStats& s) {
                 s.count, s.rmse, s.mean, s.median, s.std, s.min, s.max);
   return b;
 }
+
+int body(int argc, char** argv) {
+  const CommandLine cl(argc, argv, {"--delta", "--max-dt", "--plot"}, {"--json", "--help"});
+  if (cl.flag("--help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  const double delta = cl.number("--delta", 1.0, 0.0);
+  const double max_dt = cl.number("--max-dt", 0.02, 0.0);
+  const bool json = cl.flag("--json");
+  const std::string plot = cl.value("--plot", "");
+  const auto& pos = cl.positional();
+  if (pos.size() != 2) throw InputError("usage", "expected <groundtruth.txt> <estimate.txt> (see --help)");
+
+  const Trajectory gt = readTumTrajectory(pos[0]);
+  const Trajectory est = readTumTrajectory(pos[1]);
+  if (gt.empty()) throw InputError(pos[0], "contains no poses");
+  if (est.empty()) throw InputError(pos[1], "contains no poses");
+  const AteResult ate = computeAte(gt, est, max_dt);
+  if (!ate.success) throw InputError(pos[1], ate.message);
+  const RpeResult rpe = computeRpe(gt, est, delta, max_dt);
+
+  if (json) {
+    std::printf("{\"groundtruth\": \"%s\", \"estimate\": \"%s\",\n \"ate_m\": %s,\n", pos[0].c_str(), pos[1].c_str(),
+                statsJson(ate.trans).c_str());
+    if (rpe.success)
+      std::printf(" \"rpe\": {\"delta_s\": %.9g, \"trans_m\": %s,\n         \"rot_deg\": %s}}\n", delta,
+                  statsJson(rpe.trans).c_str(), statsJson(rpe.rot_deg).c_str());
+    else
+      std::printf(" \"rpe\": null, \"rpe_error\": \"%s\"}\n", rpe.message.c_str());
+  } else {
+    std::printf("%zu poses associated (ATE), %zu pose pairs %.3g s apart (RPE)\n", ate.trans.count,
+                rpe.trans.count, delta);
+    std::printf("%-8s %12s %16s %15s\n", "", "ATE [m]", "RPE trans [m]", "RPE rot [deg]");
+    auto row = [&](const char* name, double a, double t, double r) {
+      if (rpe.success) std::printf("%-8s %12.6f %16.6f %15.6f\n", name, a, t, r);
+      else std::printf("%-8s %12.6f %16s %15s\n", name, a, "-", "-");
+    };
+    row("Std", ate.trans.std, rpe.trans.std, rpe.rot_deg.std);
+    row("Median", ate.trans.median, rpe.trans.median, rpe.rot_deg.median);
+    row("RMS", ate.trans.rmse, rpe.trans.rmse, rpe.rot_deg.rmse);
+    row("Mean", ate.trans.mean, rpe.trans.mean, rpe.rot_deg.mean);
+    row("Max", ate.trans.max, rpe.trans.max, rpe.rot_deg.max);
+    if (!rpe.success) std::printf("RPE: %s\n", rpe.message.c_str());
+  }
+  if (!plot.empty()) plotAteReport(plot, ate, pos[1]);
+  return 0;
+}
+
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    std::vector<std::string> pos;
-    double delta = 1.0, max_dt = 0.02;
-    bool json = false;
-    std::string plot;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto value = [&]() -> const char* {
-        if (i + 1 >= argc) throw InputError(a, "needs a value");
-        return argv[++i];
-      };
-      if (a == "-h" || a == "--help") {
-        std::cout << kUsage;
-        return 0;
-      } else if (a == "--delta") delta = number(a, value());
-      else if (a == "--max-dt") max_dt = number(a, value());
-      else if (a == "--json") json = true;
-      else if (a == "--plot") plot = value();
-      else if (!a.empty() && a[0] == '-') throw InputError(a, "unknown option (see --help)");
-      else pos.push_back(a);
-    }
-    if (pos.size() != 2) {
-      std::cerr << kUsage;
-      return 2;
-    }
-    const Trajectory gt = readTumTrajectory(pos[0]);
-    const Trajectory est = readTumTrajectory(pos[1]);
-    if (gt.empty()) throw InputError(pos[0], "contains no poses");
-    if (est.empty()) throw InputError(pos[1], "contains no poses");
-    const AteResult ate = computeAte(gt, est, max_dt);
-    if (!ate.success) throw InputError(pos[1], ate.message);
-    const RpeResult rpe = computeRpe(gt, est, delta, max_dt);
-
-    if (json) {
-      std::printf("{\"groundtruth\": \"%s\", \"estimate\": \"%s\",\n \"ate_m\": %s,\n", pos[0].c_str(), pos[1].c_str(),
-                  statsJson(ate.trans).c_str());
-      if (rpe.success)
-        std::printf(" \"rpe\": {\"delta_s\": %.9g, \"trans_m\": %s,\n         \"rot_deg\": %s}}\n", delta,
-                    statsJson(rpe.trans).c_str(), statsJson(rpe.rot_deg).c_str());
-      else
-        std::printf(" \"rpe\": null, \"rpe_error\": \"%s\"}\n", rpe.message.c_str());
-    } else {
-      std::printf("%zu poses associated (ATE), %zu pose pairs %.3g s apart (RPE)\n", ate.trans.count,
-                  rpe.trans.count, delta);
-      std::printf("%-8s %12s %16s %15s\n", "", "ATE [m]", "RPE trans [m]", "RPE rot [deg]");
-      auto row = [&](const char* name, double a, double t, double r) {
-        if (rpe.success) std::printf("%-8s %12.6f %16.6f %15.6f\n", name, a, t, r);
-        else std::printf("%-8s %12.6f %16s %15s\n", name, a, "-", "-");
-      };
-      row("Std", ate.trans.std, rpe.trans.std, rpe.rot_deg.std);
-      row("Median", ate.trans.median, rpe.trans.median, rpe.rot_deg.median);
-      row("RMS", ate.trans.rmse, rpe.trans.rmse, rpe.rot_deg.rmse);
-      row("Mean", ate.trans.mean, rpe.trans.mean, rpe.rot_deg.mean);
-      row("Max", ate.trans.max, rpe.trans.max, rpe.rot_deg.max);
-      if (!rpe.success) std::printf("RPE: %s\n", rpe.message.c_str());
-    }
-    if (!plot.empty()) plotAteReport(plot, ate, pos[1]);
-    return 0;
-  } catch (const InputError& e) {
-    std::cerr << "rgbd-eval: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "rgbd-eval: " << e.what() << "\n";
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return runApp("rgbd-eval", body, argc, argv); }

@@ -3,15 +3,14 @@
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <string>
-#include <vector>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include "vofusion/core/atomic_file.h"
+#include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/io/rawlog.h"
@@ -30,11 +29,13 @@ const char* kUsage =
     "  --no-noise exact depth instead of the Kinect v1 noise model; --seed S random seed (default 1)\n"
     "  --size     image size (default 640x480; intrinsics scaled from fx=fy=525)\n";
 
-long integer(const std::string& flag, const std::string& v, long lo) {
-  char* end = nullptr;
-  const long n = std::strtol(v.c_str(), &end, 10);
-  if (v.empty() || *end || n < lo) throw InputError(flag, "expected an integer >= " + std::to_string(lo) + ", got '" + v + "'");
-  return n;
+// "WxH" with a 4:3 aspect: the default camera scaled to that size.
+CameraIntrinsics cameraForSize(const std::string& size) {
+  int w = 0, h = 0;
+  char tail = 0;
+  if (std::sscanf(size.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w < 16 || h < 16 || w * 3 != h * 4)
+    throw InputError("--size", "expected WxH with a 4:3 aspect, e.g. 320x240, got '" + size + "'");
+  return sim::SimOptions().camera.scaled(w / 640.0);
 }
 
 void writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
@@ -90,53 +91,30 @@ void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
   out.commit();
   progress.finish("-> " + path);
 }
+int body(int argc, char** argv) {
+  const CommandLine cl(argc, argv, {"--out", "--scene", "--frames", "--seed", "--fps", "--size"},
+                       {"--no-noise", "--help"});
+  if (cl.flag("--help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  sim::SimOptions o;
+  o.scene = cl.value("--scene", o.scene);
+  o.frames = cl.count("--frames", o.frames, 1);
+  o.seed = std::uint32_t(cl.count("--seed", o.seed));
+  o.noise = !cl.flag("--no-noise");
+  o.fps = cl.number("--fps", o.fps, 0.0, 1000.0);
+  if (const auto size = cl.value("--size")) o.camera = cameraForSize(*size);
+  if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "' (see --help)");
+  const std::string out = cl.value("--out", "");
+  if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");
+
+  const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
+  if (fs::path(out).extension() == ".rawlog") writeRawlog(seq, out);
+  else writeTum(seq, out);
+  return 0;
+}
+
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    sim::SimOptions o;
-    std::string out;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto value = [&]() -> std::string {
-        if (i + 1 >= argc) throw InputError(a, "needs a value");
-        return argv[++i];
-      };
-      if (a == "-h" || a == "--help") {
-        std::cout << kUsage;
-        return 0;
-      } else if (a == "--out") out = value();
-      else if (a == "--scene") o.scene = value();
-      else if (a == "--frames") o.frames = std::size_t(integer(a, value(), 1));
-      else if (a == "--seed") o.seed = std::uint32_t(integer(a, value(), 0));
-      else if (a == "--no-noise") o.noise = false;
-      else if (a == "--fps") {
-        const std::string v = value();
-        char* end = nullptr;
-        o.fps = std::strtod(v.c_str(), &end);
-        if (v.empty() || *end || !(o.fps > 0) || o.fps > 1000) throw InputError(a, "expected a frame rate in Hz, got '" + v + "'");
-      } else if (a == "--size") {
-        const std::string v = value();
-        int w = 0, h = 0;
-        char tail = 0;
-        if (std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w < 16 || h < 16 || w * 3 != h * 4)
-          throw InputError(a, "expected WxH with a 4:3 aspect, e.g. 320x240, got '" + v + "'");
-        o.camera = o.camera.scaled(w / 640.0);
-      } else throw InputError(a, "unknown option (see --help)");
-    }
-    if (out.empty()) {
-      std::cerr << kUsage;
-      return 2;
-    }
-    const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
-    if (fs::path(out).extension() == ".rawlog") writeRawlog(seq, out);
-    else writeTum(seq, out);
-    return 0;
-  } catch (const InputError& e) {
-    std::cerr << "rgbd-simulate: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "rgbd-simulate: " << e.what() << "\n";
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return runApp("rgbd-simulate", body, argc, argv); }

@@ -5,7 +5,7 @@ set -e
 src=$(realpath "$1"); out=$(realpath -m "$2")
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=$(realpath "${3:-$root/build-fusion}")
-ninja -C "$build" -j2 vofusion test_fusion >/dev/null
+ninja -C "$build" -j2 vofusion_lib test_fusion >/dev/null
 python3 - "$build" "$src" "$out" <<'PY'
 import json, shlex, subprocess, sys
 build, src, out = sys.argv[1:]

@@ -1,5 +1,6 @@
 #include "vofusion/core/cli.h"
 
+#include <cmath>
 #include <cstdio>
 #include <exception>
 
@@ -7,10 +8,20 @@
 
 namespace vofusion {
 
+namespace {
+std::string fmt(double x) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", x);
+  return b;
+}
+}  // namespace
+
 CommandLine::CommandLine(int argc, char** argv, std::set<std::string> value_options,
                          std::set<std::string> flag_options) {
   for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
+    std::string a = argv[i];
+    if (a == "-h" && flag_options.count("--help")) a = "--help";
+    if (a.size() > 1 && a[0] == '-' && a[1] != '-') throw InputError("usage", "unknown option " + a);
     if (a.size() > 2 && a.rfind("--", 0) == 0) {
       std::string name = a, val;
       const auto eq = a.find('=');
@@ -44,7 +55,14 @@ std::string CommandLine::value(const std::string& name, const std::string& fallb
   return value(name).value_or(fallback);
 }
 
-std::size_t CommandLine::count(const std::string& name, std::size_t fallback) const {
+std::vector<std::string> CommandLine::values(const std::string& name) const {
+  std::vector<std::string> all;
+  for (const auto& [k, x] : values_)
+    if (k == name) all.push_back(x);
+  return all;
+}
+
+std::size_t CommandLine::count(const std::string& name, std::size_t fallback, std::size_t min) const {
   const auto v = value(name);
   if (!v) return fallback;
   std::size_t used = 0;
@@ -53,7 +71,11 @@ std::size_t CommandLine::count(const std::string& name, std::size_t fallback) co
     n = std::stoll(*v, &used);
   } catch (const std::exception&) {
   }
-  if (n < 0 || used != v->size()) throw InputError("usage", name + " expects a non-negative integer, got '" + *v + "'");
+  if (n < 0 || used != v->size() || static_cast<std::size_t>(n) < min)
+    throw InputError("usage", name + " expects " +
+                                  (min == 0 ? std::string("a non-negative integer")
+                                            : "an integer >= " + std::to_string(min)) +
+                                  ", got '" + *v + "'");
   return static_cast<std::size_t>(n);
 }
 
@@ -71,16 +93,33 @@ double CommandLine::number(const std::string& name, double fallback) const {
   return x;
 }
 
+double CommandLine::number(const std::string& name, double fallback, double above, double at_most) const {
+  const double x = number(name, fallback);
+  if (!(x > above && x <= at_most)) {
+    std::string range = "a number > " + fmt(above);
+    if (std::isfinite(at_most)) range += " and <= " + fmt(at_most);
+    throw InputError("usage", name + " expects " + range + ", got '" + value(name, fmt(x)) + "'");
+  }
+  return x;
+}
+
 bool CommandLine::flag(const std::string& name) const { return flags_.count(name) > 0; }
+
+namespace {
+void report(const char* app_name, const std::exception& e) {
+  if (app_name) std::fprintf(stderr, "%s: error: %s\n", app_name, e.what());
+  else std::fprintf(stderr, "%s\n", e.what());
+}
+}  // namespace
 
 int runApp(const char* app_name, int (*body)(int, char**), int argc, char** argv) {
   try {
     return body(argc, argv);
   } catch (const InputError& e) {
-    std::fprintf(stderr, "%s: error: %s\n", app_name, e.what());
+    report(app_name, e);
     return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: error: %s\n", app_name, e.what());
+    report(app_name, e);
     return 1;
   }
 }

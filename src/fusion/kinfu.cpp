@@ -107,7 +107,21 @@ FusionResult KinFu::process(const Frame& frame, const OdometryResult* odom) {
   cam.height = frame.depth.rows;
 
   auto t0 = std::chrono::steady_clock::now();
-  const std::vector<DepthLevel> levels = preprocessDepth(frame.depth, cam, P.preprocess);
+  // Tracking at half resolution: a quarter of the filtering, ray casting and ICP work; the finest
+  // ICP level is then 320x240, which KinFu-style coarse-to-fine tracking hardly misses.
+  CameraIntrinsics track_cam = cam;
+  std::vector<DepthLevel> levels;
+  if (P.tracking_downsample == 2) {
+    PreprocessParams pp = P.preprocess;
+    pp.sigma_spatial *= 0.5f;
+    pp.kernel = std::max(3, ((pp.kernel + 1) / 2) | 1);
+    if (P.preprocess.kernel <= 1) pp.kernel = P.preprocess.kernel;
+    track_cam = cam.scaled(0.5);
+    levels = preprocessDepth(downsampleDepth(clipDepth(frame.depth, pp.min_depth, pp.max_depth), pp.sigma_depth),
+                             track_cam, pp);
+  } else {
+    levels = preprocessDepth(frame.depth, cam, P.preprocess);
+  }
   res.times.add("preprocess", seconds(t0));
 
   const bool odom_ok = odom && odom->success;
@@ -123,12 +137,17 @@ FusionResult KinFu::process(const Frame& frame, const OdometryResult* odom) {
   } else {
     const bool seeded = s.mode == TrackingMode::Paper && odom_ok;
     t0 = std::chrono::steady_clock::now();
+    // Weak directions keep the initial guess only when it is worth keeping (the odometry); from the
+    // last pose alone (mode kinfu) every direction that is not numerically singular is solved.
+    IcpParams ip = P.icp;
+    if (!seeded) ip.degenerate_ratio = std::min(ip.degenerate_ratio, P.min_condition);
     const IcpResult icp = projectiveIcp(levels, s.model_vertices, s.model_normals, s.model_pose,
-                                        seeded ? predicted : s.pose, P.icp);
+                                        seeded ? predicted : s.pose, ip);
     res.times.add("icp", seconds(t0));
     res.icp_inliers = icp.inliers;
     res.icp_rms = icp.rms;
     res.condition = icp.condition;
+    res.degenerate_dims = icp.degenerate_dims;
     // Divergence / degeneracy tests.
     if (!icp.solved) res.reason = "ICP system not solvable";
     else if (icp.inliers < P.min_inlier_ratio * std::max(1, icp.valid_pixels))
@@ -158,26 +177,26 @@ FusionResult KinFu::process(const Frame& frame, const OdometryResult* odom) {
   // Fuse, move the volume with the camera, and predict the surface for the next frame.
   if (res.tracked && (!res.fell_back || P.integrate_on_fallback)) {
     t0 = std::chrono::steady_clock::now();
-    s.stats.shifts += 0;
     if (s.volume->shiftIfNeeded(s.focusPoint(s.pose), P.shift_threshold)) {
       res.shifted = true;
       ++s.stats.shifts;
     }
     res.times.add("shift", seconds(t0));
     t0 = std::chrono::steady_clock::now();
-    const cv::Mat fuse_depth = P.integrate_filtered ? levels[0].depth : frame.depth;
+    const cv::Mat fuse_depth = P.integrate_filtered && P.tracking_downsample == 1 ? levels[0].depth : frame.depth;
     s.volume->integrate(fuse_depth, frame.rgb, cam, s.pose.cast<float>());
     res.times.add("integrate", seconds(t0));
     res.integrated = true;
-    s.raycastModel(levels[0].depth, cam, res.times);
+    s.raycastModel(levels[0].depth, track_cam, res.times);
   } else if (res.tracked) {
     // Not fused (fallback pose): re-predict the model from the new pose so ICP keeps up.
-    s.raycastModel(cv::Mat(), cam, res.times);
+    s.raycastModel(cv::Mat(), track_cam, res.times);
   }
 
   ++s.stats.frames;
   if (res.tracked) ++s.stats.tracked;
   if (res.fell_back) ++s.stats.fell_back;
+  if (res.degenerate_dims > 0 && res.reason.empty()) ++s.stats.degenerate;
   if (!res.tracked) ++s.stats.lost;
   s.stats.times.merge(res.times);
   return res;

@@ -32,15 +32,17 @@ std::vector<Key> keys(KinFuParams& p) {
       {"min_depth", &p.preprocess.min_depth, "m, readings used for tracking"},
       {"max_depth", &p.preprocess.max_depth, "m"},
       {"max_normal_jump", &p.preprocess.max_normal_jump, "fraction of depth: larger neighbour jumps give no normal"},
-      {"icp_iterations_l0", &p.icp.iterations[0], "ICP iterations at full resolution"},
-      {"icp_iterations_l1", &p.icp.iterations[1], "ICP iterations at 1/2 resolution"},
-      {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 resolution"},
+      {"icp_iterations_l0", &p.icp.iterations[0], "ICP iterations at the finest tracking level"},
+      {"icp_iterations_l1", &p.icp.iterations[1], "ICP iterations at 1/2 of it"},
+      {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 of it"},
       {"icp_max_distance", &p.icp.max_distance, "m, correspondence distance threshold"},
       {"icp_max_angle", &p.icp.max_angle, "degrees, correspondence normal angle threshold"},
+      {"tracking_downsample", &p.tracking_downsample, "1 or 2: tracking (filter, ray cast, ICP) at full or half resolution"},
       {"shift_threshold", &p.shift_threshold, "m, focus point to volume centre distance that shifts the volume"},
       {"focus_distance", &p.focus_distance, "m, the volume follows the point this far along the optical axis"},
       {"min_inlier_ratio", &p.min_inlier_ratio, "ICP inliers / valid pixels below which ICP is rejected"},
-      {"min_condition", &p.min_condition, "smallest/largest eigenvalue of the ICP system below which it is degenerate"},
+      {"icp_degenerate_ratio", &p.icp.degenerate_ratio, "eigenvalue / largest (rotation scaled by depth) below which an ICP direction keeps the prediction"},
+      {"min_condition", &p.min_condition, "smallest/largest eigenvalue of the ICP system below which the whole ICP is rejected"},
       {"max_jump_translation", &p.max_jump_translation, "m, ICP vs odometry prediction beyond which ICP is rejected"},
       {"max_jump_rotation", &p.max_jump_rotation, "degrees, same for rotation"},
       {"integrate_on_fallback", &p.integrate_on_fallback, "fuse frames posed by the odometry fallback"},
@@ -67,6 +69,7 @@ void KinFuParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
     throw InputError(where, "volume_voxels must be a positive multiple of 8");
   if (!(tsdf.voxel_size > 0.f) || !(tsdf.truncation > tsdf.voxel_size))
     throw InputError(where, "voxel_size must be positive and truncation larger than it");
+  if (tracking_downsample != 1 && tracking_downsample != 2) throw InputError(where, "tracking_downsample must be 1 or 2");
   if (tsdf.max_weight < 1 || tsdf.max_weight > 255) throw InputError(where, "max_weight must be in 1..255");
 }
 

@@ -16,6 +16,7 @@ struct Accum {
   double A[21] = {};  // upper triangle of J^T J
   double b[6] = {};
   double r2 = 0.0;
+  double d2 = 0.0;  // squared distances of the inliers from the camera centre
   int n = 0;
 };
 
@@ -115,6 +116,7 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
               acc.b[i] -= J[i] * r;
             }
             acc.r2 += static_cast<double>(r) * r;
+            acc.d2 += pc.squaredNorm();
             ++acc.n;
           }
         }
@@ -123,6 +125,7 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
           for (int i = 0; i < 21; ++i) total.A[i] += acc.A[i];
           for (int i = 0; i < 6; ++i) total.b[i] += acc.b[i];
           total.r2 += acc.r2;
+          total.d2 += acc.d2;
           total.n += acc.n;
           valid += nvalid;
         }
@@ -134,7 +137,6 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
         for (int j = i; j < 6; ++j) A(i, j) = A(j, i) = total.A[k++];
         b[i] = total.b[i];
       }
-      const bool last = l == 0 && it == iters - 1;
       if (l == 0) {
         res.inliers = total.n;
         res.valid_pixels = valid;
@@ -145,12 +147,36 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
         if (l == 0) res.condition = 0.0;
         break;
       }
-      if (last || (l == 0 && it == 0)) {
-        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(A, Eigen::EigenvaluesOnly);
-        const double emax = es.eigenvalues()[5];
-        res.condition = emax > 0 ? std::max(0.0, es.eigenvalues()[0]) / emax : 0.0;
+      // Scale the rotation block by the rms point distance from the camera centre: then a unit of
+      // either part moves the points by about a metre, and eigenvalues compare across the two.
+      const double scale = std::sqrt(std::max(1e-6, total.d2 / total.n));
+      Eigen::Matrix<double, 6, 1> D;
+      D << 1.0 / scale, 1.0 / scale, 1.0 / scale, 1.0, 1.0, 1.0;
+      const Eigen::Matrix<double, 6, 6> As = D.asDiagonal() * A * D.asDiagonal();
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(As);
+      const double emax = es.eigenvalues()[5];
+      if (!(emax > 0.0) || !es.eigenvectors().allFinite()) {
+        res.solved = false;
+        break;
       }
-      const Eigen::Matrix<double, 6, 1> xi = A.ldlt().solve(b);
+      // Solve only in the well-constrained subspace; the rest of the step is zero.
+      Eigen::Matrix<double, 6, 1> xs = Eigen::Matrix<double, 6, 1>::Zero();
+      const Eigen::Matrix<double, 6, 1> bs = D.asDiagonal() * b;
+      int degenerate = 0;
+      for (int i = 0; i < 6; ++i) {
+        const double e = es.eigenvalues()[i];
+        if (e < params.degenerate_ratio * emax) {
+          ++degenerate;
+          continue;
+        }
+        const auto v = es.eigenvectors().col(i);
+        xs += v * (v.dot(bs) / e);
+      }
+      if (l == 0) {
+        res.condition = std::max(0.0, es.eigenvalues()[0]) / emax;
+        res.degenerate_dims = degenerate;
+      }
+      const Eigen::Matrix<double, 6, 1> xi = D.asDiagonal() * xs;
       if (!xi.allFinite()) {
         res.solved = false;
         break;

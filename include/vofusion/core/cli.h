@@ -1,6 +1,8 @@
 #pragma once
-// Minimal command-line parsing for the thin apps: "--name value", "--flag", positionals.
+// Minimal command-line parsing for the thin apps: "--name value" (or "--name=value"), "--flag",
+// positionals; "-h" means "--help" when the app knows --help, other "-x" are unknown options.
 // Every problem is an InputError("usage", ...) so apps report it as one line and exit 2.
+#include <limits>
 #include <optional>
 #include <set>
 #include <string>
@@ -15,8 +17,13 @@ class CommandLine {
 
   std::optional<std::string> value(const std::string& name) const;
   std::string value(const std::string& name, const std::string& fallback) const;
-  std::size_t count(const std::string& name, std::size_t fallback) const;  // non-negative integer
+  // Every occurrence in order, for repeatable options such as "--set k=v".
+  std::vector<std::string> values(const std::string& name) const;
+  std::size_t count(const std::string& name, std::size_t fallback, std::size_t min = 0) const;  // integer >= min
   double number(const std::string& name, double fallback) const;
+  // A number with above < x <= at_most.
+  double number(const std::string& name, double fallback, double above,
+                double at_most = std::numeric_limits<double>::infinity()) const;
   bool flag(const std::string& name) const;
   const std::vector<std::string>& positional() const { return positional_; }
 
@@ -27,7 +34,8 @@ class CommandLine {
 };
 
 // Runs an app's body, turning any exception into one line on stderr and exit code 2
-// (InputError: bad input or usage) or 1 (anything else).
+// (InputError: bad input or usage) or 1 (anything else). The line is "<app_name>: error: <what>",
+// or just "<what>" when app_name is null.
 int runApp(const char* app_name, int (*body)(int, char**), int argc, char** argv);
 
 }  // namespace vofusion

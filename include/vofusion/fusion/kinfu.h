@@ -30,15 +30,20 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
   fusion::PreprocessParams preprocess;  // bilateral_*, min_depth, max_depth, max_normal_jump
   fusion::IcpParams icp;              // icp_iterations_l0..l2, icp_max_distance, icp_max_angle
 
+  int tracking_downsample = 2;        // 1 or 2: preprocessing, ray casting and ICP at full or half
+                                      // resolution (integration always fuses the full-resolution depth)
   float shift_threshold = 0.3f;       // m, distance focus point <-> volume centre that triggers a shift
   float focus_distance = 1.2f;        // m, the volume follows the point this far along the optical axis
   // Tracking failure (divergence, degeneracy) detection:
   float min_inlier_ratio = 0.10f;     // inliers / valid pixels at full resolution
-  double min_condition = 1e-4;        // smallest/largest eigenvalue of the ICP normal matrix
+  double min_condition = 1e-6;        // smallest/largest eigenvalue of the (depth-scaled) ICP system
+                                      // below which the whole ICP is rejected; weaker directions
+                                      // are handled by icp.degenerate_ratio (kept from the prediction)
   float max_jump_translation = 0.05f; // m, ICP pose vs odometry prediction (mode paper)
   float max_jump_rotation = 5.0f;     // degrees, same
   bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback
   bool integrate_filtered = false;    // fuse the bilateral-filtered depth instead of the raw one
+                                      // (with tracking_downsample 1 only)
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
@@ -62,12 +67,14 @@ struct FusionResult {
   int icp_inliers = 0;
   double icp_rms = 0.0;       // m
   double condition = 0.0;     // of the ICP normal matrix (0 when no ICP ran)
+  int degenerate_dims = 0;    // ICP directions too weak to solve, kept from the prediction
   bool shifted = false;       // the volume moved this frame
   StageTimes times;           // preprocess, icp, integrate, raycast, shift
 };
 
 struct KinFuStats {
   std::size_t frames = 0, tracked = 0, fell_back = 0, lost = 0, shifts = 0;
+  std::size_t degenerate = 0;    // frames whose ICP left some direction at the prediction
   std::size_t bricks_in_volume = 0, bricks_in_world_model = 0;
   std::size_t memory_bytes = 0;  // TSDF storage
   StageTimes times;              // accumulated over all frames

@@ -16,6 +16,10 @@ struct IcpParams {
   std::array<int, 3> iterations{6, 4, 3};  // per level, level 0 (full resolution) first
   float max_distance = 0.10f;    // m, correspondences farther apart are rejected
   float max_angle = 30.0f;       // degrees between normals
+  // Directions of the 6x6 system (rotation scaled by the scene depth, so both are in metres) whose
+  // eigenvalue is below this fraction of the largest are not solved: the pose keeps the initial
+  // guess along them (the odometry prediction in mode paper, the last pose in mode kinfu).
+  double degenerate_ratio = 1e-2;
 };
 
 struct IcpResult {
@@ -23,7 +27,8 @@ struct IcpResult {
   int inliers = 0;             // correspondences at the last iteration of level 0
   int valid_pixels = 0;        // frame pixels with a vertex and normal at level 0
   double rms = 0.0;            // m, point-to-plane residual over the inliers
-  double condition = 0.0;      // smallest / largest eigenvalue of the 6x6 normal matrix
+  double condition = 0.0;      // smallest / largest eigenvalue of the depth-scaled 6x6 normal matrix
+  int degenerate_dims = 0;     // directions left at the initial guess at the last level-0 iteration
   bool solved = false;         // false when a linear system could not be solved
 };
 
