@@ -1,0 +1,112 @@
+// vofusion::CommandLine and runApp: what the thin apps rely on for parsing and error reporting.
+#include <gtest/gtest.h>
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "vofusion/core/cli.h"
+#include "vofusion/core/errors.h"
+
+using namespace vofusion;
+
+namespace {
+// argv from words (argv[0] is the program name).
+struct Args {
+  explicit Args(std::vector<std::string> words) : words_(std::move(words)) {
+    words_.insert(words_.begin(), "app");
+    for (auto& w : words_) ptrs_.push_back(w.data());
+  }
+  int argc() { return int(ptrs_.size()); }
+  char** argv() { return ptrs_.data(); }
+
+ private:
+  std::vector<std::string> words_;
+  std::vector<char*> ptrs_;
+};
+
+CommandLine parse(std::vector<std::string> words) {
+  Args a(std::move(words));
+  return CommandLine(a.argc(), a.argv(), {"--out", "--set", "--n", "--x"}, {"--help", "--flag"});
+}
+
+std::string usageError(std::vector<std::string> words) {
+  try {
+    parse(std::move(words));
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+}  // namespace
+
+TEST(CommandLine, ValuesFlagsAndPositionals) {
+  const auto cl = parse({"in", "--out", "o1", "--flag", "--out=o2", "more"});
+  EXPECT_EQ(cl.value("--out", ""), "o2");  // the last occurrence wins
+  EXPECT_TRUE(cl.flag("--flag"));
+  EXPECT_FALSE(cl.flag("--help"));
+  EXPECT_EQ(cl.positional(), (std::vector<std::string>{"in", "more"}));
+  EXPECT_FALSE(cl.value("--set").has_value());
+}
+
+TEST(CommandLine, RepeatableOptionKeepsEveryOccurrenceInOrder) {
+  const auto cl = parse({"--set", "a.b=1", "--set=c.d=2", "--set", "a.b=3"});
+  EXPECT_EQ(cl.values("--set"), (std::vector<std::string>{"a.b=1", "c.d=2", "a.b=3"}));
+  EXPECT_TRUE(parse({}).values("--set").empty());
+}
+
+TEST(CommandLine, ShortHelpAndUnknownOptions) {
+  EXPECT_TRUE(parse({"-h"}).flag("--help"));
+  EXPECT_NE(usageError({"-x"}).find("unknown option -x"), std::string::npos);
+  EXPECT_NE(usageError({"--nope"}).find("unknown option --nope"), std::string::npos);
+  EXPECT_NE(usageError({"--flag=1"}).find("unknown option --flag"), std::string::npos);
+  EXPECT_NE(usageError({"--out"}).find("--out needs a value"), std::string::npos);
+}
+
+TEST(CommandLine, IntegerWithMinimum) {
+  EXPECT_EQ(parse({}).count("--n", 7, 1), 7u);
+  EXPECT_EQ(parse({"--n", "3"}).count("--n", 0, 1), 3u);
+  EXPECT_EQ(parse({"--n", "0"}).count("--n", 5), 0u);
+  for (const char* bad : {"0", "-2", "2.5", "x", ""}) {
+    try {
+      parse({"--n", bad}).count("--n", 0, 1);
+      ADD_FAILURE() << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("--n expects an integer >= 1"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(CommandLine, NumberInRange) {
+  EXPECT_DOUBLE_EQ(parse({}).number("--x", 0.5, 0.0, 1.0), 0.5);
+  EXPECT_DOUBLE_EQ(parse({"--x", "1"}).number("--x", 0.5, 0.0, 1.0), 1.0);  // upper bound included
+  EXPECT_DOUBLE_EQ(parse({"--x", "1e9"}).number("--x", 1.0, 0.0), 1e9);     // no upper bound
+  for (const char* bad : {"0", "-1", "1.5", "nan"}) {
+    try {
+      parse({"--x", bad}).number("--x", 0.5, 0.0, 1.0);
+      ADD_FAILURE() << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("--x expects a number > 0 and <= 1"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(parse({"--x", "abc"}).number("--x", 0.5, 0.0, 1.0), InputError);
+}
+
+namespace {
+int throwsInput(int, char**) { throw InputError("f.txt", "bad"); }
+int throwsOther(int, char**) { throw std::runtime_error("boom"); }
+int returns7(int, char**) { return 7; }
+}  // namespace
+
+TEST(RunApp, ExitCodesAndOneLine) {
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(runApp("app", throwsInput, 0, nullptr), 2);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "app: error: f.txt: bad\n");
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(runApp("app", throwsOther, 0, nullptr), 1);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "app: error: boom\n");
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(runApp(nullptr, throwsInput, 0, nullptr), 2);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "f.txt: bad\n");
+  EXPECT_EQ(runApp("app", returns7, 0, nullptr), 7);
+}
