@@ -32,6 +32,8 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
   impl_->odo_params.loadFromConfigFile(cfg, "odometry");
   impl_->kinfu_params.loadFromConfigFile(cfg, "kinfu");
   if (mode != TrackingMode::KinFu) impl_->odometry = std::make_unique<RgbdOdometry>(impl_->odo_params);
+  // The map is anchored at the first frame; when that frame knows its ground-truth pose the map
+  // lives in the ground truth's world frame (z up for TUM), so scenes show estimate and truth together.
   impl_->kinfu = std::make_unique<KinFu>(impl_->kinfu_params, mode);
 }
 
@@ -49,6 +51,8 @@ FrameReport Reconstruction::process(const Frame& frame) {
     // The very first frame has no motion to estimate: not a failure.
     if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
   }
+  if (m.frames == 0 && frame.groundTruth)
+    m.kinfu = std::make_unique<KinFu>(m.kinfu_params, m.mode, *frame.groundTruth);
   const FusionResult f = m.kinfu->process(frame, r.odometry.success ? &r.odometry : nullptr);
   r.times.merge(f.times);
   r.tracked = f.tracked || m.frames == 0;
