@@ -73,7 +73,7 @@ RunSummary runSequence(const sim::SyntheticSequence& seq, TrackingMode mode, con
 // A plane constrains 3 of the 6 degrees of freedom: ICP alone cannot see the slide along the wall
 // (it stays behind), while mode paper keeps the odometry along the unconstrained directions.
 TEST(KinFu, PaperModeStaysOnBareWallWhereKinFuDrifts) {
-  const sim::SyntheticSequence seq(simOpts("bare_wall", 60));
+  const sim::SyntheticSequence seq(simOpts("bare_wall", 40));
   const KinFuParams p = testParams();
   const RunSummary kinfu = runSequence(seq, TrackingMode::KinFu, p);
   const RunSummary paper = runSequence(seq, TrackingMode::Paper, p);
