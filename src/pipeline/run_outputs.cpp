@@ -208,7 +208,7 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   s["fps"] = info.seconds > 0 ? frames / info.seconds : 0.0;
   s["stages"] = timesJson(rec.totalTimes(), frames);
   const KinFuStats ks = rec.fusionStats();
-  s["fusion"] = {{"volume_shifts", ks.shifts}, {"bricks_in_volume", ks.bricks_in_volume},
+  s["fusion"] = {{"volume_shifts", ks.shifts}, {"icp_degenerate_frames", ks.degenerate}, {"bricks_in_volume", ks.bricks_in_volume},
                  {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0}};
   if (!info.extra.is_null()) s.update(info.extra);
 
