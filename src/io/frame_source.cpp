@@ -12,6 +12,12 @@ namespace fs = std::filesystem;
 
 namespace vofusion {
 
+bool IndexedFrameSource::next(Frame& frame) {
+  if (pos_ >= size()) return false;
+  frame = read(pos_++);
+  return true;
+}
+
 std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts) {
   if (path.rfind("synthetic", 0) == 0 && !fs::exists(path))
     return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));

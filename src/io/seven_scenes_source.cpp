@@ -157,10 +157,4 @@ Frame SevenScenesSource::read(std::size_t i) const {
   return f;
 }
 
-bool SevenScenesSource::next(Frame& frame) {
-  if (pos_ >= frames_.size()) return false;
-  frame = read(pos_++);
-  return true;
-}
-
 }  // namespace vofusion

@@ -184,10 +184,4 @@ Frame TumFolderSource::read(std::size_t i) const {
   return f;
 }
 
-bool TumFolderSource::next(Frame& frame) {
-  if (pos_ >= pairs_.size()) return false;
-  frame = read(pos_++);
-  return true;
-}
-
 }  // namespace vofusion

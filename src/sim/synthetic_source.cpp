@@ -23,10 +23,4 @@ SimOptions SyntheticSource::optionsFromSpec(const std::string& spec, const Sourc
   return s;
 }
 
-bool SyntheticSource::next(Frame& frame) {
-  if (pos_ >= seq_.size()) return false;
-  frame = seq_.render(pos_++);
-  return true;
-}
-
 }  // namespace vofusion::sim

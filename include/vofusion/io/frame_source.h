@@ -23,6 +23,19 @@ class FrameSource {
   virtual std::string name() const = 0;
 };
 
+// A source whose frames can be read by index (a folder, a synthetic sequence): next() and rewind()
+// walk read(0), read(1), ... read(size() - 1).
+class IndexedFrameSource : public FrameSource {
+ public:
+  // Reads frame i without moving the cursor.
+  virtual Frame read(std::size_t i) const = 0;
+  bool next(Frame& frame) override;
+  void rewind() override { pos_ = 0; }
+
+ private:
+  std::size_t pos_ = 0;
+};
+
 struct SourceOptions {
   std::optional<std::string> intrinsics;  // preset or "fx,fy,cx,cy"; overrides what the data says
   std::size_t max_frames = 0;             // 0 = all

@@ -15,7 +15,7 @@
 
 namespace vofusion {
 
-class SevenScenesSource : public FrameSource {
+class SevenScenesSource : public IndexedFrameSource {
  public:
   static constexpr double kFps = 30.0;  // Hz, stamps of the synthetic timeline
   // The dataset's default intrinsics (depth camera).
@@ -25,15 +25,12 @@ class SevenScenesSource : public FrameSource {
 
   // Throws InputError(folder or file, problem) when the folder holds no frames or a pose is malformed.
   SevenScenesSource(const std::string& folder, const SourceOptions& opts);
-  bool next(Frame& frame) override;
   std::size_t size() const override { return frames_.size(); }
-  void rewind() override { pos_ = 0; }
   std::string name() const override { return folder_; }
 
   // Poses of every frame with a valid pose file (camera-to-world), stamped like the frames.
   const Trajectory& groundTruth() const { return gt_; }
-  // Reads frame i without moving the cursor.
-  Frame read(std::size_t i) const;
+  Frame read(std::size_t i) const override;
 
  private:
   struct Entry {
@@ -46,7 +43,6 @@ class SevenScenesSource : public FrameSource {
   std::vector<Entry> frames_;
   Trajectory gt_;
   std::vector<int> gt_index_;  // frames_ index -> gt_ index, -1 when the pose is unknown
-  std::size_t pos_ = 0;
 };
 
 // Parses a 7-Scenes pose file's text (4x4, row-major). Throws InputError(origin, ...) if it is not

@@ -29,25 +29,21 @@ struct TumAssociation {
 std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const std::vector<TumEntry>& depth,
                                       double max_diff, bool one_to_one = true);
 
-class TumFolderSource : public FrameSource {
+class TumFolderSource : public IndexedFrameSource {
  public:
   TumFolderSource(const std::string& folder, const SourceOptions& opts);
-  bool next(Frame& frame) override;
   std::size_t size() const override { return pairs_.size(); }
-  void rewind() override { pos_ = 0; }
   std::string name() const override { return folder_; }
 
   const Trajectory& groundTruth() const { return gt_; }
   const std::vector<TumAssociation>& pairs() const { return pairs_; }
-  // Reads frame i without moving the cursor.
-  Frame read(std::size_t i) const;
+  Frame read(std::size_t i) const override;
 
  private:
   std::string folder_;
   CameraIntrinsics camera_;
   std::vector<TumAssociation> pairs_;
   Trajectory gt_;
-  std::size_t pos_ = 0;
 };
 
 // Loads a TUM depth PNG (16-bit, scale 5000/m) as CV_32F metres; throws InputError on any problem.

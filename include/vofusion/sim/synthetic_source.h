@@ -5,22 +5,20 @@
 
 namespace vofusion::sim {
 
-class SyntheticSource : public FrameSource {
+class SyntheticSource : public IndexedFrameSource {
  public:
   explicit SyntheticSource(const SimOptions& opts) : seq_(opts) {}
   // "synthetic" (room) or "synthetic:<scene>"; SourceOptions::max_frames sets the length (default
   // SimOptions::frames) and SourceOptions::intrinsics the camera. Throws InputError(spec, ...).
   static SimOptions optionsFromSpec(const std::string& spec, const SourceOptions& opts);
 
-  bool next(Frame& frame) override;
   std::size_t size() const override { return seq_.size(); }
-  void rewind() override { pos_ = 0; }
+  Frame read(std::size_t i) const override { return seq_.render(i); }
   std::string name() const override { return "synthetic:" + seq_.options().scene; }
   const SyntheticSequence& sequence() const { return seq_; }
 
  private:
   SyntheticSequence seq_;
-  std::size_t pos_ = 0;
 };
 
 }  // namespace vofusion::sim
