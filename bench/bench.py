@@ -133,8 +133,7 @@ def run_sequence(seq, args, command):
     seven = is_seven_scenes(seq)
     gt = (seven_scenes_groundtruth(seq, os.path.join(work, "groundtruth.txt")) if seven
           else os.path.join(seq, "groundtruth.txt"))
-    if not os.path.exists(gt):
-        gt = None
+    gt = os.path.normpath(gt) if os.path.exists(gt) else None
     result = {"sequence": name, "path": os.path.abspath(seq), "layout": "7-Scenes" if seven else "TUM",
               "groundtruth": gt, "max_frames": args.max_frames, "modes": {}}
     for mode in args.modes:

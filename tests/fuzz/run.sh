@@ -3,7 +3,7 @@
 # given time. See tests/fuzz/README.md.
 #   tests/fuzz/run.sh [seconds_per_harness=60] [harness...]    harnesses: tum_list tum_trajectory rawlog
 # Env: FUZZ_BUILD (default build-fuzz), CXX (default clang++), JOBS (libFuzzer -jobs, default 1),
-#      NICE (default 19).
+#      NICE (default 19), RSS_LIMIT_MB (libFuzzer -rss_limit_mb, also the malloc limit; default 2048).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
@@ -51,7 +51,7 @@ for h in "${harnesses[@]}"; do
   # rss_limit: a hostile length field must not make the reader allocate gigabytes.
   # -jobs would send the output to ./fuzz-N.log: parallel runs only when asked (JOBS > 1), logs in $out.
   par=(); [ "${JOBS:-1}" -gt 1 ] && par=(-jobs="$JOBS" -workers="$JOBS")
-  (cd "$out" && nice -n "$nice_n" "$out/fuzz_$h" "$corpus" "${dict[@]}" -max_total_time="$secs" -rss_limit_mb=2048 \
+  (cd "$out" && nice -n "$nice_n" "$out/fuzz_$h" "$corpus" "${dict[@]}" -max_total_time="$secs" -rss_limit_mb="${RSS_LIMIT_MB:-2048}" \
         -max_len=65536 "${par[@]}" -print_final_stats=1 -artifact_prefix="$out/artifacts_$h/" \
         >"$out/fuzz_$h.log" 2>&1) || true
   [ ${#par[@]} -eq 0 ] || cat "$out"/fuzz-*.log >>"$out/fuzz_$h.log"
