@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <sstream>
 
 #include <Eigen/Dense>
@@ -13,24 +12,13 @@
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
 
 namespace vofusion {
 
-static std::string slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw InputError(path, "cannot open file");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
 Trajectory parseTumTrajectory(const std::string& text, const std::string& origin) {
   Trajectory traj;
-  std::istringstream in(text);
-  std::string line;
-  for (int n = 1; std::getline(in, line); ++n) {
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
+  for (const auto& [n, line] : dataLines(text)) {
     std::istringstream ls(line);
     double v[8];
     for (double& x : v)
@@ -50,7 +38,7 @@ Trajectory parseTumTrajectory(const std::string& text, const std::string& origin
   return traj;
 }
 
-Trajectory readTumTrajectory(const std::string& path) { return parseTumTrajectory(slurp(path), path); }
+Trajectory readTumTrajectory(const std::string& path) { return parseTumTrajectory(readTextFile(path), path); }
 
 void writeTumTrajectory(const std::string& path, const Trajectory& traj) {
   std::string out = "# timestamp tx ty tz qx qy qz qw (camera-to-world)\n";

@@ -30,28 +30,8 @@ std::string colourFor(const std::string& stem) {
   return {};
 }
 
-// Same check as the TUM loader: libpng would print its own line for a truncated file.
-bool truncatedPng(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  char sig[8] = {};
-  if (!f.read(sig, 8) || std::string(sig, 8) != "\x89PNG\r\n\x1a\n") return false;
-  f.seekg(0, std::ios::end);
-  const auto size = static_cast<long long>(f.tellg());
-  if (size < 8 + 12) return true;
-  char tail[8] = {};
-  f.seekg(size - 8);
-  return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
-}
-
 cv::Mat loadMillimetreDepth(const std::string& path, int w, int h) {
-  if (!fs::exists(path)) throw InputError(path, "depth image is missing");
-  if (truncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
-  cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
-  if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
-  if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel (millimetres)");
-  if (raw.cols != w || raw.rows != h)
-    throw InputError(path, "depth image is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
-                               ", expected " + std::to_string(w) + "x" + std::to_string(h));
+  cv::Mat raw = loadRawDepthPng(path, w, h, " (millimetres)");
   raw.setTo(0, raw == 65535);  // the dataset's "no reading" marker
   cv::Mat depth;
   raw.convertTo(depth, CV_32F, 1e-3);

@@ -9,15 +9,15 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
 
 namespace fs = std::filesystem;
 
 namespace vofusion {
 
-namespace {
 // A PNG that does not end with its IEND chunk is truncated. Caught before OpenCV sees the file,
 // because libpng prints its own "libpng error" line to stderr before OpenCV gives up.
-bool truncatedPng(const std::string& path) {
+bool isTruncatedPng(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   char sig[8] = {};
   if (!f.read(sig, 8) || std::string(sig, 8) != "\x89PNG\r\n\x1a\n") return false;  // not a PNG: OpenCV decides
@@ -28,15 +28,10 @@ bool truncatedPng(const std::string& path) {
   f.seekg(size - 8);
   return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
 }
-}  // namespace
 
 std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin) {
   std::vector<TumEntry> out;
-  std::istringstream in(text);
-  std::string line;
-  for (int n = 1; std::getline(in, line); ++n) {
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
+  for (const auto& [n, line] : dataLines(text)) {
     std::istringstream ls(line);
     TumEntry e;
     if (!(ls >> e.timestamp) || !std::isfinite(e.timestamp) || !(ls >> e.file))
@@ -51,13 +46,7 @@ std::vector<TumEntry> parseTumList(const std::string& text, const std::string& o
   return out;
 }
 
-std::vector<TumEntry> readTumList(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw InputError(path, "cannot open file");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  return parseTumList(ss.str(), path);
-}
+std::vector<TumEntry> readTumList(const std::string& path) { return parseTumList(readTextFile(path), path); }
 
 std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const std::vector<TumEntry>& depth,
                                       double max_diff, bool one_to_one) {
@@ -95,23 +84,27 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
   return out;
 }
 
-cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h) {
+cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note) {
   if (!fs::exists(path)) throw InputError(path, "depth image is missing");
-  if (truncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
+  if (isTruncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
   cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
-  if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel");
+  if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel" + unit_note);
   if (raw.cols != expect_w || raw.rows != expect_h)
     throw InputError(path, "depth image is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
                                ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h));
+  return raw;
+}
+
+cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h) {
   cv::Mat depth;
-  raw.convertTo(depth, CV_32F, 1.0 / 5000.0);  // TUM: 5000 units per metre, 0 = no reading
+  loadRawDepthPng(path, expect_w, expect_h).convertTo(depth, CV_32F, 1.0 / 5000.0);  // TUM: 5000/m, 0 = no reading
   return depth;
 }
 
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   if (!fs::exists(path)) throw InputError(path, "colour image is missing");
-  if (truncatedPng(path)) throw InputError(path, "cannot decode colour image (truncated PNG)");
+  if (isTruncatedPng(path)) throw InputError(path, "cannot decode colour image (truncated PNG)");
   cv::Mat img = cv::imread(path, cv::IMREAD_COLOR);
   if (img.empty()) throw InputError(path, "cannot decode colour image (corrupt or truncated?)");
   if (img.cols != expect_w || img.rows != expect_h)
@@ -121,22 +114,16 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
 }
 
 CameraIntrinsics readIntrinsicsFile(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw InputError(path, "cannot open file");
-  std::string line;
-  for (int n = 1; std::getline(f, line); ++n) {
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
-    std::istringstream ls(line);
-    double v[4];
-    std::string extra;
-    if (!(ls >> v[0] >> v[1] >> v[2] >> v[3]) || (ls >> extra))
-      throw InputError(path, "line " + std::to_string(n) + ": expected 'fx fy cx cy'");
-    CameraIntrinsics c;
-    c.fx = v[0]; c.fy = v[1]; c.cx = v[2]; c.cy = v[3];
-    return c;
-  }
-  throw InputError(path, "no 'fx fy cx cy' line");
+  const auto lines = dataLines(readTextFile(path));
+  if (lines.empty()) throw InputError(path, "no 'fx fy cx cy' line");
+  std::istringstream ls(lines[0].text);
+  double v[4];
+  std::string extra;
+  if (!(ls >> v[0] >> v[1] >> v[2] >> v[3]) || (ls >> extra))
+    throw InputError(path, "line " + std::to_string(lines[0].number) + ": expected 'fx fy cx cy'");
+  CameraIntrinsics c;
+  c.fx = v[0]; c.fy = v[1]; c.cx = v[2]; c.cy = v[3];
+  return c;
 }
 
 TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
@@ -160,7 +147,7 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   else camera_ = CameraIntrinsics::forTumFolder(folder);
   // Image size comes from the data itself; the first colour frame sets it for the whole sequence.
   const std::string first_path = (fs::path(folder) / pairs_[0].rgb.file).string();
-  const cv::Mat first = truncatedPng(first_path) ? cv::Mat() : cv::imread(first_path, cv::IMREAD_COLOR);
+  const cv::Mat first = isTruncatedPng(first_path) ? cv::Mat() : cv::imread(first_path, cv::IMREAD_COLOR);
   if (!first.empty()) {
     camera_.width = first.cols;
     camera_.height = first.rows;

@@ -48,6 +48,12 @@ class TumFolderSource : public IndexedFrameSource {
 
 // Loads a TUM depth PNG (16-bit, scale 5000/m) as CV_32F metres; throws InputError on any problem.
 cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h);
+// A 16-bit single-channel depth PNG of the expected size, in its raw units (CV_16UC1); throws
+// InputError(path, ...) when it is missing, undecodable, of another type (message + unit_note) or size.
+cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note = "");
+// True for a PNG cut short (no IEND chunk at the end). Checked before decoding, because libpng
+// prints its own line to stderr for such a file.
+bool isTruncatedPng(const std::string& path);
 // Reads "fx fy cx cy" (first non-comment line); throws InputError(path, ...).
 CameraIntrinsics readIntrinsicsFile(const std::string& path);
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h);

@@ -1,0 +1,30 @@
+#include "vofusion/core/text_file.h"
+
+#include <fstream>
+#include <sstream>
+
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+std::string readTextFile(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path, "cannot open file");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+std::vector<TextLine> dataLines(const std::string& text) {
+  std::vector<TextLine> lines;
+  std::istringstream in(text);
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    lines.push_back({n, std::move(line)});
+  }
+  return lines;
+}
+
+}  // namespace vofusion

@@ -1,0 +1,39 @@
+// core/text_file.h: whole-file reads and the data lines of '#'-commented text formats.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <string>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
+
+using namespace vofusion;
+
+TEST(TextFile, DataLinesSkipBlankAndCommentLinesAndKeepLineNumbers) {
+  const auto lines = dataLines("# header\n\n1 a\n   # indented comment\n \t\r\n2 b\r\n  3 c # not a comment\nlast");
+  ASSERT_EQ(lines.size(), 4u);
+  EXPECT_EQ(lines[0].number, 3);
+  EXPECT_EQ(lines[0].text, "1 a");
+  EXPECT_EQ(lines[1].number, 6);
+  EXPECT_EQ(lines[1].text, "2 b\r");
+  EXPECT_EQ(lines[2].number, 7);
+  EXPECT_EQ(lines[2].text, "  3 c # not a comment");
+  EXPECT_EQ(lines[3].number, 8);  // no final newline
+  EXPECT_EQ(lines[3].text, "last");
+  EXPECT_TRUE(dataLines("").empty());
+  EXPECT_TRUE(dataLines("#\n\n").empty());
+}
+
+TEST(TextFile, ReadsWholeFileOrNamesIt) {
+  const std::string dir = test::tempDir("text_file");
+  const std::string bytes = std::string("a\nb\0c\r\n", 7);
+  std::ofstream(dir + "/f.txt", std::ios::binary) << bytes;
+  EXPECT_EQ(readTextFile(dir + "/f.txt"), bytes);
+  try {
+    readTextFile(dir + "/missing.txt");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), dir + "/missing.txt: cannot open file");
+  }
+}
