@@ -32,7 +32,7 @@ LiveViewer::LiveViewer(const std::string& title) {
     inset->setViewportPosition(0.0, 0.6, 0.4, 0.4);
     win_->unlockAccess3DScene();
   }
-  win_->setCameraZoom(4.0f);
+  win_->setCameraZoom(2.5f);
   win_->repaint();
 }
 
@@ -79,6 +79,8 @@ void LiveViewer::show(const LiveView& view, const LiveStats& stats) {
     drawText(stats);
   }
   win_->unlockAccess3DScene();
+  // Keep the camera in sight: the path lives wherever the map's world frame puts it.
+  if (view.pose) win_->setCameraPointingToPoint(view.pose->x(), view.pose->y(), view.pose->z());
   if (redraw) win_->repaint();
 }
 
