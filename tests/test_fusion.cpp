@@ -79,7 +79,7 @@ TEST(KinFu, PaperModeStaysOnBareWallWhereKinFuDrifts) {
   const RunSummary paper = runSequence(seq, TrackingMode::Paper, p);
   EXPECT_GT(kinfu.max_error, 0.05);
   EXPECT_EQ(paper.stats.lost, 0u);
-  EXPECT_GT(paper.stats.degenerate, 50u);  // the degenerate directions were noticed, not trusted
+  EXPECT_GT(paper.stats.degenerate, seq.size() * 3 / 4);  // the degenerate directions were noticed, not trusted
   EXPECT_LT(paper.max_error, 0.02);
 }
 

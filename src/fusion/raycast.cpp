@@ -1,5 +1,5 @@
 // Ray casting the TSDF (KinectFusion §3.4): march each pixel's ray through the volume, skipping
-// unallocated bricks whole and free space by the stored distance, stop at the first +/- zero crossing
+// unallocated bricks (and empty 4x4x4-brick blocks) whole and free space by the stored distance, stop at the first +/- zero crossing
 // of the trilinearly interpolated field, refine it by regula falsi and take the normal from the TSDF
 // gradient. Every sample is trilinear: nearest-voxel samples put the crossing up to half a voxel off,
 // in rings that follow the marching phase (a systematic bias ICP then tracks as drift).
@@ -43,6 +43,8 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
       const float len = ray_cam.norm();                // metres of ray per metre of depth
       const Eigen::Vector3f dq = R * ray_cam * inv_vs;  // voxel units per metre of depth
       const float min_step = 0.5f * vs / len;           // half a voxel along the ray, in depth
+      const float inv_dq_norm = 1.f / dq.norm();
+      const Eigen::Vector3f inv_dq = dq.cwiseInverse();
       // Clip the depth interval to the volume box.
       float z0 = z_near, z1 = z_far;
       for (int i = 0; i < 3; ++i) {
@@ -70,16 +72,21 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
                     iz = static_cast<int>(std::floor(q.z()));
           if (!brickAt(ix >> 3, iy >> 3, iz >> 3)) {
             if (first && need_free_start) return March::Untrusted;
-            // Jump to where the ray leaves this brick (no surface inside an unallocated brick).
-            float exit = std::numeric_limits<float>::max();
+            // Jump to where the ray leaves this brick, or its whole 4x4x4-brick block when that is
+            // empty (no surface inside unallocated bricks).
             const int b[3] = {ix >> 3, iy >> 3, iz >> 3};
+            const bool block = !blockOccupied(b[0], b[1], b[2]);
+            const int shift = block ? 5 : 3;
+            const float edge = block ? 32.f : 8.f;
+            const int c[3] = {ix >> shift, iy >> shift, iz >> shift};
+            float exit = std::numeric_limits<float>::max();
             for (int i = 0; i < 3; ++i) {
               if (std::fabs(dq[i]) < 1e-9f) continue;
-              const float bound = dq[i] > 0 ? b[i] * 8 + 8.f : b[i] * 8.f;
-              exit = std::min(exit, (bound - oq[i]) / dq[i]);
+              const float bound = dq[i] > 0 ? c[i] * edge + edge : c[i] * edge;
+              exit = std::min(exit, (bound - oq[i]) * inv_dq[i]);
             }
-            // Back off one voxel so the crossing into the next brick is sampled with its neighbours.
-            z = std::max(z + min_step, exit - 1.f / dq.norm());
+            // Go straight into the next brick: samples in this one have no data anyway.
+            z = std::max(z + min_step, exit + 0.01f * inv_dq_norm);
             prev_ok = false;
             first = false;
             continue;
@@ -89,7 +96,9 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
             if (first && need_free_start) return March::Untrusted;
             prev_ok = false;
             first = false;
-            z += min_step;
+            // A whole voxel: the observed band before any surface is several voxels deep, so the
+            // first sample back in it still lands on its positive side.
+            z += 2.f * min_step;
             continue;
           }
           if (f < 0.f) {
@@ -121,7 +130,7 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
       bool found = false;
       if (use_hint && hrow[x] > 0.f) {
         const float zh = hrow[x];
-        found = march(std::max(z0, zh - trunc), std::min(z1, zh + 2.f * trunc), true) == March::Hit &&
+        found = march(std::max(z0, zh - 0.5f * trunc), std::min(z1, zh + 2.f * trunc), true) == March::Hit &&
                 normalAt(oq + dq * zs);
       }
       // Whatever the hinted search could not settle, the full search decides.

@@ -27,6 +27,9 @@ TsdfVolume::TsdfVolume(const TsdfParams& params, const Eigen::Vector3f& centre) 
   marks_.assign(slots_.size(), 0);
   const float brick = kBrickEdge * params_.voxel_size;
   for (int i = 0; i < 3; ++i) origin_[i] = static_cast<int>(std::lround(centre[i] / brick)) - n_ / 2;
+  slot_brick_.assign(slots_.size(), nullptr);
+  if (n_ % 4 == 0) block_count_.assign(slots_.size() / 64, 0);
+  updateCyclicTables();
 }
 
 std::uint64_t TsdfVolume::key(int bx, int by, int bz) {
@@ -34,19 +37,36 @@ std::uint64_t TsdfVolume::key(int bx, int by, int bz) {
   return u(bx) | (u(by) << 21) | (u(bz) << 42);
 }
 
-int TsdfVolume::slotOf(int bx, int by, int bz) const {
-  if (static_cast<unsigned>(bx - origin_.x()) >= static_cast<unsigned>(n_) ||
-      static_cast<unsigned>(by - origin_.y()) >= static_cast<unsigned>(n_) ||
-      static_cast<unsigned>(bz - origin_.z()) >= static_cast<unsigned>(n_))
-    return -1;
-  return modPos(bx, n_) + n_ * (modPos(by, n_) + n_ * modPos(bz, n_));
+void TsdfVolume::updateCyclicTables() {
+  int stride = 1;
+  for (int a = 0; a < 3; ++a) {
+    cyclic_[a].resize(n_);
+    for (int i = 0; i < n_; ++i) cyclic_[a][i] = stride * modPos(origin_[a] + i, n_);
+    stride *= n_;
+  }
+  if (n_ % 4 != 0) return;
+  const int m = n_ / 4;
+  stride = 1;
+  for (int a = 0; a < 3; ++a) {
+    block_cyclic_[a].resize(n_);
+    for (int i = 0; i < n_; ++i) block_cyclic_[a][i] = stride * (modPos(origin_[a] + i, n_) / 4);
+    stride *= m;
+  }
 }
 
-const Brick* TsdfVolume::brickAt(int bx, int by, int bz) const {
-  const int s = slotOf(bx, by, bz);
-  if (s < 0) return nullptr;
-  const std::int32_t id = slots_[s];
-  return id < 0 ? nullptr : pool_[id].get();
+int TsdfVolume::blockOfSlot(int slot) const {
+  const int m = n_ / 4;
+  const int sx = slot % n_, sy = (slot / n_) % n_, sz = slot / (n_ * n_);
+  return sx / 4 + m * (sy / 4 + m * (sz / 4));
+}
+
+void TsdfVolume::setSlot(int slot, std::int32_t id) {
+  if (!block_count_.empty() && (slots_[slot] < 0) != (id < 0)) {
+    if (id < 0) --block_count_[blockOfSlot(slot)];
+    else ++block_count_[blockOfSlot(slot)];
+  }
+  slots_[slot] = id;
+  slot_brick_[slot] = id < 0 ? nullptr : pool_[id].get();
 }
 
 std::int32_t TsdfVolume::allocate(int bx, int by, int bz) {
@@ -118,7 +138,7 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
       const int bx = origin_.x() + modPos(sx - origin_.x(), n_);
       const int by = origin_.y() + modPos(sy - origin_.y(), n_);
       const int bz = origin_.z() + modPos(sz - origin_.z(), n_);
-      slots_[s] = allocate(bx, by, bz);
+      setSlot(static_cast<int>(s), allocate(bx, by, bz));
     }
     touched.push_back(slots_[s]);
   }
@@ -196,11 +216,21 @@ bool TsdfVolume::trilinear(const Eigen::Vector3f& q, float& f) const {
     v[0] = base; v[1] = base + X; v[2] = base + Y; v[3] = base + X + Y;
     v[4] = base + Z; v[5] = base + X + Z; v[6] = base + Y + Z; v[7] = base + X + Y + Z;
   } else {
+    // Straddles a brick border: at most 8 bricks, looked up once per distinct one.
+    const int bx[2] = {floorDiv8(x0), floorDiv8(x0 + 1)}, by[2] = {floorDiv8(y0), floorDiv8(y0 + 1)},
+              bz[2] = {floorDiv8(z0), floorDiv8(z0 + 1)};
+    const Brick* brs[8];
     for (int i = 0; i < 8; ++i) {
-      const int x = x0 + (i & 1), y = y0 + ((i >> 1) & 1), z = z0 + ((i >> 2) & 1);
-      const Brick* br = brickAt(floorDiv8(x), floorDiv8(y), floorDiv8(z));
-      if (!br) return false;
-      v[i] = &br->voxels[Brick::index(x & 7, y & 7, z & 7)];
+      const int ix = i & 1, iy = (i >> 1) & 1, iz = (i >> 2) & 1;
+      if ((ix && bx[1] == bx[0]) || (iy && by[1] == by[0]) || (iz && bz[1] == bz[0])) {
+        brs[i] = brs[i & ~((ix && bx[1] == bx[0] ? 1 : 0) | (iy && by[1] == by[0] ? 2 : 0) |
+                           (iz && bz[1] == bz[0] ? 4 : 0))];
+      } else {
+        brs[i] = brickAt(bx[ix], by[iy], bz[iz]);
+      }
+      if (!brs[i]) return false;
+      const int x = x0 + ix, y = y0 + iy, z = z0 + iz;
+      v[i] = &brs[i]->voxels[Brick::index(x & 7, y & 7, z & 7)];
     }
   }
   for (const Voxel* p : v)
@@ -247,15 +277,16 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
     const Eigen::Vector3i& c = pool_[id]->coord;
     if (!inside(c)) {
       world_[key(c.x(), c.y(), c.z())] = id;
-      id = -1;
+      setSlot(static_cast<int>(&id - slots_.data()), -1);
     }
   }
   origin_ = o;
+  updateCyclicTables();
   // ...and world-model bricks the volume now covers come back (camera revisiting a place).
   for (auto it = world_.begin(); it != world_.end();) {
     const Eigen::Vector3i& c = pool_[it->second]->coord;
     if (inside(c)) {
-      slots_[slotOf(c.x(), c.y(), c.z())] = it->second;
+      setSlot(slotOf(c.x(), c.y(), c.z()), it->second);
       it = world_.erase(it);
     } else {
       ++it;

@@ -70,8 +70,30 @@ class TsdfVolume {
   const TsdfParams& params() const { return params_; }
 
  private:
-  const Brick* brickAt(int bx, int by, int bz) const;
-  int slotOf(int bx, int by, int bz) const;  // -1 outside the volume
+  const Brick* brickAt(int bx, int by, int bz) const {
+    const int s = slotOf(bx, by, bz);
+    return s < 0 ? nullptr : slot_brick_[s];
+  }
+  // -1 outside the volume. Table lookups: no integer division on the ray caster's hot path.
+  int slotOf(int bx, int by, int bz) const {
+    const unsigned ux = static_cast<unsigned>(bx - origin_.x()), uy = static_cast<unsigned>(by - origin_.y()),
+                   uz = static_cast<unsigned>(bz - origin_.z());
+    if (ux >= static_cast<unsigned>(n_) || uy >= static_cast<unsigned>(n_) || uz >= static_cast<unsigned>(n_)) return -1;
+    return cyclic_[0][ux] + cyclic_[1][uy] + cyclic_[2][uz];
+  }
+  // False only when no brick of the 4x4x4-brick block holding world brick (bx,by,bz) is allocated:
+  // the ray caster then skips the whole block. Outside the volume: true.
+  bool blockOccupied(int bx, int by, int bz) const {
+    const unsigned ux = static_cast<unsigned>(bx - origin_.x()), uy = static_cast<unsigned>(by - origin_.y()),
+                   uz = static_cast<unsigned>(bz - origin_.z());
+    if (block_count_.empty() || ux >= static_cast<unsigned>(n_) || uy >= static_cast<unsigned>(n_) ||
+        uz >= static_cast<unsigned>(n_))
+      return true;
+    return block_count_[block_cyclic_[0][ux] + block_cyclic_[1][uy] + block_cyclic_[2][uz]] != 0;
+  }
+  void updateCyclicTables();
+  void setSlot(int slot, std::int32_t id);  // keeps slot_brick_ and block_count_ in step
+  int blockOfSlot(int slot) const;
   bool trilinear(const Eigen::Vector3f& q, float& f) const;  // q in voxel units
   bool gradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const;
   std::int32_t allocate(int bx, int by, int bz);
@@ -81,6 +103,12 @@ class TsdfVolume {
   int n_;                        // bricks per edge
   Eigen::Vector3i origin_;       // world brick coordinate of the volume's first brick
   std::vector<std::int32_t> slots_;                  // n^3 brick ids, -1 = none
+  std::vector<const Brick*> slot_brick_;             // n^3, the brick of each slot (nullptr = none)
+  std::vector<int> cyclic_[3];                       // per axis: (brick - origin) -> slot offset
+  // Allocated bricks per cyclic 4x4x4-brick block (empty when the volume is not a multiple of 32
+  // voxels); a block may also count bricks of the opposite volume end, which only makes it cautious.
+  std::vector<std::uint16_t> block_count_;
+  std::vector<int> block_cyclic_[3];                 // per axis: (brick - origin) -> block offset
   std::vector<std::unique_ptr<Brick>> pool_;         // brick id -> storage (never moved)
   std::unordered_map<std::uint64_t, std::int32_t> world_;  // bricks that left the volume
   std::vector<std::uint8_t> marks_;                  // per slot, scratch of integrate()
