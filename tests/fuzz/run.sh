@@ -2,7 +2,8 @@
 # Builds the libFuzzer harnesses with clang (independent of the g++/CMake build) and runs each for a
 # given time. See tests/fuzz/README.md.
 #   tests/fuzz/run.sh [seconds_per_harness=60] [harness...]    harnesses: tum_list tum_trajectory rawlog
-# Env: FUZZ_BUILD (default build-fuzz), CXX (default clang++), JOBS (libFuzzer -jobs, default 1),
+# Env: FUZZ_BUILD (default build-fuzz), LIB_BUILD (the g++ CMake build providing libvofusion.a, default
+#      build), CXX (default clang++), JOBS (libFuzzer -jobs, default 1),
 #      NICE (default 19), RSS_LIMIT_MB (libFuzzer -rss_limit_mb, also the malloc limit; default 2048).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -16,27 +17,25 @@ mkdir -p "$out/obj"
 
 flags=(-std=c++17 -O1 -g -fno-omit-frame-pointer -I"$root/include" -I/usr/include/opencv4 -I/usr/include/eigen3)
 for m in /usr/include/mrpt/*/include; do flags+=(-I"$m"); done
-libs=(-lmrpt-obs -lmrpt-maps -lmrpt-opengl -lmrpt-img -lmrpt-poses -lmrpt-math -lmrpt-serialization -lmrpt-io
-      -lmrpt-config -lmrpt-system -lmrpt-containers -lmrpt-rtti -lmrpt-random -lmrpt-core
-      -lopencv_imgcodecs -lopencv_imgproc -lopencv_core -lz -lpthread)
-# The library sources the parsers need, instrumented for coverage.
-srcs=(src/core/trajectory.cpp src/core/atomic_file.cpp src/core/camera.cpp src/io/tum_source.cpp src/io/rawlog.cpp)
+# The parser under test is compiled here with coverage instrumentation; everything else it calls comes
+# from the regular g++ build's libvofusion.a, linked with that build's own library list.
+lib_build="$(cd "${LIB_BUILD:-$root/build}" && pwd)"
+declare -A src_of=([tum_list]=src/io/tum_source.cpp [tum_trajectory]=src/core/trajectory.cpp [rawlog]=src/io/rawlog.cpp)
 
 build() {
-  local objs=()
-  for s in "${srcs[@]}"; do
-    local o="$out/obj/$(basename "${s%.cpp}").o"
-    if [ ! -f "$o" ] || [ "$root/$s" -nt "$o" ]; then
-      echo "compiling $s" >&2
+  nice -n "$nice_n" ninja -C "$lib_build" vofusion_lib rgbd-eval >&2
+  local link
+  link="$(ninja -C "$lib_build" -t commands rgbd-eval | tail -1)"
+  link="${link#*-o bin/rgbd-eval}"; link="${link% && :}"
+  for h in "${harnesses[@]}"; do
+    local s="${src_of[$h]}" o="$out/obj/$h.o"
+    if [ ! -f "$o" ] || [ "$root/$s" -nt "$o" ] || [ "$here/run.sh" -nt "$o" ]; then
+      echo "compiling $s (instrumented)" >&2
       nice -n "$nice_n" "$cxx" "${flags[@]}" -fsanitize=fuzzer-no-link,address -c "$root/$s" -o "$o"
     fi
-    objs+=("$o")
-  done
-  for h in "${harnesses[@]}"; do
-    if [ ! -x "$out/fuzz_$h" ] || [ "$here/fuzz_$h.cpp" -nt "$out/fuzz_$h" ] || [ -n "$(find "$out/obj" -newer "$out/fuzz_$h" -name '*.o')" ]; then
-      echo "linking fuzz_$h" >&2
-      nice -n "$nice_n" "$cxx" "${flags[@]}" -fsanitize=fuzzer,address "$here/fuzz_$h.cpp" "${objs[@]}" "${libs[@]}" -o "$out/fuzz_$h"
-    fi
+    echo "linking fuzz_$h" >&2
+    (cd "$lib_build" && eval nice -n "$nice_n" "$cxx" -fsanitize=fuzzer,address "$here/fuzz_$h.cpp" "${flags[*]}" \
+       "$o" "$link" -o "$out/fuzz_$h")
   done
 }
 
