@@ -10,6 +10,7 @@ void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, 
   motion_method = c.read_string(s, "motion_method", motion_method);
   narf_concurrent = c.read_bool(s, "narf_concurrent", narf_concurrent);
   union_radius = c.read_double(s, "union_radius", union_radius);
+  keyframe_min_inliers = c.read_int(s, "keyframe_min_inliers", keyframe_min_inliers);
   undistort = c.read_bool(s, "undistort", undistort);
   depth_window = c.read_int(s, "depth_window", depth_window);
   depth_mode = c.read_string(s, "depth_mode", depth_mode);
@@ -34,6 +35,7 @@ void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, 
   robust.iterations = c.read_int(mo, "ransac_iterations", robust.iterations);
   robust.inlier_threshold = c.read_double(mo, "inlier_threshold", robust.inlier_threshold);
   robust.gauss_newton_iterations = c.read_int(mo, "gauss_newton_iterations", robust.gauss_newton_iterations);
+  robust.ray_noise = c.read_bool(mo, "ray_noise", robust.ray_noise);
   min_inliers = c.read_int(mo, "min_inliers", min_inliers);
   min_extent = c.read_double(mo, "min_extent", min_extent);
   max_rms = c.read_double(mo, "max_rms", max_rms);
@@ -49,6 +51,7 @@ void OdometryParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const st
   c.write(s, "motion_method", motion_method, -1, -1, "paper (Algorithm 1) | robust");
   c.write(s, "narf_concurrent", narf_concurrent, -1, -1, "NARF on a second thread");
   c.write(s, "union_radius", union_radius, -1, -1, "pixels, duplicate radius");
+  c.write(s, "keyframe_min_inliers", keyframe_min_inliers, -1, -1, "keep the keyframe while this many inliers, 0 = off");
   c.write(s, "undistort", undistort, -1, -1, "undistort keypoints before 3D/homography");
   c.write(s, "depth_window", depth_window, -1, -1, "pixels, half-size of the keypoint depth window");
   c.write(s, "depth_mode", depth_mode, -1, -1, "median | min of that window");
@@ -64,6 +67,7 @@ void OdometryParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const st
   c.write(mo, "ransac_iterations", robust.iterations, -1, -1, "robust: max hypotheses");
   c.write(mo, "inlier_threshold", robust.inlier_threshold, -1, -1, "m at <= 1 m depth, grows with z^2");
   c.write(mo, "gauss_newton_iterations", robust.gauss_newton_iterations, -1, -1, "robust: refinement steps");
+  c.write(mo, "ray_noise", robust.ray_noise, -1, -1, "robust: Kinect noise along rays in Gauss-Newton");
   c.write(mo, "min_inliers", min_inliers, -1, -1, "3D inliers needed");
   c.write(mo, "min_extent", min_extent, -1, -1, "m, inlier spread needed");
   c.write(mo, "max_rms", max_rms, -1, -1, "m, inlier RMS accepted");

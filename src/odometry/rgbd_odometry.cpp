@@ -54,10 +54,16 @@ float keypointDepth(const cv::Mat& depth, int x, int y, int r, bool nearest) {
 struct RgbdOdometry::Impl {
   OdometryParams params;
   BrandExtractor brand;
-  std::optional<FrameFeatures> reference;
+  // The keyframe new frames are matched against, and the last frame with a pose relative to it
+  // (T_kf_last); with keyframes off both are the previous usable frame.
+  std::optional<FrameFeatures> reference, last;
+  Eigen::Isometry3d T_kf_last = Eigen::Isometry3d::Identity();
   explicit Impl(const OdometryParams& p) : params(p), brand(p.brand) {}
 
   FrameFeatures extract(const Frame& frame, StageTimes& times) const;
+  // Motion T_ref_cur from matching, homography filter and rigid fit; fills matches, inliers,
+  // rms_error, failure and the stage times of r.
+  bool estimate(const FrameFeatures& ref, const FrameFeatures& cur, OdometryResult& r, RigidFit& fit) const;
 };
 
 FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, StageTimes& times) const {
@@ -137,7 +143,11 @@ FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, StageTimes& times)
     kept.reserve(px.size());
     for (std::size_t i = 0; i < px.size(); ++i) {
       const auto& k = f.keypoints[i];
-      const float z = keypointDepth(frame.depth, cvRound(k.pt.x), cvRound(k.pt.y), params.depth_window, nearest);
+      // A NARF keypoint stands for a block of the reduced depth image whose value is the block's
+      // nearest reading (it sits on foreground borders): take that reading, not the centre pixel's.
+      const bool narf = k.class_id == 1 && params.narf.downsample > 1;
+      const float z = narf ? keypointDepth(frame.depth, cvRound(k.pt.x), cvRound(k.pt.y), params.narf.downsample / 2, true)
+                           : keypointDepth(frame.depth, cvRound(k.pt.x), cvRound(k.pt.y), params.depth_window, nearest);
       if (!(z > 0.f)) continue;
       f.points.emplace_back((px[i].x - c.cx) * z / c.fx, (px[i].y - c.cy) * z / c.fy, z);
       f.pixels.push_back(px[i]);
@@ -152,47 +162,26 @@ FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, StageTimes& times)
 
 RgbdOdometry::RgbdOdometry(const OdometryParams& params) : impl_(std::make_unique<Impl>(params)) {}
 RgbdOdometry::~RgbdOdometry() = default;
-void RgbdOdometry::reset() { impl_->reference.reset(); }
+void RgbdOdometry::reset() {
+  impl_->reference.reset();
+  impl_->last.reset();
+}
 
-OdometryResult RgbdOdometry::process(const Frame& frame) {
-  OdometryResult r;
-  r.covariance.setIdentity();
-  const OdometryParams& P = impl_->params;
+bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const FrameFeatures& cur, OdometryResult& r,
+                                  RigidFit& fit) const {
+  const OdometryParams& P = params;
   auto fail = [&r](const std::string& why) {
-    r.success = false;
     r.failure = why;
-    return r;
+    return false;
   };
-  if (!frame.valid()) return fail("empty frame");
-
-  FrameFeatures cur = impl_->extract(frame, r.times);
-  r.keypoints = int(cur.keypoints.size());
-  r.star_keypoints = cur.star;
-  r.narf_keypoints = cur.narf;
-  if (!impl_->reference) {
-    impl_->reference = std::move(cur);
-    r.reference_index = frame.index;
-    r.reference_timestamp = frame.timestamp;
-    return fail("first frame");
-  }
-  const FrameFeatures& ref = *impl_->reference;
-  r.reference_index = ref.index;
-  r.reference_timestamp = ref.timestamp;
-  // A frame with almost nothing to match (textureless, no depth) cannot be anyone's reference:
-  // keep the last good one so the next frame can bridge the gap.
-  if (int(cur.keypoints.size()) < P.min_matches) return fail("too few keypoints (textureless or no depth)");
-  // Any other failure below is about the pair: the current frame becomes the reference.
-  struct Advance {
-    std::optional<FrameFeatures>& ref;
-    FrameFeatures& cur;
-    ~Advance() { ref = std::move(cur); }
-  } advance{impl_->reference, cur};
-
+  r.matches = r.inliers = 0;
+  r.rms_error = 0.0;
   // Brute-force Hamming matching with cross-check (query = current, train = reference).
   std::vector<cv::DMatch> matches;
   {
     ScopedStageTimer t(r.times, "matching");
-    if (!ref.descriptors.empty()) cv::BFMatcher(cv::NORM_HAMMING, true).match(cur.descriptors, ref.descriptors, matches);
+    if (!ref.descriptors.empty() && !cur.descriptors.empty())
+      cv::BFMatcher(cv::NORM_HAMMING, true).match(cur.descriptors, ref.descriptors, matches);
     std::vector<cv::DMatch> close;
     for (const auto& m : matches)
       if (m.distance <= P.max_hamming) close.push_back(m);
@@ -220,7 +209,6 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   // T_ref_cur maps current-frame points onto the reference frame's.
   Points3 src, dst;
   for (const auto& m : matches) src.push_back(cur.points[m.queryIdx]), dst.push_back(ref.points[m.trainIdx]);
-  RigidFit fit;
   {
     ScopedStageTimer t(r.times, "motion");
     fit = P.motion_method == "paper" ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust);
@@ -231,14 +219,78 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   if (r.inliers < P.min_inliers) return fail("too few inliers");
   if (secondaryExtent(src, fit.inliers) < P.min_extent) return fail("degenerate geometry (inliers nearly collinear)");
   if (fit.rms > P.max_rms) return fail("inconsistent matches (inlier RMS too large)");
+  return true;
+}
 
-  Eigen::Matrix4d M = fit.T.matrix();
+OdometryResult RgbdOdometry::process(const Frame& frame) {
+  OdometryResult r;
+  r.covariance.setIdentity();
+  const OdometryParams& P = impl_->params;
+  Impl& m = *impl_;
+  auto fail = [&r](const std::string& why) {
+    r.success = false;
+    r.failure = why;
+    return r;
+  };
+  if (!frame.valid()) return fail("empty frame");
+
+  FrameFeatures cur = m.extract(frame, r.times);
+  r.keypoints = int(cur.keypoints.size());
+  r.star_keypoints = cur.star;
+  r.narf_keypoints = cur.narf;
+  if (!m.reference) {
+    m.reference = std::move(cur);
+    m.last.reset();
+    m.T_kf_last.setIdentity();
+    r.reference_index = frame.index;
+    r.reference_timestamp = frame.timestamp;
+    return fail("first frame");
+  }
+  // `motion` is relative to the last frame with a pose (the previous one unless that failed).
+  const FrameFeatures& last = m.last ? *m.last : *m.reference;
+  r.reference_index = last.index;
+  r.reference_timestamp = last.timestamp;
+  // A frame with almost nothing to match (textureless, no depth) cannot be anyone's reference:
+  // keep the last good one so the next frame can bridge the gap.
+  if (int(cur.keypoints.size()) < P.min_matches) return fail("too few keypoints (textureless or no depth)");
+
+  // Against the keyframe first; a failed or weak keyframe match falls back to the last frame and
+  // the current frame becomes the new keyframe. Any failure makes it the new reference too.
+  RigidFit fit;
+  bool ok = m.estimate(*m.reference, cur, r, fit);
+  Eigen::Isometry3d T_last_cur = m.T_kf_last.inverse() * fit.T;
+  const bool keep_keyframe = P.keyframe_min_inliers > 0 && ok && r.inliers >= P.keyframe_min_inliers;
+  if (!keep_keyframe && m.last) {
+    OdometryResult r2;
+    RigidFit fit2;
+    if (m.estimate(*m.last, cur, r2, fit2) || !ok) {
+      ok = r2.failure.empty();
+      fit = fit2;
+      T_last_cur = fit2.T;
+      r.matches = r2.matches, r.inliers = r2.inliers, r.rms_error = r2.rms_error, r.failure = r2.failure;
+    }
+    r.times.merge(r2.times);
+  }
+  if (keep_keyframe) {
+    m.T_kf_last = fit.T;
+    m.last = std::move(cur);
+  } else {
+    m.reference = std::move(cur);
+    m.last.reset();
+    m.T_kf_last.setIdentity();
+  }
+  if (!ok) return fail(r.failure);
+
+  Eigen::Matrix4d M = T_last_cur.matrix();
   mrpt::math::CMatrixDouble44 Mm;
   for (int i = 0; i < 4; ++i)
     for (int j = 0; j < 4; ++j) Mm(i, j) = M(i, j);
   r.motion = mrpt::poses::CPose3D(Mm);
+  // The covariance is the one of the fit that gave the motion (keyframe-to-current when a keyframe
+  // was kept: an upper bound on the frame-to-frame uncertainty).
   for (int i = 0; i < 6; ++i)
     for (int j = 0; j < 6; ++j) r.covariance(i, j) = fit.covariance(i, j);
+  r.failure.clear();
   r.success = true;
   return r;
 }

@@ -18,6 +18,15 @@ double pointSigma(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return 0.002 + 0.0015 * (a.z() * a.z() + b.z() * b.z());
 }
 
+// Kinect noise of a point as a 3x3 covariance: axial sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 along
+// the viewing ray (Khoshelham & Elberink; Nguyen et al.), lateral one pixel (525 px focal length).
+Eigen::Matrix3d rayCovariance(const Eigen::Vector3d& p) {
+  const double z = std::max(0.3, p.z());
+  const double axial = 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4), lateral = z / 525.0;
+  const Eigen::Vector3d ray = p.normalized();
+  return lateral * lateral * Eigen::Matrix3d::Identity() + (axial * axial - lateral * lateral) * ray * ray.transpose();
+}
+
 // MRPT's CPose3D convention: R = Rz(yaw) Ry(pitch) Rx(roll).
 Eigen::Isometry3d fromVector(const Eigen::Matrix<double, 6, 1>& p) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
@@ -100,11 +109,21 @@ double secondaryExtent(const Points3& pts, const std::vector<int>& subset) {
 
 Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
                                     const Eigen::Isometry3d& T0, int iterations,
-                                    Eigen::Matrix<double, 6, 6>* covariance) {
+                                    Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise) {
   const std::vector<int> idx = subset.empty() ? allIndices(src.size()) : subset;
   Eigen::Matrix<double, 6, 1> p = toVector(T0);
-  std::vector<double> w(idx.size());
-  for (std::size_t k = 0; k < idx.size(); ++k) w[k] = 1.0 / pointSigma(src[idx[k]], dst[idx[k]]);
+  // Whitening of each residual T s - d: the inverse Cholesky factor of R C_s R^T + C_d (R from T0).
+  std::vector<Eigen::Matrix3d> w(idx.size());
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    const Eigen::Vector3d &s = src[idx[k]], &d = dst[idx[k]];
+    if (ray_noise) {
+      const Eigen::Matrix3d R = T0.linear();
+      const Eigen::Matrix3d C = R * rayCovariance(s) * R.transpose() + rayCovariance(d);
+      w[k] = Eigen::Matrix3d(C.llt().matrixL()).inverse();
+    } else {
+      w[k] = Eigen::Matrix3d::Identity() / pointSigma(s, d);
+    }
+  }
   auto residuals = [&](const Eigen::Matrix<double, 6, 1>& q, Eigen::VectorXd& r) {
     const Eigen::Isometry3d T = fromVector(q);
     r.resize(3 * idx.size());
@@ -226,7 +245,7 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
     best_in = in;
     T = umeyamaRigid(src, dst, best_in);
   }
-  T = refineGaussNewton(src, dst, best_in, T, o.gauss_newton_iterations, &fit.covariance);
+  T = refineGaussNewton(src, dst, best_in, T, o.gauss_newton_iterations, &fit.covariance, o.ray_noise);
   inliersOf(T, in);
   if (in.size() >= 3) best_in = in;
   fit.T = T;

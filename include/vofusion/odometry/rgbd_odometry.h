@@ -25,6 +25,7 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   std::string motion_method = "robust";  // "paper" (Algorithm 1) or "robust" (RANSAC + LS + Gauss-Newton)
   bool narf_concurrent = true;      // NARF on a second thread while STAR, normals and smoothing run
   double union_radius = 3.0;        // pixels; a NARF keypoint this close to a STAR one is a duplicate
+  int keyframe_min_inliers = 0;     // match against a keyframe while it keeps this many inliers (0 = frame to frame)
   bool undistort = true;            // undistort keypoint pixels (CameraIntrinsics::dist) before 3D and homography
   int depth_window = 0;             // pixels; half-size of the window the keypoint's depth comes from (0 = centre)
   std::string depth_mode = "median";  // "median" or "min" (nearest) valid reading of that window
