@@ -12,6 +12,10 @@ namespace vofusion::fusion {
 
 namespace {
 
+// Coarse levels run on one thread: their iterations take less than waking and joining OpenMP threads
+// on a loaded machine.
+constexpr std::size_t kParallelMinPixels = 30000;
+
 struct Accum {
   double A[21] = {};  // upper triangle of J^T J
   double b[6] = {};
@@ -27,7 +31,7 @@ void downsampleMaps(const cv::Mat& vertices, const cv::Mat& normals, cv::Mat& ve
   const int w = vertices.cols / 2, h = vertices.rows / 2;
   vertices_out.create(h, w, CV_32FC3);
   normals_out.create(h, w, CV_32FC3);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (vertices.total() >= kParallelMinPixels)
   for (int y = 0; y < h; ++y) {
     cv::Vec3f* vo = vertices_out.ptr<cv::Vec3f>(y);
     cv::Vec3f* no = normals_out.ptr<cv::Vec3f>(y);
@@ -79,7 +83,7 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
       const Eigen::Vector3f t = T.translation();
       Accum total;
       int valid = 0;
-#pragma omp parallel
+#pragma omp parallel if (lv.vertices.total() >= kParallelMinPixels)
       {
         Accum acc;
         int nvalid = 0;
