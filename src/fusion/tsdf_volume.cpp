@@ -149,6 +149,8 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
   const Eigen::Vector3f dx = Rt.col(0) * vs, dy = Rt.col(1) * vs, dz = Rt.col(2) * vs;
   const int max_w = params_.max_weight;
   const float inv_trunc = 1.f / trunc;
+  float inv_count[256];  // 1 / (weight + 1)
+  for (int i = 0; i < 256; ++i) inv_count[i] = 1.f / (i + 1);
   std::size_t updated = 0;
 #pragma omp parallel for schedule(dynamic, 16) reduction(+ : updated)
   for (std::size_t i = 0; i < touched.size(); ++i) {
@@ -185,9 +187,10 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
           const float f = std::min(1.f, sdf * inv_trunc);
           Voxel& vx = vox[x];
           const int wold = vx.weight;
-          const float fold = vx.tsdf * (1.f / kTsdfScale);
-          const float fnew = (fold * wold + f) / (wold + 1);
-          vx.tsdf = static_cast<std::int16_t>(std::lround(fnew * kTsdfScale));
+          // Running average in tsdf units (no division, no libm rounding call): tsdf in [-1, 1]
+          // times 32767, rounded half away from zero as lround did.
+          const float fnew = (vx.tsdf * static_cast<float>(wold) + f * kTsdfScale) * inv_count[wold];
+          vx.tsdf = static_cast<std::int16_t>(fnew + (fnew >= 0.f ? 0.5f : -0.5f));
           vx.weight = static_cast<std::uint8_t>(std::min(wold + 1, max_w));
           if (colour && sdf < trunc) {
             const cv::Vec3b& c = bgr.ptr<cv::Vec3b>(v)[u];
