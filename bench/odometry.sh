@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Benchmark of the 6D RGB-D odometry (issue 3) on TUM fr1_xyz (first 300 frames) with ground truth:
-# ATE RMSE, RPE (1 s) and speed for the paper variant, the robust variant and each keypoint set alone,
-# then the NARF resolution / threading choices.
+# ATE RMSE, RPE (1 s) and speed for the paper variant, the robust variant (the default) and each
+# keypoint set alone; with EXTRA=1 also the NARF resolution / threading / keyframe choices.
 #   bench/odometry.sh [build_dir] [data_dir] [max_frames]
 # Speed: "fps" is wall-clock odometry-only frames per second (image loading excluded) as the app
 # measures it; "cpu ms/f" is the process's user+sys CPU time per frame (includes PNG decoding),
-# which stays meaningful when other jobs share the machine.
+# which stays meaningful when other jobs share the machine; "load" is the 1-minute load average
+# when the row finished (fps is only comparable to the 2-core target when it is below ~2).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${1:-$root/build}"
@@ -20,32 +21,39 @@ run() {  # name, then --set arguments
   local name="$1"; shift
   local sets=()
   for s in "$@"; do sets+=(--set "$s"); done
-  local t0 t1 out
-  out="$( { /usr/bin/time -f "CPU %U %S" "$bin" "$data" --out "$tmp/$name" --no-rawlog --max-frames "$frames" \
+  local out
+  out="$( { /usr/bin/time -f "CPU %U %S" "$bin" "$data" --out "$tmp/run" --no-rawlog --max-frames "$frames" \
           "${sets[@]}" 2>&1 1>&3 | grep -E "^CPU|per-stage" ; } 3>&1 )"
-  local ate rpe_t rpe_r fps failed cpu stages
+  local ate rpe_t rpe_r fps failed cpu load
   ate=$(sed -n 's/^ATE rmse \([0-9.]*\) m.*/\1/p' <<<"$out")
   rpe_t=$(sed -n 's/^RPE(1s) rmse \([0-9.]*\) m  \([0-9.]*\) deg/\1/p' <<<"$out")
   rpe_r=$(sed -n 's/^RPE(1s) rmse \([0-9.]*\) m  \([0-9.]*\) deg/\2/p' <<<"$out")
   fps=$(sed -n 's/.*odometry \([0-9.]*\) fps/\1/p' <<<"$out")
   failed=$(sed -n 's/.*failed \([0-9]*\) .*/\1/p' <<<"$out")
-  cpu=$(awk '/^CPU/ {printf "%.1f", 1000*($2+$3)/'"$frames"'}' <<<"$out")
-  printf "%-34s %8s %9s %9s %7s %8s %7s\n" "$name" "${ate:-?}" "${rpe_t:-?}" "${rpe_r:-?}" "${fps:-?}" "${cpu:-?}" "${failed:-?}"
-  grep "per-stage" <<<"$out" | sed 's/^/    /' >>"$tmp/stages.txt"
+  cpu=$(awk '/^CPU/ {printf "%.0f", 1000*($2+$3)/'"$frames"'}' <<<"$out")
+  load=$(cut -d' ' -f1 /proc/loadavg)
+  printf "| %-30s | %7s | %8s | %8s | %5s | %8s | %6s | %5s |\n" "$name" "${ate:-?}" "${rpe_t:-?}" "${rpe_r:-?}" \
+    "${fps:-?}" "${cpu:-?}" "${failed:-?}" "$load"
+  printf "%-30s %s\n" "$name" "$(grep per-stage <<<"$out")" >>"$tmp/stages.txt"
 }
 
-echo "data: $data ($frames frames), $(nproc) cores"
-printf "%-34s %8s %9s %9s %7s %8s %7s\n" variant "ATE[m]" "RPE[m]" "RPE[deg]" fps "cpu ms/f" failed
-run "paper (union, Algorithm 1)"       odometry.motion_method=paper
-run "robust (union)"                   odometry.motion_method=robust
-run "robust, STAR only"                odometry.keypoints=star
-run "robust, NARF only"                odometry.keypoints=narf
-run "paper, STAR only"                 odometry.keypoints=star odometry.motion_method=paper
-run "paper, NARF only"                 odometry.keypoints=narf odometry.motion_method=paper
-echo "# NARF resolution and threading (robust, union)"
-run "narf 1/2 res (320x240)"           narf.downsample=2
-run "narf 1/8 res (80x60)"             narf.downsample=8
-run "narf 1/4, max 50 points"          narf.max_points=50
-run "narf 1/4, sequential"             odometry.narf_concurrent=false
-echo "# per-stage ms/frame of each run, in order:"
+echo "data: $data ($frames frames), $(nproc) cores, load at start: $(cut -d' ' -f1-3 /proc/loadavg)"
+printf "| %-30s | %7s | %8s | %8s | %5s | %8s | %6s | %5s |\n" variant "ATE [m]" "RPE [m]" "RPE[deg]" fps \
+  "cpu ms/f" failed load
+echo "|--------------------------------|---------|----------|----------|-------|----------|--------|-------|"
+run "paper (union, Algorithm 1)"   odometry.motion_method=paper
+run "robust (union, default)"
+run "robust, STAR only"            odometry.keypoints=star
+run "robust, NARF only"            odometry.keypoints=narf
+run "paper, STAR only"             odometry.keypoints=star odometry.motion_method=paper
+if [ "${EXTRA:-0}" = 1 ]; then
+  run "robust, NARF 1/4 res"       narf.downsample=4
+  run "robust, NARF 1/8 res"       narf.downsample=8
+  run "robust, NARF 1 thread"      narf.threads=1
+  run "robust, NARF sequential"    odometry.narf_concurrent=false
+  run "robust, no undistortion"    odometry.undistort=false
+  run "robust, isotropic weights"  motion.ray_noise=false
+  run "robust, keyframes (60)"     odometry.keyframe_min_inliers=60
+fi
+echo "# per-stage wall ms/frame of each run (narf runs beside the others unless sequential):"
 cat "$tmp/stages.txt"

@@ -57,6 +57,7 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
   range.setUnseenToMaxRange();
 
   pcl::RangeImageBorderExtractor border;
+  border.getParameters().max_no_of_threads = p.threads;
   pcl::NarfKeypoint narf(&border);
   narf.setRangeImage(&range);
   auto& np = narf.getParameters();

@@ -14,10 +14,10 @@ namespace vofusion {
 
 struct NarfParams : public mrpt::config::CLoadableOptions {
   double support_size = 0.2;        // m; area covered by an interest point (the NARF paper's value)
-  int downsample = 4;               // factor; 1 = full resolution (seconds per frame)
+  int downsample = 5;               // factor; 1 = full resolution (seconds per frame)
   int max_points = 0;               // keypoints kept, strongest first; 0 = all
   double min_interest_value = 0.45; // [0, 1]; PCL default
-  int threads = 1;                  // OpenMP threads PCL may use inside NARF
+  int threads = 2;                  // OpenMP threads PCL may use inside NARF (border extraction + interest)
   bool recursive_scale_reduction = false;  // PCL: interest values of near (large) surfaces on a coarser scale
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;

