@@ -4,7 +4,7 @@
 #   tests/fuzz/run.sh [seconds_per_harness=60] [harness...]    harnesses: tum_list tum_trajectory rawlog
 # Env: FUZZ_BUILD (default build-fuzz), LIB_BUILD (the g++ CMake build providing libvofusion.a, default
 #      build), CXX (default clang++), JOBS (libFuzzer -jobs, default 1),
-#      NICE (default 19), RSS_LIMIT_MB (libFuzzer -rss_limit_mb, also the malloc limit; default 2048).
+#      SANITIZE (default address; empty: libFuzzer alone), NICE (default 19), RSS_LIMIT_MB (libFuzzer -rss_limit_mb, also the malloc limit; default 2048).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
@@ -13,6 +13,7 @@ harnesses=("$@"); [ ${#harnesses[@]} -gt 0 ] || harnesses=(tum_list tum_trajecto
 out="${FUZZ_BUILD:-$root/build-fuzz}"
 cxx="${CXX:-clang++}"
 nice_n="${NICE:-19}"
+san="${SANITIZE-address}"   # SANITIZE= (empty) builds without AddressSanitizer
 mkdir -p "$out/obj"
 
 flags=(-std=c++17 -O1 -g -fno-omit-frame-pointer -I"$root/include" -I/usr/include/opencv4 -I/usr/include/eigen3)
@@ -29,12 +30,13 @@ build() {
   link="${link#*-o bin/rgbd-eval}"; link="${link% && :}"
   for h in "${harnesses[@]}"; do
     local s="${src_of[$h]}" o="$out/obj/$h.o"
+    o="$out/obj/$h${san:+-$san}.o"
     if [ ! -f "$o" ] || [ "$root/$s" -nt "$o" ] || [ "$here/run.sh" -nt "$o" ]; then
       echo "compiling $s (instrumented)" >&2
-      nice -n "$nice_n" "$cxx" "${flags[@]}" -fsanitize=fuzzer-no-link,address -c "$root/$s" -o "$o"
+      nice -n "$nice_n" "$cxx" "${flags[@]}" -fsanitize=fuzzer-no-link${san:+,$san} -c "$root/$s" -o "$o"
     fi
     echo "linking fuzz_$h" >&2
-    (cd "$lib_build" && eval nice -n "$nice_n" "$cxx" -fsanitize=fuzzer,address "$here/fuzz_$h.cpp" "${flags[*]}" \
+    (cd "$lib_build" && eval nice -n "$nice_n" "$cxx" "-fsanitize=fuzzer${san:+,$san}" "$here/fuzz_$h.cpp" "${flags[*]}" \
        "$o" "$link" -o "$out/fuzz_$h")
   done
 }
