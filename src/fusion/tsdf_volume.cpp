@@ -219,21 +219,24 @@ bool TsdfVolume::trilinear(const Eigen::Vector3f& q, float& f) const {
     v[0] = base; v[1] = base + X; v[2] = base + Y; v[3] = base + X + Y;
     v[4] = base + Z; v[5] = base + X + Z; v[6] = base + Y + Z; v[7] = base + X + Y + Z;
   } else {
-    // Straddles a brick border: at most 8 bricks, looked up once per distinct one.
-    const int bx[2] = {floorDiv8(x0), floorDiv8(x0 + 1)}, by[2] = {floorDiv8(y0), floorDiv8(y0 + 1)},
-              bz[2] = {floorDiv8(z0), floorDiv8(z0 + 1)};
-    const Brick* brs[8];
+    // Straddles a brick border: per axis the two voxel positions as (slot offset, index in brick).
+    const int lo[3] = {x0 - origin_.x() * kBrickEdge, y0 - origin_.y() * kBrickEdge, z0 - origin_.z() * kBrickEdge};
+    const int span = n_ * kBrickEdge;
+    int slot_off[3][2], vox_off[3][2];
+    constexpr int stride[3] = {1, kBrickEdge, kBrickEdge * kBrickEdge};
+    for (int a = 0; a < 3; ++a) {
+      for (int k = 0; k < 2; ++k) {
+        const int u = lo[a] + k;  // voxel index relative to the volume's first voxel
+        if (static_cast<unsigned>(u) >= static_cast<unsigned>(span)) return false;
+        slot_off[a][k] = cyclic_[a][u >> 3];
+        vox_off[a][k] = stride[a] * ((u + origin_[a] * kBrickEdge) & 7);
+      }
+    }
     for (int i = 0; i < 8; ++i) {
       const int ix = i & 1, iy = (i >> 1) & 1, iz = (i >> 2) & 1;
-      if ((ix && bx[1] == bx[0]) || (iy && by[1] == by[0]) || (iz && bz[1] == bz[0])) {
-        brs[i] = brs[i & ~((ix && bx[1] == bx[0] ? 1 : 0) | (iy && by[1] == by[0] ? 2 : 0) |
-                           (iz && bz[1] == bz[0] ? 4 : 0))];
-      } else {
-        brs[i] = brickAt(bx[ix], by[iy], bz[iz]);
-      }
-      if (!brs[i]) return false;
-      const int x = x0 + ix, y = y0 + iy, z = z0 + iz;
-      v[i] = &brs[i]->voxels[Brick::index(x & 7, y & 7, z & 7)];
+      const Brick* br = slot_brick_[slot_off[0][ix] + slot_off[1][iy] + slot_off[2][iz]];
+      if (!br) return false;
+      v[i] = &br->voxels[vox_off[0][ix] + vox_off[1][iy] + vox_off[2][iz]];
     }
   }
   for (const Voxel* p : v)
