@@ -168,3 +168,21 @@ TEST(OdometryParams, RejectsUnknownMethod) {
   OdometryParams p;
   EXPECT_THROW(p.loadFromConfigFile(cfg, "odometry"), InputError);
 }
+
+// With keyframes on, frames are matched against the keyframe but `motion` stays relative to the
+// previous frame (what the pipeline and OdometrySource compose), still within 2 mm / 0.2 deg.
+TEST(Odometry, KeyframeMotionIsRelativeToThePreviousFrame) {
+  const auto seq = room(false);
+  OdometryParams p;
+  p.keyframe_min_inliers = 20;
+  RgbdOdometry odo(p);
+  odo.process(seq.render(10));
+  for (std::size_t i = 11; i <= 14; ++i) {
+    const OdometryResult r = odo.process(seq.render(i));
+    ASSERT_TRUE(r.success) << "frame " << i << ": " << r.failure;
+    EXPECT_EQ(r.reference_index, i - 1);
+    const mrpt::poses::CPose3D err = r.motion - (seq.groundTruth(i) - seq.groundTruth(i - 1));
+    EXPECT_LT(err.translation().norm(), 0.002) << "frame " << i;
+    EXPECT_LT(rotDeg(err), 0.2) << "frame " << i;
+  }
+}
