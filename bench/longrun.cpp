@@ -4,7 +4,7 @@
 // current RSS, fps, volume shifts, world-model size and tracking counts every K frames.
 //   longrun <tum_dir> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] [--config f.ini]
 //           [--json out.json]
-// Built by bench/build-longrun.sh (not part of the CMake build; a benchmark, not a test).
+// Built by CMake as build/bin/longrun (a benchmark, not a test: run it by hand, see bench/README.md).
 #include <sys/resource.h>
 #include <unistd.h>
 
