@@ -165,7 +165,10 @@ TumFixture makeTum(const std::string& name, std::size_t n = 3) {
   const std::string tum = test::tumFirst300();
   TumFixture f;
   f.dir = test::tempDir(name);
-  TumFolderSource src(tum, {});
+  // One-to-one pairs: every image in the fixture's lists once, so a case can break one entry.
+  SourceOptions one_to_one;
+  one_to_one.unique_depth = true;
+  TumFolderSource src(tum, one_to_one);
   for (std::size_t i = 0; i < n; ++i) {
     TumAssociation a = src.pairs()[i];
     a.rgb.file = (fs::path(tum) / a.rgb.file).string();

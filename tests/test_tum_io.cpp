@@ -39,18 +39,30 @@ TEST(Associate, NearestWithinToleranceEachUsedOnce) {
   EXPECT_EQ(a[1].depth.file, "db");
 }
 
-TEST(Associate, NearestMayShareADepthFrameUnlessOneToOne) {
-  std::vector<TumEntry> rgb{{1.000, "a"}, {1.030, "b"}, {1.060, "c"}};
-  std::vector<TumEntry> depth{{1.010, "d1"}, {1.065, "d2"}};
+TEST(Associate, EveryDepthFrameTakesItsNearestColourUnlessOneToOne) {
+  std::vector<TumEntry> rgb{{1.000, "a"}, {1.060, "c"}};
+  std::vector<TumEntry> depth{{1.010, "d1"}, {1.018, "d2"}, {1.065, "d3"}};
   const auto nearest = associate(rgb, depth, 0.02, false);
   ASSERT_EQ(nearest.size(), 3u);
-  EXPECT_EQ(nearest[0].depth.file, "d1");
-  EXPECT_EQ(nearest[1].depth.file, "d1");  // 0.020 from d1, 0.035 from d2
-  EXPECT_EQ(nearest[2].depth.file, "d2");
+  EXPECT_EQ(nearest[0].rgb.file, "a");
+  EXPECT_EQ(nearest[1].rgb.file, "a");  // 0.018 from a, 0.042 from c: a serves two depth frames
+  EXPECT_EQ(nearest[2].rgb.file, "c");
   const auto unique = associate(rgb, depth, 0.02, true);
   ASSERT_EQ(unique.size(), 2u);
-  EXPECT_EQ(unique[0].rgb.file, "a");
-  EXPECT_EQ(unique[1].rgb.file, "c");
+  EXPECT_EQ(unique[0].depth.file, "d1");
+  EXPECT_EQ(unique[1].depth.file, "d3");
+}
+
+TEST(TumFolder, FramesAreStampedAtTheirDepthCapture) {
+  const std::string dir = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(dir);
+  TumFolderSource src(dir, {});
+  for (std::size_t i = 0; i < src.pairs().size(); ++i) {
+    const auto& a = src.pairs()[i];
+    EXPECT_LE(std::abs(a.rgb.timestamp - a.depth.timestamp), 0.02);
+    if (i > 0) EXPECT_GT(a.depth.timestamp, src.pairs()[i - 1].depth.timestamp);  // strictly increasing stamps
+  }
+  EXPECT_DOUBLE_EQ(src.read(5).timestamp, src.pairs()[5].depth.timestamp);
 }
 
 TEST(Trajectory, WriteReadRoundTrip) {

@@ -61,13 +61,13 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
   }
   std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.dt < b.dt; });
   if (!one_to_one) {
-    // Best first, so the first candidate seen for a colour frame is its nearest depth frame.
-    std::vector<long> nearest(rgb.size(), -1);
+    // Best first, so the first candidate seen for a depth frame is its nearest colour frame.
+    std::vector<long> nearest(depth.size(), -1);
     for (const Cand& c : cands)
-      if (nearest[c.i] < 0) nearest[c.i] = long(c.j);
+      if (nearest[c.j] < 0) nearest[c.j] = long(c.i);
     std::vector<TumAssociation> out;
-    for (std::size_t i = 0; i < rgb.size(); ++i)
-      if (nearest[i] >= 0) out.push_back({rgb[i], depth[std::size_t(nearest[i])]});
+    for (std::size_t j = 0; j < depth.size(); ++j)
+      if (nearest[j] >= 0) out.push_back({rgb[std::size_t(nearest[j])], depth[j]});
     return out;
   }
   std::vector<char> used_rgb(rgb.size(), 0), used_depth(depth.size(), 0);
@@ -162,7 +162,9 @@ Frame TumFolderSource::read(std::size_t i) const {
   const TumAssociation& a = pairs_.at(i);
   Frame f;
   f.index = i;
-  f.timestamp = a.rgb.timestamp;
+  // The pose a frame yields is where the camera was when the depth image was taken: ICP and the TSDF
+  // see only depth, and colour may be up to max_time_diff away.
+  f.timestamp = a.depth.timestamp;
   f.camera = camera_;
   f.rgb = loadColour((fs::path(folder_) / a.rgb.file).string(), camera_.width, camera_.height);
   f.depth = loadTumDepth((fs::path(folder_) / a.depth.file).string(), camera_.width, camera_.height);

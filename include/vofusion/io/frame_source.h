@@ -40,7 +40,7 @@ struct SourceOptions {
   std::optional<std::string> intrinsics;  // preset or "fx,fy,cx,cy"; overrides what the data says
   std::size_t max_frames = 0;             // 0 = all
   double max_time_diff = 0.02;            // s, colour<->depth association (TUM benchmark tolerance)
-  bool unique_depth = false;              // TUM: each depth frame used once (associate.py), else nearest
+  bool unique_depth = false;              // TUM: one-to-one pairs (associate.py), else nearest colour per depth frame
 };
 
 // Detects the kind of input: a directory with rgb.txt/depth.txt (TUM), a *.rawlog file, or the

@@ -22,10 +22,11 @@ std::vector<TumEntry> parseTumList(const std::string& text, const std::string& o
 struct TumAssociation {
   TumEntry rgb, depth;
 };
-// Colour frames paired with depth frames, |dt| <= max_diff, in colour-time order.
-// one_to_one = true is the benchmark's associate.py (greedy by |dt|, each depth frame used once);
-// false (the default for sources) gives every colour frame its nearest depth frame, so no colour
-// frame is lost when the depth stream skips one (fr1_xyz first300: 300 pairs instead of 294).
+// Colour and depth frames paired within max_diff, in time order.
+// one_to_one = true is the benchmark's associate.py (greedy by |dt|, each frame used once);
+// false (the default for sources) gives every depth frame its nearest colour frame, so every depth
+// image is used once and a frame is stamped at its depth capture (fr1_xyz first300: 300 pairs; the
+// one-to-one rule keeps 294).
 std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const std::vector<TumEntry>& depth,
                                       double max_diff, bool one_to_one = true);
 
