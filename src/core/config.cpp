@@ -58,3 +58,33 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
 std::string dumpConfig(const std::vector<ConfigSection>& known) { return defaultsOf(known).getContent(); }
 
 }  // namespace vofusion
+
+namespace vofusion {
+
+void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
+  for (const ConfigKey& k : keys)
+    std::visit(
+        [&](auto* v) {
+          using T = std::remove_pointer_t<decltype(v)>;
+          if constexpr (std::is_same_v<T, int>) *v = cfg.read_int(section, k.name, *v);
+          else if constexpr (std::is_same_v<T, float>) *v = cfg.read_float(section, k.name, *v);
+          else if constexpr (std::is_same_v<T, double>) *v = cfg.read_double(section, k.name, *v);
+          else if constexpr (std::is_same_v<T, bool>) *v = cfg.read_bool(section, k.name, *v);
+          else *v = cfg.read_string(section, k.name, *v);
+        },
+        k.value);
+}
+
+void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
+  for (const ConfigKey& k : keys)
+    std::visit(
+        [&](auto* v) {
+          using T = std::remove_pointer_t<decltype(v)>;
+          if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), -1, 1, k.comment);
+          else if constexpr (std::is_same_v<T, float>) cfg.write(section, k.name, static_cast<double>(*v), -1, 1, k.comment);
+          else cfg.write(section, k.name, *v, -1, 1, k.comment);
+        },
+        k.value);
+}
+
+}  // namespace vofusion

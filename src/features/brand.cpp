@@ -6,30 +6,34 @@
 #include <random>
 
 #include <mrpt/config/CConfigFileBase.h>
+
+#include "vofusion/core/config.h"
 #include <opencv2/imgproc.hpp>
 
 namespace vofusion {
 
+namespace {
+// Every key of the section, once: loading and saving both walk this list.
+std::vector<ConfigKey> brandKeys(BrandParams& p) {
+  return {
+      {"patch_size", &p.patch_size, "pixels at depth <= 2 m"},
+      {"smoothing_sigma", &p.smoothing_sigma, "pixels, Gaussian on intensity"},
+      {"normal_angle", &p.normal_angle, "degrees, geometric test threshold"},
+      {"normal_window", &p.normal_window, "pixels, half-size of normal boxes"},
+      {"max_depth_step", &p.max_depth_step, "m, no normals across larger jumps"},
+      {"use_intensity", &p.use_intensity, "intensity tests on/off"},
+      {"use_geometry", &p.use_geometry, "normal/convexity tests on/off"},
+      {"oriented", &p.oriented, "rotate to canonical orientation"},
+  };
+}
+}  // namespace
+
 void BrandParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
-  patch_size = cfg.read_int(s, "patch_size", patch_size);
-  smoothing_sigma = cfg.read_double(s, "smoothing_sigma", smoothing_sigma);
-  normal_angle = cfg.read_double(s, "normal_angle", normal_angle);
-  normal_window = cfg.read_int(s, "normal_window", normal_window);
-  max_depth_step = cfg.read_double(s, "max_depth_step", max_depth_step);
-  use_intensity = cfg.read_bool(s, "use_intensity", use_intensity);
-  use_geometry = cfg.read_bool(s, "use_geometry", use_geometry);
-  oriented = cfg.read_bool(s, "oriented", oriented);
+  loadKeys(cfg, s, brandKeys(*this));
 }
 
 void BrandParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
-  cfg.write(s, "patch_size", patch_size, -1, -1, "pixels at depth <= 2 m");
-  cfg.write(s, "smoothing_sigma", smoothing_sigma, -1, -1, "pixels, Gaussian on intensity");
-  cfg.write(s, "normal_angle", normal_angle, -1, -1, "degrees, geometric test threshold");
-  cfg.write(s, "normal_window", normal_window, -1, -1, "pixels, half-size of normal boxes");
-  cfg.write(s, "max_depth_step", max_depth_step, -1, -1, "m, no normals across larger jumps");
-  cfg.write(s, "use_intensity", use_intensity, -1, -1, "intensity tests on/off");
-  cfg.write(s, "use_geometry", use_geometry, -1, -1, "normal/convexity tests on/off");
-  cfg.write(s, "oriented", oriented, -1, -1, "rotate to canonical orientation");
+  saveKeys(cfg, s, brandKeys(const_cast<BrandParams&>(*this)));
 }
 
 cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& c) {

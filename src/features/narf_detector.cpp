@@ -7,26 +7,34 @@
 #include <pcl/range_image/range_image_planar.h>
 #include <mrpt/config/CConfigFileBase.h>
 
+#include "vofusion/core/config.h"
+
 #include "vofusion/features/narf_detector.h"
 
 namespace vofusion {
 
+namespace {
+// Every key of the section, once: loading and saving both walk this list.
+std::vector<ConfigKey> narfKeys(NarfParams& p) {
+  return {
+      {"support_size", &p.support_size, "m, area covered by a keypoint"},
+      {"downsample", &p.downsample, "factor on the depth image (1 = full res)"},
+      {"max_points", &p.max_points, "strongest kept, 0 = all"},
+      {"min_interest_value", &p.min_interest_value, "[0,1]"},
+      {"threads", &p.threads, "OpenMP threads inside PCL's NARF"},
+      {"recursive_scale_reduction", &p.recursive_scale_reduction, "PCL speed-up on near surfaces"},
+  };
+}
+}  // namespace
+
 void NarfParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
-  support_size = cfg.read_double(s, "support_size", support_size);
-  downsample = std::max(1, cfg.read_int(s, "downsample", downsample));
-  max_points = cfg.read_int(s, "max_points", max_points);
-  min_interest_value = cfg.read_double(s, "min_interest_value", min_interest_value);
-  threads = std::max(1, cfg.read_int(s, "threads", threads));
-  recursive_scale_reduction = cfg.read_bool(s, "recursive_scale_reduction", recursive_scale_reduction);
+  loadKeys(cfg, s, narfKeys(*this));
+  downsample = std::max(1, downsample);
+  threads = std::max(1, threads);
 }
 
 void NarfParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
-  cfg.write(s, "support_size", support_size, -1, -1, "m, area covered by a keypoint");
-  cfg.write(s, "downsample", downsample, -1, -1, "factor on the depth image (1 = full res)");
-  cfg.write(s, "max_points", max_points, -1, -1, "strongest kept, 0 = all");
-  cfg.write(s, "min_interest_value", min_interest_value, -1, -1, "[0,1]");
-  cfg.write(s, "threads", threads, -1, -1, "OpenMP threads inside PCL's NARF");
-  cfg.write(s, "recursive_scale_reduction", recursive_scale_reduction, -1, -1, "PCL speed-up on near surfaces");
+  saveKeys(cfg, s, narfKeys(const_cast<NarfParams&>(*this)));
 }
 
 cv::Mat downsampleDepth(const cv::Mat& depth, int factor) {

@@ -5,24 +5,31 @@
 #include <cstdint>
 
 #include <mrpt/config/CConfigFileBase.h>
+
+#include "vofusion/core/config.h"
 #include <opencv2/imgproc.hpp>
 
 namespace vofusion {
 
+namespace {
+// Every key of the section, once: loading and saving both walk this list.
+std::vector<ConfigKey> starKeys(StarParams& p) {
+  return {
+      {"max_size", &p.max_size, "largest filter size, pixels"},
+      {"response_threshold", &p.response_threshold, "minimum |response|, grey levels"},
+      {"line_threshold_projected", &p.line_threshold_projected, "Harris trace^2/det limit"},
+      {"line_threshold_binarized", &p.line_threshold_binarized, "same, on the scale map"},
+      {"suppress_nonmax_size", &p.suppress_nonmax_size, "non-max window, pixels"},
+  };
+}
+}  // namespace
+
 void StarParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
-  max_size = cfg.read_int(s, "max_size", max_size);
-  response_threshold = cfg.read_int(s, "response_threshold", response_threshold);
-  line_threshold_projected = cfg.read_int(s, "line_threshold_projected", line_threshold_projected);
-  line_threshold_binarized = cfg.read_int(s, "line_threshold_binarized", line_threshold_binarized);
-  suppress_nonmax_size = cfg.read_int(s, "suppress_nonmax_size", suppress_nonmax_size);
+  loadKeys(cfg, s, starKeys(*this));
 }
 
 void StarParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
-  cfg.write(s, "max_size", max_size, -1, -1, "largest filter size, pixels");
-  cfg.write(s, "response_threshold", response_threshold, -1, -1, "minimum |response|, grey levels");
-  cfg.write(s, "line_threshold_projected", line_threshold_projected, -1, -1, "Harris trace^2/det limit");
-  cfg.write(s, "line_threshold_binarized", line_threshold_binarized, -1, -1, "same, on the scale map");
-  cfg.write(s, "suppress_nonmax_size", suppress_nonmax_size, -1, -1, "non-max window, pixels");
+  saveKeys(cfg, s, starKeys(const_cast<StarParams&>(*this)));
 }
 
 namespace {

@@ -1,9 +1,7 @@
 // [kinfu] INI section. One table lists every key, so loading and saving can never disagree.
-#include <functional>
-#include <variant>
-
 #include <mrpt/config/CConfigFileBase.h>
 
+#include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/fusion/kinfu.h"
 
@@ -11,13 +9,7 @@ namespace vofusion {
 
 namespace {
 
-struct Key {
-  const char* name;
-  std::variant<float*, int*, double*, bool*> value;
-  const char* comment;  // unit and meaning, written next to the value
-};
-
-std::vector<Key> keys(KinFuParams& p) {
+std::vector<ConfigKey> keys(KinFuParams& p) {
   return {
       {"volume_voxels", &p.tsdf.volume_voxels, "voxels per volume edge (multiple of 8)"},
       {"voxel_size", &p.tsdf.voxel_size, "m"},
@@ -53,17 +45,7 @@ std::vector<Key> keys(KinFuParams& p) {
 }  // namespace
 
 void KinFuParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) {
-  for (const Key& k : keys(*this)) {
-    std::visit(
-        [&](auto* v) {
-          using T = std::remove_pointer_t<decltype(v)>;
-          if constexpr (std::is_same_v<T, float>) *v = cfg.read_float(section, k.name, *v);
-          else if constexpr (std::is_same_v<T, int>) *v = cfg.read_int(section, k.name, *v);
-          else if constexpr (std::is_same_v<T, double>) *v = cfg.read_double(section, k.name, *v);
-          else *v = cfg.read_bool(section, k.name, *v);
-        },
-        k.value);
-  }
+  loadKeys(cfg, section, keys(*this));
   const std::string where = "[" + section + "]";
   if (tsdf.volume_voxels < 8 || tsdf.volume_voxels % 8 != 0)
     throw InputError(where, "volume_voxels must be a positive multiple of 8");
@@ -74,16 +56,7 @@ void KinFuParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
 }
 
 void KinFuParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const {
-  for (const Key& k : keys(const_cast<KinFuParams&>(*this))) {
-    std::visit(
-        [&](auto* v) {
-          using T = std::remove_pointer_t<decltype(v)>;
-          if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), -1, 12, k.comment);
-          else if constexpr (std::is_same_v<T, int>) cfg.write(section, k.name, *v, -1, 12, k.comment);
-          else cfg.write(section, k.name, static_cast<double>(*v), -1, 12, k.comment);
-        },
-        k.value);
-  }
+  saveKeys(cfg, section, keys(const_cast<KinFuParams&>(*this)));
 }
 
 }  // namespace vofusion

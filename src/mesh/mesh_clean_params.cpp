@@ -5,42 +5,40 @@
 
 #include <mrpt/config/CConfigFileBase.h>
 
+#include "vofusion/core/config.h"
+
 #include "vofusion/mesh/mesh_clean.h"
 
 namespace vofusion {
 
-void MeshCleanParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, const std::string& s) {
-  repair = c.read_bool(s, "repair", repair);
-  weld_distance = c.read_double(s, "weld_distance", weld_distance);
-  min_component_faces = c.read_int(s, "min_component_faces", min_component_faces);
-  min_component_area = c.read_double(s, "min_component_area", min_component_area);
-  max_hole_perimeter = c.read_double(s, "max_hole_perimeter", max_hole_perimeter);
-  max_hole_edges = c.read_int(s, "max_hole_edges", max_hole_edges);
-  hole_fairing = c.read_bool(s, "hole_fairing", hole_fairing);
-  target_faces = c.read_int(s, "target_faces", target_faces);
-  target_edge_length = c.read_double(s, "target_edge_length", target_edge_length);
-  smooth_iterations = c.read_int(s, "smooth_iterations", smooth_iterations);
-  smooth_time = c.read_double(s, "smooth_time", smooth_time);
-  relax_iterations = c.read_int(s, "relax_iterations", relax_iterations);
-  orient_closed_outward = c.read_bool(s, "orient_closed_outward", orient_closed_outward);
-  recompute_normals = c.read_bool(s, "recompute_normals", recompute_normals);
+namespace {
+// Every key of the section, once: loading and saving both walk this list.
+std::vector<ConfigKey> meshCleanKeys(MeshCleanParams& p) {
+  return {
+      {"repair", &p.repair, "merge duplicates, drop degenerate/duplicate faces, orient, make manifold, stitch"},
+      {"weld_distance", &p.weld_distance, "m, also merge vertices closer than this (0: exact duplicates only)"},
+      {"min_component_faces", &p.min_component_faces, "faces, smaller connected components are removed (0: off)"},
+      {"min_component_area", &p.min_component_area, "m^2, smaller connected components are removed (0: off)"},
+      {"max_hole_perimeter", &p.max_hole_perimeter, "m, longer hole borders stay open (0: fill no holes)"},
+      {"max_hole_edges", &p.max_hole_edges, "edges, hole borders with more edges stay open"},
+      {"hole_fairing", &p.hole_fairing, "fair (smooth) hole patches; false: flat refined patch"},
+      {"target_faces", &p.target_faces, "faces, edge-collapse simplification target (0: off)"},
+      {"target_edge_length", &p.target_edge_length, "m, simplify until no shorter edge is left (0: off)"},
+      {"smooth_iterations", &p.smooth_iterations, "iterations of curvature-flow shape smoothing (0: off)"},
+      {"smooth_time", &p.smooth_time, "time step of the curvature flow per iteration"},
+      {"relax_iterations", &p.relax_iterations, "iterations of tangential relaxation (0: off)"},
+      {"orient_closed_outward", &p.orient_closed_outward, "orient closed results with normals outward"},
+      {"recompute_normals", &p.recompute_normals, "write fresh vertex normals (false: none written)"},
+  };
+}
+}  // namespace
+
+void MeshCleanParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
+  loadKeys(cfg, s, meshCleanKeys(*this));
 }
 
-void MeshCleanParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
-  c.write(s, "repair", repair, -1, 1, "merge duplicates, drop degenerate/duplicate faces, orient, make manifold, stitch");
-  c.write(s, "weld_distance", weld_distance, -1, 1, "m, also merge vertices closer than this (0: exact duplicates only)");
-  c.write(s, "min_component_faces", min_component_faces, -1, 1, "faces, smaller connected components are removed (0: off)");
-  c.write(s, "min_component_area", min_component_area, -1, 1, "m^2, smaller connected components are removed (0: off)");
-  c.write(s, "max_hole_perimeter", max_hole_perimeter, -1, 1, "m, longer hole borders stay open (0: fill no holes)");
-  c.write(s, "max_hole_edges", max_hole_edges, -1, 1, "edges, hole borders with more edges stay open");
-  c.write(s, "hole_fairing", hole_fairing, -1, 1, "fair (smooth) hole patches; false: flat refined patch");
-  c.write(s, "target_faces", target_faces, -1, 1, "faces, edge-collapse simplification target (0: off)");
-  c.write(s, "target_edge_length", target_edge_length, -1, 1, "m, simplify until no shorter edge is left (0: off)");
-  c.write(s, "smooth_iterations", smooth_iterations, -1, 1, "iterations of curvature-flow shape smoothing (0: off)");
-  c.write(s, "smooth_time", smooth_time, -1, 1, "time step of the curvature flow per iteration");
-  c.write(s, "relax_iterations", relax_iterations, -1, 1, "iterations of tangential relaxation (0: off)");
-  c.write(s, "orient_closed_outward", orient_closed_outward, -1, 1, "orient closed results with normals outward");
-  c.write(s, "recompute_normals", recompute_normals, -1, 1, "write fresh vertex normals (false: none written)");
+void MeshCleanParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
+  saveKeys(cfg, s, meshCleanKeys(const_cast<MeshCleanParams&>(*this)));
 }
 
 static std::string jsonString(const std::string& s) {

@@ -13,6 +13,7 @@
 #include <mrpt/config/CConfigFileBase.h>
 
 #include "vofusion/core/atomic_file.h"
+#include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/io/rawlog.h"
@@ -24,26 +25,29 @@ using nlohmann::json;
 
 namespace vofusion {
 
+namespace {
+// Every [output] key, once: loading and saving both walk this list.
+std::vector<ConfigKey> outputKeys(OutputParams& p) {
+  return {
+      {"write_rawlog", &p.write_rawlog, "poses.rawlog: observations + odometry actions + fused poses"},
+      {"save_raw_mesh", &p.save_raw_mesh, "also mesh_raw.ply (marching cubes before CGAL post-processing)"},
+      {"clean_mesh", &p.clean_mesh, "CGAL post-processing with the [mesh] parameters"},
+      {"frustum_every", &p.frustum_every, "frames between camera frustums in scene.3Dscene"},
+      {"image_width", &p.image_width, "px, mesh.png and trajectory.png"},
+      {"image_height", &p.image_height, "px"},
+      {"rpe_delta", &p.rpe_delta, "s, pose-pair spacing of the relative pose error in summary.json"},
+  };
+}
+}  // namespace
+
 void OutputParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, const std::string& s) {
-  MRPT_LOAD_CONFIG_VAR(write_rawlog, bool, c, s);
-  MRPT_LOAD_CONFIG_VAR(save_raw_mesh, bool, c, s);
-  MRPT_LOAD_CONFIG_VAR(clean_mesh, bool, c, s);
-  MRPT_LOAD_CONFIG_VAR(frustum_every, int, c, s);
-  MRPT_LOAD_CONFIG_VAR(image_width, int, c, s);
-  MRPT_LOAD_CONFIG_VAR(image_height, int, c, s);
-  MRPT_LOAD_CONFIG_VAR(rpe_delta, double, c, s);
+  loadKeys(c, s, outputKeys(*this));
   if (frustum_every < 1 || image_width < 64 || image_height < 64 || !(rpe_delta > 0))
     throw InputError("[" + s + "]", "out-of-range value (frustum_every >= 1, image size >= 64 px, rpe_delta > 0)");
 }
 
 void OutputParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
-  MRPT_SAVE_CONFIG_VAR_COMMENT(write_rawlog, "poses.rawlog: observations + odometry actions + fused poses");
-  MRPT_SAVE_CONFIG_VAR_COMMENT(save_raw_mesh, "also mesh_raw.ply (marching cubes before CGAL post-processing)");
-  MRPT_SAVE_CONFIG_VAR_COMMENT(clean_mesh, "CGAL post-processing with the [mesh] parameters");
-  MRPT_SAVE_CONFIG_VAR_COMMENT(frustum_every, "frames between camera frustums in scene.3Dscene");
-  MRPT_SAVE_CONFIG_VAR_COMMENT(image_width, "px, mesh.png and trajectory.png");
-  MRPT_SAVE_CONFIG_VAR_COMMENT(image_height, "px");
-  MRPT_SAVE_CONFIG_VAR_COMMENT(rpe_delta, "s, pose-pair spacing of the relative pose error in summary.json");
+  saveKeys(c, s, outputKeys(const_cast<OutputParams&>(*this)));
 }
 
 double peakMemoryMiB() {

@@ -4,6 +4,7 @@
 // a user's file can be checked for typos ("unknown key") against the defaults themselves.
 #include <string>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include <mrpt/config/CConfigFileMemory.h>
@@ -25,5 +26,19 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
 
 // The defaults of all given stages as INI text (for --dump-config and the documented share/ file).
 std::string dumpConfig(const std::vector<ConfigSection>& known);
+
+}  // namespace vofusion
+
+namespace vofusion {
+
+// One INI key bound to a parameter field. A stage lists its keys once and both loading and saving
+// walk that list, so the two can never disagree.
+struct ConfigKey {
+  const char* name;
+  std::variant<int*, float*, double*, bool*, std::string*> value;
+  const char* comment;  // unit and meaning, written next to the value
+};
+void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
+void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
 
 }  // namespace vofusion
