@@ -10,6 +10,8 @@
 #include "vofusion/core/config.h"
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion {
 
 namespace {
@@ -41,15 +43,14 @@ cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& c) {
   cv::Mat pts(depth.size(), CV_32FC3);
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float ifx = float(1.0 / c.fx), ify = float(1.0 / c.fy), cx = float(c.cx), cy = float(c.cy);
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < depth.rows; ++y) {
+  parallelFor(0, depth.rows, [&](int y) {
     const float* d = depth.ptr<float>(y);
     cv::Vec3f* p = pts.ptr<cv::Vec3f>(y);
     for (int x = 0; x < depth.cols; ++x) {
       const float z = d[x];
       p[x] = z > 0.f ? cv::Vec3f((x - cx) * z * ifx, (y - cy) * z * ify, z) : cv::Vec3f(nan, nan, nan);
     }
-  }
+  });
   return pts;
 }
 
@@ -84,8 +85,8 @@ cv::Mat computeNormalMap(const cv::Mat& points, int w, float max_depth_step) {
   };
   // Evaluated on every second pixel and copied to its 2x2 block: the boxes are 2w+1 wide, so
   // neighbouring normals are nearly equal anyway, and this is 4x cheaper.
-#pragma omp parallel for schedule(static)
-  for (int y = w; y < rows - w - 1; y += 2) {
+  parallelFor(0, std::max(0, (rows - 2 * w) / 2), [&](int i) {
+    const int y = w + 2 * i;
     cv::Vec3f* out = normals.ptr<cv::Vec3f>(y);
     cv::Vec3f* out2 = normals.ptr<cv::Vec3f>(y + 1);
     const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
@@ -103,7 +104,7 @@ cv::Mat computeNormalMap(const cv::Mat& points, int w, float max_depth_step) {
       if (n.dot(cv::Vec3d(p[x])) > 0) n = -n;  // face the camera
       out[x] = out[x + 1] = out2[x] = out2[x + 1] = cv::Vec3f(n);
     }
-  }
+  });
   return normals;
 }
 
@@ -143,16 +144,15 @@ void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, 
   std::vector<char> ok(keypoints.size(), 0);
   cv::Mat desc(int(keypoints.size()), 32, CV_8U, cv::Scalar(0));
 
-#pragma omp parallel for schedule(dynamic, 16)
-  for (int k = 0; k < int(keypoints.size()); ++k) {
+  parallelFor(0, int(keypoints.size()), [&](int k) {
     cv::KeyPoint kp = keypoints[k];
     const int kx = cvRound(kp.pt.x), ky = cvRound(kp.pt.y);
-    if (kx < 0 || ky < 0 || kx >= cols || ky >= rows) continue;
+    if (kx < 0 || ky < 0 || kx >= cols || ky >= rows) return;
     const float z = points.at<cv::Vec3f>(ky, kx)[2];
-    if (!std::isfinite(z)) continue;
+    if (!std::isfinite(z)) return;
     const float S = float(params_.patch_size * scaleForDepth(z));
     const float reach = S * 0.5f * 1.4143f + 1.f;  // rotated patch corner
-    if (kx - reach < 1 || ky - reach < 1 || kx + reach > cols - 2 || ky + reach > rows - 2) continue;
+    if (kx - reach < 1 || ky - reach < 1 || kx + reach > cols - 2 || ky + reach > rows - 2) return;
 
     float angle = 0.f;
     if (params_.oriented) {
@@ -196,7 +196,7 @@ void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, 
     if (kp.angle < 0) kp.angle += 360.f;
     kept[k] = kp;
     ok[k] = 1;
-  }
+  }, 16);
   std::vector<cv::KeyPoint> out;
   cv::Mat out_desc(0, 32, CV_8U);
   out.reserve(keypoints.size());

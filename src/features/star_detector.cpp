@@ -9,6 +9,8 @@
 #include "vofusion/core/config.h"
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion {
 
 namespace {
@@ -120,8 +122,7 @@ int computeResponses(const cv::Mat& img, int max_size, cv::Mat& responses, cv::M
     inv_inner[p] = 1.f / inner;
   }
 
-#pragma omp parallel for schedule(static)
-  for (int y = border; y < rows - border; ++y) {
+  parallelFor(border, rows - border, [&](int y) {
     float* r = responses.ptr<float>(y);
     short* sz = sizes.ptr<short>(y);
     // Row pointers for every filter's 8 corners.
@@ -155,7 +156,7 @@ int computeResponses(const cv::Mat& img, int max_size, cv::Mat& responses, cv::M
       r[x] = best;
       sz[x] = static_cast<short>(best_size);
     }
-  }
+  });
   return border;
 }
 
@@ -211,8 +212,9 @@ std::vector<cv::KeyPoint> detectStar(const cv::Mat& gray, const StarParams& p) {
   // Tiles of (d+1)^2 pixels: each proposes its strongest positive and negative response, kept if
   // it is the extremum of the (2d+1)^2 window around it, at an interior scale and not line-like.
   std::vector<std::vector<cv::KeyPoint>> per_row(std::max(0, rows));
-#pragma omp parallel for schedule(dynamic, 4)
-  for (int y = border; y < rows - border; y += d + 1) {
+  const int tile = d + 1, tile_rows = std::max(0, (rows - 2 * border + d) / tile);
+  parallelFor(0, tile_rows, [&](int ty) {
+    const int y = border + ty * tile;
     auto& out = per_row[y];
     for (int x = border; x < cols - border; x += d + 1) {
       float max_r = float(p.response_threshold), min_r = -float(p.response_threshold);
@@ -235,7 +237,7 @@ std::vector<cv::KeyPoint> detectStar(const cv::Mat& gray, const StarParams& p) {
         out.emplace_back(float(pt.x), float(pt.y), float(size), -1.f, val);
       }
     }
-  }
+  }, 4);
   std::vector<cv::KeyPoint> keypoints;
   for (auto& r : per_row) keypoints.insert(keypoints.end(), r.begin(), r.end());
   return keypoints;

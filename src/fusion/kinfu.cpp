@@ -9,6 +9,8 @@
 
 #include "vofusion/core/errors.h"
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion {
 
 using namespace fusion;
@@ -60,14 +62,21 @@ struct KinFu::Impl {
   Eigen::Isometry3d model_pose = Eigen::Isometry3d::Identity();
   bool have_model = false;
   KinFuStats stats;
+  // What track() leaves for fuse(): the frame, its finest tracking level (ray-cast hint) and cameras.
+  struct Pending {
+    bool valid = false;
+    cv::Mat depth, rgb, hint;
+    CameraIntrinsics cam, track_cam;
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  } pending;
 
   Eigen::Vector3f focusPoint(const Eigen::Isometry3d& T) const {
     return (T.translation() + T.linear().col(2) * params.focus_distance).cast<float>();
   }
 
-  void raycastModel(const cv::Mat& hint, const CameraIntrinsics& cam, StageTimes& times) {
+  void raycastModel(const Eigen::Isometry3d& from, const cv::Mat& hint, const CameraIntrinsics& cam, StageTimes& times) {
     const auto t0 = std::chrono::steady_clock::now();
-    RaycastMaps maps = volume->raycast(pose.cast<float>(), cam, &hint, false);
+    RaycastMaps maps = volume->raycast(from.cast<float>(), cam, &hint, false);
     const int levels = std::max(1, params.preprocess.levels);
     model_vertices.assign(levels, cv::Mat());
     model_normals.assign(levels, cv::Mat());
@@ -75,7 +84,7 @@ struct KinFu::Impl {
     model_normals[0] = maps.normals;
     for (int l = 1; l < levels; ++l)
       downsampleMaps(model_vertices[l - 1], model_normals[l - 1], model_vertices[l], model_normals[l]);
-    model_pose = pose;
+    model_pose = from;
     have_model = true;
     times.add("raycast", seconds(t0));
   }
@@ -92,7 +101,14 @@ KinFu::KinFu(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CP
 KinFu::~KinFu() = default;
 
 FusionResult KinFu::process(const Frame& frame, const OdometryResult* odom) {
+  FusionResult res = track(frame, odom);
+  fuse(res);
+  return res;
+}
+
+FusionResult KinFu::track(const Frame& frame, const OdometryResult* odom) {
   Impl& s = *impl_;
+  s.pending.valid = false;
   const KinFuParams& P = s.params;
   FusionResult res;
   if (frame.depth.empty() || frame.depth.type() != CV_32FC1) {
@@ -174,32 +190,44 @@ FusionResult KinFu::process(const Frame& frame, const OdometryResult* odom) {
   if (res.tracked) s.pose = new_pose;
   res.pose = toMrpt(s.pose);
 
-  // Fuse, move the volume with the camera, and predict the surface for the next frame.
-  if (res.tracked && (!res.fell_back || P.integrate_on_fallback)) {
-    t0 = std::chrono::steady_clock::now();
-    if (s.volume->shiftIfNeeded(s.focusPoint(s.pose), P.shift_threshold)) {
-      res.shifted = true;
-      ++s.stats.shifts;
-    }
-    res.times.add("shift", seconds(t0));
-    t0 = std::chrono::steady_clock::now();
-    const cv::Mat fuse_depth = P.integrate_filtered && P.tracking_downsample == 1 ? levels[0].depth : frame.depth;
-    s.volume->integrate(fuse_depth, frame.rgb, cam, s.pose.cast<float>());
-    res.times.add("integrate", seconds(t0));
-    res.integrated = true;
-    s.raycastModel(levels[0].depth, track_cam, res.times);
-  } else if (res.tracked) {
-    // Not fused (fallback pose): re-predict the model from the new pose so ICP keeps up.
-    s.raycastModel(cv::Mat(), track_cam, res.times);
-  }
-
   ++s.stats.frames;
   if (res.tracked) ++s.stats.tracked;
   if (res.fell_back) ++s.stats.fell_back;
   if (res.degenerate_dims > 0 && res.reason.empty()) ++s.stats.degenerate;
   if (!res.tracked) ++s.stats.lost;
   s.stats.times.merge(res.times);
+  if (res.tracked)
+    s.pending = {true, P.integrate_filtered && P.tracking_downsample == 1 ? levels[0].depth : frame.depth, frame.rgb,
+                 levels[0].depth, cam, track_cam, s.pose};
   return res;
+}
+
+void KinFu::fuse(FusionResult& res) {
+  Impl& s = *impl_;
+  const KinFuParams& P = s.params;
+  if (!s.pending.valid) return;
+  s.pending.valid = false;
+  const Impl::Pending& f = s.pending;
+  StageTimes times;
+  // Fuse, move the volume with the camera, and predict the surface for the next frame.
+  if (!res.fell_back || P.integrate_on_fallback) {
+    auto t0 = std::chrono::steady_clock::now();
+    if (s.volume->shiftIfNeeded(s.focusPoint(f.pose), P.shift_threshold)) {
+      res.shifted = true;
+      ++s.stats.shifts;
+    }
+    times.add("shift", seconds(t0));
+    t0 = std::chrono::steady_clock::now();
+    s.volume->integrate(f.depth, f.rgb, f.cam, f.pose.cast<float>());
+    times.add("integrate", seconds(t0));
+    res.integrated = true;
+    s.raycastModel(f.pose, f.hint, f.track_cam, times);
+  } else {
+    // Not fused (fallback pose): re-predict the model from the new pose so ICP keeps up.
+    s.raycastModel(f.pose, cv::Mat(), f.track_cam, times);
+  }
+  res.times.merge(times);
+  s.stats.times.merge(times);
 }
 
 mrpt::poses::CPose3D KinFu::pose() const { return toMrpt(impl_->pose); }
@@ -211,8 +239,7 @@ cv::Mat KinFu::renderView(const mrpt::poses::CPose3D& cam_to_world, const Camera
   const RaycastMaps maps = impl_->volume->raycast(T, cam, nullptr, coloured);
   cv::Mat img(cam.height, cam.width, CV_8UC3, cv::Scalar(0, 0, 0));
   const Eigen::Vector3f c = T.translation();
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < cam.height; ++y) {
+  parallelFor(0, cam.height, [&](int y) {
     for (int x = 0; x < cam.width; ++x) {
       const cv::Vec3f& v = maps.vertices.ptr<cv::Vec3f>(y)[x];
       const cv::Vec3f& n = maps.normals.ptr<cv::Vec3f>(y)[x];
@@ -229,7 +256,7 @@ cv::Mat KinFu::renderView(const mrpt::poses::CPose3D& cam_to_world, const Camera
         img.ptr<cv::Vec3b>(y)[x] = cv::Vec3b(g, g, g);
       }
     }
-  }
+  });
   return img;
 }
 

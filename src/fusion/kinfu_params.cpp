@@ -39,6 +39,7 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"max_jump_rotation", &p.max_jump_rotation, "degrees, same for rotation"},
       {"integrate_on_fallback", &p.integrate_on_fallback, "fuse frames posed by the odometry fallback"},
       {"integrate_filtered", &p.integrate_filtered, "fuse bilateral-filtered instead of raw depth"},
+      {"overlap_fusion", &p.overlap_fusion, "fuse frame k beside the odometry of frame k+1 (same results, faster)"},
   };
 }
 

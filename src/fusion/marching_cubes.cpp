@@ -11,6 +11,8 @@
 // Lorensen & Cline lookup tables (Bourke's edgeTable/triTable), as shipped by PCL.
 #include <pcl/surface/marching_cubes.h>
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion::fusion {
 
 namespace {
@@ -75,8 +77,7 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
   std::vector<std::array<int, 8>> nbs(bricks.size());
 
   // Pass 1: the vertices on the edges each brick owns.
-#pragma omp parallel for schedule(dynamic, 8)
-  for (std::size_t i = 0; i < bricks.size(); ++i) {
+  parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
     int* nb = nbs[i].data();
     grid.neighbours(i, nb);
     BrickVertices& bv = verts[i];
@@ -101,7 +102,7 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
             bv.colours.push_back({mix(a->r, b->r), mix(a->g, b->g), mix(a->b, b->b)});
           }
         }
-  }
+  }, 8);
   std::uint32_t total = 0;
   for (auto& bv : verts) bv.base = total, total += static_cast<std::uint32_t>(bv.points.size());
   mesh.vertices.reserve(total);
@@ -113,8 +114,7 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
 
   // Pass 2: triangles of every cell whose 8 corners are usable.
   std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(bricks.size());
-#pragma omp parallel for schedule(dynamic, 8)
-  for (std::size_t i = 0; i < bricks.size(); ++i) {
+  parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
     const int* nb = nbs[i].data();
     auto vertexOf = [&](int cx, int cy, int cz, int axis) -> std::int64_t {
       const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
@@ -156,7 +156,7 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
                                 static_cast<std::uint32_t>(i2)});
           }
         }
-  }
+  }, 8);
   std::size_t nf = 0;
   for (const auto& f : faces) nf += f.size();
   mesh.faces.reserve(nf);

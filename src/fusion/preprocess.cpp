@@ -7,6 +7,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion::fusion {
 
 namespace {
@@ -19,15 +21,14 @@ constexpr std::size_t kParallelMinPixels = 100000;
 cv::Mat clipDepth(const cv::Mat& depth, float min_depth, float max_depth) {
   CV_Assert(depth.type() == CV_32FC1);
   cv::Mat out(depth.size(), CV_32FC1);
-#pragma omp parallel for schedule(static) if (depth.total() >= kParallelMinPixels)
-  for (int y = 0; y < depth.rows; ++y) {
+  parallelFor(0, depth.rows, [&](int y) {
     const float* s = depth.ptr<float>(y);
     float* d = out.ptr<float>(y);
     for (int x = 0; x < depth.cols; ++x) {
       const float z = s[x];
       d[x] = (z >= min_depth && z <= max_depth) ? z : 0.f;  // NaN fails both tests
     }
-  }
+  }, 1, depth.total() >= kParallelMinPixels);
   return out;
 }
 
@@ -53,8 +54,7 @@ cv::Mat bilateralFilterDepth(const cv::Mat& depth, float sigma_depth, float sigm
   for (int i = 0; i <= kBins; ++i) range[i] = std::exp(-0.5f * (i * bin) * (i * bin) / (sigma_depth * sigma_depth));
   const int w = depth.cols, h = depth.rows, n = static_cast<int>(offsets.size());
   cv::Mat out(depth.size(), CV_32FC1);
-#pragma omp parallel for schedule(static) if (depth.total() >= kParallelMinPixels)
-  for (int y = 0; y < h; ++y) {
+  parallelFor(0, h, [&](int y) {
     const float* s = depth.ptr<float>(y);
     float* d = out.ptr<float>(y);
     const bool inner_y = y >= r && y < h - r;
@@ -84,7 +84,7 @@ cv::Mat bilateralFilterDepth(const cv::Mat& depth, float sigma_depth, float sigm
       }
       d[x] = sum / wsum;  // the centre itself has weight 1
     }
-  }
+  }, 1, depth.total() >= kParallelMinPixels);
   return out;
 }
 
@@ -92,8 +92,7 @@ cv::Mat downsampleDepth(const cv::Mat& depth, float sigma_depth) {
   const int w = depth.cols / 2, h = depth.rows / 2;
   cv::Mat out(h, w, CV_32FC1);
   const float band = 3.f * sigma_depth;
-#pragma omp parallel for schedule(static) if (depth.total() >= kParallelMinPixels)
-  for (int y = 0; y < h; ++y) {
+  parallelFor(0, h, [&](int y) {
     const float* r0 = depth.ptr<float>(2 * y);
     const float* r1 = depth.ptr<float>(2 * y + 1);
     float* d = out.ptr<float>(y);
@@ -108,15 +107,14 @@ cv::Mat downsampleDepth(const cv::Mat& depth, float sigma_depth) {
         if (z > 0.f && z - nearest <= band) sum += z, ++n;
       d[x] = n ? sum / n : 0.f;
     }
-  }
+  }, 1, depth.total() >= kParallelMinPixels);
   return out;
 }
 
 cv::Mat depthToVertices(const cv::Mat& depth, const CameraIntrinsics& cam) {
   cv::Mat out(depth.size(), CV_32FC3);
   const float ifx = 1.f / cam.fx, ify = 1.f / cam.fy, cx = cam.cx, cy = cam.cy;
-#pragma omp parallel for schedule(static) if (depth.total() >= kParallelMinPixels)
-  for (int y = 0; y < depth.rows; ++y) {
+  parallelFor(0, depth.rows, [&](int y) {
     const float* s = depth.ptr<float>(y);
     cv::Vec3f* d = out.ptr<cv::Vec3f>(y);
     const float ry = (y - cy) * ify;
@@ -124,15 +122,14 @@ cv::Mat depthToVertices(const cv::Mat& depth, const CameraIntrinsics& cam) {
       const float z = s[x];
       d[x] = z > 0.f ? cv::Vec3f((x - cx) * ifx * z, ry * z, z) : cv::Vec3f(kNaN, kNaN, kNaN);
     }
-  }
+  }, 1, depth.total() >= kParallelMinPixels);
   return out;
 }
 
 cv::Mat verticesToNormals(const cv::Mat& vertices, float max_jump) {
   cv::Mat out(vertices.size(), CV_32FC3, cv::Scalar::all(kNaN));
   const int w = vertices.cols, h = vertices.rows;
-#pragma omp parallel for schedule(static) if (vertices.total() >= kParallelMinPixels)
-  for (int y = 1; y < h - 1; ++y) {
+  parallelFor(1, h - 1, [&](int y) {
     const cv::Vec3f* up = vertices.ptr<cv::Vec3f>(y - 1);
     const cv::Vec3f* row = vertices.ptr<cv::Vec3f>(y);
     const cv::Vec3f* down = vertices.ptr<cv::Vec3f>(y + 1);
@@ -153,7 +150,7 @@ cv::Mat verticesToNormals(const cv::Mat& vertices, float max_jump) {
       if (n.dot(c) > 0.f) n = -n;  // face the camera
       d[x] = n;
     }
-  }
+  }, 1, vertices.total() >= kParallelMinPixels);
   return out;
 }
 

@@ -8,12 +8,13 @@
 
 #include <Eigen/Dense>
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion::fusion {
 
 namespace {
 
-// Coarse levels run on one thread: their iterations take less than waking and joining OpenMP threads
-// on a loaded machine.
+// Coarse levels run on one thread: their iterations take less than handing rows out to the pool.
 constexpr std::size_t kParallelMinPixels = 30000;
 
 struct Accum {
@@ -22,7 +23,17 @@ struct Accum {
   double r2 = 0.0;
   double d2 = 0.0;  // squared distances of the inliers from the camera centre
   int n = 0;
+  int valid = 0;  // pixels with a vertex and a normal
 };
+
+void addAccum(Accum& total, const Accum& a) {
+  for (int i = 0; i < 21; ++i) total.A[i] += a.A[i];
+  for (int i = 0; i < 6; ++i) total.b[i] += a.b[i];
+  total.r2 += a.r2;
+  total.d2 += a.d2;
+  total.n += a.n;
+  total.valid += a.valid;
+}
 
 }  // namespace
 
@@ -31,8 +42,7 @@ void downsampleMaps(const cv::Mat& vertices, const cv::Mat& normals, cv::Mat& ve
   const int w = vertices.cols / 2, h = vertices.rows / 2;
   vertices_out.create(h, w, CV_32FC3);
   normals_out.create(h, w, CV_32FC3);
-#pragma omp parallel for schedule(static) if (vertices.total() >= kParallelMinPixels)
-  for (int y = 0; y < h; ++y) {
+  parallelFor(0, h, [&](int y) {
     cv::Vec3f* vo = vertices_out.ptr<cv::Vec3f>(y);
     cv::Vec3f* no = normals_out.ptr<cv::Vec3f>(y);
     for (int x = 0; x < w; ++x) {
@@ -55,7 +65,7 @@ void downsampleMaps(const cv::Mat& vertices, const cv::Mat& normals, cv::Mat& ve
         no[x] = ns * (1.f / len);
       }
     }
-  }
+  }, 1, vertices.total() >= kParallelMinPixels);
 }
 
 IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<cv::Mat>& model_vertices,
@@ -81,59 +91,47 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
       const Eigen::Isometry3f T = res.pose.cast<float>();
       const Eigen::Matrix3f R = T.linear();
       const Eigen::Vector3f t = T.translation();
-      Accum total;
-      int valid = 0;
-#pragma omp parallel if (lv.vertices.total() >= kParallelMinPixels)
-      {
-        Accum acc;
-        int nvalid = 0;
-#pragma omp for schedule(static) nowait
-        for (int y = 0; y < lv.vertices.rows; ++y) {
-          const cv::Vec3f* vrow = lv.vertices.ptr<cv::Vec3f>(y);
-          const cv::Vec3f* nrow = lv.normals.ptr<cv::Vec3f>(y);
-          for (int x = 0; x < lv.vertices.cols; ++x) {
-            const cv::Vec3f& vc = vrow[x];
-            const cv::Vec3f& nc = nrow[x];
-            if (std::isnan(vc[0]) || std::isnan(nc[0])) continue;
-            ++nvalid;
-            const Eigen::Vector3f vg = R * Eigen::Vector3f(vc[0], vc[1], vc[2]) + t;
-            const Eigen::Vector3f pm = Rm * vg + tm;  // in the model camera
-            if (pm.z() <= 0.f) continue;
-            const float uf = fx * pm.x() / pm.z() + cx, vf = fy * pm.y() / pm.z() + cy;
-            if (!(uf > -0.5f && vf > -0.5f && uf < mw - 0.5f && vf < mh - 0.5f)) continue;
-            const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
-            const cv::Vec3f& m = mv.ptr<cv::Vec3f>(v)[u];
-            const cv::Vec3f& n = mn.ptr<cv::Vec3f>(v)[u];
-            if (std::isnan(m[0]) || std::isnan(n[0])) continue;
-            const Eigen::Vector3f vm(m[0], m[1], m[2]), nm(n[0], n[1], n[2]);
-            const Eigen::Vector3f d = vg - vm;
-            if (d.squaredNorm() > max_d2) continue;
-            const Eigen::Vector3f ng = R * Eigen::Vector3f(nc[0], nc[1], nc[2]);
-            if (ng.dot(nm) < min_cos) continue;
-            const float r = nm.dot(d);
-            const Eigen::Vector3f pc = vg - t;
-            const Eigen::Vector3f rot = pc.cross(nm);
-            const double J[6] = {rot.x(), rot.y(), rot.z(), nm.x(), nm.y(), nm.z()};
-            int k = 0;
-            for (int i = 0; i < 6; ++i) {
-              for (int j = i; j < 6; ++j) acc.A[k++] += J[i] * J[j];
-              acc.b[i] -= J[i] * r;
+      // Rows in fixed chunks, summed in a fixed order: the same frame gives the same pose on every run.
+      const Accum total = parallelReduce(
+          0, lv.vertices.rows, Accum{},
+          [&](int y, Accum& acc) {
+            const cv::Vec3f* vrow = lv.vertices.ptr<cv::Vec3f>(y);
+            const cv::Vec3f* nrow = lv.normals.ptr<cv::Vec3f>(y);
+            for (int x = 0; x < lv.vertices.cols; ++x) {
+              const cv::Vec3f& vc = vrow[x];
+              const cv::Vec3f& nc = nrow[x];
+              if (std::isnan(vc[0]) || std::isnan(nc[0])) continue;
+              ++acc.valid;
+              const Eigen::Vector3f vg = R * Eigen::Vector3f(vc[0], vc[1], vc[2]) + t;
+              const Eigen::Vector3f pm = Rm * vg + tm;  // in the model camera
+              if (pm.z() <= 0.f) continue;
+              const float uf = fx * pm.x() / pm.z() + cx, vf = fy * pm.y() / pm.z() + cy;
+              if (!(uf > -0.5f && vf > -0.5f && uf < mw - 0.5f && vf < mh - 0.5f)) continue;
+              const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
+              const cv::Vec3f& m = mv.ptr<cv::Vec3f>(v)[u];
+              const cv::Vec3f& n = mn.ptr<cv::Vec3f>(v)[u];
+              if (std::isnan(m[0]) || std::isnan(n[0])) continue;
+              const Eigen::Vector3f vm(m[0], m[1], m[2]), nm(n[0], n[1], n[2]);
+              const Eigen::Vector3f d = vg - vm;
+              if (d.squaredNorm() > max_d2) continue;
+              const Eigen::Vector3f ng = R * Eigen::Vector3f(nc[0], nc[1], nc[2]);
+              if (ng.dot(nm) < min_cos) continue;
+              const float r = nm.dot(d);
+              const Eigen::Vector3f pc = vg - t;
+              const Eigen::Vector3f rot = pc.cross(nm);
+              const double J[6] = {rot.x(), rot.y(), rot.z(), nm.x(), nm.y(), nm.z()};
+              int k = 0;
+              for (int i = 0; i < 6; ++i) {
+                for (int j = i; j < 6; ++j) acc.A[k++] += J[i] * J[j];
+                acc.b[i] -= J[i] * r;
+              }
+              acc.r2 += static_cast<double>(r) * r;
+              acc.d2 += pc.squaredNorm();
+              ++acc.n;
             }
-            acc.r2 += static_cast<double>(r) * r;
-            acc.d2 += pc.squaredNorm();
-            ++acc.n;
-          }
-        }
-#pragma omp critical
-        {
-          for (int i = 0; i < 21; ++i) total.A[i] += acc.A[i];
-          for (int i = 0; i < 6; ++i) total.b[i] += acc.b[i];
-          total.r2 += acc.r2;
-          total.d2 += acc.d2;
-          total.n += acc.n;
-          valid += nvalid;
-        }
-      }
+          },
+          addAccum, 16, lv.vertices.total() >= kParallelMinPixels);
+      const int valid = total.valid;
       Eigen::Matrix<double, 6, 6> A;
       Eigen::Matrix<double, 6, 1> b;
       int k = 0;

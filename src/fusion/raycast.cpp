@@ -8,6 +8,8 @@
 
 #include "vofusion/fusion/tsdf_volume.h"
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion::fusion {
 
 namespace {
@@ -32,8 +34,7 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
   const Eigen::Vector3f hi = lo + Eigen::Vector3f::Constant(static_cast<float>(params_.volume_voxels - 1));
   const float z_near = params_.min_depth, z_far = params_.max_depth + trunc;
 
-#pragma omp parallel for schedule(dynamic, 4)
-  for (int y = 0; y < h; ++y) {
+  parallelFor(0, h, [&](int y) {
     cv::Vec3f* vrow = maps.vertices.ptr<cv::Vec3f>(y);
     cv::Vec3f* nrow = maps.normals.ptr<cv::Vec3f>(y);
     const float* hrow = use_hint ? depth_hint->ptr<float>(y) : nullptr;
@@ -126,7 +127,7 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
       };
 
       Eigen::Vector3f g;
-      const auto normalAt = [&](const Eigen::Vector3f& q) { return gradient(q, g) && g.squaredNorm() > 0.f; };
+      const auto normalAt = [&](const Eigen::Vector3f& q) { return cellGradient(q, g) && g.squaredNorm() > 0.f; };
       bool found = false;
       if (use_hint && hrow[x] > 0.f) {
         const float zh = hrow[x];
@@ -151,7 +152,7 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
         }
       }
     }
-  }
+  }, 4);
   return maps;
 }
 

@@ -1,9 +1,11 @@
 #include "vofusion/fusion/tsdf_volume.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 
+#include "vofusion/core/parallel.h"
 #include "vofusion/fusion/marching_cubes.h"
 
 namespace vofusion::fusion {
@@ -110,8 +112,8 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
 
   // 1. Bricks touched by the truncation band [z - trunc, z + trunc] of (a subsample of) the readings.
   std::fill(marks_.begin(), marks_.end(), 0);
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < h; y += step) {
+  parallelFor(0, (h + step - 1) / step, [&](int row_index) {
+    const int y = row_index * step;
     const float* row = depth.ptr<float>(y);
     for (int x = 0; x < w; x += step) {
       const float z = row[x];
@@ -121,13 +123,11 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
         const Eigen::Vector3f p = (R * (ray * (z + 0.5f * k * trunc)) + t) * inv_brick;
         const int s = slotOf(static_cast<int>(std::floor(p.x())), static_cast<int>(std::floor(p.y())),
                              static_cast<int>(std::floor(p.z())));
-        if (s >= 0) {
-#pragma omp atomic write
-          marks_[s] = 1;
-        }
+        // Many rows mark the same brick: a relaxed atomic store (all write the same 1).
+        if (s >= 0) __atomic_store_n(&marks_[s], std::uint8_t{1}, __ATOMIC_RELAXED);
       }
     }
-  }
+  });
 
   // 2. Allocate the touched bricks that are new (serial: the pool grows).
   std::vector<std::int32_t> touched;
@@ -151,10 +151,10 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
   const float inv_trunc = 1.f / trunc;
   float inv_count[256];  // 1 / (weight + 1)
   for (int i = 0; i < 256; ++i) inv_count[i] = 1.f / (i + 1);
-  std::size_t updated = 0;
-#pragma omp parallel for schedule(dynamic, 16) reduction(+ : updated)
-  for (std::size_t i = 0; i < touched.size(); ++i) {
+  std::atomic<std::size_t> updated{0};
+  parallelFor(0, static_cast<int>(touched.size()), [&](int i) {
     Brick& b = *pool_[touched[i]];
+    std::size_t brick_updates = 0;
     const Eigen::Vector3f p0 = Rt * ((b.coord * kBrickEdge).cast<float>() * vs) + tc;
     for (int z = 0; z < kBrickEdge; ++z) {
       for (int y = 0; y < kBrickEdge; ++y) {
@@ -198,19 +198,21 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
             vx.g = static_cast<std::uint8_t>((vx.g * wold + c[1]) / (wold + 1));
             vx.b = static_cast<std::uint8_t>((vx.b * wold + c[0]) / (wold + 1));
           }
-          ++updated;
+          ++brick_updates;
         }
       }
     }
-  }
-  return updated;
+    updated.fetch_add(brick_updates, std::memory_order_relaxed);
+  }, 16);
+  return updated.load();
 }
 
-bool TsdfVolume::trilinear(const Eigen::Vector3f& q, float& f) const {
+// The 8 voxels of the cell holding q (voxel units) and q's position in it; false when one of them is
+// outside the volume, in an unallocated brick or never observed.
+bool TsdfVolume::cell(const Eigen::Vector3f& q, const Voxel* (&v)[8], float& a, float& b, float& c) const {
   const float fx0 = std::floor(q.x()), fy0 = std::floor(q.y()), fz0 = std::floor(q.z());
   const int x0 = static_cast<int>(fx0), y0 = static_cast<int>(fy0), z0 = static_cast<int>(fz0);
-  const float a = q.x() - fx0, b = q.y() - fy0, c = q.z() - fz0;
-  const Voxel* v[8];
+  a = q.x() - fx0, b = q.y() - fy0, c = q.z() - fz0;
   if ((x0 & 7) != 7 && (y0 & 7) != 7 && (z0 & 7) != 7) {
     const Brick* br = brickAt(floorDiv8(x0), floorDiv8(y0), floorDiv8(z0));
     if (!br) return false;
@@ -224,12 +226,12 @@ bool TsdfVolume::trilinear(const Eigen::Vector3f& q, float& f) const {
     const int span = n_ * kBrickEdge;
     int slot_off[3][2], vox_off[3][2];
     constexpr int stride[3] = {1, kBrickEdge, kBrickEdge * kBrickEdge};
-    for (int a = 0; a < 3; ++a) {
+    for (int ax = 0; ax < 3; ++ax) {
       for (int k = 0; k < 2; ++k) {
-        const int u = lo[a] + k;  // voxel index relative to the volume's first voxel
+        const int u = lo[ax] + k;  // voxel index relative to the volume's first voxel
         if (static_cast<unsigned>(u) >= static_cast<unsigned>(span)) return false;
-        slot_off[a][k] = cyclic_[a][u >> 3];
-        vox_off[a][k] = stride[a] * ((u + origin_[a] * kBrickEdge) & 7);
+        slot_off[ax][k] = cyclic_[ax][u >> 3];
+        vox_off[ax][k] = stride[ax] * ((u + origin_[ax] * kBrickEdge) & 7);
       }
     }
     for (int i = 0; i < 8; ++i) {
@@ -241,12 +243,36 @@ bool TsdfVolume::trilinear(const Eigen::Vector3f& q, float& f) const {
   }
   for (const Voxel* p : v)
     if (p->weight == 0) return false;
+  return true;
+}
+
+bool TsdfVolume::trilinear(const Eigen::Vector3f& q, float& f) const {
+  const Voxel* v[8];
+  float a, b, c;
+  if (!cell(q, v, a, b, c)) return false;
   const float c00 = v[0]->tsdf + a * (v[1]->tsdf - v[0]->tsdf);
   const float c10 = v[2]->tsdf + a * (v[3]->tsdf - v[2]->tsdf);
   const float c01 = v[4]->tsdf + a * (v[5]->tsdf - v[4]->tsdf);
   const float c11 = v[6]->tsdf + a * (v[7]->tsdf - v[6]->tsdf);
   const float c0 = c00 + b * (c10 - c00), c1 = c01 + b * (c11 - c01);
   f = (c0 + c * (c1 - c0)) * (1.f / kTsdfScale);
+  return true;
+}
+
+bool TsdfVolume::cellGradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const {
+  const Voxel* v[8];
+  float a, b, c;
+  if (!cell(q, v, a, b, c)) return false;
+  float t[8];
+  for (int i = 0; i < 8; ++i) t[i] = v[i]->tsdf;
+  // Partial derivatives of the trilinear interpolant: per axis, the difference of the cell's two faces
+  // interpolated bilinearly at q.
+  const float dx00 = t[1] - t[0], dx10 = t[3] - t[2], dx01 = t[5] - t[4], dx11 = t[7] - t[6];
+  const float dy00 = t[2] - t[0], dy10 = t[3] - t[1], dy01 = t[6] - t[4], dy11 = t[7] - t[5];
+  const float dz00 = t[4] - t[0], dz10 = t[5] - t[1], dz01 = t[6] - t[2], dz11 = t[7] - t[3];
+  g.x() = (1 - b) * (1 - c) * dx00 + b * (1 - c) * dx10 + (1 - b) * c * dx01 + b * c * dx11;
+  g.y() = (1 - a) * (1 - c) * dy00 + a * (1 - c) * dy10 + (1 - a) * c * dy01 + a * c * dy11;
+  g.z() = (1 - a) * (1 - b) * dz00 + a * (1 - b) * dz10 + (1 - a) * b * dz01 + a * b * dz11;
   return true;
 }
 

@@ -2,6 +2,8 @@
 
 #include <chrono>
 
+#include <tbb/task_group.h>
+
 namespace vofusion {
 
 namespace {
@@ -24,6 +26,22 @@ struct Reconstruction::Impl {
   Trajectory trajectory;
   StageTimes times;
   std::size_t frames = 0, fallbacks = 0, lost = 0, odo_failures = 0;
+  // The fusion of the last frame (integrate + ray cast), running beside the next frame's odometry
+  // and image loading when overlap_fusion is on; `fusing_frame` keeps its images alive and unchanged.
+  tbb::task_group fusing;
+  bool fusing_pending = false;
+  FusionResult fusing_result;
+  Frame fusing_frame;
+
+  void waitFusion() {
+    if (!fusing_pending) return;
+    fusing.wait();  // rethrows what fuse() threw
+    fusing_pending = false;
+    times.merge(fusing_result.times);
+  }
+  ~Impl() {
+    if (fusing_pending) fusing.wait();
+  }
 };
 
 Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode)
@@ -51,9 +69,24 @@ FrameReport Reconstruction::process(const Frame& frame) {
     // The very first frame has no motion to estimate: not a failure.
     if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
   }
+  m.waitFusion();
   if (m.frames == 0 && frame.groundTruth)
     m.kinfu = std::make_unique<KinFu>(m.kinfu_params, m.mode, *frame.groundTruth);
-  const FusionResult f = m.kinfu->process(frame, r.odometry.success ? &r.odometry : nullptr);
+  const OdometryResult* odom = r.odometry.success ? &r.odometry : nullptr;
+  FusionResult f;
+  if (m.kinfu_params.overlap_fusion) {
+    // The caller may refill its frame's buffers before the fusion has read them.
+    m.fusing_frame = frame;
+    m.fusing_frame.depth = frame.depth.clone();
+    m.fusing_frame.rgb = frame.rgb.clone();
+    f = m.kinfu->track(m.fusing_frame, odom);
+    m.fusing_result = f;
+    m.fusing_result.times = StageTimes();
+    m.fusing_pending = true;
+    m.fusing.run([&m] { m.kinfu->fuse(m.fusing_result); });
+  } else {
+    f = m.kinfu->process(frame, odom);
+  }
   r.times.merge(f.times);
   r.tracked = f.tracked || m.frames == 0;
   r.fell_back = f.fell_back;
@@ -70,15 +103,25 @@ FrameReport Reconstruction::process(const Frame& frame) {
 
 TrackingMode Reconstruction::mode() const { return impl_->mode; }
 const Trajectory& Reconstruction::trajectory() const { return impl_->trajectory; }
-TriangleMesh Reconstruction::extractMesh() const { return impl_->kinfu->extractMesh(); }
+TriangleMesh Reconstruction::extractMesh() const {
+  impl_->waitFusion();
+  return impl_->kinfu->extractMesh();
+}
 cv::Mat Reconstruction::renderView(const CameraIntrinsics& cam) const {
+  impl_->waitFusion();
   return impl_->kinfu->renderView(impl_->kinfu->pose(), cam);
 }
-const StageTimes& Reconstruction::totalTimes() const { return impl_->times; }
+const StageTimes& Reconstruction::totalTimes() const {
+  impl_->waitFusion();
+  return impl_->times;
+}
 std::size_t Reconstruction::framesProcessed() const { return impl_->frames; }
 std::size_t Reconstruction::fallbacks() const { return impl_->fallbacks; }
 std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
-KinFuStats Reconstruction::fusionStats() const { return impl_->kinfu->stats(); }
+KinFuStats Reconstruction::fusionStats() const {
+  impl_->waitFusion();
+  return impl_->kinfu->stats();
+}
 
 }  // namespace vofusion

@@ -13,6 +13,7 @@
 #include <mrpt/opengl/CSetOfTriangles.h>
 
 #include "vofusion/core/atomic_file.h"
+#include "vofusion/core/parallel.h"
 #include "vofusion/core/errors.h"
 
 namespace vofusion {
@@ -42,23 +43,19 @@ static Eigen::Vector3d dominantPlaneNormal(const TriangleMesh& mesh, const Eigen
   }
   if (samples.empty()) return up;
   std::vector<double> score(samples.size(), 0.0);
-#pragma omp parallel for schedule(dynamic, 64)
-  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(samples.size()); ++i)
+  parallelFor(0, int(samples.size()), [&](int i) {
     for (const auto& s : samples)
       if (s.n.dot(samples[i].n) > cos_near) score[i] += s.area;
+  }, 64);
   Eigen::Vector3d best = samples[std::max_element(score.begin(), score.end()) - score.begin()].n;
   for (int it = 0; it < 3; ++it) {
-    double sx = 0, sy = 0, sz = 0;
-#pragma omp parallel for reduction(+ : sx, sy, sz) schedule(static)
-    for (std::ptrdiff_t f = 0; f < std::ptrdiff_t(mesh.faces.size()); ++f) {
-      const Eigen::Vector3d n = normalOf(std::size_t(f));  // length = 2 * area: area-weighted
-      if (n.dot(best) > cos_near * n.norm()) {
-        sx += n.x();
-        sy += n.y();
-        sz += n.z();
-      }
-    }
-    const Eigen::Vector3d m(sx, sy, sz);
+    const Eigen::Vector3d m = parallelReduce(
+        0, int(mesh.faces.size()), Eigen::Vector3d(Eigen::Vector3d::Zero()),
+        [&](int f, Eigen::Vector3d& sum) {
+          const Eigen::Vector3d n = normalOf(std::size_t(f));  // length = 2 * area: area-weighted
+          if (n.dot(best) > cos_near * n.norm()) sum += n;
+        },
+        [](Eigen::Vector3d& a, const Eigen::Vector3d& b) { a += b; }, 4096);
     if (m.norm() > 0) best = m.normalized();
   }
   return best;
@@ -111,8 +108,7 @@ static mrpt::opengl::CSetOfTriangles::Ptr meshTriangles(const TriangleMesh& mesh
   std::vector<mrpt::opengl::TTriangle> tris(mesh.faces.size());
   const bool colours = mesh.colors.size() == mesh.vertices.size();
   const bool normals = mesh.normals.size() == mesh.vertices.size();
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t f = 0; f < std::ptrdiff_t(mesh.faces.size()); ++f) {
+  parallelFor(0, int(mesh.faces.size()), [&](int f) {
     auto& t = tris[f];
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t i = mesh.faces[f][k];
@@ -128,7 +124,7 @@ static mrpt::opengl::CSetOfTriangles::Ptr meshTriangles(const TriangleMesh& mesh
       }
     else
       t.computeNormals();
-  }
+  }, 1024);
   auto obj = mrpt::opengl::CSetOfTriangles::Create();
   obj->setName("mesh");
   obj->insertTriangles(tris.begin(), tris.end());
@@ -143,9 +139,10 @@ static int frontFacesCameras(const TriangleMesh& mesh, const Trajectory& path) {
   const std::size_t step = std::max<std::size_t>(1, path.size() / 32);
   for (std::size_t i = 0; i < path.size(); i += step)
     cams.emplace_back(float(path[i].pose.x()), float(path[i].pose.y()), float(path[i].pose.z()));
-  double vote = 0, total = 0;
-#pragma omp parallel for reduction(+ : vote, total) schedule(static)
-  for (std::ptrdiff_t f = 0; f < std::ptrdiff_t(mesh.faces.size()); ++f) {
+  struct Votes {
+    double vote = 0, total = 0;
+  };
+  const Votes v = parallelReduce(0, int(mesh.faces.size()), Votes{}, [&](int f, Votes& acc) {
     const auto& a = mesh.vertices[mesh.faces[f][0]];
     const auto& b = mesh.vertices[mesh.faces[f][1]];
     const auto& c = mesh.vertices[mesh.faces[f][2]];
@@ -155,9 +152,10 @@ static int frontFacesCameras(const TriangleMesh& mesh, const Trajectory& path) {
     for (const auto& cam : cams)
       if ((cam - centre).squaredNorm() < (*best - centre).squaredNorm()) best = &cam;
     const Eigen::Vector3f to_cam = *best - centre;
-    vote += n.dot(to_cam) > 0 ? n.norm() : -n.norm();
-    total += n.norm();
-  }
+    acc.vote += n.dot(to_cam) > 0 ? n.norm() : -n.norm();
+    acc.total += n.norm();
+  }, [](Votes& a, const Votes& b) { a.vote += b.vote, a.total += b.total; }, 4096);
+  const double vote = v.vote, total = v.total;
   if (total <= 0 || std::abs(vote) < 0.2 * total) return 0;
   return vote > 0 ? 1 : -1;
 }

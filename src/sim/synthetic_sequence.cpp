@@ -11,6 +11,8 @@
 
 #include "vofusion/core/errors.h"
 
+#include "vofusion/core/parallel.h"
+
 namespace vofusion::sim {
 
 namespace {
@@ -268,8 +270,7 @@ Frame SyntheticSequence::render(std::size_t i) const {
   cv::Mat truth(c.height, c.width, CV_64F);
   cv::Mat grazing(c.height, c.width, CV_8U);
   f.rgb.create(c.height, c.width, CV_8UC3);
-#pragma omp parallel for schedule(dynamic, 4)
-  for (int v = 0; v < c.height; ++v) {
+  parallelFor(0, c.height, [&](int v) {
     double* zrow = truth.ptr<double>(v);
     unsigned char* grow = grazing.ptr<unsigned char>(v);
     cv::Vec3b* crow = f.rgb.ptr<cv::Vec3b>(v);
@@ -290,15 +291,14 @@ Frame SyntheticSequence::render(std::size_t i) const {
       const auto col = m.texture(h.surface, h.tu, h.tv);
       for (int k = 0; k < 3; ++k) crow[u][k] = cv::saturate_cast<unsigned char>(255.0 * col[k] * shade);
     }
-  }
+  }, 4);
   // Slight optical blur as a real lens has; also tames aliasing of the sharp texture edges.
   cv::GaussianBlur(f.rgb, f.rgb, cv::Size(3, 3), 0.6);
 
   f.depth.create(c.height, c.width, CV_32F);
   const double kinect_f = c.fx * 640.0 / c.width;  // disparity measured on a 640 px wide sensor
   const std::uint64_t frame_key = hash(o.seed, 901, i);
-#pragma omp parallel for schedule(static)
-  for (int v = 0; v < c.height; ++v) {
+  parallelFor(0, c.height, [&](int v) {
     const double* zrow = truth.ptr<double>(v);
     float* out = f.depth.ptr<float>(v);
     for (int u = 0; u < c.width; ++u) {
@@ -327,7 +327,7 @@ Frame SyntheticSequence::render(std::size_t i) const {
       const double zq = kinect_f * kKinectBaseline / quantised;
       if (zq >= kKinectMinRange && zq <= o.max_range) out[u] = float(zq);
     }
-  }
+  });
   return f;
 }
 

@@ -44,6 +44,8 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
   bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback
   bool integrate_filtered = false;    // fuse the bilateral-filtered depth instead of the raw one
                                       // (with tracking_downsample 1 only)
+  bool overlap_fusion = true;         // pipeline (Reconstruction): integrate + ray cast frame k on
+                                      // another thread while the odometry of frame k+1 runs; same poses
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
@@ -89,6 +91,13 @@ class KinFu {
 
   // odom: the odometry's motion from the previous frame to this one, nullptr when there is none.
   FusionResult process(const Frame& frame, const OdometryResult* odom);
+
+  // process() in two halves, for a caller that overlaps fusing frame k with the odometry of frame
+  // k+1: track() estimates the frame's pose (it needs the previous frame's fuse() done); fuse()
+  // integrates that frame and ray-casts the model for the next one, adding its stage times to res.
+  // The frame's images must stay unchanged until fuse() returns.
+  FusionResult track(const Frame& frame, const OdometryResult* odom);
+  void fuse(FusionResult& res);
 
   mrpt::poses::CPose3D pose() const;
   // Whole world model + current volume.
