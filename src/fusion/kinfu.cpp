@@ -74,9 +74,22 @@ struct KinFu::Impl {
     return (T.translation() + T.linear().col(2) * params.focus_distance).cast<float>();
   }
 
-  void raycastModel(const Eigen::Isometry3d& from, const cv::Mat& hint, const CameraIntrinsics& cam, StageTimes& times) {
+  // Depth the last ray cast found per pixel: the hint where the new frame has no reading. The camera
+  // moved a little since, so it is only a starting point (the ray cast checks and falls back).
+  cv::Mat model_depth;
+
+  void raycastModel(const Eigen::Isometry3d& from, const cv::Mat& frame_depth, const CameraIntrinsics& cam,
+                    StageTimes& times) {
     const auto t0 = std::chrono::steady_clock::now();
-    RaycastMaps maps = volume->raycast(from.cast<float>(), cam, &hint, false);
+    // Only rays with a hint are cast: ICP pairs the next frame's readings with model pixels next to
+    // where this frame had readings (or the last prediction had a surface). Rays without one marched
+    // from min_depth through partly observed bricks, three quarters of all ray-cast samples, mostly
+    // to find nothing. Hints outside the fused depth range have no surface to find.
+    cv::Mat hint = frame_depth.empty() ? cv::Mat::zeros(cam.height, cam.width, CV_32F) : frame_depth.clone();
+    hint.setTo(0.f, (hint < params.tsdf.min_depth) | (hint > params.tsdf.max_depth));
+    if (model_depth.size() == hint.size()) model_depth.copyTo(hint, hint <= 0.f);
+    RaycastMaps maps = volume->raycast(from.cast<float>(), cam, &hint, false, true);
+    model_depth = maps.depth;
     const int levels = std::max(1, params.preprocess.levels);
     model_vertices.assign(levels, cv::Mat());
     model_normals.assign(levels, cv::Mat());

@@ -17,12 +17,13 @@ enum class March { Hit, Miss, Untrusted };
 }
 
 RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const CameraIntrinsics& cam,
-                                const cv::Mat* depth_hint, bool with_colour) const {
+                                const cv::Mat* depth_hint, bool with_colour, bool hinted_only) const {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const int w = cam.width, h = cam.height;
   RaycastMaps maps;
   maps.vertices.create(h, w, CV_32FC3);
   maps.normals.create(h, w, CV_32FC3);
+  maps.depth.create(h, w, CV_32FC1);
   if (with_colour) maps.colours = cv::Mat::zeros(h, w, CV_8UC3);
   const bool use_hint = depth_hint && !depth_hint->empty() && depth_hint->size() == cv::Size(w, h);
 
@@ -38,8 +39,11 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
     cv::Vec3f* vrow = maps.vertices.ptr<cv::Vec3f>(y);
     cv::Vec3f* nrow = maps.normals.ptr<cv::Vec3f>(y);
     const float* hrow = use_hint ? depth_hint->ptr<float>(y) : nullptr;
+    float* zrow = maps.depth.ptr<float>(y);
     for (int x = 0; x < w; ++x) {
       vrow[x] = nrow[x] = cv::Vec3f(nan, nan, nan);
+      zrow[x] = 0.f;
+      if (hinted_only && !(use_hint && hrow[x] > 0.f)) continue;
       const Eigen::Vector3f ray_cam((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.f);
       const float len = ray_cam.norm();                // metres of ray per metre of depth
       const Eigen::Vector3f dq = R * ray_cam * inv_vs;  // voxel units per metre of depth
@@ -134,14 +138,19 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
         found = march(std::max(z0, zh - 0.5f * trunc), std::min(z1, zh + 2.f * trunc), true) == March::Hit &&
                 normalAt(oq + dq * zs);
       }
-      // Whatever the hinted search could not settle, the full search decides.
-      if (!found) found = march(z0, z1, false) == March::Hit && normalAt(oq + dq * zs);
+      // Whatever the hinted search could not settle, the full search decides; for tracking only up to
+      // the hint's band (a surface farther behind the reading is hidden by it and would not pair).
+      if (!found) {
+        const float zend = hinted_only ? std::min(z1, hrow[x] + 2.f * trunc) : z1;
+        found = march(z0, zend, false) == March::Hit && normalAt(oq + dq * zs);
+      }
       if (!found) continue;
 
       const Eigen::Vector3f q = oq + dq * zs;
       g.normalize();
       const Eigen::Vector3f p = q * vs;
       vrow[x] = cv::Vec3f(p.x(), p.y(), p.z());
+      zrow[x] = zs;
       nrow[x] = cv::Vec3f(g.x(), g.y(), g.z());
       if (with_colour) {
         const int ix = static_cast<int>(std::floor(q.x() + 0.5f)), iy = static_cast<int>(std::floor(q.y() + 0.5f)),

@@ -32,6 +32,7 @@ struct RaycastMaps {
   cv::Mat vertices;  // CV_32FC3, m, world frame
   cv::Mat normals;   // CV_32FC3, unit, world frame, from the TSDF gradient
   cv::Mat colours;   // CV_8UC3 BGR (only when asked for)
+  cv::Mat depth;     // CV_32FC1, m along the optical axis, 0 where the ray found no surface
 };
 
 class TsdfVolume {
@@ -43,10 +44,13 @@ class TsdfVolume {
   std::size_t integrate(const cv::Mat& depth, const cv::Mat& bgr, const CameraIntrinsics& cam,
                         const Eigen::Isometry3f& cam_to_world);
 
-  // depth_hint (optional, CV_32F, same size): the depth frame last fused from this very pose; rays
-  // then start just before it instead of marching from min_depth (falls back when inconsistent).
+  // depth_hint (optional, CV_32F, same size): where the surface is expected along each ray (the depth
+  // frame last fused from this pose, holes filled from the previous ray cast); rays then start just
+  // before it instead of marching from min_depth (and fall back to that when it is inconsistent).
+  // hinted_only: rays without a hint are not cast, and none marches past its hint's band: for
+  // tracking, where only model pixels close to readings find partners.
   RaycastMaps raycast(const Eigen::Isometry3f& cam_to_world, const CameraIntrinsics& cam,
-                      const cv::Mat* depth_hint = nullptr, bool with_colour = false) const;
+                      const cv::Mat* depth_hint = nullptr, bool with_colour = false, bool hinted_only = false) const;
 
   // Re-centres the volume on `point` if it is farther than `threshold` (m) from the centre.
   bool shiftIfNeeded(const Eigen::Vector3f& point, float threshold);
