@@ -193,10 +193,12 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
           vx.tsdf = static_cast<std::int16_t>(fnew + (fnew >= 0.f ? 0.5f : -0.5f));
           vx.weight = static_cast<std::uint8_t>(std::min(wold + 1, max_w));
           if (colour && sdf < trunc) {
+            // Same running average, rounded; a multiply instead of three integer divisions per voxel.
             const cv::Vec3b& c = bgr.ptr<cv::Vec3b>(v)[u];
-            vx.r = static_cast<std::uint8_t>((vx.r * wold + c[2]) / (wold + 1));
-            vx.g = static_cast<std::uint8_t>((vx.g * wold + c[1]) / (wold + 1));
-            vx.b = static_cast<std::uint8_t>((vx.b * wold + c[0]) / (wold + 1));
+            const float k = inv_count[wold], fw = static_cast<float>(wold);
+            vx.r = static_cast<std::uint8_t>((vx.r * fw + c[2]) * k + 0.5f);
+            vx.g = static_cast<std::uint8_t>((vx.g * fw + c[1]) * k + 0.5f);
+            vx.b = static_cast<std::uint8_t>((vx.b * fw + c[0]) * k + 0.5f);
           }
           ++brick_updates;
         }
