@@ -60,7 +60,7 @@ struct KinFu::Impl {
   // Model ray-cast from `model_pose` after the last integration, one map per pyramid level.
   std::vector<cv::Mat> model_vertices, model_normals;
   Eigen::Isometry3d model_pose = Eigen::Isometry3d::Identity();
-  bool have_model = false;
+  bool have_model = false;  // a frame was fused: the next one is tracked against the map
   KinFuStats stats;
   // What track() leaves for fuse(): the frame, its finest tracking level (ray-cast hint) and cameras.
   struct Pending {
@@ -221,6 +221,7 @@ void KinFu::fuse(FusionResult& res) {
   if (!s.pending.valid) return;
   s.pending.valid = false;
   const Impl::Pending& f = s.pending;
+  s.have_model = true;  // the map exists from the first fused (or tracked) frame on
   StageTimes times;
   // Fuse, move the volume with the camera, and predict the surface for the next frame.
   if (!res.fell_back || P.integrate_on_fallback) {
@@ -234,8 +235,9 @@ void KinFu::fuse(FusionResult& res) {
     s.volume->integrate(f.depth, f.rgb, f.cam, f.pose.cast<float>());
     times.add("integrate", seconds(t0));
     res.integrated = true;
-    s.raycastModel(f.pose, f.hint, f.track_cam, times);
-  } else {
+    // Mode odometry has no ICP: nothing reads the predicted model.
+    if (s.mode != TrackingMode::Odometry) s.raycastModel(f.pose, f.hint, f.track_cam, times);
+  } else if (s.mode != TrackingMode::Odometry) {
     // Not fused (fallback pose): re-predict the model from the new pose so ICP keeps up.
     s.raycastModel(f.pose, cv::Mat(), f.track_cam, times);
   }
