@@ -11,8 +11,10 @@
 #include <fstream>
 #include <new>
 #include <thread>
+#include <vector>
 
 #include <mrpt/core/aligned_allocator.h>
+#include <mrpt/obs/CActionCollection.h>
 #include <mrpt/io/CMemoryStream.h>
 #include <mrpt/serialization/CArchive.h>
 
@@ -64,14 +66,17 @@ uint32_t readU32(const std::string& s, std::size_t at) {
 
 void patchU32(std::string& s, std::size_t at, uint32_t v) { std::memcpy(&s[at], &v, 4); }
 
+void p_unused(void* p) { ::operator delete(p); }
+
 std::string writeFile(const std::string& name, const std::string& bytes) {
   const std::string path = test::tempDir("rawlog_corrupt") + "/" + name;
   std::ofstream(path, std::ios::binary) << bytes;
   return path;
 }
 
-// Reading `path` must end in one InputError line containing `needle`, without a peak RSS rise.
-void expectBoundedFailure(const std::string& path, const std::string& needle) {
+// Reading `path` must end in one InputError line containing `needle`; peak RSS may rise by at most
+// max_growth (MRPT zero-fills what it is granted).
+void expectBoundedFailure(const std::string& path, const std::string& needle, std::size_t max_growth = 64 * kMiB) {
   const long before = peakRssKiB();
   try {
     RawlogSource src(path, {});
@@ -85,7 +90,7 @@ void expectBoundedFailure(const std::string& path, const std::string& needle) {
     EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
   }
   const long grew_kib = peakRssKiB() - before;
-  EXPECT_LT(grew_kib, long(64 * kMiB / 1024)) << "peak RSS rose by " << grew_kib / 1024 << " MiB";
+  EXPECT_LT(grew_kib, long(max_growth / 1024)) << "peak RSS rose by " << grew_kib / 1024 << " MiB";
 }
 
 }  // namespace
@@ -93,13 +98,14 @@ void expectBoundedFailure(const std::string& path, const std::string& needle) {
 TEST(AllocationLimit, RefusesLargerRequestsOnThisThreadOnly) {
   void* p = nullptr;
   {
-    const ScopedAllocationLimit limit(kMiB);
+    const ScopedAllocationLimit limit(kMiB, 64 * kMiB);
     EXPECT_THROW(p = ::operator new(2 * kMiB), std::bad_alloc);
-    EXPECT_EQ(limit.refused(), 2 * kMiB);
+    EXPECT_EQ(limit.refusedRequest(), 2 * kMiB);
     EXPECT_EQ(::operator new[](3 * kMiB, std::nothrow), nullptr);
-    EXPECT_EQ(limit.refused(), 3 * kMiB);
+    EXPECT_EQ(limit.refusedRequest(), 3 * kMiB);
     EXPECT_THROW(p = mrpt::aligned_malloc(2 * kMiB, 16), std::bad_alloc);
     EXPECT_THROW(p = mrpt::aligned_calloc(2 * kMiB, 16), std::bad_alloc);  // MRPT's own, via aligned_malloc
+    EXPECT_FALSE(limit.totalExceeded());
     p = ::operator new(kMiB);  // at the limit: allowed
     ::operator delete(p);
     p = mrpt::aligned_malloc(kMiB / 2, 64);
@@ -116,9 +122,9 @@ TEST(AllocationLimit, RefusesLargerRequestsOnThisThreadOnly) {
     EXPECT_TRUE(other_thread_ok);
 
     {
-      const ScopedAllocationLimit looser(16 * kMiB);  // cannot loosen the enclosing limit
+      const ScopedAllocationLimit looser(16 * kMiB, 64 * kMiB);  // cannot loosen the enclosing limit
       EXPECT_THROW(p = ::operator new(2 * kMiB), std::bad_alloc);
-      const ScopedAllocationLimit tighter(kMiB / 4);
+      const ScopedAllocationLimit tighter(kMiB / 4, 64 * kMiB);
       EXPECT_THROW(p = ::operator new(kMiB / 2), std::bad_alloc);
     }
     EXPECT_THROW(p = ::operator new(2 * kMiB), std::bad_alloc);
@@ -127,6 +133,47 @@ TEST(AllocationLimit, RefusesLargerRequestsOnThisThreadOnly) {
   }
   p = ::operator new(8 * kMiB);
   ::operator delete(p);
+}
+
+TEST(AllocationLimit, TotalCountsEveryRequestButNotCleanup) {
+  std::vector<void*> blocks;
+  blocks.reserve(8192);  // so that only the blocks count
+  {
+    const ScopedAllocationLimit limit(kMiB, 4 * kMiB);
+    try {
+      for (;;) blocks.push_back(::operator new(1000));  // small blocks, freed or not, add up
+    } catch (const std::bad_alloc&) {
+      EXPECT_TRUE(limit.totalExceeded());
+      EXPECT_EQ(limit.refusedRequest(), 0u);
+      void* in_handler = ::operator new(1000);  // while an exception is handled: granted
+      ::operator delete(in_handler);
+    }
+    EXPECT_EQ(blocks.size(), 4 * kMiB / 1000);
+    for (void* b : blocks) ::operator delete(b);
+    EXPECT_THROW(p_unused(::operator new(1000)), std::bad_alloc);  // frees are not credited
+
+    struct AllocatesWhenDestroyed {
+      ~AllocatesWhenDestroyed() { ::operator delete(::operator new(100)); }  // like MRPT's buffer pool
+    };
+    EXPECT_THROW(
+        {
+          AllocatesWhenDestroyed a;
+          throw std::bad_alloc();
+        },
+        std::bad_alloc);  // the destructor runs while unwinding: granted, no std::terminate
+    {
+      const ScopedAllocationLimit inner(kMiB, 64 * kMiB);  // nested: bounded by what the outer has left
+      EXPECT_THROW(p_unused(::operator new(1000)), std::bad_alloc);
+    }
+  }
+  {
+    const ScopedAllocationLimit outer(kMiB, 3 * kMiB + kMiB / 2);
+    {
+      const ScopedAllocationLimit inner(kMiB, 64 * kMiB);
+      for (int i = 0; i < 3; ++i) ::operator delete(::operator new(kMiB));
+    }
+    EXPECT_THROW(p_unused(::operator new(kMiB)), std::bad_alloc);  // the inner scope's use counts
+  }
 }
 
 // sensorLabel's length (std::string: operator>> in libmrpt-serialization, _M_mutate in libstdc++).
@@ -166,6 +213,25 @@ TEST(RawlogCorrupt, HugeRangeImage) {
   patchU32(bytes, at + 4, 49152);
   patchU32(bytes, at + 8, 49152);  // 4.5 GiB of uint16
   expectBoundedFailure(writeFile("range.rawlog", bytes), "asks for a buffer of 4608 MiB");
+}
+
+// The action count of a CActionCollection (a std::deque: 512-byte blocks, each below any per-buffer
+// limit; only the total stops it).
+TEST(RawlogCorrupt, HugeActionCount) {
+  mrpt::obs::CActionCollection actions;
+  actions.insert(makeOdometryAction(mrpt::poses::CPose3D(0.1, 0, 0, 0, 0, 0), 1.0));
+  mrpt::io::CMemoryStream mem;
+  auto arch = mrpt::serialization::archiveFrom(mem);
+  arch << actions;
+  std::string bytes(static_cast<const char*>(mem.getRawBufferData()), mem.getTotalBytesCount());
+  const std::string name = "CActionCollection";
+  const std::size_t at = bytes.find(name);
+  ASSERT_NE(at, std::string::npos);
+  const std::size_t count_at = at + name.size() + 1;  // class name, version byte, uint32 count
+  ASSERT_EQ(readU32(bytes, count_at), 1u);
+  patchU32(bytes, count_at, 0x0F000000u);  // 252 M actions: 4 GiB of deque blocks, a 63 MiB block map
+  expectBoundedFailure(writeFile("actions.rawlog", bytes), "(needs more than the 256 MiB an entry may use)",
+                       320 * kMiB);
 }
 
 // The limit leaves real frames alone: a 4K depth frame with its point cloud (33 MB per vector).

@@ -31,14 +31,16 @@ namespace {
 
 constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
 
-// Largest single buffer one rawlog entry may ask for while it is deserialised. MRPT sizes (and
-// zero-fills) strings, vectors and matrices from the archive's length fields before reading the
-// data, so without a bound one corrupt field costs up to 4 GiB per buffer (16 GiB for a point
-// cloud's five vectors). 64 MiB is twice the largest real per-pixel buffer: a 4K (3840x2160) depth
-// sensor's float point vector is 33 MB, its range image 17 MB; colour pixels are OpenCV's, not
-// bounded here. A corrupt entry then touches at most ~256 MiB (five point vectors) before the read
-// fails.
+// What one rawlog entry may allocate while it is deserialised. MRPT sizes (and zero-fills) strings,
+// vectors, deques and matrices from the archive's length fields before reading the data, so without
+// a bound one corrupt field costs up to 4 GiB per buffer (16 GiB for a point cloud's five vectors, or
+// 4 GiB in 512-byte deque blocks for an action count). Per buffer, 64 MiB is twice the largest real
+// per-pixel buffer: a 4K (3840x2160) depth sensor's float point vector is 33 MB, its range image
+// 17 MB. In all, 256 MiB holds such a frame with its point cloud (150 MB); colour pixels are
+// OpenCV's, not counted. A corrupt entry then touches at most 256 MiB before the read fails (plus up
+// to 192 MiB that MRPT's point-cloud destructor re-allocates while unwinding, for its buffer pool).
 constexpr std::size_t kMaxEntryBuffer = std::size_t(64) << 20;
+constexpr std::size_t kMaxEntryTotal = std::size_t(256) << 20;
 
 std::string mebibytes(std::size_t n) { return std::to_string((n + (1u << 20) - 1) >> 20) + " MiB"; }
 
@@ -83,7 +85,7 @@ std::string stripRawlogExtension(const std::string& path) {
 Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string& origin,
                            const std::optional<CameraIntrinsics>& override_camera) {
   try {
-    const ScopedAllocationLimit limit(kMaxEntryBuffer);  // external files carry length fields too
+    const ScopedAllocationLimit limit(kMaxEntryBuffer, kMaxEntryTotal);  // external files have length fields too
     obs.load();
   } catch (const std::exception& e) {
     throw InputError(obs.rangeImage_isExternallyStored() ? obs.rangeImage_getExternalStorageFileAbsolutePath("")
@@ -170,7 +172,7 @@ struct RawlogSource::Reader {
     while (pending.empty()) {
       const uint64_t before = counter->getPosition();
       mrpt::serialization::CSerializable::Ptr obj;
-      const ScopedAllocationLimit limit(kMaxEntryBuffer);
+      const ScopedAllocationLimit limit(kMaxEntryBuffer, kMaxEntryTotal);
       try {
         *arch >> obj;
       } catch (const mrpt::serialization::CExceptionEOF&) {
@@ -178,10 +180,12 @@ struct RawlogSource::Reader {
         throw InputError(path, "truncated rawlog (ends inside entry " + std::to_string(objects + 1) + ")");
       } catch (const std::exception&) {
         // Refused requests surface as bad_alloc or as MRPT's wrapper around it.
-        const std::string why = limit.refused() ? " (asks for a buffer of " + mebibytes(limit.refused()) +
-                                                      ", more than the " + mebibytes(kMaxEntryBuffer) +
-                                                      " an entry may use)"
-                                : objects == 0 ? " (not an MRPT rawlog?)" : "";
+        const std::string why =
+            limit.refusedRequest() ? " (asks for a buffer of " + mebibytes(limit.refusedRequest()) +
+                                         ", more than the " + mebibytes(kMaxEntryBuffer) + " an entry may use)"
+            : limit.totalExceeded() ? " (needs more than the " + mebibytes(kMaxEntryTotal) + " an entry may use)"
+            : objects == 0          ? " (not an MRPT rawlog?)"
+                                    : "";
         throw InputError(path, "corrupt or truncated rawlog at entry " + std::to_string(objects + 1) + why);
       }
       ++objects;

@@ -1,15 +1,18 @@
 #pragma once
-// A per-thread ceiling on single heap requests, for code that lets a file's length fields size its
-// buffers before the data is read: MRPT's deserialisation resizes (and zero-fills) strings, vectors
+// Per-thread bounds on heap requests, for code that lets a file's length fields size its buffers
+// before the data is read: MRPT's deserialisation resizes (and zero-fills) strings, vectors, deques
 // and matrices to whatever an archive claims, so one corrupt field costs gigabytes before the read
-// fails.
+// fails -- in one buffer, or in millions of small deque blocks.
 //
-// While a ScopedAllocationLimit lives, a request above the limit made on the same thread through
-//  - the global operator new / new[] (std::string, std::vector, ...): throws std::bad_alloc
-//    (the nothrow forms return nullptr);
-//  - mrpt::aligned_malloc (MRPT's matrices and aligned vectors): throws std::bad_alloc, as does a
-//    failed one (MRPT's allocator would hand nullptr to a vector that writes through it).
-// Other threads, and code outside a scope, allocate exactly as before.
+// While a ScopedAllocationLimit lives, a request made on the same thread through
+//  - the global operator new / new[] (std::string, std::vector, std::deque, ...), or
+//  - mrpt::aligned_malloc (MRPT's matrices and aligned vectors; a failed one throws as well, where
+//    MRPT's own would hand nullptr to a vector that writes through it)
+// throws std::bad_alloc (the nothrow forms return nullptr) if it is larger than max_request or if
+// the bytes requested since the scope began (frees are not credited) would exceed max_total.
+// Exceptions: while an exception is propagating or being handled, requests are granted and not
+// counted -- cleanup code (destructors, catch blocks) may allocate, and throwing there would end
+// the program. Other threads, and code outside a scope, allocate exactly as before.
 //
 // allocation_limit.cpp replaces those functions for the whole program and defines this class, so a
 // program that sets a limit always links the replacements (also from the static library). Not
@@ -22,17 +25,20 @@ namespace vofusion {
 
 class ScopedAllocationLimit {
  public:
-  // Scopes nest; an inner scope can only tighten the limit.
-  explicit ScopedAllocationLimit(std::size_t max_bytes);
-  ~ScopedAllocationLimit();  // restores the enclosing limit
+  // Scopes nest: an inner scope can only tighten max_request, and what it uses counts for the outer.
+  ScopedAllocationLimit(std::size_t max_request, std::size_t max_total);
+  ~ScopedAllocationLimit();  // restores the enclosing limits
   ScopedAllocationLimit(const ScopedAllocationLimit&) = delete;
   ScopedAllocationLimit& operator=(const ScopedAllocationLimit&) = delete;
 
-  // Largest request refused on this thread since the scope began (0: none), for error messages.
-  std::size_t refused() const;
+  // What was refused on this thread since the scope began, for error messages: the largest request
+  // above max_request (0: none), and whether max_total ran out.
+  std::size_t refusedRequest() const;
+  bool totalExceeded() const;
 
  private:
-  std::size_t outer_limit_, outer_refused_;
+  std::size_t outer_max_request_, outer_remaining_, start_remaining_, outer_refused_;
+  bool outer_exceeded_;
 };
 
 }  // namespace vofusion
