@@ -19,6 +19,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 
 namespace fs = std::filesystem;
@@ -29,6 +30,19 @@ namespace vofusion {
 namespace {
 
 constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
+
+// What one rawlog entry may allocate while it is deserialised. MRPT sizes (and zero-fills) strings,
+// vectors, deques and matrices from the archive's length fields before reading the data, so without
+// a bound one corrupt field costs up to 4 GiB per buffer (16 GiB for a point cloud's five vectors, or
+// 4 GiB in 512-byte deque blocks for an action count). Per buffer, 64 MiB is twice the largest real
+// per-pixel buffer: a 4K (3840x2160) depth sensor's float point vector is 33 MB, its range image
+// 17 MB. In all, 256 MiB holds such a frame with its point cloud (150 MB); colour pixels are
+// OpenCV's, not counted. A corrupt entry then touches at most 256 MiB before the read fails (plus up
+// to 192 MiB that MRPT's point-cloud destructor re-allocates while unwinding, for its buffer pool).
+constexpr std::size_t kMaxEntryBuffer = std::size_t(64) << 20;
+constexpr std::size_t kMaxEntryTotal = std::size_t(256) << 20;
+
+std::string mebibytes(std::size_t n) { return std::to_string((n + (1u << 20) - 1) >> 20) + " MiB"; }
 
 // Counts delivered bytes, so a clean end of file (EOF before an object starts) can be told apart
 // from a truncated one (EOF inside an object).
@@ -71,6 +85,7 @@ std::string stripRawlogExtension(const std::string& path) {
 Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string& origin,
                            const std::optional<CameraIntrinsics>& override_camera) {
   try {
+    const ScopedAllocationLimit limit(kMaxEntryBuffer, kMaxEntryTotal);  // external files have length fields too
     obs.load();
   } catch (const std::exception& e) {
     throw InputError(obs.rangeImage_isExternallyStored() ? obs.rangeImage_getExternalStorageFileAbsolutePath("")
@@ -157,17 +172,21 @@ struct RawlogSource::Reader {
     while (pending.empty()) {
       const uint64_t before = counter->getPosition();
       mrpt::serialization::CSerializable::Ptr obj;
+      const ScopedAllocationLimit limit(kMaxEntryBuffer, kMaxEntryTotal);
       try {
         *arch >> obj;
       } catch (const mrpt::serialization::CExceptionEOF&) {
         if (counter->getPosition() == before) return nullptr;
         throw InputError(path, "truncated rawlog (ends inside entry " + std::to_string(objects + 1) + ")");
-      } catch (const std::exception& e) {
-        std::string why = e.what();
-        const auto nl = why.find('\n');
-        if (nl != std::string::npos) why = why.substr(0, nl);
-        throw InputError(path, "corrupt or truncated rawlog at entry " + std::to_string(objects + 1) +
-                                   (objects == 0 ? " (not an MRPT rawlog?)" : ""));
+      } catch (const std::exception&) {
+        // Refused requests surface as bad_alloc or as MRPT's wrapper around it.
+        const std::string why =
+            limit.refusedRequest() ? " (asks for a buffer of " + mebibytes(limit.refusedRequest()) +
+                                         ", more than the " + mebibytes(kMaxEntryBuffer) + " an entry may use)"
+            : limit.totalExceeded() ? " (needs more than the " + mebibytes(kMaxEntryTotal) + " an entry may use)"
+            : objects == 0          ? " (not an MRPT rawlog?)"
+                                    : "";
+        throw InputError(path, "corrupt or truncated rawlog at entry " + std::to_string(objects + 1) + why);
       }
       ++objects;
       if (!obj) continue;

@@ -4,7 +4,7 @@
 #   tests/fuzz/run.sh [seconds_per_harness=60] [harness...]    harnesses: tum_list tum_trajectory rawlog
 # Env: FUZZ_BUILD (default build-fuzz), LIB_BUILD (the g++ CMake build providing libvofusion.a, default
 #      build), CXX (default clang++), JOBS (libFuzzer -jobs, default 1),
-#      SANITIZE (default address; empty: libFuzzer alone), NICE (default 19), RSS_LIMIT_MB (libFuzzer -rss_limit_mb, also the malloc limit; default 2048).
+#      SANITIZE (default address; empty: libFuzzer alone), NICE (default 19), RSS_LIMIT_MB (libFuzzer -rss_limit_mb, also the malloc limit; default 2048, rawlog 2560).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
@@ -52,7 +52,14 @@ for h in "${harnesses[@]}"; do
   # rss_limit: a hostile length field must not make the reader allocate gigabytes.
   # -jobs would send the output to ./fuzz-N.log: parallel runs only when asked (JOBS > 1), logs in $out.
   par=(); [ "${JOBS:-1}" -gt 1 ] && par=(-jobs="$JOBS" -workers="$JOBS")
-  (cd "$out" && nice -n "$nice_n" "$out/fuzz_$h" "$corpus" "${dict[@]}" -max_total_time="$secs" -rss_limit_mb="${RSS_LIMIT_MB:-2048}" \
+  # Under ASan a request above the RSS limit fails as glibc's malloc fails on a machine without that
+  # much memory (nullptr; OpenCV and operator new throw) instead of aborting: an untouched cv::Mat
+  # sized from a corrupt field costs address space only (see README).
+  # rawlog: MRPT keeps the buffers of up to 5 destroyed 3D observations for reuse, up to 1.6 GB when
+  # corrupt entries each come close to the reader's 64 MiB buffer limit (see README).
+  rss="${RSS_LIMIT_MB:-$([ "$h" = rawlog ] && echo 2560 || echo 2048)}"
+  asan_opts="${ASAN_OPTIONS:-allocator_may_return_null=1:max_allocation_size_mb=$((rss - 1))}"
+  (cd "$out" && ASAN_OPTIONS="$asan_opts" nice -n "$nice_n" "$out/fuzz_$h" "$corpus" "${dict[@]}" -max_total_time="$secs" -rss_limit_mb="$rss" \
         -max_len=65536 "${par[@]}" -print_final_stats=1 -artifact_prefix="$out/artifacts_$h/" \
         >"$out/fuzz_$h.log" 2>&1) || true
   [ ${#par[@]} -eq 0 ] || cat "$out"/fuzz-*.log >>"$out/fuzz_$h.log"

@@ -34,6 +34,9 @@ namespace vofusion {
 // rangeUnits. Colour: the intensity image as BGR (grey images are expanded; a missing one becomes
 // mid-grey). Intrinsics: cameraParams (depth camera), unless SourceOptions::intrinsics overrides.
 // Ground truth: "<name>.groundtruth.txt" if present, else CObservationRobotPose "GROUND_TRUTH" entries.
+// A truncated or corrupt file throws InputError ("<file>: ... at entry N"); while an entry is
+// deserialised, MRPT may allocate at most 64 MiB per buffer and 256 MiB in all (ScopedAllocationLimit),
+// so corrupt length fields cannot make it allocate gigabytes first.
 class RawlogSource : public FrameSource {
  public:
   RawlogSource(const std::string& path, const SourceOptions& opts);
