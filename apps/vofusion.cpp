@@ -15,6 +15,7 @@
 #include "vofusion/core/progress.h"
 #include "vofusion/io/default_recording.h"
 #include "vofusion/io/frame_source.h"
+#include "vofusion/io/prefetching_source.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
 
@@ -75,7 +76,7 @@ int body(int argc, char** argv) {
   src_opts.max_frames = cl.count("--max-frames", 0);
   src_opts.intrinsics = cl.value("--intrinsics");
   const std::string input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
-  auto source = openFrameSource(input, src_opts);
+  auto source = std::make_unique<PrefetchingSource>(openFrameSource(input, src_opts));
   Reconstruction rec(cfg, mode);
   RunRecorder recorder(*out_dir, out_params, mesh_params);
 

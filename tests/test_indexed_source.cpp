@@ -4,7 +4,9 @@
 
 #include <vector>
 
+#include "vofusion/core/errors.h"
 #include "vofusion/io/frame_source.h"
+#include "vofusion/io/prefetching_source.h"
 #include "vofusion/sim/synthetic_source.h"
 
 using namespace vofusion;
@@ -64,4 +66,50 @@ TEST(IndexedFrameSource, SyntheticSourceNextMatchesRead) {
   src.rewind();
   ASSERT_TRUE(src.next(f));
   EXPECT_EQ(f.timestamp, src.read(0).timestamp);
+}
+
+namespace {
+// Throws InputError when frame `bad` is read.
+class FailsAt : public Counting {
+ public:
+  FailsAt(std::size_t n, std::size_t bad) : Counting(n), bad_(bad) {}
+  Frame read(std::size_t i) const override {
+    if (i == bad_) throw InputError("frame " + std::to_string(i), "unreadable");
+    return Counting::read(i);
+  }
+
+ private:
+  std::size_t bad_;
+};
+}  // namespace
+
+TEST(PrefetchingSource, HandsOutTheSameFramesInOrderAndRewinds) {
+  PrefetchingSource src(std::make_unique<Counting>(4));
+  EXPECT_EQ(src.size(), 4u);
+  EXPECT_EQ(src.name(), "counting");
+  for (int pass = 0; pass < 2; ++pass) {
+    Frame f;
+    for (std::size_t i = 0; i < 4; ++i) {
+      ASSERT_TRUE(src.next(f));
+      EXPECT_EQ(f.index, i);
+      EXPECT_EQ(f.timestamp, 10.0 * double(i));
+    }
+    EXPECT_FALSE(src.next(f));
+    EXPECT_FALSE(src.next(f));  // stays at the end
+    src.rewind();
+  }
+}
+
+TEST(PrefetchingSource, AnErrorSurfacesWithTheFrameThatCausedIt) {
+  PrefetchingSource src(std::make_unique<FailsAt>(5, 2));
+  Frame f;
+  ASSERT_TRUE(src.next(f));
+  ASSERT_TRUE(src.next(f));  // frame 2 is already being read (and failing) in the background
+  EXPECT_EQ(f.index, 1u);
+  try {
+    src.next(f);
+    FAIL() << "frame 2 should throw";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("frame 2"), std::string::npos);
+  }
 }

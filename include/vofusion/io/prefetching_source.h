@@ -1,0 +1,33 @@
+#pragma once
+// Reads (decodes) the next frame on another thread while the caller processes the current one:
+// PNG decoding of a TUM frame is ~8 ms of CPU that would otherwise sit on the pipeline's critical
+// path. Frames, their order and errors are those of the wrapped source; an error surfaces when the
+// frame that caused it is asked for.
+#include <future>
+#include <memory>
+
+#include "vofusion/io/frame_source.h"
+
+namespace vofusion {
+
+class PrefetchingSource : public FrameSource {
+ public:
+  explicit PrefetchingSource(std::unique_ptr<FrameSource> inner);
+  ~PrefetchingSource() override;
+  bool next(Frame& frame) override;
+  std::size_t size() const override { return inner_->size(); }
+  void rewind() override;
+  std::string name() const override { return inner_->name(); }
+
+ private:
+  struct Read {
+    bool ok = false;
+    Frame frame;
+  };
+  void start();  // begins reading the frame after the last one handed out
+  std::unique_ptr<FrameSource> inner_;
+  std::future<Read> ahead_;
+  bool ended_ = false;
+};
+
+}  // namespace vofusion
