@@ -136,3 +136,19 @@ TEST(RigidMotion, RayNoiseWeightingBeatsIsotropicOnAxialNoise) {
   }
   EXPECT_LT(err_ray, 0.95 * err_iso) << "ray " << err_ray / 30 << " m, isotropic " << err_iso / 30 << " m";
 }
+
+// Half the 3000 matches wrong: a first RANSAC hypothesis with an outlier in its sample has almost no
+// inliers, and the draws it asks for (log(0.001) / log(1 - 1e-9)) overflowed an int, which ended the
+// loop after one hypothesis.
+TEST(RigidMotion, RobustSurvivesAHopelessFirstHypothesis) {
+  Points3 s, d;
+  makeCorrespondences(3000, 0.002, 0.5, s, d, 5);
+  for (std::uint32_t seed = 1; seed <= 8; ++seed) {
+    RobustFitOptions o;
+    o.seed = seed;
+    const RigidFit f = fitRobust(s, d, o);
+    ASSERT_TRUE(f.ok) << "seed " << seed << ": " << f.failure;
+    EXPECT_GT(f.inliers.size(), 1400u) << "seed " << seed;
+    EXPECT_LT((f.T.translation() - knownMotion().translation()).norm(), 0.003) << "seed " << seed;
+  }
+}

@@ -230,7 +230,8 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
       const double ratio = double(best_in.size()) / n;
       const double p_good = ratio * ratio * ratio;
       if (p_good > 0.999999) needed = h + 1;
-      else if (p_good > 0) needed = std::min(o.iterations, int(std::ceil(std::log(1e-3) / std::log(1 - p_good))) + 1);
+      // (in double: a first hypothesis with a handful of inliers asks for more draws than an int holds)
+      else if (p_good > 0) needed = int(std::min<double>(o.iterations, std::ceil(std::log(1e-3) / std::log1p(-p_good)) + 1));
     }
   }
   if (best_in.size() < 3) {
