@@ -40,6 +40,7 @@ std::vector<ConfigKey> motionKeys(OdometryParams& p) {
       {"inlier_threshold", &p.robust.inlier_threshold, "m at <= 1 m depth, grows with z^2"},
       {"gauss_newton_iterations", &p.robust.gauss_newton_iterations, "robust: refinement steps"},
       {"ray_noise", &p.robust.ray_noise, "robust: Kinect noise along rays in Gauss-Newton"},
+      {"cauchy", &p.robust.cauchy, "robust: Cauchy kernel scale in Gauss-Newton, sigmas (0 = off)"},
       {"min_inliers", &p.min_inliers, "3D inliers needed"},
       {"min_extent", &p.min_extent, "m, inlier spread needed"},
       {"max_rms", &p.max_rms, "m, inlier RMS accepted"},
