@@ -41,8 +41,8 @@ RigidFit fitPaper(const Points3& src, const Points3& dst, const PaperFitOptions&
 struct RobustFitOptions {
   int iterations = 200;            // RANSAC hypotheses (stops early at 99.9 % confidence)
   double inlier_threshold = 0.01;  // m at 1 m depth; scaled with z^2 beyond
-  int gauss_newton_iterations = 3; // weighted refinement steps (0 = plain least squares)
-  double cauchy = 0.0;             // sigmas; Gauss-Newton reweights whitened residuals by a Cauchy kernel of
+  int gauss_newton_iterations = 6; // weighted refinement steps (0 = plain least squares)
+  double cauchy = 1.0;             // sigmas; Gauss-Newton reweights whitened residuals by a Cauchy kernel of
                                    // this scale (iteratively reweighted least squares), 0 = plain
   bool ray_noise = true;           // Gauss-Newton whitens each residual by the Kinect noise along the
                                    // viewing rays (axial 0.0012 + 0.0019 (z-0.4)^2, lateral 1 px); else isotropic
