@@ -49,11 +49,16 @@ run "paper, STAR only"             odometry.keypoints=star odometry.motion_metho
 if [ "${EXTRA:-0}" = 1 ]; then
   run "robust, NARF 1/4 res"       narf.downsample=4
   run "robust, NARF 1/8 res"       narf.downsample=8
-  run "robust, NARF 1 thread"      narf.threads=1
   run "robust, NARF sequential"    odometry.narf_concurrent=false
+  run "robust, previous frame only" odometry.references=1
+  run "robust, no colour time"     odometry.colour_time=false
+  run "robust, no Cauchy kernel"   motion.cauchy=0
+  run "robust, integer STAR"       star.subpixel=false
   run "robust, no undistortion"    odometry.undistort=false
   run "robust, isotropic weights"  motion.ray_noise=false
   run "robust, keyframes (60)"     odometry.keyframe_min_inliers=60
+  run "former defaults"            odometry.references=1 odometry.colour_time=false motion.cauchy=0 \
+                                   motion.gauss_newton_iterations=3 star.subpixel=false
 fi
 echo "# per-stage wall ms/frame of each run (narf runs beside the others unless sequential):"
 cat "$tmp/stages.txt"

@@ -186,3 +186,65 @@ TEST(Odometry, KeyframeMotionIsRelativeToThePreviousFrame) {
     EXPECT_LT(rotDeg(err), 0.2) << "frame " << i;
   }
 }
+
+// references = 3: the two frames before the previous one are matched too and fitted jointly with it;
+// the motion stays relative to the previous frame and within 2 mm / 0.2 deg.
+TEST(Odometry, OlderFramesJoinTheFit) {
+  const auto seq = room(false);
+  OdometryParams one, three;
+  one.references = 1;
+  three.references = 3;
+  one.narf.downsample = three.narf.downsample = 2;
+  RgbdOdometry a(one), b(three);
+  for (std::size_t i = 10; i <= 14; ++i) {
+    const Frame f = seq.render(i);
+    const OdometryResult ra = a.process(f), rb = b.process(f);
+    if (i == 10) continue;
+    ASSERT_TRUE(ra.success && rb.success) << "frame " << i << ": " << ra.failure << rb.failure;
+    EXPECT_EQ(rb.reference_index, i - 1);
+    if (i >= 13) EXPECT_GT(rb.matches, ra.matches + ra.matches / 2) << "frame " << i;  // three frames matched
+    const mrpt::poses::CPose3D err = rb.motion - (seq.groundTruth(i) - seq.groundTruth(i - 1));
+    EXPECT_LT(err.translation().norm(), 0.002) << "frame " << i;
+    EXPECT_LT(rotDeg(err), 0.2) << "frame " << i;
+  }
+}
+
+// Colour captured 11 ms before or after the depth (alternating, as TUM's fr1 within +-20 ms): bearings
+// and depths then describe different camera poses. colour_time moves the keypoints to the depth
+// capture with the velocity of a first fit and fits again: most of the error goes (measured 2.0 vs
+// 5.6 mm mean here, with turns up to 30 deg/s; the rest is the first fit's velocity error).
+TEST(Odometry, ColourCaptureOffsetIsCompensated) {
+  sim::SimOptions o;
+  o.scene = "room";
+  o.fps = 90;      // three samples per 30 Hz frame: the neighbours are 11 ms away
+  o.frames = 120;  // the same 1.33 s path as room()
+  o.noise = false;
+  const sim::SyntheticSequence seq(o);
+  auto frame = [&](std::size_t k) {
+    Frame f = seq.render(3 * k);
+    const int shift = k % 2 ? 1 : -1;
+    f.rgb = seq.render(3 * k + shift).rgb;
+    f.colour_offset = shift / o.fps;
+    f.index = k;
+    return f;
+  };
+  double err[2] = {0, 0};
+  for (bool colour_time : {false, true}) {
+    OdometryParams p;
+    p.colour_time = colour_time;
+    p.narf.downsample = 2;
+    RgbdOdometry odo(p);
+    for (std::size_t k = 10; k <= 16; ++k) {
+      const OdometryResult r = odo.process(frame(k));
+      if (k == 10) continue;
+      ASSERT_TRUE(r.success) << "frame " << k << ": " << r.failure;
+      const mrpt::poses::CPose3D e = r.motion - (seq.groundTruth(3 * k) - seq.groundTruth(3 * k - 3));
+      err[colour_time] += e.translation().norm() / 6;
+      if (colour_time) {
+        EXPECT_LT(e.translation().norm(), 0.005) << "frame " << k;
+        EXPECT_LT(rotDeg(e), 0.3) << "frame " << k;
+      }
+    }
+  }
+  EXPECT_LT(2 * err[1], err[0]) << "mean error with colour_time " << err[1] << " m, without " << err[0] << " m";
+}

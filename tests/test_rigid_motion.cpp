@@ -125,6 +125,8 @@ TEST(RigidMotion, RayNoiseWeightingBeatsIsotropicOnAxialNoise) {
       RobustFitOptions o;
       o.inlier_threshold = 0.05;  // no outliers here: every point is an inlier
       o.ray_noise = ray;
+      o.cauchy = 0;  // plain least squares: the weighting alone is compared (a kernel costs a little
+                     // efficiency on noise that is exactly Gaussian, as here)
       o.gauss_newton_iterations = 10;
       const RigidFit f = fitRobust(s, d, o);
       ASSERT_TRUE(f.ok) << f.failure;
@@ -135,4 +137,50 @@ TEST(RigidMotion, RayNoiseWeightingBeatsIsotropicOnAxialNoise) {
     }
   }
   EXPECT_LT(err_ray, 0.95 * err_iso) << "ray " << err_ray / 30 << " m, isotropic " << err_iso / 30 << " m";
+}
+
+// Half the 3000 matches wrong: a first RANSAC hypothesis with an outlier in its sample has almost no
+// inliers, and the draws it asks for (log(0.001) / log(1 - 1e-9)) overflowed an int, which ended the
+// loop after one hypothesis.
+TEST(RigidMotion, RobustSurvivesAHopelessFirstHypothesis) {
+  Points3 s, d;
+  makeCorrespondences(3000, 0.002, 0.5, s, d, 5);
+  for (std::uint32_t seed = 1; seed <= 8; ++seed) {
+    RobustFitOptions o;
+    o.seed = seed;
+    const RigidFit f = fitRobust(s, d, o);
+    ASSERT_TRUE(f.ok) << "seed " << seed << ": " << f.failure;
+    EXPECT_GT(f.inliers.size(), 1400u) << "seed " << seed;
+    EXPECT_LT((f.T.translation() - knownMotion().translation()).norm(), 0.003) << "seed " << seed;
+  }
+}
+
+// Matches whose depth came from another surface a few mm away pass the inlier threshold and pull a
+// plain least-squares refinement; the Cauchy kernel lets them pull much less.
+TEST(RigidMotion, CauchyKernelResistsInliersWithWrongDepth) {
+  const Eigen::Isometry3d T = knownMotion();
+  double err_plain = 0, err_cauchy = 0;
+  for (std::uint32_t seed = 50; seed < 70; ++seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-1, 1), z(0.8, 2.0), shift(0.004, 0.009);
+    std::normal_distribution<double> g(0, 0.001);
+    Points3 s, d;
+    for (int i = 0; i < 150; ++i) {
+      const Eigen::Vector3d p(u(rng), u(rng), z(rng));
+      s.push_back(p);
+      Eigen::Vector3d q = T * p + Eigen::Vector3d(g(rng), g(rng), g(rng));
+      if (i % 4 == 0) q += shift(rng) * q.normalized();  // a quarter read a surface behind the point
+      d.push_back(q);
+    }
+    for (double c : {0.0, 1.0}) {
+      RobustFitOptions o;
+      o.cauchy = c;
+      const RigidFit f = fitRobust(s, d, o);
+      ASSERT_TRUE(f.ok) << f.failure;
+      double e = 0;
+      for (const auto& p : s) e += (f.T * p - T * p).norm();
+      (c > 0 ? err_cauchy : err_plain) += e / s.size();
+    }
+  }
+  EXPECT_LT(err_cauchy, 0.7 * err_plain) << "cauchy " << err_cauchy / 20 << " m, plain " << err_plain / 20 << " m";
 }

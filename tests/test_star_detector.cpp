@@ -53,6 +53,28 @@ TEST(Star, FindsAnIsolatedBlobAtItsCentreWithItsScale) {
   EXPECT_GT(best.response, 30.f);  // bright centre
 }
 
+// A blob centred between pixels: the response peak's parabola vertex finds it to a fraction of a pixel,
+// the integer extremum only to the nearest pixel.
+TEST(Star, SubpixelPositionOfAnOffCentreBlob) {
+  const cv::Point2f centre(120.35f, 110.7f);
+  cv::Mat img(240, 240, CV_8U, cv::Scalar(60));
+  constexpr int kShift = 8;  // fractional drawing: coordinates in 1/256 px
+  cv::circle(img, cv::Point(cvRound(centre.x * 256), cvRound(centre.y * 256)), 8 * 256, cv::Scalar(220), cv::FILLED,
+             cv::LINE_AA, kShift);
+  auto strongest = [&](bool subpixel) {
+    StarParams p;
+    p.subpixel = subpixel;
+    const auto kps = detectStar(img, p);
+    EXPECT_FALSE(kps.empty());
+    return std::max_element(kps.begin(), kps.end(), [](const cv::KeyPoint& a, const cv::KeyPoint& b) {
+             return a.response < b.response;
+           })->pt;
+  };
+  const float whole = float(cv::norm(strongest(false) - centre)), fine = float(cv::norm(strongest(true) - centre));
+  EXPECT_LT(fine, 0.3f);
+  EXPECT_LT(fine, whole);
+}
+
 TEST(Star, FlatAndStraightEdgeImagesGiveNothing) {
   cv::Mat flat(240, 320, CV_8U, cv::Scalar(90));
   EXPECT_TRUE(detectStar(flat).empty());

@@ -62,7 +62,10 @@ TEST(TumFolder, FramesAreStampedAtTheirDepthCapture) {
     EXPECT_LE(std::abs(a.rgb.timestamp - a.depth.timestamp), 0.02);
     if (i > 0) EXPECT_GT(a.depth.timestamp, src.pairs()[i - 1].depth.timestamp);  // strictly increasing stamps
   }
-  EXPECT_DOUBLE_EQ(src.read(5).timestamp, src.pairs()[5].depth.timestamp);
+  const Frame f = src.read(5);
+  EXPECT_DOUBLE_EQ(f.timestamp, src.pairs()[5].depth.timestamp);
+  // The colour image's own capture time travels along (the odometry's keypoint bearings come from it).
+  EXPECT_DOUBLE_EQ(f.timestamp + f.colour_offset, src.pairs()[5].rgb.timestamp);
 }
 
 TEST(Trajectory, WriteReadRoundTrip) {

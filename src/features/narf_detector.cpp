@@ -21,7 +21,7 @@ std::vector<ConfigKey> narfKeys(NarfParams& p) {
       {"downsample", &p.downsample, "factor on the depth image (1 = full res)"},
       {"max_points", &p.max_points, "strongest kept, 0 = all"},
       {"min_interest_value", &p.min_interest_value, "[0,1]"},
-      {"threads", &p.threads, "OpenMP threads inside PCL's NARF"},
+      {"threads", &p.threads, "OpenMP threads of PCL's border extraction"},
       {"recursive_scale_reduction", &p.recursive_scale_reduction, "PCL speed-up on near surfaces"},
   };
 }
@@ -65,13 +65,20 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
   range.setUnseenToMaxRange();
 
   pcl::RangeImageBorderExtractor border;
-  border.getParameters().max_no_of_threads = p.threads;
   pcl::NarfKeypoint narf(&border);
   narf.setRangeImage(&range);
+  // Border descriptions and surface changes are per-pixel results: computed here on `threads`
+  // threads (PCL caches them). The interest search that follows runs on one thread: PCL's sparse
+  // interest image lets each seed pixel write its neighbours' interest values and skips pixels already
+  // written, so with more threads which seed computes a pixel (from its own neighbourhood) depends on
+  // the threads' interleaving, and the keypoints vary run to run (about one fr1_xyz frame in ten).
+  border.getParameters().max_no_of_threads = p.threads;
+  border.getBorderDescriptions();
+  border.getSurfaceChangeScores();
   auto& np = narf.getParameters();
   np.support_size = float(p.support_size);
   np.min_interest_value = float(p.min_interest_value);
-  np.max_no_of_threads = p.threads;
+  np.max_no_of_threads = 1;
   np.use_recursive_scale_reduction = p.recursive_scale_reduction;
   np.max_no_of_interest_points = p.max_points > 0 ? p.max_points : -1;
   pcl::PointCloud<int> indices;

@@ -22,6 +22,7 @@ std::vector<ConfigKey> starKeys(StarParams& p) {
       {"line_threshold_projected", &p.line_threshold_projected, "Harris trace^2/det limit"},
       {"line_threshold_binarized", &p.line_threshold_binarized, "same, on the scale map"},
       {"suppress_nonmax_size", &p.suppress_nonmax_size, "non-max window, pixels"},
+      {"subpixel", &p.subpixel, "refine positions to the response peak"},
   };
 }
 }  // namespace
@@ -201,6 +202,19 @@ bool isExtremum(const cv::Mat& responses, cv::Point pt, int d, float value, int 
   return true;
 }
 
+// Sub-pixel position of a response extremum: the vertex of the parabola through it and its two
+// neighbours, along x and along y (the extremum is strict, so the offset is within half a pixel).
+cv::Point2f refinePeak(const cv::Mat& responses, cv::Point pt) {
+  auto offset = [](float a, float b, float c) {
+    const float curv = a - 2.f * b + c;
+    return curv != 0.f ? std::clamp(0.5f * (a - c) / curv, -0.5f, 0.5f) : 0.f;
+  };
+  const float* r = responses.ptr<float>(pt.y);
+  const float dx = offset(r[pt.x - 1], r[pt.x], r[pt.x + 1]);
+  const float dy = offset(responses.at<float>(pt.y - 1, pt.x), r[pt.x], responses.at<float>(pt.y + 1, pt.x));
+  return {pt.x + dx, pt.y + dy};
+}
+
 }  // namespace
 
 std::vector<cv::KeyPoint> detectStar(const cv::Mat& gray, const StarParams& p) {
@@ -240,6 +254,8 @@ std::vector<cv::KeyPoint> detectStar(const cv::Mat& gray, const StarParams& p) {
   }, 4);
   std::vector<cv::KeyPoint> keypoints;
   for (auto& r : per_row) keypoints.insert(keypoints.end(), r.begin(), r.end());
+  if (p.subpixel)
+    for (auto& k : keypoints) k.pt = refinePeak(responses, cv::Point(cvRound(k.pt.x), cvRound(k.pt.y)));
   return keypoints;
 }
 

@@ -165,6 +165,7 @@ Frame TumFolderSource::read(std::size_t i) const {
   // The pose a frame yields is where the camera was when the depth image was taken: ICP and the TSDF
   // see only depth, and colour may be up to max_time_diff away.
   f.timestamp = a.depth.timestamp;
+  f.colour_offset = a.rgb.timestamp - a.depth.timestamp;  // the odometry's keypoint bearings come from colour
   f.camera = camera_;
   f.rgb = loadColour((fs::path(folder_) / a.rgb.file).string(), camera_.width, camera_.height);
   f.depth = loadTumDepth((fs::path(folder_) / a.depth.file).string(), camera_.width, camera_.height);

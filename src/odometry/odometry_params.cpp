@@ -19,6 +19,8 @@ std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
       {"undistort", &p.undistort, "undistort keypoints before 3D/homography"},
       {"depth_window", &p.depth_window, "pixels, half-size of the keypoint depth window"},
       {"depth_mode", &p.depth_mode, "median | min of that window"},
+      {"references", &p.references, "frames matched: the previous one and references-1 before it"},
+      {"colour_time", &p.colour_time, "keypoints moved to the depth capture time"},
   };
 }
 
@@ -40,6 +42,7 @@ std::vector<ConfigKey> motionKeys(OdometryParams& p) {
       {"inlier_threshold", &p.robust.inlier_threshold, "m at <= 1 m depth, grows with z^2"},
       {"gauss_newton_iterations", &p.robust.gauss_newton_iterations, "robust: refinement steps"},
       {"ray_noise", &p.robust.ray_noise, "robust: Kinect noise along rays in Gauss-Newton"},
+      {"cauchy", &p.robust.cauchy, "robust: Cauchy kernel scale in Gauss-Newton, sigmas (0 = off)"},
       {"min_inliers", &p.min_inliers, "3D inliers needed"},
       {"min_extent", &p.min_extent, "m, inlier spread needed"},
       {"max_rms", &p.max_rms, "m, inlier RMS accepted"},
@@ -52,6 +55,7 @@ void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, 
   loadKeys(c, s, odometryKeys(*this));
   loadKeys(c, "matching", matchingKeys(*this));
   loadKeys(c, "motion", motionKeys(*this));
+  if (references < 1 || references > 8) throw InputError("[" + s + "] references", "must be 1..8 frames");
   if (depth_window < 0 || depth_window > 10) throw InputError("[" + s + "] depth_window", "must be 0..10 pixels");
   if (depth_mode != "median" && depth_mode != "min")
     throw InputError("[" + s + "] depth_mode", "must be median or min (got '" + depth_mode + "')");

@@ -109,7 +109,7 @@ double secondaryExtent(const Points3& pts, const std::vector<int>& subset) {
 
 Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
                                     const Eigen::Isometry3d& T0, int iterations,
-                                    Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise) {
+                                    Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise, double cauchy) {
   const std::vector<int> idx = subset.empty() ? allIndices(src.size()) : subset;
   Eigen::Matrix<double, 6, 1> p = toVector(T0);
   // Whitening of each residual T s - d: the inverse Cholesky factor of R C_s R^T + C_d (R from T0).
@@ -124,16 +124,28 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
       w[k] = Eigen::Matrix3d::Identity() / pointSigma(s, d);
     }
   }
+  // Cauchy kernel by iteratively reweighted least squares: each pass weighs a whitened residual e by
+  // 1 / (1 + (e/c)^2), fixed while the step is solved and tested (all ones without a kernel).
+  std::vector<double> sw(idx.size(), 1.0);
   auto residuals = [&](const Eigen::Matrix<double, 6, 1>& q, Eigen::VectorXd& r) {
     const Eigen::Isometry3d T = fromVector(q);
     r.resize(3 * idx.size());
-    for (std::size_t k = 0; k < idx.size(); ++k) r.segment<3>(3 * k) = w[k] * (T * src[idx[k]] - dst[idx[k]]);
+    for (std::size_t k = 0; k < idx.size(); ++k) r.segment<3>(3 * k) = sw[k] * (w[k] * (T * src[idx[k]] - dst[idx[k]]));
+  };
+  auto reweight = [&](const Eigen::Matrix<double, 6, 1>& q) {
+    if (cauchy <= 0) return;
+    const Eigen::Isometry3d T = fromVector(q);
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      const double e = (w[k] * (T * src[idx[k]] - dst[idx[k]])).norm() / cauchy;
+      sw[k] = 1.0 / std::sqrt(1.0 + e * e);
+    }
   };
   Eigen::VectorXd r, rp, rm;
   Eigen::MatrixXd J(3 * idx.size(), 6);
   Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Identity();
   double chi2 = 0;
   for (int it = 0; it <= iterations; ++it) {
+    reweight(p);
     residuals(p, r);
     chi2 = r.squaredNorm();
     // Central-difference Jacobian: 12 cheap evaluations, exact enough for 6 parameters.
@@ -230,7 +242,8 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
       const double ratio = double(best_in.size()) / n;
       const double p_good = ratio * ratio * ratio;
       if (p_good > 0.999999) needed = h + 1;
-      else if (p_good > 0) needed = std::min(o.iterations, int(std::ceil(std::log(1e-3) / std::log(1 - p_good))) + 1);
+      // (in double: a first hypothesis with a handful of inliers asks for more draws than an int holds)
+      else if (p_good > 0) needed = int(std::min<double>(o.iterations, std::ceil(std::log(1e-3) / std::log1p(-p_good)) + 1));
     }
   }
   if (best_in.size() < 3) {
@@ -245,7 +258,7 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
     best_in = in;
     T = umeyamaRigid(src, dst, best_in);
   }
-  T = refineGaussNewton(src, dst, best_in, T, o.gauss_newton_iterations, &fit.covariance, o.ray_noise);
+  T = refineGaussNewton(src, dst, best_in, T, o.gauss_newton_iterations, &fit.covariance, o.ray_noise, o.cauchy);
   inliersOf(T, in);
   if (in.size() >= 3) best_in = in;
   fit.T = T;

@@ -12,7 +12,8 @@ namespace vofusion {
 
 struct Frame {
   std::size_t index = 0;      // 0-based position in its source
-  double timestamp = 0.0;     // seconds (UNIX time for real data)
+  double timestamp = 0.0;     // seconds (UNIX time for real data); when the depth image was taken
+  double colour_offset = 0.0; // seconds; colour capture time minus `timestamp` (TUM fr1: within +-20 ms)
   cv::Mat rgb;                // CV_8UC3, BGR order (OpenCV convention), registered to depth
   cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
   CameraIntrinsics camera;

@@ -17,7 +17,8 @@ struct NarfParams : public mrpt::config::CLoadableOptions {
   int downsample = 5;               // factor; 1 = full resolution (seconds per frame)
   int max_points = 0;               // keypoints kept, strongest first; 0 = all
   double min_interest_value = 0.45; // [0, 1]; PCL default
-  int threads = 2;                  // OpenMP threads PCL may use inside NARF (border extraction + interest)
+  int threads = 2;                  // OpenMP threads of PCL's border extraction; the interest search always
+                                    // runs on one (more makes the keypoints vary run to run)
   bool recursive_scale_reduction = false;  // PCL: interest values of near (large) surfaces on a coarser scale
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;

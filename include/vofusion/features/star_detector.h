@@ -17,6 +17,7 @@ struct StarParams : public mrpt::config::CLoadableOptions {
   int line_threshold_projected = 10;  // ratio; Harris trace^2/det limit on the responses
   int line_threshold_binarized = 8;   // ratio; the same on the binarised scale map
   int suppress_nonmax_size = 5;       // pixels; non-maximum suppression window
+  bool subpixel = true;               // positions refined to the parabola vertex of the response peak
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;

@@ -29,6 +29,10 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   bool undistort = true;            // undistort keypoint pixels (CameraIntrinsics::dist) before 3D and homography
   int depth_window = 0;             // pixels; half-size of the window the keypoint's depth comes from (0 = centre)
   std::string depth_mode = "median";  // "median" or "min" (nearest) valid reading of that window
+  int references = 3;               // frames matched: the previous one and references-1 before it, one joint
+                                    // fit (frame to frame only, not with keyframes)
+  bool colour_time = true;          // keypoints moved to their depth capture (Frame::colour_offset) at the
+                                    // estimated velocity, then fitted again
   // [matching]
   int max_hamming = 80;             // bits of 256; matches farther apart are dropped (256 = no limit)
   bool use_homography = true;       // RANSAC homography between matched pixels (the paper's filter)
@@ -60,7 +64,7 @@ struct OdometryResult {
   std::string failure;                 // why, when !success ("too few matches", "degenerate geometry", ...)
   mrpt::poses::CPose3D motion;         // current camera pose in the previous camera's frame (T_prev_curr)
   mrpt::math::CMatrixDouble66 covariance;  // of motion, (x y z yaw pitch roll), for CPose3DPDFGaussian
-  int keypoints = 0, matches = 0, inliers = 0;
+  int keypoints = 0, matches = 0, inliers = 0;  // matches and inliers over all frames matched (references)
   double rms_error = 0.0;              // m, over the inlier 3D correspondences
   StageTimes times;                    // this frame's per-stage wall time
   // Additions: which frame `motion` is relative to. Usually the previous frame; when that frame was
