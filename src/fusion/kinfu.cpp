@@ -85,9 +85,18 @@ struct KinFu::Impl {
     // where this frame had readings (or the last prediction had a surface). Rays without one marched
     // from min_depth through partly observed bricks, three quarters of all ray-cast samples, mostly
     // to find nothing. Hints outside the fused depth range have no surface to find.
-    cv::Mat hint = frame_depth.empty() ? cv::Mat::zeros(cam.height, cam.width, CV_32F) : frame_depth.clone();
-    hint.setTo(0.f, (hint < params.tsdf.min_depth) | (hint > params.tsdf.max_depth));
-    if (model_depth.size() == hint.size()) model_depth.copyTo(hint, hint <= 0.f);
+    cv::Mat hint(cam.height, cam.width, CV_32F);
+    const bool have_frame = frame_depth.size() == hint.size(), have_last = model_depth.size() == hint.size();
+    const float lo = params.tsdf.min_depth, hi = params.tsdf.max_depth;
+    for (int y = 0; y < hint.rows; ++y) {
+      const float* d = have_frame ? frame_depth.ptr<float>(y) : nullptr;
+      const float* m = have_last ? model_depth.ptr<float>(y) : nullptr;
+      float* h = hint.ptr<float>(y);
+      for (int x = 0; x < hint.cols; ++x) {
+        const float z = d ? d[x] : 0.f;
+        h[x] = z >= lo && z <= hi ? z : (m ? m[x] : 0.f);
+      }
+    }
     RaycastMaps maps = volume->raycast(from.cast<float>(), cam, &hint, false, true);
     model_depth = maps.depth;
     const int levels = std::max(1, params.preprocess.levels);

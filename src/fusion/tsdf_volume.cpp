@@ -278,18 +278,6 @@ bool TsdfVolume::cellGradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) cons
   return true;
 }
 
-bool TsdfVolume::gradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const {
-  for (int i = 0; i < 3; ++i) {
-    Eigen::Vector3f a = q, b = q;
-    a[i] += 1.f;
-    b[i] -= 1.f;
-    float fa, fb;
-    if (!trilinear(a, fa) || !trilinear(b, fb)) return false;
-    g[i] = fa - fb;
-  }
-  return true;
-}
-
 bool TsdfVolume::sdfAt(const Eigen::Vector3f& p, float& sdf_m) const {
   float f;
   if (!trilinear(p / params_.voxel_size, f)) return false;

@@ -100,9 +100,8 @@ class TsdfVolume {
   int blockOfSlot(int slot) const;
   bool cell(const Eigen::Vector3f& q, const Voxel* (&v)[8], float& a, float& b, float& c) const;
   bool trilinear(const Eigen::Vector3f& q, float& f) const;  // q in voxel units
-  // TSDF gradient at q: central differences of trilinear samples one voxel apart (48 voxel reads),
-  // or the derivative of the trilinear interpolant inside q's cell (its 8 voxels, 1/6 of the work).
-  bool gradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const;
+  // TSDF gradient at q: the derivative of the trilinear interpolant inside q's cell (its 8 voxels;
+  // central differences of trilinear samples read 48 and moved no figure of the benchmark).
   bool cellGradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const;
   std::int32_t allocate(int bx, int by, int bz);
   static std::uint64_t key(int bx, int by, int bz);
