@@ -171,6 +171,7 @@ def run_sequence(seq, args, command):
         entry["odometry_failures"] = s.get("odometry_failures")
         entry["summary_peak_memory_mib"] = s.get("peak_memory_mib")
         entry["fusion"] = s.get("fusion")
+        entry["mesh"] = s.get("mesh")
         if gt:
             png = os.path.join(fig_dir, mode + ".png")
             entry["eval"] = evaluate(args.rgbd_eval, gt, os.path.join(out, "trajectory.txt"), png)
@@ -249,6 +250,7 @@ def markdown(res, command):
     row("lost frames", lambda e: str(e.get("lost_frames", "-")))
     row("odometry failures", lambda e: str(e.get("odometry_failures", "-")))
     row("volume shifts", lambda e: str((e.get("fusion") or {}).get("volume_shifts", "-")))
+    row("mesh faces / vertices", lambda e: "%d / %d" % (e["mesh"]["faces"], e["mesh"]["vertices"]) if e.get("mesh") else "-")
     stages = []
     for m in ok:
         for st in res["modes"][m].get("stages", {}):
