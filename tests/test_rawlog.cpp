@@ -1,5 +1,6 @@
 #include <Eigen/Dense>
 // MRPT rawlog reading and writing: a real OpenNI2 capture, round trips in both formats, bad input.
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 
@@ -8,6 +9,9 @@
 #include <mrpt/obs/CObservationOdometry.h>
 #include <mrpt/obs/CRawlog.h>
 #include <mrpt/serialization/CArchive.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "support.h"
 #include "vofusion/core/errors.h"
@@ -100,6 +104,38 @@ TEST(Rawlog, RoundTripObservationsExternalImages) {
   // Nothing temporary left behind.
   for (const auto& e : fs::directory_iterator(dir))
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
+namespace {
+std::string fileBytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
+}
+}  // namespace
+
+// Frames decoded from an 8-bit RGB PNG (TUM, 7-Scenes) keep that file's bytes in the rawlog's
+// images; anything else (here a grey PNG the reader expanded to BGR) is encoded from the pixels.
+TEST(Rawlog, ExternalImagesCopySourcePngsWhenTheyMatch) {
+  auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_copy_png");
+  const std::string rgb_png = dir + "/rgb0.png", grey_png = dir + "/grey1.png";
+  ASSERT_TRUE(cv::imwrite(rgb_png, frames[0].rgb, {cv::IMWRITE_PNG_COMPRESSION, 9}));
+  cv::Mat grey;
+  cv::cvtColor(frames[1].rgb, grey, cv::COLOR_BGR2GRAY);
+  ASSERT_TRUE(cv::imwrite(grey_png, grey));
+  cv::cvtColor(grey, frames[1].rgb, cv::COLOR_GRAY2BGR);
+  frames[0].colour_file = rgb_png;
+  frames[1].colour_file = grey_png;
+  const std::string path = writeRawlog(dir + "/seq.rawlog", frames, {});
+  std::vector<std::string> written;
+  for (const auto& e : fs::directory_iterator(dir + "/seq_Images"))
+    if (e.path().extension() == ".png") written.push_back(e.path().string());
+  std::sort(written.begin(), written.end());
+  ASSERT_EQ(written.size(), 2u);
+  EXPECT_EQ(fileBytes(written[0]), fileBytes(rgb_png));  // level 9: our own encoder (level 1) differs
+  EXPECT_NE(fileBytes(written[1]), fileBytes(grey_png));
+  RawlogSource src(path, {});
+  expectSameFrames(frames, src, 1e-4 + 1e-6);
 }
 
 TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {

@@ -2,6 +2,7 @@
 // The unit that flows through the pipeline: one associated colour + depth pair.
 #include <cstddef>
 #include <optional>
+#include <string>
 
 #include <mrpt/poses/CPose3D.h>
 #include <opencv2/core.hpp>
@@ -15,6 +16,8 @@ struct Frame {
   double timestamp = 0.0;     // seconds (UNIX time for real data); when the depth image was taken
   double colour_offset = 0.0; // seconds; colour capture time minus `timestamp` (TUM fr1: within +-20 ms)
   cv::Mat rgb;                // CV_8UC3, BGR order (OpenCV convention), registered to depth
+  std::string colour_file;    // the image file rgb was decoded from, unchanged (empty if none): writers
+                              // may copy its bytes instead of encoding rgb again
   cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
   CameraIntrinsics camera;
   std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
