@@ -13,6 +13,7 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/features/hamming_matcher.h"
 #include "vofusion/features/keypoint_union.h"
 
 namespace vofusion {
@@ -54,38 +55,6 @@ float keypointDepth(const cv::Mat& depth, int x, int y, int r, bool nearest) {
   return v[n / 2];
 }
 
-// Brute-force Hamming matching with cross-check (as cv::BFMatcher(NORM_HAMMING, true)), fed the
-// current frame's descriptors in parts: the nearest reference descriptor of each current one is final
-// at once, the nearest current descriptor of each reference one is kept up to date (ties go to the
-// earlier row, as BFMatcher does), and the cross-check is applied at the end.
-struct SplitMatch {
-  std::vector<cv::DMatch> forward;   // per current row: nearest reference row
-  std::vector<cv::DMatch> backward;  // per reference row: nearest current row so far
-  int rows = 0;                      // current rows matched so far
-
-  void add(const cv::Mat& cur, const cv::Mat& ref) {
-    if (cur.rows <= rows || ref.empty()) return;
-    const cv::Mat part = cur.rowRange(rows, cur.rows);
-    cv::BFMatcher bf(cv::NORM_HAMMING, false);
-    std::vector<cv::DMatch> f, b;
-    bf.match(part, ref, f);
-    bf.match(ref, part, b);
-    for (auto& m : f) m.queryIdx += rows, forward.push_back(m);
-    backward.resize(ref.rows, cv::DMatch(-1, -1, std::numeric_limits<float>::max()));
-    for (auto m : b) {
-      m.trainIdx += rows;
-      if (m.distance < backward[m.queryIdx].distance) backward[m.queryIdx] = m;
-    }
-    rows = cur.rows;
-  }
-  std::vector<cv::DMatch> crossChecked() const {
-    std::vector<cv::DMatch> out;
-    for (const auto& m : forward)
-      if (backward[m.trainIdx].trainIdx == m.queryIdx) out.push_back(m);
-    return out;
-  }
-};
-
 }  // namespace
 
 struct RgbdOdometry::Impl {
@@ -126,13 +95,13 @@ struct RgbdOdometry::Impl {
 
   // Matches of cur against ref after the Hamming limit and the homography filter; "" or why too few.
   // `split` holds the matching of cur's descriptors known so far (may be empty).
-  std::string matchPair(const FrameFeatures& ref, const FrameFeatures& cur, SplitMatch& split, StageTimes& times,
+  std::string matchPair(const FrameFeatures& ref, const FrameFeatures& cur, CrossCheckedHammingMatcher& split, StageTimes& times,
                         std::vector<cv::DMatch>& matches) const;
   // Motion T_ref_cur from matching (against ref and the older frames; split[0] for ref, split[1 + i]
   // for older[i]), homography filter and one rigid fit over all correspondences; fills matches,
   // inliers, rms_error, failure and the stage times of r.
   bool estimate(const FrameFeatures& ref, const std::vector<OlderFrame>& older, const FrameFeatures& cur,
-                std::vector<SplitMatch>& split, OdometryResult& r, RigidFit& fit) const;
+                std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r, RigidFit& fit) const;
 };
 
 FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, StageTimes& times) const {
@@ -250,7 +219,7 @@ void RgbdOdometry::reset() {
   impl_->older.clear();
 }
 
-std::string RgbdOdometry::Impl::matchPair(const FrameFeatures& ref, const FrameFeatures& cur, SplitMatch& split,
+std::string RgbdOdometry::Impl::matchPair(const FrameFeatures& ref, const FrameFeatures& cur, CrossCheckedHammingMatcher& split,
                                           StageTimes& times, std::vector<cv::DMatch>& matches) const {
   const OdometryParams& P = params;
   // Brute-force Hamming matching with cross-check (query = current, train = reference).
@@ -279,7 +248,7 @@ std::string RgbdOdometry::Impl::matchPair(const FrameFeatures& ref, const FrameF
 }
 
 bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<OlderFrame>& older,
-                                  const FrameFeatures& cur, std::vector<SplitMatch>& split, OdometryResult& r,
+                                  const FrameFeatures& cur, std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r,
                                   RigidFit& fit) const {
   const OdometryParams& P = params;
   auto fail = [&r](const std::string& why) {
@@ -371,7 +340,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   Impl::Extraction ex;
   FrameFeatures cur = m.begin(frame, ex, r.times);
   // While NARF runs: match the STAR part against the reference and the older frames.
-  std::vector<SplitMatch> split(1 + older.size());
+  std::vector<CrossCheckedHammingMatcher> split(1 + older.size());
   if (m.reference && ex.narf_job.valid()) {
     ScopedStageTimer t(r.times, "matching");
     split[0].add(cur.descriptors, m.reference->descriptors);
@@ -407,7 +376,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   if (!keep_keyframe && m.last) {
     OdometryResult r2;
     RigidFit fit2;
-    std::vector<SplitMatch> fresh;
+    std::vector<CrossCheckedHammingMatcher> fresh;
     if (m.estimate(*m.last, {}, cur, fresh, r2, fit2) || !ok) {
       ok = r2.failure.empty();
       fit = fit2;

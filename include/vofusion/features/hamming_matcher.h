@@ -1,0 +1,28 @@
+#pragma once
+// Brute-force Hamming matching with cross-check, the paper's matcher: the same matches as
+// cv::BFMatcher(NORM_HAMMING, crossCheck = true), ties to the earlier row as it does, but each
+// descriptor pair's distance is computed once for both directions (BFMatcher walks the distance
+// matrix twice) and the current frame's descriptors can arrive in parts: the STAR ones are matched
+// while NARF still runs.
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace vofusion {
+
+class CrossCheckedHammingMatcher {
+ public:
+  // Matches the rows of `cur` not seen yet (cur grows between calls; the first rows must stay the
+  // same) against `ref`, which must be the same at every call. CV_8U descriptors, any width.
+  void add(const cv::Mat& cur, const cv::Mat& ref);
+  // queryIdx = row of cur, trainIdx = row of ref; each the other's nearest, in cur's row order.
+  std::vector<cv::DMatch> crossChecked() const;
+  int rowsMatched() const { return rows_; }
+
+ private:
+  std::vector<cv::DMatch> forward_;   // per current row: nearest reference row
+  std::vector<cv::DMatch> backward_;  // per reference row: nearest current row so far
+  int rows_ = 0;
+};
+
+}  // namespace vofusion

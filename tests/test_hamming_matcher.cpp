@@ -1,0 +1,58 @@
+// The cross-checked Hamming matcher gives exactly cv::BFMatcher(NORM_HAMMING, crossCheck = true)'s
+// matches, also when the current descriptors arrive in parts and when many distances tie.
+#include <gtest/gtest.h>
+
+#include <opencv2/features2d.hpp>
+
+#include "vofusion/features/hamming_matcher.h"
+
+using namespace vofusion;
+
+namespace {
+// Few distinct bit patterns: many equal distances, so tie-breaking is exercised.
+cv::Mat randomDescriptors(int rows, int cols, cv::RNG& rng, int levels) {
+  cv::Mat m(rows, cols, CV_8U);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) m.at<uchar>(r, c) = static_cast<uchar>(rng.uniform(0, levels));
+  return m;
+}
+
+void expectSame(const std::vector<cv::DMatch>& got, const std::vector<cv::DMatch>& want) {
+  ASSERT_EQ(got.size(), want.size());
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    EXPECT_EQ(got[i].queryIdx, want[i].queryIdx) << i;
+    EXPECT_EQ(got[i].trainIdx, want[i].trainIdx) << i;
+    EXPECT_EQ(got[i].distance, want[i].distance) << i;
+  }
+}
+}  // namespace
+
+TEST(HammingMatcher, SameAsBFMatcherCrossCheck) {
+  cv::RNG rng(7);
+  for (const int cols : {32, 61}) {
+    for (const int levels : {2, 256}) {
+      const cv::Mat cur = randomDescriptors(300, cols, rng, levels), ref = randomDescriptors(250, cols, rng, levels);
+      std::vector<cv::DMatch> want;
+      cv::BFMatcher(cv::NORM_HAMMING, true).match(cur, ref, want);
+      ASSERT_GT(want.size(), 20u);
+      CrossCheckedHammingMatcher whole;
+      whole.add(cur, ref);
+      expectSame(whole.crossChecked(), want);
+      // In parts, as the odometry feeds it (STAR rows first, NARF rows once they are described).
+      CrossCheckedHammingMatcher parts;
+      parts.add(cur.rowRange(0, 120), ref);
+      parts.add(cur.rowRange(0, 121), ref);
+      parts.add(cur, ref);
+      parts.add(cur, ref);  // nothing new: no effect
+      EXPECT_EQ(parts.rowsMatched(), cur.rows);
+      expectSame(parts.crossChecked(), want);
+    }
+  }
+}
+
+TEST(HammingMatcher, EmptyReferenceGivesNoMatches) {
+  cv::RNG rng(1);
+  CrossCheckedHammingMatcher m;
+  m.add(randomDescriptors(10, 32, rng, 256), cv::Mat());
+  EXPECT_TRUE(m.crossChecked().empty());
+}
