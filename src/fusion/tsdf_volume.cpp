@@ -7,6 +7,7 @@
 
 #include "vofusion/core/parallel.h"
 #include "vofusion/fusion/marching_cubes.h"
+#include "vofusion/fusion/voxel_projection.h"
 
 namespace vofusion::fusion {
 
@@ -152,37 +153,23 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
   float inv_count[256];  // 1 / (weight + 1)
   for (int i = 0; i < 256; ++i) inv_count[i] = 1.f / (i + 1);
   std::atomic<std::size_t> updated{0};
+  const cv::Mat depth_c = depth.isContinuous() ? depth : depth.clone();
+  const cv::Mat bgr_c = colour && !bgr.isContinuous() ? bgr.clone() : bgr;
+  const cv::Vec3b* colours = colour ? bgr_c.ptr<cv::Vec3b>() : nullptr;
+  // Bilinear depth only where the 4 neighbours spread less than half the truncation (voxel_projection.h).
+  const VoxelProjector projector(depth_c, cam, zmin, zmax, 0.5f * trunc);
   parallelFor(0, static_cast<int>(touched.size()), [&](int i) {
     Brick& b = *pool_[touched[i]];
     std::size_t brick_updates = 0;
     const Eigen::Vector3f p0 = Rt * ((b.coord * kBrickEdge).cast<float>() * vs) + tc;
+    VoxelRowSamples row;
     for (int z = 0; z < kBrickEdge; ++z) {
       for (int y = 0; y < kBrickEdge; ++y) {
-        Eigen::Vector3f pc = p0 + dy * static_cast<float>(y) + dz * static_cast<float>(z);
+        projector.sampleRow(p0 + dy * static_cast<float>(y) + dz * static_cast<float>(z), dx, row);
         Voxel* vox = &b.voxels[Brick::index(0, y, z)];
-        for (int x = 0; x < kBrickEdge; ++x, pc += dx) {
-          if (pc.z() <= 0.f) continue;
-          const float iz = 1.f / pc.z();
-          const float uf = fx * pc.x() * iz + cx, vf = fy * pc.y() * iz + cy;
-          if (!(uf > -0.5f && vf > -0.5f && uf < w - 0.5f && vf < h - 0.5f)) continue;
-          const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
-          float d = depth.ptr<float>(v)[u];
-          if (!(d >= zmin && d <= zmax)) continue;
-          // Bilinear depth where the 4 neighbours agree: with voxels about as small as a pixel's
-          // footprint, the nearest reading alone fuses a staircase into the TSDF (noisy normals).
-          const int u0 = static_cast<int>(uf), v0 = static_cast<int>(vf);
-          if (uf >= 0.f && vf >= 0.f && u0 + 1 < w && v0 + 1 < h) {
-            const float* r0 = depth.ptr<float>(v0);
-            const float* r1 = depth.ptr<float>(v0 + 1);
-            const float d00 = r0[u0], d01 = r0[u0 + 1], d10 = r1[u0], d11 = r1[u0 + 1];
-            const float lo = std::min(std::min(d00, d01), std::min(d10, d11));
-            const float hi = std::max(std::max(d00, d01), std::max(d10, d11));
-            if (lo > 0.f && hi - lo < 0.5f * trunc) {
-              const float a = uf - u0, b = vf - v0;
-              d = (d00 * (1 - a) + d01 * a) * (1 - b) + (d10 * (1 - a) + d11 * a) * b;
-            }
-          }
-          const float sdf = d - pc.z();
+        for (int x = 0; x < kBrickEdge; ++x) {
+          if (row.pixel[x] < 0) continue;
+          const float sdf = row.depth[x] - row.z[x];
           if (sdf < -trunc) continue;
           const float f = std::min(1.f, sdf * inv_trunc);
           Voxel& vx = vox[x];
@@ -194,7 +181,7 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
           vx.weight = static_cast<std::uint8_t>(std::min(wold + 1, max_w));
           if (colour && sdf < trunc) {
             // Same running average, rounded; a multiply instead of three integer divisions per voxel.
-            const cv::Vec3b& c = bgr.ptr<cv::Vec3b>(v)[u];
+            const cv::Vec3b& c = colours[row.pixel[x]];
             const float k = inv_count[wold], fw = static_cast<float>(wold);
             vx.r = static_cast<std::uint8_t>((vx.r * fw + c[2]) * k + 0.5f);
             vx.g = static_cast<std::uint8_t>((vx.g * fw + c[1]) * k + 0.5f);
