@@ -35,7 +35,7 @@ class CommandLine {
 
 // Runs an app's body, turning any exception into one line on stderr and exit code 2
 // (InputError: bad input or usage) or 1 (anything else). The line is "<app_name>: error: <what>",
-// or just "<what>" when app_name is null.
+// or just "<what>" when app_name is null. Also sets up the allocator for frame-sized buffers.
 int runApp(const char* app_name, int (*body)(int, char**), int argc, char** argv);
 
 }  // namespace vofusion
