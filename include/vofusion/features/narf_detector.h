@@ -20,6 +20,8 @@ struct NarfParams : public mrpt::config::CLoadableOptions {
   int threads = 2;                  // OpenMP threads of PCL's border extraction; the interest search always
                                     // runs on one (more makes the keypoints vary run to run)
   bool recursive_scale_reduction = false;  // PCL: interest values of near (large) surfaces on a coarser scale
+  std::string implementation = "pcl";      // "fast": narf_fast.h, PCL's steps on flat arrays, one thread;
+                                           // "pcl": pcl::NarfKeypoint (the reference)
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
