@@ -2,7 +2,8 @@
 // of a TUM sequence (default parameters otherwise, [narf] threads = 1 unless --threads), and how
 // well the two agree: the share of each one's keypoints with one of the other's within 1 pixel of
 // the reduced image, and the number of frames with identical keypoints.
-//   narf_speed <tum_dir> [--every 3] [--repeat 3] [--threads 1]
+//   narf_speed <tum_dir> [--every 3] [--repeat 3] [--threads 1] [--only fast|pcl]
+// --only times one implementation (for a profiler) and skips the comparison.
 // Built by CMake as build/bin/narf_speed (a benchmark, not a test: run it by hand).
 #include <time.h>
 
@@ -46,10 +47,12 @@ int main(int argc, char** argv) {
     return 2;
   }
   int every = 3, repeat = 3, threads = 1;
+  std::string only;
   for (int i = 2; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--every")) every = std::max(1, std::atoi(argv[i + 1]));
     else if (!std::strcmp(argv[i], "--repeat")) repeat = std::max(1, std::atoi(argv[i + 1]));
     else if (!std::strcmp(argv[i], "--threads")) threads = std::max(1, std::atoi(argv[i + 1]));
+    else if (!std::strcmp(argv[i], "--only")) only = argv[i + 1];
   }
   TumFolderSource src(argv[1], {});
   NarfParams fast, pcl;
@@ -65,10 +68,10 @@ int main(int argc, char** argv) {
     std::vector<cv::KeyPoint> a, b;
     for (int r = 0; r < repeat; ++r) {
       double t = threadCpuMs(), p = processCpuMs();
-      a = detectNarf(frame.depth, frame.camera, fast);
+      if (only != "pcl") a = detectNarf(frame.depth, frame.camera, fast);
       cpu_fast += threadCpuMs() - t, proc_fast += processCpuMs() - p;
       t = threadCpuMs(), p = processCpuMs();
-      b = detectNarf(frame.depth, frame.camera, pcl);
+      if (only != "fast") b = detectNarf(frame.depth, frame.camera, pcl);
       cpu_pcl += threadCpuMs() - t, proc_pcl += processCpuMs() - p;
       ++calls;
     }

@@ -5,6 +5,10 @@
 #include <array>
 #include <cmath>
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #include <pcl/common/angles.h>
 #include <pcl/common/eigen.h>
 
@@ -19,20 +23,21 @@ constexpr float kMinSurfaceChange = 0.2f;    // min_surface_change_score
 constexpr float kMinPointDistance = 0.25f;   // min_distance_between_interest_points, factor on support size
 constexpr float kUnset = 2.0f;               // PCL's marker of a pixel whose interest is still to compute
 
-// nkdGetScores: a surface change close by lowers the score (negative), one at the right distance
-// raises its direction's histogram cell (positive).
-inline void scores(float distance_factor, float change, float pixel_distance, float& negative, float& positive) {
-  negative = 1.0f - 0.5f * change * std::max(1.0f - distance_factor / kOptimalDistance, 0.0f);
-  negative = powf(negative, 2);
-  positive = pixel_distance < 2.0 ? change : change * (1.0f - distance_factor);
-}
+// Eigen's squaredNorm() of a 3-vector sums x^2 + (y^2 + z^2); PCL's distances through Eigen do, so
+// ours must too for the same floats.
+inline float eigenSquaredNorm(float dx, float dy, float dz) { return dx * dx + (dy * dy + dz * dz); }
 
 // nkdGetDirectionAngle and the histogram cell of that angle, in the seed's viewer frame.
 inline int directionCell(const Eigen::Vector3f& direction, const Eigen::Affine3f& rotation) {
   const Eigen::Vector3f rotated = rotation * direction;
   Eigen::Vector2f v(rotated[0], rotated[1]);
   v.normalize();
-  const float angle = 0.5f * pcl::normAngle(2.0f * std::acos(v[0]));
+  // pcl::normAngle(a) for a = 2 acos in [0, 2 pi]: fmod(a + pi, 2 pi) - pi, where the fmod is one
+  // exact subtraction (Sterbenz), so this is the same float without the libm call.
+  const float pi = float(M_PI), two_pi = 2.0f * pi;
+  float t = 2.0f * std::acos(v[0]) + pi;
+  if (t >= two_pi) t -= two_pi;
+  const float angle = 0.5f * (t - pi);
   return std::min(kBins - 1, int(std::lrint(double(std::floor((angle + pcl::deg2rad(90.0f)) / pcl::deg2rad(180.0f) * kBins)))));
 }
 
@@ -51,13 +56,116 @@ float angleChange(const std::array<float, kBins>& hist) {
   return std::sqrt(change);
 }
 
+// A seed's surface changes, cell after cell ([begin[c], begin[c + 1])), as flat arrays.
+struct Changes {
+  std::array<int, kBins + 1> begin;
+  std::vector<float> x, y, z, score, px, py;  // m; [0,1]; pixel coordinates (floats for SIMD)
+  void clear() {
+    for (auto* v : {&x, &y, &z, &score, &px, &py}) v->clear();
+  }
+  void push(const Eigen::Vector3f& p, float s, int u, int v) {
+    x.push_back(p.x()), y.push_back(p.y()), z.push_back(p.z());
+    score.push_back(s), px.push_back(float(u)), py.push_back(float(v));
+  }
+  void move(int from, int to) {
+    for (auto* v : {&x, &y, &z, &score, &px, &py}) (*v)[to] = (*v)[from];
+  }
+  void resize(int n) {
+    for (auto* v : {&x, &y, &z, &score, &px, &py}) v->resize(n);
+  }
+};
+
 // The buffers of the sparse interest image, allocated once per image.
 struct Workspace {
+  std::vector<std::uint8_t> usable;     // valid and neither shadow border nor veil point
   std::vector<std::uint8_t> touched;
-  std::vector<int> to_check, near;  // region of a seed; its pixels close enough to get a value from it
+  std::vector<int> to_check;            // the seed's region in growing order, at most every pixel once
+  std::vector<short> check_x, check_y;  // its pixel coordinates (no division per visit)
+  std::vector<int> near;                // the region's pixels close enough to get a value from this seed
   std::array<std::vector<std::pair<int, float>>, kBins> relevant;  // (pixel, change) per direction cell
+  Changes changes;                      // the same, thinned
   std::vector<std::uint8_t> still_valid;
 };
+
+// Thins the sorted changes [first, first + n): drops those within `limit` of a stronger one, where
+// PCL compares the distance (not its square) with the squared limit (kept: the keypoints must be
+// PCL's). Almost no pair is that close, so a test on the squared distance, 4 at a time, goes first.
+void thin(Changes& c, int first, int n, float limit, std::vector<std::uint8_t>& valid) {
+  const float pre = limit * limit * 1.001f;  // above it, the distance is surely above `limit`
+  const float *x = c.x.data() + first, *y = c.y.data() + first, *z = c.z.data() + first;
+  valid.assign(n, 1);
+  auto check = [&](int k1, int k2) {
+    const float d2 = eigenSquaredNorm(x[k1] - x[k2], y[k1] - y[k2], z[k1] - z[k2]);
+    if (d2 <= pre && std::sqrt(d2) <= limit) valid[k2] = 0;  // PCL's norm()
+  };
+  for (int k1 = 0; k1 < n - 1; ++k1) {
+    if (!valid[k1]) continue;
+    int k2 = k1 + 1;
+#ifdef __SSE2__
+    const __m128 X = _mm_set1_ps(x[k1]), Y = _mm_set1_ps(y[k1]), Z = _mm_set1_ps(z[k1]), PRE = _mm_set1_ps(pre);
+    for (; k2 + 4 <= n; k2 += 4) {
+      const __m128 dx = _mm_sub_ps(X, _mm_loadu_ps(x + k2)), dy = _mm_sub_ps(Y, _mm_loadu_ps(y + k2)),
+                   dz = _mm_sub_ps(Z, _mm_loadu_ps(z + k2));
+      const __m128 d2 = _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+      if (_mm_movemask_ps(_mm_cmple_ps(d2, PRE)))
+        for (int l = 0; l < 4; ++l) check(k1, k2 + l);
+    }
+#endif
+    for (; k2 < n; ++k2) check(k1, k2);
+  }
+  int kept = first;
+  for (int k = 0; k < n; ++k)
+    if (valid[k]) c.move(first + k, kept++);
+  c.resize(kept);
+}
+
+// nkdGetScores of every change in [k0, k1) for the point p at pixel (u, v): the cell's value (largest
+// positive score) is returned, `negative` lowered to the smallest negative score. A change close by
+// lowers the score (negative); one at the right distance raises its cell (positive). All pairs are
+// scored, as in PCL: a far change leaves both as they were, so no branch is needed.
+float cellScore(const Changes& c, int k0, int k1, const Eigen::Vector3f& p, float u, float v, float radius_inv,
+                float& negative) {
+  float best = 0.0f;
+  int k = k0;
+  auto score = [&](int i) {
+    const float pixel_distance = std::max(std::abs(c.px[i] - u), std::abs(c.py[i] - v));
+    const float df = radius_inv * std::sqrt(eigenSquaredNorm(c.x[i] - p.x(), c.y[i] - p.y(), c.z[i] - p.z()));
+    float neg = 1.0f - 0.5f * c.score[i] * std::max(1.0f - df / kOptimalDistance, 0.0f);
+    neg = neg * neg;  // powf(neg, 2), which compilers fold to this
+    const float pos = pixel_distance < 2.0f ? c.score[i] : c.score[i] * (1.0f - df);
+    best = std::max(best, pos);
+    negative = std::min(negative, neg);
+  };
+#ifdef __SSE2__
+  // Four at a time, the same operations lane by lane. max/min may differ from std::max/min only in
+  // the sign of a zero, which no later step sees (a cell is skipped when == 0).
+  const __m128 U = _mm_set1_ps(u), V = _mm_set1_ps(v), PX = _mm_set1_ps(p.x()), PY = _mm_set1_ps(p.y()),
+               PZ = _mm_set1_ps(p.z()), RI = _mm_set1_ps(radius_inv), ONE = _mm_set1_ps(1.0f),
+               HALF = _mm_set1_ps(0.5f), OPT = _mm_set1_ps(kOptimalDistance), TWO = _mm_set1_ps(2.0f),
+               ABS = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  __m128 vbest = _mm_setzero_ps(), vneg = _mm_set1_ps(negative);
+  for (; k + 4 <= k1; k += 4) {
+    const __m128 du = _mm_and_ps(_mm_sub_ps(_mm_loadu_ps(&c.px[k]), U), ABS),
+                 dv = _mm_and_ps(_mm_sub_ps(_mm_loadu_ps(&c.py[k]), V), ABS);
+    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(&c.x[k]), PX), dy = _mm_sub_ps(_mm_loadu_ps(&c.y[k]), PY),
+                 dz = _mm_sub_ps(_mm_loadu_ps(&c.z[k]), PZ);
+    const __m128 d2 = _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+    const __m128 df = _mm_mul_ps(RI, _mm_sqrt_ps(d2)), s = _mm_loadu_ps(&c.score[k]);
+    __m128 neg = _mm_sub_ps(ONE, _mm_mul_ps(_mm_mul_ps(HALF, s), _mm_max_ps(_mm_sub_ps(ONE, _mm_div_ps(df, OPT)), _mm_setzero_ps())));
+    neg = _mm_mul_ps(neg, neg);
+    const __m128 adjacent = _mm_cmplt_ps(_mm_max_ps(du, dv), TWO);
+    const __m128 pos = _mm_or_ps(_mm_and_ps(adjacent, s), _mm_andnot_ps(adjacent, _mm_mul_ps(s, _mm_sub_ps(ONE, df))));
+    vbest = _mm_max_ps(vbest, pos);
+    vneg = _mm_min_ps(vneg, neg);
+  }
+  alignas(16) float lanes_best[4], lanes_neg[4];
+  _mm_store_ps(lanes_best, vbest);
+  _mm_store_ps(lanes_neg, vneg);
+  for (int l = 0; l < 4; ++l) best = std::max(best, lanes_best[l]), negative = std::min(negative, lanes_neg[l]);
+#endif
+  for (; k < k1; ++k) score(k);
+  return best;
+}
 
 // calculateSparseInterestImage, one seed: grow the region within 1.5 support radii, histogram its
 // surface changes by direction; if no pixel nearby can reach the minimum, zero them all, else compute
@@ -72,73 +180,58 @@ void seedInterest(const RangeImage& im, const Borders& b, float support_size, fl
   Eigen::Affine3f rotation;
   pcl::getTransformationFromTwoUnitVectors(Eigen::Vector3f(0.0f, -1.0f, 0.0f), point.normalized(), rotation);
 
-  ws.to_check.clear();
-  ws.to_check.push_back(index);
+  int n_check = 0;
+  auto touch = [&](int i, int xi, int yi) {
+    ws.touched[i] = 1;
+    ws.to_check[n_check] = i, ws.check_x[n_check] = short(xi), ws.check_y[n_check] = short(yi);
+    ++n_check;
+  };
+  touch(index, x, y);
   ws.near.clear();
-  ws.touched[index] = 1;
   std::array<float, kBins> hist{};
   for (auto& r : ws.relevant) r.clear();
-  for (std::size_t k = 0; k < ws.to_check.size(); ++k) {
+  for (int k = 0; k < n_check; ++k) {
     const int i2 = ws.to_check[k];
-    if (!im.valid(i2) || (b.traits[i2] & (kShadow | kVeil))) continue;
-    const int x2 = i2 % w, y2 = i2 / w;
-    const float pixel_distance = float(std::max(std::abs(x2 - x), std::abs(y2 - y)));
+    if (!ws.usable[i2]) continue;
+    const int x2 = ws.check_x[k], y2 = ws.check_y[k];
+    const int pixel_distance = std::max(std::abs(x2 - x), std::abs(y2 - y));
     const Eigen::Vector3f& p2 = im.points[i2];
     const float dx = p2.x() - point.x(), dy = p2.y() - point.y(), dz = p2.z() - point.z();
-    const float d2 = dx * dx + dy * dy + dz * dz;
+    const float d2 = dx * dx + dy * dy + dz * dz;  // pcl::squaredEuclideanDistance's order
     if (d2 <= overhead2) ws.near.push_back(i2);
-    if (pixel_distance > 2.0f && d2 > increased2) continue;  // immediate neighbours always count
+    if (pixel_distance > 2 && d2 > increased2) continue;  // immediate neighbours always count
     for (int y3 = std::max(0, y2 - 1); y3 <= std::min(y2 + 1, h - 1); ++y3)
       for (int x3 = std::max(0, x2 - 1); x3 <= std::min(x2 + 1, w - 1); ++x3)
-        if (!ws.touched[y3 * w + x3]) {
-          ws.to_check.push_back(y3 * w + x3);
-          ws.touched[y3 * w + x3] = 1;
-        }
+        if (!ws.touched[y3 * w + x3]) touch(y3 * w + x3, x3, y3);
     const float change = b.change_score[i2];
     if (change < kMinSurfaceChange) continue;
     const int cell = directionCell(b.change_dir[i2], rotation);
     hist[cell] = std::max(hist[cell], change);
     ws.relevant[cell].emplace_back(i2, change);
   }
-  for (int i : ws.to_check) ws.touched[i] = 0;
+  for (int k = 0; k < n_check; ++k) ws.touched[ws.to_check[k]] = 0;
 
   if (angleChange(hist) < min_interest) {  // no pixel within the overhead radius can do better
     for (int i : ws.near) interest[i] = 0.0f;
     return;
   }
-  // Thin each cell's changes: drop those close to a stronger one. PCL compares the distance (not
-  // its square) with the squared limit; kept, since the keypoints must be PCL's.
-  const float min_relevant2 = powf(0.25f * radius, 2);
-  for (auto& rel : ws.relevant) {
-    std::sort(rel.begin(), rel.end(), [](const auto& a, const auto& c) { return a.second > c.second; });
-    ws.still_valid.assign(rel.size(), 1);
-    for (int k1 = 0; k1 < int(rel.size()) - 1; ++k1) {
-      if (!ws.still_valid[k1]) continue;
-      for (int k2 = k1 + 1; k2 < int(rel.size()); ++k2)
-        if (ws.still_valid[k2] && (im.points[rel[k1].first] - im.points[rel[k2].first]).norm() <= min_relevant2)
-          ws.still_valid[k2] = 0;
-    }
-    std::size_t kept = 0;
-    for (std::size_t k = 0; k < rel.size(); ++k)
-      if (ws.still_valid[k]) rel[kept++] = rel[k];
-    rel.resize(kept);
+  Changes& c = ws.changes;
+  c.clear();
+  for (int cell = 0; cell < kBins; ++cell) {
+    auto& rel = ws.relevant[cell];
+    std::sort(rel.begin(), rel.end(), [](const auto& a1, const auto& a2) { return a1.second > a2.second; });
+    c.begin[cell] = int(c.x.size());
+    for (const auto& [i3, change] : rel) c.push(im.points[i3], change, i3 % w, i3 / w);
+    thin(c, c.begin[cell], int(rel.size()), powf(0.25f * radius, 2), ws.still_valid);
   }
+  c.begin[kBins] = int(c.x.size());
+
   for (int i2 : ws.near) {
     if (interest[i2] <= 1.0f) continue;  // already computed by an earlier seed
-    const int x2 = i2 % w, y2 = i2 / w;
-    const Eigen::Vector3f& p2 = im.points[i2];
     float negative = 1.0f;
-    for (int cell = 0; cell < kBins; ++cell) {
-      hist[cell] = 0.0f;
-      for (const auto& [i3, change] : ws.relevant[cell]) {
-        const float pixel_distance = float(std::max(std::abs(i3 % w - x2), std::abs(i3 / w - y2)));
-        const float distance = (im.points[i3] - p2).norm();
-        float neg, pos;
-        scores(radius_inv * distance, change, pixel_distance, neg, pos);
-        hist[cell] = std::max(hist[cell], pos);
-        negative = std::min(negative, neg);
-      }
-    }
+    for (int cell = 0; cell < kBins; ++cell)
+      hist[cell] = cellScore(c, c.begin[cell], c.begin[cell + 1], im.points[i2], float(i2 % w), float(i2 / w),
+                             radius_inv, negative);
     interest[i2] = negative * angleChange(hist);
   }
 }
@@ -147,11 +240,14 @@ void seedInterest(const RangeImage& im, const Borders& b, float support_size, fl
 std::vector<int> interestPoints(const RangeImage& im, const Borders& b, const KeypointParams& p,
                                 std::vector<float>& interest) {
   const int w = im.width, h = im.height, size = w * h;
+  Workspace ws;
+  ws.usable.resize(size);
+  for (int i = 0; i < size; ++i) ws.usable[i] = im.valid(i) && !(b.traits[i] & (kShadow | kVeil));
   interest.assign(size, 0.0f);
   for (int i = 0; i < size; ++i)
-    if (im.valid(i) && !(b.traits[i] & (kShadow | kVeil))) interest[i] = kUnset;
-  Workspace ws;
+    if (ws.usable[i]) interest[i] = kUnset;
   ws.touched.assign(size, 0);
+  ws.to_check.resize(size), ws.check_x.resize(size), ws.check_y.resize(size);
   // Seeds in raster order: each computes itself and its still unset neighbours, so later pixels
   // take the value the first seed near them gave (PCL's order, hence PCL's values).
   for (int i = 0; i < size; ++i)
