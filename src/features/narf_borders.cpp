@@ -41,12 +41,34 @@ struct Surface {
 // RangeImage::getSurfaceInformation: the closest 9 of the 5x5 neighbours fix a distance; all within
 // twice it define the plane. The sort is PCL's (same input order, same std::sort) so the points enter
 // the running average in the same order.
+struct Neighbour {
+  float distance;
+  int index;
+  bool operator<(const Neighbour& o) const { return distance < o.distance; }
+};
+
+// std::sort's order of (at most 25) neighbours by distance. Without equal distances that is the
+// only ascending order, found here by counting the smaller ones (no branches); equal distances, rare,
+// are left to std::sort itself, whose order among them the sums downstream depend on.
+void sortByDistance(Neighbour* nb, int n) {
+  float d[25];
+  for (int i = 0; i < n; ++i) d[i] = nb[i].distance;
+  int rank[25], equal = 0;
+  for (int i = 0; i < n; ++i) {
+    int r = 0;
+    for (int j = 0; j < n; ++j) r += d[j] < d[i], equal += d[j] == d[i];
+    rank[i] = r;
+  }
+  if (equal != n) {
+    std::sort(nb, nb + n);
+    return;
+  }
+  Neighbour sorted[25];
+  for (int i = 0; i < n; ++i) sorted[rank[i]] = nb[i];
+  std::copy(sorted, sorted + n, nb);
+}
+
 Surface localSurface(const RangeImage& im, int x, int y) {
-  struct Neighbour {
-    float distance;
-    int index;
-    bool operator<(const Neighbour& o) const { return distance < o.distance; }
-  };
   std::array<Neighbour, (2 * kRadiusPlane + 1) * (2 * kRadiusPlane + 1)> nb;
   const Eigen::Vector3f& p = im.points[y * im.width + x];
   int n = 0;
@@ -54,7 +76,7 @@ Surface localSurface(const RangeImage& im, int x, int y) {
     for (int x2 = x - kRadiusPlane; x2 <= x + kRadiusPlane; ++x2)
       if (im.valid(x2, y2)) nb[n++] = {sqDist(p, im.points[y2 * im.width + x2]), y2 * im.width + x2};
   Surface s;
-  std::sort(nb.begin(), nb.begin() + n);
+  sortByDistance(nb.data(), n);
   s.max_neighbour_dist2 = nb[std::min(n, kPlaneNeighbours) - 1].distance;
   const float max_dist2 = s.max_neighbour_dist2 * 4.0f;
   pcl::VectorAverage3f avg;

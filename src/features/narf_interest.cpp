@@ -41,18 +41,20 @@ inline int directionCell(const Eigen::Vector3f& direction, const Eigen::Affine3f
   return std::min(kBins - 1, int(std::lrint(double(std::floor((angle + pcl::deg2rad(90.0f)) / pcl::deg2rad(180.0f) * kBins)))));
 }
 
-// The strongest change between two direction cells, weighted by their angle apart.
+// The strongest change between two direction cells, weighted by their angle apart (PCL's loop over
+// all cell pairs, here over the non-empty cells only: the same products, the same maximum).
 float angleChange(const std::array<float, kBins>& hist) {
+  int cells[kBins], n = 0;
+  for (int c = 0; c < kBins; ++c)
+    if (hist[c] != 0.0f) cells[n++] = c;
   float change = 0.0f;
-  for (int c1 = 0; c1 < kBins - 1; ++c1) {
-    if (hist[c1] == 0.0f) continue;
-    for (int c2 = c1 + 1; c2 < kBins; ++c2) {
-      if (hist[c2] == 0.0f) continue;
+  for (int a = 0; a + 1 < n; ++a)
+    for (int b = a + 1; b < n; ++b) {
+      const int c1 = cells[a], c2 = cells[b];
       float diff = 2.0f * float(c2 - c1) / float(kBins);
       diff = diff <= 1.0f ? diff : 2.0f - diff;
       change = std::max(hist[c1] * hist[c2] * diff, change);
     }
-  }
   return std::sqrt(change);
 }
 
