@@ -23,9 +23,9 @@ std::vector<ConfigKey> narfKeys(NarfParams& p) {
       {"downsample", &p.downsample, "factor on the depth image (1 = full res)"},
       {"max_points", &p.max_points, "strongest kept, 0 = all"},
       {"min_interest_value", &p.min_interest_value, "[0,1]"},
-      {"threads", &p.threads, "OpenMP threads of PCL's border extraction"},
+      {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)"},
       {"recursive_scale_reduction", &p.recursive_scale_reduction, "PCL speed-up on near surfaces"},
-      {"implementation", &p.implementation, "fast (ours, PCL's steps) | pcl (pcl::NarfKeypoint)"},
+      {"implementation", &p.implementation, "fast (PCL's steps, one thread) | pcl (pcl::NarfKeypoint)"},
   };
 }
 }  // namespace
