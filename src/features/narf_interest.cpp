@@ -34,11 +34,11 @@ inline int directionCell(const Eigen::Vector3f& direction, const Eigen::Affine3f
   v.normalize();
   // pcl::normAngle(a) for a = 2 acos in [0, 2 pi]: fmod(a + pi, 2 pi) - pi, where the fmod is one
   // exact subtraction (Sterbenz), so this is the same float without the libm call.
-  const float pi = float(M_PI), two_pi = 2.0f * pi;
+  static const float pi = float(M_PI), two_pi = 2.0f * pi, deg90 = pcl::deg2rad(90.0f), deg180 = pcl::deg2rad(180.0f);
   float t = 2.0f * std::acos(v[0]) + pi;
   if (t >= two_pi) t -= two_pi;
   const float angle = 0.5f * (t - pi);
-  return std::min(kBins - 1, int(std::lrint(double(std::floor((angle + pcl::deg2rad(90.0f)) / pcl::deg2rad(180.0f) * kBins)))));
+  return std::min(kBins - 1, int(std::lrint(double(std::floor((angle + deg90) / deg180 * kBins)))));
 }
 
 // The strongest change between two direction cells, weighted by their angle apart (PCL's loop over
@@ -80,7 +80,7 @@ struct Changes {
 // The buffers of the sparse interest image, allocated once per image.
 struct Workspace {
   std::vector<std::uint8_t> usable;     // valid and neither shadow border nor veil point
-  std::vector<std::uint8_t> touched;
+  std::vector<std::uint8_t> touched;    // on the image padded by one pixel, the padding always touched
   std::vector<int> to_check;            // the seed's region in growing order, at most every pixel once
   std::vector<short> check_x, check_y;  // its pixel coordinates (no division per visit)
   std::vector<int> near;                // the region's pixels close enough to get a value from this seed
@@ -174,7 +174,7 @@ float cellScore(const Changes& c, int k0, int k1, const Eigen::Vector3f& p, floa
 // the pixels within the overhead radius from a thinned list of the changes.
 void seedInterest(const RangeImage& im, const Borders& b, float support_size, float min_interest, int index,
                   Workspace& ws, std::vector<float>& interest) {
-  const int w = im.width, h = im.height;
+  const int w = im.width;
   const float radius = 0.5f * support_size, radius_inv = 1.0f / radius, increased = 1.5f * radius,
               increased2 = increased * increased, overhead = increased - radius, overhead2 = overhead * overhead;
   const int x = index % w, y = index / w;
@@ -184,7 +184,7 @@ void seedInterest(const RangeImage& im, const Borders& b, float support_size, fl
 
   int n_check = 0;
   auto touch = [&](int i, int xi, int yi) {
-    ws.touched[i] = 1;
+    ws.touched[(yi + 1) * (w + 2) + xi + 1] = 1;
     ws.to_check[n_check] = i, ws.check_x[n_check] = short(xi), ws.check_y[n_check] = short(yi);
     ++n_check;
   };
@@ -202,16 +202,18 @@ void seedInterest(const RangeImage& im, const Borders& b, float support_size, fl
     const float d2 = dx * dx + dy * dy + dz * dz;  // pcl::squaredEuclideanDistance's order
     if (d2 <= overhead2) ws.near.push_back(i2);
     if (pixel_distance > 2 && d2 > increased2) continue;  // immediate neighbours always count
-    for (int y3 = std::max(0, y2 - 1); y3 <= std::min(y2 + 1, h - 1); ++y3)
-      for (int x3 = std::max(0, x2 - 1); x3 <= std::min(x2 + 1, w - 1); ++x3)
-        if (!ws.touched[y3 * w + x3]) touch(y3 * w + x3, x3, y3);
+    // The 3x3 neighbours in PCL's order; the padding stands for PCL's clamping to the image.
+    const std::uint8_t* t = &ws.touched[y2 * (w + 2) + x2];  // padded (x2 - 1, y2 - 1)
+    for (int dy = 0; dy < 3; ++dy, t += w + 2)
+      for (int dx = 0; dx < 3; ++dx)
+        if (!t[dx]) touch(i2 + (dy - 1) * w + dx - 1, x2 + dx - 1, y2 + dy - 1);
     const float change = b.change_score[i2];
     if (change < kMinSurfaceChange) continue;
     const int cell = directionCell(b.change_dir[i2], rotation);
     hist[cell] = std::max(hist[cell], change);
     ws.relevant[cell].emplace_back(i2, change);
   }
-  for (int k = 0; k < n_check; ++k) ws.touched[ws.to_check[k]] = 0;
+  for (int k = 0; k < n_check; ++k) ws.touched[(ws.check_y[k] + 1) * (w + 2) + ws.check_x[k] + 1] = 0;
 
   if (angleChange(hist) < min_interest) {  // no pixel within the overhead radius can do better
     for (int i : ws.near) interest[i] = 0.0f;
@@ -248,7 +250,8 @@ std::vector<int> interestPoints(const RangeImage& im, const Borders& b, const Ke
   interest.assign(size, 0.0f);
   for (int i = 0; i < size; ++i)
     if (ws.usable[i]) interest[i] = kUnset;
-  ws.touched.assign(size, 0);
+  ws.touched.assign(std::size_t(w + 2) * (h + 2), 1);
+  for (int y = 0; y < h; ++y) std::fill_n(&ws.touched[(y + 1) * (w + 2) + 1], w, 0);
   ws.to_check.resize(size), ws.check_x.resize(size), ws.check_y.resize(size);
   // Seeds in raster order: each computes itself and its still unset neighbours, so later pixels
   // take the value the first seed near them gave (PCL's order, hence PCL's values).
