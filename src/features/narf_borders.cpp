@@ -38,9 +38,6 @@ struct Surface {
   bool ok = false;
 };
 
-// RangeImage::getSurfaceInformation: the closest 9 of the 5x5 neighbours fix a distance; all within
-// twice it define the plane. The sort is PCL's (same input order, same std::sort) so the points enter
-// the running average in the same order.
 struct Neighbour {
   float distance;
   int index;
@@ -68,6 +65,9 @@ void sortByDistance(Neighbour* nb, int n) {
   std::copy(sorted, sorted + n, nb);
 }
 
+// RangeImage::getSurfaceInformation: the closest 9 of the 5x5 neighbours fix a distance; all within
+// twice it define the plane. The neighbours are ordered as PCL's std::sort orders them, so they
+// enter the running average in the same order.
 Surface localSurface(const RangeImage& im, int x, int y) {
   std::array<Neighbour, (2 * kRadiusPlane + 1) * (2 * kRadiusPlane + 1)> nb;
   const Eigen::Vector3f& p = im.points[y * im.width + x];
