@@ -34,6 +34,7 @@ void NarfParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, co
   loadKeys(cfg, s, narfKeys(*this));
   downsample = std::max(1, downsample);
   threads = std::max(1, threads);
+  if (!(support_size > 0.0)) throw InputError("[" + s + "] support_size", "must be positive");
   if (implementation != "fast" && implementation != "pcl")
     throw InputError("[" + s + "] implementation", "must be fast or pcl (got '" + implementation + "')");
 }
@@ -87,7 +88,10 @@ std::vector<int> pclInterestPoints(cv::Mat& d, const CameraIntrinsics& cam, cons
   pcl::PointCloud<int> indices;
   narf.compute(indices);
   const float* image = narf.getInterestImage();
-  interest.assign(image, image + d.total());
+  if (image)
+    interest.assign(image, image + d.total());
+  else
+    interest.assign(d.total(), 1.0f);
   return {indices.points.begin(), indices.points.end()};
 }
 }  // namespace
