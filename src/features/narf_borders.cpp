@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 #include <pcl/common/angles.h>
+#include <pcl/common/eigen.h>
 #include <pcl/common/vector_average.h>
 
 #include "vofusion/features/narf_fast.h"
@@ -243,10 +245,21 @@ bool principalCurvature(const RangeImage& im, const std::vector<Surface>& surf, 
       }
   }
   if (avg.getNoOfSamples() < 3) return false;
-  Eigen::Vector3f values, v1, v2;
-  avg.doPCA(values, v1, v2, direction);
+  // The eigenvalues exactly as doPCA's eigen33() gets them (roots of the scaled matrix); the
+  // eigenvectors, most of its cost, only where the keypoint stage reads the direction.
+  const Eigen::Matrix3f& cov = avg.getCovariance();
+  float scale = cov.cwiseAbs().maxCoeff();
+  if (scale <= std::numeric_limits<float>::min()) scale = 1.0f;
+  Eigen::Vector3f values;
+  pcl::computeRoots(Eigen::Matrix3f(cov / scale), values);
+  values *= scale;
   magnitude = std::sqrt(values[2]);
-  return std::isfinite(magnitude);
+  if (!std::isfinite(magnitude)) return false;
+  if (magnitude >= kMinSurfaceChange) {
+    Eigen::Vector3f v1, v2;
+    avg.doPCA(values, v1, v2, direction);
+  }
+  return true;
 }
 }  // namespace
 

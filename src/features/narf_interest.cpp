@@ -19,7 +19,6 @@ namespace vofusion::narf {
 namespace {
 constexpr int kBins = 18;                    // angle_histogram_size: directions over 180 degrees
 constexpr float kOptimalDistance = 0.25f;    // optimal_distance_to_high_surface_change, factor on the radius
-constexpr float kMinSurfaceChange = 0.2f;    // min_surface_change_score
 constexpr float kMinPointDistance = 0.25f;   // min_distance_between_interest_points, factor on support size
 constexpr float kUnset = 2.0f;               // PCL's marker of a pixel whose interest is still to compute
 

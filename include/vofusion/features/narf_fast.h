@@ -36,11 +36,15 @@ enum Trait : std::uint8_t {
   kShadow = 32, kVeil = 64,
 };
 
+// NarfKeypoint's min_surface_change_score: weaker surface changes play no part in the interest values.
+constexpr float kMinSurfaceChange = 0.2f;
+
 // What RangeImageBorderExtractor hands to the keypoint stage, per pixel.
 struct Borders {
   std::vector<std::uint8_t> traits;          // Trait bits
   std::vector<float> change_score;           // [0,1], 1 on obstacle borders, else principal curvature
-  std::vector<Eigen::Vector3f> change_dir;   // unit, camera frame (border direction or main curvature)
+  std::vector<Eigen::Vector3f> change_dir;   // unit, camera frame (border direction or main curvature);
+                                             // only where change_score >= kMinSurfaceChange
 };
 
 // PCL's RangeImageBorderExtractor with its default parameters.
