@@ -466,6 +466,7 @@ TEST(FaultsConfig, UnknownKeyOrSectionOutOfRangeOrMissing) {
       {"[odometri]\nkeypoints = star\n", "unknown section \\[odometri\\]"},
       {"[odometry]\nkeypoints = sift\n", "keypoints.*must be union, star or narf"},
       {"[odometry]\nmotion_method = magic\n", "motion_method.*must be paper or robust"},
+      {"[narf]\nimplementation = magic\n", "implementation.*must be fast or pcl"},
       {"[motion]\nsample_size = 2\n", "sample_size.*at least 3"},
   };
   for (const auto& app : trackers()) {

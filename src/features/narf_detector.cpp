@@ -8,8 +8,10 @@
 #include <mrpt/config/CConfigFileBase.h>
 
 #include "vofusion/core/config.h"
+#include "vofusion/core/errors.h"
 
 #include "vofusion/features/narf_detector.h"
+#include "vofusion/features/narf_fast.h"
 
 namespace vofusion {
 
@@ -21,8 +23,9 @@ std::vector<ConfigKey> narfKeys(NarfParams& p) {
       {"downsample", &p.downsample, "factor on the depth image (1 = full res)"},
       {"max_points", &p.max_points, "strongest kept, 0 = all"},
       {"min_interest_value", &p.min_interest_value, "[0,1]"},
-      {"threads", &p.threads, "OpenMP threads of PCL's border extraction"},
+      {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)"},
       {"recursive_scale_reduction", &p.recursive_scale_reduction, "PCL speed-up on near surfaces"},
+      {"implementation", &p.implementation, "fast (PCL's steps, one thread) | pcl (pcl::NarfKeypoint)"},
   };
 }
 }  // namespace
@@ -31,6 +34,9 @@ void NarfParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, co
   loadKeys(cfg, s, narfKeys(*this));
   downsample = std::max(1, downsample);
   threads = std::max(1, threads);
+  if (!(support_size > 0.0)) throw InputError("[" + s + "] support_size", "must be positive");
+  if (implementation != "fast" && implementation != "pcl")
+    throw InputError("[" + s + "] implementation", "must be fast or pcl (got '" + implementation + "')");
 }
 
 void NarfParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
@@ -54,12 +60,10 @@ cv::Mat downsampleDepth(const cv::Mat& depth, int factor) {
   return out;
 }
 
-std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
-  const int f = std::max(1, p.downsample);
-  const cv::Mat small = downsampleDepth(depth, f);
-  const CameraIntrinsics cam = f > 1 ? camera.scaled(1.0 / f) : camera;
-  cv::Mat d = small.isContinuous() ? small : small.clone();
-
+namespace {
+// The reference: pcl::NarfKeypoint with pcl::RangeImageBorderExtractor on a RangeImagePlanar.
+std::vector<int> pclInterestPoints(cv::Mat& d, const CameraIntrinsics& cam, const NarfParams& p,
+                                   std::vector<float>& interest) {
   pcl::RangeImagePlanar range;
   range.setDepthImage(d.ptr<float>(), d.cols, d.rows, float(cam.cx), float(cam.cy), float(cam.fx), float(cam.fy));
   range.setUnseenToMaxRange();
@@ -83,19 +87,43 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
   np.max_no_of_interest_points = p.max_points > 0 ? p.max_points : -1;
   pcl::PointCloud<int> indices;
   narf.compute(indices);
+  const float* image = narf.getInterestImage();
+  if (image)
+    interest.assign(image, image + d.total());
+  else
+    interest.assign(d.total(), 1.0f);
+  return {indices.points.begin(), indices.points.end()};
+}
+}  // namespace
 
-  const float* interest = narf.getInterestImage();
+std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
+  const int f = std::max(1, p.downsample);
+  const cv::Mat small = downsampleDepth(depth, f);
+  const CameraIntrinsics cam = f > 1 ? camera.scaled(1.0 / f) : camera;
+  cv::Mat d = small.isContinuous() ? small : small.clone();
+
+  std::vector<float> interest;
+  std::vector<int> indices;
+  if (p.implementation == "fast") {
+    const narf::RangeImage range(d, cam);
+    const narf::Borders borders = narf::extractBorders(range);
+    const narf::KeypointParams kp{float(p.support_size), float(p.min_interest_value), p.max_points};
+    indices = narf::interestPoints(range, borders, kp, interest);
+  } else {
+    indices = pclInterestPoints(d, cam, p, interest);
+  }
+
   std::vector<cv::KeyPoint> out;
   out.reserve(indices.size());
   const float scale = float(f);
-  for (int idx : indices.points) {
-    const int x = idx % int(range.width), y = idx / int(range.width);
+  for (int idx : indices) {
+    const int x = idx % d.cols, y = idx / d.cols;
     const float z = d.at<float>(y, x);
     if (!(z > 0.f)) continue;
     // Back to full-resolution pixel centres.
     const float u = (x + 0.5f) * scale - 0.5f, v = (y + 0.5f) * scale - 0.5f;
     const float size_px = float(p.support_size * camera.fx / z);
-    out.emplace_back(u, v, size_px, -1.f, interest ? interest[idx] : 1.f, 0, 1 /*class: NARF*/);
+    out.emplace_back(u, v, size_px, -1.f, interest[idx], 0, 1 /*class: NARF*/);
   }
   return out;
 }
