@@ -24,7 +24,7 @@ std::vector<ConfigKey> narfKeys(NarfParams& p) {
       {"max_points", &p.max_points, "strongest kept, 0 = all"},
       {"min_interest_value", &p.min_interest_value, "[0,1]"},
       {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)"},
-      {"recursive_scale_reduction", &p.recursive_scale_reduction, "PCL speed-up on near surfaces"},
+      {"recursive_scale_reduction", &p.recursive_scale_reduction, "implementation pcl only; no effect in PCL 1.13 (sparse interest image)"},
       {"implementation", &p.implementation, "fast (PCL's steps, one thread) | pcl (pcl::NarfKeypoint)"},
   };
 }
