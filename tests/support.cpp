@@ -7,6 +7,8 @@
 #include <cstdlib>
 #include <filesystem>
 
+#include <gtest/gtest.h>
+
 namespace fs = std::filesystem;
 
 namespace vofusion::test {
@@ -25,7 +27,11 @@ bool inCi() {
 }
 
 std::string tempDir(const std::string& name) {
-  const fs::path p = fs::path(VOFUSION_BIN_DIR) / ".." / "test-tmp" / name;
+  // Under the running test's own folder: ctest runs every test case as its own process, in parallel,
+  // and two cases asking for the same name must not empty each other's files.
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  const std::string owner = info ? std::string(info->test_suite_name()) + "." + info->name() : "no_test";
+  const fs::path p = fs::path(VOFUSION_BIN_DIR) / ".." / "test-tmp" / owner / name;
   fs::remove_all(p);
   fs::create_directories(p);
   return p.lexically_normal().string();

@@ -19,7 +19,8 @@ std::string tumFirst300();
 bool dataPresent(const std::string& path);
 bool inCi();
 
-// A fresh empty directory under the build tree, removed at process exit is not promised.
+// A fresh empty directory under the build tree, in a folder of the running test case's own (ctest runs
+// cases in parallel); removed at process exit is not promised.
 std::string tempDir(const std::string& name);
 // Path of an app built by this project (build/bin/<name>).
 std::string app(const std::string& name);
