@@ -29,32 +29,24 @@ using mrpt::obs::CObservation3DRangeScan;
 namespace vofusion {
 
 namespace {
-// True for a PNG of 8-bit RGB pixels of that size (its IHDR says so): decoding it gives exactly the
-// frame's colour image, so its bytes can stand for it.
-bool isPlainRgbPng(const std::string& path, int width, int height) {
+// The bytes of `path` when it is a PNG of 8-bit RGB pixels of that size (its IHDR says so): decoding
+// it gives exactly the frame's colour image, so its bytes can stand for it. False otherwise.
+bool readPlainRgbPng(const std::string& path, int width, int height, std::vector<uchar>& bytes) {
   if (path.empty()) return false;
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return false;
-  unsigned char h[29];
-  const bool read = std::fread(h, 1, sizeof h, f) == sizeof h;
-  std::fclose(f);
-  const auto be32 = [&](int at) { return (std::uint32_t(h[at]) << 24) | (h[at + 1] << 16) | (h[at + 2] << 8) | h[at + 3]; };
-  return read && std::memcmp(h, "\x89PNG\r\n\x1a\n", 8) == 0 && std::memcmp(h + 12, "IHDR", 4) == 0 &&
-         be32(16) == std::uint32_t(width) && be32(20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
-}
-
-bool readFileBytes(const std::string& path, std::vector<uchar>& bytes) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
   bytes.clear();
   unsigned char buf[1 << 16];
   std::size_t n;
   while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) bytes.insert(bytes.end(), buf, buf + n);
-  const bool ok = !std::ferror(f);
+  const bool read = !std::ferror(f);
   std::fclose(f);
-  return ok && !bytes.empty();
+  if (!read || bytes.size() < 29) return false;
+  const uchar* h = bytes.data();
+  const auto be32 = [&](int at) { return (std::uint32_t(h[at]) << 24) | (h[at + 1] << 16) | (h[at + 2] << 8) | h[at + 3]; };
+  return std::memcmp(h, "\x89PNG\r\n\x1a\n", 8) == 0 && std::memcmp(h + 12, "IHDR", 4) == 0 &&
+         be32(16) == std::uint32_t(width) && be32(20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
 }
-
 
 constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
 
@@ -406,7 +398,7 @@ void RawlogWriter::write(const Frame& frame) {
     const std::string dir = impl_->images.tmp();
     std::vector<uchar> bytes;
     // A TUM/7-Scenes colour PNG is copied as it is: encoding it again was ~25 ms of CPU per frame.
-    if (!isPlainRgbPng(frame.colour_file, frame.rgb.cols, frame.rgb.rows) || !readFileBytes(frame.colour_file, bytes)) {
+    if (!readPlainRgbPng(frame.colour_file, frame.rgb.cols, frame.rgb.rows, bytes)) {
       // Encoded in memory and written here: on a full disk libpng would print its own error line.
       if (!cv::imencode(".png", frame.rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, opts_.png_compression}))
         throw InputError(impl_->images.path() + "/" + png, "cannot encode image");
