@@ -127,10 +127,7 @@ std::vector<std::string> trackers() {
 }
 // vofusion without the slow extras (CGAL mesh post-processing, poses.rawlog) unless a case gives --config.
 std::string fastVofusionConfig() {
-  // One folder per test case: ctest runs the cases as parallel processes, and tempDir() empties it.
-  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  const std::string path =
-      test::tempDir(std::string("faults_cfg_") + info->test_suite_name() + "_" + info->name()) + "/fast.ini";
+  const std::string path = test::tempDir("faults_cfg") + "/fast.ini";  // in this test case's own folder
   writeText(path, "[output]\nwrite_rawlog = false\nclean_mesh = false\n");
   return path;
 }

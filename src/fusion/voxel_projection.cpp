@@ -7,11 +7,7 @@ namespace vofusion::fusion {
 
 namespace {
 
-struct Setup {
-  const float* depth;
-  int w, h;
-  float fx, fy, cx, cy, zmin, zmax, agree;
-};
+using Setup = VoxelProjector::Setup;
 
 void sampleScalar(const Setup& s, const float* first, const float* step, VoxelRowSamples& out) {
   for (int x = 0; x < 8; ++x) {
@@ -110,17 +106,17 @@ const bool kAvx2 = __builtin_cpu_supports("avx2");
 
 VoxelProjector::VoxelProjector(const cv::Mat& depth, const CameraIntrinsics& cam, float min_depth, float max_depth,
                                float agree, bool simd)
-    : depth_(depth.ptr<float>()), w_(depth.cols), h_(depth.rows), fx_(float(cam.fx)), fy_(float(cam.fy)),
-      cx_(float(cam.cx)), cy_(float(cam.cy)), zmin_(min_depth), zmax_(max_depth), agree_(agree), avx2_(simd && kAvx2) {
+    : s_{depth.ptr<float>(), depth.cols, depth.rows, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy),
+         min_depth, max_depth, agree},
+      avx2_(simd && kAvx2) {
   CV_Assert(depth.type() == CV_32FC1 && depth.isContinuous());
 }
 
 bool VoxelProjector::usesAvx2() { return kAvx2; }
 
 void VoxelProjector::sampleRow(const Eigen::Vector3f& first, const Eigen::Vector3f& step, VoxelRowSamples& out) const {
-  const Setup s{depth_, w_, h_, fx_, fy_, cx_, cy_, zmin_, zmax_, agree_};
-  if (avx2_) sampleAvx2(s, first.data(), step.data(), out);
-  else sampleScalar(s, first.data(), step.data(), out);
+  if (avx2_) sampleAvx2(s_, first.data(), step.data(), out);
+  else sampleScalar(s_, first.data(), step.data(), out);
 }
 
 }  // namespace vofusion::fusion

@@ -10,7 +10,6 @@
 
 #include <Eigen/Dense>
 #include <opencv2/calib3d.hpp>
-#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "vofusion/features/hamming_matcher.h"

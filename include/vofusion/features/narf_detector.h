@@ -23,7 +23,6 @@ struct NarfParams : public mrpt::config::CLoadableOptions {
                                     // interest search always runs on one (more makes the keypoints vary)
   bool recursive_scale_reduction = false;  // PCL option, implementation pcl only: PCL 1.13 ignores it with
                                            // the sparse interest image it uses (same keypoints on or off)
-                                           // (PCL's sparse interest image, the one used, ignores it)
   std::string implementation = "fast";     // "fast": narf_fast.h, PCL's steps on flat arrays, one thread;
                                            // "pcl": pcl::NarfKeypoint itself (the reference)
 

@@ -29,10 +29,14 @@ class VoxelProjector {
   void sampleRow(const Eigen::Vector3f& first, const Eigen::Vector3f& step, VoxelRowSamples& out) const;
   static bool usesAvx2();
 
+  struct Setup {  // what both builds read
+    const float* depth;
+    int w, h;
+    float fx, fy, cx, cy, zmin, zmax, agree;
+  };
+
  private:
-  const float* depth_;
-  int w_, h_;
-  float fx_, fy_, cx_, cy_, zmin_, zmax_, agree_;
+  Setup s_;
   bool avx2_;
 };
 
