@@ -13,6 +13,10 @@ namespace fs = std::filesystem;
 
 namespace vofusion::test {
 
+std::string sourceDir() { return VOFUSION_SOURCE_DIR; }
+std::string shareDir() { return (fs::path(VOFUSION_SOURCE_DIR) / "share").string(); }
+std::string binDir() { return VOFUSION_BIN_DIR; }
+
 std::string tumFirst300() {
   return (fs::path(VOFUSION_SOURCE_DIR) / ".." / "shared" / "data" / "tum" / "rgbd_dataset_freiburg1_xyz_first300")
       .lexically_normal()

@@ -6,6 +6,10 @@
 
 namespace vofusion::test {
 
+// The checkout's root and its share/ folder, and the build's bin/ folder.
+std::string sourceDir();
+std::string shareDir();
+std::string binDir();
 // The real TUM sequence shipped beside the project (../shared/data/tum/...).
 std::string tumFirst300();
 // Skips the test when shared data is missing; fails with a clear message under CI (CI=true).

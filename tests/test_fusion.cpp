@@ -172,7 +172,7 @@ TEST(KinFuParams, SaveWritesEveryKeyAndLoadReadsItBack) {
 }
 
 TEST(KinFuParams, ShippedDefaultsFileMatchesTheCode) {
-  const std::string path = std::string(VOFUSION_SOURCE_DIR) + "/share/kinfu.ini";
+  const std::string path = test::shareDir() + "/kinfu.ini";
   mrpt::config::CConfigFile file(path);
   std::vector<std::string> keys;
   file.getAllKeys("kinfu", keys);

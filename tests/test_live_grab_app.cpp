@@ -67,7 +67,7 @@ TEST(GrabApp, NoSensorFailsInOneLineQuicklyWithNonZeroExit) {
   std::string log;
   const auto t0 = std::chrono::steady_clock::now();
   // timeout(1) guards against a hang: it would exit 124.
-  const int rc = test::run("timeout 60 " + test::app("vofusion-grab") + " --config " + VOFUSION_SHARE_DIR +
+  const int rc = test::run("timeout 60 " + test::app("vofusion-grab") + " --config " + test::shareDir() +
                                "/grab-openni2.ini --out " + out + " --no-gui",
                            &log);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -148,7 +148,7 @@ TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
 }
 
 TEST(OdometryParams, ShareIniHoldsEveryKeyWithTheDefaults) {
-  const std::string ini = std::string(VOFUSION_SHARE_DIR) + "/odometry.ini";
+  const std::string ini = test::shareDir() + "/odometry.ini";
   auto cfg = loadConfig(ini);
   const OdometryParams defaults;
   checkConfigKeys(cfg, ini, {{"odometry", &defaults}});  // no unknown keys
