@@ -50,8 +50,8 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
   impl_->odo_params.loadFromConfigFile(cfg, "odometry");
   impl_->kinfu_params.loadFromConfigFile(cfg, "kinfu");
   if (mode != TrackingMode::KinFu) impl_->odometry = std::make_unique<RgbdOdometry>(impl_->odo_params);
-  // The map is anchored at the first frame; when that frame knows its ground-truth pose the map
-  // lives in the ground truth's world frame (z up for TUM), so scenes show estimate and truth together.
+  // The map is anchored at the first camera (world = first camera frame). Ground truth never changes
+  // what the tracker or the map does; evaluation and pictures align to it afterwards.
   impl_->kinfu = std::make_unique<KinFu>(impl_->kinfu_params, mode);
 }
 
@@ -70,8 +70,6 @@ FrameReport Reconstruction::process(const Frame& frame) {
     if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
   }
   m.waitFusion();
-  if (m.frames == 0 && frame.groundTruth)
-    m.kinfu = std::make_unique<KinFu>(m.kinfu_params, m.mode, *frame.groundTruth);
   const OdometryResult* odom = r.odometry.success ? &r.odometry : nullptr;
   FusionResult f;
   if (m.kinfu_params.overlap_fusion) {
