@@ -18,7 +18,7 @@ std::string trim(const std::string& s) {
 }  // namespace
 
 TEST(DefaultConfig, ShareFileHoldsEveryKeyWithItsDefault) {
-  const std::string path = std::string(VOFUSION_SHARE_DIR) + "/vofusion.ini";
+  const std::string path = test::shareDir() + "/vofusion.ini";
   const OutputParams out;
   const MeshCleanParams mesh;
   auto sections = reconstructionConfigSections();

@@ -287,7 +287,7 @@ TEST(MeshClean, ReportJsonHasSteps) {
 TEST(MeshClean, SharedIniDocumentsEveryKeyWithItsDefault) {
   mrpt::config::CConfigFileMemory shipped;
   {
-    std::ifstream f(std::string(VOFUSION_SHARE_DIR) + "/mesh.ini");
+    std::ifstream f(test::shareDir() + "/mesh.ini");
     ASSERT_TRUE(f.good());
     shipped.setContent(std::string(std::istreambuf_iterator<char>(f), {}));
   }
