@@ -9,6 +9,8 @@
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
 
+#include "vofusion/core/depth_noise.h"
+
 namespace vofusion {
 
 namespace {
@@ -16,15 +18,6 @@ namespace {
 // Kinect-like noise of a correspondence (m): both points' depth noise grows with z^2.
 double pointSigma(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return 0.002 + 0.0015 * (a.z() * a.z() + b.z() * b.z());
-}
-
-// Kinect noise of a point as a 3x3 covariance: axial sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 along
-// the viewing ray (Khoshelham & Elberink; Nguyen et al.), lateral one pixel (525 px focal length).
-Eigen::Matrix3d rayCovariance(const Eigen::Vector3d& p) {
-  const double z = std::max(0.3, p.z());
-  const double axial = 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4), lateral = z / 525.0;
-  const Eigen::Vector3d ray = p.normalized();
-  return lateral * lateral * Eigen::Matrix3d::Identity() + (axial * axial - lateral * lateral) * ray * ray.transpose();
 }
 
 // MRPT's CPose3D convention: R = Rz(yaw) Ry(pitch) Rx(roll).

@@ -23,6 +23,7 @@
 #include <mrpt/poses/CPose3D.h>
 
 #include "vofusion/core/camera.h"
+#include "vofusion/core/depth_noise.h"
 #include "vofusion/core/frame.h"
 
 namespace vofusion::sim {
@@ -33,7 +34,7 @@ constexpr double kKinectBaseline = 0.075;  // m
 constexpr double kDisparitySubpixel = 8.0;  // steps per pixel
 
 // Standard deviation of the simulated depth noise at range z (before quantisation), m.
-inline double kinectNoiseSigma(double z) { return 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4); }
+inline double kinectNoiseSigma(double z) { return kinectAxialSigma(z); }
 
 struct SimOptions {
   std::string scene = "room";   // "room" (walls, floor, boxes), "corridor" (long, for volume shifting),
