@@ -30,7 +30,14 @@ OdometryResult OdometrySource::process(const Frame& input) {
     covariance_ = r.covariance;
     has_increment_ = count_ > 0;
   } else if (count_ > 0) {
+    // No motion is dropped: the frame moves on at the last increment (constant velocity); the next
+    // frame is matched against the last good one and lands where the odometry says.
     ++failures_;
+    if (has_velocity_) pose_ = previous + velocity_;
+  }
+  if (r.success && count_ > 0) {
+    velocity_ = pose_ - previous;
+    has_velocity_ = true;
   }
   recent_poses_[count_] = pose_;
   // References older than a few dozen frames are never used again.

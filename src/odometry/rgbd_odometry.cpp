@@ -62,6 +62,9 @@ struct RgbdOdometry::Impl {
   // The keyframe new frames are matched against, and the last frame with a pose relative to it
   // (T_kf_last); with keyframes off both are the previous usable frame.
   std::optional<FrameFeatures> reference, last;
+  // The newest frame whose motion failed (while `reference` stays the last good frame): the next
+  // frame is matched against it only when the good reference no longer matches.
+  std::optional<FrameFeatures> failed;
   Eigen::Isometry3d T_kf_last = Eigen::Isometry3d::Identity();
   explicit Impl(const OdometryParams& p) : params(p), brand(p.brand) {}
 
@@ -215,6 +218,7 @@ RgbdOdometry::~RgbdOdometry() = default;
 void RgbdOdometry::reset() {
   impl_->reference.reset();
   impl_->last.reset();
+  impl_->failed.reset();
   impl_->older.clear();
 }
 
@@ -312,6 +316,12 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   r.matches = int(corr.size());
   r.inliers = int(fit.inliers.size());
   r.rms_error = fit.rms;
+  r.inlier_current.clear();
+  r.inlier_reference.clear();
+  for (const int k : fit.inliers) {
+    r.inlier_current.push_back(src[k]);
+    r.inlier_reference.push_back(dst[k]);
+  }
   if (!fit.ok) return fail(fit.failure);
   if (r.inliers < P.min_inliers) return fail("too few inliers");
   if (secondaryExtent(src, fit.inliers) < P.min_extent) return fail("degenerate geometry (inliers nearly collinear)");
@@ -367,32 +377,55 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   if (int(cur.keypoints.size()) < P.min_matches) return fail("too few keypoints (textureless or no depth)");
 
   // Against the keyframe first; a failed or weak keyframe match falls back to the last frame and
-  // the current frame becomes the new keyframe. Any failure makes it the new reference too.
+  // the current frame becomes the new keyframe.
   RigidFit fit;
   bool ok = m.estimate(*m.reference, older, cur, split, r, fit);
   Eigen::Isometry3d T_last_cur = m.T_kf_last.inverse() * fit.T;
+  Eigen::Isometry3d T_last_fitref = m.T_kf_last.inverse();  // the fit's reference coordinates -> last's
   const bool keep_keyframe = P.keyframe_min_inliers > 0 && ok && r.inliers >= P.keyframe_min_inliers;
-  if (!keep_keyframe && m.last) {
+  // Another reference when the first did not do: the motion and the correspondences come from it.
+  auto tryReference = [&](FrameFeatures& other) {
     OdometryResult r2;
     RigidFit fit2;
     std::vector<CrossCheckedHammingMatcher> fresh;
-    if (m.estimate(*m.last, {}, cur, fresh, r2, fit2) || !ok) {
-      ok = r2.failure.empty();
-      fit = fit2;
-      T_last_cur = fit2.T;
-      r.matches = r2.matches, r.inliers = r2.inliers, r.rms_error = r2.rms_error, r.failure = r2.failure;
-    }
+    const bool ok2 = m.estimate(other, {}, cur, fresh, r2, fit2);
     r.times.merge(r2.times);
+    if (!ok2 && ok) return false;
+    fit = fit2;
+    T_last_cur = fit2.T;
+    T_last_fitref.setIdentity();
+    r.matches = r2.matches, r.inliers = r2.inliers, r.rms_error = r2.rms_error, r.failure = r2.failure;
+    r.inlier_current = std::move(r2.inlier_current);
+    r.inlier_reference = std::move(r2.inlier_reference);
+    ok = ok2;
+    return ok2;
+  };
+  if (!keep_keyframe && m.last) tryReference(*m.last);
+  // The last good reference no longer matches after a failure: try the failed frame (the caller knows
+  // its pose from elsewhere, e.g. ICP); it becomes the reference.
+  if (!ok && m.failed && tryReference(*m.failed)) {
+    r.reference_index = m.failed->index;
+    r.reference_timestamp = m.failed->timestamp;
+    m.reference = std::move(*m.failed);
+    m.older.clear();
+    m.last.reset();
+    m.T_kf_last.setIdentity();
   }
+  if (!ok) {
+    // The last good frame stays the reference (its pose is known): the next frame bridges the gap.
+    m.failed = std::move(cur);
+    return fail(r.failure);
+  }
+  m.failed.reset();
+  for (auto& p : r.inlier_reference) p = T_last_fitref * p;
   if (keep_keyframe) {
     m.T_kf_last = fit.T;
     m.last = std::move(cur);
   } else {
-    // The previous frame joins the older ones, all re-expressed in the current frame; after a failure
-    // their relation to the current frame is unknown.
+    // The previous frame joins the older ones, all re-expressed in the current frame.
     std::deque<std::pair<FrameFeatures, Eigen::Isometry3d>> next;
     const Eigen::Isometry3d T_cur_last = T_last_cur.inverse();
-    if (ok && !keyframes && P.references > 1) {
+    if (!keyframes && P.references > 1) {
       next.emplace_back(std::move(*m.reference), T_cur_last);
       for (auto& [f, T] : m.older)
         if (int(next.size()) < P.references - 1) next.emplace_back(std::move(f), T_cur_last * T);
@@ -402,7 +435,6 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
     m.last.reset();
     m.T_kf_last.setIdentity();
   }
-  if (!ok) return fail(r.failure);
 
   Eigen::Matrix4d M = T_last_cur.matrix();
   mrpt::math::CMatrixDouble44 Mm;

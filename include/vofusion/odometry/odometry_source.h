@@ -24,8 +24,8 @@ class OdometrySource {
   // Converts with the io stage's frameFromObservation (throws InputError on unusable observations).
   OdometryResult process(const mrpt::obs::CObservation3DRangeScan& obs);
 
-  // Camera-to-world of the last frame processed. A frame whose motion failed keeps the pose of the
-  // frame before it (constant position), flagged by hasIncrement() == false.
+  // Camera-to-world of the last frame processed. A frame whose motion failed moves on by the last
+  // increment (constant velocity), flagged by hasIncrement() == false.
   const mrpt::poses::CPose3D& pose() const { return pose_; }
   // Pose change from the previous frame to the last one (camera-to-camera); valid if hasIncrement().
   const mrpt::poses::CPose3D& increment() const { return increment_; }
@@ -40,9 +40,10 @@ class OdometrySource {
  private:
   RgbdOdometry odometry_;
   mrpt::poses::CPose3D pose_, increment_;
+  mrpt::poses::CPose3D velocity_;  // pose change over the last successful frame
   mrpt::math::CMatrixDouble66 covariance_;
   double timestamp_ = 0.0;
-  bool has_increment_ = false;
+  bool has_increment_ = false, has_velocity_ = false;
   std::size_t count_ = 0, failures_ = 0;
   std::map<std::size_t, mrpt::poses::CPose3D> recent_poses_;  // frame number -> pose (references)
   StageTimes times_;

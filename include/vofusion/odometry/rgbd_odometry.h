@@ -72,14 +72,19 @@ struct OdometryResult {
   std::size_t reference_index = 0;     // Frame::index of the reference
   double reference_timestamp = 0.0;    // s
   int star_keypoints = 0, narf_keypoints = 0;  // before the union and the depth check
+  // The fit's inlier correspondences (after the colour-time correction): points of this frame in its
+  // camera coordinates and their matches in the reference frame's camera coordinates, m. A tracker
+  // weighs them in its own estimate.
+  Points3 inlier_current, inlier_reference;
 };
 
 class RgbdOdometry {
  public:
   explicit RgbdOdometry(const OdometryParams& params = {});
   ~RgbdOdometry();
-  // Motion since the previous frame given; the first frame (or the first after reset()) returns
-  // success=false with failure "first frame".
+  // Motion since the reference frame (OdometryResult::reference_index): the previous frame, or after
+  // a failure the last frame whose motion was estimated (then, if that fails too, the failed frame);
+  // the first frame (or the first after reset()) returns success=false with failure "first frame".
   OdometryResult process(const Frame& frame);
   void reset();
 
