@@ -34,7 +34,7 @@ const char* kSection = "vofusion-grab";  // our own keys; sensor sections belong
 const char* kUsage =
     "usage: vofusion-grab [--config grab.ini] [--sensor SECTION] [--out DIR] [--live] [--no-gui]\n"
     "                     [--replay TUM_DIR|FILE.rawlog] [--max-frames N] [--queue N] [--speed X]\n"
-    "                     [--mode paper|kinfu|odometry] [--no-record] [--simulate-work-ms MS]\n"
+    "                     [--mode joint|paper-handoff|kinfu|odometry] [--no-record] [--simulate-work-ms MS]\n"
     "                     [--verbose] [--dump-config]\n"
     "  Records the sensor of --config (default share/grab-openni2.ini) to DIR/grab.rawlog until\n"
     "  Ctrl-C or --max-frames. --live also reconstructs online (window unless --no-gui) and writes\n"
@@ -72,7 +72,7 @@ Args parseArgs(int argc, char** argv) {
   a.sensor = cl.value("--sensor", "");
   a.out = cl.value("--out", "grab");
   a.replay = cl.value("--replay", "");
-  a.mode = cl.value("--mode", "paper");
+  a.mode = cl.value("--mode", "joint");
   a.live = cl.flag("--live");
   a.gui = !cl.flag("--no-gui");
   a.record = !cl.flag("--no-record");

@@ -1,6 +1,6 @@
 // vofusion: an RGB-D recording in, a trajectory, a clean coloured mesh and an MRPT 3D scene out.
 //   vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]
-//            [--mode paper|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
+//            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
 //            [--raw-mesh] [--dump-config]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
@@ -28,7 +28,7 @@ void onSigint(int) { g_stop = true; }
 
 const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]\n"
-    "                [--mode paper|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
+    "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
     "                [--raw-mesh] [--dump-config]\n";
 
 std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanParams& mesh) {
@@ -58,7 +58,7 @@ int body(int argc, char** argv) {
   const std::string config_path = cl.value("--config", "");
   const auto cfg = loadConfig(config_path);
   checkConfigKeys(cfg, config_path, allSections(default_out, default_mesh));
-  const TrackingMode mode = parseTrackingMode(cl.value("--mode", "paper"));
+  const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
   OutputParams out_params;
   MeshCleanParams mesh_params;
   try {  // out-of-range values: name the file they came from

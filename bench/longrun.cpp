@@ -59,7 +59,7 @@ int body(int argc, char** argv) {
   const std::string config_path = cl.value("--config", "");
   const auto cfg = loadConfig(config_path);
   checkConfigKeys(cfg, config_path, reconstructionConfigSections());
-  const TrackingMode mode = parseTrackingMode(cl.value("--mode", "paper"));
+  const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
 
   TumFolderSource src(cl.positional()[0], {});
   const std::size_t n = src.size();

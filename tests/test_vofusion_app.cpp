@@ -59,7 +59,7 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
 
   const auto summary = readJson(out + "/summary.json");
   EXPECT_EQ(summary["frames"].get<int>(), 12);
-  EXPECT_EQ(summary["mode"].get<std::string>(), "paper");
+  EXPECT_EQ(summary["mode"].get<std::string>(), "joint");
   ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.05);
   EXPECT_GT(summary["mesh"]["faces"].get<int>(), 1000);

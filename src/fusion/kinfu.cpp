@@ -1,12 +1,15 @@
 #include "vofusion/fusion/kinfu.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <deque>
 
 #include <Eigen/Dense>
 #include <mrpt/math/CMatrixFixed.h>
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/core/depth_noise.h"
 #include "vofusion/core/errors.h"
 
 #include "vofusion/core/parallel.h"
@@ -16,17 +19,28 @@ namespace vofusion {
 using namespace fusion;
 
 TrackingMode parseTrackingMode(const std::string& s, const std::string& origin) {
-  if (s == "paper") return TrackingMode::Paper;
+  if (s == "joint") return TrackingMode::Joint;
+  if (s == "paper-handoff" || s == "paper") return TrackingMode::PaperHandoff;
   if (s == "kinfu") return TrackingMode::KinFu;
   if (s == "odometry") return TrackingMode::Odometry;
-  throw InputError(origin, "unknown mode '" + s + "' (expected paper, kinfu or odometry)");
+  throw InputError(origin, "unknown mode '" + s + "' (expected joint, paper-handoff, kinfu or odometry)");
 }
 
 std::string toString(TrackingMode m) {
   switch (m) {
-    case TrackingMode::Paper: return "paper";
+    case TrackingMode::Joint: return "joint";
+    case TrackingMode::PaperHandoff: return "paper-handoff";
     case TrackingMode::KinFu: return "kinfu";
     case TrackingMode::Odometry: return "odometry";
+  }
+  return "?";
+}
+
+std::string toString(InitialGuess g) {
+  switch (g) {
+    case InitialGuess::Prior: return "prior";
+    case InitialGuess::ConstantVelocity: return "constant velocity";
+    case InitialGuess::LastPose: return "last pose";
   }
   return "?";
 }
@@ -69,6 +83,83 @@ struct KinFu::Impl {
     CameraIntrinsics cam, track_cam;
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   } pending;
+
+  // Poses of the last tracked frames by Frame::index: a prior's reference is looked up here.
+  std::deque<std::pair<std::size_t, Eigen::Isometry3d>> recent;
+  // Motion per second over the last two tracked frames, for the constant-velocity prediction.
+  Eigen::Isometry3d last_motion = Eigen::Isometry3d::Identity();
+  double last_motion_dt = 0.0, last_timestamp = 0.0;
+  bool have_last = false;
+
+  const Eigen::Isometry3d* poseOf(std::size_t index) const {
+    for (const auto& [i, T] : recent)
+      if (i == index) return &T;
+    return nullptr;
+  }
+  // The last pose moved on by the last motion, scaled to the time since the last tracked frame.
+  Eigen::Isometry3d constantVelocity(double timestamp) const {
+    if (!(last_motion_dt > 0)) return pose;
+    const double s = std::clamp((timestamp - last_timestamp) / last_motion_dt, 0.0, 3.0);
+    const Eigen::AngleAxisd rot(last_motion.linear());
+    Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
+    step.linear() = Eigen::AngleAxisd(s * rot.angle(), rot.axis()).toRotationMatrix();
+    step.translation() = s * last_motion.translation();
+    return pose * step;
+  }
+  void remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T) {
+    if (have_last && timestamp > last_timestamp) {
+      last_motion = pose.inverse() * T;
+      last_motion_dt = timestamp - last_timestamp;
+    }
+    pose = T;
+    last_timestamp = timestamp;
+    have_last = true;
+    recent.emplace_back(index, T);
+    if (recent.size() > 32) recent.pop_front();
+  }
+  // The prior's matches in world coordinates, each weighed by both points' Kinect noise.
+  PointMatches matchesOf(const MotionPrior& prior, const Eigen::Isometry3d& T_world_ref, const Eigen::Isometry3d& guess) const {
+    PointMatches pm;
+    pm.cauchy = params.joint_match_cauchy;
+    const std::size_t n = std::min(prior.current_points.size(), prior.reference_points.size());
+    const Eigen::Matrix3d Rr = T_world_ref.linear(), Rc = guess.linear();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d& p = prior.current_points[i];
+      const Eigen::Vector3d& q = prior.reference_points[i];
+      const Eigen::Matrix3d C = Rc * rayCovariance(p) * Rc.transpose() + Rr * rayCovariance(q) * Rr.transpose();
+      pm.camera_points.push_back(p);
+      pm.world_points.push_back(T_world_ref * q);
+      pm.information.push_back(C.inverse());
+    }
+    return pm;
+  }
+  // Mode joint: the candidate that explains the frame clearly best after a few ICP steps at the
+  // coarsest level (so errors ICP corrects anyway do not count); the prior wins ties (where geometry
+  // cannot tell, e.g. sliding along a wall). Returns the candidate; `refined` gets its refined pose.
+  InitialGuess chooseGuess(const std::vector<DepthLevel>& levels, const IcpParams& ip, bool have_prior,
+                           const Eigen::Isometry3d& prior_pose, const Eigen::Isometry3d& velocity_pose) const {
+    const std::size_t L = std::min(levels.size(), model_vertices.size()) - 1;
+    const std::vector<DepthLevel> coarse{levels[L]};
+    const std::vector<cv::Mat> mv{model_vertices[L]}, mn{model_normals[L]};
+    IcpParams coarse_ip = ip;
+    coarse_ip.iterations = {3, 3, 3};
+    coarse_ip.point_to_plane_sigma = 0;
+    const double truncation = 0.5 * ip.max_distance;
+    auto cost = [&](const Eigen::Isometry3d& T) {
+      const IcpResult r = projectiveIcp(coarse, mv, mn, model_pose, T, coarse_ip);
+      return scoreAlignment(coarse[0], mv[0], mn[0], model_pose, r.pose, ip, truncation).cost;
+    };
+    InitialGuess best = have_prior ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
+    double best_cost = cost(have_prior ? prior_pose : velocity_pose);
+    const std::pair<InitialGuess, const Eigen::Isometry3d*> others[] = {{InitialGuess::ConstantVelocity, &velocity_pose},
+                                                                        {InitialGuess::LastPose, &pose}};
+    for (const auto& [g, T] : others) {
+      if (g == best) continue;
+      const double c = cost(*T);
+      if (c < params.guess_margin * best_cost) best = g, best_cost = c;
+    }
+    return best;
+  }
 
   Eigen::Vector3f focusPoint(const Eigen::Isometry3d& T) const {
     return (T.translation() + T.linear().col(2) * params.focus_distance).cast<float>();
@@ -122,13 +213,13 @@ KinFu::KinFu(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CP
 
 KinFu::~KinFu() = default;
 
-FusionResult KinFu::process(const Frame& frame, const OdometryResult* odom) {
-  FusionResult res = track(frame, odom);
+FusionResult KinFu::process(const Frame& frame, const MotionPrior* prior) {
+  FusionResult res = track(frame, prior);
   fuse(res);
   return res;
 }
 
-FusionResult KinFu::track(const Frame& frame, const OdometryResult* odom) {
+FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
   Impl& s = *impl_;
   s.pending.valid = false;
   const KinFuParams& P = s.params;
@@ -162,61 +253,111 @@ FusionResult KinFu::track(const Frame& frame, const OdometryResult* odom) {
   }
   res.times.add("preprocess", seconds(t0));
 
-  const bool odom_ok = odom && odom->success;
-  const Eigen::Isometry3d predicted = odom_ok ? s.pose * toEigen(odom->motion) : s.pose;
+  // The prior counts only when its reference frame has a pose here.
+  const Eigen::Isometry3d* ref_pose = prior ? s.poseOf(prior->reference_index) : nullptr;
+  const bool have_prior = ref_pose != nullptr;
+  const Eigen::Isometry3d prior_pose = have_prior ? *ref_pose * prior->T_ref_cur : s.pose;
+  const Eigen::Isometry3d velocity_pose = s.constantVelocity(frame.timestamp);
   Eigen::Isometry3d new_pose = s.pose;
 
   if (!s.have_model) {
     res.tracked = true;  // the first frame defines the map
   } else if (s.mode == TrackingMode::Odometry) {
-    res.tracked = odom_ok;
-    if (odom_ok) new_pose = predicted;
-    else res.reason = odom ? "odometry failed: " + odom->failure : "no odometry";
+    res.tracked = true;
+    res.guess = have_prior ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
+    new_pose = have_prior ? prior_pose : velocity_pose;
+    res.predicted = !have_prior;
+    if (!have_prior) res.reason = prior ? "prior's reference frame has no pose" : "no motion prior";
   } else {
-    const bool seeded = s.mode == TrackingMode::Paper && odom_ok;
-    t0 = std::chrono::steady_clock::now();
-    // Weak directions keep the initial guess only when it is worth keeping (the odometry); from the
-    // last pose alone (mode kinfu) every direction that is not numerically singular is solved.
+    const bool joint = s.mode == TrackingMode::Joint;
+    const bool seeded = s.mode == TrackingMode::PaperHandoff && have_prior;
     IcpParams ip = P.icp;
+    // Weak directions keep the initial guess only when it is worth keeping (the prior); from the
+    // last pose alone (mode kinfu) every direction that is not numerically singular is solved.
     if (!seeded) ip.degenerate_ratio = std::min(ip.degenerate_ratio, P.min_condition);
-    const IcpResult icp = projectiveIcp(levels, s.model_vertices, s.model_normals, s.model_pose,
-                                        seeded ? predicted : s.pose, ip);
+    PointMatches matches;
+    if (joint) {
+      // ICP's weak directions follow the prior's pose (projectiveIcp); without a prior nothing else
+      // can decide them: solve all but numerically null ones.
+      ip.point_to_plane_sigma = P.joint_icp_sigma;
+      ip.degenerate_ratio = have_prior ? P.icp.degenerate_ratio : std::min(P.icp.degenerate_ratio, P.min_condition);
+      res.guess = s.chooseGuess(levels, ip, have_prior, prior_pose, velocity_pose);
+      if (have_prior) matches = s.matchesOf(*prior, *ref_pose, prior_pose);
+    } else {
+      res.guess = seeded ? InitialGuess::Prior : InitialGuess::LastPose;
+    }
+    const Eigen::Isometry3d& initial = res.guess == InitialGuess::Prior              ? prior_pose
+                                       : res.guess == InitialGuess::ConstantVelocity ? velocity_pose
+                                                                                     : s.pose;
+    if (joint && P.joint_rolling_shutter > 0 && s.have_last && frame.timestamp > s.last_timestamp) {
+      // Turn rate from the initial guess; the scene depth from the coarsest level's readings.
+      const double turn = Eigen::AngleAxisd((s.pose.inverse() * initial).linear()).angle() / (frame.timestamp - s.last_timestamp);
+      const cv::Mat& d = levels.back().depth;
+      const double depth = cv::mean(d, d > 0)[0];
+      ip.point_to_plane_sigma += P.joint_rolling_shutter * turn * depth;
+    }
+    res.icp_sigma = ip.point_to_plane_sigma;
+    t0 = std::chrono::steady_clock::now();
+    // Mode joint: the constant-velocity prediction as a motion model, its spread growing with the time
+    // since the last tracked frame.
+    PosePrior motion;
+    motion.pose = velocity_pose;
+    const double frames_since = s.have_last ? std::max(1.0, (frame.timestamp - s.last_timestamp) * 30.0) : 1.0;
+    motion.sigma_translation = P.motion_sigma_translation * frames_since;
+    motion.sigma_rotation = P.motion_sigma_rotation * M_PI / 180.0 * frames_since;
+    JointTerms terms;
+    if (joint) {
+      if (!matches.camera_points.empty()) terms.matches = &matches;
+      if (s.last_motion_dt > 0 && (motion.sigma_translation > 0 || motion.sigma_rotation > 0)) terms.motion = &motion;
+      if (have_prior) terms.weak_anchor = &prior_pose;
+    }
+    const IcpResult icp = projectiveIcp(levels, s.model_vertices, s.model_normals, s.model_pose, initial, ip, terms);
     res.times.add("icp", seconds(t0));
     res.icp_inliers = icp.inliers;
     res.icp_rms = icp.rms;
     res.condition = icp.condition;
     res.degenerate_dims = icp.degenerate_dims;
+    res.match_inliers = icp.point_inliers;
     // Divergence / degeneracy tests.
     if (!icp.solved) res.reason = "ICP system not solvable";
     else if (icp.inliers < P.min_inlier_ratio * std::max(1, icp.valid_pixels))
       res.reason = "too few ICP inliers (" + std::to_string(icp.inliers) + " of " + std::to_string(icp.valid_pixels) + ")";
-    else if (icp.condition < P.min_condition)
+    else if (!joint && icp.condition < P.min_condition)
       res.reason = "ill-conditioned ICP (eigenvalue ratio " + std::to_string(icp.condition) + ")";
-    else if (seeded) {
-      const Eigen::Isometry3d d = predicted.inverse() * icp.pose;
+    else if (seeded || (joint && have_prior)) {
+      const Eigen::Isometry3d d = prior_pose.inverse() * icp.pose;
       const double dt = d.translation().norm();
       const double da = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
       if (dt > P.max_jump_translation || da > P.max_jump_rotation)
-        res.reason = "ICP jumped " + std::to_string(dt) + " m / " + std::to_string(da) + " deg from the odometry";
+        res.reason = "ICP jumped " + std::to_string(dt) + " m / " + std::to_string(da) + " deg from the prior";
     }
     if (res.reason.empty()) {
       res.tracked = true;
       new_pose = icp.pose;
-    } else if (s.mode == TrackingMode::Paper && odom_ok) {
-      res.tracked = true;
-      res.fell_back = true;
-      new_pose = predicted;
+    } else if (s.mode != TrackingMode::KinFu && have_prior) {
+      res.tracked = res.fell_back = true;
+      new_pose = prior_pose;
+    } else if (joint) {
+      // No motion is dropped: without ICP and without a prior the frame moves on at constant velocity.
+      res.tracked = res.predicted = true;
+      new_pose = velocity_pose;
     }
   }
 
-  if (res.tracked) s.pose = new_pose;
+  if (res.tracked) s.remember(frame.index, frame.timestamp, new_pose);
   res.pose = toMrpt(s.pose);
 
   ++s.stats.frames;
   if (res.tracked) ++s.stats.tracked;
   if (res.fell_back) ++s.stats.fell_back;
+  if (res.predicted) ++s.stats.predicted;
   if (res.degenerate_dims > 0 && res.reason.empty()) ++s.stats.degenerate;
   if (!res.tracked) ++s.stats.lost;
+  if (s.have_model && s.mode != TrackingMode::Odometry) {
+    if (res.guess == InitialGuess::Prior) ++s.stats.guess_prior;
+    else if (res.guess == InitialGuess::ConstantVelocity) ++s.stats.guess_velocity;
+    else ++s.stats.guess_last;
+  }
   s.stats.times.merge(res.times);
   if (res.tracked)
     s.pending = {true, P.integrate_filtered && P.tracking_downsample == 1 ? levels[0].depth : frame.depth, frame.rgb,
@@ -233,7 +374,8 @@ void KinFu::fuse(FusionResult& res) {
   s.have_model = true;  // the map exists from the first fused (or tracked) frame on
   StageTimes times;
   // Fuse, move the volume with the camera, and predict the surface for the next frame.
-  if (!res.fell_back || P.integrate_on_fallback) {
+  // A constant-velocity guess is not fused: nothing measured where the camera was.
+  if (!res.predicted && (!res.fell_back || P.integrate_on_fallback)) {
     auto t0 = std::chrono::steady_clock::now();
     if (s.volume->shiftIfNeeded(s.focusPoint(f.pose), P.shift_threshold)) {
       res.shifted = true;
@@ -247,7 +389,7 @@ void KinFu::fuse(FusionResult& res) {
     // Mode odometry has no ICP: nothing reads the predicted model.
     if (s.mode != TrackingMode::Odometry) s.raycastModel(f.pose, f.hint, f.track_cam, times);
   } else if (s.mode != TrackingMode::Odometry) {
-    // Not fused (fallback pose): re-predict the model from the new pose so ICP keeps up.
+    // Not fused (fallback or predicted pose): re-predict the model from the new pose so ICP keeps up.
     s.raycastModel(f.pose, cv::Mat(), f.track_cam, times);
   }
   res.times.merge(times);

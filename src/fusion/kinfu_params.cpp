@@ -40,6 +40,12 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"integrate_on_fallback", &p.integrate_on_fallback, "fuse frames posed by the odometry fallback"},
       {"integrate_filtered", &p.integrate_filtered, "fuse bilateral-filtered instead of raw depth"},
       {"overlap_fusion", &p.overlap_fusion, "fuse frame k beside the odometry of frame k+1 (same results, faster)"},
+      {"joint_icp_sigma", &p.joint_icp_sigma, "m, mode joint: noise of one point-to-plane residual (smaller: geometry outweighs the matches more)"},
+      {"joint_rolling_shutter", &p.joint_rolling_shutter, "s, mode joint: depth readout time; ICP noise grows by it x turn rate x depth"},
+      {"joint_match_cauchy", &p.joint_match_cauchy, "sigmas, mode joint: Cauchy kernel on the odometry matches' whitened residuals (0 = none)"},
+      {"motion_sigma_translation", &p.motion_sigma_translation, "m per 1/30 s, mode joint: camera centre vs the constant-velocity prediction (0 = no motion model)"},
+      {"motion_sigma_rotation", &p.motion_sigma_rotation, "degrees per 1/30 s, mode joint: rotation vs the constant-velocity prediction (0 = none)"},
+      {"guess_margin", &p.guess_margin, "mode joint: another initial guess replaces the odometry's when its alignment cost is below this fraction"},
   };
 }
 
@@ -54,6 +60,12 @@ void KinFuParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
     throw InputError(where, "voxel_size must be positive and truncation larger than it");
   if (tracking_downsample != 1 && tracking_downsample != 2) throw InputError(where, "tracking_downsample must be 1 or 2");
   if (tsdf.max_weight < 1 || tsdf.max_weight > 255) throw InputError(where, "max_weight must be in 1..255");
+  if (!(joint_icp_sigma >= 1e-4 && joint_icp_sigma <= 1.0)) throw InputError(where, "joint_icp_sigma must be in [0.0001, 1] m");
+  if (!(joint_rolling_shutter >= 0 && joint_rolling_shutter <= 0.1)) throw InputError(where, "joint_rolling_shutter must be in [0, 0.1] s");
+  if (!(joint_match_cauchy >= 0 && joint_match_cauchy <= 100)) throw InputError(where, "joint_match_cauchy must be in [0, 100]");
+  if (!(motion_sigma_translation >= 0 && motion_sigma_translation <= 10)) throw InputError(where, "motion_sigma_translation must be in [0, 10] m");
+  if (!(motion_sigma_rotation >= 0 && motion_sigma_rotation <= 180)) throw InputError(where, "motion_sigma_rotation must be in [0, 180] degrees");
+  if (!(guess_margin > 0 && guess_margin <= 1)) throw InputError(where, "guess_margin must be in (0, 1]");
 }
 
 void KinFuParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const {

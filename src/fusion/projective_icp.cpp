@@ -22,8 +22,10 @@ struct Accum {
   double b[6] = {};
   double r2 = 0.0;
   double d2 = 0.0;  // squared distances of the inliers from the camera centre
+  double r2_truncated = 0.0;  // sum of min(r^2, truncation^2) over the inliers (alignment scores)
   int n = 0;
   int valid = 0;  // pixels with a vertex and a normal
+  int in_view = 0;  // valid pixels that land on a model pixel with a vertex and a normal
 };
 
 void addAccum(Accum& total, const Accum& a) {
@@ -31,8 +33,67 @@ void addAccum(Accum& total, const Accum& a) {
   for (int i = 0; i < 6; ++i) total.b[i] += a.b[i];
   total.r2 += a.r2;
   total.d2 += a.d2;
+  total.r2_truncated += a.r2_truncated;
   total.n += a.n;
   total.valid += a.valid;
+  total.in_view += a.in_view;
+}
+
+// Projective association of one level's pixels with the model and the point-to-plane normal equations
+// about the camera centre (truncation > 0 also sums the truncated squared residuals).
+Accum accumulate(const DepthLevel& lv, const cv::Mat& mv, const cv::Mat& mn, const Eigen::Isometry3f& model_inv,
+                 const Eigen::Isometry3f& T, const IcpParams& params, float truncation) {
+  const float max_d2 = params.max_distance * params.max_distance;
+  const float min_cos = static_cast<float>(std::cos(params.max_angle * M_PI / 180.0));
+  const float trunc2 = truncation * truncation;
+  const Eigen::Matrix3f Rm = model_inv.linear();
+  const Eigen::Vector3f tm = model_inv.translation();
+  const float fx = lv.camera.fx, fy = lv.camera.fy, cx = lv.camera.cx, cy = lv.camera.cy;
+  const int mw = mv.cols, mh = mv.rows;
+  const Eigen::Matrix3f R = T.linear();
+  const Eigen::Vector3f t = T.translation();
+  // Rows in fixed chunks, summed in a fixed order: the same frame gives the same pose on every run.
+  return parallelReduce(
+      0, lv.vertices.rows, Accum{},
+      [&](int y, Accum& acc) {
+        const cv::Vec3f* vrow = lv.vertices.ptr<cv::Vec3f>(y);
+        const cv::Vec3f* nrow = lv.normals.ptr<cv::Vec3f>(y);
+        for (int x = 0; x < lv.vertices.cols; ++x) {
+          const cv::Vec3f& vc = vrow[x];
+          const cv::Vec3f& nc = nrow[x];
+          if (std::isnan(vc[0]) || std::isnan(nc[0])) continue;
+          ++acc.valid;
+          const Eigen::Vector3f vg = R * Eigen::Vector3f(vc[0], vc[1], vc[2]) + t;
+          const Eigen::Vector3f pm = Rm * vg + tm;  // in the model camera
+          if (pm.z() <= 0.f) continue;
+          const float uf = fx * pm.x() / pm.z() + cx, vf = fy * pm.y() / pm.z() + cy;
+          if (!(uf > -0.5f && vf > -0.5f && uf < mw - 0.5f && vf < mh - 0.5f)) continue;
+          const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
+          const cv::Vec3f& m = mv.ptr<cv::Vec3f>(v)[u];
+          const cv::Vec3f& n = mn.ptr<cv::Vec3f>(v)[u];
+          if (std::isnan(m[0]) || std::isnan(n[0])) continue;
+          ++acc.in_view;
+          const Eigen::Vector3f vm(m[0], m[1], m[2]), nm(n[0], n[1], n[2]);
+          const Eigen::Vector3f d = vg - vm;
+          if (d.squaredNorm() > max_d2) continue;
+          const Eigen::Vector3f ng = R * Eigen::Vector3f(nc[0], nc[1], nc[2]);
+          if (ng.dot(nm) < min_cos) continue;
+          const float r = nm.dot(d);
+          const Eigen::Vector3f pc = vg - t;
+          const Eigen::Vector3f rot = pc.cross(nm);
+          const double J[6] = {rot.x(), rot.y(), rot.z(), nm.x(), nm.y(), nm.z()};
+          int k = 0;
+          for (int i = 0; i < 6; ++i) {
+            for (int j = i; j < 6; ++j) acc.A[k++] += J[i] * J[j];
+            acc.b[i] -= J[i] * r;
+          }
+          acc.r2 += static_cast<double>(r) * r;
+          acc.r2_truncated += std::min(r * r, trunc2);
+          acc.d2 += pc.squaredNorm();
+          ++acc.n;
+        }
+      },
+      addAccum, 16, lv.vertices.total() >= kParallelMinPixels);
 }
 
 }  // namespace
@@ -68,102 +129,123 @@ void downsampleMaps(const cv::Mat& vertices, const cv::Mat& normals, cv::Mat& ve
   }, 1, vertices.total() >= kParallelMinPixels);
 }
 
+namespace {
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d S;
+  S << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return S;
+}
+
+// Adds the point matches' whitened, Cauchy-weighted residuals T p - q to the system about the camera
+// centre c (parameters: rotation about c, then translation); returns the matches within 3 sigmas.
+int addPointMatches(const PointMatches& pm, const Eigen::Isometry3d& T, Eigen::Matrix<double, 6, 6>& A,
+                    Eigen::Matrix<double, 6, 1>& b) {
+  const Eigen::Vector3d c = T.translation();
+  int close = 0;
+  for (std::size_t i = 0; i < pm.camera_points.size(); ++i) {
+    const Eigen::Vector3d p = T * pm.camera_points[i];
+    const Eigen::Vector3d e = p - pm.world_points[i];
+    const Eigen::Matrix3d& W = pm.information[i];
+    const double m2 = e.dot(W * e);  // squared Mahalanobis length
+    if (m2 < 9.0) ++close;
+    const double w = pm.cauchy > 0 ? 1.0 / (1.0 + m2 / (pm.cauchy * pm.cauchy)) : 1.0;
+    Eigen::Matrix<double, 3, 6> J;
+    J << -skew(p - c), Eigen::Matrix3d::Identity();
+    A += w * J.transpose() * W * J;
+    b -= w * J.transpose() * (W * e);
+  }
+  return close;
+}
+
+// Adds the pose prior: rotation residual log(R R_prior^T) (world frame, Jacobian I in the rotation
+// part) and camera-centre residual (Jacobian I in the translation part).
+void addPosePrior(const PosePrior& pp, const Eigen::Isometry3d& T, Eigen::Matrix<double, 6, 6>& A,
+                  Eigen::Matrix<double, 6, 1>& b) {
+  if (pp.sigma_rotation > 0) {
+    const Eigen::AngleAxisd d(T.linear() * pp.pose.linear().transpose());
+    const Eigen::Vector3d e = d.angle() * d.axis();
+    const double w = 1.0 / (pp.sigma_rotation * pp.sigma_rotation);
+    A.topLeftCorner<3, 3>() += w * Eigen::Matrix3d::Identity();
+    b.head<3>() -= w * e;
+  }
+  if (pp.sigma_translation > 0) {
+    const Eigen::Vector3d e = T.translation() - pp.pose.translation();
+    const double w = 1.0 / (pp.sigma_translation * pp.sigma_translation);
+    A.bottomRightCorner<3, 3>() += w * Eigen::Matrix3d::Identity();
+    b.tail<3>() -= w * e;
+  }
+}
+
+}  // namespace
+
+AlignmentScore scoreAlignment(const DepthLevel& frame, const cv::Mat& model_vertices, const cv::Mat& model_normals,
+                              const Eigen::Isometry3d& model_pose, const Eigen::Isometry3d& pose,
+                              const IcpParams& params, double truncation) {
+  const Accum a = accumulate(frame, model_vertices, model_normals, model_pose.inverse().cast<float>(), pose.cast<float>(),
+                             params, float(truncation));
+  AlignmentScore s;
+  s.inliers = a.n;
+  s.valid = a.valid;
+  // Over the pixels that see the model: leaving the model's view is no evidence against a pose
+  // (sliding along a wall moves pixels out of it while the geometry cannot tell).
+  s.in_view = a.in_view;
+  s.cost = a.in_view ? (a.r2_truncated + double(a.in_view - a.n) * truncation * truncation) / a.in_view
+                     : truncation * truncation;
+  return s;
+}
+
 IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<cv::Mat>& model_vertices,
                         const std::vector<cv::Mat>& model_normals, const Eigen::Isometry3d& model_pose,
-                        const Eigen::Isometry3d& initial, const IcpParams& params) {
+                        const Eigen::Isometry3d& initial, const IcpParams& params, const JointTerms& joint) {
   IcpResult res;
   res.pose = initial;
   const int levels = static_cast<int>(std::min({frame.size(), model_vertices.size(), model_normals.size()}));
-  const float max_d2 = params.max_distance * params.max_distance;
-  const float min_cos = static_cast<float>(std::cos(params.max_angle * M_PI / 180.0));
   const Eigen::Isometry3f model_inv = model_pose.inverse().cast<float>();
-  const Eigen::Matrix3f Rm = model_inv.linear();
-  const Eigen::Vector3f tm = model_inv.translation();
+  const PointMatches* points = joint.matches;
+  const PosePrior* pose_prior = joint.motion;
+  const bool have_points = points && !points->camera_points.empty();
 
   for (int l = levels - 1; l >= 0; --l) {
     const DepthLevel& lv = frame[l];
-    const cv::Mat& mv = model_vertices[l];
-    const cv::Mat& mn = model_normals[l];
-    const float fx = lv.camera.fx, fy = lv.camera.fy, cx = lv.camera.cx, cy = lv.camera.cy;
-    const int mw = mv.cols, mh = mv.rows;
     const int iters = l < static_cast<int>(params.iterations.size()) ? params.iterations[l] : params.iterations.back();
+    // A pixel of level l averages 4^l finest-level readings.
+    const double icp_weight =
+        params.point_to_plane_sigma > 0 ? double(1 << (2 * l)) / (params.point_to_plane_sigma * params.point_to_plane_sigma) : 1.0;
     for (int it = 0; it < iters; ++it) {
-      const Eigen::Isometry3f T = res.pose.cast<float>();
-      const Eigen::Matrix3f R = T.linear();
-      const Eigen::Vector3f t = T.translation();
-      // Rows in fixed chunks, summed in a fixed order: the same frame gives the same pose on every run.
-      const Accum total = parallelReduce(
-          0, lv.vertices.rows, Accum{},
-          [&](int y, Accum& acc) {
-            const cv::Vec3f* vrow = lv.vertices.ptr<cv::Vec3f>(y);
-            const cv::Vec3f* nrow = lv.normals.ptr<cv::Vec3f>(y);
-            for (int x = 0; x < lv.vertices.cols; ++x) {
-              const cv::Vec3f& vc = vrow[x];
-              const cv::Vec3f& nc = nrow[x];
-              if (std::isnan(vc[0]) || std::isnan(nc[0])) continue;
-              ++acc.valid;
-              const Eigen::Vector3f vg = R * Eigen::Vector3f(vc[0], vc[1], vc[2]) + t;
-              const Eigen::Vector3f pm = Rm * vg + tm;  // in the model camera
-              if (pm.z() <= 0.f) continue;
-              const float uf = fx * pm.x() / pm.z() + cx, vf = fy * pm.y() / pm.z() + cy;
-              if (!(uf > -0.5f && vf > -0.5f && uf < mw - 0.5f && vf < mh - 0.5f)) continue;
-              const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
-              const cv::Vec3f& m = mv.ptr<cv::Vec3f>(v)[u];
-              const cv::Vec3f& n = mn.ptr<cv::Vec3f>(v)[u];
-              if (std::isnan(m[0]) || std::isnan(n[0])) continue;
-              const Eigen::Vector3f vm(m[0], m[1], m[2]), nm(n[0], n[1], n[2]);
-              const Eigen::Vector3f d = vg - vm;
-              if (d.squaredNorm() > max_d2) continue;
-              const Eigen::Vector3f ng = R * Eigen::Vector3f(nc[0], nc[1], nc[2]);
-              if (ng.dot(nm) < min_cos) continue;
-              const float r = nm.dot(d);
-              const Eigen::Vector3f pc = vg - t;
-              const Eigen::Vector3f rot = pc.cross(nm);
-              const double J[6] = {rot.x(), rot.y(), rot.z(), nm.x(), nm.y(), nm.z()};
-              int k = 0;
-              for (int i = 0; i < 6; ++i) {
-                for (int j = i; j < 6; ++j) acc.A[k++] += J[i] * J[j];
-                acc.b[i] -= J[i] * r;
-              }
-              acc.r2 += static_cast<double>(r) * r;
-              acc.d2 += pc.squaredNorm();
-              ++acc.n;
-            }
-          },
-          addAccum, 16, lv.vertices.total() >= kParallelMinPixels);
-      const int valid = total.valid;
+      const Accum total = accumulate(lv, model_vertices[l], model_normals[l], model_inv, res.pose.cast<float>(), params, 0.f);
       Eigen::Matrix<double, 6, 6> A;
       Eigen::Matrix<double, 6, 1> b;
       int k = 0;
       for (int i = 0; i < 6; ++i) {
-        for (int j = i; j < 6; ++j) A(i, j) = A(j, i) = total.A[k++];
-        b[i] = total.b[i];
+        for (int j = i; j < 6; ++j) A(i, j) = A(j, i) = icp_weight * total.A[k++];
+        b[i] = icp_weight * total.b[i];
       }
       if (l == 0) {
         res.inliers = total.n;
-        res.valid_pixels = valid;
+        res.valid_pixels = total.valid;
         res.rms = total.n ? std::sqrt(total.r2 / total.n) : 0.0;
       }
-      if (total.n < 6) {
+      if (total.n < 6 && !have_points && !pose_prior) {
         res.solved = false;
         if (l == 0) res.condition = 0.0;
         break;
       }
       // Scale the rotation block by the rms point distance from the camera centre: then a unit of
       // either part moves the points by about a metre, and eigenvalues compare across the two.
-      const double scale = std::sqrt(std::max(1e-6, total.d2 / total.n));
+      const double scale = std::sqrt(std::max(1e-6, total.n ? total.d2 / total.n : 1.0));
       Eigen::Matrix<double, 6, 1> D;
       D << 1.0 / scale, 1.0 / scale, 1.0 / scale, 1.0, 1.0, 1.0;
-      const Eigen::Matrix<double, 6, 6> As = D.asDiagonal() * A * D.asDiagonal();
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(As);
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(D.asDiagonal() * A * D.asDiagonal());
       const double emax = es.eigenvalues()[5];
+      const bool other_terms = have_points || pose_prior || joint.weak_anchor;
       if (!(emax > 0.0) || !es.eigenvectors().allFinite()) {
         res.solved = false;
         break;
       }
-      // Solve only in the well-constrained subspace; the rest of the step is zero.
-      Eigen::Matrix<double, 6, 1> xs = Eigen::Matrix<double, 6, 1>::Zero();
-      const Eigen::Matrix<double, 6, 1> bs = D.asDiagonal() * b;
+      // The geometry's strong directions (eigenvalue at least degenerate_ratio of the largest) are
+      // solved; the weak ones get no step, or the step to the weak anchor.
+      Eigen::Matrix<double, 6, 6> As = Eigen::Matrix<double, 6, 6>::Zero(), Ps = As;
       int degenerate = 0;
       for (int i = 0; i < 6; ++i) {
         const double e = es.eigenvalues()[i];
@@ -172,11 +254,49 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
           continue;
         }
         const auto v = es.eigenvectors().col(i);
-        xs += v * (v.dot(bs) / e);
+        As += e * v * v.transpose();
+        Ps += v * v.transpose();
       }
       if (l == 0) {
         res.condition = std::max(0.0, es.eigenvalues()[0]) / emax;
         res.degenerate_dims = degenerate;
+      }
+      const Eigen::Matrix<double, 6, 1> b_icp = D.asDiagonal() * b;
+      Eigen::Matrix<double, 6, 1> xs = Eigen::Matrix<double, 6, 1>::Zero();
+      if (!other_terms) {
+        for (int i = 0; i < 6; ++i) {
+          const double e = es.eigenvalues()[i];
+          if (e >= params.degenerate_ratio * emax) xs += es.eigenvectors().col(i) * (es.eigenvectors().col(i).dot(b_icp) / e);
+        }
+      } else {
+        Eigen::Matrix<double, 6, 6> At = Eigen::Matrix<double, 6, 6>::Zero();
+        Eigen::Matrix<double, 6, 1> bt = Eigen::Matrix<double, 6, 1>::Zero();
+        if (have_points) {
+          const int close = addPointMatches(*points, res.pose, At, bt);
+          if (l == 0) res.point_inliers = close;
+        }
+        if (pose_prior) addPosePrior(*pose_prior, res.pose, At, bt);
+        // Strong subspace: ICP, the matches and the motion model together.
+        const Eigen::Matrix<double, 6, 6> Ss = As + Ps * D.asDiagonal() * At * D.asDiagonal() * Ps;
+        const Eigen::Matrix<double, 6, 1> bb = Ps * (b_icp + D.asDiagonal() * bt);
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> ej(Ss);
+        if (!ej.eigenvectors().allFinite()) {
+          res.solved = false;
+          break;
+        }
+        for (int i = 0; i < 6; ++i) {
+          const double e = ej.eigenvalues()[i];
+          if (e > 1e-9 * ej.eigenvalues()[5]) xs += ej.eigenvectors().col(i) * (ej.eigenvectors().col(i).dot(bb) / e);
+        }
+        // Weak subspace: the step that brings the pose to the anchor (rotation about the camera
+        // centre, then the centre), in the scaled coordinates.
+        if (joint.weak_anchor && degenerate > 0) {
+          const Eigen::AngleAxisd dr(joint.weak_anchor->linear() * res.pose.linear().transpose());
+          Eigen::Matrix<double, 6, 1> delta;
+          delta << dr.angle() * dr.axis(), joint.weak_anchor->translation() - res.pose.translation();
+          const Eigen::Matrix<double, 6, 1> delta_s = delta.cwiseQuotient(D);
+          xs += (Eigen::Matrix<double, 6, 6>::Identity() - Ps) * delta_s;
+        }
       }
       const Eigen::Matrix<double, 6, 1> xi = D.asDiagonal() * xs;
       if (!xi.allFinite()) {

@@ -11,6 +11,17 @@ namespace {
 // pointers to their defaults.
 const OdometryParams& defaultOdometry() { static const OdometryParams p; return p; }
 const KinFuParams& defaultKinFu() { static const KinFuParams p; return p; }
+
+// What fusion is told about the odometry's motion: pose, covariance and inlier matches.
+fusion::MotionPrior motionPriorOf(const OdometryResult& o) {
+  fusion::MotionPrior p;
+  p.reference_index = o.reference_index;
+  p.T_ref_cur.matrix() = o.motion.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
+  p.covariance = o.covariance.asEigen();
+  p.current_points = o.inlier_current;
+  p.reference_points = o.inlier_reference;
+  return p;
+}
 }  // namespace
 
 std::vector<ConfigSection> reconstructionConfigSections() {
@@ -25,7 +36,7 @@ struct Reconstruction::Impl {
   std::unique_ptr<KinFu> kinfu;
   Trajectory trajectory;
   StageTimes times;
-  std::size_t frames = 0, fallbacks = 0, lost = 0, odo_failures = 0;
+  std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
   // The fusion of the last frame (integrate + ray cast), running beside the next frame's odometry
   // and image loading when overlap_fusion is on; `fusing_frame` keeps its images alive and unchanged.
   tbb::task_group fusing;
@@ -70,27 +81,31 @@ FrameReport Reconstruction::process(const Frame& frame) {
     if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
   }
   m.waitFusion();
-  const OdometryResult* odom = r.odometry.success ? &r.odometry : nullptr;
+  fusion::MotionPrior prior;
+  if (r.odometry.success) prior = motionPriorOf(r.odometry);
+  const fusion::MotionPrior* have_prior = r.odometry.success ? &prior : nullptr;
   FusionResult f;
   if (m.kinfu_params.overlap_fusion) {
     // The caller may refill its frame's buffers before the fusion has read them.
     m.fusing_frame = frame;
     m.fusing_frame.depth = frame.depth.clone();
     m.fusing_frame.rgb = frame.rgb.clone();
-    f = m.kinfu->track(m.fusing_frame, odom);
+    f = m.kinfu->track(m.fusing_frame, have_prior);
     m.fusing_result = f;
     m.fusing_result.times = StageTimes();
     m.fusing_pending = true;
     m.fusing.run([&m] { m.kinfu->fuse(m.fusing_result); });
   } else {
-    f = m.kinfu->process(frame, odom);
+    f = m.kinfu->process(frame, have_prior);
   }
   r.times.merge(f.times);
   r.tracked = f.tracked || m.frames == 0;
   r.fell_back = f.fell_back;
+  r.predicted = f.predicted;
   r.note = f.reason;
   r.pose = f.pose;
   if (f.fell_back) ++m.fallbacks;
+  if (f.predicted) ++m.predicted;
   if (!r.tracked) ++m.lost;
   ++m.frames;
   m.trajectory.push_back({frame.timestamp, f.pose});
@@ -115,6 +130,7 @@ const StageTimes& Reconstruction::totalTimes() const {
 }
 std::size_t Reconstruction::framesProcessed() const { return impl_->frames; }
 std::size_t Reconstruction::fallbacks() const { return impl_->fallbacks; }
+std::size_t Reconstruction::predictedFrames() const { return impl_->predicted; }
 std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
 KinFuStats Reconstruction::fusionStats() const {

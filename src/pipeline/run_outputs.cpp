@@ -207,12 +207,15 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   s["frames"] = frames;
   s["lost_frames"] = rec.lostFrames();
   s["icp_fallbacks_to_odometry"] = rec.fallbacks();
+  s["predicted_frames"] = rec.predictedFrames();
   s["odometry_failures"] = rec.odometryFailures();
   s["seconds"] = info.seconds;
   s["fps"] = info.seconds > 0 ? frames / info.seconds : 0.0;
   s["stages"] = timesJson(rec.totalTimes(), frames);
   const KinFuStats ks = rec.fusionStats();
-  s["fusion"] = {{"volume_shifts", ks.shifts}, {"icp_degenerate_frames", ks.degenerate}, {"bricks_in_volume", ks.bricks_in_volume},
+  s["fusion"] = {{"volume_shifts", ks.shifts}, {"icp_degenerate_frames", ks.degenerate},
+                 {"initial_guess", {{"odometry", ks.guess_prior}, {"constant_velocity", ks.guess_velocity}, {"last_pose", ks.guess_last}}},
+                 {"bricks_in_volume", ks.bricks_in_volume},
                  {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0}};
   if (!info.extra.is_null()) s.update(info.extra);
 

@@ -20,6 +20,18 @@ struct IcpParams {
   // eigenvalue is below this fraction of the largest are not solved: the pose keeps the initial
   // guess along them (the odometry prediction in mode paper, the last pose in mode kinfu).
   double degenerate_ratio = 1e-2;
+  // m; > 0 weighs every point-to-plane residual as a measurement of this noise at the finest level
+  // (a coarser level's averaged pixel: 4x the weight per level), so the ICP term can be summed with
+  // other terms (PointMatches). 0: unweighted, as KinectFusion.
+  double point_to_plane_sigma = 0.0;
+};
+
+// 3D points of the current frame held to fixed world points beside the ICP residuals, in the same
+// Gauss-Newton (joint tracking): camera_points[i] (current camera, m) should land on world_points[i].
+struct PointMatches {
+  std::vector<Eigen::Vector3d> camera_points, world_points;
+  std::vector<Eigen::Matrix3d> information;  // per match, world frame, 1/m^2 (inverse noise covariance)
+  double cauchy = 1.0;  // scale of the Cauchy kernel on the whitened residual (sigmas); 0 = none
 };
 
 struct IcpResult {
@@ -30,13 +42,43 @@ struct IcpResult {
   double condition = 0.0;      // smallest / largest eigenvalue of the depth-scaled 6x6 normal matrix
   int degenerate_dims = 0;     // directions left at the initial guess at the last level-0 iteration
   bool solved = false;         // false when a linear system could not be solved
+  int point_inliers = 0;       // PointMatches within 3 sigmas at the solution
 };
+
+// A Gaussian prior on the camera pose itself (a motion model's prediction): rotation and camera
+// centre each with an isotropic standard deviation. Summed into every iteration's system.
+struct PosePrior {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // camera-to-world
+  double sigma_rotation = 0.0;     // rad, 0 = no rotation term
+  double sigma_translation = 0.0;  // m, 0 = no translation term
+};
+
+// How well a pose explains the frame at one level, for choosing an initial guess: point-to-plane
+// residuals truncated at `truncation` (m) over the pixels that land on the model, those rejected
+// (too far, normals disagree) counted as truncated.
+struct AlignmentScore {
+  int inliers = 0, valid = 0, in_view = 0;
+  double cost = 0.0;  // mean truncated squared residual over the in-view pixels, m^2
+};
+AlignmentScore scoreAlignment(const DepthLevel& frame, const cv::Mat& model_vertices, const cv::Mat& model_normals,
+                              const Eigen::Isometry3d& model_pose, const Eigen::Isometry3d& pose,
+                              const IcpParams& params, double truncation);
 
 // model_vertices/normals: per level, world frame, ray-cast from model_pose (camera-to-world);
 // model_cams: their intrinsics. frame: preprocessed current frame, same number of levels.
+// What joint tracking adds to ICP. The geometry's well-constrained directions are solved from ICP
+// and the matches and the motion model together (ICP residuals then need their weight,
+// params.point_to_plane_sigma > 0); its weak directions (see degenerate_ratio) move to weak_anchor
+// (the prior's pose) when given, else they keep the initial guess.
+struct JointTerms {
+  const PointMatches* matches = nullptr;
+  const PosePrior* motion = nullptr;
+  const Eigen::Isometry3d* weak_anchor = nullptr;  // camera-to-world
+};
+
 IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<cv::Mat>& model_vertices,
                         const std::vector<cv::Mat>& model_normals, const Eigen::Isometry3d& model_pose,
-                        const Eigen::Isometry3d& initial, const IcpParams& params);
+                        const Eigen::Isometry3d& initial, const IcpParams& params, const JointTerms& joint = {});
 
 // 2x2 block average of valid world-frame vertices/normals (for the model pyramid).
 void downsampleMaps(const cv::Mat& vertices, const cv::Mat& normals, cv::Mat& vertices_out,

@@ -2,7 +2,7 @@
 // The whole per-frame pipeline (6D RGB-D odometry -> KinectFusion) behind one call, shared by the
 // offline app (vofusion) and the live one (vofusion-grab --live).
 //
-//   Reconstruction rec(cfg, TrackingMode::Paper);
+//   Reconstruction rec(cfg, TrackingMode::Joint);
 //   for each frame: FrameReport r = rec.process(frame);
 //   TriangleMesh mesh = rec.extractMesh();
 #include <memory>
@@ -26,7 +26,8 @@ struct FrameReport {
   std::size_t index = 0;
   double timestamp = 0.0;
   bool tracked = false;       // a pose was estimated for this frame (false: lost, pose held)
-  bool fell_back = false;     // ICP rejected, odometry pose used instead (mode paper)
+  bool fell_back = false;     // ICP rejected, odometry pose used instead
+  bool predicted = false;     // neither ICP nor the odometry: constant-velocity prediction
   std::string note;           // why ICP was rejected or tracking lost; empty when all went well
   mrpt::poses::CPose3D pose;  // camera-to-world after this frame
   OdometryResult odometry;    // success=false when not run (mode kinfu) or failed
@@ -51,6 +52,7 @@ class Reconstruction {
   const StageTimes& totalTimes() const;  // accumulated over all frames, plus "total"
   std::size_t framesProcessed() const;
   std::size_t fallbacks() const;         // frames whose pose came from the odometry fallback
+  std::size_t predictedFrames() const;   // frames whose pose came from the constant-velocity prediction
   std::size_t lostFrames() const;
   std::size_t odometryFailures() const;
   KinFuStats fusionStats() const;

@@ -1,0 +1,24 @@
+#pragma once
+// What KinectFusion's tracker is told about a frame's motion by another estimator (the 6D RGB-D
+// odometry, an IMU, a wheel odometry): the motion from an earlier frame, its covariance, and, when
+// the estimator had them, the 3D point correspondences it rests on. The tracker weighs the
+// correspondences in its own estimate (fusion/joint_tracker.h); the pose alone is enough for the
+// paper's hand-off. fusion/ knows nothing of who produced it.
+#include <cstddef>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace vofusion::fusion {
+
+struct MotionPrior {
+  std::size_t reference_index = 0;  // Frame::index of the frame the motion starts from
+  Eigen::Isometry3d T_ref_cur = Eigen::Isometry3d::Identity();  // current camera in the reference camera
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();  // x y z yaw pitch roll
+  // Inlier correspondences: a point of the current frame (its camera coordinates, m) and the same
+  // point in the reference camera's coordinates. Empty when the estimator has none.
+  std::vector<Eigen::Vector3d> current_points, reference_points;
+};
+
+}  // namespace vofusion::fusion
