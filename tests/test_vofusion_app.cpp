@@ -131,3 +131,31 @@ TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   EXPECT_TRUE(fs::exists(out + "/mesh.ply"));
   EXPECT_TRUE(fs::exists(out + "/scene.3Dscene"));
 }
+
+// Ground truth never steers the tracker or the map: the same TUM frames with and without
+// groundtruth.txt give the same trajectory.txt, byte for byte.
+TEST(VofusionApp, GroundTruthChangesNothingButTheEvaluation) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string dir = test::tempDir("vofusion_app_no_gt");
+  // The same recording without ground truth: its lists and image folders linked, not copied.
+  const std::string bare = dir + "/bare";
+  fs::create_directories(bare);
+  for (const char* entry : {"rgb", "depth", "rgb.txt", "depth.txt"})
+    fs::create_symlink(fs::absolute(fs::path(tum) / entry), fs::path(bare) / entry);
+  auto run = [&](const std::string& input, const std::string& out) {
+    std::string log;
+    EXPECT_EQ(test::run(test::app("vofusion") + " " + input + " --max-frames 40 --intrinsics fr1 --config " +
+                            validConfig(dir) + " --out " + out,
+                        &log),
+              0)
+        << log;
+    std::ifstream f(out + "/trajectory.txt");
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  const std::string with_gt = run(tum, dir + "/with"), without_gt = run(bare, dir + "/without");
+  ASSERT_GT(with_gt.size(), 1000u);
+  EXPECT_EQ(with_gt, without_gt);
+  EXPECT_TRUE(readJson(dir + "/with/summary.json").contains("ate"));
+  EXPECT_FALSE(readJson(dir + "/without/summary.json").contains("ate"));
+}
