@@ -329,7 +329,7 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
       const double dt = d.translation().norm();
       const double da = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
       if (dt > P.max_jump_translation || da > P.max_jump_rotation)
-        res.reason = "ICP jumped " + std::to_string(dt) + " m / " + std::to_string(da) + " deg from the prior";
+        res.reason = "ICP jumped from the prior (" + std::to_string(dt) + " m / " + std::to_string(da) + " deg)";
     }
     if (res.reason.empty()) {
       res.tracked = true;

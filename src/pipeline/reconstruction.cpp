@@ -1,6 +1,7 @@
 #include "vofusion/pipeline/reconstruction.h"
 
 #include <chrono>
+#include <map>
 
 #include <tbb/task_group.h>
 
@@ -37,6 +38,7 @@ struct Reconstruction::Impl {
   Trajectory trajectory;
   StageTimes times;
   std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
+  std::map<std::string, std::size_t> rejections;  // why ICP was rejected (reason without its figures)
   // The fusion of the last frame (integrate + ray cast), running beside the next frame's odometry
   // and image loading when overlap_fusion is on; `fusing_frame` keeps its images alive and unchanged.
   tbb::task_group fusing;
@@ -103,6 +105,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
   r.fell_back = f.fell_back;
   r.predicted = f.predicted;
   r.note = f.reason;
+  if (!f.reason.empty()) ++m.rejections[f.reason.substr(0, f.reason.find(" ("))];
   r.pose = f.pose;
   if (f.fell_back) ++m.fallbacks;
   if (f.predicted) ++m.predicted;
@@ -131,6 +134,7 @@ const StageTimes& Reconstruction::totalTimes() const {
 std::size_t Reconstruction::framesProcessed() const { return impl_->frames; }
 std::size_t Reconstruction::fallbacks() const { return impl_->fallbacks; }
 std::size_t Reconstruction::predictedFrames() const { return impl_->predicted; }
+const std::map<std::string, std::size_t>& Reconstruction::icpRejections() const { return impl_->rejections; }
 std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
 KinFuStats Reconstruction::fusionStats() const {

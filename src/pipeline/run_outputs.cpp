@@ -208,6 +208,7 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   s["lost_frames"] = rec.lostFrames();
   s["icp_fallbacks_to_odometry"] = rec.fallbacks();
   s["predicted_frames"] = rec.predictedFrames();
+  s["icp_rejections"] = rec.icpRejections();
   s["odometry_failures"] = rec.odometryFailures();
   s["seconds"] = info.seconds;
   s["fps"] = info.seconds > 0 ? frames / info.seconds : 0.0;

@@ -5,6 +5,7 @@
 //   Reconstruction rec(cfg, TrackingMode::Joint);
 //   for each frame: FrameReport r = rec.process(frame);
 //   TriangleMesh mesh = rec.extractMesh();
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -53,6 +54,7 @@ class Reconstruction {
   std::size_t framesProcessed() const;
   std::size_t fallbacks() const;         // frames whose pose came from the odometry fallback
   std::size_t predictedFrames() const;   // frames whose pose came from the constant-velocity prediction
+  const std::map<std::string, std::size_t>& icpRejections() const;  // why ICP was rejected, how often
   std::size_t lostFrames() const;
   std::size_t odometryFailures() const;
   KinFuStats fusionStats() const;
