@@ -320,8 +320,11 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
     res.match_inliers = icp.point_inliers;
     // Divergence / degeneracy tests.
     if (!icp.solved) res.reason = "ICP system not solvable";
-    else if (icp.inliers < P.min_inlier_ratio * std::max(1, icp.valid_pixels))
-      res.reason = "too few ICP inliers (" + std::to_string(icp.inliers) + " of " + std::to_string(icp.valid_pixels) + ")";
+    // Mode joint judges ICP on the pixels that see the model: a view that is mostly new is no sign
+    // of divergence, and there the matches outweigh the few ICP residuals anyway.
+    else if (icp.inliers < P.min_inlier_ratio * std::max(1, joint ? icp.in_view : icp.valid_pixels))
+      res.reason = "too few ICP inliers (" + std::to_string(icp.inliers) + " of " +
+                   std::to_string(joint ? icp.in_view : icp.valid_pixels) + ")";
     else if (!joint && icp.condition < P.min_condition)
       res.reason = "ill-conditioned ICP (eigenvalue ratio " + std::to_string(icp.condition) + ")";
     else if (seeded || (joint && have_prior)) {

@@ -224,6 +224,7 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
       if (l == 0) {
         res.inliers = total.n;
         res.valid_pixels = total.valid;
+        res.in_view = total.in_view;
         res.rms = total.n ? std::sqrt(total.r2 / total.n) : 0.0;
       }
       if (total.n < 6 && !have_points && !pose_prior) {

@@ -38,6 +38,7 @@ struct IcpResult {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // camera-to-world estimate
   int inliers = 0;             // correspondences at the last iteration of level 0
   int valid_pixels = 0;        // frame pixels with a vertex and normal at level 0
+  int in_view = 0;             // of those, landing on a model pixel with a vertex and normal
   double rms = 0.0;            // m, point-to-plane residual over the inliers
   double condition = 0.0;      // smallest / largest eigenvalue of the depth-scaled 6x6 normal matrix
   int degenerate_dims = 0;     // directions left at the initial guess at the last level-0 iteration
