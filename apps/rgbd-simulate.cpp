@@ -1,4 +1,4 @@
-// rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall] [--frames N] [--fps F]
+// rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall] [--trajectory smooth|shake] [--frames N] [--fps F]
 //               [--no-noise] [--seed S] [--size WxH]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
@@ -21,10 +21,13 @@ namespace fs = std::filesystem;
 
 namespace {
 const char* kUsage =
-    "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall] [--frames N] [--fps F]\n"
-    "                     [--no-noise] [--seed S] [--size WxH]\n"
+    "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall] [--trajectory smooth|shake]\n"
+    "                     [--frames N] [--fps F] [--no-noise] [--seed S] [--size WxH]\n"
     "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/)\n"
     "  --scene    room (default), corridor (long, camera travels along it), bare_wall (flat textured wall)\n"
+    "  --trajectory smooth (default: the scene's hand-held path) or shake: hand shake on top (turns up to\n"
+    "             ~150 deg/s), motion-blurred colour taken up to 15 ms off the depth capture (a TUM\n"
+    "             folder keeps that offset in rgb.txt; a rawlog has no place for it)\n"
     "  --frames   number of frames (default 300); --fps frame rate (default 30)\n"
     "  --no-noise exact depth instead of the Kinect v1 noise model; --seed S random seed (default 1)\n"
     "  --size     image size (default 640x480; intrinsics scaled from fx=fy=525)\n";
@@ -59,7 +62,10 @@ void writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
     if (!cv::imwrite((fs::path(out.tmp()) / "rgb" / name).string(), f.rgb) ||
         !cv::imwrite((fs::path(out.tmp()) / "depth" / name).string(), d16))
       throw InputError(dir, "cannot write images (disk full?)");
-    rgb_txt += std::string(name, std::strlen(name) - 4) + " rgb/" + name + "\n";
+    // The colour image under its own capture time (the shake trajectory's colour/depth offset).
+    char rgb_stamp[32];
+    std::snprintf(rgb_stamp, sizeof rgb_stamp, "%.6f", f.timestamp + f.colour_offset);
+    rgb_txt += std::string(rgb_stamp) + " rgb/" + name + "\n";
     depth_txt += std::string(name, std::strlen(name) - 4) + " depth/" + name + "\n";
     gt.push_back({f.timestamp, *f.groundTruth});
     progress.update(i + 1);
@@ -92,7 +98,7 @@ void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
   progress.finish("-> " + path);
 }
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--out", "--scene", "--frames", "--seed", "--fps", "--size"},
+  const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--size"},
                        {"--no-noise", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
@@ -100,6 +106,7 @@ int body(int argc, char** argv) {
   }
   sim::SimOptions o;
   o.scene = cl.value("--scene", o.scene);
+  o.trajectory = cl.value("--trajectory", o.trajectory);
   o.frames = cl.count("--frames", o.frames, 1);
   o.seed = std::uint32_t(cl.count("--seed", o.seed));
   o.noise = !cl.flag("--no-noise");

@@ -85,10 +85,13 @@ struct SyntheticSequence::Impl {
   std::vector<Box> boxes;
   std::vector<Plane> planes;
   Wave x, y, z, yaw, pitch, roll;
+  std::vector<Wave> shake;  // trajectory "shake": added to yaw, pitch, roll
 
   mrpt::poses::CPose3D pose(double t) const {
     // Body frame (x forward, y left, z up) then the optical frame (z forward, x right, y down).
-    const mrpt::poses::CPose3D body(x.at(t), y.at(t), z.at(t), yaw.at(t), pitch.at(t), roll.at(t));
+    const double dyaw = shake.empty() ? 0 : shake[0].at(t), dpitch = shake.empty() ? 0 : shake[1].at(t),
+                 droll = shake.empty() ? 0 : shake[2].at(t);
+    const mrpt::poses::CPose3D body(x.at(t), y.at(t), z.at(t), yaw.at(t) + dyaw, pitch.at(t) + dpitch, roll.at(t) + droll);
     static const mrpt::poses::CPose3D optical(0, 0, 0, -M_PI / 2, 0, -M_PI / 2);
     return body + optical;
   }
@@ -137,6 +140,35 @@ struct SyntheticSequence::Impl {
       best.tv = pl.v.dot(p);
     }
     return best;
+  }
+
+  // The shaded colour seen along a ray (black where nothing is hit).
+  cv::Vec3d colourAlong(const Vec3& org, const Vec3& dw) const {
+    static const Vec3 light = Vec3(0.3, 0.5, 0.8).normalized();
+    const Hit h = cast(org, dw);
+    if (!std::isfinite(h.s)) return cv::Vec3d(0, 0, 0);
+    const double shade = 0.72 + 0.28 * std::abs(h.n.dot(light));
+    const auto col = texture(h.surface, h.tu, h.tv);
+    return cv::Vec3d(255.0 * col[0] * shade, 255.0 * col[1] * shade, 255.0 * col[2] * shade);
+  }
+  // Colour exposed from t - exposure/2 to t + exposure/2: the mean of sub-frames (motion blur).
+  cv::Mat blurredColour(double t) const {
+    const CameraIntrinsics& c = opts.camera;
+    const int samples = opts.exposure > 0 ? 7 : 1;
+    cv::Mat sum(c.height, c.width, CV_64FC3, cv::Scalar::all(0));
+    for (int k = 0; k < samples; ++k) {
+      const double tk = samples > 1 ? t + opts.exposure * (double(k) / (samples - 1) - 0.5) : t;
+      const mrpt::poses::CPose3D p = pose(tk);
+      const Eigen::Matrix3d R = p.getRotationMatrix().asEigen();
+      const Vec3 org(p.x(), p.y(), p.z());
+      parallelFor(0, c.height, [&](int v) {
+        cv::Vec3d* row = sum.ptr<cv::Vec3d>(v);
+        for (int u = 0; u < c.width; ++u) row[u] += colourAlong(org, R * Vec3((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0));
+      }, 4);
+    }
+    cv::Mat out;
+    sum.convertTo(out, CV_8UC3, 1.0 / samples);
+    return out;
   }
 
   // Layered procedural texture: at each scale the surface is tiled in cells, a hashed share of which
@@ -235,6 +267,17 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   } else {
     throw InputError("--scene", "unknown scene '" + o.scene + "' (expected room, corridor or bare_wall)");
   }
+  if (o.trajectory == "shake") {
+    // Hand shake on top of the path: each angle gets two faster sinusoids (rad, rad/s); with the
+    // path's own turns the camera turns at ~80 deg/s on average and up to ~150 deg/s.
+    impl->shake = {wave(0, 0, 0.19, 6.0, 0.06, 13.0, s, 10),   // yaw
+                   wave(0, 0, 0.12, 7.5, 0.05, 15.0, s, 11),   // pitch
+                   wave(0, 0, 0.085, 9.0, 0.035, 17.0, s, 12)};  // roll
+  } else if (o.trajectory != "smooth") {
+    throw InputError("--trajectory", "unknown trajectory '" + o.trajectory + "' (expected smooth or shake)");
+  }
+  if (!(o.exposure >= 0 && o.exposure <= 0.1)) throw InputError("--exposure", "must be in [0, 0.1] s");
+  if (!(o.colour_offset_max >= 0 && o.colour_offset_max <= 0.05)) throw InputError("--colour-offset", "must be in [0, 0.05] s");
   impl_ = impl;
 }
 
@@ -292,6 +335,12 @@ Frame SyntheticSequence::render(std::size_t i) const {
       for (int k = 0; k < 3; ++k) crow[u][k] = cv::saturate_cast<unsigned char>(255.0 * col[k] * shade);
     }
   }, 4);
+  // Shake: the colour camera's own capture time and exposure (the depth and the pose stay at the
+  // depth capture).
+  if (!m.shake.empty()) {
+    f.colour_offset = o.colour_offset_max * (2.0 * unit(hash(o.seed, 902, i)) - 1.0);
+    f.rgb = m.blurredColour(f.timestamp + f.colour_offset);
+  }
   // Slight optical blur as a real lens has; also tames aliasing of the sharp texture edges.
   cv::GaussianBlur(f.rgb, f.rgb, cv::Size(3, 3), 0.6);
 

@@ -9,8 +9,14 @@ SimOptions SyntheticSource::optionsFromSpec(const std::string& spec, const Sourc
   if (spec.rfind("synthetic", 0) != 0) throw InputError(spec, "not a synthetic source");
   const std::string rest = spec.substr(9);
   if (!rest.empty()) {
-    if (rest[0] != ':' || rest.size() == 1) throw InputError(spec, "expected 'synthetic' or 'synthetic:<scene>'");
+    if (rest[0] != ':' || rest.size() == 1) throw InputError(spec, "expected 'synthetic' or 'synthetic:<scene>[:<trajectory>]'");
     s.scene = rest.substr(1);
+    if (const auto colon = s.scene.find(':'); colon != std::string::npos) {
+      s.trajectory = s.scene.substr(colon + 1);
+      s.scene = s.scene.substr(0, colon);
+      if (s.trajectory != "smooth" && s.trajectory != "shake")
+        throw InputError(spec, "unknown synthetic trajectory '" + s.trajectory + "' (expected smooth or shake)");
+    }
   }
   if (s.scene != "room" && s.scene != "corridor" && s.scene != "bare_wall")
     throw InputError(spec, "unknown synthetic scene '" + s.scene + "' (expected room, corridor or bare_wall)");

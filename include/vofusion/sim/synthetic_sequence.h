@@ -40,6 +40,12 @@ struct SimOptions {
   std::string scene = "room";   // "room" (walls, floor, boxes), "corridor" (long, for volume shifting),
                                 // "bare_wall" (camera sliding along a flat textured wall: geometry
                                 // gives ICP nothing, colour gives odometry plenty)
+  std::string trajectory = "smooth";  // "smooth" (the scene's hand-held path, <= ~30 deg/s) or "shake":
+                                // the same path with fast hand shake added (turns up to ~150 deg/s),
+                                // colour exposed over `exposure` (motion blur) and taken up to
+                                // +-colour_offset_max from the depth capture (Frame::colour_offset)
+  double exposure = 0.012;        // s, colour exposure of the shake trajectory
+  double colour_offset_max = 0.015;  // s
   std::size_t frames = 300;
   double fps = 30.0;            // Hz; timestamps start at 0
   CameraIntrinsics camera;      // default 640x480, fx=fy=525
@@ -53,7 +59,7 @@ class SyntheticSequence {
   // Throws InputError("--scene", ...) for an unknown scene, InputError("--intrinsics", ...) for a bad camera.
   explicit SyntheticSequence(const SimOptions& opts);
   std::size_t size() const;
-  Frame render(std::size_t i) const;                   // rgb, depth and groundTruth filled
+  Frame render(std::size_t i) const;                   // rgb, depth, colour_offset and groundTruth filled
   mrpt::poses::CPose3D groundTruth(std::size_t i) const;  // camera-to-world
   const SimOptions& options() const;
   // Exact depth (m, 0 = nothing hit) along pixel (u, v) of a camera at `pose`: the analytic value

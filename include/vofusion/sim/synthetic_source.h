@@ -1,5 +1,6 @@
 #pragma once
-// A FrameSource over a SyntheticSequence: openFrameSource("synthetic") or "synthetic:<scene>".
+// A FrameSource over a SyntheticSequence: openFrameSource("synthetic"), "synthetic:<scene>" or
+// "synthetic:<scene>:<trajectory>" (e.g. synthetic:room:shake).
 #include "vofusion/io/frame_source.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
@@ -14,7 +15,10 @@ class SyntheticSource : public IndexedFrameSource {
 
   std::size_t size() const override { return seq_.size(); }
   Frame read(std::size_t i) const override { return seq_.render(i); }
-  std::string name() const override { return "synthetic:" + seq_.options().scene; }
+  std::string name() const override {
+    const SimOptions& o = seq_.options();
+    return "synthetic:" + o.scene + (o.trajectory == "smooth" ? "" : ":" + o.trajectory);
+  }
   const SyntheticSequence& sequence() const { return seq_; }
 
  private:
