@@ -45,7 +45,7 @@ std::vector<ConfigKey> motionKeys(OdometryParams& p) {
       {"cauchy", &p.robust.cauchy, "robust: Cauchy kernel scale in Gauss-Newton, sigmas (0 = off)"},
       {"min_inliers", &p.min_inliers, "3D inliers needed"},
       {"min_extent", &p.min_extent, "m, inlier spread needed"},
-      {"max_rms", &p.max_rms, "m, inlier RMS accepted"},
+      {"max_rms", &p.max_rms, "m at <= 1 m depth (grows with z^2 as the inlier threshold), inlier RMS accepted"},
   };
 }
 

@@ -325,7 +325,8 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   if (!fit.ok) return fail(fit.failure);
   if (r.inliers < P.min_inliers) return fail("too few inliers");
   if (secondaryExtent(src, fit.inliers) < P.min_extent) return fail("degenerate geometry (inliers nearly collinear)");
-  if (fit.rms > P.max_rms) return fail("inconsistent matches (inlier RMS too large)");
+  // Against the noise the inliers were chosen with (it grows with z^2): far scenes are not inconsistent.
+  if (fit.rms_at_1m > P.max_rms) return fail("inconsistent matches (inlier RMS too large)");
   return true;
 }
 

@@ -198,9 +198,21 @@ RigidFit fitPaper(const Points3& src, const Points3& dst, const PaperFitOptions&
     if (e <= thr2) fit.inliers.push_back(i), sum_in += e;
   }
   fit.rms = fit.inliers.empty() ? best : std::sqrt(sum_in / fit.inliers.size());
+  fit.rms_at_1m = fit.rms;  // Algorithm 1's inliers are within a fixed distance at any depth
   refineGaussNewton(src, dst, {}, fit.T, 0, &fit.covariance);  // covariance only, T unchanged
   fit.ok = true;
   return fit;
+}
+
+// RMS of the inliers' residuals, each scaled to 1 m depth by the noise's z^2 growth.
+double rmsAtOneMetre(const Eigen::Isometry3d& T, const Points3& src, const Points3& dst, const std::vector<int>& in) {
+  if (in.empty()) return 0.0;
+  double sum = 0;
+  for (const int i : in) {
+    const double z = std::max(1.0, 0.5 * (src[i].z() + dst[i].z()));
+    sum += squaredError(T, src[i], dst[i]) / (z * z * z * z);
+  }
+  return std::sqrt(sum / in.size());
 }
 
 RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& o) {
@@ -261,6 +273,7 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
   for (int i : best_in) sum_in += squaredError(T, src[i], dst[i]);
   fit.rms = std::sqrt(sum_in / best_in.size());
   fit.rms_all = std::sqrt(sum_all / n);
+  fit.rms_at_1m = rmsAtOneMetre(T, src, dst, best_in);
   fit.ok = true;
   return fit;
 }

@@ -43,7 +43,8 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   RobustFitOptions robust;          // ransac_iterations, inlier_threshold (m at 1 m), gauss_newton_iterations
   int min_inliers = 8;              // 3D inliers needed, else "too few inliers"
   double min_extent = 0.03;         // m; inliers spread less (second axis) = "degenerate geometry"
-  double max_rms = 0.04;            // m; inlier RMS above this = "inconsistent matches"
+  double max_rms = 0.04;            // m at <= 1 m depth, scaled like the inlier threshold (z^2); inlier
+                                    // RMS above this = "inconsistent matches"
   // Stage parameters.
   // OpenCV's StarDetector defaults except the response threshold: 20 instead of 30 gives ~40 % more
   // keypoints and a lower RPE on fr1_xyz (0.0282 vs 0.0315 m/s) for ~2 ms more per frame.

@@ -24,6 +24,8 @@ struct RigidFit {
   std::vector<int> inliers;              // indices with residual <= the inlier threshold
   double rms = 0.0;                      // m, over the inliers
   double rms_all = 0.0;                  // m, over all correspondences
+  double rms_at_1m = 0.0;                // m, over the inliers, each residual divided by max(1, z^2) (the
+                                         // Kinect noise's growth): comparable across scene depths
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();  // x y z yaw pitch roll
 };
 
