@@ -26,8 +26,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # name -> (vofusion --mode, INI text of the variant). "odometry" alone uses the defaults
 # (union keypoints, robust motion); the variants select the keypoint set and the paper's Algorithm 1.
 MODES = {
-    "paper": ("paper", ""),
-    "paper-algo1": ("paper", "[odometry]\nmotion_method = paper\n"),
+    "joint": ("joint", ""),
+    "paper-handoff": ("paper-handoff", ""),
+    "paper-algo1": ("paper-handoff", "[odometry]\nmotion_method = paper\n"),
     "kinfu": ("kinfu", ""),
     "odometry": ("odometry", ""),
     "odo-union-algo1": ("odometry", "[odometry]\nkeypoints = union\nmotion_method = paper\n"),
@@ -35,7 +36,17 @@ MODES = {
     "odo-narf": ("odometry", "[odometry]\nkeypoints = narf\n"),
     "odo-star-algo1": ("odometry", "[odometry]\nkeypoints = star\nmotion_method = paper\n"),
 }
-DEFAULT_MODES = list(MODES)
+DEFAULT_MODES = ["joint", "paper-handoff", "kinfu", "odometry"]
+QUICK_MODES = ["joint", "kinfu", "odometry"]
+
+# Synthetic sequences the benchmark renders itself (rgbd-simulate, exact ground truth) beside the real
+# ones: name -> rgbd-simulate arguments.
+SYNTHETIC = {
+    "synthetic_room": ["--scene", "room"],
+    "synthetic_corridor": ["--scene", "corridor"],
+    "synthetic_bare_wall": ["--scene", "bare_wall"],
+    "synthetic_shake": ["--scene", "room", "--trajectory", "shake"],
+}
 
 # Settings shared by every run: no poses.rawlog (PNG encoding would dominate the fps of the fast modes)
 # and no CGAL mesh post-processing (minutes per run on 2 cores; it does not change the trajectory).
@@ -168,6 +179,7 @@ def run_sequence(seq, args, command):
         entry["stages"] = s.get("stages", {})
         entry["lost_frames"] = s.get("lost_frames")
         entry["icp_fallbacks_to_odometry"] = s.get("icp_fallbacks_to_odometry")
+        entry["predicted_frames"] = s.get("predicted_frames", 0)
         entry["odometry_failures"] = s.get("odometry_failures")
         entry["summary_peak_memory_mib"] = s.get("peak_memory_mib")
         entry["fusion"] = s.get("fusion")
@@ -187,6 +199,51 @@ def run_sequence(seq, args, command):
             "%.4f" % ev["ate_m"]["rmse"] if "ate_m" in ev else "-", entry["icp_fallbacks_to_odometry"],
             entry["lost_frames"], rss))
     return result
+
+
+def synthetic_sequences(args):
+    """Renders the synthetic sequences into <build>/bench-synthetic/ (kept while their arguments hold)."""
+    simulate = os.path.join(args.build, "bin", "rgbd-simulate")
+    root = os.path.join(args.build, "bench-synthetic")
+    os.makedirs(root, exist_ok=True)
+    seqs = []
+    for name, extra in SYNTHETIC.items():
+        folder = os.path.join(root, name)
+        cmd = [simulate, "--out", folder, "--frames", str(args.synthetic_frames)] + extra
+        stamp = os.path.join(root, name + ".cmd")
+        if not (os.path.exists(stamp) and open(stamp).read() == " ".join(cmd) and os.path.isdir(folder)):
+            log("[%s] rendering: %s" % (name, " ".join(cmd)))
+            if os.path.exists(folder):
+                subprocess.run(["rm", "-rf", folder], check=True)
+            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+            with open(stamp, "w") as f:
+                f.write(" ".join(cmd))
+        seqs.append(folder)
+    return seqs
+
+
+def summary_markdown(results, modes, command):
+    """One row per sequence, one column per mode: ATE RMSE [m] and (lost / fallbacks / odometry failures)."""
+    L = ["# Summary: ATE RMSE [m] per sequence and mode", "",
+         "Produced by `%s` on %s. Cell: ATE RMSE, then (lost frames / ICP fallbacks to the odometry / "
+         "frames predicted at constant velocity). Frame-loop fps below each sequence's row." % (
+             command, datetime.datetime.now().strftime("%Y-%m-%d %H:%M")), "",
+         "| sequence | " + " | ".join(modes) + " |", "|---|" + "---|" * len(modes)]
+    for res in results:
+        cells, fps = [], []
+        for m in modes:
+            e = res["modes"].get(m)
+            if not e or e.get("exit_code") != 0:
+                cells.append("n/a")
+                fps.append("-")
+                continue
+            ate = ((e.get("eval") or {}).get("ate_m") or {}).get("rmse")
+            cells.append("%s (%s / %s / %s)" % (fmt(ate), e.get("lost_frames"), e.get("icp_fallbacks_to_odometry"),
+                                               e.get("predicted_frames", 0)))
+            fps.append(fmt(e.get("loop_fps"), 1))
+        L.append("| %s | %s |" % (res["sequence"], " | ".join(cells)))
+        L.append("| &nbsp;&nbsp;fps | %s |" % " | ".join(fps))
+    return "\n".join(L) + "\n"
 
 
 def fmt(v, digits=4):
@@ -247,6 +304,7 @@ def markdown(res, command):
     row("wall time [s]", lambda e: fmt(e.get("wall_s"), 1))
     row("peak RSS [MiB]", lambda e: fmt(e.get("peak_rss_mib"), 0))
     row("ICP fallbacks to odometry", lambda e: str(e.get("icp_fallbacks_to_odometry", "-")))
+    row("predicted frames (constant velocity)", lambda e: str(e.get("predicted_frames", "-")))
     row("lost frames", lambda e: str(e.get("lost_frames", "-")))
     row("odometry failures", lambda e: str(e.get("odometry_failures", "-")))
     row("volume shifts", lambda e: str((e.get("fusion") or {}).get("volume_shifts", "-")))
@@ -278,17 +336,26 @@ def markdown(res, command):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("sequences", nargs="*", help="TUM or 7-Scenes folders (default: ../shared/data/tum/*)")
-    ap.add_argument("--modes", default=",".join(DEFAULT_MODES),
-                    help="comma-separated subset of: " + ", ".join(MODES))
+    ap.add_argument("sequences", nargs="*",
+                    help="TUM or 7-Scenes folders (default: ../shared/data/tum/* and the synthetic scenes)")
+    ap.add_argument("--modes", default=None,
+                    help="comma-separated subset of: %s (default: %s)" % (", ".join(MODES), ",".join(DEFAULT_MODES)))
     ap.add_argument("--max-frames", type=int, default=0)
+    ap.add_argument("--synthetic-frames", type=int, default=300, help="length of the rendered synthetic sequences")
+    ap.add_argument("--no-synthetic", action="store_true", help="default sequences: the real ones only")
+    ap.add_argument("--quick", action="store_true",
+                    help="a fast check: %s, 100 frames of every sequence" % ",".join(QUICK_MODES))
     ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(ROOT, "build")))
     ap.add_argument("--results", default=os.path.join(ROOT, "bench", "results"))
     ap.add_argument("--work", default=None, help="run outputs (default <build>/bench-runs)")
     ap.add_argument("--intrinsics", default=None, help="7-Scenes only: override the default 585/320/240")
     ap.add_argument("--nice", type=int, default=0, help="run vofusion under nice -n N")
     args = ap.parse_args()
-    args.modes = [m.strip() for m in args.modes.split(",") if m.strip()]
+    if args.quick:
+        args.modes = args.modes or ",".join(QUICK_MODES)
+        args.max_frames = args.max_frames or 100
+        args.synthetic_frames = min(args.synthetic_frames, 100)
+    args.modes = [m.strip() for m in (args.modes or ",".join(DEFAULT_MODES)).split(",") if m.strip()]
     for m in args.modes:
         if m not in MODES:
             ap.error("unknown mode '%s' (known: %s)" % (m, ", ".join(MODES)))
@@ -300,15 +367,33 @@ def main():
     args.work = args.work or os.path.join(args.build, "bench-runs")
     seqs = args.sequences or sorted(d for d in glob.glob(os.path.join(ROOT, "..", "shared", "data", "tum", "*"))
                                     if os.path.isdir(d))
+    if not args.sequences and not args.no_synthetic:
+        seqs += synthetic_sequences(args)
     if not seqs:
         ap.error("no sequences given and none under ../shared/data/tum/")
     command = "bench/run " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     os.makedirs(args.results, exist_ok=True)
+    results = []
     for seq in seqs:
         if not os.path.isdir(seq):
             ap.error("%s: no such folder" % seq)
         res = run_sequence(seq, args, command)
+        results.append(res)
         print(write_results(res, args, command))
+        # The summary after every sequence: an interrupted benchmark keeps what it measured.
+        summary = summary_markdown(results, args.modes, command)
+        for path, text in ((os.path.join(args.results, "summary.md"), summary),
+                           (os.path.join(args.results, "summary.json"),
+                            json.dumps({"command": command, "modes": args.modes, "sequences": [
+                                {"sequence": r["sequence"], "modes": {m: {k: e.get(k) for k in (
+                                    "frames", "loop_fps", "lost_frames", "icp_fallbacks_to_odometry", "predicted_frames",
+                                    "odometry_failures")} | {"ate_rmse_m": ((e.get("eval") or {}).get("ate_m") or {}).get("rmse")}
+                                    for m, e in r["modes"].items()}} for r in results]}, indent=1) + "\n")):
+            tmp = path + ".tmp-%d" % os.getpid()
+            with open(tmp, "w") as f:
+                f.write(text)
+            os.replace(tmp, path)
+    print(summary)
     return 0
 
 
