@@ -26,12 +26,13 @@ const char* kUsage =
     "usage: rgbd-odometry <tum_dir|in.rawlog|synthetic[:scene]> --out <dir> [options]\n"
     "  --config F         INI file ([odometry] [star] [narf] [brand] [matching] [motion]; see share/odometry.ini)\n"
     "  --max-frames N     process at most N frames\n"
+    "  --depth-scale S    TUM-layout folders: depth PNG units per metre (default: the folder's camera file, else 5000)\n"
     "  --set S.K=V        override one key, e.g. --set odometry.motion_method=paper\n"
     "  --no-rawlog        write only trajectory.txt\n"
     "  --dump-config      print the defaults as INI and exit\n";
 
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--out", "--config", "--max-frames", "--set"},
+  const CommandLine cl(argc, argv, {"--out", "--config", "--max-frames", "--set", "--depth-scale"},
                        {"--no-rawlog", "--dump-config", "--help"});
   const OdometryParams defaults;
   const std::vector<ConfigSection> known{{"odometry", &defaults}};
@@ -69,6 +70,7 @@ int body(int argc, char** argv) {
 
   SourceOptions so;
   so.max_frames = max_frames;
+  if (cl.value("--depth-scale")) so.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   auto source = openFrameSource(input, so);
   ensureWritableDirectory(out);
   const std::string traj_path = (std::filesystem::path(out) / "trajectory.txt").string();

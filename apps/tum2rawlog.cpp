@@ -16,15 +16,16 @@ using namespace vofusion;
 namespace {
 const char* kUsage =
     "usage: tum2rawlog <tum_dir> <out.rawlog> [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy] [--max-frames N]\n"
-    "                  [--format obs|sf] [--embed-images] [--range-units U]\n"
+    "                  [--depth-scale S] [--format obs|sf] [--embed-images] [--range-units U]\n"
     "  --intrinsics   camera preset or values (default: from the folder name freiburg1/2/3)\n"
     "  --max-frames   convert only the first N associated frames\n"
+    "  --depth-scale  depth PNG units per metre (default: intrinsics.txt / camera.yaml, else 5000 as TUM)\n"
     "  --format       obs: observations only (default); sf: action/sensory-frame pairs\n"
     "  --embed-images keep images inside the rawlog instead of <out>_Images/\n"
     "  --range-units  metres per range unit (default 2e-4 = TUM's 1/5000, lossless)\n";
 
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--intrinsics", "--max-frames", "--format", "--range-units"},
+  const CommandLine cl(argc, argv, {"--intrinsics", "--max-frames", "--format", "--range-units", "--depth-scale"},
                        {"--embed-images", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
@@ -33,6 +34,7 @@ int body(int argc, char** argv) {
   SourceOptions so;
   so.intrinsics = cl.value("--intrinsics");
   so.max_frames = cl.count("--max-frames", so.max_frames, 1);
+  if (cl.value("--depth-scale")) so.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   RawlogWriterOptions wo;
   const std::string format = cl.value("--format", "obs");
   if (format == "obs") wo.format = RawlogWriterOptions::Format::Observations;

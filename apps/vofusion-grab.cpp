@@ -33,7 +33,7 @@ const char* kSection = "vofusion-grab";  // our own keys; sensor sections belong
 
 const char* kUsage =
     "usage: vofusion-grab [--config grab.ini] [--sensor SECTION] [--out DIR] [--live] [--no-gui]\n"
-    "                     [--replay TUM_DIR|FILE.rawlog] [--max-frames N] [--queue N] [--speed X]\n"
+    "                     [--replay TUM_DIR|FILE.rawlog [--depth-scale S]] [--max-frames N] [--queue N] [--speed X]\n"
     "                     [--mode joint|paper-handoff|kinfu|odometry] [--no-record] [--simulate-work-ms MS]\n"
     "                     [--verbose] [--dump-config]\n"
     "  Records the sensor of --config (default share/grab-openni2.ini) to DIR/grab.rawlog until\n"
@@ -51,6 +51,7 @@ void onSignal(int) {
 
 struct Args {
   std::string config, sensor, out, replay, mode;
+  double depth_scale = 0.0;  // --replay of a TUM-layout folder: depth units per metre (0 = its camera file / 5000)
   bool live, gui, record, verbose, dump;
   std::optional<std::size_t> max_frames, queue;
   std::optional<double> speed;
@@ -60,7 +61,7 @@ struct Args {
 Args parseArgs(int argc, char** argv) {
   const CommandLine cl(argc, argv,
                        {"--config", "--sensor", "--out", "--replay", "--mode", "--max-frames", "--queue", "--speed",
-                        "--simulate-work-ms"},
+                        "--simulate-work-ms", "--depth-scale"},
                        {"--live", "--no-gui", "--no-record", "--verbose", "--dump-config", "--help"});
   if (cl.flag("--help")) {
     std::fputs(kUsage, stdout);
@@ -72,6 +73,7 @@ Args parseArgs(int argc, char** argv) {
   a.sensor = cl.value("--sensor", "");
   a.out = cl.value("--out", "grab");
   a.replay = cl.value("--replay", "");
+  if (cl.value("--depth-scale")) a.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   a.mode = cl.value("--mode", "joint");
   a.live = cl.flag("--live");
   a.gui = !cl.flag("--no-gui");
@@ -159,7 +161,9 @@ int run(const Args& args) {
   std::unique_ptr<LiveSource> source;
   std::string label = "KINECT";
   if (!args.replay.empty()) {
-    source = std::make_unique<ReplaySource>(openFrameSource(args.replay), opts.replay_speed);
+    SourceOptions so;
+    so.depth_scale = args.depth_scale;
+    source = std::make_unique<ReplaySource>(openFrameSource(args.replay, so), opts.replay_speed);
   } else {
     const std::string section = findSensorSection(cfg, args.sensor, config);
     label = cfg.read_string(section, "sensorLabel", label);

@@ -1,6 +1,7 @@
 // vofusion: an RGB-D recording in, a trajectory, a clean coloured mesh and an MRPT 3D scene out.
 //   vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]
 //            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
+//            [--depth-scale S]
 //            [--raw-mesh] [--dump-config]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
@@ -29,7 +30,9 @@ void onSigint(int) { g_stop = true; }
 const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]\n"
     "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
-    "                [--raw-mesh] [--dump-config]\n";
+    "                [--depth-scale S] [--raw-mesh] [--dump-config]\n"
+    "  --depth-scale  TUM-layout folders: depth PNG units per metre (default: the folder's intrinsics.txt /\n"
+    "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n";
 
 std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanParams& mesh) {
   auto sections = reconstructionConfigSections();
@@ -39,7 +42,7 @@ std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanP
 }
 
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics"},
+  const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale"},
                        {"--raw-mesh", "--dump-config", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
@@ -75,6 +78,7 @@ int body(int argc, char** argv) {
   SourceOptions src_opts;
   src_opts.max_frames = cl.count("--max-frames", 0);
   src_opts.intrinsics = cl.value("--intrinsics");
+  if (cl.value("--depth-scale")) src_opts.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   const std::string input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
   auto source = std::make_unique<PrefetchingSource>(openFrameSource(input, src_opts));
   Reconstruction rec(cfg, mode);

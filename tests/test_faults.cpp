@@ -51,13 +51,14 @@ struct Outcome {
 };
 
 // Informational lines, not errors: Progress ("<label> 12/300 frames ...", "<label> 300 frames in ..."),
-// rgbd-odometry's stage times, vofusion's start banner ("vofusion: <input>, mode paper, 4 frames -> <out>").
+// rgbd-odometry's stage times, vofusion's start banner ("vofusion: <input>, mode joint, 4 frames -> <out>"),
+// warnings about an assumption ("warning: <file>: ...", e.g. guessed intrinsics).
 bool isProgressLine(const std::string& l) {
   static const std::regex progress(R"(^.+ \d+(/\d+)? frames .*)");
   static const std::regex stage_times(R"(^per-stage time .*)");
-  static const std::regex banner(R"(^vofusion: .+, mode \w+, \d+ frames -> .*)");
+  static const std::regex banner(R"(^vofusion: .+, mode [\w-]+, \d+ frames -> .*)");
   return (std::regex_match(l, progress) && l.find("error") == std::string::npos) ||
-         std::regex_match(l, stage_times) || std::regex_match(l, banner);
+         std::regex_match(l, stage_times) || std::regex_match(l, banner) || l.rfind("warning: ", 0) == 0;
 }
 
 Outcome runSplit(const std::string& cmd, const std::string& shell_prefix = "") {

@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <optional>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
+#include <opencv2/core/persistence.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "vofusion/core/errors.h"
@@ -96,9 +99,9 @@ cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, con
   return raw;
 }
 
-cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h) {
+cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double scale) {
   cv::Mat depth;
-  loadRawDepthPng(path, expect_w, expect_h).convertTo(depth, CV_32F, 1.0 / 5000.0);  // TUM: 5000/m, 0 = no reading
+  loadRawDepthPng(path, expect_w, expect_h).convertTo(depth, CV_32F, 1.0 / scale);  // 0 = no reading
   return depth;
 }
 
@@ -113,18 +116,89 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   return img;
 }
 
-CameraIntrinsics readIntrinsicsFile(const std::string& path) {
+CameraFile readIntrinsicsFile(const std::string& path) {
   const auto lines = dataLines(readTextFile(path));
   if (lines.empty()) throw InputError(path, "no 'fx fy cx cy' line");
+  auto bad = [&](std::size_t k, const std::string& what) {
+    return InputError(path, "line " + std::to_string(lines[k].number) + ": expected " + what);
+  };
   std::istringstream ls(lines[0].text);
-  double v[4];
-  std::string extra;
-  if (!(ls >> v[0] >> v[1] >> v[2] >> v[3]) || (ls >> extra))
-    throw InputError(path, "line " + std::to_string(lines[0].number) + ": expected 'fx fy cx cy'");
-  CameraIntrinsics c;
-  c.fx = v[0]; c.fy = v[1]; c.cx = v[2]; c.cy = v[3];
-  return c;
+  std::vector<double> v;
+  for (double x; ls >> x;) v.push_back(x);
+  if (!ls.eof() || (v.size() != 4 && v.size() != 9)) throw bad(0, "'fx fy cx cy [k1 k2 p1 p2 k3]'");
+  CameraFile f;
+  f.camera.fx = v[0]; f.camera.fy = v[1]; f.camera.cx = v[2]; f.camera.cy = v[3];
+  f.camera.dist = {};
+  for (std::size_t i = 4; i < v.size(); ++i) f.camera.dist[i - 4] = v[i];
+  for (std::size_t k = 1; k < lines.size(); ++k) {
+    std::istringstream kv(lines[k].text);
+    std::string key, extra;
+    kv >> key;
+    if (key == "size") {
+      if (!(kv >> f.camera.width >> f.camera.height) || (kv >> extra) || f.camera.width < 1 || f.camera.height < 1)
+        throw bad(k, "'size W H' (pixels)");
+      f.has_size = true;
+    } else if (key == "depth_scale") {
+      if (!(kv >> f.depth_scale) || (kv >> extra) || !(f.depth_scale > 0 && f.depth_scale <= 1e6))
+        throw bad(k, "'depth_scale S' with S in (0, 1e6] depth units per metre");
+    } else {
+      throw bad(k, "'size W H' or 'depth_scale S' (unknown key '" + key + "')");
+    }
+  }
+  return f;
 }
+
+CameraFile readCameraYaml(const std::string& path) {
+  cv::FileStorage fsr;
+  try {
+    if (!fsr.open(path, cv::FileStorage::READ | cv::FileStorage::FORMAT_YAML)) throw InputError(path, "cannot read");
+  } catch (const cv::Exception&) {
+    throw InputError(path, "not an OpenCV YAML file (camera_matrix, distortion_coefficients, image_width, ...)");
+  }
+  cv::Mat K, d;
+  fsr["camera_matrix"] >> K;
+  if (K.rows != 3 || K.cols != 3) throw InputError(path, "camera_matrix must be a 3x3 matrix");
+  K.convertTo(K, CV_64F);
+  CameraFile f;
+  f.camera.fx = K.at<double>(0, 0); f.camera.fy = K.at<double>(1, 1);
+  f.camera.cx = K.at<double>(0, 2); f.camera.cy = K.at<double>(1, 2);
+  f.camera.dist = {};
+  fsr["distortion_coefficients"] >> d;
+  if (!d.empty()) {
+    d.convertTo(d, CV_64F);
+    for (int i = 0; i < std::min<int>(5, int(d.total())); ++i) f.camera.dist[i] = d.at<double>(i);
+  }
+  if (!fsr["image_width"].empty() && !fsr["image_height"].empty()) {
+    f.camera.width = int(fsr["image_width"]);
+    f.camera.height = int(fsr["image_height"]);
+    f.has_size = true;
+  }
+  if (!fsr["depth_scale"].empty()) {
+    f.depth_scale = double(fsr["depth_scale"]);
+    if (!(f.depth_scale > 0 && f.depth_scale <= 1e6)) throw InputError(path, "depth_scale must be in (0, 1e6] units per metre");
+  }
+  return f;
+}
+
+namespace {
+
+void warn(const std::string& origin, const std::string& what) {
+  std::fprintf(stderr, "warning: %s: %s\n", origin.c_str(), what.c_str());
+}
+
+// The median reading of a depth PNG in its own units (0 when it has none).
+double medianRaw(const cv::Mat& raw) {
+  std::vector<uint16_t> v;
+  v.reserve(raw.total());
+  for (int y = 0; y < raw.rows; y += 2)
+    for (int x = 0; x < raw.cols; x += 2)
+      if (const uint16_t d = raw.at<uint16_t>(y, x)) v.push_back(d);
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
 
 TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
   if (!fs::is_directory(folder)) throw InputError(folder, "no such folder");
@@ -141,18 +215,48 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
     throw InputError(folder, "no colour frame has a depth frame within " + std::to_string(opts.max_time_diff) + " s");
   if (opts.max_frames > 0 && pairs_.size() > opts.max_frames) pairs_.resize(opts.max_frames);
 
-  const std::string intrinsics_file = (fs::path(folder) / "intrinsics.txt").string();
-  if (opts.intrinsics) camera_ = CameraIntrinsics::parse(*opts.intrinsics);
-  else if (fs::exists(intrinsics_file)) camera_ = readIntrinsicsFile(intrinsics_file);
-  else camera_ = CameraIntrinsics::forTumFolder(folder);
+  // The camera and the depth unit: the command line, else the folder's camera file, else a guess.
+  const std::string txt = (fs::path(folder) / "intrinsics.txt").string(), yaml = (fs::path(folder) / "camera.yaml").string();
+  std::optional<CameraFile> file;
+  std::string origin = folder;
+  if (fs::exists(txt)) file = readIntrinsicsFile(txt), origin = txt;
+  else if (fs::exists(yaml)) file = readCameraYaml(yaml), origin = yaml;
   // Image size comes from the data itself; the first colour frame sets it for the whole sequence.
   const std::string first_path = (fs::path(folder) / pairs_[0].rgb.file).string();
   const cv::Mat first = isTruncatedPng(first_path) ? cv::Mat() : cv::imread(first_path, cv::IMREAD_COLOR);
-  if (!first.empty()) {
-    camera_.width = first.cols;
-    camera_.height = first.rows;
+  const int width = first.empty() ? 640 : first.cols, height = first.empty() ? 480 : first.rows;
+  const std::string size = std::to_string(width) + "x" + std::to_string(height);
+  if (opts.intrinsics) {
+    camera_ = CameraIntrinsics::parse(*opts.intrinsics);
+    origin = "--intrinsics";
+  } else if (file) {
+    camera_ = file->camera;
+    if (file->has_size && (camera_.width != width || camera_.height != height))
+      throw InputError(origin, "intrinsics are for " + std::to_string(camera_.width) + "x" + std::to_string(camera_.height) +
+                                   " images, this recording's are " + size);
+  } else {
+    camera_ = CameraIntrinsics::forTumFolder(folder);
+    const bool tum = folder.find("freiburg") != std::string::npos;
+    if (width != 640 || height != 480)
+      throw InputError(folder, "no intrinsics for its " + size + " images: give --intrinsics fx,fy,cx,cy or put an "
+                               "intrinsics.txt ('fx fy cx cy') or camera.yaml beside rgb.txt");
+    if (!tum)
+      warn(folder, "no intrinsics.txt or camera.yaml and no --intrinsics: assuming fx = fy = 525, cx = 319.5, cy = 239.5");
   }
-  camera_.validate(opts.intrinsics ? "--intrinsics" : fs::exists(intrinsics_file) ? intrinsics_file : folder);
+  camera_.width = width;
+  camera_.height = height;
+  camera_.validate(origin);
+
+  depth_scale_ = opts.depth_scale > 0 ? opts.depth_scale : file && file->depth_scale > 0 ? file->depth_scale : 5000.0;
+  // A unit mix-up shows in the first frame's median reading (indoor RGB-D: 0.4-5 m; millimetres read
+  // as TUM's units land at a fifth, TUM's read as millimetres at five times).
+  if (!pairs_.empty()) {
+    const std::string d0 = (fs::path(folder) / pairs_[0].depth.file).string();
+    const double median = medianRaw(loadRawDepthPng(d0, width, height)) / depth_scale_;
+    if (median > 5.0 || (median > 0 && median < 0.4))
+      warn(d0, cv::format("median depth %.2f m at %g depth units per metre: another unit? (--depth-scale: 1000 for "
+                          "millimetres, 5000 for TUM)", median, depth_scale_));
+  }
 
   const std::string gt = (fs::path(folder) / "groundtruth.txt").string();
   if (fs::exists(gt)) gt_ = readTumTrajectory(gt);
@@ -169,7 +273,7 @@ Frame TumFolderSource::read(std::size_t i) const {
   f.camera = camera_;
   f.colour_file = (fs::path(folder_) / a.rgb.file).string();
   f.rgb = loadColour(f.colour_file, camera_.width, camera_.height);
-  f.depth = loadTumDepth((fs::path(folder_) / a.depth.file).string(), camera_.width, camera_.height);
+  f.depth = loadTumDepth((fs::path(folder_) / a.depth.file).string(), camera_.width, camera_.height, depth_scale_);
   mrpt::poses::CPose3D gt;
   if (interpolatePose(gt_, f.timestamp, 0.05, gt)) f.groundTruth = gt;
   return f;

@@ -38,6 +38,8 @@ class IndexedFrameSource : public FrameSource {
 
 struct SourceOptions {
   std::optional<std::string> intrinsics;  // preset or "fx,fy,cx,cy"; overrides what the data says
+  double depth_scale = 0.0;               // TUM layout: depth PNG units per metre (5000 TUM, 1000 mm);
+                                          // 0 = the folder's camera file, else 5000
   std::size_t max_frames = 0;             // 0 = all
   double max_time_diff = 0.02;            // s, colour<->depth association (TUM benchmark tolerance)
   bool unique_depth = false;              // TUM: one-to-one pairs (associate.py), else nearest colour per depth frame

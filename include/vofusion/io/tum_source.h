@@ -1,8 +1,18 @@
 #pragma once
-// A TUM RGB-D benchmark folder: rgb.txt, depth.txt, rgb/, depth/ (16-bit PNG, value/5000 = m),
-// optional groundtruth.txt. Colour frames are associated with the nearest depth frame.
-// Intrinsics: SourceOptions::intrinsics, else an optional intrinsics.txt in the folder (one line
-// "fx fy cx cy", '#' comments; written by rgbd-simulate), else the preset from the folder name.
+// A TUM RGB-D benchmark folder: rgb.txt, depth.txt, rgb/, depth/ (16-bit PNG, value/scale = m,
+// scale 5000 as TUM's), optional groundtruth.txt. Colour frames are associated with the nearest depth
+// frame. The same layout from other sensors (RealSense, Azure Kinect, Open3D's recorder) stores
+// millimetres: SourceOptions::depth_scale or a camera file says so.
+// The camera, first found wins:
+//   SourceOptions::intrinsics (--intrinsics);
+//   intrinsics.txt in the folder: a line "fx fy cx cy [k1 k2 p1 p2 k3]", optional lines
+//     "size W H" and "depth_scale S", '#' comments (rgbd-simulate writes one);
+//   camera.yaml in the folder (OpenCV FileStorage, as OpenCV's calibration writes it): camera_matrix,
+//     optional distortion_coefficients, image_width, image_height, depth_scale;
+//   a guess, announced on stderr: TUM's preset for a folder named freiburg1/2/3, else fx = fy = 525,
+//   c = (319.5, 239.5), both only for 640x480 images (anything else is an error).
+// Intrinsics that do not fit the images (another size, principal point outside) are an error, and a
+// depth scale under which the first frame's median reading is beyond 5 m or within 0.4 m is announced.
 #include <string>
 #include <vector>
 
@@ -38,25 +48,38 @@ class TumFolderSource : public IndexedFrameSource {
 
   const Trajectory& groundTruth() const { return gt_; }
   const std::vector<TumAssociation>& pairs() const { return pairs_; }
+  double depthScale() const { return depth_scale_; }
+  const CameraIntrinsics& camera() const { return camera_; }
   Frame read(std::size_t i) const override;
 
  private:
   std::string folder_;
   CameraIntrinsics camera_;
+  double depth_scale_ = 5000.0;
   std::vector<TumAssociation> pairs_;
   Trajectory gt_;
 };
 
-// Loads a TUM depth PNG (16-bit, scale 5000/m) as CV_32F metres; throws InputError on any problem.
-cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h);
+// Loads a TUM depth PNG (16-bit, `scale` units per metre) as CV_32F metres; throws InputError on any problem.
+cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double scale = 5000.0);
 // A 16-bit single-channel depth PNG of the expected size, in its raw units (CV_16UC1); throws
 // InputError(path, ...) when it is missing, undecodable, of another type (message + unit_note) or size.
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note = "");
 // True for a PNG cut short (no IEND chunk at the end). Checked before decoding, because libpng
 // prints its own line to stderr for such a file.
 bool isTruncatedPng(const std::string& path);
-// Reads "fx fy cx cy" (first non-comment line); throws InputError(path, ...).
-CameraIntrinsics readIntrinsicsFile(const std::string& path);
+// A camera description read from a file: intrinsics, and what else the file says.
+struct CameraFile {
+  CameraIntrinsics camera;
+  bool has_size = false;    // camera.width/height come from the file
+  double depth_scale = 0;   // units per metre, 0 = not given
+};
+// intrinsics.txt: "fx fy cx cy [k1 k2 p1 p2 k3]" (first non-comment line), then optional "size W H",
+// "depth_scale S"; throws InputError(path, ...).
+CameraFile readIntrinsicsFile(const std::string& path);
+// camera.yaml (OpenCV FileStorage): camera_matrix, [distortion_coefficients, image_width, image_height,
+// depth_scale]; throws InputError(path, ...).
+CameraFile readCameraYaml(const std::string& path);
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h);
 
 }  // namespace vofusion

@@ -1,0 +1,146 @@
+// TUM-layout folders from other sensors: the depth unit (--depth-scale, a camera file), intrinsics
+// from intrinsics.txt / camera.yaml, a guess only for 640x480 and then announced, sizes checked.
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/core/trajectory.h"
+#include "vofusion/io/tum_source.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+
+// A one-frame TUM-layout folder of the given size: a grey image and a flat depth of `raw` units.
+std::string oneFrameFolder(const std::string& dir, int w, int h, uint16_t raw) {
+  fs::create_directories(dir + "/rgb");
+  fs::create_directories(dir + "/depth");
+  cv::imwrite(dir + "/rgb/0.000000.png", cv::Mat(h, w, CV_8UC3, cv::Scalar(90, 120, 150)));
+  cv::imwrite(dir + "/depth/0.000000.png", cv::Mat(h, w, CV_16UC1, cv::Scalar(raw)));
+  std::ofstream(dir + "/rgb.txt") << "0.000000 rgb/0.000000.png\n";
+  std::ofstream(dir + "/depth.txt") << "0.000000 depth/0.000000.png\n";
+  return dir;
+}
+
+std::string errorOf(const std::string& folder, const SourceOptions& so = {}) {
+  try {
+    TumFolderSource src(folder, so);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(CameraFiles, IntrinsicsTxtWithSizeAndDepthScale) {
+  const std::string dir = oneFrameFolder(test::tempDir("cam_txt") + "/seq", 320, 240, 1500);
+  std::ofstream(dir + "/intrinsics.txt") << "# from a RealSense\n300 301 160.5 119.5 0.1 -0.2 0 0 0.05\nsize 320 240\n"
+                                            "depth_scale 1000\n";
+  TumFolderSource src(dir, {});
+  EXPECT_DOUBLE_EQ(src.camera().fx, 300);
+  EXPECT_DOUBLE_EQ(src.camera().cy, 119.5);
+  EXPECT_DOUBLE_EQ(src.camera().dist[4], 0.05);
+  EXPECT_DOUBLE_EQ(src.depthScale(), 1000);
+  EXPECT_NEAR(src.read(0).depth.at<float>(10, 10), 1.5f, 1e-6);
+  SourceOptions so;
+  so.depth_scale = 5000;  // the command line wins over the file
+  EXPECT_NEAR(TumFolderSource(dir, so).read(0).depth.at<float>(10, 10), 0.3f, 1e-6);
+  // A file for another image size is an error naming the file.
+  std::ofstream(dir + "/intrinsics.txt") << "300 300 160 120\nsize 640 480\n";
+  EXPECT_NE(errorOf(dir).find("intrinsics.txt: intrinsics are for 640x480 images, this recording's are 320x240"),
+            std::string::npos) << errorOf(dir);
+  std::ofstream(dir + "/intrinsics.txt") << "300 300 160 120\ndepth_unit 1000\n";
+  EXPECT_NE(errorOf(dir).find("line 2"), std::string::npos) << errorOf(dir);
+}
+
+TEST(CameraFiles, CameraYamlAsOpenCvWritesIt) {
+  const std::string dir = oneFrameFolder(test::tempDir("cam_yaml") + "/seq", 320, 240, 1200);
+  {
+    cv::FileStorage fs(dir + "/camera.yaml", cv::FileStorage::WRITE);
+    fs << "image_width" << 320 << "image_height" << 240;
+    fs << "camera_matrix" << (cv::Mat_<double>(3, 3) << 310, 0, 158, 0, 309, 121, 0, 0, 1);
+    fs << "distortion_coefficients" << (cv::Mat_<double>(1, 5) << 0.01, 0.02, 0, 0, 0);
+    fs << "depth_scale" << 1000.0;
+  }
+  TumFolderSource src(dir, {});
+  EXPECT_DOUBLE_EQ(src.camera().fx, 310);
+  EXPECT_DOUBLE_EQ(src.camera().cx, 158);
+  EXPECT_DOUBLE_EQ(src.camera().dist[1], 0.02);
+  EXPECT_NEAR(src.read(0).depth.at<float>(5, 5), 1.2f, 1e-6);
+  std::ofstream(dir + "/camera.yaml") << "%YAML:1.0\nimage_width: 320\n";
+  EXPECT_NE(errorOf(dir).find("camera.yaml: camera_matrix must be a 3x3 matrix"), std::string::npos) << errorOf(dir);
+}
+
+// Without a camera file, only a 640x480 recording gets a guess, and the guess is said; another size
+// is an error that says what to do.
+TEST(CameraFiles, GuessOnlyFor640x480AndAnnounced) {
+  const std::string base = test::tempDir("cam_guess");
+  const std::string big = oneFrameFolder(base + "/hd", 1280, 720, 7000);
+  EXPECT_NE(errorOf(big).find("no intrinsics for its 1280x720 images: give --intrinsics"), std::string::npos) << errorOf(big);
+  SourceOptions so;
+  so.intrinsics = "910,910,639.5,359.5";
+  EXPECT_EQ(errorOf(big, so), "");
+  oneFrameFolder(base + "/vga", 640, 480, 7000);
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion") + " " + base + "/vga --mode kinfu --out " + base + "/out", &log), 0) << log;
+  EXPECT_NE(log.find("warning: " + base + "/vga: no intrinsics.txt or camera.yaml and no --intrinsics: assuming fx = fy = 525"),
+            std::string::npos)
+      << log;
+  // Millimetres read as TUM's units: a fifth of the distance, announced.
+  oneFrameFolder(base + "/mm", 640, 480, 1400);
+  ASSERT_EQ(test::run(test::app("vofusion") + " " + base + "/mm --intrinsics ros --mode kinfu --out " + base + "/out2", &log), 0)
+      << log;
+  EXPECT_NE(log.find("median depth 0.28 m at 5000 depth units per metre: another unit?"), std::string::npos) << log;
+}
+
+// The check: a depth-in-mm copy of a shared TUM sequence (converted here, never stored in the
+// project) gives the original's trajectory within 1 mm with --depth-scale 1000.
+TEST(CameraFiles, MillimetreCopyOfTumGivesTheSameTrajectory) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string dir = test::tempDir("cam_mm");
+  const std::string mm = dir + "/mm";
+  fs::create_directories(mm + "/depth");
+  fs::create_symlink(fs::absolute(fs::path(tum) / "rgb"), mm + "/rgb");
+  fs::copy_file(fs::path(tum) / "rgb.txt", mm + "/rgb.txt");
+  const auto depth = readTumList(tum + "/depth.txt");
+  std::ofstream list(mm + "/depth.txt");
+  const std::size_t frames = 40;
+  for (std::size_t i = 0; i < frames + 2 && i < depth.size(); ++i) {
+    const cv::Mat raw = cv::imread(tum + "/" + depth[i].file, cv::IMREAD_UNCHANGED);
+    ASSERT_EQ(raw.type(), CV_16UC1);
+    cv::Mat millimetres;
+    raw.convertTo(millimetres, CV_16U, 1000.0 / 5000.0);  // rounds to the millimetre, as such sensors store it
+    ASSERT_TRUE(cv::imwrite(mm + "/" + depth[i].file, millimetres));
+    list << std::fixed << depth[i].timestamp << " " << depth[i].file << "\n";
+  }
+  list.close();
+  auto run = [&](const std::string& input, const std::string& extra, const std::string& out) {
+    std::string log;
+    EXPECT_EQ(test::run(test::app("vofusion") + " " + input + " --max-frames " + std::to_string(frames) +
+                            " --intrinsics fr1 --out " + out + " " + extra,
+                        &log),
+              0)
+        << log;
+    return readTumTrajectory(out + "/trajectory.txt");
+  };
+  const Trajectory a = run(tum, "", dir + "/a"), b = run(mm, "--depth-scale 1000", dir + "/b");
+  ASSERT_EQ(a.size(), frames);
+  ASSERT_EQ(b.size(), frames);
+  double worst = 0, sum2 = 0;
+  for (std::size_t i = 0; i < frames; ++i) {
+    const double d = (a[i].pose.translation() - b[i].pose.translation()).norm();
+    worst = std::max(worst, d);
+    sum2 += d * d;
+  }
+  const double rms = std::sqrt(sum2 / frames);
+  std::printf("mm copy vs original, %zu frames: position difference RMS %.5f m, largest %.5f m\n", frames, rms, worst);
+  EXPECT_LT(rms, 0.001);
+  EXPECT_LT(worst, 0.003);  // millimetre steps instead of 0.2 mm ones move single frames a little
+}
