@@ -229,8 +229,15 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   writeTumTrajectory(staged("trajectory.txt"), rec.trajectory());
   wrote("trajectory.txt", std::to_string(rec.trajectory().size()) + " poses");
 
+  // Ground truth drawn in the map's frame (the map is anchored at the first camera): the ATE's
+  // rigid alignment (estimate -> ground truth), inverted.
+  Trajectory gt_in_map;
   if (!m.ground_truth.empty()) {
     const AteResult ate = computeAte(m.ground_truth, rec.trajectory());
+    if (ate.success) {
+      const mrpt::poses::CPose3D to_map = -ate.alignment;
+      for (const auto& g : m.ground_truth) gt_in_map.push_back({g.timestamp, to_map + g.pose});
+    }
     const RpeResult rpe = computeRpe(m.ground_truth, rec.trajectory(), p.rpe_delta);
     if (ate.success) s["ate"] = statsJson(ate.trans);
     if (rpe.success) s["rpe"] = {{"delta_s", rpe.delta}, {"trans_m", statsJson(rpe.trans)}, {"rot_deg", statsJson(rpe.rot_deg)}};
@@ -262,8 +269,7 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
   SceneOptions scene_opts;
   scene_opts.frustum_every_k = p.frustum_every;
-  exportScene(staged("scene.3Dscene"), mesh, rec.trajectory(), m.ground_truth.empty() ? nullptr : &m.ground_truth,
-              cam, scene_opts);
+  exportScene(staged("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam, scene_opts);
   wrote("scene.3Dscene", "open with SceneViewer3D");
   if (!mesh.empty()) {
     renderMeshPng(staged("mesh.png"), mesh, &rec.trajectory(), p.image_width, p.image_height);
