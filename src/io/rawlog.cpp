@@ -1,4 +1,5 @@
 #include "vofusion/io/rawlog.h"
+#include "vofusion/io/colour_registration.h"
 
 #include <cerrno>
 #include <cstdint>
@@ -101,6 +102,32 @@ std::string stripRawlogExtension(const std::string& path) {
 // ------------------------------------------------------------------------------------------------
 // Reading
 
+// MRPT gives the colour camera's pose in the depth sensor's frame (x forward, y left, z up), its
+// rotation included: CPose3D(0, 0, 0, -90 deg, 0, -90 deg) is "both cameras coincide".
+static const mrpt::poses::CPose3D kCoincide(0, 0, 0, -M_PI / 2, 0, -M_PI / 2);
+
+Eigen::Isometry3d colourFromDepth(const mrpt::obs::CObservation3DRangeScan& obs) {
+  // depth optical -> sensor (kCoincide), sensor -> colour optical (the colour pose, inverted).
+  const mrpt::poses::CPose3D T = -obs.relativePoseIntensityWRTDepth + kCoincide;
+  Eigen::Isometry3d E;
+  E.matrix() = T.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
+  return E;
+}
+
+bool colourRegisteredToDepth(const mrpt::obs::CObservation3DRangeScan& obs) {
+  const mrpt::img::TCamera &d = obs.cameraParams, &c = obs.cameraParamsIntensity;
+  if (!(c.fx() > 0)) return true;  // no colour camera given: taken as the depth camera
+  const Eigen::Isometry3d T = colourFromDepth(obs);
+  const bool same_pose = T.translation().norm() < 1e-4 && Eigen::AngleAxisd(T.linear()).angle() < 1e-5;
+  auto close = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(a)); };
+  const bool same_camera = close(d.fx(), c.fx()) && close(d.fy(), c.fy()) && close(d.cx(), c.cx()) && close(d.cy(), c.cy());
+  // The same camera at another resolution (intrinsics scaled with the image) is registered too.
+  const bool scaled = d.ncols > 0 && c.ncols > 0 && close(c.fx() / c.ncols, d.fx() / d.ncols) &&
+                      close((c.cx() + 0.5) / c.ncols, (d.cx() + 0.5) / d.ncols) &&
+                      close((c.cy() + 0.5) / c.nrows, (d.cy() + 0.5) / d.nrows);
+  return same_pose && (same_camera || scaled);
+}
+
 Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string& origin,
                            const std::optional<CameraIntrinsics>& override_camera) {
   try {
@@ -161,8 +188,19 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     if (img.channels() == 1) cv::cvtColor(img, f.rgb, cv::COLOR_GRAY2BGR);
     else if (img.channels() == 4) cv::cvtColor(img, f.rgb, cv::COLOR_BGRA2BGR);
     else f.rgb = img.clone();
-    // Registered sensors may deliver colour at another resolution (e.g. 1280x1024 over 640x480 depth).
-    if (f.rgb.cols != cols || f.rgb.rows != rows) cv::resize(f.rgb, f.rgb, cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
+    // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
+    // depth camera. A registered one at another resolution (e.g. 1280x1024 over 640x480) is resized.
+    if (!override_camera && !colourRegisteredToDepth(obs)) {
+      const CameraIntrinsics colour_cam = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
+      colour_cam.validate(origin + " (colour camera)");
+      if (colour_cam.width != f.rgb.cols || colour_cam.height != f.rgb.rows)
+        throw InputError(origin, "colour image is " + std::to_string(f.rgb.cols) + "x" + std::to_string(f.rgb.rows) +
+                                     ", its camera parameters say " + std::to_string(colour_cam.width) + "x" +
+                                     std::to_string(colour_cam.height));
+      f.rgb = colourInDepthCamera(f.rgb, f.depth, f.camera, colour_cam, colourFromDepth(obs));
+    } else if (f.rgb.cols != cols || f.rgb.rows != rows) {
+      cv::resize(f.rgb, f.rgb, cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
+    }
     obs.intensityImage.unload();
   } else {
     f.rgb = cv::Mat(rows, cols, CV_8UC3, cv::Scalar(128, 128, 128));

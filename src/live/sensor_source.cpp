@@ -99,13 +99,12 @@ void abandonSensor(mrpt::hwdrivers::CGenericSensor::Ptr sensor) {
 Frame sensorObservationToFrame(const mrpt::obs::CObservation3DRangeScan& obs, const std::string& origin) {
   if (!obs.hasRangeImage) throw SensorError(origin + ": no depth image (set grab_depth = true)");
   if (!obs.hasIntensityImage) throw SensorError(origin + ": no colour image (set grab_image = true)");
-  // The pipeline needs depth registered to colour (OpenNI2 registers in hardware): then the colour
-  // camera's intrinsics describe the depth image too, whatever the depth camera's own are.
-  const auto& t = obs.relativePoseIntensityWRTDepth;
-  if (std::sqrt(t.x() * t.x() + t.y() * t.y() + t.z() * t.z()) > 1e-3)
-    throw SensorError(origin + ": depth is not registered to colour (relative pose has a translation)");
+  // Depth registered to colour (OpenNI2 registers in hardware): the colour camera's intrinsics describe
+  // the depth image too, whatever the depth camera's own are. Otherwise the colour is re-projected into
+  // the depth camera (frameFromObservation), as for a rawlog.
   std::optional<CameraIntrinsics> camera;
-  if (obs.cameraParamsIntensity.fx() > 0) camera = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
+  if (obs.cameraParamsIntensity.fx() > 0 && colourRegisteredToDepth(obs))
+    camera = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
   try {
     return frameFromObservation(obs, origin, camera);
   } catch (const std::exception& e) {

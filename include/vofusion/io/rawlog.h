@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <mrpt/obs/CAction.h>
 #include <mrpt/obs/CActionRobotMovement3D.h>
 #include <mrpt/obs/CObservation.h>
@@ -57,7 +58,14 @@ class RawlogSource : public FrameSource {
   std::unique_ptr<Reader> reader_;
 };
 
+// Whether the observation's colour camera is its depth camera (same pose and intrinsics, or the same
+// camera at another resolution): then colour and depth share pixels.
+bool colourRegisteredToDepth(const mrpt::obs::CObservation3DRangeScan& obs);
+// Depth-camera optical coordinates -> colour-camera optical coordinates, from relativePoseIntensityWRTDepth.
+Eigen::Isometry3d colourFromDepth(const mrpt::obs::CObservation3DRangeScan& obs);
 // Converts one observation to a Frame (loads external data first). `origin` names the rawlog in errors.
+// A colour camera that is not registered to depth has its colour re-projected into the depth camera
+// (io/colour_registration.h); override_camera (the sensor's registered colour intrinsics) skips that.
 Frame frameFromObservation(const mrpt::obs::CObservation3DRangeScan& obs, const std::string& origin,
                            const std::optional<CameraIntrinsics>& override_camera = std::nullopt);
 // Builds an observation (images embedded) from a Frame; depth quantised to range_units metres.

@@ -1,0 +1,109 @@
+// A rawlog whose colour camera is not its depth camera (another pose, other intrinsics, another
+// size): colour is re-projected into the depth camera, not resized onto it.
+#include <cmath>
+
+#include <mrpt/img/CImage.h>
+#include <opencv2/imgproc.hpp>
+
+#include "support.h"
+#include "vofusion/io/colour_registration.h"
+#include "vofusion/io/rawlog.h"
+
+using namespace vofusion;
+using mrpt::poses::CPose3D;
+
+namespace {
+
+// A checkerboard of 10 cm cells painted on the world (depth camera coordinates).
+cv::Vec3b paint(double x, double y) {
+  const bool odd = (int(std::floor(x / 0.1)) + int(std::floor(y / 0.1))) & 1;
+  return odd ? cv::Vec3b(30, 40, 220) : cv::Vec3b(220, 180, 20);
+}
+bool nearEdge(double x, double y) {
+  const double fx = x / 0.1 - std::floor(x / 0.1), fy = y / 0.1 - std::floor(y / 0.1);
+  return std::min(fx, 1 - fx) < 0.04 || std::min(fy, 1 - fy) < 0.04;
+}
+
+constexpr double kWall = 2.0;  // m: a wall facing the depth camera
+
+struct Rig {
+  CameraIntrinsics depth_cam, colour_cam;
+  Eigen::Isometry3d T_depth_colour = Eigen::Isometry3d::Identity();  // colour camera in depth coordinates
+};
+
+// The observation a sensor with this rig records of the wall.
+mrpt::obs::CObservation3DRangeScan::Ptr observe(const Rig& rig) {
+  Frame f;
+  f.camera = rig.depth_cam;
+  f.depth = cv::Mat(rig.depth_cam.height, rig.depth_cam.width, CV_32F, cv::Scalar(kWall));
+  cv::Mat colour(rig.colour_cam.height, rig.colour_cam.width, CV_8UC3);
+  const CameraIntrinsics& c = rig.colour_cam;
+  for (int v = 0; v < colour.rows; ++v)
+    for (int u = 0; u < colour.cols; ++u) {
+      const Eigen::Vector3d o = rig.T_depth_colour.translation();
+      const Eigen::Vector3d d = rig.T_depth_colour.linear() * Eigen::Vector3d((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1);
+      const Eigen::Vector3d p = o + (kWall - o.z()) / d.z() * d;
+      colour.at<cv::Vec3b>(v, u) = paint(p.x(), p.y());
+    }
+  f.rgb = cv::Mat(f.depth.size(), CV_8UC3);  // replaced below: the observation carries the colour camera's own image
+  auto obs = observationFromFrame(f);
+  obs->intensityImage = mrpt::img::CImage(colour, mrpt::img::DEEP_COPY);
+  obs->cameraParamsIntensity = rig.colour_cam.toMrpt();
+  CPose3D pose_in_depth;
+  mrpt::math::CMatrixDouble44 M;
+  M.asEigen() = rig.T_depth_colour.matrix();
+  pose_in_depth = CPose3D(M);
+  obs->relativePoseIntensityWRTDepth = CPose3D(0, 0, 0, -M_PI / 2, 0, -M_PI / 2) + pose_in_depth;
+  return obs;
+}
+
+// Share of the depth pixels (away from the cell edges, seen by the colour camera) whose colour is the
+// wall's there.
+double agreement(const Frame& f, const Rig& rig) {
+  const CameraIntrinsics& d = rig.depth_cam;
+  int good = 0, n = 0;
+  for (int v = 0; v < f.rgb.rows; ++v)
+    for (int u = 0; u < f.rgb.cols; ++u) {
+      const double x = (u - d.cx) * kWall / d.fx, y = (v - d.cy) * kWall / d.fy;
+      const cv::Vec3b got = f.rgb.at<cv::Vec3b>(v, u);
+      if (nearEdge(x, y) || got == cv::Vec3b(0, 0, 0)) continue;
+      ++n;
+      const cv::Vec3b want = paint(x, y);
+      good += std::abs(got[0] - want[0]) + std::abs(got[1] - want[1]) + std::abs(got[2] - want[2]) < 30;
+    }
+  return n > 0 ? double(good) / n : 0.0;
+}
+
+}  // namespace
+
+TEST(ColourRegistration, OffsetColourCameraIsReprojectedIntoTheDepthCamera) {
+  Rig rig;
+  rig.depth_cam = CameraIntrinsics{}.scaled(0.5);  // 320x240, f = 262.5
+  rig.colour_cam = CameraIntrinsics{};              // 640x480, f = 525, shifted principal point
+  rig.colour_cam.fx = 560, rig.colour_cam.fy = 558, rig.colour_cam.cx = 330, rig.colour_cam.cy = 236;
+  rig.T_depth_colour.translation() = Eigen::Vector3d(0.052, -0.01, 0.004);  // a Kinect's baseline, roughly
+  rig.T_depth_colour.linear() = Eigen::AngleAxisd(2.0 * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const auto obs = observe(rig);
+  EXPECT_FALSE(colourRegisteredToDepth(*obs));
+  const Frame f = frameFromObservation(*obs, "offset.rawlog");
+  ASSERT_EQ(f.rgb.size(), cv::Size(320, 240));
+  const double registered = agreement(f, rig);
+  EXPECT_GT(registered, 0.99);
+  // What resizing the colour image onto the depth image (the former reading) gives: far off.
+  Frame resized = f;
+  cv::resize(obs->intensityImage.asCvMat<cv::Mat>(mrpt::img::SHALLOW_COPY), resized.rgb, cv::Size(320, 240), 0, 0,
+             cv::INTER_AREA);
+  EXPECT_LT(agreement(resized, rig), 0.8);
+  std::printf("colour agreement: re-projected %.4f, resized %.4f\n", registered, agreement(resized, rig));
+}
+
+TEST(ColourRegistration, RegisteredCamerasKeepTheirPixels) {
+  Rig rig;
+  rig.depth_cam = rig.colour_cam = CameraIntrinsics{}.scaled(0.5);
+  const auto obs = observe(rig);
+  EXPECT_TRUE(colourRegisteredToDepth(*obs));
+  EXPECT_GT(agreement(frameFromObservation(*obs, "registered.rawlog"), rig), 0.99);
+  // The same camera at twice the resolution (a registered 640x480 colour over 320x240 depth).
+  rig.colour_cam = CameraIntrinsics{};
+  EXPECT_TRUE(colourRegisteredToDepth(*observe(rig)));
+}
