@@ -465,7 +465,7 @@ TEST(FaultsConfig, UnknownKeyOrSectionOutOfRangeOrMissing) {
       {"[odometry]\nkeypoints = sift\n", "keypoints.*must be union, star or narf"},
       {"[odometry]\nmotion_method = magic\n", "motion_method.*must be paper or robust"},
       {"[narf]\nimplementation = magic\n", "implementation.*must be fast or pcl"},
-      {"[motion]\nsample_size = 2\n", "sample_size.*at least 3"},
+      {"[motion]\nsample_size = 2\n", "sample_size.*must be in \\[3, 100\\], got 2"},
   };
   for (const auto& app : trackers()) {
     for (const Case& c : cases) {

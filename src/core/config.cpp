@@ -1,6 +1,7 @@
 #include "vofusion/core/config.h"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -61,6 +62,12 @@ std::string dumpConfig(const std::vector<ConfigSection>& known) { return default
 
 namespace vofusion {
 
+static std::string rangeText(const ConfigKey& k) {
+  std::ostringstream r;
+  r << "[" << k.lo << ", " << k.hi << "]";
+  return r.str();
+}
+
 void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
   for (const ConfigKey& k : keys)
     std::visit(
@@ -71,20 +78,30 @@ void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& secti
           else if constexpr (std::is_same_v<T, double>) *v = cfg.read_double(section, k.name, *v);
           else if constexpr (std::is_same_v<T, bool>) *v = cfg.read_bool(section, k.name, *v);
           else *v = cfg.read_string(section, k.name, *v);
+          if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
+            const double x = double(*v);
+            if (!std::isnan(k.lo) && !(x >= k.lo && x <= k.hi)) {
+              std::ostringstream got;
+              got << x;
+              throw InputError("[" + section + "] " + k.name, "must be in " + rangeText(k) + ", got " + got.str());
+            }
+          }
         },
         k.value);
 }
 
 void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
-  for (const ConfigKey& k : keys)
+  for (const ConfigKey& k : keys) {
+    const std::string comment = std::isnan(k.lo) ? std::string(k.comment) : std::string(k.comment) + "; range " + rangeText(k);
     std::visit(
         [&](auto* v) {
           using T = std::remove_pointer_t<decltype(v)>;
-          if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), -1, 1, k.comment);
-          else if constexpr (std::is_same_v<T, float>) cfg.write(section, k.name, static_cast<double>(*v), -1, 1, k.comment);
-          else cfg.write(section, k.name, *v, -1, 1, k.comment);
+          if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), -1, 1, comment);
+          else if constexpr (std::is_same_v<T, float>) cfg.write(section, k.name, static_cast<double>(*v), -1, 1, comment);
+          else cfg.write(section, k.name, *v, -1, 1, comment);
         },
         k.value);
+  }
 }
 
 }  // namespace vofusion

@@ -18,11 +18,11 @@ namespace {
 // Every key of the section, once: loading and saving both walk this list.
 std::vector<ConfigKey> brandKeys(BrandParams& p) {
   return {
-      {"patch_size", &p.patch_size, "pixels at depth <= 2 m"},
-      {"smoothing_sigma", &p.smoothing_sigma, "pixels, Gaussian on intensity"},
-      {"normal_angle", &p.normal_angle, "degrees, geometric test threshold"},
-      {"normal_window", &p.normal_window, "pixels, half-size of normal boxes"},
-      {"max_depth_step", &p.max_depth_step, "m, no normals across larger jumps"},
+      {"patch_size", &p.patch_size, "pixels at depth <= 2 m", 8.0, 256.0},
+      {"smoothing_sigma", &p.smoothing_sigma, "pixels, Gaussian on intensity (0 = none)", 0.0, 20.0},
+      {"normal_angle", &p.normal_angle, "degrees, geometric test threshold", 0.0, 180.0},
+      {"normal_window", &p.normal_window, "pixels, half-size of normal boxes", 1.0, 32.0},
+      {"max_depth_step", &p.max_depth_step, "m, no normals across larger jumps", 0.001, 10.0},
       {"use_intensity", &p.use_intensity, "intensity tests on/off"},
       {"use_geometry", &p.use_geometry, "normal/convexity tests on/off"},
       {"oriented", &p.oriented, "rotate to canonical orientation"},
@@ -125,6 +125,7 @@ BrandExtractor::BrandExtractor(const BrandParams& params) : params_(params) {
 double BrandExtractor::scaleForDepth(double d) { return std::max(0.2, (3.8 - 0.4 * std::max(2.0, d)) / 3.0); }
 
 cv::Mat BrandExtractor::smooth(const cv::Mat& gray) const {
+  if (!(params_.smoothing_sigma > 0)) return gray;  // 0: the intensity tests read the raw image
   cv::Mat out;
   cv::GaussianBlur(gray, out, cv::Size(0, 0), params_.smoothing_sigma);
   return out;

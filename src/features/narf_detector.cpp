@@ -19,11 +19,11 @@ namespace {
 // Every key of the section, once: loading and saving both walk this list.
 std::vector<ConfigKey> narfKeys(NarfParams& p) {
   return {
-      {"support_size", &p.support_size, "m, area covered by a keypoint"},
-      {"downsample", &p.downsample, "factor on the depth image (1 = full res)"},
-      {"max_points", &p.max_points, "strongest kept, 0 = all"},
-      {"min_interest_value", &p.min_interest_value, "[0,1]"},
-      {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)"},
+      {"support_size", &p.support_size, "m, area covered by a keypoint", 0.01, 10.0},
+      {"downsample", &p.downsample, "factor on the depth image (1 = full res)", 1.0, 20.0},
+      {"max_points", &p.max_points, "strongest kept, 0 = all", 0.0, 100000.0},
+      {"min_interest_value", &p.min_interest_value, "[0,1]", 0.0, 1.0},
+      {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)", 1.0, 64.0},
       {"recursive_scale_reduction", &p.recursive_scale_reduction, "implementation pcl only; no effect in PCL 1.13 (sparse interest image)"},
       {"implementation", &p.implementation, "fast (PCL's steps, one thread) | pcl (pcl::NarfKeypoint)"},
   };

@@ -18,11 +18,11 @@ namespace {
 // Every key of the section, once: loading and saving both walk this list.
 std::vector<ConfigKey> starKeys(StarParams& p) {
   return {
-      {"max_size", &p.max_size, "largest filter size, pixels"},
-      {"response_threshold", &p.response_threshold, "minimum |response|, grey levels"},
-      {"line_threshold_projected", &p.line_threshold_projected, "Harris trace^2/det limit"},
-      {"line_threshold_binarized", &p.line_threshold_binarized, "same, on the scale map"},
-      {"suppress_nonmax_size", &p.suppress_nonmax_size, "non-max window, pixels"},
+      {"max_size", &p.max_size, "largest filter size, pixels", 4.0, 128.0},
+      {"response_threshold", &p.response_threshold, "minimum |response|, grey levels", 0.0, 100000.0},
+      {"line_threshold_projected", &p.line_threshold_projected, "Harris trace^2/det limit", 0.0, 1000.0},
+      {"line_threshold_binarized", &p.line_threshold_binarized, "same, on the scale map", 0.0, 1000.0},
+      {"suppress_nonmax_size", &p.suppress_nonmax_size, "non-max window, pixels", 1.0, 31.0},
       {"subpixel", &p.subpixel, "refine positions to the response peak"},
   };
 }
@@ -231,8 +231,10 @@ cv::Point2f refinePeak(const cv::Mat& responses, cv::Point pt) {
 std::vector<cv::KeyPoint> detectStar(const cv::Mat& gray, const StarParams& p) {
   CV_Assert(gray.type() == CV_8UC1);
   cv::Mat responses, sizes;
-  const int border = computeResponses(gray, p.max_size, responses, sizes);
-  const int rows = gray.rows, cols = gray.cols, d = p.suppress_nonmax_size / 2;
+  const int d = p.suppress_nonmax_size / 2;
+  // The non-maximum window reaches d pixels around a candidate: keep it inside the image too.
+  const int border = std::max(computeResponses(gray, p.max_size, responses, sizes), d);
+  const int rows = gray.rows, cols = gray.cols;
 
   // Tiles of (d+1)^2 pixels: each proposes its strongest positive and negative response, kept if
   // it is the extremum of the (2d+1)^2 window around it, at an interior scale and not line-like.

@@ -11,41 +11,41 @@ namespace {
 
 std::vector<ConfigKey> keys(KinFuParams& p) {
   return {
-      {"volume_voxels", &p.tsdf.volume_voxels, "voxels per volume edge (multiple of 8)"},
-      {"voxel_size", &p.tsdf.voxel_size, "m"},
-      {"truncation", &p.tsdf.truncation, "m, TSDF band half width"},
-      {"max_weight", &p.tsdf.max_weight, "frames, weight cap of the running average (<= 255)"},
-      {"integrate_min_depth", &p.tsdf.min_depth, "m, depth readings fused"},
-      {"integrate_max_depth", &p.tsdf.max_depth, "m"},
-      {"mark_step", &p.tsdf.mark_step, "pixels between readings that mark touched bricks"},
-      {"bilateral_sigma_depth", &p.preprocess.sigma_depth, "m"},
-      {"bilateral_sigma_spatial", &p.preprocess.sigma_spatial, "pixels"},
-      {"bilateral_kernel", &p.preprocess.kernel, "pixels (window edge; 0 = no filter)"},
-      {"min_depth", &p.preprocess.min_depth, "m, readings used for tracking"},
-      {"max_depth", &p.preprocess.max_depth, "m"},
-      {"max_normal_jump", &p.preprocess.max_normal_jump, "fraction of depth: larger neighbour jumps give no normal"},
-      {"icp_iterations_l0", &p.icp.iterations[0], "ICP iterations at the finest tracking level"},
-      {"icp_iterations_l1", &p.icp.iterations[1], "ICP iterations at 1/2 of it"},
-      {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 of it"},
-      {"icp_max_distance", &p.icp.max_distance, "m, correspondence distance threshold"},
-      {"icp_max_angle", &p.icp.max_angle, "degrees, correspondence normal angle threshold"},
-      {"tracking_downsample", &p.tracking_downsample, "1 or 2: tracking (filter, ray cast, ICP) at full or half resolution"},
-      {"shift_threshold", &p.shift_threshold, "m, focus point to volume centre distance that shifts the volume"},
-      {"focus_distance", &p.focus_distance, "m, the volume follows the point this far along the optical axis"},
-      {"min_inlier_ratio", &p.min_inlier_ratio, "ICP inliers / valid pixels below which ICP is rejected"},
-      {"icp_degenerate_ratio", &p.icp.degenerate_ratio, "eigenvalue / largest (rotation scaled by depth) below which an ICP direction keeps the prediction"},
-      {"min_condition", &p.min_condition, "smallest/largest eigenvalue of the ICP system below which the whole ICP is rejected"},
-      {"max_jump_translation", &p.max_jump_translation, "m, ICP vs odometry prediction beyond which ICP is rejected"},
-      {"max_jump_rotation", &p.max_jump_rotation, "degrees, same for rotation"},
+      {"volume_voxels", &p.tsdf.volume_voxels, "voxels per volume edge (multiple of 8)", 8.0, 1024.0},
+      {"voxel_size", &p.tsdf.voxel_size, "m", 0.001, 1.0},
+      {"truncation", &p.tsdf.truncation, "m, TSDF band half width", 0.002, 10.0},
+      {"max_weight", &p.tsdf.max_weight, "frames, weight cap of the running average (<= 255)", 1.0, 255.0},
+      {"integrate_min_depth", &p.tsdf.min_depth, "m, depth readings fused", 0.0, 20.0},
+      {"integrate_max_depth", &p.tsdf.max_depth, "m", 0.1, 20.0},
+      {"mark_step", &p.tsdf.mark_step, "pixels between readings that mark touched bricks", 1.0, 64.0},
+      {"bilateral_sigma_depth", &p.preprocess.sigma_depth, "m", 0.001, 1.0},
+      {"bilateral_sigma_spatial", &p.preprocess.sigma_spatial, "pixels", 0.1, 50.0},
+      {"bilateral_kernel", &p.preprocess.kernel, "pixels (window edge; 0 = no filter)", 0.0, 31.0},
+      {"min_depth", &p.preprocess.min_depth, "m, readings used for tracking", 0.0, 20.0},
+      {"max_depth", &p.preprocess.max_depth, "m", 0.1, 20.0},
+      {"max_normal_jump", &p.preprocess.max_normal_jump, "fraction of depth: larger neighbour jumps give no normal", 0.001, 10.0},
+      {"icp_iterations_l0", &p.icp.iterations[0], "ICP iterations at the finest tracking level", 0.0, 100.0},
+      {"icp_iterations_l1", &p.icp.iterations[1], "ICP iterations at 1/2 of it", 0.0, 100.0},
+      {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 of it", 0.0, 100.0},
+      {"icp_max_distance", &p.icp.max_distance, "m, correspondence distance threshold", 0.001, 10.0},
+      {"icp_max_angle", &p.icp.max_angle, "degrees, correspondence normal angle threshold", 0.0, 180.0},
+      {"tracking_downsample", &p.tracking_downsample, "1 or 2: tracking (filter, ray cast, ICP) at full or half resolution", 1.0, 2.0},
+      {"shift_threshold", &p.shift_threshold, "m, focus point to volume centre distance that shifts the volume", 0.0, 100.0},
+      {"focus_distance", &p.focus_distance, "m, the volume follows the point this far along the optical axis", 0.0, 10.0},
+      {"min_inlier_ratio", &p.min_inlier_ratio, "ICP inliers / valid pixels below which ICP is rejected", 0.0, 1.0},
+      {"icp_degenerate_ratio", &p.icp.degenerate_ratio, "eigenvalue / largest (rotation scaled by depth) below which an ICP direction keeps the prediction", 0.0, 1.0},
+      {"min_condition", &p.min_condition, "smallest/largest eigenvalue of the ICP system below which the whole ICP is rejected", 0.0, 1.0},
+      {"max_jump_translation", &p.max_jump_translation, "m, ICP vs odometry prediction beyond which ICP is rejected", 0.0, 100.0},
+      {"max_jump_rotation", &p.max_jump_rotation, "degrees, same for rotation", 0.0, 180.0},
       {"integrate_on_fallback", &p.integrate_on_fallback, "fuse frames posed by the odometry fallback"},
       {"integrate_filtered", &p.integrate_filtered, "fuse bilateral-filtered instead of raw depth"},
       {"overlap_fusion", &p.overlap_fusion, "fuse frame k beside the odometry of frame k+1 (same results, faster)"},
-      {"joint_icp_sigma", &p.joint_icp_sigma, "m, mode joint: noise of one point-to-plane residual (smaller: geometry outweighs the matches more)"},
-      {"joint_rolling_shutter", &p.joint_rolling_shutter, "s, mode joint: depth readout time; ICP noise grows by it x turn rate x depth"},
-      {"joint_match_cauchy", &p.joint_match_cauchy, "sigmas, mode joint: Cauchy kernel on the odometry matches' whitened residuals (0 = none)"},
-      {"motion_sigma_translation", &p.motion_sigma_translation, "m per 1/30 s, mode joint: camera centre vs the constant-velocity prediction (0 = no motion model)"},
-      {"motion_sigma_rotation", &p.motion_sigma_rotation, "degrees per 1/30 s, mode joint: rotation vs the constant-velocity prediction (0 = none)"},
-      {"guess_margin", &p.guess_margin, "mode joint: another initial guess replaces the odometry's when its alignment cost is below this fraction"},
+      {"joint_icp_sigma", &p.joint_icp_sigma, "m, mode joint: noise of one point-to-plane residual (smaller: geometry outweighs the matches more)", 0.0001, 1.0},
+      {"joint_rolling_shutter", &p.joint_rolling_shutter, "s, mode joint: depth readout time; ICP noise grows by it x turn rate x depth", 0.0, 0.1},
+      {"joint_match_cauchy", &p.joint_match_cauchy, "sigmas, mode joint: Cauchy kernel on the odometry matches' whitened residuals (0 = none)", 0.0, 100.0},
+      {"motion_sigma_translation", &p.motion_sigma_translation, "m per 1/30 s, mode joint: camera centre vs the constant-velocity prediction (0 = no motion model)", 0.0, 10.0},
+      {"motion_sigma_rotation", &p.motion_sigma_rotation, "degrees per 1/30 s, mode joint: rotation vs the constant-velocity prediction (0 = none)", 0.0, 180.0},
+      {"guess_margin", &p.guess_margin, "mode joint: another initial guess replaces the odometry's when its alignment cost is below this fraction", 0.01, 1.0},
   };
 }
 
@@ -60,12 +60,8 @@ void KinFuParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
     throw InputError(where, "voxel_size must be positive and truncation larger than it");
   if (tracking_downsample != 1 && tracking_downsample != 2) throw InputError(where, "tracking_downsample must be 1 or 2");
   if (tsdf.max_weight < 1 || tsdf.max_weight > 255) throw InputError(where, "max_weight must be in 1..255");
-  if (!(joint_icp_sigma >= 1e-4 && joint_icp_sigma <= 1.0)) throw InputError(where, "joint_icp_sigma must be in [0.0001, 1] m");
-  if (!(joint_rolling_shutter >= 0 && joint_rolling_shutter <= 0.1)) throw InputError(where, "joint_rolling_shutter must be in [0, 0.1] s");
-  if (!(joint_match_cauchy >= 0 && joint_match_cauchy <= 100)) throw InputError(where, "joint_match_cauchy must be in [0, 100]");
-  if (!(motion_sigma_translation >= 0 && motion_sigma_translation <= 10)) throw InputError(where, "motion_sigma_translation must be in [0, 10] m");
-  if (!(motion_sigma_rotation >= 0 && motion_sigma_rotation <= 180)) throw InputError(where, "motion_sigma_rotation must be in [0, 180] degrees");
-  if (!(guess_margin > 0 && guess_margin <= 1)) throw InputError(where, "guess_margin must be in (0, 1]");
+  if (!(preprocess.min_depth < preprocess.max_depth)) throw InputError(where, "min_depth must be below max_depth");
+  if (!(tsdf.min_depth < tsdf.max_depth)) throw InputError(where, "integrate_min_depth must be below integrate_max_depth");
 }
 
 void KinFuParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const {

@@ -14,38 +14,38 @@ std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
       {"keypoints", &p.keypoints, "union | star | narf"},
       {"motion_method", &p.motion_method, "paper (Algorithm 1) | robust"},
       {"narf_concurrent", &p.narf_concurrent, "NARF on a second thread"},
-      {"union_radius", &p.union_radius, "pixels, duplicate radius"},
-      {"keyframe_min_inliers", &p.keyframe_min_inliers, "keep the keyframe while this many inliers, 0 = off"},
+      {"union_radius", &p.union_radius, "pixels, duplicate radius", 0.0, 50.0},
+      {"keyframe_min_inliers", &p.keyframe_min_inliers, "keep the keyframe while this many inliers, 0 = off", 0.0, 100000.0},
       {"undistort", &p.undistort, "undistort keypoints before 3D/homography"},
-      {"depth_window", &p.depth_window, "pixels, half-size of the keypoint depth window"},
+      {"depth_window", &p.depth_window, "pixels, half-size of the keypoint depth window", 0.0, 10.0},
       {"depth_mode", &p.depth_mode, "median | min of that window"},
-      {"references", &p.references, "frames matched: the previous one and references-1 before it"},
+      {"references", &p.references, "frames matched: the previous one and references-1 before it", 1.0, 8.0},
       {"colour_time", &p.colour_time, "keypoints moved to the depth capture time"},
   };
 }
 
 std::vector<ConfigKey> matchingKeys(OdometryParams& p) {
   return {
-      {"max_hamming", &p.max_hamming, "bits of 256, 256 = no limit"},
+      {"max_hamming", &p.max_hamming, "bits of 256, 256 = no limit", 0.0, 256.0},
       {"use_homography", &p.use_homography, "RANSAC homography filter"},
-      {"homography_threshold", &p.homography_threshold, "pixels"},
-      {"min_matches", &p.min_matches, "after the homography filter"},
+      {"homography_threshold", &p.homography_threshold, "pixels", 0.1, 100.0},
+      {"min_matches", &p.min_matches, "after the homography filter", 4.0, 100000.0},
   };
 }
 
 std::vector<ConfigKey> motionKeys(OdometryParams& p) {
   return {
-      {"hypotheses", &p.paper.hypotheses, "paper: N"},
-      {"sample_size", &p.paper.sample_size, "paper: s correspondences"},
-      {"paper_inlier_threshold", &p.paper.inlier_threshold, "m, paper: inlier report"},
-      {"ransac_iterations", &p.robust.iterations, "robust: max hypotheses"},
-      {"inlier_threshold", &p.robust.inlier_threshold, "m at <= 1 m depth, grows with z^2"},
-      {"gauss_newton_iterations", &p.robust.gauss_newton_iterations, "robust: refinement steps"},
+      {"hypotheses", &p.paper.hypotheses, "paper: N", 1.0, 100000.0},
+      {"sample_size", &p.paper.sample_size, "paper: s correspondences", 3.0, 100.0},
+      {"paper_inlier_threshold", &p.paper.inlier_threshold, "m, paper: inlier report", 0.0001, 1.0},
+      {"ransac_iterations", &p.robust.iterations, "robust: max hypotheses", 1.0, 100000.0},
+      {"inlier_threshold", &p.robust.inlier_threshold, "m at <= 1 m depth, grows with z^2", 0.0001, 1.0},
+      {"gauss_newton_iterations", &p.robust.gauss_newton_iterations, "robust: refinement steps", 0.0, 100.0},
       {"ray_noise", &p.robust.ray_noise, "robust: Kinect noise along rays in Gauss-Newton"},
-      {"cauchy", &p.robust.cauchy, "robust: Cauchy kernel scale in Gauss-Newton, sigmas (0 = off)"},
-      {"min_inliers", &p.min_inliers, "3D inliers needed"},
-      {"min_extent", &p.min_extent, "m, inlier spread needed"},
-      {"max_rms", &p.max_rms, "m at <= 1 m depth (grows with z^2 as the inlier threshold), inlier RMS accepted"},
+      {"cauchy", &p.robust.cauchy, "robust: Cauchy kernel scale in Gauss-Newton, sigmas (0 = off)", 0.0, 100.0},
+      {"min_inliers", &p.min_inliers, "3D inliers needed", 3.0, 100000.0},
+      {"min_extent", &p.min_extent, "m, inlier spread needed", 0.0, 10.0},
+      {"max_rms", &p.max_rms, "m at <= 1 m depth (grows with z^2 as the inlier threshold), inlier RMS accepted", 0.0001, 10.0},
   };
 }
 
@@ -63,7 +63,6 @@ void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, 
     throw InputError("[" + s + "] keypoints", "must be union, star or narf (got '" + keypoints + "')");
   if (motion_method != "paper" && motion_method != "robust")
     throw InputError("[" + s + "] motion_method", "must be paper or robust (got '" + motion_method + "')");
-  if (paper.sample_size < 3) throw InputError("[motion] sample_size", "must be at least 3");
 
   star.loadFromConfigFile(c, "star");
   narf.loadFromConfigFile(c, "narf");

@@ -41,6 +41,7 @@ struct FrameFeatures {
 // alone is noisy at the edges where keypoints like to sit); 0 if the window has no reading.
 float keypointDepth(const cv::Mat& depth, int x, int y, int r, bool nearest) {
   if (r <= 0) return depth.at<float>(y, x);
+  r = std::min(r, 10);  // the buffer's reach ([odometry] depth_window and [narf] downsample are checked to fit)
   float v[21 * 21];
   int n = 0;
   for (int yy = std::max(0, y - r); yy <= std::min(depth.rows - 1, y + r); ++yy) {

@@ -32,10 +32,10 @@ std::vector<ConfigKey> outputKeys(OutputParams& p) {
       {"write_rawlog", &p.write_rawlog, "poses.rawlog: observations + odometry actions + fused poses"},
       {"save_raw_mesh", &p.save_raw_mesh, "also mesh_raw.ply (marching cubes before CGAL post-processing)"},
       {"clean_mesh", &p.clean_mesh, "CGAL post-processing with the [mesh] parameters"},
-      {"frustum_every", &p.frustum_every, "frames between camera frustums in scene.3Dscene"},
-      {"image_width", &p.image_width, "px, mesh.png and trajectory.png"},
-      {"image_height", &p.image_height, "px"},
-      {"rpe_delta", &p.rpe_delta, "s, pose-pair spacing of the relative pose error in summary.json"},
+      {"frustum_every", &p.frustum_every, "frames between camera frustums in scene.3Dscene", 0.0, 100000.0},
+      {"image_width", &p.image_width, "px, mesh.png and trajectory.png", 16.0, 8192.0},
+      {"image_height", &p.image_height, "px", 16.0, 8192.0},
+      {"rpe_delta", &p.rpe_delta, "s, pose-pair spacing of the relative pose error in summary.json", 0.01, 100.0},
   };
 }
 }  // namespace

@@ -2,6 +2,7 @@
 // INI configuration the MRPT way: each stage's parameters are a CLoadableOptions reading its own
 // section. What a stage's saveToConfigFile() writes is, by definition, the set of keys it knows, so
 // a user's file can be checked for typos ("unknown key") against the defaults themselves.
+#include <limits>
 #include <string>
 #include <utility>
 #include <variant>
@@ -32,11 +33,14 @@ std::string dumpConfig(const std::vector<ConfigSection>& known);
 namespace vofusion {
 
 // One INI key bound to a parameter field. A stage lists its keys once and both loading and saving
-// walk that list, so the two can never disagree.
+// walk that list, so the two can never disagree. A numeric key carries its valid range (inclusive):
+// loading a value outside it is a one-line error, saving writes it into the comment, and a test
+// (tests/test_config_ranges.cpp) fails for any numeric key without one.
 struct ConfigKey {
   const char* name;
   std::variant<int*, float*, double*, bool*, std::string*> value;
   const char* comment;  // unit and meaning, written next to the value
+  double lo = std::numeric_limits<double>::quiet_NaN(), hi = std::numeric_limits<double>::quiet_NaN();
 };
 void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
 void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
