@@ -1,5 +1,6 @@
 // TUM-layout folders from other sensors: the depth unit (--depth-scale, a camera file), intrinsics
 // from intrinsics.txt / camera.yaml, a guess only for 640x480 and then announced, sizes checked.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -143,4 +144,36 @@ TEST(CameraFiles, MillimetreCopyOfTumGivesTheSameTrajectory) {
   std::printf("mm copy vs original, %zu frames: position difference RMS %.5f m, largest %.5f m\n", frames, rms, worst);
   EXPECT_LT(rms, 0.001);
   EXPECT_LT(worst, 0.003);  // millimetre steps instead of 0.2 mm ones move single frames a little
+}
+
+// "Up" from TUM's accelerometer.txt: turned into the world by the ground truth, it points along the
+// ground truth's z (its up) on both shared sequences, the slow and the fast one: a few degrees per
+// frame (the camera's own accelerations add to gravity) and ~4 deg averaged over the recording as the
+// run outputs use it, on both (the same offset on both: the mocap frame's z and the accelerometer).
+TEST(CameraFiles, AccelerometerUpMatchesGroundTruthUp) {
+  for (const std::string name : {"rgbd_dataset_freiburg1_xyz_first300", "rgbd_dataset_freiburg1_rpy_first100"}) {
+    const std::string folder = (fs::path(test::tumFirst300()).parent_path() / name).string();
+    VOFUSION_REQUIRE_DATA(folder);
+    TumFolderSource src(folder, {});
+    double worst = 0, sum = 0;
+    int n = 0;
+    Eigen::Vector3d mean_up = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < src.size(); i += 5) {
+      const Frame f = src.read(i);
+      ASSERT_TRUE(f.up.has_value()) << name << " frame " << i;
+      ASSERT_TRUE(f.groundTruth.has_value());
+      const Eigen::Vector3d up_world = f.groundTruth->getRotationMatrix().asEigen() * *f.up;
+      const double deg = std::acos(std::clamp(up_world.z(), -1.0, 1.0)) * 180 / M_PI;
+      worst = std::max(worst, deg);
+      sum += deg;
+      mean_up += up_world;
+      ++n;
+    }
+    const double mean_deg = std::acos(std::clamp(mean_up.normalized().z(), -1.0, 1.0)) * 180 / M_PI;
+    std::printf("%s: accelerometer up vs ground truth: %.2f deg averaged; per frame mean %.2f, worst %.2f deg (%d frames)\n",
+                name.c_str(), mean_deg, sum / n, worst, n);
+    EXPECT_LT(mean_deg, 6.0) << name;
+    EXPECT_LT(sum / n, 8.0) << name;
+    EXPECT_LT(worst, 20.0) << name;
+  }
 }

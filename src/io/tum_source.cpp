@@ -260,6 +260,21 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
 
   const std::string gt = (fs::path(folder) / "groundtruth.txt").string();
   if (fs::exists(gt)) gt_ = readTumTrajectory(gt);
+
+  // The Kinect's accelerometer reads the reaction to gravity ("up") with its x and y axes opposite to
+  // the optical frame's (checked on fr1 xyz and rpy against their ground truth).
+  const std::string accel = (fs::path(folder) / "accelerometer.txt").string();
+  if (fs::exists(accel))
+    for (const auto& l : dataLines(readTextFile(accel))) {
+      std::istringstream ls(l.text);
+      double t, a[3];
+      std::string extra;
+      if (!(ls >> t >> a[0] >> a[1] >> a[2]) || (ls >> extra) || !std::isfinite(t))
+        throw InputError(accel, "line " + std::to_string(l.number) + ": expected 'timestamp ax ay az'");
+      const Eigen::Vector3d up(-a[0], -a[1], a[2]);
+      if (up.allFinite() && up.norm() > 1.0) accel_.emplace_back(t, up);  // m/s^2; ~0 = no reading
+    }
+  std::sort(accel_.begin(), accel_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
 }
 
 Frame TumFolderSource::read(std::size_t i) const {
@@ -276,6 +291,12 @@ Frame TumFolderSource::read(std::size_t i) const {
   f.depth = loadTumDepth((fs::path(folder_) / a.depth.file).string(), camera_.width, camera_.height, depth_scale_);
   mrpt::poses::CPose3D gt;
   if (interpolatePose(gt_, f.timestamp, 0.05, gt)) f.groundTruth = gt;
+  // The mean of the readings within 0.1 s: the camera's own accelerations average out a little.
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  auto it = std::lower_bound(accel_.begin(), accel_.end(), f.timestamp - 0.1,
+                             [](const auto& a, double t) { return a.first < t; });
+  for (; it != accel_.end() && it->first <= f.timestamp + 0.1; ++it) sum += it->second;
+  if (sum.norm() > 0) f.up = sum.normalized();
   return f;
 }
 

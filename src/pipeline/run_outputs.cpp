@@ -156,6 +156,7 @@ struct RunRecorder::Impl {
   MeshCleanParams mesh_params;
   std::unique_ptr<RawlogThread> rawlog;
   Trajectory ground_truth;
+  Eigen::Vector3d up_sum = Eigen::Vector3d::Zero();  // accelerometer "up" of the frames, in the map
   CameraIntrinsics camera;
   bool have_camera = false;
 
@@ -176,6 +177,7 @@ RunRecorder::~RunRecorder() = default;
 void RunRecorder::add(const Frame& frame, const FrameReport& report) {
   if (!impl_->have_camera) impl_->camera = frame.camera, impl_->have_camera = true;
   if (frame.groundTruth) impl_->ground_truth.push_back({frame.timestamp, *frame.groundTruth});
+  if (frame.up && report.tracked) impl_->up_sum += report.pose.getRotationMatrix().asEigen() * *frame.up;
   if (impl_->rawlog) impl_->rawlog->push(frame, report);
 }
 
@@ -267,12 +269,17 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   wrote("mesh.ply", std::to_string(mesh.faces.size()) + " faces");
 
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
+  // Up: the accelerometer's where the recording has one, else the scene finds the floor.
   SceneOptions scene_opts;
   scene_opts.frustum_every_k = p.frustum_every;
+  if (m.up_sum.norm() > 0) {
+    scene_opts.up_vector = m.up_sum.normalized();
+    s["up_from_accelerometer"] = {m.up_sum.normalized().x(), m.up_sum.normalized().y(), m.up_sum.normalized().z()};
+  }
   exportScene(staged("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam, scene_opts);
   wrote("scene.3Dscene", "open with SceneViewer3D");
   if (!mesh.empty()) {
-    renderMeshPng(staged("mesh.png"), mesh, &rec.trajectory(), p.image_width, p.image_height);
+    renderMeshPng(staged("mesh.png"), mesh, &rec.trajectory(), p.image_width, p.image_height, scene_opts.up_vector);
     wrote("mesh.png", std::to_string(p.image_width) + "x" + std::to_string(p.image_height));
   }
 

@@ -14,19 +14,21 @@
 
 namespace vofusion {
 
-void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width, int height) {
+void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width, int height,
+                   const std::optional<Eigen::Vector3d>& up_vector) {
   if (width < 16 || height < 16 || width > 8192 || height > 8192)
     throw InputError(png, "unreasonable image size " + std::to_string(width) + "x" + std::to_string(height));
   const Trajectory empty;
   const Trajectory& traj = path ? *path : empty;
   SceneOptions opt;
   opt.frustum_every_k = 0;
+  opt.up_vector = up_vector;
   const auto scene = buildScene(mesh, traj, nullptr, CameraIntrinsics{}, opt);
   scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
 
   // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
   // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
-  const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up);
+  const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up, opt.up_vector);
   // Frame the bulk of the mesh (2nd to 98th percentile per axis), not its stray fragments.
   std::vector<double> axis[3];
   const auto add = [&](double x, double y, double z) {

@@ -61,14 +61,14 @@ static Eigen::Vector3d dominantPlaneNormal(const TriangleMesh& mesh, const Eigen
   return best;
 }
 
-mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh* mesh, SceneOptions::Up up) {
+mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh* mesh, SceneOptions::Up up,
+                                     const std::optional<Eigen::Vector3d>& up_vector) {
   bool camera_frame = up == SceneOptions::Up::MinusY;
   if (up == SceneOptions::Up::Auto) camera_frame = !path.empty() && path.front().pose.asVectorVal().norm() < 1e-6;
-  if (!camera_frame) return CPose3D();
+  if (!camera_frame && !up_vector) return CPose3D();
   Eigen::Vector3d u(0, -1, 0);
-  if (up == SceneOptions::Up::Auto && mesh && !mesh->faces.empty()) {
-    u = dominantPlaneNormal(*mesh, u);
-  }
+  if (up_vector && up_vector->norm() > 0) u = up_vector->normalized();
+  else if (up == SceneOptions::Up::Auto && mesh && !mesh->faces.empty()) u = dominantPlaneNormal(*mesh, u);
   // The smallest rotation taking u to +z.
   const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(u, Eigen::Vector3d::UnitZ());
   mrpt::math::CMatrixDouble44 T;
@@ -164,7 +164,7 @@ std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh,
                                                         const Trajectory* ground_truth, const CameraIntrinsics& cam,
                                                         const SceneOptions& opt) {
   auto scene = std::make_shared<mrpt::opengl::COpenGLScene>();
-  const CPose3D up = sceneUpRotation(path_est.empty() && ground_truth ? *ground_truth : path_est, &mesh, opt.up);
+  const CPose3D up = sceneUpRotation(path_est.empty() && ground_truth ? *ground_truth : path_est, &mesh, opt.up, opt.up_vector);
 
   auto world = mrpt::opengl::CSetOfObjects::Create();
   world->setName("world");

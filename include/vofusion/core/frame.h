@@ -4,6 +4,7 @@
 #include <optional>
 #include <string>
 
+#include <Eigen/Core>
 #include <mrpt/poses/CPose3D.h>
 #include <opencv2/core.hpp>
 
@@ -21,6 +22,8 @@ struct Frame {
   cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
   CameraIntrinsics camera;
   std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
+  std::optional<Eigen::Vector3d> up;  // unit "up" (against gravity) in the camera frame, from the
+                                      // recording's accelerometer when it has one (TUM accelerometer.txt)
 
   bool valid() const { return !rgb.empty() && !depth.empty(); }
 };

@@ -13,8 +13,13 @@
 //   c = (319.5, 239.5), both only for 640x480 images (anything else is an error).
 // Intrinsics that do not fit the images (another size, principal point outside) are an error, and a
 // depth scale under which the first frame's median reading is beyond 5 m or within 0.4 m is announced.
+// accelerometer.txt ("timestamp ax ay az", the Kinect's accelerometer), when present, gives each frame
+// its "up" (Frame::up): the mean reading within 0.1 s, its x and y axes turned into the optical frame's.
 #include <string>
+#include <utility>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "vofusion/core/trajectory.h"
 #include "vofusion/io/frame_source.h"
@@ -56,6 +61,7 @@ class TumFolderSource : public IndexedFrameSource {
   std::string folder_;
   CameraIntrinsics camera_;
   double depth_scale_ = 5000.0;
+  std::vector<std::pair<double, Eigen::Vector3d>> accel_;  // accelerometer.txt: time, up in the camera frame
   std::vector<TumAssociation> pairs_;
   Trajectory gt_;
 };

@@ -9,7 +9,10 @@
 //   "frustums"      CSetOfObjects of CFrustum, one every k frames of the estimated path
 //   "grid"          CGridPlaneXY under the reconstruction (a child of the scene, outside "world")
 #include <memory>
+#include <optional>
 #include <string>
+
+#include <Eigen/Core>
 
 #include <mrpt/opengl/COpenGLScene.h>
 #include <mrpt/poses/CPose3D.h>
@@ -26,6 +29,8 @@ struct SceneOptions {
   // the normal of the mesh's dominant roughly-horizontal surface (floor, table) found near the
   // camera's -y, or -y itself without a mesh; +z otherwise (TUM ground truth, mocap frame).
   Up up = Up::Auto;
+  // Measured "up" in the reconstruction's frame (e.g. from an accelerometer): wins over `up`.
+  std::optional<Eigen::Vector3d> up_vector;
   int frustum_every_k = 30;          // frames; 0: no frustums
   double frustum_depth = 0.15;       // m, distance of the frustum's far plane
   // With a path given: draw only the side of the surface that faces the cameras (decided by an
@@ -36,7 +41,8 @@ struct SceneOptions {
 };
 
 // The rotation (a pure rotation CPose3D) applied to the reconstruction so that its up axis is +z.
-mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh* mesh, SceneOptions::Up up);
+mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh* mesh, SceneOptions::Up up,
+                                     const std::optional<Eigen::Vector3d>& up_vector = std::nullopt);
 
 // The camera frustum pose for a camera-to-world optical pose (x right, y down, z forward):
 // CFrustum looks along +x with z up, so this is pose * (optical <- MRPT body) rotation.
@@ -55,6 +61,6 @@ void exportScene(const std::string& path, const TriangleMesh& mesh, const Trajec
 // given, the camera path, seen from above and behind the cameras, looking at the mesh's centre.
 // Written atomically as PNG; throws InputError(png, ...) on failure (including no EGL device).
 void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width = 1024,
-                   int height = 768);
+                   int height = 768, const std::optional<Eigen::Vector3d>& up_vector = std::nullopt);
 
 }  // namespace vofusion
