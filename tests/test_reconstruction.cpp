@@ -62,14 +62,19 @@ void expectSame(const PipelineRun& a, const PipelineRun& b) {
   EXPECT_EQ(a.fallbacks, b.fallbacks);
 }
 
-}  // namespace
-
-TEST(Reconstruction, OverlappedFusionGivesTheSamePosesAndMeshAsSerial) {
+// 12 frames of the synthetic room at 320x240.
+sim::SimOptions smallRoom() {
   sim::SimOptions o;
   o.scene = "room";
   o.frames = 12;
   o.camera = CameraIntrinsics{}.scaled(0.5);
-  const sim::SyntheticSequence seq(o);
+  return o;
+}
+
+}  // namespace
+
+TEST(Reconstruction, OverlappedFusionGivesTheSamePosesAndMeshAsSerial) {
+  const sim::SyntheticSequence seq(smallRoom());
   const PipelineRun serial = reconstruct(seq, false);
   const PipelineRun overlapped = reconstruct(seq, true);
   ASSERT_GT(serial.faces, 1000u);
@@ -84,11 +89,7 @@ TEST(Reconstruction, OverlappedFusionGivesTheSamePosesAndMeshAsSerial) {
 // poses it; in mode odometry it moves on at constant velocity and the next frame is matched against
 // the last good one, so the path continues from the right place.
 TEST(Reconstruction, AFrameWhoseOdometryFailsLosesNoMotion) {
-  sim::SimOptions o;
-  o.scene = "room";
-  o.frames = 12;
-  o.camera = CameraIntrinsics{}.scaled(0.5);
-  const sim::SyntheticSequence seq(o);
+  const sim::SyntheticSequence seq(smallRoom());
   const std::size_t blank = 6;
   for (const TrackingMode mode : {TrackingMode::Joint, TrackingMode::Odometry}) {
     const PipelineRun run = reconstruct(seq, true, mode, blank);
