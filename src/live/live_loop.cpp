@@ -14,9 +14,10 @@ void LiveOptions::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
   sensor_timeout = cfg.read_double(s, "sensor_timeout", sensor_timeout);
   replay_speed = cfg.read_double(s, "replay_speed", replay_speed);
   max_frames = std::size_t(cfg.read_uint64_t(s, "max_frames", max_frames));
-  if (queue_capacity < 1) throw InputError("[" + s + "] queue_capacity", "must be at least 1");
-  if (!(sensor_timeout > 0)) throw InputError("[" + s + "] sensor_timeout", "must be positive");
-  if (!(replay_speed >= 0)) throw InputError("[" + s + "] replay_speed", "must be >= 0");
+  if (queue_capacity < 1 || queue_capacity > 1000) throw InputError("[" + s + "] queue_capacity", "must be in [1, 1000] frames");
+  if (!(sensor_timeout > 0 && sensor_timeout <= 3600)) throw InputError("[" + s + "] sensor_timeout", "must be in (0, 3600] s");
+  if (!(replay_speed >= 0 && replay_speed <= 1000))
+    throw InputError("[" + s + "] replay_speed", "must be in [0, 1000] (0 = as fast as possible)");
 }
 
 void LiveOptions::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
