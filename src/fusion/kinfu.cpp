@@ -133,6 +133,55 @@ struct KinFu::Impl {
     }
     return pm;
   }
+  // ICP's settings per mode. Weak directions keep the initial guess only when it is worth keeping (the
+  // prior: mode paper-handoff), or follow the prior's pose (mode joint, see projectiveIcp); from the
+  // last pose alone every direction that is not numerically singular is solved.
+  IcpParams icpParams(bool joint, bool seeded, bool have_prior) const {
+    IcpParams ip = params.icp;
+    if (!seeded && !(joint && have_prior)) ip.degenerate_ratio = std::min(ip.degenerate_ratio, params.min_condition);
+    if (joint) ip.point_to_plane_sigma = params.joint_icp_sigma;
+    return ip;
+  }
+  // Mode joint: what a turning camera adds to a residual's noise (the depth camera reads its rows over
+  // joint_rolling_shutter seconds): that time x the turn rate of the initial guess x the scene depth.
+  double rollingShutterSigma(const std::vector<DepthLevel>& levels, const Eigen::Isometry3d& initial, double timestamp) const {
+    if (!(params.joint_rolling_shutter > 0) || !have_last || !(timestamp > last_timestamp)) return 0.0;
+    const double turn = Eigen::AngleAxisd((pose.inverse() * initial).linear()).angle() / (timestamp - last_timestamp);
+    const cv::Mat& d = levels.back().depth;
+    return params.joint_rolling_shutter * turn * cv::mean(d, d > 0)[0];
+  }
+  // Mode joint: the constant-velocity prediction as a motion model, its spread growing with the time
+  // since the last tracked frame.
+  PosePrior motionModel(const Eigen::Isometry3d& velocity_pose, double timestamp) const {
+    PosePrior m;
+    m.pose = velocity_pose;
+    const double frames_since = have_last ? std::max(1.0, (timestamp - last_timestamp) * 30.0) : 1.0;
+    m.sigma_translation = params.motion_sigma_translation * frames_since;
+    m.sigma_rotation = params.motion_sigma_rotation * M_PI / 180.0 * frames_since;
+    return m;
+  }
+  // Why an ICP result is not taken ("" when it is): divergence and degeneracy tests, and a jump from
+  // the prior's pose when given. Mode joint judges the inliers among the pixels that see the model: a
+  // view that is mostly new is no sign of divergence, and there the matches outweigh the few ICP
+  // residuals anyway; its weak directions are held by the prior, so no condition test.
+  std::string rejection(const IcpResult& icp, bool joint, const Eigen::Isometry3d* prior_pose) const {
+    const KinFuParams& P = params;
+    const int judged = joint ? icp.in_view : icp.valid_pixels;
+    if (!icp.solved) return "ICP system not solvable";
+    if (icp.inliers < P.min_inlier_ratio * std::max(1, judged))
+      return "too few ICP inliers (" + std::to_string(icp.inliers) + " of " + std::to_string(judged) + ")";
+    if (!joint && icp.condition < P.min_condition)
+      return "ill-conditioned ICP (eigenvalue ratio " + std::to_string(icp.condition) + ")";
+    if (prior_pose) {
+      const Eigen::Isometry3d d = prior_pose->inverse() * icp.pose;
+      const double dt = d.translation().norm();
+      const double da = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
+      if (dt > P.max_jump_translation || da > P.max_jump_rotation)
+        return "ICP jumped from the prior (" + std::to_string(dt) + " m / " + std::to_string(da) + " deg)";
+    }
+    return "";
+  }
+
   // Mode joint: the candidate that explains the frame clearly best after a few ICP steps at the
   // coarsest level (so errors ICP corrects anyway do not count); the prior wins ties (where geometry
   // cannot tell, e.g. sliding along a wall). Returns the candidate; `refined` gets its refined pose.
@@ -271,16 +320,9 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
   } else {
     const bool joint = s.mode == TrackingMode::Joint;
     const bool seeded = s.mode == TrackingMode::PaperHandoff && have_prior;
-    IcpParams ip = P.icp;
-    // Weak directions keep the initial guess only when it is worth keeping (the prior); from the
-    // last pose alone (mode kinfu) every direction that is not numerically singular is solved.
-    if (!seeded) ip.degenerate_ratio = std::min(ip.degenerate_ratio, P.min_condition);
+    IcpParams ip = s.icpParams(joint, seeded, have_prior);
     PointMatches matches;
     if (joint) {
-      // ICP's weak directions follow the prior's pose (projectiveIcp); without a prior nothing else
-      // can decide them: solve all but numerically null ones.
-      ip.point_to_plane_sigma = P.joint_icp_sigma;
-      ip.degenerate_ratio = have_prior ? P.icp.degenerate_ratio : std::min(P.icp.degenerate_ratio, P.min_condition);
       res.guess = s.chooseGuess(levels, ip, have_prior, prior_pose, velocity_pose);
       if (have_prior) matches = s.matchesOf(*prior, *ref_pose, prior_pose);
     } else {
@@ -289,22 +331,10 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
     const Eigen::Isometry3d& initial = res.guess == InitialGuess::Prior              ? prior_pose
                                        : res.guess == InitialGuess::ConstantVelocity ? velocity_pose
                                                                                      : s.pose;
-    if (joint && P.joint_rolling_shutter > 0 && s.have_last && frame.timestamp > s.last_timestamp) {
-      // Turn rate from the initial guess; the scene depth from the coarsest level's readings.
-      const double turn = Eigen::AngleAxisd((s.pose.inverse() * initial).linear()).angle() / (frame.timestamp - s.last_timestamp);
-      const cv::Mat& d = levels.back().depth;
-      const double depth = cv::mean(d, d > 0)[0];
-      ip.point_to_plane_sigma += P.joint_rolling_shutter * turn * depth;
-    }
+    if (joint) ip.point_to_plane_sigma += s.rollingShutterSigma(levels, initial, frame.timestamp);
     res.icp_sigma = ip.point_to_plane_sigma;
     t0 = std::chrono::steady_clock::now();
-    // Mode joint: the constant-velocity prediction as a motion model, its spread growing with the time
-    // since the last tracked frame.
-    PosePrior motion;
-    motion.pose = velocity_pose;
-    const double frames_since = s.have_last ? std::max(1.0, (frame.timestamp - s.last_timestamp) * 30.0) : 1.0;
-    motion.sigma_translation = P.motion_sigma_translation * frames_since;
-    motion.sigma_rotation = P.motion_sigma_rotation * M_PI / 180.0 * frames_since;
+    const PosePrior motion = s.motionModel(velocity_pose, frame.timestamp);
     JointTerms terms;
     if (joint) {
       if (!matches.camera_points.empty()) terms.matches = &matches;
@@ -318,22 +348,7 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
     res.condition = icp.condition;
     res.degenerate_dims = icp.degenerate_dims;
     res.match_inliers = icp.point_inliers;
-    // Divergence / degeneracy tests.
-    if (!icp.solved) res.reason = "ICP system not solvable";
-    // Mode joint judges ICP on the pixels that see the model: a view that is mostly new is no sign
-    // of divergence, and there the matches outweigh the few ICP residuals anyway.
-    else if (icp.inliers < P.min_inlier_ratio * std::max(1, joint ? icp.in_view : icp.valid_pixels))
-      res.reason = "too few ICP inliers (" + std::to_string(icp.inliers) + " of " +
-                   std::to_string(joint ? icp.in_view : icp.valid_pixels) + ")";
-    else if (!joint && icp.condition < P.min_condition)
-      res.reason = "ill-conditioned ICP (eigenvalue ratio " + std::to_string(icp.condition) + ")";
-    else if (seeded || (joint && have_prior)) {
-      const Eigen::Isometry3d d = prior_pose.inverse() * icp.pose;
-      const double dt = d.translation().norm();
-      const double da = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
-      if (dt > P.max_jump_translation || da > P.max_jump_rotation)
-        res.reason = "ICP jumped from the prior (" + std::to_string(dt) + " m / " + std::to_string(da) + " deg)";
-    }
+    res.reason = s.rejection(icp, joint, seeded || (joint && have_prior) ? &prior_pose : nullptr);
     if (res.reason.empty()) {
       res.tracked = true;
       new_pose = icp.pose;
