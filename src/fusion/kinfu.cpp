@@ -262,13 +262,13 @@ KinFu::KinFu(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CP
 
 KinFu::~KinFu() = default;
 
-FusionResult KinFu::process(const Frame& frame, const MotionPrior* prior) {
-  FusionResult res = track(frame, prior);
+FusionResult KinFu::process(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry) {
+  FusionResult res = track(frame, prior, geometry);
   fuse(res);
   return res;
 }
 
-FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
+FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry) {
   Impl& s = *impl_;
   s.pending.valid = false;
   const KinFuParams& P = s.params;
@@ -289,7 +289,11 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior) {
   // ICP level is then 320x240, which KinFu-style coarse-to-fine tracking hardly misses.
   CameraIntrinsics track_cam = cam;
   std::vector<DepthLevel> levels;
-  if (P.tracking_downsample == 2) {
+  if (geometry && geometry->points.size() == frame.depth.size() && geometry->normals.size() == frame.depth.size()) {
+    // The frame's shared maps, averaged down: one back-projection and normal map serve BRAND and ICP.
+    levels = levelsFromGeometry(*geometry, frame.depth, cam, P.tracking_downsample, P.preprocess);
+    track_cam = levels[0].camera;
+  } else if (P.tracking_downsample == 2) {
     PreprocessParams pp = P.preprocess;
     pp.sigma_spatial *= 0.5f;
     pp.kernel = std::max(3, ((pp.kernel + 1) / 2) | 1);

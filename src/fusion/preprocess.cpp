@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/parallel.h"
+#include "vofusion/fusion/projective_icp.h"
 
 namespace vofusion::fusion {
 
@@ -168,6 +169,42 @@ std::vector<DepthLevel> preprocessDepth(const cv::Mat& depth, const CameraIntrin
   for (auto& lv : levels) {
     lv.vertices = depthToVertices(lv.depth, lv.camera);
     lv.normals = verticesToNormals(lv.vertices, p.max_normal_jump);
+  }
+  return levels;
+}
+
+std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat& depth, const CameraIntrinsics& cam,
+                                           int downsample, const PreprocessParams& p) {
+  std::vector<DepthLevel> levels(std::max(1, p.levels));
+  cv::Mat clipped = clipDepth(depth, p.min_depth, p.max_depth), vertices = g.points, normals = g.normals;
+  CameraIntrinsics c = cam;
+  c.width = depth.cols;
+  c.height = depth.rows;
+  for (int k = 1; k < downsample; ++k) {
+    clipped = downsampleDepth(clipped, p.sigma_depth);
+    cv::Mat v, n;
+    downsampleMaps(vertices, normals, v, n);
+    vertices = v, normals = n;
+    c = c.scaled(0.5);
+  }
+  for (std::size_t l = 0; l < levels.size(); ++l) {
+    if (l > 0) {
+      clipped = downsampleDepth(clipped, p.sigma_depth);
+      cv::Mat v, n;
+      downsampleMaps(levels[l - 1].vertices, levels[l - 1].normals, v, n);
+      vertices = v, normals = n;
+      c = c.scaled(0.5);
+    } else {
+      vertices = vertices.clone(), normals = normals.clone();  // the shared maps stay as they are
+    }
+    // Only readings the tracker uses (the same depth range as preprocessDepth's clip).
+    parallelFor(0, vertices.rows, [&](int y) {
+      cv::Vec3f* v = vertices.ptr<cv::Vec3f>(y);
+      cv::Vec3f* n = normals.ptr<cv::Vec3f>(y);
+      for (int x = 0; x < vertices.cols; ++x)
+        if (!(v[x][2] >= p.min_depth && v[x][2] <= p.max_depth)) v[x] = n[x] = cv::Vec3f(kNaN, kNaN, kNaN);
+    }, 1, vertices.total() >= kParallelMinPixels);
+    levels[l] = {clipped, vertices, normals, c};
   }
   return levels;
 }

@@ -358,6 +358,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
     for (std::size_t i = 0; i < older.size(); ++i) split[1 + i].add(cur.descriptors, older[i].features->descriptors);
   }
   m.finish(frame, ex, cur, r.times);
+  if (P.brand.use_geometry) r.geometry = std::make_shared<const FrameGeometry>(FrameGeometry{ex.points, ex.normals});
   r.keypoints = int(cur.keypoints.size());
   r.star_keypoints = cur.star;
   r.narf_keypoints = cur.narf;

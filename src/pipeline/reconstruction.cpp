@@ -92,13 +92,13 @@ FrameReport Reconstruction::process(const Frame& frame) {
     m.fusing_frame = frame;
     m.fusing_frame.depth = frame.depth.clone();
     m.fusing_frame.rgb = frame.rgb.clone();
-    f = m.kinfu->track(m.fusing_frame, have_prior);
+    f = m.kinfu->track(m.fusing_frame, have_prior, r.odometry.geometry.get());
     m.fusing_result = f;
     m.fusing_result.times = StageTimes();
     m.fusing_pending = true;
     m.fusing.run([&m] { m.kinfu->fuse(m.fusing_result); });
   } else {
-    f = m.kinfu->process(frame, have_prior);
+    f = m.kinfu->process(frame, have_prior, r.odometry.geometry.get());
   }
   r.times.merge(f.times);
   r.tracked = f.tracked || m.frames == 0;

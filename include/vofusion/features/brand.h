@@ -13,6 +13,7 @@
 #include <opencv2/core.hpp>
 
 #include "vofusion/core/camera.h"
+#include "vofusion/core/point_maps.h"
 
 namespace vofusion {
 
@@ -30,11 +31,6 @@ struct BrandParams : public mrpt::config::CLoadableOptions {
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
 };
 
-// Back-projects depth (CV_32F metres) to a CV_32FC3 point map in the camera frame; NaN where no reading.
-cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& camera);
-// Integral-image normals (average 3D gradient over boxes of half-size `window`), CV_32FC3 unit
-// vectors facing the camera; NaN where undefined (no depth, or a depth jump > max_depth_step).
-cv::Mat computeNormalMap(const cv::Mat& points, int window, float max_depth_step);
 
 class BrandExtractor {
  public:

@@ -113,13 +113,16 @@ class KinFu {
   ~KinFu();
 
   // prior: the motion from an earlier frame (by Frame::index) to this one, nullptr when there is none.
-  FusionResult process(const Frame& frame, const fusion::MotionPrior* prior);
+  // geometry: the frame's point and normal maps when another stage computed them (the odometry, for
+  // BRAND): ICP then reads them instead of filtering the depth again; nullptr: KinectFusion's own
+  // bilateral filter and pyramid.
+  FusionResult process(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry = nullptr);
 
   // process() in two halves, for a caller that overlaps fusing frame k with the odometry of frame
   // k+1: track() estimates the frame's pose (it needs the previous frame's fuse() done); fuse()
   // integrates that frame and ray-casts the model for the next one, adding its stage times to res.
   // The frame's images must stay unchanged until fuse() returns.
-  FusionResult track(const Frame& frame, const fusion::MotionPrior* prior);
+  FusionResult track(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry = nullptr);
   void fuse(FusionResult& res);
 
   mrpt::poses::CPose3D pose() const;

@@ -6,6 +6,7 @@
 #include <opencv2/core.hpp>
 
 #include "vofusion/core/camera.h"
+#include "vofusion/core/point_maps.h"
 
 namespace vofusion::fusion {
 
@@ -40,5 +41,11 @@ cv::Mat clipDepth(const cv::Mat& depth, float min_depth, float max_depth);
 // Full chain: clip, filter, pyramid, vertex + normal maps.
 std::vector<DepthLevel> preprocessDepth(const cv::Mat& depth, const CameraIntrinsics& cam,
                                         const PreprocessParams& p);
+// The pyramid from a frame's shared geometry (core/point_maps.h) instead of filtering again: the full
+// resolution point and normal maps averaged over 2x2 blocks `downsample - 1` times for level 0, then
+// once per level; readings outside [min_depth, max_depth] are dropped. `depth` is the frame's raw depth
+// (the levels' depth images), cam its full-resolution camera.
+std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& geometry, const cv::Mat& depth, const CameraIntrinsics& cam,
+                                           int downsample, const PreprocessParams& p);
 
 }  // namespace vofusion::fusion

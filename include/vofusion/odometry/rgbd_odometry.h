@@ -9,6 +9,7 @@
 #include <mrpt/poses/CPose3D.h>
 
 #include "vofusion/core/frame.h"
+#include "vofusion/core/point_maps.h"
 #include "vofusion/core/timing.h"
 #include "vofusion/features/brand.h"
 #include "vofusion/features/narf_detector.h"
@@ -77,6 +78,9 @@ struct OdometryResult {
   // camera coordinates and their matches in the reference frame's camera coordinates, m. A tracker
   // weighs them in its own estimate.
   Points3 inlier_current, inlier_reference;
+  // The frame's point and normal maps the odometry computed for BRAND (null when it did not, e.g.
+  // [brand] use_geometry = false): the pipeline hands them to the tracker, so they are computed once.
+  std::shared_ptr<const FrameGeometry> geometry;
 };
 
 class RgbdOdometry {

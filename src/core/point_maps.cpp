@@ -1,0 +1,83 @@
+#include "vofusion/core/point_maps.h"
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include <opencv2/imgproc.hpp>
+
+#include "vofusion/core/parallel.h"
+
+namespace vofusion {
+
+cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& c) {
+  CV_Assert(depth.type() == CV_32FC1);
+  cv::Mat pts(depth.size(), CV_32FC3);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float ifx = float(1.0 / c.fx), ify = float(1.0 / c.fy), cx = float(c.cx), cy = float(c.cy);
+  parallelFor(0, depth.rows, [&](int y) {
+    const float* d = depth.ptr<float>(y);
+    cv::Vec3f* p = pts.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < depth.cols; ++x) {
+      const float z = d[x];
+      p[x] = z > 0.f ? cv::Vec3f((x - cx) * z * ifx, (y - cy) * z * ify, z) : cv::Vec3f(nan, nan, nan);
+    }
+  });
+  return pts;
+}
+
+cv::Mat computeNormalMap(const cv::Mat& points, int w, float max_depth_step) {
+  CV_Assert(points.type() == CV_32FC3 && w >= 1);
+  const int rows = points.rows, cols = points.cols;
+  // Integral images of the valid points and of their count.
+  cv::Mat clean(points.size(), CV_32FC3), valid(points.size(), CV_8U);
+  for (int y = 0; y < rows; ++y) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
+    cv::Vec3f* q = clean.ptr<cv::Vec3f>(y);
+    uint8_t* v = valid.ptr<uint8_t>(y);
+    for (int x = 0; x < cols; ++x) {
+      const bool ok = std::isfinite(p[x][2]);
+      q[x] = ok ? p[x] : cv::Vec3f(0, 0, 0);
+      v[x] = ok;
+    }
+  }
+  cv::Mat sum, cnt;
+  cv::integral(clean, sum, CV_64F);
+  cv::integral(valid, cnt, CV_32S);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  cv::Mat normals(points.size(), CV_32FC3, cv::Scalar::all(nan));
+  const int min_count = (w * (2 * w + 1)) / 2;
+  // Mean point of the box [x0, x1) x [y0, y1); false if too few readings.
+  auto mean = [&](int x0, int y0, int x1, int y1, cv::Vec3d& m) {
+    const int n = cnt.at<int>(y1, x1) - cnt.at<int>(y0, x1) - cnt.at<int>(y1, x0) + cnt.at<int>(y0, x0);
+    if (n < min_count) return false;
+    m = (sum.at<cv::Vec3d>(y1, x1) - sum.at<cv::Vec3d>(y0, x1) - sum.at<cv::Vec3d>(y1, x0) + sum.at<cv::Vec3d>(y0, x0)) /
+        double(n);
+    return true;
+  };
+  // Evaluated on every second pixel and copied to its 2x2 block: the boxes are 2w+1 wide, so
+  // neighbouring normals are nearly equal anyway, and this is 4x cheaper.
+  parallelFor(0, std::max(0, (rows - 2 * w) / 2), [&](int i) {
+    const int y = w + 2 * i;
+    cv::Vec3f* out = normals.ptr<cv::Vec3f>(y);
+    cv::Vec3f* out2 = normals.ptr<cv::Vec3f>(y + 1);
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
+    for (int x = w; x < cols - w - 1; x += 2) {
+      if (!std::isfinite(p[x][2])) continue;
+      cv::Vec3d l, r, t, b;
+      if (!mean(x - w, y - w, x, y + w + 1, l) || !mean(x + 1, y - w, x + w + 1, y + w + 1, r) ||
+          !mean(x - w, y - w, x + w + 1, y, t) || !mean(x - w, y + 1, x + w + 1, y + w + 1, b))
+        continue;
+      if (std::abs(r[2] - l[2]) > max_depth_step || std::abs(b[2] - t[2]) > max_depth_step) continue;
+      cv::Vec3d n = (r - l).cross(b - t);
+      const double len = cv::norm(n);
+      if (len <= 0) continue;
+      n /= len;
+      if (n.dot(cv::Vec3d(p[x])) > 0) n = -n;  // face the camera
+      out[x] = out[x + 1] = out2[x] = out2[x + 1] = cv::Vec3f(n);
+    }
+  });
+  return normals;
+}
+
+}  // namespace vofusion
