@@ -1,7 +1,7 @@
 // vofusion: an RGB-D recording in, a trajectory, a clean coloured mesh and an MRPT 3D scene out.
 //   vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]
 //            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
-//            [--depth-scale S]
+//            [--depth-scale S] [--no-loop-closure]
 //            [--raw-mesh] [--dump-config]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
@@ -30,9 +30,11 @@ void onSigint(int) { g_stop = true; }
 const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]\n"
     "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
-    "                [--depth-scale S] [--raw-mesh] [--dump-config]\n"
+    "                [--depth-scale S] [--no-loop-closure] [--raw-mesh] [--dump-config]\n"
     "  --depth-scale  TUM-layout folders: depth PNG units per metre (default: the folder's intrinsics.txt /\n"
-    "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n";
+    "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n"
+    "  --no-loop-closure  keyframes, place recognition and the pose graph off ([loop] enabled = false);\n"
+    "                 trajectory.txt is then the tracked trajectory\n";
 
 std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanParams& mesh) {
   auto sections = reconstructionConfigSections();
@@ -43,7 +45,7 @@ std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanP
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale"},
-                       {"--raw-mesh", "--dump-config", "--help"});
+                       {"--raw-mesh", "--dump-config", "--no-loop-closure", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
     return 0;
@@ -59,8 +61,9 @@ int body(int argc, char** argv) {
   if (!out_dir) throw InputError("usage", "--out <dir> is required");
 
   const std::string config_path = cl.value("--config", "");
-  const auto cfg = loadConfig(config_path);
+  auto cfg = loadConfig(config_path);
   checkConfigKeys(cfg, config_path, allSections(default_out, default_mesh));
+  if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
   const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
   OutputParams out_params;
   MeshCleanParams mesh_params;
@@ -69,6 +72,7 @@ int body(int argc, char** argv) {
     mesh_params.loadFromConfigFile(cfg, "mesh");
     OdometryParams().loadFromConfigFile(cfg, "odometry");
     KinFuParams().loadFromConfigFile(cfg, "kinfu");
+    loop::LoopParams().loadFromConfigFile(cfg, "loop");
   } catch (const InputError& e) {
     if (config_path.empty()) throw;
     throw InputError(config_path, e.what());
@@ -95,7 +99,9 @@ int body(int argc, char** argv) {
     const FrameReport report = rec.process(frame);
     recorder.add(frame, report);
     ++done;
-    progress.update(done, "fallbacks " + std::to_string(rec.fallbacks()) + "  lost " + std::to_string(rec.lostFrames()));
+    std::string status = "fallbacks " + std::to_string(rec.fallbacks()) + "  lost " + std::to_string(rec.lostFrames());
+    if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
+    progress.update(done, status);
   }
   const bool interrupted = g_stop;
   std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C while writing outputs kills as usual
@@ -103,9 +109,22 @@ int body(int argc, char** argv) {
   if (done == 0) throw InputError(source->name(), "no frames to process");
   if (frames_with_depth == 0 && !interrupted)
     throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
-
+  const std::string source_name = source->name();
+  source.reset();
+  rec.finish();
   RunInfo info;
-  info.input = source->name();
+  if (rec.mapNeedsReintegration() && !interrupted) {
+    // Loops moved the poses: the map, fused at the tracked ones, is fused again at the corrected ones
+    // (reading the recording a second time rather than keeping every frame in memory).
+    auto again = std::make_unique<PrefetchingSource>(openFrameSource(input, src_opts));
+    Progress refuse("vofusion [re-fusing at the loop-closed poses]", done);
+    const std::size_t fused = rec.reintegrate([&](Frame& f) { return again->next(f); },
+                                              [&](std::size_t n) { refuse.update(n); });
+    refuse.finish();
+    info.extra["loop_closure_reintegration"] = {{"frames_fused", fused}, {"seconds", refuse.elapsedSeconds()}};
+  }
+
+  info.input = source_name;
   info.config = config_path;
   info.interrupted = interrupted;
   info.seconds = progress.elapsedSeconds();

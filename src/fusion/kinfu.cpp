@@ -418,6 +418,26 @@ void KinFu::fuse(FusionResult& res) {
   s.stats.times.merge(times);
 }
 
+void KinFu::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world) {
+  Impl& s = *impl_;
+  ++s.stats.frames;
+  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) return;
+  CameraIntrinsics cam = frame.camera;
+  cam.width = frame.depth.cols;
+  cam.height = frame.depth.rows;
+  s.pose = toEigen(cam_to_world);
+  StageTimes times;
+  auto t0 = std::chrono::steady_clock::now();
+  if (s.volume->shiftIfNeeded(s.focusPoint(s.pose), s.params.shift_threshold)) ++s.stats.shifts;
+  times.add("shift", seconds(t0));
+  t0 = std::chrono::steady_clock::now();
+  s.volume->integrate(frame.depth, frame.rgb, cam, s.pose.cast<float>());
+  times.add("integrate", seconds(t0));
+  s.have_model = true;
+  ++s.stats.tracked;
+  s.stats.times.merge(times);
+}
+
 mrpt::poses::CPose3D KinFu::pose() const { return toMrpt(impl_->pose); }
 
 TriangleMesh KinFu::extractMesh() const { return impl_->volume->extractMesh(); }

@@ -359,6 +359,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   }
   m.finish(frame, ex, cur, r.times);
   if (P.brand.use_geometry) r.geometry = std::make_shared<const FrameGeometry>(FrameGeometry{ex.points, ex.normals});
+  r.features = std::make_shared<const DescribedKeypoints>(DescribedKeypoints{cur.descriptors, cur.points});
   r.keypoints = int(cur.keypoints.size());
   r.star_keypoints = cur.star;
   r.narf_keypoints = cur.narf;

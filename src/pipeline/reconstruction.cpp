@@ -12,6 +12,13 @@ namespace {
 // pointers to their defaults.
 const OdometryParams& defaultOdometry() { static const OdometryParams p; return p; }
 const KinFuParams& defaultKinFu() { static const KinFuParams p; return p; }
+const loop::LoopParams& defaultLoop() { static const loop::LoopParams p; return p; }
+
+Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
+  Eigen::Isometry3d T;
+  T.matrix() = p.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
+  return T;
+}
 
 // What fusion is told about the odometry's motion: pose, covariance and inlier matches.
 fusion::MotionPrior motionPriorOf(const OdometryResult& o) {
@@ -26,7 +33,7 @@ fusion::MotionPrior motionPriorOf(const OdometryResult& o) {
 }  // namespace
 
 std::vector<ConfigSection> reconstructionConfigSections() {
-  return {{"odometry", &defaultOdometry()}, {"kinfu", &defaultKinFu()}};
+  return {{"odometry", &defaultOdometry()}, {"kinfu", &defaultKinFu()}, {"loop", &defaultLoop()}};
 }
 
 struct Reconstruction::Impl {
@@ -35,7 +42,13 @@ struct Reconstruction::Impl {
   KinFuParams kinfu_params;
   std::unique_ptr<RgbdOdometry> odometry;  // null in mode kinfu: ICP alone, as KinFu LS
   std::unique_ptr<KinFu> kinfu;
-  Trajectory trajectory;
+  Trajectory trajectory;  // tracked
+  loop::LoopParams loop_params;
+  std::unique_ptr<loop::LoopCloser> loops;  // null: loop closure off
+  Trajectory optimised;                     // after finish(), when loop closure ran
+  bool finished = false, reintegrated = false;
+  KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
+  std::vector<bool> fused;                  // per frame: fused into the map during tracking
   StageTimes times;
   std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
   std::map<std::string, std::size_t> rejections;  // why ICP was rejected (reason without its figures)
@@ -62,7 +75,10 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
   impl_->mode = mode;
   impl_->odo_params.loadFromConfigFile(cfg, "odometry");
   impl_->kinfu_params.loadFromConfigFile(cfg, "kinfu");
+  impl_->loop_params.loadFromConfigFile(cfg, "loop");
   if (mode != TrackingMode::KinFu) impl_->odometry = std::make_unique<RgbdOdometry>(impl_->odo_params);
+  // Place recognition needs the odometry's descriptors: mode kinfu has none.
+  if (impl_->loop_params.enabled && impl_->odometry) impl_->loops = std::make_unique<loop::LoopCloser>(impl_->loop_params);
   // The map is anchored at the first camera (world = first camera frame). Ground truth never changes
   // what the tracker or the map does; evaluation and pictures align to it afterwards.
   impl_->kinfu = std::make_unique<KinFu>(impl_->kinfu_params, mode);
@@ -112,13 +128,65 @@ FrameReport Reconstruction::process(const Frame& frame) {
   if (!r.tracked) ++m.lost;
   ++m.frames;
   m.trajectory.push_back({frame.timestamp, f.pose});
+  m.fused.push_back(r.tracked && !r.predicted && (!r.fell_back || m.kinfu_params.integrate_on_fallback));
+  if (m.loops) {
+    ScopedStageTimer t(r.times, "keyframes");
+    m.loops->addFrame(frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, r.odometry.features);
+  }
   r.times.add("total", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   m.times.merge(r.times);
   return r;
 }
 
 TrackingMode Reconstruction::mode() const { return impl_->mode; }
-const Trajectory& Reconstruction::trajectory() const { return impl_->trajectory; }
+const Trajectory& Reconstruction::trajectory() const {
+  return impl_->finished && impl_->loops ? impl_->optimised : impl_->trajectory;
+}
+const Trajectory& Reconstruction::trackedTrajectory() const { return impl_->trajectory; }
+
+void Reconstruction::finish() {
+  Impl& m = *impl_;
+  if (m.finished) return;
+  m.waitFusion();
+  if (m.loops) {
+    m.loops->finish();
+    m.optimised = m.loops->correct(m.trajectory);
+  }
+  m.finished = true;
+}
+
+const loop::LoopCloser* Reconstruction::loopCloser() const { return impl_->loops.get(); }
+
+bool Reconstruction::mapNeedsReintegration() const {
+  const Impl& m = *impl_;
+  if (!m.finished || !m.loops || m.loops->activeLoops() == 0) return false;
+  for (std::size_t i = 0; i < m.trajectory.size(); ++i)
+    if (m.trajectory[i].pose.distanceTo(m.optimised[i].pose) > m.loop_params.reintegrate_min_correction) return true;
+  return false;
+}
+
+std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
+                                        const std::function<void(std::size_t)>& progress) {
+  Impl& m = *impl_;
+  finish();
+  const Trajectory& poses = trajectory();
+  // The tracking run's statistics stay (guesses, shifts); the map and its memory are the new volume's.
+  const KinFuStats tracking = m.kinfu->stats();
+  auto map = std::make_unique<KinFu>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
+  std::size_t read = 0, fused = 0;
+  Frame frame;
+  while (read < poses.size() && next(frame)) {
+    if (m.fused[read]) map->integrateAt(frame, poses[read].pose), ++fused;
+    ++read;
+    if (progress) progress(read);
+  }
+  m.kinfu = std::move(map);
+  m.tracking_stats = tracking;
+  m.reintegrated = true;
+  return fused;
+}
+
+bool Reconstruction::reintegrated() const { return impl_->reintegrated; }
 TriangleMesh Reconstruction::extractMesh() const {
   impl_->waitFusion();
   return impl_->kinfu->extractMesh();
@@ -139,7 +207,13 @@ std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
 KinFuStats Reconstruction::fusionStats() const {
   impl_->waitFusion();
-  return impl_->kinfu->stats();
+  if (!impl_->reintegrated) return impl_->kinfu->stats();
+  KinFuStats s = impl_->tracking_stats;
+  const KinFuStats map = impl_->kinfu->stats();
+  s.bricks_in_volume = map.bricks_in_volume;
+  s.bricks_in_world_model = map.bricks_in_world_model;
+  s.memory_bytes = map.memory_bytes;
+  return s;
 }
 
 }  // namespace vofusion

@@ -9,7 +9,9 @@
 #include <mutex>
 #include <thread>
 
+#include <mrpt/core/bits_math.h>
 #include <mrpt/obs/CObservationRobotPose.h>
+#include <mrpt/poses/Lie/SO.h>
 #include <mrpt/config/CConfigFileBase.h>
 
 #include "vofusion/core/atomic_file.h"
@@ -133,6 +135,13 @@ class RawlogThread {
   std::thread thread_;
 };
 
+mrpt::poses::CPose3D toMrptPose(const Eigen::Isometry3d& T) {
+  mrpt::math::CMatrixDouble44 M;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) M(i, j) = T.matrix()(i, j);
+  return mrpt::poses::CPose3D(M);
+}
+
 json statsJson(const ErrorStats& s) {
   return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std}, {"max", s.max}, {"count", s.count}};
 }
@@ -147,6 +156,49 @@ json timesJson(const StageTimes& t, std::size_t frames) {
 }
 
 json meshJson(const TriangleMesh& m) { return {{"vertices", m.vertices.size()}, {"faces", m.faces.size()}}; }
+
+// summary.json "loops": one entry per accepted loop; with ground truth, how far the loop's measured
+// relative pose is from the truth's (what a loop is worth, whatever the tracker did).
+json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth) {
+  json a = json::array();
+  for (const loop::LoopRecord& l : lc.loops()) {
+    json j = {{"from_frame", l.from_frame}, {"to_frame", l.to_frame}, {"from_keyframe", l.from_keyframe},
+              {"to_keyframe", l.to_keyframe}, {"matches", l.matches}, {"inliers", l.inliers}, {"icp_rms_m", l.icp_rms},
+              {"correction_m", l.correction_m}, {"correction_deg", l.correction_deg}, {"active", l.active}};
+    mrpt::poses::CPose3D a_gt, b_gt;
+    if (interpolatePose(ground_truth, l.from_timestamp, 0.02, a_gt) && interpolatePose(ground_truth, l.to_timestamp, 0.02, b_gt)) {
+      const mrpt::poses::CPose3D error = toMrptPose(l.measured) - (b_gt - a_gt);
+      j["error_vs_ground_truth_m"] = error.norm();
+      j["error_vs_ground_truth_deg"] = mrpt::RAD2DEG(mrpt::poses::Lie::SO<3>::log(error.getRotationMatrix()).norm());
+    }
+    a.push_back(j);
+  }
+  return a;
+}
+
+json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std::size_t frames) {
+  std::size_t active = 0, removed = 0;
+  for (const loop::LoopRecord& l : lc.loops()) (l.active ? active : removed)++;
+  double max_correction = 0.0;
+  const Trajectory& tracked = rec.trackedTrajectory();
+  const Trajectory& optimised = rec.trajectory();
+  for (std::size_t i = 0; i < tracked.size() && i < optimised.size(); ++i)
+    max_correction = std::max(max_correction, tracked[i].pose.distanceTo(optimised[i].pose));
+  const StageTimes t = lc.times();
+  // Keyframing runs on the frame loop; recognition, verification and the graph on their own thread.
+  double front = 0.0, back = 0.0;
+  for (const auto& [stage, sec] : t.seconds) (stage == "keyframes" ? front : back) += sec;
+  return {{"enabled", true},
+          {"keyframes", lc.keyframes().size()},
+          {"loops_accepted", active},
+          {"loops_removed_after_optimisation", removed},
+          {"candidates_rejected", lc.rejections()},
+          {"max_pose_correction_m", max_correction},
+          {"map_reintegrated", rec.reintegrated()},
+          {"frame_loop_ms_per_frame", frames ? front * 1e3 / frames : 0.0},
+          {"thread_ms_per_frame", frames ? back * 1e3 / frames : 0.0},
+          {"stages", timesJson(t, frames)}};
+}
 
 }  // namespace
 
@@ -226,10 +278,30 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     const std::string err = m.rawlog->stop();
     if (!err.empty()) throw InputError(m.file("poses.rawlog"), err);
     if (!m.ground_truth.empty()) m.rawlog->writer().writeGroundTruth(m.ground_truth);
+    // Loop closure: the corrected poses follow the frames as "VOFUSION_POSE_OPTIMISED" (the tracked
+    // ones went in with each frame as "VOFUSION_POSE"), one per frame in one last sensory frame.
+    if (rec.loopCloser())
+      for (const StampedPose& sp : rec.trajectory()) {
+        mrpt::obs::CObservationRobotPose pose;
+        pose.sensorLabel = "VOFUSION_POSE_OPTIMISED";
+        pose.timestamp = mrpt::Clock::fromDouble(sp.timestamp);
+        pose.pose.mean = sp.pose;
+        m.rawlog->writer().writeObservation(pose);
+      }
   }
 
   writeTumTrajectory(staged("trajectory.txt"), rec.trajectory());
   wrote("trajectory.txt", std::to_string(rec.trajectory().size()) + " poses");
+  const loop::LoopCloser* loops = rec.loopCloser();
+  if (loops) {
+    writeTumTrajectory(staged("trajectory_tracked.txt"), rec.trackedTrajectory());
+    wrote("trajectory_tracked.txt", "the tracker's poses, before loop closure");
+    s["loop_closure"] = loopClosureJson(*loops, rec, frames);
+    s["loops"] = loopsJson(*loops, m.ground_truth);
+  } else {
+    s["loop_closure"] = {{"enabled", false}};
+    s["loops"] = json::array();
+  }
 
   // Ground truth drawn in the map's frame (the map is anchored at the first camera): the ATE's
   // rigid alignment (estimate -> ground truth), inverted.
@@ -242,6 +314,10 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     }
     const RpeResult rpe = computeRpe(m.ground_truth, rec.trajectory(), p.rpe_delta);
     if (ate.success) s["ate"] = statsJson(ate.trans);
+    if (loops) {  // the same run without loop closure, for comparison
+      const AteResult tracked = computeAte(m.ground_truth, rec.trackedTrajectory());
+      if (tracked.success) s["ate_tracked"] = statsJson(tracked.trans);
+    }
     if (rpe.success) s["rpe"] = {{"delta_s", rpe.delta}, {"trans_m", statsJson(rpe.trans)}, {"rot_deg", statsJson(rpe.rot_deg)}};
     if (ate.success) {
       plotAteReport(staged("trajectory.png"), ate, "vofusion " + toString(rec.mode()) + ": " + info.input);
@@ -272,6 +348,14 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   // Up: the accelerometer's where the recording has one, else the scene finds the floor.
   SceneOptions scene_opts;
   scene_opts.frustum_every_k = p.frustum_every;
+  if (loops) {
+    const std::vector<loop::KeyframePose> kf = loops->keyframes();
+    auto at = [&](std::size_t id) { return toMrptPose(kf[id].optimised); };
+    for (const auto& k : kf) scene_opts.keyframes.push_back(toMrptPose(k.optimised));
+    for (const loop::LoopRecord& l : loops->loops())
+      if (l.active && l.from_keyframe < kf.size() && l.to_keyframe < kf.size())
+        scene_opts.loop_edges.push_back({at(l.from_keyframe), at(l.to_keyframe)});
+  }
   if (m.up_sum.norm() > 0) {
     scene_opts.up_vector = m.up_sum.normalized();
     s["up_from_accelerometer"] = {m.up_sum.normalized().x(), m.up_sum.normalized().y(), m.up_sum.normalized().z()};

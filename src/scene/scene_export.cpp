@@ -8,6 +8,7 @@
 #include <mrpt/math/CMatrixFixed.h>
 #include <mrpt/opengl/CFrustum.h>
 #include <mrpt/opengl/CGridPlaneXY.h>
+#include <mrpt/opengl/CPointCloud.h>
 #include <mrpt/opengl/CSetOfLines.h>
 #include <mrpt/opengl/CSetOfObjects.h>
 #include <mrpt/opengl/CSetOfTriangles.h>
@@ -200,6 +201,22 @@ std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh,
       frustums->insert(f);
     }
     world->insert(frustums);
+  }
+  if (!opt.keyframes.empty()) {
+    auto kf = mrpt::opengl::CPointCloud::Create();
+    kf->setName("keyframes");
+    kf->setColor_u8(mrpt::img::TColor(250, 150, 20));
+    kf->setPointSize(6.f);
+    for (const auto& k : opt.keyframes) kf->insertPoint(float(k.x()), float(k.y()), float(k.z()));
+    world->insert(kf);
+  }
+  if (!opt.loop_edges.empty()) {
+    auto lines = mrpt::opengl::CSetOfLines::Create();
+    lines->setName("loop_edges");
+    lines->setColor_u8(mrpt::img::TColor(220, 20, 20));
+    lines->setLineWidth(3.f);
+    for (const auto& [a, b] : opt.loop_edges) lines->appendLine(a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+    world->insert(lines);
   }
   scene->insert(world);
 

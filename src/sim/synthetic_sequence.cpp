@@ -47,6 +47,7 @@ struct Hit {
 struct Box {
   Vec3 lo, hi;
   bool inside;  // true: the camera is inside (room walls), false: a solid box seen from outside
+  int texture = -1;  // texture id (-1: the box's index); look-alike copies share one
 };
 
 struct Plane {
@@ -86,12 +87,54 @@ struct SyntheticSequence::Impl {
   std::vector<Plane> planes;
   Wave x, y, z, yaw, pitch, roll;
   std::vector<Wave> shake;  // trajectory "shake": added to yaw, pitch, roll
+  double texture_period_x = 0.0;  // m; > 0: textures repeat along x with this period (look-alike places)
+  // Scene "loop": the camera walks a rounded rectangle (half sizes a x b, corner radius r) `laps`
+  // times over the sequence, facing along it.
+  double ring_a = 0.0, ring_b = 0.0, ring_r = 0.0, laps = 0.0, duration = 1.0;
+
+  // Position on the ring at arc length s (wrapped), and the heading (rad) of the path there.
+  std::pair<Eigen::Vector2d, double> ringAt(double s) const {
+    const double lx = 2 * (ring_a - ring_r), ly = 2 * (ring_b - ring_r), arc = M_PI / 2 * ring_r;
+    const double perimeter = 2 * lx + 2 * ly + 4 * arc;
+    s -= perimeter * std::floor(s / perimeter);
+    // Counter-clockwise from the middle of the bottom side (0, -b), heading +x: half a side, then
+    // corner, side, corner, ... each corner a quarter circle.
+    const double sides[4] = {lx, ly, lx, ly};
+    const Eigen::Vector2d centres[4] = {{ring_a - ring_r, -(ring_b - ring_r)}, {ring_a - ring_r, ring_b - ring_r},
+                                        {-(ring_a - ring_r), ring_b - ring_r}, {-(ring_a - ring_r), -(ring_b - ring_r)}};
+    double start = -lx / 2;  // the first side starts half a side before s = 0
+    for (int k = 0; k < 8; ++k) {
+      const int side = k % 4;
+      const double heading0 = side * M_PI / 2;
+      const Eigen::Vector2d dir(std::cos(heading0), std::sin(heading0));
+      const Eigen::Vector2d normal(std::sin(heading0), -std::cos(heading0));  // outwards (right of travel)
+      // Straight part along `side`, ending where corner `side` starts.
+      const Eigen::Vector2d end = centres[side] + ring_r * normal;
+      if (s < start + sides[side]) return {end - (start + sides[side] - s) * dir, heading0};
+      start += sides[side];
+      if (s < start + arc) {
+        const double a = (s - start) / ring_r;  // angle turned into the corner
+        const double phi = heading0 - M_PI / 2 + a;  // direction from the corner's centre
+        return {centres[side] + ring_r * Eigen::Vector2d(std::cos(phi), std::sin(phi)), heading0 + a};
+      }
+      start += arc;
+    }
+    return {Eigen::Vector2d(0, -ring_b), 0.0};
+  }
+  double ringPerimeter() const { return 4 * (ring_a - ring_r) + 4 * (ring_b - ring_r) + 2 * M_PI * ring_r; }
 
   mrpt::poses::CPose3D pose(double t) const {
     // Body frame (x forward, y left, z up) then the optical frame (z forward, x right, y down).
     const double dyaw = shake.empty() ? 0 : shake[0].at(t), dpitch = shake.empty() ? 0 : shake[1].at(t),
                  droll = shake.empty() ? 0 : shake[2].at(t);
-    const mrpt::poses::CPose3D body(x.at(t), y.at(t), z.at(t), yaw.at(t) + dyaw, pitch.at(t) + dpitch, roll.at(t) + droll);
+    double px = x.at(t), py = y.at(t), heading = yaw.at(t);
+    if (laps > 0) {  // on the ring: the waves add wobble around it
+      const auto [p, h] = ringAt(laps * ringPerimeter() * t / duration);
+      px += p.x();
+      py += p.y();
+      heading += h;
+    }
+    const mrpt::poses::CPose3D body(px, py, z.at(t), heading + dyaw, pitch.at(t) + dpitch, roll.at(t) + droll);
     static const mrpt::poses::CPose3D optical(0, 0, 0, -M_PI / 2, 0, -M_PI / 2);
     return body + optical;
   }
@@ -117,11 +160,12 @@ struct SyntheticSequence::Impl {
       const int axis = bx.inside ? afar : anear;
       if (axis < 0 || !(s > 1e-9) || s >= best.s) continue;
       best.s = s;
-      const Vec3 p = o + s * d;
+      Vec3 p = o + s * d;
       Vec3 n = Vec3::Zero();
       n[axis] = d[axis] > 0 ? -1 : 1;  // facing the ray
       const int side = (std::abs(p[axis] - bx.lo[axis]) < std::abs(p[axis] - bx.hi[axis])) ? 0 : 1;
-      best.surface = int(b) * 6 + axis * 2 + side;
+      best.surface = (bx.texture >= 0 ? bx.texture : int(b)) * 6 + axis * 2 + side;
+      if (texture_period_x > 0) p.x() -= texture_period_x * std::floor(p.x() / texture_period_x);
       best.n = n;
       best.tu = p[(axis + 1) % 3];
       best.tv = p[(axis + 2) % 3];
@@ -264,8 +308,48 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
     impl->yaw = wave(M_PI / 2, 0, 0.1, 0.35, 0.02, 1.2, s, 3);
     impl->pitch = wave(0, 0, 0.06, 0.5, 0.02, 1.4, s, 4);
     impl->roll = wave(0, 0, 0.04, 0.6, 0.02, 1.7, s, 5);
+  } else if (o.scene == "loop") {
+    // A corridor 2 m wide around a 6 x 4 m block (outer walls 10 x 8 m), walked once around and on
+    // for another 15 % of a lap, facing along it: the end sees again what the start saw, after a
+    // 26 m loop's drift.
+    impl->boxes = {{{-5.0, -4.0, 0.0}, {5.0, 4.0, 2.6}, true},
+                   {{-3.0, -2.0, 0.0}, {3.0, 2.0, 2.6}, false},
+                   {{1.0, -4.0, 0.0}, {1.6, -3.5, 1.2}, false},
+                   {{4.4, -1.0, 0.0}, {5.0, 0.2, 0.9}, false},
+                   {{-0.5, 3.4, 0.0}, {0.5, 4.0, 1.5}, false},
+                   {{-5.0, 1.0, 0.0}, {-4.5, 1.8, 0.7}, false},
+                   {{-2.0, -2.5, 0.0}, {-1.4, -2.0, 1.0}, false}};
+    impl->ring_a = 4.0;
+    impl->ring_b = 3.0;
+    impl->ring_r = 1.0;
+    impl->laps = 1.15;
+    impl->duration = duration;
+    impl->x = wave(0, 0, 0.06, 0.7, 0.02, 1.9, s, 0);
+    impl->y = wave(0, 0, 0.06, 0.6, 0.02, 1.7, s, 1);
+    impl->z = wave(1.4, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+    impl->yaw = wave(0, 0, 0.12, 0.5, 0.03, 1.3, s, 3);
+    impl->pitch = wave(-0.1, 0, 0.06, 0.45, 0.03, 1.4, s, 4);
+    impl->roll = wave(0, 0, 0.04, 0.5, 0.02, 1.8, s, 5);
+  } else if (o.scene == "lookalike") {
+    // A corridor whose walls and furniture repeat every 3 m (same texture, same boxes): the camera
+    // slides along one wall for more than a period, so it sees a place that looks exactly like
+    // one 3 m behind. Joining the two would be a false loop.
+    const double P = 3.0;
+    impl->texture_period_x = P;
+    impl->boxes = {{{-1.0, -1.5, 0.0}, {3 * P + 1.0, 1.5, 2.6}, true}};
+    for (int k = 0; k < 4; ++k) {
+      impl->boxes.push_back({{0.4 + k * P, 0.9, 0.0}, {1.1 + k * P, 1.5, 0.8}, false, 1});
+      impl->boxes.push_back({{1.9 + k * P, 1.1, 0.0}, {2.3 + k * P, 1.5, 1.6}, false, 2});
+    }
+    const double speed = std::min(0.4, 1.6 * P / duration);
+    impl->x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
+    impl->y = wave(-0.3, 0, 0.1, 0.4, 0.03, 1.3, s, 1);
+    impl->z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+    impl->yaw = wave(M_PI / 2, 0, 0.25, 0.35, 0.05, 1.1, s, 3);  // facing the +y wall
+    impl->pitch = wave(-0.1, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
+    impl->roll = wave(0, 0, 0.04, 0.5, 0.02, 1.8, s, 5);
   } else {
-    throw InputError("--scene", "unknown scene '" + o.scene + "' (expected room, corridor or bare_wall)");
+    throw InputError("--scene", "unknown scene '" + o.scene + "' (expected room, corridor, bare_wall, loop or lookalike)");
   }
   if (o.trajectory == "shake") {
     // Hand shake on top of the path: each angle gets two faster sinusoids (rad, rad/s); with the

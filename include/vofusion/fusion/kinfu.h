@@ -125,6 +125,10 @@ class KinFu {
   FusionResult track(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry = nullptr);
   void fuse(FusionResult& res);
 
+  // Fuses a frame at a pose known from elsewhere (re-integration with loop-closed poses): the volume
+  // follows the camera as in tracking; no ICP, no ray cast.
+  void integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
+
   mrpt::poses::CPose3D pose() const;
   // Whole world model + current volume.
   TriangleMesh extractMesh() const;

@@ -61,6 +61,13 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
 };
 
+// A frame's described keypoints, as place recognition indexes them: BRAND descriptors (CV_8U, 32
+// bytes a row) and each keypoint's 3D point in the camera frame (m), row for row.
+struct DescribedKeypoints {
+  cv::Mat descriptors;
+  Points3 points;
+};
+
 struct OdometryResult {
   bool success = false;
   std::string failure;                 // why, when !success ("too few matches", "degenerate geometry", ...)
@@ -81,6 +88,9 @@ struct OdometryResult {
   // The frame's point and normal maps the odometry computed for BRAND (null when it did not, e.g.
   // [brand] use_geometry = false): the pipeline hands them to the tracker, so they are computed once.
   std::shared_ptr<const FrameGeometry> geometry;
+  // The frame's own keypoints (all of them, not only the inliers; null on "empty frame"): loop
+  // closure keeps them for keyframes.
+  std::shared_ptr<const DescribedKeypoints> features;
 };
 
 class RgbdOdometry {

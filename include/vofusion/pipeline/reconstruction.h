@@ -4,7 +4,10 @@
 //
 //   Reconstruction rec(cfg, TrackingMode::Joint);
 //   for each frame: FrameReport r = rec.process(frame);
+//   rec.finish();                                   // loop closure done, trajectory() optimised
+//   if (rec.mapNeedsReintegration()) rec.reintegrate(next_frame_from_the_start);
 //   TriangleMesh mesh = rec.extractMesh();
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -18,6 +21,7 @@
 #include "vofusion/core/timing.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/fusion/kinfu.h"
+#include "vofusion/loop/loop_closer.h"
 #include "vofusion/mesh/triangle_mesh.h"
 #include "vofusion/odometry/rgbd_odometry.h"
 
@@ -35,7 +39,7 @@ struct FrameReport {
   StageTimes times;           // this frame's wall time: odometry, preprocess, icp, integrate, raycast, ...
 };
 
-// The sections every stage reads ([odometry...], [kinfu]), with the stages' defaults: for
+// The sections every stage reads ([odometry...], [kinfu], [loop]), with the stages' defaults: for
 // checkConfigKeys() and dumpConfig().
 std::vector<ConfigSection> reconstructionConfigSections();
 
@@ -47,7 +51,24 @@ class Reconstruction {
   FrameReport process(const Frame& frame);
 
   TrackingMode mode() const;
-  const Trajectory& trajectory() const;  // one pose per processed frame (held pose when lost)
+  // One pose per processed frame (held pose when lost): after finish(), the loop-closed poses when
+  // loop closure ran, else (and before finish()) the tracked ones.
+  const Trajectory& trajectory() const;
+  const Trajectory& trackedTrajectory() const;  // the tracker's poses, before any loop
+  // End of the frames: waits for the fusion and the loop-closure thread, then corrects the trajectory
+  // (every pose follows its keyframe). Idempotent; process() must not be called afterwards.
+  void finish();
+  // Loop closure ([loop] enabled, and a mode with the odometry's features); null when off.
+  const loop::LoopCloser* loopCloser() const;
+  // After finish(): loops moved some pose by more than [loop] reintegrate_min_correction, so the map
+  // (fused at the tracked poses) should be fused again at the corrected ones.
+  bool mapNeedsReintegration() const;
+  // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
+  // fresh volume at the corrected poses; frames not fused the first time are skipped again. progress
+  // gets the number of frames read. Returns the number of frames fused.
+  std::size_t reintegrate(const std::function<bool(Frame&)>& next,
+                          const std::function<void(std::size_t)>& progress = nullptr);
+  bool reintegrated() const;
   TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model
   cv::Mat renderView(const CameraIntrinsics& cam) const;  // shaded ray-cast from the current pose
   const StageTimes& totalTimes() const;  // accumulated over all frames, plus "total"

@@ -7,10 +7,14 @@
 //   "path"          CSetOfLines, the estimated camera centres joined in order (blue)
 //   "ground_truth"  CSetOfLines, the ground-truth camera centres (green), when given
 //   "frustums"      CSetOfObjects of CFrustum, one every k frames of the estimated path
+//   "keyframes"     CPointCloud of the loop-closure keyframes' camera centres (orange), when given
+//   "loop_edges"    CSetOfLines joining the keyframes of each accepted loop (red), when given
 //   "grid"          CGridPlaneXY under the reconstruction (a child of the scene, outside "world")
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -38,6 +42,9 @@ struct SceneOptions {
   bool cull_hidden_side = true;
   bool grid = true;
   double grid_spacing = 0.5;         // m
+  // Loop closure: keyframe poses (camera-to-world) and the pairs of poses each accepted loop joins.
+  std::vector<mrpt::poses::CPose3D> keyframes;
+  std::vector<std::pair<mrpt::poses::CPose3D, mrpt::poses::CPose3D>> loop_edges;
 };
 
 // The rotation (a pure rotation CPose3D) applied to the reconstruction so that its up axis is +z.

@@ -10,6 +10,11 @@
 //   corridor  x in [-1, 12], y in [-1.1, 1.1], z in [0, 2.6], boxes along both walls; the camera
 //             travels along +x (about 0.4 m/s, at most ~10 m over the whole sequence).
 //   bare_wall one infinite plane y = kBareWallY facing the camera, which slides along x at ~1.5 m.
+//   loop      a 2 m wide corridor around a 6 x 4 m block (outer walls x in [-5, 5], y in [-4, 4]);
+//             the camera walks it once around (26 m) and 15 % further, facing along it (loop closure).
+//   lookalike corridor x in [-1, 10], y in [-1.5, 1.5] whose walls and boxes repeat every 3 m; the
+//             camera slides along x facing the +y wall for ~1.6 periods: places 3 m apart look the
+//             same and must not be joined by loop closure.
 // Depth (noise=true) follows a Kinect v1 model: Gaussian noise sigma(z) = 0.0012 + 0.0019 (z-0.4)^2 m,
 // then disparity quantisation to 1/8 px with baseline 0.075 m (focal length normalised to a 640 px
 // wide sensor), random dropout (~2 %), holes on the far side of depth discontinuities and at grazing
@@ -39,7 +44,8 @@ inline double kinectNoiseSigma(double z) { return kinectAxialSigma(z); }
 struct SimOptions {
   std::string scene = "room";   // "room" (walls, floor, boxes), "corridor" (long, for volume shifting),
                                 // "bare_wall" (camera sliding along a flat textured wall: geometry
-                                // gives ICP nothing, colour gives odometry plenty)
+                                // gives ICP nothing, colour gives odometry plenty), "loop" (a corridor
+                                // around a block, walked once around), "lookalike" (a corridor that repeats every 3 m)
   std::string trajectory = "smooth";  // "smooth" (the scene's hand-held path, <= ~30 deg/s) or "shake":
                                 // the same path with fast hand shake added (turns up to ~150 deg/s),
                                 // colour exposed over `exposure` (motion blur) and taken up to

@@ -1,0 +1,52 @@
+#pragma once
+// Keyframes for loop closure: a tracked frame becomes one when the camera has moved or turned enough
+// since the last one (or tracking just recovered). A keyframe keeps what a later revisit is verified
+// against: its tracked pose, its BRAND descriptors with their 3D points, and a reduced depth image.
+#include <cstddef>
+#include <memory>
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include "vofusion/core/camera.h"
+#include "vofusion/core/frame.h"
+#include "vofusion/loop/loop_params.h"
+#include "vofusion/odometry/rgbd_odometry.h"
+
+namespace vofusion::loop {
+
+struct Keyframe {
+  std::size_t id = 0;           // 0, 1, 2, ... in creation order (the pose graph's node)
+  std::size_t frame_index = 0;  // Frame::index
+  double timestamp = 0.0;       // s
+  Eigen::Isometry3d tracked = Eigen::Isometry3d::Identity();  // camera-to-world, as tracked
+  double path_length = 0.0;     // m the camera travelled from the first frame to this one
+  std::shared_ptr<const DescribedKeypoints> features;
+  cv::Mat depth;                // CV_16U, kDepthUnitsPerMetre, 1/keyframe_downsample resolution (nearest reading)
+  CameraIntrinsics camera;      // of `depth`
+  static constexpr double kDepthUnitsPerMetre = 5000.0;  // TUM's: 0.2 mm steps up to 13 m, half a float's memory
+  cv::Mat depthMetres() const;  // CV_32F m, 0 where no reading
+};
+
+// The keyframe of a frame: depth reduced by `downsample` (every n-th reading, never averaged across
+// depth jumps) and its intrinsics scaled to match.
+Keyframe makeKeyframe(std::size_t id, const Frame& frame, const Eigen::Isometry3d& tracked, double path_length,
+                      std::shared_ptr<const DescribedKeypoints> features, int downsample);
+
+// Decides which frames become keyframes, and measures the path length on the way.
+class KeyframeSelector {
+ public:
+  explicit KeyframeSelector(const LoopParams& params) : params_(params) {}
+  // Every frame in order; true when this one should become a keyframe. Frames not well tracked
+  // (lost, predicted, fallback) never do; the first well-tracked frame after them always does.
+  bool next(const Eigen::Isometry3d& pose, bool well_tracked);
+  double pathLength() const { return path_; }
+
+ private:
+  LoopParams params_;
+  Eigen::Isometry3d last_keyframe_ = Eigen::Isometry3d::Identity(), last_pose_ = Eigen::Isometry3d::Identity();
+  bool have_keyframe_ = false, have_pose_ = false, recovering_ = false;
+  double path_ = 0.0;
+};
+
+}  // namespace vofusion::loop

@@ -1,0 +1,75 @@
+#pragma once
+// Loop closure beside the frame loop: every frame's tracked pose goes in (cheap); frames that become
+// keyframes are queued to a thread of their own, which indexes them (place recognition), verifies
+// the candidates, adds the accepted loops to the MRPT pose graph and optimises it. The frame loop
+// never waits for that thread; finish() does, once, at the end of a run.
+//
+//   loop::LoopCloser lc(params);
+//   for each frame: lc.addFrame(frame, tracked_pose, well_tracked, odometry.features);
+//   lc.finish();
+//   Trajectory optimised = lc.correct(tracked);   // every pose follows its keyframe
+#include <cstddef>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "vofusion/core/frame.h"
+#include "vofusion/core/timing.h"
+#include "vofusion/core/trajectory.h"
+#include "vofusion/loop/loop_params.h"
+#include "vofusion/odometry/rgbd_odometry.h"
+
+namespace vofusion::loop {
+
+// One accepted loop (summary.json "loops").
+struct LoopRecord {
+  std::size_t from_frame = 0, to_frame = 0;        // Frame::index of the older and the newer keyframe
+  std::size_t from_keyframe = 0, to_keyframe = 0;  // keyframe ids
+  int matches = 0, inliers = 0;
+  double icp_rms = 0.0;                            // m
+  double correction_m = 0.0, correction_deg = 0.0;  // measured vs tracked relative pose
+  bool active = true;                              // false: removed after optimisation (did not fit)
+  double from_timestamp = 0.0, to_timestamp = 0.0;  // s, of the two keyframes
+  Eigen::Isometry3d measured = Eigen::Isometry3d::Identity();  // the newer keyframe in the older's camera frame
+};
+
+struct KeyframePose {
+  std::size_t frame_index = 0;
+  double timestamp = 0.0;
+  Eigen::Isometry3d tracked = Eigen::Isometry3d::Identity(), optimised = Eigen::Isometry3d::Identity();
+};
+
+class LoopCloser {
+ public:
+  explicit LoopCloser(const LoopParams& params);
+  ~LoopCloser();
+
+  // Every processed frame, in order (lost ones too, well_tracked = false). Returns true when the
+  // frame became a keyframe (its features and a reduced depth are kept; features may be null).
+  bool addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked,
+                std::shared_ptr<const DescribedKeypoints> features);
+  // Waits until every queued keyframe is processed and the graph optimised.
+  void finish();
+
+  // Snapshots, safe while the thread runs.
+  std::vector<LoopRecord> loops() const;
+  std::size_t activeLoops() const;
+  std::vector<KeyframePose> keyframes() const;
+  std::map<std::string, std::size_t> rejections() const;  // verification failures by reason
+  StageTimes times() const;  // "keyframes" (frame loop); "place_recognition", "loop_verification", "pose_graph" (thread)
+
+  // `tracked` (one pose per frame given to addFrame, in order) with every pose moved with its
+  // keyframe: T' = K_optimised K_tracked^-1 T.
+  Trajectory correct(const Trajectory& tracked) const;
+  // Largest distance between a tracked pose and its corrected one, m.
+  double maxCorrection(const Trajectory& tracked) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace vofusion::loop

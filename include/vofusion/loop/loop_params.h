@@ -1,0 +1,55 @@
+#pragma once
+// INI section [loop]: keyframes, place recognition, loop verification and the pose graph; every key
+// is in share/loop.ini with the measurement behind its default.
+#include <string>
+
+#include <mrpt/config/CLoadableOptions.h>
+
+namespace vofusion::loop {
+
+struct LoopParams : public mrpt::config::CLoadableOptions {
+  bool enabled = true;                 // loop closure on (--no-loop-closure switches it off)
+  // Keyframes: a tracked frame becomes one when the camera moved or turned this much since the last.
+  double keyframe_translation = 0.15;  // m
+  double keyframe_rotation = 12.0;     // degrees
+  int keyframe_downsample = 2;         // the keyframe's depth is kept at 1/n resolution for ICP
+  // Place recognition: the keyframe's BRAND descriptors vote (nearest neighbour in an LSH index) for
+  // the older keyframes they match; the best-voted ones are verified.
+  int recent_keyframes = 8;            // the newest keyframes are not loop candidates (they are tracked)
+  int place_descriptors = 300;         // descriptors per keyframe in the index and per query (evenly spread)
+  int candidates = 3;                  // best-voted keyframes verified per keyframe
+  int min_votes = 20;                  // descriptor votes a candidate needs
+  int max_hamming = 60;                // bits of 256; a vote's descriptor distance at most
+  int lsh_tables = 4, lsh_key_bits = 24, lsh_probe_level = 0;  // FLANN LSH index
+  // Verification: RANSAC rigid motion on the matched descriptors' 3D points, then ICP of the two depths.
+  int min_inliers = 30;                // 3D inliers of the rigid motion
+  double inlier_threshold = 0.01;      // m at 1 m depth (grows with z^2 as in the odometry)
+  double min_icp_overlap = 0.25;       // ICP inliers / current keyframe's valid pixels
+  double max_icp_rms = 0.015;          // m, point-to-plane RMS over the ICP inliers
+  double max_icp_change_translation = 0.05;  // m, ICP pose vs the RANSAC pose
+  double max_icp_change_rotation = 3.0;      // degrees
+  // Plausibility: a loop may correct the tracked relative pose by at most base + rate x the path
+  // travelled between the two keyframes (look-alike places farther apart are rejected).
+  double max_drift_translation = 0.10;  // m, base
+  double max_drift_rate = 0.10;         // m per m travelled
+  double max_drift_rotation = 5.0;      // degrees, base
+  double max_drift_rotation_rate = 3.0; // degrees per m travelled
+  // Pose graph: keyframe-to-keyframe edges from the tracker, with this noise per metre / per degree
+  // moved (plus a floor); loops with the verification's covariance. After each optimisation a loop
+  // whose residual exceeds max_loop_chi2 (6 DoF) is removed and the graph optimised again.
+  double odometry_sigma_rate = 0.02;      // m per m moved, and rad per rad turned
+  double odometry_sigma_floor = 0.002;    // m (and the same in rad)
+  // A loop edge's noise: its ICP's residual RMS (m; as an angle over the keyframe's mean depth), at
+  // least these floors.
+  double loop_sigma_translation = 0.003;  // m, floor of a loop edge's noise
+  double loop_sigma_rotation = 0.1;       // degrees, same
+  double max_loop_chi2 = 22.5;            // 99.9 % of chi2 with 6 DoF
+  // Map: when the optimised poses move some frame by more than this, the frames are integrated
+  // again into a fresh volume after the run (one wall where the drift drew two).
+  double reintegrate_min_correction = 0.005;  // m
+
+  void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
+  void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
+};
+
+}  // namespace vofusion::loop

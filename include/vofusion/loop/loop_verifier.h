@@ -1,0 +1,32 @@
+#pragma once
+// Geometric verification of a loop candidate, as the issue and RGB-D SLAM systems do it: the two
+// keyframes' descriptors matched (cross-checked Hamming), a RANSAC rigid motion on their 3D points
+// (the odometry's fit), then ICP of the two reduced depth images from that motion; and a
+// plausibility test: the loop may correct the tracked relative pose by no more than the drift the
+// path between the two keyframes could have gathered (a look-alike place farther away is refused).
+#include <string>
+
+#include <Eigen/Geometry>
+
+#include "vofusion/loop/keyframe.h"
+#include "vofusion/loop/loop_params.h"
+
+namespace vofusion::loop {
+
+struct LoopCheck {
+  bool accepted = false;
+  std::string reason;            // why not, when !accepted ("too few inliers", "ICP overlap", ...)
+  int matches = 0, inliers = 0;  // descriptor matches, RANSAC inliers
+  double icp_overlap = 0.0;      // ICP inliers / valid pixels
+  double icp_rms = 0.0;          // m
+  Eigen::Isometry3d T_old_new = Eigen::Isometry3d::Identity();  // the newer keyframe in the older's camera frame
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();  // x y z yaw pitch roll
+  double correction_m = 0.0, correction_deg = 0.0;  // measured vs tracked relative pose
+};
+
+LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& params);
+
+// Translation (m) and rotation (degrees) of the pose difference a^-1 b.
+std::pair<double, double> poseDifference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b);
+
+}  // namespace vofusion::loop

@@ -1,0 +1,50 @@
+#pragma once
+// The keyframe pose graph on MRPT: mrpt::graphs::CNetworkOfPoses3DInf optimised by
+// mrpt::graphslam::optimize_graph_spa_levmarq (sparse pose adjustment, Levenberg-Marquardt).
+// Edges between consecutive keyframes come from the tracker, loop edges from verification. Robust
+// to a false loop that passed verification: after optimising, the loop edge that fits worst is
+// removed while its residual exceeds max_chi2, and the graph is optimised again without it.
+#include <cstddef>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+namespace vofusion::loop {
+
+using Matrix6 = Eigen::Matrix<double, 6, 6>;  // x y z yaw pitch roll, as MRPT's 3D pose PDFs
+
+struct GraphEdge {
+  std::size_t from = 0, to = 0;                            // node ids
+  Eigen::Isometry3d T_from_to = Eigen::Isometry3d::Identity();  // pose of `to` in `from`'s frame
+  Matrix6 information = Matrix6::Identity();
+  bool loop = false;
+  bool active = true;                                      // false: removed as inconsistent
+  double chi2 = 0.0;                                       // residual after the last optimisation
+};
+
+class PoseGraph {
+ public:
+  // Node ids are 0, 1, 2, ...: node 0 is fixed (the map is anchored at the first keyframe).
+  std::size_t addNode(const Eigen::Isometry3d& initial);
+  std::size_t addEdge(const GraphEdge& e);  // returns the edge's index
+  // Optimises all nodes; then removes the worst loop edge while its chi2 exceeds max_chi2 and
+  // optimises again. Returns the indices of the edges removed this time.
+  std::vector<std::size_t> optimise(double max_chi2);
+  const Eigen::Isometry3d& pose(std::size_t node) const { return nodes_[node]; }
+  std::size_t nodes() const { return nodes_.size(); }
+  const std::vector<GraphEdge>& edges() const { return edges_; }
+  // Nodes added after the last optimisation follow their predecessor by the edge between them.
+  void chainNewNode(std::size_t node);
+
+ private:
+  void runSpa();
+  void updateChi2();
+  std::vector<Eigen::Isometry3d> nodes_;
+  std::vector<GraphEdge> edges_;
+};
+
+// Information of a keyframe-to-keyframe tracker edge: noise `rate` x distance moved (m) and x angle
+// turned (rad), plus `floor`, per axis.
+Matrix6 odometryInformation(const Eigen::Isometry3d& T, double rate, double floor);
+
+}  // namespace vofusion::loop

@@ -1,0 +1,244 @@
+#include "vofusion/loop/loop_closer.h"
+
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <mutex>
+#include <thread>
+
+#include "vofusion/loop/keyframe.h"
+#include "vofusion/loop/loop_verifier.h"
+#include "vofusion/loop/place_index.h"
+#include "vofusion/loop/pose_graph.h"
+
+namespace vofusion::loop {
+
+namespace {
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+mrpt::poses::CPose3D toMrpt(const Eigen::Isometry3d& T) {
+  mrpt::math::CMatrixDouble44 M;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) M(i, j) = T.matrix()(i, j);
+  return mrpt::poses::CPose3D(M);
+}
+Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
+  Eigen::Isometry3d T;
+  T.matrix() = p.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
+  return T;
+}
+}  // namespace
+
+struct LoopCloser::Impl {
+  LoopParams params;
+  KeyframeSelector selector;
+  std::vector<std::size_t> frame_keyframe;  // per frame added: its keyframe (the last one at or before it)
+  std::vector<std::size_t> keyframe_position;  // per keyframe: its frame's position among the frames added
+  std::size_t keyframes_made = 0;
+
+  // Owned by the worker thread.
+  std::vector<Keyframe> keyframes;
+  PlaceIndex index;
+  PoseGraph graph;
+  std::vector<std::size_t> loop_edge_record;  // graph edge index -> loops[] index (loop edges only)
+
+  // Shared with the frame loop, under `mu`.
+  mutable std::mutex mu;
+  std::condition_variable wake, idle;
+  std::deque<Keyframe> queue;
+  bool busy = false, stop = false;
+  std::vector<LoopRecord> loops;
+  std::vector<KeyframePose> poses;
+  std::map<std::string, std::size_t> rejections;
+  StageTimes times;
+  std::thread worker;
+
+  explicit Impl(const LoopParams& p) : params(p), selector(p), index(p) { worker = std::thread([this] { run(); }); }
+
+  void run() {
+    for (;;) {
+      Keyframe k;
+      {
+        std::unique_lock<std::mutex> lock(mu);
+        busy = false;
+        idle.notify_all();
+        wake.wait(lock, [&] { return stop || !queue.empty(); });
+        if (queue.empty()) return;
+        k = std::move(queue.front());
+        queue.pop_front();
+        busy = true;
+      }
+      process(std::move(k));
+    }
+  }
+
+  // One keyframe: a node chained to the previous one, then place recognition among the keyframes
+  // older than the recent ones, verification, and an optimisation when a loop was accepted.
+  void process(Keyframe k) {
+    StageTimes t;
+    const std::size_t id = graph.addNode(k.tracked);
+    if (id > 0) {
+      const Keyframe& prev = keyframes.back();
+      GraphEdge e;
+      e.from = id - 1;
+      e.to = id;
+      e.T_from_to = prev.tracked.inverse() * k.tracked;
+      e.information = odometryInformation(e.T_from_to, params.odometry_sigma_rate, params.odometry_sigma_floor);
+      graph.addEdge(e);
+      graph.chainNewNode(id);
+    }
+    keyframes.push_back(std::move(k));
+    const Keyframe& cur = keyframes.back();
+    if (id >= std::size_t(params.recent_keyframes)) {
+      const Keyframe& eligible = keyframes[id - std::size_t(params.recent_keyframes)];
+      if (eligible.features) index.add(eligible.id, eligible.features->descriptors);
+    }
+    std::vector<PlaceCandidate> candidates;
+    auto t0 = std::chrono::steady_clock::now();
+    if (cur.features) candidates = index.query(cur.features->descriptors);
+    t.add("place_recognition", secondsSince(t0));
+
+    std::vector<LoopRecord> accepted;
+    std::map<std::string, std::size_t> rejected;
+    t0 = std::chrono::steady_clock::now();
+    for (const PlaceCandidate& c : candidates) {
+      const Keyframe& old = keyframes[c.keyframe];
+      const LoopCheck check = verifyLoop(old, cur, params);
+      if (!check.accepted) {
+        ++rejected[check.reason];
+        continue;
+      }
+      GraphEdge e;
+      e.from = old.id;
+      e.to = cur.id;
+      e.T_from_to = check.T_old_new;
+      e.information = check.covariance.inverse();
+      e.loop = true;
+      loop_edge_record.resize(graph.edges().size() + 1, std::size_t(-1));
+      loop_edge_record[graph.addEdge(e)] = loops.size() + accepted.size();
+      accepted.push_back({old.frame_index, cur.frame_index, old.id, cur.id, check.matches, check.inliers, check.icp_rms,
+                          check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp, check.T_old_new});
+    }
+    t.add("loop_verification", secondsSince(t0));
+
+    t0 = std::chrono::steady_clock::now();
+    std::vector<std::size_t> removed;
+    if (!accepted.empty()) removed = graph.optimise(params.max_loop_chi2);
+    t.add("pose_graph", secondsSince(t0));
+    publish(accepted, removed, rejected, t);
+  }
+
+  void publish(const std::vector<LoopRecord>& accepted, const std::vector<std::size_t>& removed,
+               const std::map<std::string, std::size_t>& rejected, const StageTimes& t) {
+    std::lock_guard<std::mutex> lock(mu);
+    loops.insert(loops.end(), accepted.begin(), accepted.end());
+    for (const std::size_t e : removed)
+      if (e < loop_edge_record.size() && loop_edge_record[e] < loops.size()) loops[loop_edge_record[e]].active = false;
+    for (const auto& [why, n] : rejected) rejections[why] += n;
+    if (!removed.empty()) rejections["did not fit the graph after optimisation"] += removed.size();
+    poses.resize(keyframes.size());
+    for (std::size_t i = 0; i < keyframes.size(); ++i)
+      poses[i] = {keyframes[i].frame_index, keyframes[i].timestamp, keyframes[i].tracked, graph.pose(i)};
+    times.merge(t);
+  }
+};
+
+LoopCloser::LoopCloser(const LoopParams& params) : impl_(std::make_unique<Impl>(params)) {}
+
+LoopCloser::~LoopCloser() {
+  {
+    std::lock_guard<std::mutex> lock(impl_->mu);
+    impl_->stop = true;
+    impl_->queue.clear();
+  }
+  impl_->wake.notify_all();
+  if (impl_->worker.joinable()) impl_->worker.join();
+}
+
+bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked,
+                          std::shared_ptr<const DescribedKeypoints> features) {
+  Impl& m = *impl_;
+  const auto t0 = std::chrono::steady_clock::now();
+  const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty());
+  if (key) {
+    Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
+                              m.params.keyframe_downsample);
+    std::lock_guard<std::mutex> lock(m.mu);
+    m.queue.push_back(std::move(k));
+    m.wake.notify_one();
+    ++m.keyframes_made;
+    m.keyframe_position.push_back(m.frame_keyframe.size());
+  }
+  m.frame_keyframe.push_back(m.keyframes_made == 0 ? 0 : m.keyframes_made - 1);
+  std::lock_guard<std::mutex> lock(m.mu);
+  m.times.add("keyframes", secondsSince(t0));
+  return key;
+}
+
+void LoopCloser::finish() {
+  std::unique_lock<std::mutex> lock(impl_->mu);
+  impl_->idle.wait(lock, [&] { return impl_->queue.empty() && !impl_->busy; });
+}
+
+std::vector<LoopRecord> LoopCloser::loops() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return impl_->loops;
+}
+std::size_t LoopCloser::activeLoops() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  std::size_t n = 0;
+  for (const auto& l : impl_->loops) n += l.active;
+  return n;
+}
+std::vector<KeyframePose> LoopCloser::keyframes() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return impl_->poses;
+}
+std::map<std::string, std::size_t> LoopCloser::rejections() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return impl_->rejections;
+}
+StageTimes LoopCloser::times() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return impl_->times;
+}
+
+namespace {
+// The correction a keyframe's optimisation applies to the world: optimised x tracked^-1.
+Eigen::Isometry3d correctionOf(const KeyframePose& k) { return k.optimised * k.tracked.inverse(); }
+
+// a and b blended by s in [0, 1]: rotation by slerp, translation linearly.
+Eigen::Isometry3d blend(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, double s) {
+  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
+  out.linear() = Eigen::Quaterniond(a.linear()).slerp(s, Eigen::Quaterniond(b.linear())).toRotationMatrix();
+  out.translation() = (1 - s) * a.translation() + s * b.translation();
+  return out;
+}
+}  // namespace
+
+Trajectory LoopCloser::correct(const Trajectory& tracked) const {
+  const std::vector<KeyframePose> kf = keyframes();
+  Trajectory out = tracked;
+  if (kf.empty()) return out;
+  const std::vector<std::size_t>& at = impl_->keyframe_position;
+  for (std::size_t i = 0; i < out.size() && i < impl_->frame_keyframe.size(); ++i) {
+    // Between two keyframes the correction goes from one's to the other's with the frame count, so
+    // the corrected path has no jump where a new keyframe begins.
+    const std::size_t k = std::min(impl_->frame_keyframe[i], kf.size() - 1);
+    Eigen::Isometry3d C = correctionOf(kf[k]);
+    if (k + 1 < kf.size() && k + 1 < at.size() && i > at[k])
+      C = blend(C, correctionOf(kf[k + 1]), double(i - at[k]) / double(at[k + 1] - at[k]));
+    out[i].pose = toMrpt(C * toEigen(tracked[i].pose));
+  }
+  return out;
+}
+
+double LoopCloser::maxCorrection(const Trajectory& tracked) const {
+  const Trajectory c = correct(tracked);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < c.size(); ++i) worst = std::max(worst, c[i].pose.distanceTo(tracked[i].pose));
+  return worst;
+}
+
+}  // namespace vofusion::loop
