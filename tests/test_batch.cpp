@@ -1,0 +1,262 @@
+// scripts/batch for real on this machine: synthetic recordings through GNU parallel, two at a time,
+// one table at the end; a failed recording leaves the others alone and --resume reruns only it.
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "support.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+
+// GNU parallel is a Debian package (scripts/install-deps): missing = skip here, fail in CI.
+#define REQUIRE_PARALLEL()                                                                              \
+  do {                                                                                                  \
+    if (test::run("command -v parallel") != 0) {                                                        \
+      if (test::inCi()) FAIL() << "GNU parallel missing in CI (scripts/install-deps installs it)";      \
+      GTEST_SKIP() << "GNU parallel not installed (apt-get install parallel)";                          \
+    }                                                                                                   \
+  } while (0)
+
+std::string batch() { return test::sourceDir() + "/scripts/batch"; }
+std::string build() { return (fs::path(test::binDir()) / "..").lexically_normal().string(); }
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+std::vector<std::string> lines(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string l; std::getline(in, l);) out.push_back(l);
+  return out;
+}
+
+std::vector<std::string> split(const std::string& line, char sep) {
+  std::vector<std::string> out;
+  std::istringstream in(line);
+  for (std::string f; std::getline(in, f, sep);) out.push_back(f);
+  return out;
+}
+
+// The Markdown table's data rows (after the header and its |---| line).
+std::vector<std::vector<std::string>> tableRows(const std::string& md) {
+  std::vector<std::vector<std::string>> rows;
+  for (const auto& l : lines(md))
+    if (l.rfind("| ", 0) == 0 && l.find("| recording |") != 0) {
+      std::vector<std::string> cells;
+      for (auto& c : split(l.substr(2, l.size() - 4), '|')) {
+        c.erase(0, c.find_first_not_of(' '));
+        c.erase(c.find_last_not_of(' ') + 1);
+        cells.push_back(c);
+      }
+      rows.push_back(cells);
+    }
+  return rows;
+}
+
+struct Job {
+  std::string folder;
+  double start = 0, runtime = 0;
+  int exitval = -1;
+};
+// parallel --joblog: a header, then Seq Host Starttime JobRuntime Send Receive Exitval Signal Command.
+std::vector<Job> joblog(const std::string& path) {
+  std::vector<Job> jobs;
+  const auto ls = lines(slurp(path));
+  for (std::size_t i = 1; i < ls.size(); ++i) {
+    const auto f = split(ls[i], '\t');
+    if (f.size() < 9) continue;
+    Job j;
+    j.start = std::stod(f[2]);
+    j.runtime = std::stod(f[3]);
+    j.exitval = std::stoi(f[6]);
+    const auto words = split(f[8], ' ');  // batch-job <vofusion> <out> <folder> ...
+    if (words.size() > 3) j.folder = words[3];
+    jobs.push_back(j);
+  }
+  return jobs;
+}
+
+// Vofusion options for every job: a small volume, no rawlog, no CGAL post-processing (seconds, not minutes).
+std::string smallConfig(const std::string& dir) {
+  const std::string path = dir + "/small.ini";
+  std::ofstream(path) << "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
+                         "[output]\nimage_width = 320\nimage_height = 240\nwrite_rawlog = false\nclean_mesh = false\n";
+  return path;
+}
+
+void simulate(const std::string& out, const std::string& args, int frames = 40) {
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + out + " " + args + " --frames " +
+                          std::to_string(frames) + " --size 320x240",
+                      &log),
+            0)
+      << log;
+}
+
+}  // namespace
+
+TEST(Batch, FourRecordingsTwoAtATimeGiveOneTable) {
+  REQUIRE_PARALLEL();
+  const std::string dir = test::tempDir("batch4");
+  // Three scenes as TUM folders and the shaking room as a rawlog: both kinds of recording, four names.
+  simulate(dir + "/rec/room", "--scene room");
+  simulate(dir + "/rec/corridor", "--scene corridor");
+  simulate(dir + "/rec/bare_wall", "--scene bare_wall");
+  simulate(dir + "/rec/shake.rawlog", "--scene room --trajectory shake");
+  const std::string out = dir + "/out";
+  std::string log;
+  // TMPDIR: the jobs' CPU locks private to this test, so which CPUs they get is known.
+  const int rc = test::run("TMPDIR=" + dir + " " + batch() + " --out " + out + " --jobs 2 --build " + build() + " " +
+                               dir + "/rec/room " + dir + "/rec/corridor " + dir + "/rec/bare_wall " + dir +
+                               "/rec/shake.rawlog -- --config " + smallConfig(dir),
+                           &log);
+  ASSERT_EQ(rc, 0) << log;
+
+  const std::vector<std::string> names = {"room", "corridor", "bare_wall", "shake"};
+  std::set<std::string> cpu_sets;
+  for (const auto& n : names) {
+    const std::string f = out + "/" + n;
+    for (const char* file : {"summary.json", "trajectory.txt", "mesh.ply", "vofusion.log"})
+      EXPECT_TRUE(fs::exists(f + "/" + file)) << f << "/" << file << "\n" << log;
+    EXPECT_EQ(slurp(f + "/exit_code"), "0\n") << n;
+    // batch-job's first log line: which CPUs it was pinned to ("taskset -c <list>").
+    const std::string first = lines(slurp(f + "/vofusion.log")).at(0);
+    const auto at = first.find("taskset -c ");
+    if (std::thread::hardware_concurrency() >= 2) {
+      ASSERT_NE(at, std::string::npos) << first;
+      cpu_sets.insert(split(first.substr(at + 11), ' ').at(0));
+    }
+  }
+  // Two jobs at a time, each claiming a free CPU: two CPUs used, never the same one twice at once.
+  if (std::thread::hardware_concurrency() >= 2) {
+    EXPECT_EQ(cpu_sets.size(), 2u) << log;
+  }
+
+  const auto jobs = joblog(out + "/joblog");
+  ASSERT_EQ(jobs.size(), 4u) << slurp(out + "/joblog");
+  std::set<std::string> logged;
+  for (const auto& j : jobs) {
+    EXPECT_EQ(j.exitval, 0) << j.folder;
+    logged.insert(j.folder);
+  }
+  EXPECT_EQ(logged, std::set<std::string>(names.begin(), names.end()));
+  // Really two at a time: at the first two jobs' start, both were running; never three.
+  int most = 0;
+  for (const auto& a : jobs) {
+    int running = 0;
+    for (const auto& b : jobs) running += b.start <= a.start && a.start < b.start + b.runtime;
+    most = std::max(most, running);
+  }
+  EXPECT_EQ(most, 2) << slurp(out + "/joblog");
+
+  // One table: printed and in summary.md, a row per recording in the order given.
+  const std::string md = slurp(out + "/summary.md");
+  EXPECT_NE(log.find(md.substr(0, md.find("\n"))), std::string::npos) << log;
+  const auto rows = tableRows(md);
+  ASSERT_EQ(rows.size(), 4u) << md;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    ASSERT_EQ(rows[i].size(), 10u) << md;
+    EXPECT_EQ(rows[i][0], names[i]) << md;
+    EXPECT_EQ(rows[i][1], "joint");
+    EXPECT_EQ(rows[i][2], "40");
+    EXPECT_GT(std::stod(rows[i][3]), 0.0) << md;   // fps
+    EXPECT_LT(std::stod(rows[i][4]), 0.05) << md;  // ATE RMSE [m]: synthetic ground truth
+    EXPECT_GT(std::stod(rows[i][7]), 0.0) << md;   // peak RSS
+    EXPECT_GT(std::stoi(rows[i][8]), 1000) << md;  // mesh faces
+    EXPECT_EQ(rows[i][9], "ok") << md;
+  }
+  EXPECT_NE(md.find("4 of 4 runs ok."), std::string::npos) << md;
+
+  // The same table as JSON and CSV, from any folder of runs.
+  std::string json_text, csv;
+  ASSERT_EQ(test::run("python3 " + test::sourceDir() + "/bench/collect.py " + out + " --json 2>/dev/null", &json_text),
+            0);
+  const auto j = nlohmann::json::parse(json_text);
+  ASSERT_EQ(j.size(), 4u);
+  for (const auto& r : j) {
+    EXPECT_EQ(r["status"], "ok");
+    EXPECT_EQ(r["frames"], 40);
+  }
+  ASSERT_EQ(test::run("python3 " + test::sourceDir() + "/bench/collect.py " + out + " --csv 2>/dev/null", &csv), 0);
+  const auto csv_lines = lines(csv);
+  ASSERT_EQ(csv_lines.size(), 5u) << csv;
+  EXPECT_EQ(csv_lines[0].rfind("recording,mode,frames,fps,ate_rmse_m,", 0), 0u) << csv;
+}
+
+TEST(Batch, FailedRecordingLeavesTheOthersAndResumeRerunsIt) {
+  REQUIRE_PARALLEL();
+  const std::string dir = test::tempDir("batch_fail");
+  simulate(dir + "/rec/room", "--scene room", 15);
+  fs::create_directories(dir + "/rec/empty");  // not a recording: vofusion fails on it
+  const std::string out = dir + "/out";
+  auto cmd = [&](const std::string& options) {
+    return "TMPDIR=" + dir + " " + batch() + " --out " + out + " --jobs 2 --build " + build() + options + " " + dir +
+           "/rec/empty " + dir + "/rec/room -- --config " + smallConfig(dir);
+  };
+  std::string log;
+  EXPECT_EQ(test::run(cmd(""), &log), 1) << log;
+  EXPECT_NE(log.find("batch: 1 of 2 recordings failed: empty (" + dir + "/rec/empty)"), std::string::npos) << log;
+  EXPECT_EQ(slurp(out + "/room/exit_code"), "0\n");
+  EXPECT_TRUE(fs::exists(out + "/room/summary.json"));
+  EXPECT_EQ(slurp(out + "/empty/exit_code"), "2\n");
+  auto rows = tableRows(slurp(out + "/summary.md"));
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0][0], "empty");
+  // The failed row says why: vofusion's error line from the job's log.
+  EXPECT_NE(rows[0][9].find("failed (exit 2): vofusion: error: " + dir + "/rec/empty: folder is not a TUM RGB-D"),
+            std::string::npos)
+      << rows[0][9];
+  EXPECT_EQ(rows[1][9], "ok");
+
+  // Fix the recording and resume: only the failed job runs again.
+  simulate(dir + "/rec/empty", "--scene corridor", 15);
+  const auto room_time = fs::last_write_time(out + "/room/summary.json");
+  EXPECT_EQ(test::run(cmd(" --resume"), &log), 0) << log;
+  EXPECT_EQ(fs::last_write_time(out + "/room/summary.json"), room_time);
+  const auto jobs = joblog(out + "/joblog");
+  ASSERT_EQ(jobs.size(), 3u) << slurp(out + "/joblog");
+  EXPECT_EQ(jobs[2].folder, "empty");
+  EXPECT_EQ(jobs[2].exitval, 0);
+  rows = tableRows(slurp(out + "/summary.md"));
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0][9], "ok");
+  EXPECT_EQ(rows[1][9], "ok");
+}
+
+TEST(Batch, BadArgumentsFailInOneLine) {
+  const std::string dir = test::tempDir("batch_args");
+  struct Case {
+    std::string args, message;
+  };
+  const std::vector<Case> cases = {
+      {"a", "batch: --out <dir> is required"},
+      {"--out " + dir + "/o", "batch: no recordings given"},
+      {"--out " + dir + "/o --jobs 0 " + dir, "batch: --jobs 0: expected a positive whole number"},
+      {"--out " + dir + "/o " + dir + "/missing", "batch: " + dir + "/missing: no such recording"},
+      {"--out " + dir + "/o --list " + dir + "/missing.txt", "batch: " + dir + "/missing.txt: cannot read"},
+      {"--out " + dir + "/o --resume " + dir, "batch: " + dir + "/o/joblog: no earlier batch to resume"},
+      {"--out " + dir + "/o --threads x " + dir, "batch: --threads x: expected a whole number >= 0"},
+  };
+  for (const auto& c : cases) {
+    std::string log;
+    EXPECT_EQ(test::run(batch() + " " + c.args, &log), 2) << c.args << "\n" << log;
+    EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;
+    EXPECT_EQ(log.rfind(c.message, 0), 0u) << log;
+  }
+  std::string log;
+  EXPECT_NE(test::run("python3 " + test::sourceDir() + "/bench/collect.py " + dir, &log), 0);
+  EXPECT_EQ(log, "collect: " + dir + ": no summary.json or vofusion.log under it\n");
+}
