@@ -20,21 +20,27 @@ using namespace vofusion;
 namespace {
 
 const char* kUsage =
-    "usage: vofusion-mesh <in.ply> <out.ply> [--config f.ini] [--report r.json]\n"
+    "usage: vofusion-mesh <in.ply> <out.ply|out.obj|out.stl> [--config f.ini] [--report r.json]\n"
     "                     [--png view.png] [--scene view.3Dscene] [--trajectory traj.txt]\n"
+    "                     [--full full.ply] [--distance-to ref.ply]\n"
     "       vofusion-mesh --dump-config      (print the [mesh] defaults)\n"
-    "Repairs the mesh, removes small fragments, fills small holes and optionally simplifies and\n"
-    "smooths it (CGAL), keeping vertex colours. Parameters: section [mesh] (see share/mesh.ini).\n"
+    "Repairs the mesh, removes small fragments, fills small holes, simplifies it within a bounded\n"
+    "error and optionally smooths it (CGAL), keeping vertex colours. Parameters: section [mesh] (see\n"
+    "share/mesh.ini). The output format follows the extension: PLY, OBJ (colours as \"v x y z r g b\")\n"
+    "or binary STL (no colours). --full also writes the mesh before simplification; --distance-to\n"
+    "prints the mean and max distance from the result to another mesh (e.g. the raw one).\n"
     "--png renders the result off-screen, --scene writes an MRPT scene for SceneViewer3D; both show\n"
     "the camera path of --trajectory (TUM format, camera-to-world) when given.\n";
 
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--config", "--report", "--png", "--scene", "--trajectory"}, {"--dump-config", "--help"});
+  const CommandLine cl(argc, argv, {"--config", "--report", "--png", "--scene", "--trajectory", "--full", "--distance-to"}, {"--dump-config", "--help"});
   MeshCleanParams params;
   if (cl.flag("--help")) { std::cout << kUsage; return 0; }
   if (cl.flag("--dump-config")) { std::cout << dumpConfig({{"mesh", &params}}); return 0; }
   if (cl.positional().size() != 2) throw InputError("usage", "expected <in.ply> <out.ply> (see --help)");
   const std::string in = cl.positional()[0], out = cl.positional()[1];
+  meshFormatOf(out);  // a bad extension fails now, not after the cleaning
+  if (const auto full = cl.value("--full")) meshFormatOf(*full);
 
   if (const auto config = cl.value("--config")) {
     const auto cfg = loadConfig(*config);
@@ -51,11 +57,15 @@ int body(int argc, char** argv) {
   if (const auto t = cl.value("--trajectory")) traj = readTumTrajectory(*t);
 
   TriangleMesh mesh = readPly(in);
+  const auto ref_path = cl.value("--distance-to");
+  const TriangleMesh ref = ref_path ? readPly(*ref_path) : TriangleMesh();
   const std::size_t v0 = mesh.vertices.size(), f0 = mesh.faces.size();
-  const MeshCleanReport report = cleanMesh(mesh, params);
+  TriangleMesh full;
+  const MeshCleanReport report = cleanMesh(mesh, params, cl.value("--full") ? &full : nullptr);
   if (const auto rp = cl.value("--report")) writeFileAtomically(*rp, report.toJson() + "\n");
   if (!report.success) throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
-  writePly(out, mesh);
+  writeMesh(out, mesh);
+  if (const auto f = cl.value("--full")) writeMesh(*f, full);
   if (const auto png = cl.value("--png")) renderMeshPng(*png, mesh, traj.empty() ? nullptr : &traj);
   if (const auto scene = cl.value("--scene")) exportScene(*scene, mesh, traj, nullptr, CameraIntrinsics{});
   double seconds = 0;
@@ -66,6 +76,14 @@ int body(int argc, char** argv) {
                v0, f0, mesh.vertices.size(), mesh.faces.size(), seconds, report.components_removed,
                report.holes_filled, report.holes_left, report.closed ? "closed" : "open",
                report.manifold ? "manifold" : "NOT manifold");
+  if (const auto& s = report.simplification; s.ran)
+    std::fprintf(stderr, "simplified %zu -> %zu faces (%.1f %%) in %.2f s; distance to the unsimplified mesh mean %.4f m, max %.4f m\n",
+                 s.faces_before, s.faces_after, s.faces_before ? 100.0 * s.faces_after / s.faces_before : 0.0, s.seconds,
+                 s.distance.mean, s.distance.max);
+  if (ref_path) {
+    const MeshDistance d = meshDistance(mesh, ref);
+    std::printf("distance to %s: mean %.6f m, max %.6f m (%zu samples)\n", ref_path->c_str(), d.mean, d.max, d.samples);
+  }
   return 0;
 }
 

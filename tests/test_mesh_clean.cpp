@@ -67,6 +67,7 @@ MeshCleanParams testParams() {
   p.min_component_faces = 30;  // the 20-face fragment goes
   p.max_hole_perimeter = 2.0;  // m: the punched cap (~1.3 m around) is filled
   p.max_hole_edges = 100;
+  p.max_simplify_error = 0;    // the checks below count the repaired faces and vertices
   return p;
 }
 
@@ -195,6 +196,7 @@ TEST(MeshClean, SimplifiesToFaceBudgetKeepingShapeAndColours) {
   TriangleMesh m = icosphere(4);  // 5120 faces
   const double ref_vol = signedVolume(m);
   MeshCleanParams p;
+  p.max_simplify_error = 0;  // shortest edges first
   p.target_faces = 1000;
   const MeshCleanReport r = cleanMesh(m, p);
   ASSERT_TRUE(r.success) << r.failure;
@@ -209,11 +211,95 @@ TEST(MeshClean, SimplifiesToFaceBudgetKeepingShapeAndColours) {
 TEST(MeshClean, SimplifiesToEdgeLength) {
   TriangleMesh m = icosphere(4);  // edges ~0.08 m
   MeshCleanParams p;
+  p.max_simplify_error = 0;  // shortest edges first
   p.target_edge_length = 0.2;
   const MeshCleanReport r = cleanMesh(m, p);
   ASSERT_TRUE(r.success) << r.failure;
   EXPECT_LT(m.faces.size(), 1500u);
   EXPECT_TRUE(closedAndOriented(m));
+}
+
+// A finely tessellated plane (1 m square, 5 mm steps) beside a sphere (r = 0.3 m, 20480 faces).
+TriangleMesh planeAndSphere() {
+  TriangleMesh m = icosphere(5, 0.3f, {0, 0, 0.5f});
+  const int n = 200;
+  const auto base = std::uint32_t(m.vertices.size());
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      m.vertices.emplace_back(-0.5f + float(i) / n, -0.5f + float(j) / n, 0.f);
+      m.colors.push_back(colourAt(m.vertices.back()));
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const std::uint32_t a = base + j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      m.faces.push_back({a, b, d});
+      m.faces.push_back({a, d, c});
+    }
+  return m;
+}
+
+TEST(MeshClean, ErrorBoundedSimplificationStaysWithinItsBound) {
+  const TriangleMesh ref = planeAndSphere();
+  for (const double bound : {0.001, 0.004}) {
+    TriangleMesh m = ref, full;
+    MeshCleanParams p;
+    p.max_simplify_error = bound;
+    const MeshCleanReport r = cleanMesh(m, p, &full);
+    ASSERT_TRUE(r.success) << r.failure;
+    ASSERT_TRUE(r.simplification.ran);
+    EXPECT_EQ(r.simplification.faces_before, ref.faces.size());
+    EXPECT_EQ(r.simplification.faces_after, m.faces.size());
+    EXPECT_EQ(full.faces.size(), ref.faces.size());  // the unsimplified mesh, as asked
+    EXPECT_LT(m.faces.size(), ref.faces.size() / 10) << bound;  // the plane collapses to a few faces
+    // Measured both ways (simplified -> original, original -> simplified), independently of the report.
+    const MeshDistance there = meshDistance(m, ref), back = meshDistance(ref, m);
+    EXPECT_LE(there.max, bound) << bound;
+    EXPECT_LE(back.max, bound) << bound;
+    EXPECT_LE(r.simplification.distance.max, bound);
+    EXPECT_NEAR(r.simplification.distance.mean, there.mean, 0.2 * there.mean + 1e-6);
+    EXPECT_GT(r.simplification.distance.samples, 10000u);
+    // The sphere is curved: it keeps more of its faces with the tighter bound, and stays round.
+    std::size_t sphere_vertices = 0;
+    for (std::size_t i = 0; i < m.vertices.size(); ++i) {
+      if (m.vertices[i].z() < 0.15f) continue;
+      ++sphere_vertices;
+      EXPECT_NEAR((m.vertices[i] - Eigen::Vector3f(0, 0, 0.5f)).norm(), 0.3f, bound);
+      for (int k = 0; k < 3; ++k) EXPECT_NEAR(m.colors[i][k], colourAt(m.vertices[i])[k], 12);
+    }
+    EXPECT_GT(sphere_vertices, bound < 0.002 ? 1000u : 100u) << bound;
+  }
+}
+
+TEST(MeshClean, FaceBudgetStillStopsErrorBoundedSimplification) {
+  MeshCleanParams p;
+  p.max_simplify_error = 0.5;  // m, on a unit sphere: far below 500 faces on its own
+  TriangleMesh bound_only = icosphere(4);
+  ASSERT_TRUE(cleanMesh(bound_only, p).success);
+  ASSERT_LT(bound_only.faces.size(), 400u);
+  p.target_faces = 500;  // whichever comes first: here the budget
+  TriangleMesh m = icosphere(4);
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_LE(m.faces.size(), 550u);
+  EXPECT_GE(m.faces.size(), 450u);
+  EXPECT_TRUE(closedAndOriented(m));
+}
+
+TEST(MeshClean, EdgeLengthTargetNeedsLengthOrder) {
+  mrpt::config::CConfigFileMemory ini;
+  ini.write("mesh", "max_simplify_error", 0.006);
+  ini.write("mesh", "target_edge_length", 0.02);
+  MeshCleanParams p;
+  try {
+    p.loadFromConfigFile(ini, "mesh");
+    ADD_FAILURE() << "no error";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("target_edge_length"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("max_simplify_error = 0"), std::string::npos) << e.what();
+  }
+  ini.write("mesh", "max_simplify_error", 0.0);
+  p.loadFromConfigFile(ini, "mesh");
+  EXPECT_DOUBLE_EQ(p.target_edge_length, 0.02);
 }
 
 TEST(MeshClean, SmoothingReducesNoise) {
@@ -228,6 +314,7 @@ TEST(MeshClean, SmoothingReducesNoise) {
   };
   const double before = radialSpread(m);
   MeshCleanParams p;
+  p.max_simplify_error = 0;  // smoothing alone
   p.smooth_iterations = 3;
   p.smooth_time = 1e-3;
   p.relax_iterations = 2;
@@ -247,6 +334,7 @@ TEST(MeshClean, ParamsRoundTripThroughIni) {
   a.max_hole_perimeter = 0.7;
   a.max_hole_edges = 33;
   a.hole_fairing = false;
+  a.max_simplify_error = 0;
   a.target_faces = 1234;
   a.target_edge_length = 0.02;
   a.smooth_iterations = 4;
@@ -265,6 +353,7 @@ TEST(MeshClean, ParamsRoundTripThroughIni) {
   EXPECT_DOUBLE_EQ(b.max_hole_perimeter, a.max_hole_perimeter);
   EXPECT_EQ(b.max_hole_edges, a.max_hole_edges);
   EXPECT_EQ(b.hole_fairing, a.hole_fairing);
+  EXPECT_DOUBLE_EQ(b.max_simplify_error, a.max_simplify_error);
   EXPECT_EQ(b.target_faces, a.target_faces);
   EXPECT_DOUBLE_EQ(b.target_edge_length, a.target_edge_length);
   EXPECT_EQ(b.smooth_iterations, a.smooth_iterations);
@@ -309,9 +398,10 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   TriangleMesh m = icosphere(2, 0.2f);
   m.faces.erase(m.faces.begin());  // a one-triangle hole, ~0.19 m around: within the default bound
   writePly(dir + "/in.ply", m);
+  std::ofstream(dir + "/keep.ini") << "[mesh]\nmax_simplify_error = 0\n";  // the face count below is the filled sphere's
   std::string out;
-  ASSERT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.ply --report " + dir +
-                          "/r.json --scene " + dir + "/s.3Dscene --png " + dir + "/m.png",
+  ASSERT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.ply --config " + dir +
+                          "/keep.ini --report " + dir + "/r.json --scene " + dir + "/s.3Dscene --png " + dir + "/m.png",
                       &out),
             0)
       << out;

@@ -13,6 +13,7 @@
 #include "support.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/triangle_mesh.h"
 
 using namespace vofusion;
@@ -31,7 +32,7 @@ std::string smallConfig(const std::string& dir) {
 std::string validConfig(const std::string& dir) {
   const std::string path = dir + "/small.ini";
   std::ofstream(path) << "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
-                         "[output]\nimage_width = 320\nimage_height = 240\n";
+                         "[output]\nimage_width = 320\nimage_height = 240\nsave_full_mesh = true\n";
   return path;
 }
 
@@ -51,7 +52,7 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
                       &log),
             0)
       << log;
-  for (const char* f : {"trajectory.txt", "poses.rawlog", "mesh.ply", "mesh_raw.ply", "scene.3Dscene", "summary.json",
+  for (const char* f : {"trajectory.txt", "poses.rawlog", "mesh.ply", "mesh_raw.ply", "mesh_full.ply", "scene.3Dscene", "summary.json",
                         "trajectory.png", "mesh.png"})
     EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f << "\n" << log;
   for (const auto& e : fs::directory_iterator(out))
@@ -62,7 +63,13 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   EXPECT_EQ(summary["mode"].get<std::string>(), "joint");
   ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.05);
-  EXPECT_GT(summary["mesh"]["faces"].get<int>(), 1000);
+  EXPECT_GT(summary["mesh_raw"]["faces"].get<int>(), 1000);
+  // The default mesh is simplified within its error bound (flat walls: to a small fraction).
+  const auto& simp = summary["mesh_simplification"];
+  EXPECT_EQ(simp["faces_after"].get<std::size_t>(), summary["mesh"]["faces"].get<std::size_t>());
+  EXPECT_LT(simp["ratio_to_raw"].get<double>(), 0.5);
+  EXPECT_LE(simp["max_distance_m"].get<double>(), MeshCleanParams().max_simplify_error);
+  EXPECT_EQ(readPly(out + "/mesh_full.ply").faces.size(), simp["faces_before"].get<std::size_t>());
   EXPECT_TRUE(summary["stages"].contains("odometry"));
   EXPECT_TRUE(summary["stages"].contains("integrate"));
 

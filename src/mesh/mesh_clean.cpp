@@ -10,10 +10,14 @@
 #include <cstring>
 #include <unordered_map>
 
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/border.h>
 #include <CGAL/Polygon_mesh_processing/compute_normal.h>
 #include <CGAL/Polygon_mesh_processing/connected_components.h>
+#include <CGAL/Polygon_mesh_processing/distance.h>
 #include <CGAL/Polygon_mesh_processing/manifoldness.h>
 #include <CGAL/Polygon_mesh_processing/measure.h>
 #include <CGAL/Polygon_mesh_processing/orient_polygon_soup.h>
@@ -29,6 +33,7 @@
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_placement.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Edge_length_cost.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/GarlandHeckbert_plane_policies.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/LindstromTurk_placement.h>
 #include <CGAL/Surface_mesh_simplification/Edge_collapse_visitor_base.h>
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
@@ -141,16 +146,74 @@ std::size_t borderCycleCount(const Mesh& m) {
   return cycles.size();
 }
 
-// Stops edge collapse at a face budget or once the shortest remaining edge reaches a length.
+// Stops edge collapse at a face budget, once the shortest remaining edge reaches a length (length
+// order), or before the cheapest collapse costs more than a bound (Garland-Heckbert order).
 struct StopAtTarget {
   std::size_t target_edges = 0;  // 0: unused
   double min_sq_length = 0.0;    // m^2, 0: unused
+  double max_cost = 0.0;         // m^2, 0: unused
   template <typename F, typename Profile>
-  bool operator()(const F&, const Profile& profile, std::size_t, std::size_t current_edges) const {
+  bool operator()(const F& cost, const Profile& profile, std::size_t, std::size_t current_edges) const {
     if (target_edges && current_edges <= target_edges) return true;
+    if (max_cost > 0 && cost > max_cost) return true;
     return min_sq_length > 0 && CGAL::squared_distance(profile.p0(), profile.p1()) >= min_sq_length;
   }
 };
+
+// A triangle soup: distances are measured on soups, so any mesh (non-manifold too) can be compared.
+struct Soup {
+  std::vector<Point> points;
+  std::vector<std::array<std::size_t, 3>> triangles;
+};
+
+Soup soupOf(const Mesh& m) {
+  Soup s;
+  s.points.reserve(m.num_vertices());
+  for (std::size_t i = 0; i < m.num_vertices(); ++i) s.points.push_back(m.point(VD(i)));  // removed ones unreferenced
+  for (FD f : m.faces()) {
+    const HD h = m.halfedge(f);
+    s.triangles.push_back({m.source(h).idx(), m.target(h).idx(), m.target(m.next(h)).idx()});
+  }
+  return s;
+}
+
+Soup soupOf(const TriangleMesh& m) {
+  Soup s;
+  for (const auto& v : m.vertices) s.points.emplace_back(v.x(), v.y(), v.z());
+  for (const auto& f : m.faces) {
+    for (std::uint32_t i : f)
+      if (i >= m.vertices.size()) throw std::invalid_argument("a face references vertex " + std::to_string(i));
+    s.triangles.push_back({f[0], f[1], f[2]});
+  }
+  return s;
+}
+
+// Mean and max distance from points sampled uniformly by area on `from`'s faces to `to`'s surface.
+MeshDistance distanceBetween(const Soup& from, const Soup& to, std::size_t samples) {
+  MeshDistance d;
+  if (from.triangles.empty() || to.triangles.empty() || samples == 0) return d;
+  std::vector<Point> points;
+  PMP::sample_triangle_soup(from.points, from.triangles, std::back_inserter(points),
+                            CGAL::parameters::number_of_points_on_faces(samples)
+                                .do_sample_vertices(false)
+                                .do_sample_edges(false)
+                                .random_seed(20240615u));
+  std::vector<Kernel::Triangle_3> triangles;
+  triangles.reserve(to.triangles.size());
+  for (const auto& t : to.triangles) triangles.emplace_back(to.points[t[0]], to.points[t[1]], to.points[t[2]]);
+  using Primitive = CGAL::AABB_triangle_primitive<Kernel, std::vector<Kernel::Triangle_3>::const_iterator>;
+  CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>> tree(triangles.cbegin(), triangles.cend());
+  tree.accelerate_distance_queries();
+  double sum = 0.0;
+  for (const Point& p : points) {
+    const double e = std::sqrt(tree.squared_distance(p));
+    sum += e;
+    d.max = std::max(d.max, e);
+  }
+  d.samples = points.size();
+  d.mean = points.empty() ? 0.0 : sum / double(points.size());
+  return d;
+}
 
 // Gives the vertex that survives an edge collapse the mean colour of the edge's two ends.
 struct BlendColoursOnCollapse : SMS::Edge_collapse_visitor_base<Mesh> {
@@ -167,7 +230,8 @@ struct BlendColoursOnCollapse : SMS::Edge_collapse_visitor_base<Mesh> {
 
 class Cleaner {
  public:
-  Cleaner(const MeshCleanParams& p, MeshCleanReport& r) : p_(p), r_(r) {}
+  Cleaner(const MeshCleanParams& p, MeshCleanReport& r, TriangleMesh* unsimplified)
+      : p_(p), r_(r), unsimplified_(unsimplified) {}
 
   void run(TriangleMesh& in) {
     has_colours_ = !in.colors.empty() && in.colors.size() == in.vertices.size();
@@ -178,10 +242,16 @@ class Cleaner {
     step("repair", [&] { buildRepaired(in); });
     if (p_.min_component_faces > 0 || p_.min_component_area > 0) step("components", [&] { removeSmallComponents(); });
     if (p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) step("holes", [&] { fillHoles(); });
-    if (p_.target_faces > 0 || p_.target_edge_length > 0) step("simplify", [&] { simplify(); });
+    const bool simplifying = p_.max_simplify_error > 0 || p_.target_faces > 0 || p_.target_edge_length > 0;
+    Mesh before;  // the mesh as simplification found it: measured against, and `unsimplified`
+    if (simplifying || unsimplified_) before = m_;
+    if (simplifying) step("simplify", [&] { simplifyAndMeasure(before); });
     if (p_.smooth_iterations > 0 || p_.relax_iterations > 0) step("smooth", [&] { smooth(); });
-    m_.collect_garbage();
-    if (p_.orient_closed_outward && !m_.is_empty() && CGAL::is_closed(m_)) PMP::orient(m_);
+    finish(m_);
+    if (unsimplified_) {
+      finish(before);
+      *unsimplified_ = toTriangleMesh(before);
+    }
     r_.border_cycles_after = borderCycleCount(m_);
     {
       auto fcc = m_.add_property_map<FD, std::size_t>("f:cc_final", 0).first;
@@ -191,7 +261,7 @@ class Cleaner {
     r_.closed = r_.border_cycles_after == 0 && !m_.is_empty();
     r_.manifold = nonManifoldVertexCount(m_) == 0;
     r_.area = m_.is_empty() ? 0.0 : PMP::area(m_);
-    in = toTriangleMesh();
+    in = toTriangleMesh(m_);
   }
 
  private:
@@ -315,21 +385,46 @@ class Cleaner {
     propagateColours(m_, col_, known_);
   }
 
+  void simplifyAndMeasure(const Mesh& before) {
+    const auto t0 = std::chrono::steady_clock::now();
+    MeshSimplification& s = r_.simplification;
+    s.ran = true;
+    s.faces_before = m_.number_of_faces();
+    simplify();
+    s.faces_after = m_.number_of_faces();
+    // Cheap enough to run every time (a fixed number of samples): the bound is measured, not assumed.
+    if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(m_), soupOf(before), kDistanceSamples);
+    s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+
   void simplify() {
     if (!CGAL::is_triangle_mesh(m_) || m_.is_empty()) return;
     StopAtTarget stop;
     if (p_.target_faces > 0 && m_.number_of_faces() > std::size_t(p_.target_faces))
       // Edges per face is nearly constant under collapse (3/2 on a closed surface).
       stop.target_edges = std::size_t(double(p_.target_faces) * m_.number_of_edges() / m_.number_of_faces());
-    stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
-    if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
-    // Shortest edges first, placed by Lindstrom-Turk, refusing collapses that flip normals. The
-    // surviving vertex of a collapse keeps its colour.
-    SMS::Bounded_normal_change_placement<SMS::LindstromTurk_placement<Mesh>> placement;
-    SMS::edge_collapse(m_, stop,
-                       CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
-                           .get_placement(placement)
-                           .visitor(BlendColoursOnCollapse(col_)));
+    if (p_.max_simplify_error > 0 && p_.target_edge_length > 0)
+      throw std::invalid_argument("target_edge_length works only with max_simplify_error = 0 (shortest edges first)");
+    if (p_.max_simplify_error > 0) {
+      // Garland-Heckbert: the cost of a collapse is the sum of squared distances from the new vertex
+      // to the planes of every face merged into it, so stopping at max_error^2 keeps each of them
+      // within max_error of the new vertex (a conservative bound: the planes overlap).
+      stop.max_cost = p_.max_simplify_error * p_.max_simplify_error;
+      SMS::GarlandHeckbert_plane_policies<Mesh, Kernel> gh(m_);
+      SMS::Bounded_normal_change_placement<SMS::GarlandHeckbert_plane_policies<Mesh, Kernel>> placement(gh.get_placement());
+      SMS::edge_collapse(m_, stop,
+                         CGAL::parameters::get_cost(gh.get_cost()).get_placement(placement).visitor(BlendColoursOnCollapse(col_)));
+    } else {
+      stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
+      if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
+      // Shortest edges first, placed by Lindstrom-Turk, refusing collapses that flip normals. The
+      // surviving vertex of a collapse keeps its colour.
+      SMS::Bounded_normal_change_placement<SMS::LindstromTurk_placement<Mesh>> placement;
+      SMS::edge_collapse(m_, stop,
+                         CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
+                             .get_placement(placement)
+                             .visitor(BlendColoursOnCollapse(col_)));
+    }
     m_.collect_garbage();
   }
 
@@ -345,32 +440,43 @@ class Cleaner {
     m_.remove_property_map(fixed);
   }
 
-  TriangleMesh toTriangleMesh() {
+  void finish(Mesh& m) const {
+    m.collect_garbage();  // indices are now 0..n-1
+    if (p_.orient_closed_outward && !m.is_empty() && CGAL::is_closed(m)) PMP::orient(m);
+  }
+
+  // `m` is m_ or a copy of it (with the copied colour map).
+  TriangleMesh toTriangleMesh(Mesh& m) const {
     TriangleMesh out;
-    m_.collect_garbage();  // indices are now 0..n-1
-    out.vertices.reserve(m_.number_of_vertices());
-    for (VD v : m_.vertices()) {
-      const Point& p = m_.point(v);
+    m.collect_garbage();
+    const auto col = m.property_map<VD, Rgb>("v:rgb").first;
+    out.vertices.reserve(m.number_of_vertices());
+    for (VD v : m.vertices()) {
+      const Point& p = m.point(v);
       out.vertices.emplace_back(float(p.x()), float(p.y()), float(p.z()));
-      if (has_colours_) out.colors.push_back(col_[v]);
+      if (has_colours_) out.colors.push_back(col[v]);
     }
-    for (FD f : m_.faces()) {
+    for (FD f : m.faces()) {
       std::array<std::uint32_t, 3> tri{};
       int k = 0;
-      for (VD v : CGAL::vertices_around_face(m_.halfedge(f), m_))
+      for (VD v : CGAL::vertices_around_face(m.halfedge(f), m))
         if (k < 3) tri[k++] = std::uint32_t(v.idx());
       out.faces.push_back(tri);
     }
-    if (p_.recompute_normals && !m_.is_empty()) {
-      auto vn = m_.add_property_map<VD, Kernel::Vector_3>("v:n", CGAL::NULL_VECTOR).first;
-      PMP::compute_vertex_normals(m_, vn);
-      for (VD v : m_.vertices()) out.normals.emplace_back(float(vn[v].x()), float(vn[v].y()), float(vn[v].z()));
+    if (p_.recompute_normals && !m.is_empty()) {
+      auto vn = m.add_property_map<VD, Kernel::Vector_3>("v:n", CGAL::NULL_VECTOR).first;
+      PMP::compute_vertex_normals(m, vn);
+      for (VD v : m.vertices()) out.normals.emplace_back(float(vn[v].x()), float(vn[v].y()), float(vn[v].z()));
+      m.remove_property_map(vn);
     }
     return out;
   }
 
+  static constexpr std::size_t kDistanceSamples = 100000;
+
   const MeshCleanParams& p_;
   MeshCleanReport& r_;
+  TriangleMesh* unsimplified_;
   Mesh m_;
   Mesh::Property_map<VD, Rgb> col_;
   Mesh::Property_map<VD, bool> known_;
@@ -380,19 +486,24 @@ class Cleaner {
 
 }  // namespace
 
-MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params) {
+MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, TriangleMesh* unsimplified) {
   MeshCleanReport report;
-  TriangleMesh work = mesh;
+  TriangleMesh work = mesh, before;
   try {
-    Cleaner(params, report).run(work);
+    Cleaner(params, report, unsimplified ? &before : nullptr).run(work);
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
     return report;
   }
   mesh = std::move(work);
+  if (unsimplified) *unsimplified = std::move(before);
   report.success = true;
   return report;
+}
+
+MeshDistance meshDistance(const TriangleMesh& from, const TriangleMesh& to, std::size_t samples) {
+  return distanceBetween(soupOf(from), soupOf(to), samples);
 }
 
 }  // namespace vofusion

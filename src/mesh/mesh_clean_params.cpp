@@ -6,6 +6,7 @@
 #include <mrpt/config/CConfigFileBase.h>
 
 #include "vofusion/core/config.h"
+#include "vofusion/core/errors.h"
 
 #include "vofusion/mesh/mesh_clean.h"
 
@@ -22,6 +23,7 @@ std::vector<ConfigKey> meshCleanKeys(MeshCleanParams& p) {
       {"max_hole_perimeter", &p.max_hole_perimeter, "m, longer hole borders stay open (0: fill no holes)", 0.0, 100.0},
       {"max_hole_edges", &p.max_hole_edges, "edges, hole borders with more edges stay open", 0.0, 1000000.0},
       {"hole_fairing", &p.hole_fairing, "fair (smooth) hole patches; false: flat refined patch"},
+      {"max_simplify_error", &p.max_simplify_error, "m, Garland-Heckbert simplification up to this quadric error (0: off)", 0.0, 1.0},
       {"target_faces", &p.target_faces, "faces, edge-collapse simplification target (0: off)", 0.0, 1000000000.0},
       {"target_edge_length", &p.target_edge_length, "m, simplify until no shorter edge is left (0: off)", 0.0, 10.0},
       {"smooth_iterations", &p.smooth_iterations, "iterations of curvature-flow shape smoothing (0: off)", 0.0, 1000.0},
@@ -35,6 +37,9 @@ std::vector<ConfigKey> meshCleanKeys(MeshCleanParams& p) {
 
 void MeshCleanParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
   loadKeys(cfg, s, meshCleanKeys(*this));
+  // The error-bounded order is not by length: a length target would stop it at a random point.
+  if (max_simplify_error > 0 && target_edge_length > 0)
+    throw InputError("[" + s + "] target_edge_length", "works only with max_simplify_error = 0 (shortest edges first)");
 }
 
 void MeshCleanParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
@@ -76,7 +81,14 @@ std::string MeshCleanReport::toJson() const {
     << ", \"components_removed\": " << components_removed << ", \"components_kept\": " << components_kept
     << ", \"holes_filled\": " << holes_filled << ", \"holes_left\": " << holes_left
     << ", \"border_cycles_after\": " << border_cycles_after << ", \"closed\": " << (closed ? "true" : "false")
-    << ", \"manifold\": " << (manifold ? "true" : "false") << ", \"area\": " << num(area) << "}";
+    << ", \"manifold\": " << (manifold ? "true" : "false") << ", \"area\": " << num(area);
+  if (simplification.ran) {
+    const auto& s = simplification;
+    o << ", \"simplification\": {\"faces_before\": " << s.faces_before << ", \"faces_after\": " << s.faces_after
+      << ", \"distance_samples\": " << s.distance.samples << ", \"mean_distance_m\": " << num(s.distance.mean)
+      << ", \"max_distance_m\": " << num(s.distance.max) << ", \"seconds\": " << num(s.seconds) << "}";
+  }
+  o << "}";
   return o.str();
 }
 

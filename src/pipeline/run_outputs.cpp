@@ -34,6 +34,7 @@ std::vector<ConfigKey> outputKeys(OutputParams& p) {
       {"write_rawlog", &p.write_rawlog, "poses.rawlog: observations + odometry actions + fused poses"},
       {"save_raw_mesh", &p.save_raw_mesh, "also mesh_raw.ply (marching cubes before CGAL post-processing)"},
       {"clean_mesh", &p.clean_mesh, "CGAL post-processing with the [mesh] parameters"},
+      {"save_full_mesh", &p.save_full_mesh, "also mesh_full.ply (post-processed but not simplified)"},
       {"frustum_every", &p.frustum_every, "frames between camera frustums in scene.3Dscene", 0.0, 100000.0},
       {"image_width", &p.image_width, "px, mesh.png and trajectory.png", 16.0, 8192.0},
       {"image_height", &p.image_height, "px", 16.0, 8192.0},
@@ -200,6 +201,14 @@ json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std:
           {"stages", timesJson(t, frames)}};
 }
 
+// Faces against the marching-cubes mesh; distances against the mesh just before simplification.
+json simplificationJson(const MeshSimplification& s, std::size_t raw_faces) {
+  return {{"faces_raw", raw_faces}, {"faces_before", s.faces_before}, {"faces_after", s.faces_after},
+          {"ratio_to_raw", raw_faces ? double(s.faces_after) / double(raw_faces) : 0.0},
+          {"mean_distance_m", s.distance.mean}, {"max_distance_m", s.distance.max},
+          {"distance_samples", s.distance.samples}, {"seconds", s.seconds}};
+}
+
 }  // namespace
 
 struct RunRecorder::Impl {
@@ -337,8 +346,15 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
   }
   if (p.clean_mesh && !mesh.empty()) {
-    const MeshCleanReport report = cleanMesh(mesh, m.mesh_params);
+    const std::size_t raw_faces = mesh.faces.size();
+    TriangleMesh full;
+    const MeshCleanReport report = cleanMesh(mesh, m.mesh_params, p.save_full_mesh ? &full : nullptr);
     s["mesh_clean"] = json::parse(report.toJson());
+    if (report.simplification.ran) s["mesh_simplification"] = simplificationJson(report.simplification, raw_faces);
+    if (p.save_full_mesh) {
+      writePly(staged("mesh_full.ply"), full);
+      wrote("mesh_full.ply", std::to_string(full.faces.size()) + " faces");
+    }
   }
   s["mesh"] = meshJson(mesh);
   writePly(staged("mesh.ply"), mesh);

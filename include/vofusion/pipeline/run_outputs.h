@@ -3,7 +3,7 @@
 //   trajectory.txt   TUM format, one pose per processed frame
 //   poses.rawlog     input observations + odometry actions (CActionRobotMovement3D, emVisualOdometry)
 //                    + fused poses (CObservationRobotPose "VOFUSION_POSE"), for RawLogViewer / MRPT tools
-//   mesh.ply         CGAL post-processed coloured mesh (mesh_raw.ply too when asked)
+//   mesh.ply         CGAL post-processed coloured mesh, simplified (mesh_raw.ply, mesh_full.ply too when asked)
 //   scene.3Dscene    mesh, camera path, frustums, grid for SceneViewer3D
 //   trajectory.png   path (and ground truth + error when known); mesh.png an off-screen rendering
 //   summary.json     frames, failures, fps per stage, peak memory, mesh statistics, ATE/RPE
@@ -24,6 +24,7 @@ struct OutputParams : public mrpt::config::CLoadableOptions {
   bool write_rawlog = true;      // poses.rawlog (costs PNG encoding per frame, on a writer thread)
   bool save_raw_mesh = false;    // also mesh_raw.ply, the marching-cubes mesh before post-processing
   bool clean_mesh = true;        // CGAL post-processing with the [mesh] parameters
+  bool save_full_mesh = false;   // also mesh_full.ply, post-processed but not simplified
   int frustum_every = 30;        // frames between camera frustums drawn in scene.3Dscene
   int image_width = 1280;        // px, mesh.png and trajectory.png
   int image_height = 960;        // px
