@@ -29,6 +29,24 @@ using namespace vofusion;
 
 namespace {
 
+// Loops accepted since the last call, for the live window: a line between the two keyframes'
+// tracked poses (where the window drew the path) and a status line.
+void addNewLoops(const loop::LoopCloser& lc, std::size_t& shown, LiveView& view) {
+  const std::vector<loop::LoopRecord> loops = lc.loops();
+  if (loops.size() <= shown) return;
+  const std::vector<loop::KeyframePose> kf = lc.keyframes();
+  auto pose = [](const Eigen::Isometry3d& T) { return mrpt::poses::CPose3D(mrpt::math::CMatrixDouble44(T.matrix())); };
+  for (; shown < loops.size(); ++shown) {
+    const loop::LoopRecord& l = loops[shown];
+    if (l.from_keyframe < kf.size() && l.to_keyframe < kf.size())
+      view.new_loops.push_back({pose(kf[l.from_keyframe].tracked), pose(kf[l.to_keyframe].tracked)});
+    char line[200];
+    std::snprintf(line, sizeof line, "loop closed: frames %zu and %zu, correction %.1f cm %.1f deg (%zu loops)",
+                  l.from_frame, l.to_frame, 100.0 * l.correction_m, l.correction_deg, loops.size());
+    view.loop_status = line;
+  }
+}
+
 const char* kSection = "vofusion-grab";  // our own keys; sensor sections belong to MRPT
 
 const char* kUsage =
@@ -192,7 +210,7 @@ int run(const Args& args) {
   // The consumer: the reconstruction when --live, else nothing (recording happens on the grab
   // thread). --simulate-work-ms adds a fixed cost per frame (tests force drops with it).
   LiveStats latest;
-  std::size_t lost_in_a_row = 0;
+  std::size_t lost_in_a_row = 0, loops_shown = 0;
   FrameConsumer consumer = [&](const Frame& frame) {
     if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
     if (!rec) return;
@@ -205,6 +223,7 @@ int run(const Args& args) {
       view.pose = r.pose;
       view.tracking = r.tracked ? (r.fell_back ? "tracking (odometry fallback)" : "tracking")
                                 : "LOST" + (r.note.empty() ? std::string() : ": " + r.note);
+      if (const loop::LoopCloser* lc = rec->loopCloser()) addNewLoops(*lc, loops_shown, view);
       viewer->show(view, latest);
       if (!viewer->isOpen()) g_stop = true;  // closing the window ends the run
     }
@@ -232,6 +251,17 @@ int run(const Args& args) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   if (writer) writer->commit();
   if (rec && rec->framesProcessed() > 0) {
+    // Loop closure: the poses are corrected now; the map, fused live at the tracked poses, is fused
+    // again at the corrected ones from the recording when there is one.
+    rec->finish();
+    std::optional<std::size_t> refused;
+    if (rec->mapNeedsReintegration() && recorded > 0) {
+      auto again = openFrameSource((fs::path(args.out) / "grab.rawlog").string(), SourceOptions{});
+      refused = rec->reintegrate([&](Frame& f) { return again->next(f); });
+    } else if (rec->mapNeedsReintegration()) {
+      std::fprintf(stderr, "vofusion-grab: loops corrected the trajectory; the mesh keeps the tracked poses "
+                           "(record with the reconstruction to have it fused again at the corrected ones)\n");
+    }
     RunInfo info;
     info.input = source->name();
     info.config = config;
@@ -239,6 +269,7 @@ int run(const Args& args) {
     info.seconds = stats.seconds;
     info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
                             {"queue_capacity", opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
+    if (refused) info.extra["loop_closure_reintegration"] = {{"frames_fused", *refused}, {"from", "grab.rawlog"}};
     outputs->finish(*rec, info);
   }
   writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),

@@ -22,10 +22,14 @@ LiveViewer::LiveViewer(const std::string& title) {
   path_->setColor(0.9f, 0.2f, 0.2f);
   path_->setLineWidth(2.0f);
   camera_ = mrpt::opengl::stock_objects::CornerXYZSimple(0.15f, 2.0f);
+  loops_ = mrpt::opengl::CSetOfLines::Create();
+  loops_->setColor(1.0f, 0.85f, 0.1f);
+  loops_->setLineWidth(4.0f);
   {
     auto& scene = win_->get3DSceneAndLock();
     scene->insert(mrpt::opengl::CGridPlaneXY::Create(-3, 3, -3, 3, 0, 0.5f));
     scene->insert(path_);
+    scene->insert(loops_);
     scene->insert(camera_);
     // Inset at the top left: the current view.
     auto inset = scene->createViewport("view");
@@ -47,6 +51,10 @@ void LiveViewer::drawText(const LiveStats& s) {
   mrpt::opengl::TFontParams font;
   font.color = mrpt::img::TColorf(1, 1, 1);
   win_->addTextMessage(5, 5, line, 0, font);
+  if (!loop_status_.empty()) {
+    font.color = mrpt::img::TColorf(1, 0.85f, 0.1f);
+    win_->addTextMessage(5, 25, loop_status_, 1, font);
+  }
 }
 
 void LiveViewer::status(const LiveStats& stats) {
@@ -63,6 +71,7 @@ void LiveViewer::status(const LiveStats& stats) {
 void LiveViewer::show(const LiveView& view, const LiveStats& stats) {
   if (!isOpen()) return;
   tracking_ = view.tracking;
+  if (!view.loop_status.empty()) loop_status_ = view.loop_status;
   // The path grows every frame; the heavy part (image upload, repaint) at most ~10 Hz.
   auto& scene = win_->get3DSceneAndLock();
   if (view.pose) {
@@ -71,6 +80,7 @@ void LiveViewer::show(const LiveView& view, const LiveStats& stats) {
     last_pose_ = view.pose;
     camera_->setPose(*view.pose);
   }
+  for (const auto& [a, b] : view.new_loops) loops_->appendLine(a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
   const auto now = std::chrono::steady_clock::now();
   const bool redraw = now - last_draw_ >= std::chrono::milliseconds(100);
   if (redraw) {

@@ -176,6 +176,8 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   std::size_t read = 0, fused = 0;
   Frame frame;
   while (read < poses.size() && next(frame)) {
+    // A recording may hold frames the run never processed (dropped by the live queue): skipped.
+    if (frame.timestamp < poses[read].timestamp - 1e-3) continue;
     if (m.fused[read]) map->integrateAt(frame, poses[read].pose), ++fused;
     ++read;
     if (progress) progress(read);

@@ -6,6 +6,8 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <mrpt/gui/CDisplayWindow3D.h>
 #include <mrpt/opengl/CSetOfLines.h>
@@ -21,6 +23,10 @@ struct LiveView {
   cv::Mat image;                            // BGR: ray-cast view, or the colour frame
   std::optional<mrpt::poses::CPose3D> pose;  // camera-to-world, when something tracks
   std::string tracking = "recording only";  // "tracking", "LOST", "fell back to odometry", ...
+  // Loops closed since the last view: the two camera poses each joins (drawn as a line), and a status
+  // line for the window ("loop closed: frames 12 and 240, 4.1 cm"); empty when none.
+  std::vector<std::pair<mrpt::poses::CPose3D, mrpt::poses::CPose3D>> new_loops;
+  std::string loop_status;
 };
 
 class LiveViewer {
@@ -39,6 +45,8 @@ class LiveViewer {
   void drawText(const LiveStats& stats);
   mrpt::gui::CDisplayWindow3D::Ptr win_;
   mrpt::opengl::CSetOfLines::Ptr path_;
+  mrpt::opengl::CSetOfLines::Ptr loops_;  // accepted loops, between the poses they join
+  std::string loop_status_;
   mrpt::opengl::CSetOfObjects::Ptr camera_;
   std::optional<mrpt::poses::CPose3D> last_pose_;
   std::string tracking_ = "waiting for frames";

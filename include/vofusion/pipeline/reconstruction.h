@@ -64,7 +64,8 @@ class Reconstruction {
   // (fused at the tracked poses) should be fused again at the corrected ones.
   bool mapNeedsReintegration() const;
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
-  // fresh volume at the corrected poses; frames not fused the first time are skipped again. progress
+  // fresh volume at the corrected poses; frames not fused the first time are skipped again, and so are
+  // frames the run never processed (earlier than the next processed frame's timestamp). progress
   // gets the number of frames read. Returns the number of frames fused.
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
                           const std::function<void(std::size_t)>& progress = nullptr);
