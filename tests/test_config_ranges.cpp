@@ -6,6 +6,7 @@
 #include <cmath>
 #include <regex>
 #include <sstream>
+#include <tuple>
 
 #include <mrpt/config/CConfigFileMemory.h>
 
@@ -57,6 +58,46 @@ TEST(ConfigRanges, EveryNumericKeyCarriesItsRange) {
   EXPECT_GT(keys.size(), 70u);
   for (const auto& k : keys)
     EXPECT_NE(k.comment.find("; range ["), std::string::npos) << "[" << k.section << "] " << k.key << " has no range";
+}
+
+// Every other key is a switch (true/false) or names one of a few choices, listed in its comment.
+TEST(ConfigRanges, EveryStringKeyListsItsChoices) {
+  std::istringstream in(dumpConfig(allSections()));
+  static const std::regex line(R"(^\s*(\w+)\s*=\s*(\S+)\s*//\s*(.*)$)"), number(R"(^[-+]?[0-9.]+(e[-+]?[0-9]+)?$)");
+  std::smatch m;
+  std::string l;
+  int strings = 0;
+  while (std::getline(in, l)) {
+    if (!std::regex_match(l, m, line)) continue;
+    const std::string value = m[2];
+    if (std::regex_match(value, number) || value == "true" || value == "false") continue;
+    ++strings;
+    const std::string comment = m[3];
+    EXPECT_NE(comment.find("; one of "), std::string::npos) << m[1] << " = " << value << " lists no choices";
+    EXPECT_NE(comment.find(value), std::string::npos) << m[1] << ": its default is not among its choices";
+  }
+  EXPECT_GE(strings, 4);
+}
+
+TEST(ConfigRanges, UnknownChoiceIsOneLineNamingSectionAndKey) {
+  for (const auto& [section, key, msg] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"odometry", "keypoints", "[odometry] keypoints: must be one of union | star | narf, got 'orb'"},
+           {"odometry", "motion_method", "[odometry] motion_method: must be one of paper | robust, got 'orb'"},
+           {"odometry", "depth_mode", "[odometry] depth_mode: must be one of median | min, got 'orb'"},
+           {"narf", "implementation", "[narf] implementation: must be one of fast | pcl, got 'orb'"}}) {
+    mrpt::config::CConfigFileMemory cfg;
+    cfg.write(section, key, std::string("orb"));
+    try {
+      Reconstruction rec(cfg, TrackingMode::Joint);
+      ADD_FAILURE() << section << "." << key << " = orb accepted";
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), msg);
+    }
+  }
+  // Set in code, past the INI: refused when the odometry is built.
+  OdometryParams p;
+  p.keypoints = "orb";
+  EXPECT_THROW(RgbdOdometry{p}, InputError);
 }
 
 TEST(ConfigRanges, OutOfRangeIsOneLineNamingSectionAndKey) {

@@ -4,6 +4,9 @@
 #include <cmath>
 #include <random>
 
+#include <mrpt/config/CConfigFile.h>
+#include <mrpt/config/CConfigFileMemory.h>
+
 #include "support.h"
 #include "vofusion/loop/keyframe.h"
 #include "vofusion/loop/loop_verifier.h"
@@ -157,7 +160,7 @@ TEST(LoopPoseGraph, TrueLoopSpreadsTheDrift) {
   PoseGraph g = graphOf(c, P);
   const double before = maxError(g, c);
   g.addEdge(loopEdge(0, 39, c.truth[0].inverse() * c.truth[39]));
-  EXPECT_TRUE(g.optimise(P.max_loop_chi2).empty());
+  EXPECT_TRUE(g.optimise(P.max_loop_chi2, P.max_chain_chi2).empty());
   const double after = maxError(g, c);
   std::printf("circle of 40 keyframes: max error %.3f m tracked, %.3f m optimised\n", before, after);
   EXPECT_GT(before, 0.5);
@@ -172,7 +175,7 @@ TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
   const double before = maxError(g, c);
   g.addEdge(loopEdge(0, 39, c.truth[0].inverse() * c.truth[39]));          // true
   const std::size_t bad = g.addEdge(loopEdge(10, 30, pose(0.3, 0, 0, 0)));  // 10 and 30 are 6 m apart
-  const std::vector<std::size_t> removed = g.optimise(P.max_loop_chi2);
+  const std::vector<std::size_t> removed = g.optimise(P.max_loop_chi2, P.max_chain_chi2);
   ASSERT_EQ(removed.size(), 1u);
   EXPECT_EQ(removed[0], bad);
   EXPECT_FALSE(g.edges()[bad].active);
@@ -184,7 +187,7 @@ TEST(LoopPoseGraph, NewNodesFollowTheirOptimisedPredecessor) {
   const Circle c = circle(20, 2.0, 0.5);
   PoseGraph g = graphOf(c, P);
   g.addEdge(loopEdge(0, 19, c.truth[0].inverse() * c.truth[19]));
-  g.optimise(P.max_loop_chi2);
+  g.optimise(P.max_loop_chi2, P.max_chain_chi2);
   const Eigen::Isometry3d step = pose(0.1, 0, 0, 0);
   const std::size_t n = g.addNode(c.tracked[19] * step);
   GraphEdge e;
@@ -255,4 +258,17 @@ TEST(LoopVerifier, LookAlikePlacesAreNotJoined) {
   std::printf("look-alike: %d matches, %d inliers, reason '%s', correction %.3f m\n", c.matches, c.inliers,
               c.reason.c_str(), c.correction_m);
   EXPECT_FALSE(c.accepted);
+}
+
+TEST(LoopParams, ShippedDefaultsFileMatchesTheCode) {
+  mrpt::config::CConfigFile file(test::shareDir() + "/loop.ini");
+  mrpt::config::CConfigFileMemory mem;
+  LoopParams{}.saveToConfigFile(mem, "loop");
+  std::vector<std::string> keys, expected;
+  file.getAllKeys("loop", keys);
+  mem.getAllKeys("loop", expected);
+  std::sort(keys.begin(), keys.end());
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(keys, expected);
+  for (const auto& k : expected) EXPECT_EQ(file.read_string("loop", k, "?"), mem.read_string("loop", k, "!")) << k;
 }

@@ -20,11 +20,15 @@ struct LoopRun {
   std::vector<loop::LoopRecord> loops;
 };
 
-LoopRun reconstruct(const sim::SyntheticSequence& seq) {
+// small_volume: 3 m at 12 mm instead of vofusion's 3 m at 6 mm (quicker; the tracker then drifts
+// less on these scenes, so the loop scene is run with the defaults, as benchmarked).
+LoopRun reconstruct(const sim::SyntheticSequence& seq, bool small_volume) {
   mrpt::config::CConfigFileMemory cfg;
-  cfg.write("kinfu", "volume_voxels", 256);  // 3 m at 12 mm: the scene is walked through, not held in one volume
-  cfg.write("kinfu", "voxel_size", 0.012);
-  cfg.write("kinfu", "truncation", 0.05);
+  if (small_volume) {
+    cfg.write("kinfu", "volume_voxels", 256);
+    cfg.write("kinfu", "voxel_size", 0.012);
+    cfg.write("kinfu", "truncation", 0.05);
+  }
   Reconstruction rec(cfg, TrackingMode::Joint);
   LoopRun r;
   for (std::size_t i = 0; i < seq.size(); ++i) {
@@ -58,24 +62,24 @@ TEST(LoopScenes, LoopRoundABlockIsClosed) {
   o.scene = "loop";
   o.frames = 900;  // 30 s for 1.15 laps of 26 m: walking pace
   const sim::SyntheticSequence seq(o);
-  const LoopRun r = reconstruct(seq);
-  const std::size_t lap = std::size_t(double(o.frames) / 1.15);  // one lap after frame 0
+  const LoopRun r = reconstruct(seq, false);
   const double ate_tracked = ate(r.truth, r.tracked), ate_closed = ate(r.truth, r.closed);
-  const double gap_tracked = distanceError(r.truth, r.tracked, 0, lap), gap_closed = distanceError(r.truth, r.closed, 0, lap);
-  std::size_t active = 0, closing = 0;
+  // The measure: for each loop closing the lap (keyframes over 20 m of path apart), how far
+  // the distance between its two poses is from the truth's.
+  std::size_t closing = 0;
+  double worst_closed = 0.0, worst_tracked = 0.0;
   for (const auto& l : r.loops) {
-    active += l.active;
-    closing += l.active && l.from_frame < 100 && l.to_frame > lap - 100;
+    if (!l.active || l.to_frame - l.from_frame < o.frames / 2) continue;
+    ++closing;
+    worst_closed = std::max(worst_closed, distanceError(r.truth, r.closed, l.from_frame, l.to_frame));
+    worst_tracked = std::max(worst_tracked, distanceError(r.truth, r.tracked, l.from_frame, l.to_frame));
   }
-  std::printf("loop scene: ATE %.4f m tracked, %.4f m closed; frame 0 to %zu distance off by %.4f m tracked, %.4f m "
-              "closed; %zu loops (%zu close the lap)\n",
-              ate_tracked, ate_closed, lap, gap_tracked, gap_closed, active, closing);
-  // The targets are a gap within 1 cm and the ATE halved; vofusion's defaults reach 1.1 cm
-  // (3.7 tracked) and 0.0464 m (0.0744 tracked) on this scene: this guards what is reached.
-  EXPECT_GT(closing, 0u);
-  EXPECT_LT(gap_closed, 0.02);
-  EXPECT_LT(gap_closed, gap_tracked);
-  EXPECT_LT(ate_closed, 0.8 * ate_tracked);
+  std::printf("loop scene: ATE %.4f m tracked, %.4f m closed; %zu loops close the lap, their poses' distance off by "
+              "at most %.4f m (tracked %.4f m)\n",
+              ate_tracked, ate_closed, closing, worst_closed, worst_tracked);
+  ASSERT_GT(closing, 0u);
+  EXPECT_LT(worst_closed, 0.01);             // the target
+  EXPECT_LT(ate_closed, 0.5 * ate_tracked);  // at least halved
 }
 
 TEST(LoopScenes, LookAlikePlacesAreNeverJoined) {
@@ -83,7 +87,7 @@ TEST(LoopScenes, LookAlikePlacesAreNeverJoined) {
   o.scene = "lookalike";
   o.frames = 300;
   const sim::SyntheticSequence seq(o);
-  const LoopRun r = reconstruct(seq);
+  const LoopRun r = reconstruct(seq, true);
   // Every accepted loop must measure the true relative pose: a loop between places 3 m apart would
   // be off by about 3 m.
   for (const auto& l : r.loops) {

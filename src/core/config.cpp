@@ -62,6 +62,18 @@ std::string dumpConfig(const std::vector<ConfigSection>& known) { return default
 
 namespace vofusion {
 
+static std::string choicesText(const std::vector<std::string>& choices) {
+  std::string t;
+  for (const std::string& c : choices) t += (t.empty() ? "" : " | ") + c;
+  return t;
+}
+
+void checkChoice(const std::string& section, const char* key, const std::string& value,
+                 const std::vector<std::string>& choices) {
+  if (std::find(choices.begin(), choices.end(), value) == choices.end())
+    throw InputError("[" + section + "] " + key, "must be one of " + choicesText(choices) + ", got '" + value + "'");
+}
+
 static std::string rangeText(const ConfigKey& k) {
   std::ostringstream r;
   r << "[" << k.lo << ", " << k.hi << "]";
@@ -77,7 +89,10 @@ void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& secti
           else if constexpr (std::is_same_v<T, float>) *v = cfg.read_float(section, k.name, *v);
           else if constexpr (std::is_same_v<T, double>) *v = cfg.read_double(section, k.name, *v);
           else if constexpr (std::is_same_v<T, bool>) *v = cfg.read_bool(section, k.name, *v);
-          else *v = cfg.read_string(section, k.name, *v);
+          else {
+            *v = cfg.read_string(section, k.name, *v);
+            if (!k.choices.empty()) checkChoice(section, k.name, *v, k.choices);
+          }
           if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
             const double x = double(*v);
             if (!std::isnan(k.lo) && !(x >= k.lo && x <= k.hi)) {
@@ -92,7 +107,8 @@ void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& secti
 
 void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
   for (const ConfigKey& k : keys) {
-    const std::string comment = std::isnan(k.lo) ? std::string(k.comment) : std::string(k.comment) + "; range " + rangeText(k);
+    std::string comment = std::isnan(k.lo) ? std::string(k.comment) : std::string(k.comment) + "; range " + rangeText(k);
+    if (!k.choices.empty()) comment += "; one of " + choicesText(k.choices);
     std::visit(
         [&](auto* v) {
           using T = std::remove_pointer_t<decltype(v)>;

@@ -25,7 +25,8 @@ std::vector<ConfigKey> narfKeys(NarfParams& p) {
       {"min_interest_value", &p.min_interest_value, "[0,1]", 0.0, 1.0},
       {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)", 1.0, 64.0},
       {"recursive_scale_reduction", &p.recursive_scale_reduction, "implementation pcl only; no effect in PCL 1.13 (sparse interest image)"},
-      {"implementation", &p.implementation, "fast (PCL's steps, one thread) | pcl (pcl::NarfKeypoint)"},
+      ConfigKey::oneOf("implementation", &p.implementation, "fast = PCL's steps, one thread; pcl = pcl::NarfKeypoint",
+                       {"fast", "pcl"}),
   };
 }
 }  // namespace
@@ -35,8 +36,6 @@ void NarfParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, co
   downsample = std::max(1, downsample);
   threads = std::max(1, threads);
   if (!(support_size > 0.0)) throw InputError("[" + s + "] support_size", "must be positive");
-  if (implementation != "fast" && implementation != "pcl")
-    throw InputError("[" + s + "] implementation", "must be fast or pcl (got '" + implementation + "')");
 }
 
 void NarfParams::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {

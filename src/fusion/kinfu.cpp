@@ -1,4 +1,5 @@
 #include "vofusion/fusion/kinfu.h"
+#include "vofusion/core/pose_eigen.h"
 
 #include <algorithm>
 #include <chrono>
@@ -47,18 +48,7 @@ std::string toString(InitialGuess g) {
 
 namespace {
 
-Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = p.getRotationMatrix().asEigen();
-  T.translation() = Eigen::Vector3d(p.x(), p.y(), p.z());
-  return T;
-}
 
-mrpt::poses::CPose3D toMrpt(const Eigen::Isometry3d& T) {
-  mrpt::math::CMatrixDouble44 M;
-  M.asEigen() = T.matrix();
-  return mrpt::poses::CPose3D(M);
-}
 
 double seconds(std::chrono::steady_clock::time_point a) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();

@@ -55,6 +55,7 @@ bool KeyframeSelector::next(const Eigen::Isometry3d& pose, bool well_tracked) {
       turned < params_.keyframe_rotation)
     return false;
   last_keyframe_ = pose;
+  last_after_poor_ = recovering_;
   have_keyframe_ = true;
   recovering_ = false;
   return true;

@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "vofusion/loop/keyframe.h"
+#include "vofusion/core/pose_eigen.h"
 #include "vofusion/loop/loop_verifier.h"
 #include "vofusion/loop/place_index.h"
 #include "vofusion/loop/pose_graph.h"
@@ -16,17 +17,6 @@ namespace vofusion::loop {
 namespace {
 double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-mrpt::poses::CPose3D toMrpt(const Eigen::Isometry3d& T) {
-  mrpt::math::CMatrixDouble44 M;
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) M(i, j) = T.matrix()(i, j);
-  return mrpt::poses::CPose3D(M);
-}
-Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
-  Eigen::Isometry3d T;
-  T.matrix() = p.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
-  return T;
 }
 }  // namespace
 
@@ -40,6 +30,7 @@ struct LoopCloser::Impl {
   // Owned by the worker thread.
   std::vector<Keyframe> keyframes;
   PlaceIndex index;
+  std::size_t indexed = 0;  // keyframes[0, indexed) are loop candidates (in the index)
   PoseGraph graph;
   std::vector<std::size_t> loop_edge_record;  // graph edge index -> loops[] index (loop edges only)
 
@@ -73,6 +64,18 @@ struct LoopCloser::Impl {
     }
   }
 
+  // Older keyframes become loop candidates once they are neither among the newest nor nearer along
+  // the path than min_travel: nearer revisits are to places the tracker still holds in its volume
+  // (or takes back from the world model), where a raw keyframe-to-keyframe loop only adds noise.
+  // The path only grows, so the eligible keyframes are a prefix and join the index in order.
+  void indexEligible(const Keyframe& cur) {
+    while (indexed < cur.id && cur.id - indexed >= std::size_t(params.recent_keyframes) &&
+           cur.path_length - keyframes[indexed].path_length >= params.min_travel) {
+      const Keyframe& k = keyframes[indexed++];
+      if (k.features) index.add(k.id, k.features->descriptors);
+    }
+  }
+
   // One keyframe: a node chained to the previous one, then place recognition among the keyframes
   // older than the recent ones, verification, and an optimisation when a loop was accepted.
   void process(Keyframe k) {
@@ -85,15 +88,15 @@ struct LoopCloser::Impl {
       e.to = id;
       e.T_from_to = prev.tracked.inverse() * k.tracked;
       e.information = odometryInformation(e.T_from_to, params.odometry_sigma_rate, params.odometry_sigma_floor);
+      // Across frames the tracker lost, predicted or took from a fallback the chain may hold a jump:
+      // a loop should move it there, not spread it over the whole path.
+      if (k.after_poor_tracking) e.information /= params.poor_tracking_sigma_scale * params.poor_tracking_sigma_scale;
       graph.addEdge(e);
       graph.chainNewNode(id);
     }
     keyframes.push_back(std::move(k));
     const Keyframe& cur = keyframes.back();
-    if (id >= std::size_t(params.recent_keyframes)) {
-      const Keyframe& eligible = keyframes[id - std::size_t(params.recent_keyframes)];
-      if (eligible.features) index.add(eligible.id, eligible.features->descriptors);
-    }
+    indexEligible(cur);
     std::vector<PlaceCandidate> candidates;
     auto t0 = std::chrono::steady_clock::now();
     if (cur.features) candidates = index.query(cur.features->descriptors);
@@ -124,7 +127,7 @@ struct LoopCloser::Impl {
 
     t0 = std::chrono::steady_clock::now();
     std::vector<std::size_t> removed;
-    if (!accepted.empty()) removed = graph.optimise(params.max_loop_chi2);
+    if (!accepted.empty()) removed = graph.optimise(params.max_loop_chi2, params.max_chain_chi2);
     t.add("pose_graph", secondsSince(t0));
     publish(accepted, removed, rejected, t);
   }
@@ -164,6 +167,7 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
   if (key) {
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);
+    k.after_poor_tracking = m.selector.lastAfterPoorTracking();
     std::lock_guard<std::mutex> lock(m.mu);
     m.queue.push_back(std::move(k));
     m.wake.notify_one();

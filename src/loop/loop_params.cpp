@@ -13,6 +13,7 @@ std::vector<ConfigKey> loopKeys(LoopParams& p) {
       {"keyframe_rotation", &p.keyframe_rotation, "degrees turned since the last keyframe", 0.5, 180.0},
       {"keyframe_downsample", &p.keyframe_downsample, "keyframe depth kept at 1/n resolution (ICP)", 1.0, 16.0},
       {"recent_keyframes", &p.recent_keyframes, "newest keyframes never loop candidates", 1.0, 10000.0},
+      {"min_travel", &p.min_travel, "m of camera path between a loop's keyframes, at least", 0.0, 10000.0},
       {"place_descriptors", &p.place_descriptors, "descriptors per keyframe indexed and queried", 10.0, 100000.0},
       {"candidates", &p.candidates, "best-voted keyframes verified per keyframe", 1.0, 100.0},
       {"min_votes", &p.min_votes, "descriptor votes a candidate needs", 1.0, 100000.0},
@@ -32,9 +33,11 @@ std::vector<ConfigKey> loopKeys(LoopParams& p) {
       {"max_drift_rotation_rate", &p.max_drift_rotation_rate, "degrees of correction per m travelled", 0.0, 180.0},
       {"odometry_sigma_rate", &p.odometry_sigma_rate, "keyframe edge noise, m per m and rad per rad", 0.0001, 10.0},
       {"odometry_sigma_floor", &p.odometry_sigma_floor, "keyframe edge noise floor, m and rad", 1e-5, 1.0},
+      {"poor_tracking_sigma_scale", &p.poor_tracking_sigma_scale, "x keyframe edge noise across frames not well tracked", 1.0, 1e4},
       {"loop_sigma_translation", &p.loop_sigma_translation, "m, floor of a loop edge's noise", 1e-5, 10.0},
       {"loop_sigma_rotation", &p.loop_sigma_rotation, "degrees, floor of a loop edge's noise", 0.001, 90.0},
       {"max_loop_chi2", &p.max_loop_chi2, "a loop's residual after optimisation (6 DoF chi2)", 0.1, 1e6},
+      {"max_chain_chi2", &p.max_chain_chi2, "a tracker edge's residual after optimisation (6 DoF chi2)", 0.1, 1e6},
       {"reintegrate_min_correction", &p.reintegrate_min_correction, "m; larger corrections re-fuse the map", 0.0, 100.0},
   };
 }

@@ -6,20 +6,10 @@
 #include <mrpt/graphslam/levmarq.h>
 #include <mrpt/poses/CPose3D.h>
 
+#include "vofusion/core/pose_eigen.h"
 namespace vofusion::loop {
 
 namespace {
-mrpt::poses::CPose3D toMrpt(const Eigen::Isometry3d& T) {
-  mrpt::math::CMatrixDouble44 M;
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) M(i, j) = T.matrix()(i, j);
-  return mrpt::poses::CPose3D(M);
-}
-Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
-  Eigen::Isometry3d T;
-  T.matrix() = p.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
-  return T;
-}
 // Residual of an edge at the current poses, as (x y z yaw pitch roll) of measurement^-1 * estimate.
 Eigen::Matrix<double, 6, 1> residual(const GraphEdge& e, const std::vector<Eigen::Isometry3d>& nodes) {
   const mrpt::poses::CPose3D d = toMrpt(e.T_from_to.inverse() * nodes[e.from].inverse() * nodes[e.to]);
@@ -81,18 +71,23 @@ void PoseGraph::updateChi2() {
   }
 }
 
-std::vector<std::size_t> PoseGraph::optimise(double max_chi2) {
+std::vector<std::size_t> PoseGraph::optimise(double max_loop_chi2, double max_chain_chi2) {
   std::vector<std::size_t> removed;
   const std::vector<Eigen::Isometry3d> start = nodes_;
   for (;;) {
     runSpa();
     updateChi2();
+    // A false loop shows either in its own residual or, when it is trusted more than the chain, in
+    // the chain it bent: a tracker edge far beyond its noise. Either way the worst loop goes.
+    double chain = 0.0;
     std::size_t worst = edges_.size();
-    for (std::size_t i = 0; i < edges_.size(); ++i)
-      if (edges_[i].loop && edges_[i].active && edges_[i].chi2 > max_chi2 &&
-          (worst == edges_.size() || edges_[i].chi2 > edges_[worst].chi2))
-        worst = i;
-    if (worst == edges_.size()) return removed;
+    for (std::size_t i = 0; i < edges_.size(); ++i) {
+      const GraphEdge& e = edges_[i];
+      if (!e.active) continue;
+      if (!e.loop) chain = std::max(chain, e.chi2);
+      else if (worst == edges_.size() || e.chi2 > edges_[worst].chi2) worst = i;
+    }
+    if (worst == edges_.size() || (edges_[worst].chi2 <= max_loop_chi2 && chain <= max_chain_chi2)) return removed;
     // A false loop bent the map: drop it and start again from the poses before this optimisation.
     edges_[worst].active = false;
     removed.push_back(worst);

@@ -11,14 +11,15 @@ namespace {
 // Every key, once per section: loading and saving both walk these lists.
 std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
   return {
-      {"keypoints", &p.keypoints, "union | star | narf"},
-      {"motion_method", &p.motion_method, "paper (Algorithm 1) | robust"},
+      ConfigKey::oneOf("keypoints", &p.keypoints, "union = STAR + NARF (the paper)", {"union", "star", "narf"}),
+      ConfigKey::oneOf("motion_method", &p.motion_method, "paper = Algorithm 1; robust = RANSAC + LS + Gauss-Newton",
+                       {"paper", "robust"}),
       {"narf_concurrent", &p.narf_concurrent, "NARF on a second thread"},
       {"union_radius", &p.union_radius, "pixels, duplicate radius", 0.0, 50.0},
       {"keyframe_min_inliers", &p.keyframe_min_inliers, "keep the keyframe while this many inliers, 0 = off", 0.0, 100000.0},
       {"undistort", &p.undistort, "undistort keypoints before 3D/homography"},
       {"depth_window", &p.depth_window, "pixels, half-size of the keypoint depth window", 0.0, 10.0},
-      {"depth_mode", &p.depth_mode, "median | min of that window"},
+      ConfigKey::oneOf("depth_mode", &p.depth_mode, "of that window's valid readings", {"median", "min"}),
       {"references", &p.references, "frames matched: the previous one and references-1 before it", 1.0, 8.0},
       {"colour_time", &p.colour_time, "keypoints moved to the depth capture time"},
   };
@@ -57,12 +58,6 @@ void OdometryParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, 
   loadKeys(c, "motion", motionKeys(*this));
   if (references < 1 || references > 8) throw InputError("[" + s + "] references", "must be 1..8 frames");
   if (depth_window < 0 || depth_window > 10) throw InputError("[" + s + "] depth_window", "must be 0..10 pixels");
-  if (depth_mode != "median" && depth_mode != "min")
-    throw InputError("[" + s + "] depth_mode", "must be median or min (got '" + depth_mode + "')");
-  if (keypoints != "union" && keypoints != "star" && keypoints != "narf")
-    throw InputError("[" + s + "] keypoints", "must be union, star or narf (got '" + keypoints + "')");
-  if (motion_method != "paper" && motion_method != "robust")
-    throw InputError("[" + s + "] motion_method", "must be paper or robust (got '" + motion_method + "')");
 
   star.loadFromConfigFile(c, "star");
   narf.loadFromConfigFile(c, "narf");

@@ -1,5 +1,7 @@
 #include "vofusion/odometry/rgbd_odometry.h"
 
+#include "vofusion/core/config.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -57,8 +59,30 @@ float keypointDepth(const cv::Mat& depth, int x, int y, int r, bool nearest) {
 
 }  // namespace
 
+namespace {
+// The string keys, resolved once (the key table has checked them): nothing compares strings per frame.
+enum class KeypointSet { Union, Star, Narf };
+enum class MotionMethod { Paper, Robust };
+
+KeypointSet keypointSetOf(const OdometryParams& p) {
+  checkChoice("odometry", "keypoints", p.keypoints, {"union", "star", "narf"});
+  return p.keypoints == "star" ? KeypointSet::Star : p.keypoints == "narf" ? KeypointSet::Narf : KeypointSet::Union;
+}
+MotionMethod motionMethodOf(const OdometryParams& p) {
+  checkChoice("odometry", "motion_method", p.motion_method, {"paper", "robust"});
+  return p.motion_method == "paper" ? MotionMethod::Paper : MotionMethod::Robust;
+}
+bool nearestDepthOf(const OdometryParams& p) {
+  checkChoice("odometry", "depth_mode", p.depth_mode, {"median", "min"});
+  return p.depth_mode == "min";
+}
+}  // namespace
+
 struct RgbdOdometry::Impl {
   OdometryParams params;
+  const KeypointSet keypoints;
+  const MotionMethod motion;
+  const bool nearest_depth;  // depth_mode min: a keypoint's depth is its window's nearest reading
   BrandExtractor brand;
   // The keyframe new frames are matched against, and the last frame with a pose relative to it
   // (T_kf_last); with keyframes off both are the previous usable frame.
@@ -67,7 +91,8 @@ struct RgbdOdometry::Impl {
   // frame is matched against it only when the good reference no longer matches.
   std::optional<FrameFeatures> failed;
   Eigen::Isometry3d T_kf_last = Eigen::Isometry3d::Identity();
-  explicit Impl(const OdometryParams& p) : params(p), brand(p.brand) {}
+  explicit Impl(const OdometryParams& p)
+      : params(p), keypoints(keypointSetOf(p)), motion(motionMethodOf(p)), nearest_depth(nearestDepthOf(p)), brand(p.brand) {}
 
   // Extraction in two steps, so the STAR part can be matched while NARF still runs on its thread:
   // begin() detects STAR, builds the normals and describes the STAR keypoints; finish() waits for
@@ -115,7 +140,7 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
   f.depth = frame.depth;
   f.camera = frame.camera;
   // NARF is the slow part: start it first, on its own thread, when asked to.
-  if (params.keypoints != "star" && params.narf_concurrent)
+  if (keypoints != KeypointSet::Star && params.narf_concurrent)
     ex.narf_job = std::async(std::launch::async, [&frame, this] {
       const auto t0 = std::chrono::steady_clock::now();
       auto k = detectNarf(frame.depth, frame.camera, params.narf);
@@ -128,7 +153,7 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
     if (frame.rgb.channels() == 3) cv::cvtColor(frame.rgb, gray, cv::COLOR_BGR2GRAY);
     else gray = frame.rgb;
   }
-  if (params.keypoints != "narf") {
+  if (keypoints != KeypointSet::Narf) {
     ScopedStageTimer t(times, "star");
     ex.star = detectStar(gray, params.star);
   }
@@ -150,7 +175,7 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
 }
 
 void RgbdOdometry::Impl::finish(const Frame& frame, Extraction& ex, FrameFeatures& f, StageTimes& times) const {
-  if (params.keypoints == "star") return;
+  if (keypoints == KeypointSet::Star) return;
   std::vector<cv::KeyPoint> narf;
   if (ex.narf_job.valid()) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -200,7 +225,7 @@ float RgbdOdometry::Impl::depthOf(const cv::Mat& depth, const cv::KeyPoint& k, c
   // A NARF keypoint stands for a block of the reduced depth image whose value is the block's nearest
   // reading (it sits on foreground borders): take that reading, not the centre pixel's.
   if (k.class_id == 1 && params.narf.downsample > 1) return keypointDepth(depth, x, y, params.narf.downsample / 2, true);
-  return keypointDepth(depth, x, y, params.depth_window, params.depth_mode == "min");
+  return keypointDepth(depth, x, y, params.depth_window, nearest_depth);
 }
 
 Eigen::Vector3d RgbdOdometry::Impl::atDepthTime(const FrameFeatures& f, int i, const Eigen::Isometry3d& drift) const {
@@ -287,7 +312,7 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   }
   {
     ScopedStageTimer t(r.times, "motion");
-    auto fitMotion = [&] { return P.motion_method == "paper" ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust); };
+    auto fitMotion = [&] { return motion == MotionMethod::Paper ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust); };
     fit = fitMotion();
     // Bearings are from colour, depths from depth images taken up to 20 ms apart: with the motion
     // since the reference as constant velocity, move every point to its frame's depth capture, fit again.

@@ -1,4 +1,5 @@
 #include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/core/pose_eigen.h"
 
 #include <chrono>
 #include <map>
@@ -14,11 +15,6 @@ const OdometryParams& defaultOdometry() { static const OdometryParams p; return 
 const KinFuParams& defaultKinFu() { static const KinFuParams p; return p; }
 const loop::LoopParams& defaultLoop() { static const loop::LoopParams p; return p; }
 
-Eigen::Isometry3d toEigen(const mrpt::poses::CPose3D& p) {
-  Eigen::Isometry3d T;
-  T.matrix() = p.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
-  return T;
-}
 
 // What fusion is told about the odometry's motion: pose, covariance and inlier matches.
 fusion::MotionPrior motionPriorOf(const OdometryResult& o) {

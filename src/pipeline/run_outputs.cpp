@@ -17,6 +17,7 @@
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/pose_eigen.h"
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/mesh/triangle_mesh.h"
@@ -136,13 +137,6 @@ class RawlogThread {
   std::thread thread_;
 };
 
-mrpt::poses::CPose3D toMrptPose(const Eigen::Isometry3d& T) {
-  mrpt::math::CMatrixDouble44 M;
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) M(i, j) = T.matrix()(i, j);
-  return mrpt::poses::CPose3D(M);
-}
-
 json statsJson(const ErrorStats& s) {
   return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std}, {"max", s.max}, {"count", s.count}};
 }
@@ -168,7 +162,7 @@ json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth) {
               {"correction_m", l.correction_m}, {"correction_deg", l.correction_deg}, {"active", l.active}};
     mrpt::poses::CPose3D a_gt, b_gt;
     if (interpolatePose(ground_truth, l.from_timestamp, 0.02, a_gt) && interpolatePose(ground_truth, l.to_timestamp, 0.02, b_gt)) {
-      const mrpt::poses::CPose3D error = toMrptPose(l.measured) - (b_gt - a_gt);
+      const mrpt::poses::CPose3D error = toMrpt(l.measured) - (b_gt - a_gt);
       j["error_vs_ground_truth_m"] = error.norm();
       j["error_vs_ground_truth_deg"] = mrpt::RAD2DEG(mrpt::poses::Lie::SO<3>::log(error.getRotationMatrix()).norm());
     }
@@ -366,8 +360,8 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   scene_opts.frustum_every_k = p.frustum_every;
   if (loops) {
     const std::vector<loop::KeyframePose> kf = loops->keyframes();
-    auto at = [&](std::size_t id) { return toMrptPose(kf[id].optimised); };
-    for (const auto& k : kf) scene_opts.keyframes.push_back(toMrptPose(k.optimised));
+    auto at = [&](std::size_t id) { return toMrpt(kf[id].optimised); };
+    for (const auto& k : kf) scene_opts.keyframes.push_back(toMrpt(k.optimised));
     for (const loop::LoopRecord& l : loops->loops())
       if (l.active && l.from_keyframe < kf.size() && l.to_keyframe < kf.size())
         scene_opts.loop_edges.push_back({at(l.from_keyframe), at(l.to_keyframe)});

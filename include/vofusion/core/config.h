@@ -35,13 +35,24 @@ namespace vofusion {
 // One INI key bound to a parameter field. A stage lists its keys once and both loading and saving
 // walk that list, so the two can never disagree. A numeric key carries its valid range (inclusive):
 // loading a value outside it is a one-line error, saving writes it into the comment, and a test
-// (tests/test_config_ranges.cpp) fails for any numeric key without one.
+// (tests/test_config_ranges.cpp) fails for any numeric key without one. A string key names one of a
+// few choices (oneOf): any other value is the same kind of one-line error.
 struct ConfigKey {
   const char* name;
   std::variant<int*, float*, double*, bool*, std::string*> value;
   const char* comment;  // unit and meaning, written next to the value
   double lo = std::numeric_limits<double>::quiet_NaN(), hi = std::numeric_limits<double>::quiet_NaN();
+  std::vector<std::string> choices = {};  // string keys: the values allowed
+
+  static ConfigKey oneOf(const char* name, std::string* value, const char* comment, std::vector<std::string> choices) {
+    ConfigKey k{name, value, comment};
+    k.choices = std::move(choices);
+    return k;
+  }
 };
+// Throws InputError("[section] key", "must be one of a | b, got 'x'") unless value is one of choices.
+void checkChoice(const std::string& section, const char* key, const std::string& value,
+                 const std::vector<std::string>& choices);
 void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
 void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
 

@@ -21,6 +21,7 @@ struct Keyframe {
   double timestamp = 0.0;       // s
   Eigen::Isometry3d tracked = Eigen::Isometry3d::Identity();  // camera-to-world, as tracked
   double path_length = 0.0;     // m the camera travelled from the first frame to this one
+  bool after_poor_tracking = false;  // frames since the previous keyframe were lost, predicted or fell back
   std::shared_ptr<const DescribedKeypoints> features;
   cv::Mat depth;                // CV_16U, kDepthUnitsPerMetre, 1/keyframe_downsample resolution (nearest reading)
   CameraIntrinsics camera;      // of `depth`
@@ -41,11 +42,13 @@ class KeyframeSelector {
   // (lost, predicted, fallback) never do; the first well-tracked frame after them always does.
   bool next(const Eigen::Isometry3d& pose, bool well_tracked);
   double pathLength() const { return path_; }
+  // The keyframe just made follows frames that were not well tracked (its edge to the previous one is weak).
+  bool lastAfterPoorTracking() const { return last_after_poor_; }
 
  private:
   LoopParams params_;
   Eigen::Isometry3d last_keyframe_ = Eigen::Isometry3d::Identity(), last_pose_ = Eigen::Isometry3d::Identity();
-  bool have_keyframe_ = false, have_pose_ = false, recovering_ = false;
+  bool have_keyframe_ = false, have_pose_ = false, recovering_ = false, last_after_poor_ = false;
   double path_ = 0.0;
 };
 

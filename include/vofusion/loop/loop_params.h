@@ -16,6 +16,8 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   // Place recognition: the keyframe's BRAND descriptors vote (nearest neighbour in an LSH index) for
   // the older keyframes they match; the best-voted ones are verified.
   int recent_keyframes = 8;            // the newest keyframes are not loop candidates (they are tracked)
+  double min_travel = 3.0;             // m of camera path between a loop's keyframes, at least (about the
+                                       // default volume's edge: nearer revisits meet the tracker's own model)
   int place_descriptors = 300;         // descriptors per keyframe in the index and per query (evenly spread)
   int candidates = 3;                  // best-voted keyframes verified per keyframe
   int min_votes = 20;                  // descriptor votes a candidate needs
@@ -39,11 +41,13 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   // whose residual exceeds max_loop_chi2 (6 DoF) is removed and the graph optimised again.
   double odometry_sigma_rate = 0.02;      // m per m moved, and rad per rad turned
   double odometry_sigma_floor = 0.002;    // m (and the same in rad)
+  double poor_tracking_sigma_scale = 10.0;  // x the noise of an edge across frames not well tracked
   // A loop edge's noise: its ICP's residual RMS (m; as an angle over the keyframe's mean depth), at
   // least these floors.
   double loop_sigma_translation = 0.003;  // m, floor of a loop edge's noise
   double loop_sigma_rotation = 0.1;       // degrees, same
-  double max_loop_chi2 = 22.5;            // 99.9 % of chi2 with 6 DoF
+  double max_loop_chi2 = 1000.0;          // ~30 sigma: true loops carry some of the tracker's tension; false ones are metres off
+  double max_chain_chi2 = 100.0;          // a tracker edge bent this far (6 DoF chi2) by the loops: the worst loop goes
   // Map: when the optimised poses move some frame by more than this, the frames are integrated
   // again into a fresh volume after the run (one wall where the drift drew two).
   double reintegrate_min_correction = 0.005;  // m

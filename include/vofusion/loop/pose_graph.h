@@ -3,7 +3,8 @@
 // mrpt::graphslam::optimize_graph_spa_levmarq (sparse pose adjustment, Levenberg-Marquardt).
 // Edges between consecutive keyframes come from the tracker, loop edges from verification. Robust
 // to a false loop that passed verification: after optimising, the loop edge that fits worst is
-// removed while its residual exceeds max_chi2, and the graph is optimised again without it.
+// removed while its residual, or the strain it leaves on the tracker's chain, is too large, and the
+// graph is optimised again without it.
 #include <cstddef>
 #include <vector>
 
@@ -27,9 +28,10 @@ class PoseGraph {
   // Node ids are 0, 1, 2, ...: node 0 is fixed (the map is anchored at the first keyframe).
   std::size_t addNode(const Eigen::Isometry3d& initial);
   std::size_t addEdge(const GraphEdge& e);  // returns the edge's index
-  // Optimises all nodes; then removes the worst loop edge while its chi2 exceeds max_chi2 and
-  // optimises again. Returns the indices of the edges removed this time.
-  std::vector<std::size_t> optimise(double max_chi2);
+  // Optimises all nodes; then, while the worst loop edge's chi2 exceeds max_loop_chi2 or any tracker
+  // edge's exceeds max_chain_chi2, removes that loop and optimises again from the poses before.
+  // Returns the indices of the edges removed this time.
+  std::vector<std::size_t> optimise(double max_loop_chi2, double max_chain_chi2);
   const Eigen::Isometry3d& pose(std::size_t node) const { return nodes_[node]; }
   std::size_t nodes() const { return nodes_.size(); }
   const std::vector<GraphEdge>& edges() const { return edges_; }
