@@ -31,6 +31,7 @@
 #include <CGAL/Polygon_mesh_processing/tangential_relaxation.h>
 #include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
 #include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_placement.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Edge_length_cost.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/GarlandHeckbert_plane_policies.h>
@@ -410,10 +411,14 @@ class Cleaner {
       // to the planes of every face merged into it, so stopping at max_error^2 keeps each of them
       // within max_error of the new vertex (a conservative bound: the planes overlap).
       stop.max_cost = p_.max_simplify_error * p_.max_simplify_error;
+      // Normal flips are refused by a filter, checked only on the edge about to collapse: the
+      // placement wrapper checked every edge each time its cost was updated (most of the time).
       SMS::GarlandHeckbert_plane_policies<Mesh, Kernel> gh(m_);
-      SMS::Bounded_normal_change_placement<SMS::GarlandHeckbert_plane_policies<Mesh, Kernel>> placement(gh.get_placement());
       SMS::edge_collapse(m_, stop,
-                         CGAL::parameters::get_cost(gh.get_cost()).get_placement(placement).visitor(BlendColoursOnCollapse(col_)));
+                         CGAL::parameters::get_cost(gh.get_cost())
+                             .get_placement(gh.get_placement())
+                             .filter(SMS::Bounded_normal_change_filter<>())
+                             .visitor(BlendColoursOnCollapse(col_)));
     } else {
       stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
       if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
