@@ -10,6 +10,7 @@
 #include "support.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/tsdf_volume.h"
+#include "vofusion/pipeline/mesh_by_region.h"
 
 using namespace vofusion;
 using namespace vofusion::fusion;
@@ -288,4 +289,37 @@ TEST(MarchingCubes, RegionByRegionGivesTheWholeWorldMeshAndClosedSeams) {
   std::size_t open = 0;
   for (const auto& [e, n] : edges) open += n != 2;
   EXPECT_EQ(open, 0u);
+}
+
+TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
+  const Eigen::Vector3f centre(-0.05f, 0.13f, 0.02f);
+  const SphereBricks sphere(centre, 0.3f, 0.01f, 0.04f);
+  const TriangleMesh whole = marchingCubes(sphere.refs, 0.01f);
+  MeshCleanParams params;
+  params.max_simplify_error = 0.003;
+  const std::string raw_path = testing::TempDir() + "/mesh_by_region_raw.ply";
+  const RegionMeshResult r = meshByRegion(
+      [&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); }, params,
+      raw_path);
+  ASSERT_TRUE(r.report.success) << r.report.failure;
+  EXPECT_GT(r.regions, 20u);
+  EXPECT_EQ(r.raw_faces, whole.faces.size());
+  EXPECT_EQ(r.raw_vertices, whole.vertices.size());
+  // Simplified region by region, yet one closed manifold sphere: the seams were kept and welded.
+  EXPECT_TRUE(r.report.closed);
+  EXPECT_TRUE(r.report.manifold);
+  EXPECT_EQ(r.report.components_kept, 1u);
+  EXPECT_LT(r.mesh.faces.size(), whole.faces.size() / 3);
+  EXPECT_LT(r.report.simplification.distance.mean, 0.01);
+  double worst = 0;
+  for (const auto& v : r.mesh.vertices) worst = std::max(worst, double(std::fabs((v - centre).norm() - 0.3f)));
+  EXPECT_LT(worst, 0.01 + params.max_simplify_error);
+  // The streamed raw mesh is the whole-world marching-cubes mesh (faces by their corners' positions).
+  const TriangleMesh raw = readPly(raw_path);
+  ASSERT_EQ(raw.faces.size(), whole.faces.size());
+  ASSERT_EQ(raw.vertices.size(), whole.vertices.size());
+  std::multiset<std::array<Key, 3>> a, b;
+  for (const auto& f : raw.faces) a.insert(faceKey(raw, f));
+  for (const auto& f : whole.faces) b.insert(faceKey(whole, f));
+  EXPECT_EQ(a, b);
 }
