@@ -219,6 +219,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     raw->finish();
     out.raw_vertices = raw->vertices();
   }
+  step.vertices_before = out.raw_vertices;
 
   // The rest on the welded mesh: components are judged whole (those inside one region already
   // were, on raw faces), holes filled across seams; no second simplification.

@@ -22,7 +22,8 @@ struct RegionMeshResult {
 };
 
 // raw_ply non-empty: the raw marching-cubes mesh is also streamed there (vertices shared across
-// seams; a seam vertex's normal is its first region's). Throws on I/O errors; a region CGAL fails on
+// seams, welded by exact position: seam vertices that coincide, crossings exactly at a voxel, become
+// one; a seam vertex's normal is its first region's). Throws on I/O errors; a region CGAL fails on
 // is kept unsimplified (counted in report.failure).
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "");
 
