@@ -393,9 +393,8 @@ class Cleaner {
     }
     std::vector<std::size_t> drop;
     for (std::size_t c = 0; c < n; ++c)
-      if (on_seam[c]) continue;
-      else if ((p_.min_component_faces > 0 && faces[c] < std::size_t(p_.min_component_faces)) ||
-          (p_.min_component_area > 0 && area[c] < p_.min_component_area))
+      if (!on_seam[c] && ((p_.min_component_faces > 0 && faces[c] < std::size_t(p_.min_component_faces)) ||
+                          (p_.min_component_area > 0 && area[c] < p_.min_component_area)))
         drop.push_back(c);
     if (!drop.empty()) PMP::remove_connected_components(m_, drop, fcc);
     m_.remove_property_map(fcc);
