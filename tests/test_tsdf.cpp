@@ -1,5 +1,7 @@
 // TSDF integration, ray casting, volume shifting and marching cubes on analytic scenes.
+#include <algorithm>
 #include <cmath>
+#include <memory>
 #include <map>
 #include <set>
 
@@ -8,6 +10,7 @@
 #include "support.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/tsdf_volume.h"
+#include "vofusion/pipeline/mesh_by_region.h"
 
 using namespace vofusion;
 using namespace vofusion::fusion;
@@ -194,4 +197,129 @@ TEST(MarchingCubes, EmptyAndUnobservedGiveNoTriangles) {
   for (auto& v : b.voxels) v.tsdf = -100;
   b.voxels[0].tsdf = 100;
   EXPECT_TRUE(marchingCubes({{Eigen::Vector3i(0, 0, 0), &b}}, 0.01f).empty());
+}
+
+namespace {
+
+// Bricks holding the truncated SDF of a sphere (weight 1, colour by height), no camera involved.
+struct SphereBricks {
+  std::vector<std::unique_ptr<Brick>> storage;
+  std::vector<BrickRef> refs;
+  SphereBricks(const Eigen::Vector3f& centre, float r, float voxel, float trunc) {
+    const float brick = voxel * kBrickEdge;
+    const Eigen::Vector3i lo = ((centre.array() - r - trunc) / brick).floor().cast<int>();
+    const Eigen::Vector3i hi = ((centre.array() + r + trunc) / brick).floor().cast<int>();
+    for (int bz = lo.z(); bz <= hi.z(); ++bz)
+      for (int by = lo.y(); by <= hi.y(); ++by)
+        for (int bx = lo.x(); bx <= hi.x(); ++bx) {
+          auto b = std::make_unique<Brick>();
+          b->coord = {bx, by, bz};
+          bool near = false;
+          for (int z = 0; z < kBrickEdge; ++z)
+            for (int y = 0; y < kBrickEdge; ++y)
+              for (int x = 0; x < kBrickEdge; ++x) {
+                const Eigen::Vector3f p = (b->coord * kBrickEdge + Eigen::Vector3i(x, y, z)).cast<float>() * voxel;
+                const float d = std::clamp(((p - centre).norm() - r) / trunc, -1.f, 1.f);
+                Voxel& v = b->voxels[Brick::index(x, y, z)];
+                // Never exactly 0: a crossing at a voxel would put vertices of several edges there.
+                v.tsdf = std::int16_t(std::lround(d * kTsdfScale));
+                if (v.tsdf == 0) v.tsdf = 1;
+                v.weight = 1;
+                v.r = v.g = v.b = std::uint8_t(std::clamp(128.f + 200.f * (p.z() - centre.z()), 0.f, 255.f));
+                near |= std::fabs(d) < 0.99f;
+              }
+          if (!near) continue;
+          refs.push_back({b->coord, b.get()});
+          storage.push_back(std::move(b));
+        }
+  }
+};
+
+using Key = std::array<float, 3>;
+Key keyOf(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
+
+// A face by its corners' exact positions, rotated so the smallest comes first (orientation kept).
+std::array<Key, 3> faceKey(const TriangleMesh& m, const std::array<std::uint32_t, 3>& f) {
+  std::array<Key, 3> k{keyOf(m.vertices[f[0]]), keyOf(m.vertices[f[1]]), keyOf(m.vertices[f[2]])};
+  std::rotate(k.begin(), std::min_element(k.begin(), k.end()), k.end());
+  return k;
+}
+
+}  // namespace
+
+TEST(MarchingCubes, RegionByRegionGivesTheWholeWorldMeshAndClosedSeams) {
+  // Centred off the origin and partly at negative brick coordinates: regions round down there too.
+  const Eigen::Vector3f centre(-0.05f, 0.13f, 0.02f);
+  const SphereBricks sphere(centre, 0.3f, 0.01f, 0.04f);
+  const TriangleMesh whole = marchingCubes(sphere.refs, 0.01f);
+  ASSERT_GT(whole.faces.size(), 5000u);
+
+  std::multiset<std::array<Key, 3>> region_faces;
+  std::map<Key, std::vector<std::uint8_t>> seam_flags;  // per position, its flag in each region having it
+  int regions = 0;
+  marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, [&](RegionMesh& r) {
+    ++regions;
+    ASSERT_EQ(r.on_seam.size(), r.mesh.vertices.size());
+    ASSERT_EQ(r.mesh.colors.size(), r.mesh.vertices.size());
+    for (const auto& f : r.mesh.faces) region_faces.insert(faceKey(r.mesh, f));
+    for (std::size_t v = 0; v < r.mesh.vertices.size(); ++v) seam_flags[keyOf(r.mesh.vertices[v])].push_back(r.on_seam[v]);
+  });
+  EXPECT_GT(regions, 20);
+
+  // The same faces on the same (bit-identical) vertices, each exactly once.
+  std::multiset<std::array<Key, 3>> whole_faces;
+  for (const auto& f : whole.faces) whole_faces.insert(faceKey(whole, f));
+  EXPECT_EQ(region_faces, whole_faces);
+  std::set<Key> whole_vertices;
+  for (const auto& v : whole.vertices) whole_vertices.insert(keyOf(v));
+  EXPECT_EQ(seam_flags.size(), whole_vertices.size());
+  // A vertex in several regions is flagged as a seam vertex in each (so none of them moves it).
+  std::size_t shared = 0;
+  for (const auto& [pos, flags] : seam_flags) {
+    if (flags.size() < 2) continue;
+    ++shared;
+    for (std::uint8_t f : flags) EXPECT_EQ(f, 1) << pos[0] << " " << pos[1] << " " << pos[2];
+  }
+  EXPECT_GT(shared, 500u);
+
+  // Welded by position the regions close up: on the closed sphere every edge has two faces.
+  std::map<std::pair<Key, Key>, int> edges;
+  for (const auto& f : region_faces)
+    for (int k = 0; k < 3; ++k) ++edges[{std::min(f[k], f[(k + 1) % 3]), std::max(f[k], f[(k + 1) % 3])}];
+  std::size_t open = 0;
+  for (const auto& [e, n] : edges) open += n != 2;
+  EXPECT_EQ(open, 0u);
+}
+
+TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
+  const Eigen::Vector3f centre(-0.05f, 0.13f, 0.02f);
+  const SphereBricks sphere(centre, 0.3f, 0.01f, 0.04f);
+  const TriangleMesh whole = marchingCubes(sphere.refs, 0.01f);
+  MeshCleanParams params;
+  params.max_simplify_error = 0.003;
+  const std::string raw_path = testing::TempDir() + "/mesh_by_region_raw.ply";
+  const RegionMeshResult r = meshByRegion(
+      [&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); }, params,
+      raw_path);
+  ASSERT_TRUE(r.report.success) << r.report.failure;
+  EXPECT_GT(r.regions, 20u);
+  EXPECT_EQ(r.raw_faces, whole.faces.size());
+  EXPECT_EQ(r.raw_vertices, whole.vertices.size());
+  // Simplified region by region, yet one closed manifold sphere: the seams were kept and welded.
+  EXPECT_TRUE(r.report.closed);
+  EXPECT_TRUE(r.report.manifold);
+  EXPECT_EQ(r.report.components_kept, 1u);
+  EXPECT_LT(r.mesh.faces.size(), whole.faces.size() / 3);
+  EXPECT_LT(r.report.simplification.distance.mean, 0.01);
+  double worst = 0;
+  for (const auto& v : r.mesh.vertices) worst = std::max(worst, double(std::fabs((v - centre).norm() - 0.3f)));
+  EXPECT_LT(worst, 0.01 + params.max_simplify_error);
+  // The streamed raw mesh is the whole-world marching-cubes mesh (faces by their corners' positions).
+  const TriangleMesh raw = readPly(raw_path);
+  ASSERT_EQ(raw.faces.size(), whole.faces.size());
+  ASSERT_EQ(raw.vertices.size(), whole.vertices.size());
+  std::multiset<std::array<Key, 3>> a, b;
+  for (const auto& f : raw.faces) a.insert(faceKey(raw, f));
+  for (const auto& f : whole.faces) b.insert(faceKey(whole, f));
+  EXPECT_EQ(a, b);
 }

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 #include <unordered_map>
 
 // Lorensen & Cline lookup tables (Bourke's edgeTable/triTable), as shipped by PCL.
@@ -31,6 +32,7 @@ struct BrickVertices {
   std::vector<std::uint16_t> edges;  // owned edge ids (voxel index * 3 + axis), ascending
   std::vector<Eigen::Vector3f> points;
   std::vector<std::array<std::uint8_t, 3>> colours;
+  std::vector<std::uint8_t> seam;    // 1: also used by another region's cells (region meshing only)
   std::uint32_t base = 0;            // global index of the first vertex
 };
 
@@ -66,15 +68,35 @@ inline bool usable(const Voxel* v, int min_weight) {
   return v && v->weight >= min_weight && std::abs(v->tsdf) < 32440;  // |tsdf| < 0.99
 }
 
-}  // namespace
+// The region (block of region_bricks^3 bricks) a brick belongs to.
+Eigen::Vector3i regionOf(const Eigen::Vector3i& brick, int region_bricks) {
+  const auto d = [region_bricks](int v) { return v >= 0 ? v / region_bricks : -((-v + region_bricks - 1) / region_bricks); };
+  return {d(brick.x()), d(brick.y()), d(brick.z())};
+}
 
-TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight) {
+// Marching cubes over the cells of bricks[0, owned); the later bricks only lend voxels and the
+// vertices on edges they own. region_bricks > 0: `seam` flags the vertices that cells of another
+// region also use (those of edges owned by a later brick, or on a face the region shares).
+TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, float voxel_size, int min_weight,
+                     int region_bricks, std::vector<std::uint8_t>* seam) {
   TriangleMesh mesh;
   if (bricks.empty()) return mesh;
   min_weight = std::max(1, min_weight);
   const Grid grid(bricks);
   std::vector<BrickVertices> verts(bricks.size());
   std::vector<std::array<int, 8>> nbs(bricks.size());
+
+  // Cells using the edge at voxel (x,y,z) of brick i along `axis` lie at that voxel minus 0 or 1
+  // along each other axis: another region's when the voxel is on the region's low face there.
+  const auto onSeam = [&](std::size_t i, int x, int y, int z, int axis) -> std::uint8_t {
+    if (i >= owned) return 1;
+    const int local[3] = {x, y, z};
+    for (int k = 0; k < 3; ++k)
+      if (k != axis && local[k] == 0 &&
+          regionOf(bricks[i].coord - Eigen::Vector3i::Unit(k), region_bricks) != regionOf(bricks[i].coord, region_bricks))
+        return 1;
+    return 0;
+  };
 
   // Pass 1: the vertices on the edges each brick owns.
   parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
@@ -95,6 +117,7 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
             Eigen::Vector3f p((o.x() + x) * voxel_size, (o.y() + y) * voxel_size, (o.z() + z) * voxel_size);
             p[axis] += t * voxel_size;
             bv.edges.push_back(static_cast<std::uint16_t>(Brick::index(x, y, z) * 3 + axis));
+            if (seam) bv.seam.push_back(onSeam(i, x, y, z, axis));
             bv.points.push_back(p);
             const auto mix = [t](std::uint8_t u, std::uint8_t v) {
               return static_cast<std::uint8_t>(std::lround(u + t * (static_cast<float>(v) - u)));
@@ -110,11 +133,12 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
   for (const auto& bv : verts) {
     mesh.vertices.insert(mesh.vertices.end(), bv.points.begin(), bv.points.end());
     mesh.colors.insert(mesh.colors.end(), bv.colours.begin(), bv.colours.end());
+    if (seam) seam->insert(seam->end(), bv.seam.begin(), bv.seam.end());
   }
 
   // Pass 2: triangles of every cell whose 8 corners are usable.
-  std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(bricks.size());
-  parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
+  std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(owned);
+  parallelFor(0, static_cast<int>(owned), [&](int i) {
     const int* nb = nbs[i].data();
     auto vertexOf = [&](int cx, int cy, int cz, int axis) -> std::int64_t {
       const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
@@ -172,10 +196,12 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
     remap[v] = kept;
     mesh.vertices[kept] = mesh.vertices[v];
     mesh.colors[kept] = mesh.colors[v];
+    if (seam) (*seam)[kept] = (*seam)[v];
     ++kept;
   }
   mesh.vertices.resize(kept);
   mesh.colors.resize(kept);
+  if (seam) seam->resize(kept);
   for (auto& f : mesh.faces)
     for (auto& v : f) v = remap[v];
 
@@ -190,6 +216,47 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
     n = len > 0.f ? Eigen::Vector3f(n / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
   }
   return mesh;
+}
+
+}  // namespace
+
+TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight) {
+  return extract(bricks, bricks.size(), voxel_size, min_weight, 0, nullptr);
+}
+
+void marchingCubesByRegion(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight, int region_bricks,
+                           const std::function<void(RegionMesh&)>& sink) {
+  if (region_bricks <= 0) throw std::invalid_argument("region_bricks must be positive");
+  // Regions in a fixed order (lexicographic region coordinates): the same run gives the same file.
+  std::vector<std::pair<std::array<int, 3>, std::size_t>> order;
+  order.reserve(bricks.size());
+  for (std::size_t i = 0; i < bricks.size(); ++i) {
+    const Eigen::Vector3i r = regionOf(bricks[i].coord, region_bricks);
+    order.push_back({{r.x(), r.y(), r.z()}, i});
+  }
+  std::sort(order.begin(), order.end());
+  std::unordered_map<std::uint64_t, std::size_t> index;  // brick -> position in `bricks`
+  index.reserve(bricks.size() * 2);
+  for (std::size_t i = 0; i < bricks.size(); ++i) index[brickKey(bricks[i].coord)] = i;
+  std::vector<BrickRef> part;
+  for (std::size_t a = 0, b; a < order.size(); a = b) {
+    for (b = a; b < order.size() && order[b].first == order[a].first; ++b) {}
+    part.clear();
+    for (std::size_t k = a; k < b; ++k) part.push_back(bricks[order[k].second]);
+    // The halo: +1 neighbours in other regions, whose voxels and edges the region's cells reach.
+    std::unordered_map<std::uint64_t, bool> halo;
+    for (std::size_t k = a; k < b; ++k)
+      for (int n = 1; n < 8; ++n) {
+        const Eigen::Vector3i c = bricks[order[k].second].coord + Eigen::Vector3i(n & 1, (n >> 1) & 1, (n >> 2) & 1);
+        const auto it = index.find(brickKey(c));
+        if (it == index.end() || regionOf(c, region_bricks) == regionOf(part.front().coord, region_bricks)) continue;
+        if (halo.emplace(it->first, true).second) part.push_back(bricks[it->second]);
+      }
+    RegionMesh r;
+    r.region = regionOf(part.front().coord, region_bricks);
+    r.mesh = extract(part, b - a, voxel_size, min_weight, region_bricks, &r.on_seam);
+    if (!r.mesh.empty()) sink(r);
+  }
 }
 
 }  // namespace vofusion::fusion

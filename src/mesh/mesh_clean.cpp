@@ -8,7 +8,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <type_traits>
 #include <unordered_map>
+#include <unordered_set>
 
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
@@ -31,6 +33,7 @@
 #include <CGAL/Polygon_mesh_processing/tangential_relaxation.h>
 #include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
 #include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_placement.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Edge_length_cost.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/GarlandHeckbert_plane_policies.h>
@@ -215,23 +218,50 @@ MeshDistance distanceBetween(const Soup& from, const Soup& to, std::size_t sampl
   return d;
 }
 
-// Gives the vertex that survives an edge collapse the mean colour of the edge's two ends.
+// Gives the vertex that survives an edge collapse the mean colour of the edge's two ends, or, when
+// one end is fixed (a seam vertex), that end's colour and fixedness (whichever vertex CGAL keeps).
 struct BlendColoursOnCollapse : SMS::Edge_collapse_visitor_base<Mesh> {
   Mesh::Property_map<VD, Rgb> col;
+  Mesh::Property_map<VD, bool> fixed;  // null map: no fixed vertices
   Rgb pending{};
-  explicit BlendColoursOnCollapse(Mesh::Property_map<VD, Rgb> c) : col(c) {}
+  bool pending_fixed = false;
+  BlendColoursOnCollapse(Mesh::Property_map<VD, Rgb> c, Mesh::Property_map<VD, bool> f) : col(c), fixed(f) {}
   template <typename Profile, typename Placement>
   void OnCollapsing(const Profile& prof, const Placement&) {
-    for (int k = 0; k < 3; ++k) pending[k] = std::uint8_t((int(col[prof.v0()][k]) + int(col[prof.v1()][k]) + 1) / 2);
+    const bool f0 = fixed && fixed[prof.v0()], f1 = fixed && fixed[prof.v1()];
+    pending_fixed = f0 || f1;
+    if (pending_fixed) pending = col[f0 ? prof.v0() : prof.v1()];
+    else
+      for (int k = 0; k < 3; ++k) pending[k] = std::uint8_t((int(col[prof.v0()][k]) + int(col[prof.v1()][k]) + 1) / 2);
   }
   template <typename Profile>
-  void OnCollapsed(const Profile&, VD kept) { col[kept] = pending; }
+  void OnCollapsed(const Profile&, VD kept) {
+    col[kept] = pending;
+    if (fixed) fixed[kept] = pending_fixed;
+  }
+};
+
+// Placement that never moves a fixed vertex: an edge with one fixed end collapses onto it, one with
+// two is not collapsed. The cost is then the quadric error at the fixed point, so the bound holds.
+template <typename Base>
+struct KeepFixedPlacement {
+  Base base;
+  Mesh::Property_map<VD, bool> fixed;
+  template <typename Profile>
+  boost::optional<typename Profile::Point> operator()(const Profile& p) const {
+    const bool f0 = fixed[p.v0()], f1 = fixed[p.v1()];
+    if (f0 && f1) return boost::none;
+    if (f0) return p.p0();
+    if (f1) return p.p1();
+    return base(p);
+  }
 };
 
 class Cleaner {
  public:
-  Cleaner(const MeshCleanParams& p, MeshCleanReport& r, TriangleMesh* unsimplified)
-      : p_(p), r_(r), unsimplified_(unsimplified) {}
+  Cleaner(const MeshCleanParams& p, MeshCleanReport& r, TriangleMesh* unsimplified,
+          std::vector<std::uint8_t>* seam = nullptr, std::size_t distance_samples = kDistanceSamples)
+      : p_(p), r_(r), unsimplified_(unsimplified), seam_(seam), distance_samples_(distance_samples) {}
 
   void run(TriangleMesh& in) {
     has_colours_ = !in.colors.empty() && in.colors.size() == in.vertices.size();
@@ -241,12 +271,13 @@ class Cleaner {
                                                                  std::to_string(in.vertices.size()));
     step("repair", [&] { buildRepaired(in); });
     if (p_.min_component_faces > 0 || p_.min_component_area > 0) step("components", [&] { removeSmallComponents(); });
-    if (p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) step("holes", [&] { fillHoles(); });
+    // A region's holes may run into its neighbours: they are filled once the regions are welded.
+    if (!seam_ && p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) step("holes", [&] { fillHoles(); });
     const bool simplifying = p_.max_simplify_error > 0 || p_.target_faces > 0 || p_.target_edge_length > 0;
     Mesh before;  // the mesh as simplification found it: measured against, and `unsimplified`
     if (simplifying || unsimplified_) before = m_;
     if (simplifying) step("simplify", [&] { simplifyAndMeasure(before); });
-    if (p_.smooth_iterations > 0 || p_.relax_iterations > 0) step("smooth", [&] { smooth(); });
+    if (!seam_ && (p_.smooth_iterations > 0 || p_.relax_iterations > 0)) step("smooth", [&] { smooth(); });
     finish(m_);
     if (unsimplified_) {
       finish(before);
@@ -262,6 +293,10 @@ class Cleaner {
     r_.manifold = nonManifoldVertexCount(m_) == 0;
     r_.area = m_.is_empty() ? 0.0 : PMP::area(m_);
     in = toTriangleMesh(m_);
+    if (seam_) {
+      seam_->clear();
+      for (VD v : m_.vertices()) seam_->push_back(fixed_[v]);
+    }
   }
 
  private:
@@ -298,6 +333,10 @@ class Cleaner {
     std::unordered_map<Point, Rgb, PointHash> colour_at;
     if (has_colours_)
       for (std::size_t i = 0; i < pts.size(); ++i) colour_at.emplace(pts[i], in.colors[i]);
+    std::unordered_set<Point, PointHash> fixed_at;  // seam vertices, by position too
+    if (seam_)
+      for (std::size_t i = 0; i < pts.size() && i < seam_->size(); ++i)
+        if ((*seam_)[i]) fixed_at.insert(pts[i]);
 
     if (p_.repair) {
       const std::size_t n_points = pts.size();
@@ -325,6 +364,10 @@ class Cleaner {
       if (it != colour_at.end()) col_[v] = it->second;
       known_[v] = true;
     }
+    if (seam_) {
+      fixed_ = m_.add_property_map<VD, bool>("v:fixed_seam", false).first;
+      for (VD v : m_.vertices()) fixed_[v] = fixed_at.count(m_.point(v)) > 0;
+    }
     if (!p_.repair) return;
     r_.border_edges_stitched += PMP::stitch_borders(m_);
     const std::size_t faces_before = m_.number_of_faces();
@@ -341,14 +384,17 @@ class Cleaner {
     const std::size_t n = PMP::connected_components(m_, fcc);
     std::vector<std::size_t> faces(n, 0);
     std::vector<double> area(n, 0.0);
+    std::vector<bool> on_seam(n, false);  // continues in another region: judged there, not here
     for (FD f : m_.faces()) {
       ++faces[fcc[f]];
       area[fcc[f]] += PMP::face_area(f, m_);
+      if (seam_)
+        for (VD v : CGAL::vertices_around_face(m_.halfedge(f), m_)) on_seam[fcc[f]] = on_seam[fcc[f]] || fixed_[v];
     }
     std::vector<std::size_t> drop;
     for (std::size_t c = 0; c < n; ++c)
-      if ((p_.min_component_faces > 0 && faces[c] < std::size_t(p_.min_component_faces)) ||
-          (p_.min_component_area > 0 && area[c] < p_.min_component_area))
+      if (!on_seam[c] && ((p_.min_component_faces > 0 && faces[c] < std::size_t(p_.min_component_faces)) ||
+                          (p_.min_component_area > 0 && area[c] < p_.min_component_area)))
         drop.push_back(c);
     if (!drop.empty()) PMP::remove_connected_components(m_, drop, fcc);
     m_.remove_property_map(fcc);
@@ -393,7 +439,7 @@ class Cleaner {
     simplify();
     s.faces_after = m_.number_of_faces();
     // Cheap enough to run every time (a fixed number of samples): the bound is measured, not assumed.
-    if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(m_), soupOf(before), kDistanceSamples);
+    if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(m_), soupOf(before), distance_samples_);
     s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
 
@@ -410,10 +456,18 @@ class Cleaner {
       // to the planes of every face merged into it, so stopping at max_error^2 keeps each of them
       // within max_error of the new vertex (a conservative bound: the planes overlap).
       stop.max_cost = p_.max_simplify_error * p_.max_simplify_error;
+      // Normal flips are refused by a filter, checked only on the edge about to collapse: the
+      // placement wrapper checked every edge each time its cost was updated (most of the time).
       SMS::GarlandHeckbert_plane_policies<Mesh, Kernel> gh(m_);
-      SMS::Bounded_normal_change_placement<SMS::GarlandHeckbert_plane_policies<Mesh, Kernel>> placement(gh.get_placement());
-      SMS::edge_collapse(m_, stop,
-                         CGAL::parameters::get_cost(gh.get_cost()).get_placement(placement).visitor(BlendColoursOnCollapse(col_)));
+      const auto params = CGAL::parameters::get_cost(gh.get_cost())
+                              .filter(SMS::Bounded_normal_change_filter<>())
+                              .visitor(BlendColoursOnCollapse(col_, fixed_));
+      if (seam_) {
+        using Placement = std::decay_t<decltype(gh.get_placement())>;
+        SMS::edge_collapse(m_, stop, params.get_placement(KeepFixedPlacement<Placement>{gh.get_placement(), fixed_}));
+      } else {
+        SMS::edge_collapse(m_, stop, params.get_placement(gh.get_placement()));
+      }
     } else {
       stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
       if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
@@ -423,7 +477,7 @@ class Cleaner {
       SMS::edge_collapse(m_, stop,
                          CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
                              .get_placement(placement)
-                             .visitor(BlendColoursOnCollapse(col_)));
+                             .visitor(BlendColoursOnCollapse(col_, fixed_)));
     }
     m_.collect_garbage();
   }
@@ -442,6 +496,7 @@ class Cleaner {
 
   void finish(Mesh& m) const {
     m.collect_garbage();  // indices are now 0..n-1
+    if (seam_) return;    // a region is neither closed nor final
     if (p_.orient_closed_outward && !m.is_empty() && CGAL::is_closed(m)) PMP::orient(m);
   }
 
@@ -477,6 +532,9 @@ class Cleaner {
   const MeshCleanParams& p_;
   MeshCleanReport& r_;
   TriangleMesh* unsimplified_;
+  std::vector<std::uint8_t>* seam_;  // region mode: per vertex, fixed (shared with another region)
+  std::size_t distance_samples_;
+  Mesh::Property_map<VD, bool> fixed_;
   Mesh m_;
   Mesh::Property_map<VD, Rgb> col_;
   Mesh::Property_map<VD, bool> known_;
@@ -498,6 +556,27 @@ MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, Tri
   }
   mesh = std::move(work);
   if (unsimplified) *unsimplified = std::move(before);
+  report.success = true;
+  return report;
+}
+
+MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& seam, const MeshCleanParams& params) {
+  MeshCleanReport report;
+  if (seam.size() != mesh.vertices.size()) throw std::invalid_argument("simplifyRegion: one seam flag per vertex");
+  MeshCleanParams p = params;
+  p.recompute_normals = false;  // normals come after welding
+  TriangleMesh work = mesh;
+  std::vector<std::uint8_t> work_seam = seam;
+  try {
+    // Samples in proportion to the faces: spread over regions about as over the whole mesh.
+    Cleaner(p, report, nullptr, &work_seam, std::max<std::size_t>(100, mesh.faces.size() / 8)).run(work);
+  } catch (const std::exception& e) {
+    report.success = false;
+    report.failure = e.what();
+    return report;
+  }
+  mesh = std::move(work);
+  seam = std::move(work_seam);
   report.success = true;
   return report;
 }

@@ -189,6 +189,11 @@ TriangleMesh Reconstruction::extractMesh() const {
   impl_->waitFusion();
   return impl_->kinfu->extractMesh();
 }
+void Reconstruction::extractMeshByRegion(int region_bricks, const std::function<void(fusion::RegionMesh&)>& sink) const {
+  impl_->waitFusion();
+  const fusion::TsdfVolume& v = impl_->kinfu->volume();
+  fusion::marchingCubesByRegion(v.allBricks(), v.params().voxel_size, 1, region_bricks, sink);
+}
 cv::Mat Reconstruction::renderView(const CameraIntrinsics& cam) const {
   impl_->waitFusion();
   return impl_->kinfu->renderView(impl_->kinfu->pose(), cam);

@@ -2,6 +2,7 @@
 // Mesh post-processing with CGAL Polygon Mesh Processing: repair, drop small fragments, fill small
 // holes, optionally simplify and smooth. Vertex colours survive every step (new vertices take the
 // colours of their neighbours). INI section [mesh]; defaults documented in share/mesh.ini.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -35,6 +36,9 @@ struct MeshCleanParams : public mrpt::config::CLoadableOptions {
   int relax_iterations = 0;            // iterations of PMP::tangential_relaxation (0: off)
   bool orient_closed_outward = true;   // if the result is closed, orient every component outward
   bool recompute_normals = true;       // write fresh area-weighted vertex normals
+  // vofusion only: marching cubes, repair and simplification one block of region_bricks^3 bricks at
+  // a time (seams kept), the other steps on the welded result; 0: the whole world at once.
+  int region_bricks = 32;              // bricks (8 voxels each) per region edge (measured: share/mesh.ini)
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
@@ -85,6 +89,14 @@ struct MeshCleanReport {
 // `mesh` unchanged. `unsimplified`, when given, receives the mesh as it was just before
 // simplification (repaired, fragments removed, holes filled; not smoothed).
 MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, TriangleMesh* unsimplified = nullptr);
+
+// The first half of cleanMesh for one region of a mesh built region by region: repair, removal of
+// small components that touch no seam (those continuing into a neighbour are judged whole, after
+// welding), then simplification. Vertices flagged in `seam` (shared with a neighbouring region) are
+// neither moved nor removed, so the simplified regions weld exactly; `seam` is updated to the
+// result's vertices. The distance is measured on faces/8 samples (the regions together about as
+// many as cleanMesh takes). No holes, smoothing or normals: cleanMesh does those on the welded mesh.
+MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& seam, const MeshCleanParams& params);
 
 // Mean and max distance from `samples` points spread over `from` by area (a fixed seed: the same
 // meshes give the same figures) to the surface of `to`.

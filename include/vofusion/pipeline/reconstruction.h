@@ -21,6 +21,7 @@
 #include "vofusion/core/timing.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/fusion/kinfu.h"
+#include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/loop/loop_closer.h"
 #include "vofusion/mesh/triangle_mesh.h"
 #include "vofusion/odometry/rgbd_odometry.h"
@@ -71,6 +72,8 @@ class Reconstruction {
                           const std::function<void(std::size_t)>& progress = nullptr);
   bool reintegrated() const;
   TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model
+  // The same mesh one region of region_bricks^3 bricks at a time (fusion::marchingCubesByRegion).
+  void extractMeshByRegion(int region_bricks, const std::function<void(fusion::RegionMesh&)>& sink) const;
   cv::Mat renderView(const CameraIntrinsics& cam) const;  // shaded ray-cast from the current pose
   const StageTimes& totalTimes() const;  // accumulated over all frames, plus "total"
   std::size_t framesProcessed() const;
