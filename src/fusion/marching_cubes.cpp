@@ -68,7 +68,19 @@ inline bool usable(const Voxel* v, int min_weight) {
 
 }  // namespace
 
-TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight) {
+namespace {
+
+// Vertex key for welding region seams: brick coordinate (16 bits per axis) and edge id (11 bits).
+std::uint64_t seamKey(const Eigen::Vector3i& c, std::uint16_t edge) {
+  const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::uint32_t>(v + (1 << 15)) & 0xffff); };
+  return u(c.x()) | (u(c.y()) << 16) | (u(c.z()) << 32) | (static_cast<std::uint64_t>(edge) << 48);
+}
+
+// Marching cubes over bricks[0, owned) (faces) reading bricks[owned, n) only as +1 neighbours. No
+// normals. seam (optional, per brick): the kept vertices of those bricks get a seamKey in *keys
+// (UINT64_MAX for the others), so a caller meshing region by region can weld the regions' borders.
+TriangleMesh marchingCubesCore(const std::vector<BrickRef>& bricks, std::size_t owned, float voxel_size,
+                               int min_weight, const std::vector<char>* seam, std::vector<std::uint64_t>* keys) {
   TriangleMesh mesh;
   if (bricks.empty()) return mesh;
   min_weight = std::max(1, min_weight);
@@ -114,7 +126,7 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
 
   // Pass 2: triangles of every cell whose 8 corners are usable.
   std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(bricks.size());
-  parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
+  parallelFor(0, static_cast<int>(owned), [&](int i) {
     const int* nb = nbs[i].data();
     auto vertexOf = [&](int cx, int cy, int cz, int axis) -> std::int64_t {
       const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
@@ -162,6 +174,14 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
   mesh.faces.reserve(nf);
   for (const auto& f : faces) mesh.faces.insert(mesh.faces.end(), f.begin(), f.end());
 
+  // Seam keys of every vertex (before the unused ones are dropped).
+  if (keys) {
+    keys->assign(mesh.vertices.size(), UINT64_MAX);
+    for (std::size_t i = 0; i < bricks.size(); ++i)
+      if ((*seam)[i])
+        for (std::size_t j = 0; j < verts[i].edges.size(); ++j)
+          (*keys)[verts[i].base + j] = seamKey(bricks[i].coord, verts[i].edges[j]);
+  }
   // Drop crossings no triangle uses (edges whose cells touch unobserved voxels).
   std::vector<std::uint32_t> remap(mesh.vertices.size(), UINT32_MAX);
   for (const auto& f : mesh.faces)
@@ -172,14 +192,19 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
     remap[v] = kept;
     mesh.vertices[kept] = mesh.vertices[v];
     mesh.colors[kept] = mesh.colors[v];
+    if (keys) (*keys)[kept] = (*keys)[v];
     ++kept;
   }
   mesh.vertices.resize(kept);
   mesh.colors.resize(kept);
+  if (keys) keys->resize(kept);
   for (auto& f : mesh.faces)
     for (auto& v : f) v = remap[v];
+  return mesh;
+}
 
-  // Area-weighted vertex normals, oriented like the faces.
+// Area-weighted vertex normals, oriented like the faces.
+void computeNormals(TriangleMesh& mesh) {
   mesh.normals.assign(mesh.vertices.size(), Eigen::Vector3f::Zero());
   for (const auto& f : mesh.faces) {
     const Eigen::Vector3f n = (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]);
@@ -189,6 +214,80 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
     const float len = n.norm();
     n = len > 0.f ? Eigen::Vector3f(n / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
   }
+}
+
+}  // namespace
+
+TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight) {
+  TriangleMesh mesh = marchingCubesCore(bricks, bricks.size(), voxel_size, min_weight, nullptr, nullptr);
+  computeNormals(mesh);
+  return mesh;
+}
+
+TriangleMesh marchingCubesStreamed(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch,
+                                   float voxel_size, int min_weight, int region_bricks) {
+  TriangleMesh mesh;
+  const int G = std::max(1, region_bricks);
+  const auto regionOf = [G](const Eigen::Vector3i& c) {
+    const auto fl = [G](int v) { return v >= 0 ? v / G : -((-v + G - 1) / G); };
+    return Eigen::Vector3i(fl(c.x()), fl(c.y()), fl(c.z()));
+  };
+  std::unordered_map<std::uint64_t, char> present;
+  std::unordered_map<std::uint64_t, std::vector<Eigen::Vector3i>> regions;
+  present.reserve(coords.size() * 2);
+  for (const auto& c : coords) {
+    present[brickKey(c)] = 1;
+    regions[brickKey(regionOf(c))].push_back(c);
+  }
+  std::vector<std::uint64_t> order;
+  order.reserve(regions.size());
+  for (const auto& r : regions) order.push_back(r.first);
+  std::sort(order.begin(), order.end());  // the same mesh whatever the hash order
+  const auto onLowFace = [G](const Eigen::Vector3i& c) {
+    const auto m = [G](int v) { return ((v % G) + G) % G == 0; };
+    return m(c.x()) || m(c.y()) || m(c.z());
+  };
+  std::unordered_map<std::uint64_t, std::uint32_t> seam_index;  // welded region-border vertices
+  for (const std::uint64_t rk : order) {
+    std::vector<Eigen::Vector3i>& own = regions[rk];
+    std::sort(own.begin(), own.end(), [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+      return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+    });
+    const Eigen::Vector3i r = regionOf(own.front());
+    std::vector<Eigen::Vector3i> list = own;
+    std::unordered_map<std::uint64_t, char> in_list;
+    for (const auto& c : own) in_list[brickKey(c)] = 1;
+    for (const auto& c : own)
+      for (int k = 1; k < 8; ++k) {
+        const Eigen::Vector3i n = c + Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+        if (regionOf(n) == r || !present.count(brickKey(n)) || in_list.count(brickKey(n))) continue;
+        in_list[brickKey(n)] = 1;
+        list.push_back(n);
+      }
+    std::vector<Brick> scratch(list.size());
+    std::vector<BrickRef> refs(list.size());
+    std::vector<char> seam(list.size());
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      refs[i] = {list[i], fetch(list[i], scratch[i])};
+      seam[i] = i >= own.size() || onLowFace(list[i]);
+    }
+    std::vector<std::uint64_t> keys;
+    TriangleMesh part = marchingCubesCore(refs, own.size(), voxel_size, min_weight, &seam, &keys);
+    std::vector<std::uint32_t> to_mesh(part.vertices.size());
+    for (std::size_t v = 0; v < part.vertices.size(); ++v) {
+      if (keys[v] != UINT64_MAX) {
+        const auto [it, fresh] = seam_index.emplace(keys[v], static_cast<std::uint32_t>(mesh.vertices.size()));
+        to_mesh[v] = it->second;
+        if (!fresh) continue;
+      } else {
+        to_mesh[v] = static_cast<std::uint32_t>(mesh.vertices.size());
+      }
+      mesh.vertices.push_back(part.vertices[v]);
+      mesh.colors.push_back(part.colors[v]);
+    }
+    for (const auto& f : part.faces) mesh.faces.push_back({to_mesh[f[0]], to_mesh[f[1]], to_mesh[f[2]]});
+  }
+  computeNormals(mesh);
   return mesh;
 }
 

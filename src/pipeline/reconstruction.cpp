@@ -189,6 +189,11 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
 }
 
 bool Reconstruction::reintegrated() const { return impl_->reintegrated; }
+void Reconstruction::saveVolume(const std::string& path) const {
+  impl_->waitFusion();
+  impl_->kinfu->save(path);
+}
+void Reconstruction::resumeVolume(const std::string& path) { impl_->kinfu->resume(path); }
 TriangleMesh Reconstruction::extractMesh() const {
   impl_->waitFusion();
   return impl_->kinfu->extractMesh();

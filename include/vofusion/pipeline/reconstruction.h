@@ -70,6 +70,10 @@ class Reconstruction {
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
                           const std::function<void(std::size_t)>& progress = nullptr);
   bool reintegrated() const;
+  // The map and the current pose to a file (KinFu::save), after the fusion in flight finished.
+  void saveVolume(const std::string& path) const;
+  // Before the first frame: continue from a saved map and pose (KinFu::resume).
+  void resumeVolume(const std::string& path);
   TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model
   cv::Mat renderView(const CameraIntrinsics& cam) const;  // shaded ray-cast from the current pose
   const StageTimes& totalTimes() const;  // accumulated over all frames, plus "total"
