@@ -74,7 +74,8 @@ int body(int argc, char** argv) {
   // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.
   const std::string default_work = (std::filesystem::path(*out_dir) / ".tmp").string();
   if (cl.value("--work-dir")) cfg.write("kinfu", "work_dir", *cl.value("--work-dir"));
-  else if (cfg.read_string("kinfu", "work_dir", "").empty()) cfg.write("kinfu", "work_dir", default_work);
+  else if (const std::string w = cfg.read_string("kinfu", "work_dir", "auto"); w.empty() || w == "auto")
+    cfg.write("kinfu", "work_dir", default_work);
   const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
   OutputParams out_params;
   MeshCleanParams mesh_params;

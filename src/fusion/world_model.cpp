@@ -55,7 +55,7 @@ WorldModel::~WorldModel() {
 
 void WorldModel::openSpill() {
   namespace fs = std::filesystem;
-  const fs::path dir = spill_dir_.empty() ? fs::temp_directory_path() : fs::path(spill_dir_);
+  const fs::path dir = spill_dir_.empty() || spill_dir_ == "auto" ? fs::temp_directory_path() : fs::path(spill_dir_);
   std::error_code ec;
   fs::create_directories(dir, ec);
   std::string name = (dir / "vofusion-world-XXXXXX").string();

@@ -29,7 +29,7 @@ struct TsdfParams {
   float max_depth = 3.5f;       // m
   int mark_step = 4;            // pixels between depth readings used to find the touched bricks
   int world_cache_mib = 64;     // MiB of world-model bricks kept in RAM; the rest spill to disk
-  std::string work_dir;         // folder of the spill file ("" = the system's temporary folder)
+  std::string work_dir = "auto";  // folder of the spill file ("auto" or "": the system's temporary folder)
 };
 
 // Ray-cast surface seen from a camera: world-frame maps, NaN in x where no surface was hit.

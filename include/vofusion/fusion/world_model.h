@@ -3,7 +3,7 @@
 // hands a brick over when it leaves (put) and takes it back when the volume covers it again (take);
 // nothing else crosses. Bricks are addressed by their world brick coordinate. Up to `cache_bytes` of
 // them stay in RAM (least recently handed over first out); the rest are written zlib-compressed to a
-// spill file in `spill_dir` (the system's temporary folder when empty), which is unlinked as soon as
+// spill file in `spill_dir` (the system's temporary folder when empty or "auto"), which is unlinked as soon as
 // it is created, so it never outlives the process.
 #include <cstdint>
 #include <functional>
