@@ -1,4 +1,4 @@
-// rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike] [--trajectory smooth|shake] [--frames N] [--fps F]
+// rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake] [--frames N] [--fps F]
 //               [--no-noise] [--seed S] [--size WxH]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
@@ -21,12 +21,13 @@ namespace fs = std::filesystem;
 
 namespace {
 const char* kUsage =
-    "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike] [--trajectory smooth|shake]\n"
+    "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake]\n"
     "                     [--frames N] [--fps F] [--no-noise] [--seed S] [--size WxH]\n"
     "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/)\n"
     "  --scene    room (default), corridor (long, camera travels along it), bare_wall (flat textured wall),\n"
     "             loop (a corridor around a block, walked once round: loop closure), lookalike (a corridor repeating every 3 m:\n"
-    "             places that look the same and must not be joined)\n"
+    "             places that look the same and must not be joined), longwalk (a straight corridor walked at 1 m/s:\n"
+    "             30 m per 900 frames, 100 m = 3000 frames; memory must not grow with the path, bench/longrun)\n"
     "  --trajectory smooth (default: the scene's hand-held path) or shake: hand shake on top (turns up to\n"
     "             ~150 deg/s), motion-blurred colour taken up to 15 ms off the depth capture (a TUM\n"
     "             folder keeps that offset in rgb.txt; a rawlog has no place for it)\n"

@@ -2,7 +2,7 @@
 //   vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]
 //            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
 //            [--depth-scale S] [--no-loop-closure]
-//            [--raw-mesh] [--dump-config]
+//            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--resume f]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
 #include <csignal>
@@ -31,10 +31,16 @@ const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]\n"
     "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
     "                [--depth-scale S] [--no-loop-closure] [--raw-mesh] [--dump-config]\n"
+    "                [--work-dir d] [--save-volume f] [--resume f]\n"
     "  --depth-scale  TUM-layout folders: depth PNG units per metre (default: the folder's intrinsics.txt /\n"
     "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n"
     "  --no-loop-closure  keyframes, place recognition and the pose graph off ([loop] enabled = false);\n"
-    "                 trajectory.txt is then the tracked trajectory\n";
+    "                 trajectory.txt is then the tracked trajectory\n"
+    "  --work-dir     folder of the spill file of bricks that left the volume beyond [kinfu] world_cache_mib\n"
+    "                 (default <out>/.tmp; the file is deleted as soon as it is created, so it never stays)\n"
+    "  --save-volume  at the end, the map (volume + world model) and the camera pose to file f\n"
+    "  --resume       start from a map saved with --save-volume: the camera continues from the saved pose,\n"
+    "                 the map keeps its frame (the input should continue where the saved run stopped)\n";
 
 std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanParams& mesh) {
   auto sections = reconstructionConfigSections();
@@ -44,7 +50,8 @@ std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanP
 }
 
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale"},
+  const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale", "--work-dir",
+                        "--save-volume", "--resume"},
                        {"--raw-mesh", "--dump-config", "--no-loop-closure", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
@@ -64,6 +71,11 @@ int body(int argc, char** argv) {
   auto cfg = loadConfig(config_path);
   checkConfigKeys(cfg, config_path, allSections(default_out, default_mesh));
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
+  // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.
+  const std::string default_work = (std::filesystem::path(*out_dir) / ".tmp").string();
+  if (cl.value("--work-dir")) cfg.write("kinfu", "work_dir", *cl.value("--work-dir"));
+  else if (const std::string w = cfg.read_string("kinfu", "work_dir", "auto"); w.empty() || w == "auto")
+    cfg.write("kinfu", "work_dir", default_work);
   const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
   OutputParams out_params;
   MeshCleanParams mesh_params;
@@ -86,6 +98,7 @@ int body(int argc, char** argv) {
   const std::string input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
   auto source = std::make_unique<PrefetchingSource>(openFrameSource(input, src_opts));
   Reconstruction rec(cfg, mode);
+  if (cl.value("--resume")) rec.resumeVolume(*cl.value("--resume"));
   RunRecorder recorder(*out_dir, out_params, mesh_params);
 
   std::signal(SIGINT, onSigint);
@@ -124,6 +137,8 @@ int body(int argc, char** argv) {
     info.extra["loop_closure_reintegration"] = {{"frames_fused", fused}, {"seconds", refuse.elapsedSeconds()}};
   }
 
+  if (cl.value("--save-volume")) rec.saveVolume(*cl.value("--save-volume"));
+
   info.input = source_name;
   info.config = config_path;
   info.interrupted = interrupted;
@@ -133,6 +148,8 @@ int body(int argc, char** argv) {
                rec.fallbacks(), rec.lostFrames());
   if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
   std::fprintf(stderr, "\n");
+  std::error_code ec;
+  std::filesystem::remove(default_work, ec);  // only when empty: the spill file was never a name there
   return interrupted ? 130 : 0;
 }
 

@@ -2,7 +2,9 @@
 // alternately (0..n-1, n-2..0, 1.. : a continuous camera path) through the whole pipeline
 // (Reconstruction: odometry + KinectFusion with volume shifting) for N frames, and reports peak and
 // current RSS, fps, volume shifts, world-model size and tracking counts every K frames.
-//   longrun <tum_dir> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] [--config f.ini]
+// With synthetic:<scene> (e.g. synthetic:longwalk, a straight corridor walked at 1 m/s) the frames are
+// rendered in order instead, and each checkpoint also gives the path walked so far (ground truth).
+//   longrun <tum_dir|synthetic:scene> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] [--config f.ini]
 //           [--json out.json]
 // Built by CMake as build/bin/longrun (a benchmark, not a test: run it by hand, see bench/README.md).
 #include <sys/resource.h>
@@ -12,6 +14,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -20,6 +23,7 @@
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/eval/trajectory_eval.h"
+#include "vofusion/io/frame_source.h"
 #include "vofusion/io/tum_source.h"
 #include "vofusion/pipeline/reconstruction.h"
 
@@ -51,7 +55,7 @@ std::size_t pingPong(std::size_t k, std::size_t n) {
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--frames", "--every", "--mode", "--config", "--json"}, {"--help"});
   if (cl.flag("--help") || cl.positional().size() != 1) {
-    std::cerr << "usage: longrun <tum_dir> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] "
+    std::cerr << "usage: longrun <tum_dir|synthetic:scene> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] "
                  "[--config f.ini] [--json out.json]\n";
     return 2;
   }
@@ -61,8 +65,16 @@ int body(int argc, char** argv) {
   checkConfigKeys(cfg, config_path, reconstructionConfigSections());
   const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
 
-  TumFolderSource src(cl.positional()[0], {});
-  const std::size_t n = src.size();
+  const std::string input = cl.positional()[0];
+  const bool synthetic = input.rfind("synthetic", 0) == 0;
+  SourceOptions so;
+  so.max_frames = total;
+  std::unique_ptr<FrameSource> src;
+  if (synthetic) src = openFrameSource(input, so);
+  else src = std::make_unique<TumFolderSource>(input, SourceOptions{});
+  const std::size_t n = src->size();
+  double path_m = 0.0;
+  std::optional<Eigen::Vector3d> last_position;
   Reconstruction rec(cfg, mode);
   const double fps_stamp = 30.0;  // Hz: the replay's own timeline, strictly increasing
   Trajectory gt;
@@ -70,13 +82,23 @@ int body(int argc, char** argv) {
   const auto t0 = std::chrono::steady_clock::now();
   auto t_last = t0;
   std::size_t shifts_last = 0;
-  std::printf("%8s %10s %10s %8s %8s %10s %10s %9s %6s\n", "frames", "peakRSS", "RSS", "fps", "shifts",
+  std::printf("%8s %7s %10s %10s %8s %8s %10s %10s %9s %6s\n", "frames", "path_m", "peakRSS", "RSS", "fps", "shifts",
               "bricks_vol", "bricks_wm", "fallbacks", "lost");
   for (std::size_t k = 0; k < total; ++k) {
-    Frame f = src.read(pingPong(k, n));
-    f.index = k;
-    f.timestamp = k / fps_stamp;
-    if (f.groundTruth) gt.push_back({f.timestamp, *f.groundTruth});
+    Frame f;
+    if (synthetic) {
+      if (!src->next(f)) break;
+    } else {
+      f = static_cast<TumFolderSource&>(*src).read(pingPong(k, n));
+      f.index = k;
+      f.timestamp = k / fps_stamp;
+    }
+    if (f.groundTruth) {
+      gt.push_back({f.timestamp, *f.groundTruth});
+      const Eigen::Vector3d p(f.groundTruth->x(), f.groundTruth->y(), f.groundTruth->z());
+      if (last_position) path_m += (p - *last_position).norm();
+      last_position = p;
+    }
     rec.process(f);
     if ((k + 1) % every == 0 || k + 1 == total) {
       const auto now = std::chrono::steady_clock::now();
@@ -85,6 +107,12 @@ int body(int argc, char** argv) {
       t_last = now;
       const KinFuStats ks = rec.fusionStats();
       nlohmann::json c = {{"frames", k + 1},
+                          {"path_m", path_m},
+                          {"ms_per_frame_window", 1000.0 * dt / done_in_window},
+                          {"world_model_cache_mib", ks.world.ram_bytes / (1024.0 * 1024.0)},
+                          {"bricks_spilled", ks.world.spilled},
+                          {"spill_file_mib", ks.world.spill_file_bytes / (1024.0 * 1024.0)},
+                          {"spill_seconds", ks.world.spill_seconds},
                           {"peak_rss_mib", peakRssMiB()},
                           {"rss_mib", currentRssMiB()},
                           {"fps_window", done_in_window / dt},
@@ -97,7 +125,7 @@ int body(int argc, char** argv) {
                           {"lost", rec.lostFrames()},
                           {"odometry_failures", rec.odometryFailures()}};
       shifts_last = ks.shifts;
-      std::printf("%8zu %9.0fM %9.0fM %8.2f %8zu %10zu %10zu %9zu %6zu\n", k + 1, c["peak_rss_mib"].get<double>(),
+      std::printf("%8zu %7.1f %9.0fM %9.0fM %8.2f %8zu %10zu %10zu %9zu %6zu\n", k + 1, path_m, c["peak_rss_mib"].get<double>(),
                   c["rss_mib"].get<double>(), c["fps_window"].get<double>(), ks.shifts, ks.bricks_in_volume,
                   ks.bricks_in_world_model, rec.fallbacks(), rec.lostFrames());
       std::fflush(stdout);
@@ -105,7 +133,7 @@ int body(int argc, char** argv) {
     }
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  nlohmann::json out = {{"sequence", src.name()},  {"sequence_frames", n},          {"frames", total},
+  nlohmann::json out = {{"sequence", src->name()},  {"sequence_frames", n},          {"frames", total},
                         {"mode", toString(mode)}, {"config", config_path},          {"seconds", seconds},
                         {"fps", total / seconds}, {"checkpoints", checkpoints}};
   const AteResult ate = computeAte(gt, rec.trajectory());

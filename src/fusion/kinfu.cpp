@@ -4,12 +4,15 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <deque>
+#include <fstream>
 
 #include <Eigen/Dense>
 #include <mrpt/math/CMatrixFixed.h>
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/core/depth_noise.h"
 #include "vofusion/core/errors.h"
 
@@ -65,6 +68,7 @@ struct KinFu::Impl {
   std::vector<cv::Mat> model_vertices, model_normals;
   Eigen::Isometry3d model_pose = Eigen::Isometry3d::Identity();
   bool have_model = false;  // a frame was fused: the next one is tracked against the map
+  bool model_stale = false;  // resumed from a file: the model is ray cast (unhinted) before tracking
   KinFuStats stats;
   // What track() leaves for fuse(): the frame, its finest tracking level (ray-cast hint) and cameras.
   struct Pending {
@@ -209,7 +213,7 @@ struct KinFu::Impl {
   cv::Mat model_depth;
 
   void raycastModel(const Eigen::Isometry3d& from, const cv::Mat& frame_depth, const CameraIntrinsics& cam,
-                    StageTimes& times) {
+                    StageTimes& times, bool hinted = true) {
     const auto t0 = std::chrono::steady_clock::now();
     // Only rays with a hint are cast: ICP pairs the next frame's readings with model pixels next to
     // where this frame had readings (or the last prediction had a surface). Rays without one marched
@@ -227,7 +231,8 @@ struct KinFu::Impl {
         h[x] = z >= lo && z <= hi ? z : (m ? m[x] : 0.f);
       }
     }
-    RaycastMaps maps = volume->raycast(from.cast<float>(), cam, &hint, false, true);
+    RaycastMaps maps = hinted ? volume->raycast(from.cast<float>(), cam, &hint, false, true)
+                              : volume->raycast(from.cast<float>(), cam, nullptr, false, false);
     model_depth = maps.depth;
     const int levels = std::max(1, params.preprocess.levels);
     model_vertices.assign(levels, cv::Mat());
@@ -295,6 +300,10 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
     levels = preprocessDepth(frame.depth, cam, P.preprocess);
   }
   res.times.add("preprocess", seconds(t0));
+  if (s.model_stale) {  // resumed: no ray cast yet; a full one from the saved pose
+    s.raycastModel(s.pose, cv::Mat(), track_cam, res.times, false);
+    s.model_stale = false;
+  }
 
   // The prior counts only when its reference frame has a pose here.
   const Eigen::Isometry3d* ref_pose = prior ? s.poseOf(prior->reference_index) : nullptr;
@@ -432,6 +441,53 @@ mrpt::poses::CPose3D KinFu::pose() const { return toMrpt(impl_->pose); }
 
 TriangleMesh KinFu::extractMesh() const { return impl_->volume->extractMesh(); }
 
+namespace {
+constexpr char kMapMagic[16] = {'V', 'O', 'F', 'U', 'S', 'I', 'O', 'N', '-', 'M', 'A', 'P', ' ', '1', '\n', '\0'};
+}
+
+void KinFu::save(const std::string& path) const {
+  AtomicPath out(path);
+  {
+    std::ofstream os(out.tmp(), std::ios::binary);
+    if (!os) throw InputError(path, "cannot write the map");
+    os.write(kMapMagic, sizeof(kMapMagic));
+    const Eigen::Matrix4d T = impl_->pose.matrix();
+    os.write(reinterpret_cast<const char*>(T.data()), sizeof(double) * 16);
+    try {
+      impl_->volume->save(os);
+    } catch (const std::exception& e) {
+      throw InputError(path, std::string("cannot write the map: ") + e.what());
+    }
+    os.close();
+    if (!os) throw InputError(path, "cannot write the map (disk full?)");
+  }
+  out.commit();
+}
+
+void KinFu::resume(const std::string& path) {
+  Impl& s = *impl_;
+  std::ifstream is(path, std::ios::binary);
+  if (!is) throw InputError(path, "cannot open the saved map");
+  char magic[sizeof(kMapMagic)];
+  if (!is.read(magic, sizeof(magic)) || std::memcmp(magic, kMapMagic, sizeof(kMapMagic)) != 0)
+    throw InputError(path, "not a vofusion map (written by --save-volume)");
+  Eigen::Matrix4d T;
+  if (!is.read(reinterpret_cast<char*>(T.data()), sizeof(double) * 16) || !T.allFinite())
+    throw InputError(path, "truncated or corrupt map (camera pose)");
+  try {
+    s.volume->load(is);
+  } catch (const std::exception& e) {
+    throw InputError(path, std::string("bad saved map: ") + e.what());
+  }
+  s.pose.matrix() = T;
+  s.have_model = true;
+  s.model_stale = true;
+  s.have_last = false;
+  s.last_motion_dt = 0.0;
+  s.recent.clear();
+  s.model_depth.release();
+}
+
 cv::Mat KinFu::renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam, bool coloured) const {
   const Eigen::Isometry3f T = toEigen(cam_to_world).cast<float>();
   const RaycastMaps maps = impl_->volume->raycast(T, cam, nullptr, coloured);
@@ -463,6 +519,7 @@ KinFuStats KinFu::stats() const {
   st.bricks_in_volume = impl_->volume->bricksInVolume();
   st.bricks_in_world_model = impl_->volume->bricksInWorldModel();
   st.memory_bytes = impl_->volume->memoryBytes();
+  st.world = impl_->volume->worldModel().stats();
   return st;
 }
 

@@ -18,6 +18,8 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"integrate_min_depth", &p.tsdf.min_depth, "m, depth readings fused", 0.0, 20.0},
       {"integrate_max_depth", &p.tsdf.max_depth, "m", 0.1, 20.0},
       {"mark_step", &p.tsdf.mark_step, "pixels between readings that mark touched bricks", 1.0, 64.0},
+      {"world_cache_mib", &p.tsdf.world_cache_mib, "MiB of bricks that left the volume kept in RAM; the rest are spilled compressed to disk", 0.0, 65536.0},
+      {"work_dir", &p.tsdf.work_dir, "folder of the world model's spill file (auto: vofusion uses <out>/.tmp, --work-dir overrides; elsewhere the system's temporary folder)"},
       {"bilateral_sigma_depth", &p.preprocess.sigma_depth, "m", 0.001, 1.0},
       {"bilateral_sigma_spatial", &p.preprocess.sigma_spatial, "pixels", 0.1, 50.0},
       {"bilateral_kernel", &p.preprocess.kernel, "pixels (window edge; 0 = no filter)", 0.0, 31.0},

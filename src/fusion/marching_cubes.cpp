@@ -4,10 +4,14 @@
 #include "vofusion/fusion/marching_cubes.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
+#include <cstring>
+#include <map>
 #include <unordered_map>
+#include <unordered_set>
 
 // Lorensen & Cline lookup tables (Bourke's edgeTable/triTable), as shipped by PCL.
 #include <pcl/surface/marching_cubes.h>
@@ -72,6 +76,19 @@ inline bool usable(const Voxel* v, int min_weight) {
 Eigen::Vector3i regionOf(const Eigen::Vector3i& brick, int region_bricks) {
   const auto d = [region_bricks](int v) { return v >= 0 ? v / region_bricks : -((-v + region_bricks - 1) / region_bricks); };
   return {d(brick.x()), d(brick.y()), d(brick.z())};
+}
+
+// Area-weighted vertex normals, oriented like the faces.
+void computeNormals(TriangleMesh& mesh) {
+  mesh.normals.assign(mesh.vertices.size(), Eigen::Vector3f::Zero());
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3f n = (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]);
+    for (int k = 0; k < 3; ++k) mesh.normals[f[k]] += n;
+  }
+  for (auto& n : mesh.normals) {
+    const float len = n.norm();
+    n = len > 0.f ? Eigen::Vector3f(n / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
+  }
 }
 
 // Marching cubes over the cells of bricks[0, owned); the later bricks only lend voxels and the
@@ -204,17 +221,7 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
   if (seam) seam->resize(kept);
   for (auto& f : mesh.faces)
     for (auto& v : f) v = remap[v];
-
-  // Area-weighted vertex normals, oriented like the faces.
-  mesh.normals.assign(mesh.vertices.size(), Eigen::Vector3f::Zero());
-  for (const auto& f : mesh.faces) {
-    const Eigen::Vector3f n = (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]);
-    for (int k = 0; k < 3; ++k) mesh.normals[f[k]] += n;
-  }
-  for (auto& n : mesh.normals) {
-    const float len = n.norm();
-    n = len > 0.f ? Eigen::Vector3f(n / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
-  }
+  computeNormals(mesh);
   return mesh;
 }
 
@@ -226,37 +233,81 @@ TriangleMesh marchingCubes(const std::vector<BrickRef>& bricks, float voxel_size
 
 void marchingCubesByRegion(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight, int region_bricks,
                            const std::function<void(RegionMesh&)>& sink) {
+  std::unordered_map<std::uint64_t, const Brick*> at;
+  std::vector<Eigen::Vector3i> coords;
+  at.reserve(bricks.size() * 2);
+  for (const BrickRef& b : bricks) at[brickKey(b.coord)] = b.brick, coords.push_back(b.coord);
+  marchingCubesStreamedByRegion(coords, [&](const Eigen::Vector3i& c, Brick&) { return at.at(brickKey(c)); },
+                                voxel_size, min_weight, region_bricks, sink);
+}
+
+void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch, float voxel_size,
+                                   int min_weight, int region_bricks, const std::function<void(RegionMesh&)>& sink) {
   if (region_bricks <= 0) throw std::invalid_argument("region_bricks must be positive");
-  // Regions in a fixed order (lexicographic region coordinates): the same run gives the same file.
-  std::vector<std::pair<std::array<int, 3>, std::size_t>> order;
-  order.reserve(bricks.size());
-  for (std::size_t i = 0; i < bricks.size(); ++i) {
-    const Eigen::Vector3i r = regionOf(bricks[i].coord, region_bricks);
-    order.push_back({{r.x(), r.y(), r.z()}, i});
+  std::unordered_set<std::uint64_t> present;
+  std::map<std::array<int, 3>, std::vector<Eigen::Vector3i>> regions;  // ordered: the same mesh every run
+  present.reserve(coords.size() * 2);
+  for (const auto& c : coords) {
+    present.insert(brickKey(c));
+    const Eigen::Vector3i r = regionOf(c, region_bricks);
+    regions[{r.x(), r.y(), r.z()}].push_back(c);
   }
-  std::sort(order.begin(), order.end());
-  std::unordered_map<std::uint64_t, std::size_t> index;  // brick -> position in `bricks`
-  index.reserve(bricks.size() * 2);
-  for (std::size_t i = 0; i < bricks.size(); ++i) index[brickKey(bricks[i].coord)] = i;
-  std::vector<BrickRef> part;
-  for (std::size_t a = 0, b; a < order.size(); a = b) {
-    for (b = a; b < order.size() && order[b].first == order[a].first; ++b) {}
-    part.clear();
-    for (std::size_t k = a; k < b; ++k) part.push_back(bricks[order[k].second]);
-    // The halo: +1 neighbours in other regions, whose voxels and edges the region's cells reach.
-    std::unordered_map<std::uint64_t, bool> halo;
-    for (std::size_t k = a; k < b; ++k)
-      for (int n = 1; n < 8; ++n) {
-        const Eigen::Vector3i c = bricks[order[k].second].coord + Eigen::Vector3i(n & 1, (n >> 1) & 1, (n >> 2) & 1);
-        const auto it = index.find(brickKey(c));
-        if (it == index.end() || regionOf(c, region_bricks) == regionOf(part.front().coord, region_bricks)) continue;
-        if (halo.emplace(it->first, true).second) part.push_back(bricks[it->second]);
+  for (auto& [region, own] : regions) {
+    std::sort(own.begin(), own.end(), [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+      return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+    });
+    // Only this region's bricks and their +1 neighbours (whose voxels and edges its cells reach) are
+    // fetched, and held, at a time.
+    std::vector<Eigen::Vector3i> list = own;
+    std::unordered_set<std::uint64_t> listed;
+    for (const auto& c : own) listed.insert(brickKey(c));
+    for (const auto& c : own)
+      for (int k = 1; k < 8; ++k) {
+        const Eigen::Vector3i n = c + Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+        if (present.count(brickKey(n)) && listed.insert(brickKey(n)).second) list.push_back(n);
       }
+    std::vector<Brick> scratch(list.size());
+    std::vector<BrickRef> refs(list.size());
+    for (std::size_t i = 0; i < list.size(); ++i) refs[i] = {list[i], fetch(list[i], scratch[i])};
     RegionMesh r;
-    r.region = regionOf(part.front().coord, region_bricks);
-    r.mesh = extract(part, b - a, voxel_size, min_weight, region_bricks, &r.on_seam);
+    r.region = Eigen::Vector3i(region[0], region[1], region[2]);
+    r.mesh = extract(refs, own.size(), voxel_size, min_weight, region_bricks, &r.on_seam);
     if (!r.mesh.empty()) sink(r);
   }
+}
+
+TriangleMesh marchingCubesStreamed(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch,
+                                   float voxel_size, int min_weight, int region_bricks) {
+  TriangleMesh mesh;
+  // Seam vertices come out bit-identical in both regions (same voxels, same arithmetic): welded by
+  // their exact position.
+  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> seam_index;
+  const auto positionKey = [](const Eigen::Vector3f& p) {
+    std::uint32_t b[3];
+    std::memcpy(b, p.data(), sizeof b);
+    return (std::uint64_t(b[0]) * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t(b[1]) * 0xC2B2AE3D27D4EB4Full) ^ b[2];
+  };
+  marchingCubesStreamedByRegion(coords, fetch, voxel_size, min_weight, std::max(1, region_bricks), [&](RegionMesh& r) {
+    const TriangleMesh& part = r.mesh;
+    std::vector<std::uint32_t> to_mesh(part.vertices.size());
+    for (std::size_t v = 0; v < part.vertices.size(); ++v) {
+      if (r.on_seam[v]) {
+        auto& same = seam_index[positionKey(part.vertices[v])];
+        const auto it = std::find_if(same.begin(), same.end(), [&](std::uint32_t m) { return mesh.vertices[m] == part.vertices[v]; });
+        if (it != same.end()) {
+          to_mesh[v] = *it;
+          continue;
+        }
+        same.push_back(std::uint32_t(mesh.vertices.size()));
+      }
+      to_mesh[v] = std::uint32_t(mesh.vertices.size());
+      mesh.vertices.push_back(part.vertices[v]);
+      mesh.colors.push_back(part.colors[v]);
+    }
+    for (const auto& f : part.faces) mesh.faces.push_back({to_mesh[f[0]], to_mesh[f[1]], to_mesh[f[2]]});
+  });
+  computeNormals(mesh);
+  return mesh;
 }
 
 }  // namespace vofusion::fusion

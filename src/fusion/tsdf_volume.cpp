@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
+#include <istream>
+#include <ostream>
 #include <stdexcept>
 
 #include "vofusion/core/parallel.h"
@@ -33,11 +36,8 @@ TsdfVolume::TsdfVolume(const TsdfParams& params, const Eigen::Vector3f& centre) 
   slot_brick_.assign(slots_.size(), nullptr);
   if (n_ % 4 == 0) block_count_.assign(slots_.size() / 64, 0);
   updateCyclicTables();
-}
-
-std::uint64_t TsdfVolume::key(int bx, int by, int bz) {
-  const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::uint32_t>(v + (1 << 20)) & 0x1fffff); };
-  return u(bx) | (u(by) << 21) | (u(bz) << 42);
+  world_ = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
+                                        params_.work_dir);
 }
 
 void TsdfVolume::updateCyclicTables() {
@@ -75,6 +75,16 @@ void TsdfVolume::setSlot(int slot, std::int32_t id) {
 std::int32_t TsdfVolume::allocate(int bx, int by, int bz) {
   auto b = std::make_unique<Brick>();
   b->coord = Eigen::Vector3i(bx, by, bz);
+  return adopt(std::move(b));
+}
+
+std::int32_t TsdfVolume::adopt(std::unique_ptr<Brick> b) {
+  if (!free_ids_.empty()) {
+    const std::int32_t id = free_ids_.back();
+    free_ids_.pop_back();
+    pool_[id] = std::move(b);
+    return id;
+  }
   pool_.push_back(std::move(b));
   return static_cast<std::int32_t>(pool_.size() - 1);
 }
@@ -92,8 +102,8 @@ std::size_t TsdfVolume::bricksInVolume() const {
 }
 
 std::size_t TsdfVolume::memoryBytes() const {
-  return pool_.size() * (sizeof(Brick) + sizeof(void*)) + slots_.size() * (sizeof(std::int32_t) + 1) +
-         world_.size() * 32;
+  return (pool_.size() - free_ids_.size()) * sizeof(Brick) + pool_.size() * sizeof(void*) +
+         slots_.size() * (sizeof(std::int32_t) + sizeof(void*) + 1) + world_->stats().ram_bytes + world_->size() * 48;
 }
 
 std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, const CameraIntrinsics& cam,
@@ -283,24 +293,18 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
   // Bricks leaving the volume go to the world model...
   for (auto& id : slots_) {
     if (id < 0) continue;
-    const Eigen::Vector3i& c = pool_[id]->coord;
+    const Eigen::Vector3i c = pool_[id]->coord;
     if (!inside(c)) {
-      world_[key(c.x(), c.y(), c.z())] = id;
+      const std::int32_t leaving = id;
       setSlot(static_cast<int>(&id - slots_.data()), -1);
+      world_->put(std::move(pool_[leaving]));
+      free_ids_.push_back(leaving);
     }
   }
   origin_ = o;
   updateCyclicTables();
   // ...and world-model bricks the volume now covers come back (camera revisiting a place).
-  for (auto it = world_.begin(); it != world_.end();) {
-    const Eigen::Vector3i& c = pool_[it->second]->coord;
-    if (inside(c)) {
-      setSlot(slotOf(c.x(), c.y(), c.z()), it->second);
-      it = world_.erase(it);
-    } else {
-      ++it;
-    }
-  }
+  for (const Eigen::Vector3i& c : world_->coordsInBox(origin_, n_)) setSlot(slotOf(c.x(), c.y(), c.z()), adopt(world_->take(c)));
 }
 
 bool TsdfVolume::shiftIfNeeded(const Eigen::Vector3f& point, float threshold) {
@@ -310,15 +314,120 @@ bool TsdfVolume::shiftIfNeeded(const Eigen::Vector3f& point, float threshold) {
   return origin_ != before;
 }
 
-std::vector<BrickRef> TsdfVolume::allBricks() const {
+std::vector<BrickRef> TsdfVolume::volumeBricks() const {
   std::vector<BrickRef> out;
-  out.reserve(pool_.size());
   for (std::int32_t id : slots_)
     if (id >= 0) out.push_back({pool_[id]->coord, pool_[id].get()});
-  for (const auto& [k, id] : world_) out.push_back({pool_[id]->coord, pool_[id].get()});
   return out;
 }
 
-TriangleMesh TsdfVolume::extractMesh() const { return marchingCubes(allBricks(), params_.voxel_size, 1); }
+std::vector<Eigen::Vector3i> TsdfVolume::allCoords() const {
+  std::vector<Eigen::Vector3i> coords = world_->coords();
+  for (std::int32_t id : slots_)
+    if (id >= 0) coords.push_back(pool_[id]->coord);
+  return coords;
+}
+
+BrickFetch TsdfVolume::fetcher() const {
+  return [this](const Eigen::Vector3i& c, Brick& scratch) -> const Brick* {
+    if (const Brick* b = brickAt(c.x(), c.y(), c.z())) return b;
+    if (!world_->read(c, scratch)) throw std::logic_error("TSDF brick missing from the world model");
+    return &scratch;
+  };
+}
+
+TriangleMesh TsdfVolume::extractMesh() const {
+  return marchingCubesStreamed(allCoords(), fetcher(), params_.voxel_size, 1);
+}
+
+void TsdfVolume::extractMeshByRegion(int region_bricks, const std::function<void(RegionMesh&)>& sink) const {
+  marchingCubesStreamedByRegion(allCoords(), fetcher(), params_.voxel_size, 1, region_bricks, sink);
+}
+
+// Map file body (after the caller's header): "VFTSDF1\n", int32 volume_voxels, float voxel_size,
+// float truncation, int32 origin[3], uint64 brick count, per brick int32 coord[3] + uint32 length +
+// zlib bytes of its voxels, then "END\n".
+namespace {
+constexpr char kMagic[8] = {'V', 'F', 'T', 'S', 'D', 'F', '1', '\n'};
+template <typename T>
+void put(std::ostream& os, const T& v) {
+  os.write(reinterpret_cast<const char*>(&v), sizeof(T));
+}
+template <typename T>
+T get(std::istream& is, const char* what) {
+  T v{};
+  if (!is.read(reinterpret_cast<char*>(&v), sizeof(T))) throw std::runtime_error(std::string("truncated (") + what + ")");
+  return v;
+}
+}  // namespace
+
+void TsdfVolume::save(std::ostream& os) const {
+  os.write(kMagic, sizeof(kMagic));
+  put<std::int32_t>(os, params_.volume_voxels);
+  put<float>(os, params_.voxel_size);
+  put<float>(os, params_.truncation);
+  for (int i = 0; i < 3; ++i) put<std::int32_t>(os, origin_[i]);
+  const std::vector<Eigen::Vector3i> world = world_->coords();
+  const std::vector<BrickRef> vol = volumeBricks();
+  put<std::uint64_t>(os, world.size() + vol.size());
+  const auto write = [&](const Brick& b) {
+    for (int i = 0; i < 3; ++i) put<std::int32_t>(os, b.coord[i]);
+    const std::vector<std::uint8_t> z = compressBrick(b);
+    put<std::uint32_t>(os, static_cast<std::uint32_t>(z.size()));
+    os.write(reinterpret_cast<const char*>(z.data()), static_cast<std::streamsize>(z.size()));
+  };
+  for (const BrickRef& r : vol) write(*r.brick);
+  Brick scratch;
+  for (const Eigen::Vector3i& c : world) {
+    world_->read(c, scratch);
+    write(scratch);
+  }
+  os.write("END\n", 4);
+  if (!os) throw std::runtime_error("write failed");
+}
+
+void TsdfVolume::load(std::istream& is) {
+  char magic[sizeof(kMagic)];
+  if (!is.read(magic, sizeof(magic)) || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
+    throw std::runtime_error("not a vofusion TSDF map");
+  const auto vv = get<std::int32_t>(is, "header");
+  const auto vs = get<float>(is, "header");
+  const auto tr = get<float>(is, "header");
+  if (vv != params_.volume_voxels || vs != params_.voxel_size || tr != params_.truncation)
+    throw std::runtime_error("saved with volume_voxels " + std::to_string(vv) + ", voxel_size " + std::to_string(vs) +
+                             ", truncation " + std::to_string(tr) + ": the [kinfu] settings differ");
+  Eigen::Vector3i o;
+  for (int i = 0; i < 3; ++i) o[i] = get<std::int32_t>(is, "header");
+  const auto count = get<std::uint64_t>(is, "brick count");
+  // Start empty at the saved origin.
+  for (std::size_t s = 0; s < slots_.size(); ++s)
+    if (slots_[s] >= 0) setSlot(static_cast<int>(s), -1);
+  pool_.clear();
+  free_ids_.clear();
+  world_ = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
+                                        params_.work_dir);
+  origin_ = o;
+  updateCyclicTables();
+  std::vector<std::uint8_t> bytes;
+  for (std::uint64_t i = 0; i < count; ++i) {
+    auto b = std::make_unique<Brick>();
+    for (int k = 0; k < 3; ++k) b->coord[k] = get<std::int32_t>(is, "brick");
+    const auto len = get<std::uint32_t>(is, "brick");
+    if (len == 0 || len > 4 * sizeof(Brick)) throw std::runtime_error("corrupt brick record");
+    bytes.resize(len);
+    if (!is.read(reinterpret_cast<char*>(bytes.data()), len)) throw std::runtime_error("truncated (brick data)");
+    if (!decompressBrick(bytes.data(), len, *b)) throw std::runtime_error("corrupt brick data");
+    const Eigen::Vector3i c = b->coord;
+    const int s = slotOf(c.x(), c.y(), c.z());
+    if (s >= 0) {
+      if (slots_[s] >= 0) throw std::runtime_error("brick stored twice");
+      setSlot(s, adopt(std::move(b)));
+    } else {
+      world_->put(std::move(b));
+    }
+  }
+  char end[4];
+  if (!is.read(end, 4) || std::memcmp(end, "END\n", 4) != 0) throw std::runtime_error("truncated (no end marker)");
+}
 
 }  // namespace vofusion::fusion

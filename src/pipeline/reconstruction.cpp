@@ -185,14 +185,18 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
 }
 
 bool Reconstruction::reintegrated() const { return impl_->reintegrated; }
+void Reconstruction::saveVolume(const std::string& path) const {
+  impl_->waitFusion();
+  impl_->kinfu->save(path);
+}
+void Reconstruction::resumeVolume(const std::string& path) { impl_->kinfu->resume(path); }
 TriangleMesh Reconstruction::extractMesh() const {
   impl_->waitFusion();
   return impl_->kinfu->extractMesh();
 }
 void Reconstruction::extractMeshByRegion(int region_bricks, const std::function<void(fusion::RegionMesh&)>& sink) const {
   impl_->waitFusion();
-  const fusion::TsdfVolume& v = impl_->kinfu->volume();
-  fusion::marchingCubesByRegion(v.allBricks(), v.params().voxel_size, 1, region_bricks, sink);
+  impl_->kinfu->volume().extractMeshByRegion(region_bricks, sink);
 }
 cv::Mat Reconstruction::renderView(const CameraIntrinsics& cam) const {
   impl_->waitFusion();

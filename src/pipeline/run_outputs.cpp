@@ -275,7 +275,10 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
   s["fusion"] = {{"volume_shifts", ks.shifts}, {"icp_degenerate_frames", ks.degenerate},
                  {"initial_guess", {{"odometry", ks.guess_prior}, {"constant_velocity", ks.guess_velocity}, {"last_pose", ks.guess_last}}},
                  {"bricks_in_volume", ks.bricks_in_volume},
-                 {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0}};
+                 {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0},
+                 {"world_model", {{"cache_mib", ks.world.ram_bytes / 1048576.0}, {"bricks_spilled", ks.world.spilled},
+                                  {"bricks_reloaded", ks.world.reloaded}, {"spill_file_mib", ks.world.spill_file_bytes / 1048576.0},
+                                  {"spill_seconds", ks.world.spill_seconds}}}};
   if (!info.extra.is_null()) s.update(info.extra);
 
   if (m.rawlog) {

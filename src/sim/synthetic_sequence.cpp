@@ -348,8 +348,26 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
     impl->yaw = wave(M_PI / 2, 0, 0.25, 0.35, 0.05, 1.1, s, 3);  // facing the +y wall
     impl->pitch = wave(-0.1, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
     impl->roll = wave(0, 0, 0.04, 0.5, 0.02, 1.8, s, 5);
+  } else if (o.scene == "longwalk") {
+    // A straight corridor 2.2 m wide walked at 1 m/s for the whole sequence (30 m per 900 frames at
+    // 30 fps: 100 m = 3000 frames), furniture every ~1.5 m on alternating sides: a map that only grows,
+    // for memory bounded by the volume rather than by the area walked (bench/longrun).
+    const double speed = 1.0, length = speed * duration + 6.0;
+    impl->boxes = {{{-1.0, -1.1, 0.0}, {length, 1.1, 2.6}, true}};
+    for (int k = 0; 1.0 + 1.5 * k < length - 1.0; ++k) {
+      const double x0 = 1.0 + 1.5 * k + 0.6 * unit(hash(s, 600, k, 0)), w = 0.3 + 0.4 * unit(hash(s, 600, k, 1));
+      const double d = 0.3 + 0.3 * unit(hash(s, 600, k, 2)), h = 0.4 + 1.4 * unit(hash(s, 600, k, 3));
+      if (k % 2 == 0) impl->boxes.push_back({{x0, 1.1 - d, 0.0}, {x0 + w, 1.1, h}, false});
+      else impl->boxes.push_back({{x0, -1.1, 0.0}, {x0 + w, -1.1 + d, h}, false});
+    }
+    impl->x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
+    impl->y = wave(0, 0, 0.2, 0.4, 0.04, 1.3, s, 1);
+    impl->z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+    impl->yaw = wave(0, 0, 0.35, 0.3, 0.06, 1.1, s, 3);
+    impl->pitch = wave(-0.05, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
+    impl->roll = wave(0, 0, 0.05, 0.5, 0.02, 1.8, s, 5);
   } else {
-    throw InputError("--scene", "unknown scene '" + o.scene + "' (expected room, corridor, bare_wall, loop or lookalike)");
+    throw InputError("--scene", "unknown scene '" + o.scene + "' (expected room, corridor, bare_wall, loop, lookalike or longwalk)");
   }
   if (o.trajectory == "shake") {
     // Hand shake on top of the path: each angle gets two faster sinusoids (rad, rad/s); with the

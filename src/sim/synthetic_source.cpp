@@ -18,8 +18,10 @@ SimOptions SyntheticSource::optionsFromSpec(const std::string& spec, const Sourc
         throw InputError(spec, "unknown synthetic trajectory '" + s.trajectory + "' (expected smooth or shake)");
     }
   }
-  if (s.scene != "room" && s.scene != "corridor" && s.scene != "bare_wall")
-    throw InputError(spec, "unknown synthetic scene '" + s.scene + "' (expected room, corridor or bare_wall)");
+  if (s.scene != "room" && s.scene != "corridor" && s.scene != "bare_wall" && s.scene != "loop" &&
+      s.scene != "lookalike" && s.scene != "longwalk")
+    throw InputError(spec, "unknown synthetic scene '" + s.scene +
+                               "' (expected room, corridor, bare_wall, loop, lookalike or longwalk)");
   if (opts.max_frames > 0) s.frames = opts.max_frames;
   if (opts.intrinsics) {
     const CameraIntrinsics c = CameraIntrinsics::parse(*opts.intrinsics);

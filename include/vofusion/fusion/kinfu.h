@@ -101,7 +101,8 @@ struct KinFuStats {
   std::size_t guess_prior = 0, guess_velocity = 0, guess_last = 0;  // initial guesses chosen (ICP modes)
   std::size_t degenerate = 0;    // frames whose ICP left some direction at the prediction
   std::size_t bricks_in_volume = 0, bricks_in_world_model = 0;
-  std::size_t memory_bytes = 0;  // TSDF storage
+  std::size_t memory_bytes = 0;  // TSDF storage in RAM (volume + the world model's cache)
+  fusion::WorldModelStats world;  // the world model: cache, spill file, time spent spilling
   StageTimes times;              // accumulated over all frames
 };
 
@@ -130,6 +131,12 @@ class KinFu {
   void integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
 
   mrpt::poses::CPose3D pose() const;
+  // The map (volume + world model) and the camera pose to one file, atomically (KinFu LS's world
+  // save); a later run resumes from it with resume().
+  void save(const std::string& path) const;
+  // Replaces the map and the pose by a saved one: the next frame is tracked from the saved pose
+  // against the saved map, in its frame. Throws InputError(path, ...) for a bad or truncated file.
+  void resume(const std::string& path);
   // Whole world model + current volume.
   TriangleMesh extractMesh() const;
   // Shaded (Lambert, light at the camera) ray-cast image of the model from a pose (BGR).

@@ -29,4 +29,15 @@ struct RegionMesh {
 void marchingCubesByRegion(const std::vector<BrickRef>& bricks, float voxel_size, int min_weight, int region_bricks,
                            const std::function<void(RegionMesh&)>& sink);
 
+// The brick at a world brick coordinate: a pointer to one kept elsewhere, or `scratch` filled in.
+using BrickFetch = std::function<const Brick*(const Eigen::Vector3i& coord, Brick& scratch)>;
+// The same mesh as marchingCubes over all `coords`, built region by region (region_bricks^3 bricks
+// each, plus their +1 neighbours): only one region's bricks are fetched at a time, so a world model
+// on disk never has to be in RAM whole. Vertices on region borders are welded.
+TriangleMesh marchingCubesStreamed(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch,
+                                   float voxel_size, int min_weight = 1, int region_bricks = 16);
+// marchingCubesByRegion over bricks fetched one region at a time (what both of the above use).
+void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch, float voxel_size,
+                                   int min_weight, int region_bricks, const std::function<void(RegionMesh&)>& sink);
+
 }  // namespace vofusion::fusion

@@ -2,17 +2,22 @@
 // The TSDF volume of KinectFusion as a cyclic buffer that follows the camera (KinFu Large Scale):
 // a grid of N^3 brick slots addressed by world brick coordinate modulo N. Only bricks the truncation
 // band of some depth reading has touched are allocated. When the volume shifts, bricks that leave it
-// move to the world model (kept, meshed at the end) and bricks that re-enter are taken back.
+// are handed to the world model (world_model.h: a RAM cache bounded by world_cache_mib, the rest
+// compressed on disk) and bricks that re-enter are taken back from it.
 #include <cstdint>
+#include <functional>
+#include <iosfwd>
 #include <memory>
-#include <unordered_map>
+#include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
 #include "vofusion/core/camera.h"
+#include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/voxel_brick.h"
+#include "vofusion/fusion/world_model.h"
 #include "vofusion/mesh/triangle_mesh.h"
 
 namespace vofusion::fusion {
@@ -25,6 +30,8 @@ struct TsdfParams {
   float min_depth = 0.3f;       // m, readings used for integration
   float max_depth = 3.5f;       // m
   int mark_step = 4;            // pixels between depth readings used to find the touched bricks
+  int world_cache_mib = 64;     // MiB of world-model bricks kept in RAM; the rest spill to disk
+  std::string work_dir = "auto";  // folder of the spill file ("auto" or "": the system's temporary folder)
 };
 
 // Ray-cast surface seen from a camera: world-frame maps, NaN in x where no surface was hit.
@@ -57,10 +64,20 @@ class TsdfVolume {
   // Moves the volume so its centre is the brick-grid point nearest `point`.
   void shiftTo(const Eigen::Vector3f& point);
 
-  // Marching cubes over world model + current volume.
+  // Marching cubes over world model + current volume, region by region (world-model bricks are read
+  // from the store a region at a time, never all at once).
   TriangleMesh extractMesh() const;
-  // All allocated bricks, volume and world model.
-  std::vector<BrickRef> allBricks() const;
+  // The same, one block of region_bricks^3 bricks at a time (seam vertices flagged): bricks are read
+  // from the world model a region at a time.
+  void extractMeshByRegion(int region_bricks, const std::function<void(RegionMesh&)>& sink) const;
+  // The allocated bricks of the volume (not the world model).
+  std::vector<BrickRef> volumeBricks() const;
+
+  // The whole map (volume origin, every brick of volume and world model) to a binary stream, and back
+  // into a volume of the same TSDF geometry (voxel_size, volume_voxels, truncation); load() throws
+  // std::runtime_error naming what is wrong for a truncated or corrupt stream.
+  void save(std::ostream& os) const;
+  void load(std::istream& is);
 
   // TSDF at a world point by trilinear interpolation, in metres; false when unobserved.
   bool sdfAt(const Eigen::Vector3f& p, float& sdf_m) const;
@@ -69,7 +86,10 @@ class TsdfVolume {
   Eigen::Vector3f minCorner() const;  // world position of the volume's first voxel
   float edgeLength() const { return params_.volume_voxels * params_.voxel_size; }
   std::size_t bricksInVolume() const;
-  std::size_t bricksInWorldModel() const { return world_.size(); }
+  std::vector<Eigen::Vector3i> allCoords() const;  // every allocated brick, volume and world model
+  BrickFetch fetcher() const;                      // reads a brick from the volume or the world model
+  std::size_t bricksInWorldModel() const { return world_->size(); }
+  const WorldModel& worldModel() const { return *world_; }
   std::size_t memoryBytes() const;
   const TsdfParams& params() const { return params_; }
 
@@ -104,7 +124,7 @@ class TsdfVolume {
   // central differences of trilinear samples read 48 and moved no figure of the benchmark).
   bool cellGradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const;
   std::int32_t allocate(int bx, int by, int bz);
-  static std::uint64_t key(int bx, int by, int bz);
+  std::int32_t adopt(std::unique_ptr<Brick> b);  // a pool id for a brick from the world model
 
   TsdfParams params_;
   int n_;                        // bricks per edge
@@ -116,8 +136,9 @@ class TsdfVolume {
   // voxels); a block may also count bricks of the opposite volume end, which only makes it cautious.
   std::vector<std::uint16_t> block_count_;
   std::vector<int> block_cyclic_[3];                 // per axis: (brick - origin) -> block offset
-  std::vector<std::unique_ptr<Brick>> pool_;         // brick id -> storage (never moved)
-  std::unordered_map<std::uint64_t, std::int32_t> world_;  // bricks that left the volume
+  std::vector<std::unique_ptr<Brick>> pool_;         // brick id -> storage (never moved); null = free
+  std::vector<std::int32_t> free_ids_;               // ids of pool_ whose brick left the volume
+  std::unique_ptr<WorldModel> world_;                // bricks that left the volume
   std::vector<std::uint8_t> marks_;                  // per slot, scratch of integrate()
 };
 

@@ -71,6 +71,10 @@ class Reconstruction {
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
                           const std::function<void(std::size_t)>& progress = nullptr);
   bool reintegrated() const;
+  // The map and the current pose to a file (KinFu::save), after the fusion in flight finished.
+  void saveVolume(const std::string& path) const;
+  // Before the first frame: continue from a saved map and pose (KinFu::resume).
+  void resumeVolume(const std::string& path);
   TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model
   // The same mesh one region of region_bricks^3 bricks at a time (fusion::marchingCubesByRegion).
   void extractMeshByRegion(int region_bricks, const std::function<void(fusion::RegionMesh&)>& sink) const;

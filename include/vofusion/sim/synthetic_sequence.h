@@ -45,7 +45,8 @@ struct SimOptions {
   std::string scene = "room";   // "room" (walls, floor, boxes), "corridor" (long, for volume shifting),
                                 // "bare_wall" (camera sliding along a flat textured wall: geometry
                                 // gives ICP nothing, colour gives odometry plenty), "loop" (a corridor
-                                // around a block, walked once around), "lookalike" (a corridor that repeats every 3 m)
+                                // around a block, walked once around), "lookalike" (a corridor that repeats every 3 m),
+                                // "longwalk" (a straight corridor walked at 1 m/s: 100 m = 3000 frames)
   std::string trajectory = "smooth";  // "smooth" (the scene's hand-held path, <= ~30 deg/s) or "shake":
                                 // the same path with fast hand shake added (turns up to ~150 deg/s),
                                 // colour exposed over `exposure` (motion blur) and taken up to

@@ -1,0 +1,77 @@
+#pragma once
+// The store of the bricks that left the moving volume (KinFu Large Scale's WorldModel): the volume
+// hands a brick over when it leaves (put) and takes it back when the volume covers it again (take);
+// nothing else crosses. Bricks are addressed by their world brick coordinate. Up to `cache_bytes` of
+// them stay in RAM (least recently handed over first out); the rest are written zlib-compressed to a
+// spill file in `spill_dir` (the system's temporary folder when empty or "auto"), which is unlinked as soon as
+// it is created, so it never outlives the process.
+#include <cstdint>
+#include <functional>
+#include <list>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "vofusion/fusion/voxel_brick.h"
+
+namespace vofusion::fusion {
+
+// Brick voxels <-> zlib (level 1) bytes; decompressBrick returns false on a corrupt record.
+std::vector<std::uint8_t> compressBrick(const Brick& b);
+bool decompressBrick(const std::uint8_t* data, std::size_t size, Brick& b);
+
+struct WorldModelStats {
+  std::size_t bricks = 0;          // stored (RAM + disk)
+  std::size_t bricks_in_ram = 0;
+  std::size_t ram_bytes = 0;       // brick storage held in RAM (the cache)
+  std::size_t spill_file_bytes = 0;  // written to the spill file, including records since taken back
+  std::size_t spilled = 0, reloaded = 0;  // bricks written to / read back from the spill file
+  double spill_seconds = 0.0;      // compressing + writing + reading + decompressing
+};
+
+class WorldModel {
+ public:
+  // cache_bytes: brick storage kept in RAM (at least one brick is always kept while handing over).
+  WorldModel(std::size_t cache_bytes, std::string spill_dir);
+  ~WorldModel();
+  WorldModel(const WorldModel&) = delete;
+  WorldModel& operator=(const WorldModel&) = delete;
+
+  // Slices out: the brick (its coord set) leaves the volume. A brick already stored there is replaced.
+  void put(std::unique_ptr<Brick> brick);
+  // Slices back in: the brick at world brick coordinate c, removed from the store; null when none.
+  std::unique_ptr<Brick> take(const Eigen::Vector3i& c);
+  // Coordinates of the stored bricks inside the box [lo, lo + n) (per axis).
+  std::vector<Eigen::Vector3i> coordsInBox(const Eigen::Vector3i& lo, int n) const;
+  // Coordinates of every stored brick.
+  std::vector<Eigen::Vector3i> coords() const;
+  // Copies a stored brick without changing what is cached; false when there is none.
+  bool read(const Eigen::Vector3i& c, Brick& out) const;
+
+  std::size_t size() const { return index_.size(); }
+  bool contains(const Eigen::Vector3i& c) const { return index_.count(key(c)) != 0; }
+  WorldModelStats stats() const;
+  static std::uint64_t key(const Eigen::Vector3i& c);
+
+ private:
+  struct Entry {
+    std::unique_ptr<Brick> ram;                // null when only on disk
+    std::uint64_t offset = 0;                  // of the record in the spill file (when ram is null)
+    std::uint32_t length = 0;
+    std::list<std::uint64_t>::iterator lru;    // position in lru_ (when ram is set)
+  };
+  void evict();
+  void openSpill();
+  void readRecord(const Entry& e, Brick& out) const;
+
+  std::size_t cache_bytes_;
+  std::string spill_dir_;
+  int fd_ = -1;                                // spill file (unlinked), -1 until the first eviction
+  std::uint64_t end_ = 0;                      // bytes written to it
+  std::unordered_map<std::uint64_t, Entry> index_;
+  std::list<std::uint64_t> lru_;               // keys of the bricks in RAM, most recent first
+  mutable WorldModelStats stats_;
+};
+
+}  // namespace vofusion::fusion

@@ -1,0 +1,247 @@
+// The out-of-core world model: bricks spilled to disk come back bit-identical, the RAM cache stays
+// within its limit, the region-by-region mesh equals the one-shot one, and a saved map resumes.
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/fusion/kinfu.h"
+#include "vofusion/fusion/marching_cubes.h"
+#include "vofusion/fusion/tsdf_volume.h"
+#include "vofusion/fusion/world_model.h"
+#include "vofusion/sim/synthetic_sequence.h"
+
+using namespace vofusion;
+using namespace vofusion::fusion;
+
+namespace {
+
+std::unique_ptr<Brick> randomBrick(const Eigen::Vector3i& c, std::mt19937& rng) {
+  auto b = std::make_unique<Brick>();
+  b->coord = c;
+  std::uniform_int_distribution<int> d(0, 255);
+  for (int i = 0; i < kBrickVoxels; ++i) {
+    if (d(rng) < 128) continue;  // half never observed, as in a real brick (compressible)
+    Voxel& v = b->voxels[i];
+    v.tsdf = static_cast<std::int16_t>(d(rng) * 200 - 25000);
+    v.weight = static_cast<std::uint8_t>(1 + d(rng) % 64);
+    v.r = static_cast<std::uint8_t>(d(rng)), v.g = static_cast<std::uint8_t>(d(rng)), v.b = static_cast<std::uint8_t>(d(rng));
+  }
+  return b;
+}
+
+bool sameVoxels(const Brick& a, const Brick& b) { return std::memcmp(a.voxels, b.voxels, sizeof(a.voxels)) == 0; }
+
+// KinFu params for a fast synthetic run: a 1.54 m volume following the camera.
+KinFuParams smallKinFu(int cache_mib) {
+  KinFuParams p;
+  p.tsdf.volume_voxels = 256;
+  p.tsdf.voxel_size = 0.01f;
+  p.tsdf.truncation = 0.04f;
+  p.tsdf.world_cache_mib = cache_mib;
+  p.tsdf.work_dir = test::tempDir("world_model_spill");
+  p.shift_threshold = 0.2f;
+  return p;
+}
+
+sim::SimOptions corridor(int frames) {
+  sim::SimOptions o;
+  o.scene = "corridor";
+  o.frames = frames;
+  o.camera = o.camera.scaled(0.5);
+  return o;
+}
+
+// Largest distance from a vertex of a to the nearest vertex of b (brute force over a voxel grid hash).
+double maxNearest(const TriangleMesh& a, const TriangleMesh& b, float cell) {
+  std::unordered_map<std::uint64_t, std::vector<Eigen::Vector3f>> grid;
+  const auto key = [cell](const Eigen::Vector3i& c) {
+    return (std::uint64_t(std::uint32_t(c.x() + 100000)) << 42) ^ (std::uint64_t(std::uint32_t(c.y() + 100000)) << 21) ^
+           std::uint64_t(std::uint32_t(c.z() + 100000));
+  };
+  for (const auto& v : b.vertices) grid[key((v / cell).array().floor().cast<int>())].push_back(v);
+  double worst = 0;
+  for (const auto& v : a.vertices) {
+    const Eigen::Vector3i c = (v / cell).array().floor().cast<int>();
+    double best = 1e9;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto it = grid.find(key(c + Eigen::Vector3i(dx, dy, dz)));
+          if (it == grid.end()) continue;
+          for (const auto& w : it->second) best = std::min(best, double((v - w).norm()));
+        }
+    worst = std::max(worst, best);
+  }
+  return worst;
+}
+
+}  // namespace
+
+TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit) {
+  std::mt19937 rng(7);
+  const std::size_t limit = 10 * sizeof(Brick) + 100;  // room for 10 bricks
+  WorldModel wm(limit, test::tempDir("world_model_cache"));
+  std::vector<std::unique_ptr<Brick>> copies;
+  for (int i = 0; i < 200; ++i) {
+    auto b = randomBrick(Eigen::Vector3i(i % 7 - 3, i / 7, -i), rng);
+    copies.push_back(std::make_unique<Brick>(*b));
+    wm.put(std::move(b));
+    EXPECT_LE(wm.stats().ram_bytes, limit + sizeof(Brick));
+  }
+  const WorldModelStats st = wm.stats();
+  EXPECT_EQ(st.bricks, 200u);
+  EXPECT_LE(st.bricks_in_ram, 10u);
+  EXPECT_GE(st.spilled, 190u);
+  EXPECT_GT(st.spill_file_bytes, 0u);
+  EXPECT_LT(st.spill_file_bytes, 190u * sizeof(Brick));  // compressed
+  // read() copies without moving anything; take() removes.
+  Brick scratch;
+  for (const auto& c : copies) {
+    ASSERT_TRUE(wm.read(c->coord, scratch));
+    EXPECT_TRUE(sameVoxels(scratch, *c));
+  }
+  EXPECT_EQ(wm.size(), 200u);
+  for (const auto& c : copies) {
+    const auto b = wm.take(c->coord);
+    ASSERT_TRUE(b);
+    EXPECT_EQ(b->coord, c->coord);
+    EXPECT_TRUE(sameVoxels(*b, *c)) << "brick " << c->coord.transpose();
+  }
+  EXPECT_EQ(wm.size(), 0u);
+  EXPECT_EQ(wm.stats().ram_bytes, 0u);
+  EXPECT_FALSE(wm.take(Eigen::Vector3i(0, 0, 0)));
+  EXPECT_EQ(wm.coordsInBox(Eigen::Vector3i(-10, -10, -10), 20).size(), 0u);
+}
+
+TEST(WorldModel, StreamedMeshEqualsOneShotMesh) {
+  // Bricks of a sphere's TSDF, meshed at once and region by region (regions of 2^3 bricks: many seams).
+  std::vector<std::unique_ptr<Brick>> store;
+  std::vector<BrickRef> refs;
+  std::vector<Eigen::Vector3i> coords;
+  const float vs = 0.01f, r = 0.23f;
+  for (int bz = -4; bz < 4; ++bz)
+    for (int by = -4; by < 4; ++by)
+      for (int bx = -4; bx < 4; ++bx) {
+        auto b = std::make_unique<Brick>();
+        b->coord = Eigen::Vector3i(bx, by, bz);
+        bool any = false;
+        for (int z = 0; z < 8; ++z)
+          for (int y = 0; y < 8; ++y)
+            for (int x = 0; x < 8; ++x) {
+              const Eigen::Vector3f p = (b->coord * 8 + Eigen::Vector3i(x, y, z)).cast<float>() * vs;
+              const float d = (p.norm() - r) / 0.04f;
+              if (std::fabs(d) >= 1.f) continue;
+              Voxel& v = b->voxels[Brick::index(x, y, z)];
+              v.tsdf = static_cast<std::int16_t>(d * kTsdfScale);
+              v.weight = 5;
+              v.r = static_cast<std::uint8_t>(100 + x);
+              any = true;
+            }
+        if (!any) continue;
+        refs.push_back({b->coord, b.get()});
+        coords.push_back(b->coord);
+        store.push_back(std::move(b));
+      }
+  const TriangleMesh once = marchingCubes(refs, vs);
+  const auto fetch = [&](const Eigen::Vector3i& c, Brick&) -> const Brick* {
+    for (const auto& r : refs)
+      if (r.coord == c) return r.brick;
+    return nullptr;
+  };
+  const TriangleMesh streamed = marchingCubesStreamed(coords, fetch, vs, 1, 2);
+  ASSERT_GT(once.faces.size(), 1000u);
+  EXPECT_EQ(streamed.faces.size(), once.faces.size());
+  EXPECT_EQ(streamed.vertices.size(), once.vertices.size());  // seams welded: no duplicate vertex
+  EXPECT_LE(maxNearest(streamed, once, vs), 1e-6);
+  EXPECT_LE(maxNearest(once, streamed, vs), 1e-6);
+}
+
+TEST(WorldModel, VolumeWithEverythingOnDiskKeepsItsMapAndSavesIt) {
+  // The corridor fused at its true poses with no RAM cache at all: every brick that leaves is on disk.
+  const sim::SyntheticSequence seq(corridor(60));
+  KinFuParams ram = smallKinFu(1024), disk = smallKinFu(0);
+  KinFu a(ram, TrackingMode::Odometry, *seq.render(0).groundTruth), b(disk, TrackingMode::Odometry, *seq.render(0).groundTruth);
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const Frame f = seq.render(i);
+    a.integrateAt(f, *f.groundTruth);
+    b.integrateAt(f, *f.groundTruth);
+  }
+  const KinFuStats sb = b.stats();
+  ASSERT_GT(sb.shifts, 2u);
+  ASSERT_GT(sb.world.spilled, 20u);
+  EXPECT_EQ(sb.world.ram_bytes, 0u);
+  EXPECT_EQ(a.stats().world.spilled, 0u);
+  const TriangleMesh ma = a.extractMesh(), mb = b.extractMesh();
+  EXPECT_EQ(ma.faces.size(), mb.faces.size());
+  EXPECT_EQ(ma.vertices.size(), mb.vertices.size());
+  EXPECT_LE(maxNearest(mb, ma, 0.01f), 1e-6);
+
+  // Save and load at the volume level: the same bricks.
+  std::stringstream ss;
+  b.volume().save(ss);
+  TsdfVolume back(disk.tsdf, Eigen::Vector3f::Zero());
+  back.load(ss);
+  EXPECT_EQ(back.bricksInVolume(), b.volume().bricksInVolume());
+  EXPECT_EQ(back.bricksInWorldModel(), b.volume().bricksInWorldModel());
+  EXPECT_EQ(back.minCorner(), b.volume().minCorner());
+  EXPECT_EQ(back.extractMesh().faces.size(), mb.faces.size());
+  // A truncated stream is an error, not a partial map.
+  const std::string bytes = ss.str();
+  std::stringstream cut(bytes.substr(0, bytes.size() / 2));
+  TsdfVolume broken(disk.tsdf, Eigen::Vector3f::Zero());
+  EXPECT_THROW(broken.load(cut), std::runtime_error);
+}
+
+TEST(WorldModel, SaveThenResumeGivesTheMeshOfOneRun) {
+  // 60 corridor frames fused in one run, and as 30 + save + resume + 30 (fusion at the true poses, the
+  // world model spilling to disk in both).
+  const sim::SyntheticSequence seq(corridor(60));
+  const KinFuParams p = smallKinFu(0);
+  const auto start = *seq.render(0).groundTruth;
+  KinFu one(p, TrackingMode::Odometry, start);
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const Frame f = seq.render(i);
+    one.integrateAt(f, *f.groundTruth);
+  }
+  const std::string file = test::tempDir("world_model_resume") + "/map.vfmap";
+  {
+    KinFu first(p, TrackingMode::Odometry, start);
+    for (std::size_t i = 0; i < 30; ++i) {
+      const Frame f = seq.render(i);
+      first.integrateAt(f, *f.groundTruth);
+    }
+    first.save(file);
+  }
+  KinFu second(p, TrackingMode::Odometry);  // anchored elsewhere: resume() brings map and pose back
+  second.resume(file);
+  EXPECT_LT(second.pose().distanceTo(*seq.render(29).groundTruth), 1e-9);
+  for (std::size_t i = 30; i < seq.size(); ++i) {
+    const Frame f = seq.render(i);
+    second.integrateAt(f, *f.groundTruth);
+  }
+  const TriangleMesh m1 = one.extractMesh(), m2 = second.extractMesh();
+  ASSERT_GT(m1.faces.size(), 10000u);
+  EXPECT_LE(maxNearest(m2, m1, p.tsdf.voxel_size), p.tsdf.voxel_size);
+  EXPECT_LE(maxNearest(m1, m2, p.tsdf.voxel_size), p.tsdf.voxel_size);
+  EXPECT_NEAR(double(m2.faces.size()), double(m1.faces.size()), 0.01 * m1.faces.size());
+}
+
+TEST(WorldModel, CorruptOrTruncatedSaveFileIsAOneLineError) {
+  const std::string dir = test::tempDir("world_model_corrupt");
+  const std::string bad = dir + "/bad.vfmap";
+  std::ofstream(bad) << "VOFUSION-MAP 1\n";  // the magic's start, then nothing
+  std::string out;
+  const int rc = test::run(test::app("vofusion") + " synthetic --max-frames 2 --out " + dir + "/run --resume " + bad, &out);
+  EXPECT_NE(rc, 0);
+  EXPECT_NE(out.find(bad), std::string::npos) << out;
+  // One line: no usage dump, no stack of messages.
+  std::size_t lines = 0;
+  for (char c : out) lines += c == '\n';
+  EXPECT_LE(lines, 2u) << out;  // the app's start line may precede it
+  KinFu kf(KinFuParams(), TrackingMode::Odometry);
+  EXPECT_THROW(kf.resume(bad), InputError);
+  EXPECT_THROW(kf.resume(dir + "/missing.vfmap"), InputError);
+}
