@@ -71,6 +71,7 @@ TEST(ConfigRanges, EveryStringKeyListsItsChoices) {
     if (!std::regex_match(l, m, line)) continue;
     const std::string value = m[2];
     if (std::regex_match(value, number) || value == "true" || value == "false") continue;
+    if (m[1] == "work_dir") continue;  // a folder's path ("auto": beside the outputs), checked when opened
     ++strings;
     const std::string comment = m[3];
     EXPECT_NE(comment.find("; one of "), std::string::npos) << m[1] << " = " << value << " lists no choices";

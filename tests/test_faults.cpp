@@ -462,9 +462,9 @@ TEST(FaultsConfig, UnknownKeyOrSectionOutOfRangeOrMissing) {
   const std::vector<Case> cases{
       {"[odometry]\nkeypoint = star\n", "unknown key 'keypoint' in section \\[odometry\\]"},
       {"[odometri]\nkeypoints = star\n", "unknown section \\[odometri\\]"},
-      {"[odometry]\nkeypoints = sift\n", "keypoints.*must be union, star or narf"},
-      {"[odometry]\nmotion_method = magic\n", "motion_method.*must be paper or robust"},
-      {"[narf]\nimplementation = magic\n", "implementation.*must be fast or pcl"},
+      {"[odometry]\nkeypoints = sift\n", "keypoints.*must be one of union \\| star \\| narf"},
+      {"[odometry]\nmotion_method = magic\n", "motion_method.*must be one of paper \\| robust"},
+      {"[narf]\nimplementation = magic\n", "implementation.*must be one of fast \\| pcl"},
       {"[motion]\nsample_size = 2\n", "sample_size.*must be in \\[3, 100\\], got 2"},
   };
   for (const auto& app : trackers()) {
