@@ -1,6 +1,5 @@
 #include "vofusion/loop/loop_closer.h"
 
-#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <mutex>
@@ -13,12 +12,6 @@
 #include "vofusion/loop/pose_graph.h"
 
 namespace vofusion::loop {
-
-namespace {
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-}  // namespace
 
 struct LoopCloser::Impl {
   LoopParams params;
@@ -98,37 +91,38 @@ struct LoopCloser::Impl {
     const Keyframe& cur = keyframes.back();
     indexEligible(cur);
     std::vector<PlaceCandidate> candidates;
-    auto t0 = std::chrono::steady_clock::now();
-    if (cur.features) candidates = index.query(cur.features->descriptors);
-    t.add("place_recognition", secondsSince(t0));
-
+    {
+      ScopedStageTimer timer(t, "place_recognition");
+      if (cur.features) candidates = index.query(cur.features->descriptors);
+    }
     std::vector<LoopRecord> accepted;
     std::map<std::string, std::size_t> rejected;
-    t0 = std::chrono::steady_clock::now();
-    for (const PlaceCandidate& c : candidates) {
-      const Keyframe& old = keyframes[c.keyframe];
-      const LoopCheck check = verifyLoop(old, cur, params);
-      if (!check.accepted) {
-        ++rejected[check.reason];
-        continue;
+    {
+      ScopedStageTimer timer(t, "loop_verification");
+      for (const PlaceCandidate& c : candidates) {
+        const Keyframe& old = keyframes[c.keyframe];
+        const LoopCheck check = verifyLoop(old, cur, params);
+        if (!check.accepted) {
+          ++rejected[check.reason];
+          continue;
+        }
+        GraphEdge e;
+        e.from = old.id;
+        e.to = cur.id;
+        e.T_from_to = check.T_old_new;
+        e.information = check.covariance.inverse();
+        e.loop = true;
+        loop_edge_record.resize(graph.edges().size() + 1, std::size_t(-1));
+        loop_edge_record[graph.addEdge(e)] = loops.size() + accepted.size();
+        accepted.push_back({old.frame_index, cur.frame_index, old.id, cur.id, check.matches, check.inliers, check.icp_rms,
+                            check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp, check.T_old_new});
       }
-      GraphEdge e;
-      e.from = old.id;
-      e.to = cur.id;
-      e.T_from_to = check.T_old_new;
-      e.information = check.covariance.inverse();
-      e.loop = true;
-      loop_edge_record.resize(graph.edges().size() + 1, std::size_t(-1));
-      loop_edge_record[graph.addEdge(e)] = loops.size() + accepted.size();
-      accepted.push_back({old.frame_index, cur.frame_index, old.id, cur.id, check.matches, check.inliers, check.icp_rms,
-                          check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp, check.T_old_new});
     }
-    t.add("loop_verification", secondsSince(t0));
-
-    t0 = std::chrono::steady_clock::now();
     std::vector<std::size_t> removed;
-    if (!accepted.empty()) removed = graph.optimise(params.max_loop_chi2, params.max_chain_chi2);
-    t.add("pose_graph", secondsSince(t0));
+    {
+      ScopedStageTimer timer(t, "pose_graph");
+      if (!accepted.empty()) removed = graph.optimise(params.max_loop_chi2, params.max_chain_chi2);
+    }
     publish(accepted, removed, rejected, t);
   }
 
@@ -162,7 +156,6 @@ LoopCloser::~LoopCloser() {
 bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked,
                           std::shared_ptr<const DescribedKeypoints> features) {
   Impl& m = *impl_;
-  const auto t0 = std::chrono::steady_clock::now();
   const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty());
   if (key) {
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
@@ -175,8 +168,6 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
     m.keyframe_position.push_back(m.frame_keyframe.size());
   }
   m.frame_keyframe.push_back(m.keyframes_made == 0 ? 0 : m.keyframes_made - 1);
-  std::lock_guard<std::mutex> lock(m.mu);
-  m.times.add("keyframes", secondsSince(t0));
   return key;
 }
 
@@ -238,11 +229,5 @@ Trajectory LoopCloser::correct(const Trajectory& tracked) const {
   return out;
 }
 
-double LoopCloser::maxCorrection(const Trajectory& tracked) const {
-  const Trajectory c = correct(tracked);
-  double worst = 0.0;
-  for (std::size_t i = 0; i < c.size(); ++i) worst = std::max(worst, c[i].pose.distanceTo(tracked[i].pose));
-  return worst;
-}
 
 }  // namespace vofusion::loop

@@ -11,15 +11,15 @@ namespace {
 // Every key, once per section: loading and saving both walk these lists.
 std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
   return {
-      ConfigKey::oneOf("keypoints", &p.keypoints, "union = STAR + NARF (the paper)", {"union", "star", "narf"}),
+      ConfigKey::oneOf("keypoints", &p.keypoints, "union = STAR + NARF (the paper)", kKeypointSets),
       ConfigKey::oneOf("motion_method", &p.motion_method, "paper = Algorithm 1; robust = RANSAC + LS + Gauss-Newton",
-                       {"paper", "robust"}),
+                       kMotionMethods),
       {"narf_concurrent", &p.narf_concurrent, "NARF on a second thread"},
       {"union_radius", &p.union_radius, "pixels, duplicate radius", 0.0, 50.0},
       {"keyframe_min_inliers", &p.keyframe_min_inliers, "keep the keyframe while this many inliers, 0 = off", 0.0, 100000.0},
       {"undistort", &p.undistort, "undistort keypoints before 3D/homography"},
       {"depth_window", &p.depth_window, "pixels, half-size of the keypoint depth window", 0.0, 10.0},
-      ConfigKey::oneOf("depth_mode", &p.depth_mode, "of that window's valid readings", {"median", "min"}),
+      ConfigKey::oneOf("depth_mode", &p.depth_mode, "of that window's valid readings", kDepthModes),
       {"references", &p.references, "frames matched: the previous one and references-1 before it", 1.0, 8.0},
       {"colour_time", &p.colour_time, "keypoints moved to the depth capture time"},
   };

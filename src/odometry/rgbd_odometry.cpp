@@ -65,15 +65,15 @@ enum class KeypointSet { Union, Star, Narf };
 enum class MotionMethod { Paper, Robust };
 
 KeypointSet keypointSetOf(const OdometryParams& p) {
-  checkChoice("odometry", "keypoints", p.keypoints, {"union", "star", "narf"});
+  checkChoice("odometry", "keypoints", p.keypoints, kKeypointSets);
   return p.keypoints == "star" ? KeypointSet::Star : p.keypoints == "narf" ? KeypointSet::Narf : KeypointSet::Union;
 }
 MotionMethod motionMethodOf(const OdometryParams& p) {
-  checkChoice("odometry", "motion_method", p.motion_method, {"paper", "robust"});
+  checkChoice("odometry", "motion_method", p.motion_method, kMotionMethods);
   return p.motion_method == "paper" ? MotionMethod::Paper : MotionMethod::Robust;
 }
 bool nearestDepthOf(const OdometryParams& p) {
-  checkChoice("odometry", "depth_mode", p.depth_mode, {"median", "min"});
+  checkChoice("odometry", "depth_mode", p.depth_mode, kDepthModes);
   return p.depth_mode == "min";
 }
 }  // namespace

@@ -42,6 +42,7 @@ struct Reconstruction::Impl {
   loop::LoopParams loop_params;
   std::unique_ptr<loop::LoopCloser> loops;  // null: loop closure off
   Trajectory optimised;                     // after finish(), when loop closure ran
+  double max_correction = 0.0;              // m, largest tracked -> optimised pose change (finish())
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
   std::vector<bool> fused;                  // per frame: fused into the map during tracking
@@ -147,18 +148,19 @@ void Reconstruction::finish() {
   if (m.loops) {
     m.loops->finish();
     m.optimised = m.loops->correct(m.trajectory);
+    for (std::size_t i = 0; i < m.trajectory.size(); ++i)
+      m.max_correction = std::max(m.max_correction, m.trajectory[i].pose.distanceTo(m.optimised[i].pose));
   }
   m.finished = true;
 }
 
 const loop::LoopCloser* Reconstruction::loopCloser() const { return impl_->loops.get(); }
 
+double Reconstruction::maxLoopCorrection() const { return impl_->max_correction; }
+
 bool Reconstruction::mapNeedsReintegration() const {
   const Impl& m = *impl_;
-  if (!m.finished || !m.loops || m.loops->activeLoops() == 0) return false;
-  for (std::size_t i = 0; i < m.trajectory.size(); ++i)
-    if (m.trajectory[i].pose.distanceTo(m.optimised[i].pose) > m.loop_params.reintegrate_min_correction) return true;
-  return false;
+  return m.finished && m.loops && m.loops->activeLoops() > 0 && m.max_correction > m.loop_params.reintegrate_min_correction;
 }
 
 std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,

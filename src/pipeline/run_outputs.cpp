@@ -175,21 +175,19 @@ json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth) {
 json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std::size_t frames) {
   std::size_t active = 0, removed = 0;
   for (const loop::LoopRecord& l : lc.loops()) (l.active ? active : removed)++;
-  double max_correction = 0.0;
-  const Trajectory& tracked = rec.trackedTrajectory();
-  const Trajectory& optimised = rec.trajectory();
-  for (std::size_t i = 0; i < tracked.size() && i < optimised.size(); ++i)
-    max_correction = std::max(max_correction, tracked[i].pose.distanceTo(optimised[i].pose));
   const StageTimes t = lc.times();
-  // Keyframing runs on the frame loop; recognition, verification and the graph on their own thread.
-  double front = 0.0, back = 0.0;
-  for (const auto& [stage, sec] : t.seconds) (stage == "keyframes" ? front : back) += sec;
+  // Keyframing runs on the frame loop (the pipeline's stage); recognition, verification and the graph
+  // on their own thread.
+  const auto keyframing = rec.totalTimes().seconds.find("keyframes");
+  const double front = keyframing == rec.totalTimes().seconds.end() ? 0.0 : keyframing->second;
+  double back = 0.0;
+  for (const auto& [stage, sec] : t.seconds) back += sec;
   return {{"enabled", true},
           {"keyframes", lc.keyframes().size()},
           {"loops_accepted", active},
           {"loops_removed_after_optimisation", removed},
           {"candidates_rejected", lc.rejections()},
-          {"max_pose_correction_m", max_correction},
+          {"max_pose_correction_m", rec.maxLoopCorrection()},
           {"map_reintegrated", rec.reintegrated()},
           {"frame_loop_ms_per_frame", frames ? front * 1e3 / frames : 0.0},
           {"thread_ms_per_frame", frames ? back * 1e3 / frames : 0.0},

@@ -59,13 +59,12 @@ class LoopCloser {
   std::size_t activeLoops() const;
   std::vector<KeyframePose> keyframes() const;
   std::map<std::string, std::size_t> rejections() const;  // verification failures by reason
-  StageTimes times() const;  // "keyframes" (frame loop); "place_recognition", "loop_verification", "pose_graph" (thread)
+  StageTimes times() const;  // the thread's: "place_recognition", "loop_verification", "pose_graph" (the frame
+                             // loop's keyframing is the pipeline's stage "keyframes")
 
   // `tracked` (one pose per frame given to addFrame, in order) with every pose moved with its
   // keyframe: T' = K_optimised K_tracked^-1 T.
   Trajectory correct(const Trajectory& tracked) const;
-  // Largest distance between a tracked pose and its corrected one, m.
-  double maxCorrection(const Trajectory& tracked) const;
 
  private:
   struct Impl;

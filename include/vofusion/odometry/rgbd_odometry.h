@@ -3,6 +3,7 @@
 // CONTRACT used by fusion/ and the apps; implemented in src/odometry/.
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <mrpt/config/CLoadableOptions.h>
 #include <mrpt/math/CMatrixFixed.h>
@@ -17,6 +18,11 @@
 #include "vofusion/odometry/rigid_motion.h"
 
 namespace vofusion {
+
+// The values each string key of [odometry] may take (the key table and RgbdOdometry both check them).
+inline const std::vector<std::string> kKeypointSets = {"union", "star", "narf"};
+inline const std::vector<std::string> kMotionMethods = {"paper", "robust"};
+inline const std::vector<std::string> kDepthModes = {"median", "min"};
 
 struct OdometryParams : public mrpt::config::CLoadableOptions {
   // Read from the given section (normally [odometry]) plus the fixed sections [star], [narf], [brand],

@@ -64,6 +64,7 @@ class Reconstruction {
   // After finish(): loops moved some pose by more than [loop] reintegrate_min_correction, so the map
   // (fused at the tracked poses) should be fused again at the corrected ones.
   bool mapNeedsReintegration() const;
+  double maxLoopCorrection() const;  // after finish(): largest distance a loop moved a pose, m
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
   // fresh volume at the corrected poses; frames not fused the first time are skipped again, and so are
   // frames the run never processed (earlier than the next processed frame's timestamp). progress
