@@ -1,15 +1,10 @@
 #include "vofusion/fusion/world_model.h"
 
-#include <fcntl.h>
-#include <unistd.h>
 #include <zlib.h>
 
-#include <cerrno>
 #include <chrono>
 #include <cstring>
-#include <filesystem>
-
-#include "vofusion/core/errors.h"
+#include <stdexcept>
 
 namespace vofusion::fusion {
 
@@ -47,37 +42,24 @@ std::uint64_t WorldModel::key(const Eigen::Vector3i& c) {
 }
 
 WorldModel::WorldModel(std::size_t cache_bytes, std::string spill_dir)
-    : cache_bytes_(cache_bytes), spill_dir_(std::move(spill_dir)) {}
+    : cache_bytes_(cache_bytes), spill_(std::move(spill_dir), "the world model's spill file") {}
 
-WorldModel::~WorldModel() {
-  if (fd_ >= 0) ::close(fd_);
-}
+WorldModel::~WorldModel() = default;
 
-void WorldModel::openSpill() {
-  namespace fs = std::filesystem;
-  const fs::path dir = spill_dir_.empty() || spill_dir_ == "auto" ? fs::temp_directory_path() : fs::path(spill_dir_);
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  std::string name = (dir / "vofusion-world-XXXXXX").string();
-  fd_ = ::mkstemp(name.data());
-  if (fd_ < 0) throw InputError(dir.string(), std::string("cannot create the world model's spill file: ") + std::strerror(errno));
-  ::unlink(name.c_str());  // gone with the process, whatever happens to it
+void WorldModel::erase(std::uint64_t k) {
+  if (auto it = ram_.find(k); it != ram_.end()) {
+    lru_.erase(it->second.lru);
+    stats_.ram_bytes -= kBrickBytes;
+    ram_.erase(it);
+  }
+  disk_.erase(k);
 }
 
 void WorldModel::put(std::unique_ptr<Brick> brick) {
   const std::uint64_t k = key(brick->coord);
-  auto it = index_.find(k);
-  if (it != index_.end()) {
-    if (it->second.ram) {
-      lru_.erase(it->second.lru);
-      stats_.ram_bytes -= kBrickBytes;
-    }
-    index_.erase(it);
-  }
+  erase(k);  // a brick already stored there is replaced
   lru_.push_front(k);
-  Entry& e = index_[k];
-  e.ram = std::move(brick);
-  e.lru = lru_.begin();
+  ram_[k] = {std::move(brick), lru_.begin()};
   stats_.ram_bytes += kBrickBytes;
   evict();
 }
@@ -85,22 +67,10 @@ void WorldModel::put(std::unique_ptr<Brick> brick) {
 void WorldModel::evict() {
   while (stats_.ram_bytes > cache_bytes_ && !lru_.empty()) {
     const auto t0 = std::chrono::steady_clock::now();
-    if (fd_ < 0) openSpill();
     const std::uint64_t k = lru_.back();
-    Entry& e = index_.at(k);
-    const std::vector<std::uint8_t> bytes = compressBrick(*e.ram);
-    std::size_t done = 0;
-    while (done < bytes.size()) {
-      const ssize_t w = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(end_ + done));
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) throw InputError(spill_dir_.empty() ? "spill file" : spill_dir_,
-                                   std::string("cannot write the world model's spill file: ") + std::strerror(errno));
-      done += static_cast<std::size_t>(w);
-    }
-    e.offset = end_;
-    e.length = static_cast<std::uint32_t>(bytes.size());
-    end_ += bytes.size();
-    e.ram.reset();
+    auto it = ram_.find(k);
+    disk_[k] = spill_.append(compressBrick(*it->second.brick));
+    ram_.erase(it);
     lru_.pop_back();
     stats_.ram_bytes -= kBrickBytes;
     ++stats_.spilled;
@@ -108,68 +78,66 @@ void WorldModel::evict() {
   }
 }
 
-void WorldModel::readRecord(const Entry& e, Brick& out) const {
+void WorldModel::readRecord(SpillFile::Record r, Brick& out) const {
   const auto t0 = std::chrono::steady_clock::now();
-  std::vector<std::uint8_t> bytes(e.length);
-  std::size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t r = ::pread(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(e.offset + done));
-    if (r < 0 && errno == EINTR) continue;
-    if (r <= 0) throw std::runtime_error(std::string("cannot read the world model's spill file: ") + std::strerror(errno));
-    done += static_cast<std::size_t>(r);
-  }
+  const std::vector<std::uint8_t> bytes = spill_.read(r);
   if (!decompressBrick(bytes.data(), bytes.size(), out)) throw std::runtime_error("corrupt record in the world model's spill file");
   ++stats_.reloaded;
   stats_.spill_seconds += since(t0);
 }
 
 std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
-  auto it = index_.find(key(c));
-  if (it == index_.end()) return nullptr;
-  std::unique_ptr<Brick> b;
-  if (it->second.ram) {
-    b = std::move(it->second.ram);
-    lru_.erase(it->second.lru);
-    stats_.ram_bytes -= kBrickBytes;
-  } else {
-    b = std::make_unique<Brick>();
-    readRecord(it->second, *b);
-    b->coord = c;
+  const std::uint64_t k = key(c);
+  if (auto it = ram_.find(k); it != ram_.end()) {
+    std::unique_ptr<Brick> b = std::move(it->second.brick);
+    erase(k);
+    return b;
   }
-  index_.erase(it);
+  const auto it = disk_.find(k);
+  if (it == disk_.end()) return nullptr;
+  auto b = std::make_unique<Brick>();
+  readRecord(it->second, *b);
+  b->coord = c;
+  disk_.erase(it);
   return b;
 }
 
 bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
-  const auto it = index_.find(key(c));
-  if (it == index_.end()) return false;
-  if (it->second.ram) std::memcpy(out.voxels, it->second.ram->voxels, kVoxelBytes);
-  else readRecord(it->second, out);
+  const std::uint64_t k = key(c);
+  if (const auto it = ram_.find(k); it != ram_.end()) std::memcpy(out.voxels, it->second.brick->voxels, kVoxelBytes);
+  else if (const auto d = disk_.find(k); d != disk_.end()) readRecord(d->second, out);
+  else return false;
   out.coord = c;
   return true;
 }
 
+template <class F>
+void WorldModel::forEachKey(F&& f) const {
+  for (const auto& [k, e] : ram_) f(k);
+  for (const auto& [k, r] : disk_) f(k);
+}
+
 std::vector<Eigen::Vector3i> WorldModel::coordsInBox(const Eigen::Vector3i& lo, int n) const {
   std::vector<Eigen::Vector3i> out;
-  for (const auto& [k, e] : index_) {
+  forEachKey([&](std::uint64_t k) {
     const Eigen::Vector3i c = decode(k);
     if (((c - lo).array() >= 0).all() && ((c - lo).array() < n).all()) out.push_back(c);
-  }
+  });
   return out;
 }
 
 std::vector<Eigen::Vector3i> WorldModel::coords() const {
   std::vector<Eigen::Vector3i> out;
-  out.reserve(index_.size());
-  for (const auto& [k, e] : index_) out.push_back(decode(k));
+  out.reserve(size());
+  forEachKey([&](std::uint64_t k) { out.push_back(decode(k)); });
   return out;
 }
 
 WorldModelStats WorldModel::stats() const {
   WorldModelStats s = stats_;
-  s.bricks = index_.size();
+  s.bricks = size();
   s.bricks_in_ram = lru_.size();
-  s.spill_file_bytes = end_;
+  s.spill_file_bytes = spill_.bytes();
   return s;
 }
 

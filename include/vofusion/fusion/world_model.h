@@ -3,8 +3,8 @@
 // hands a brick over when it leaves (put) and takes it back when the volume covers it again (take);
 // nothing else crosses. Bricks are addressed by their world brick coordinate. Up to `cache_bytes` of
 // them stay in RAM (least recently handed over first out); the rest are written zlib-compressed to a
-// spill file in `spill_dir` (the system's temporary folder when empty or "auto"), which is unlinked as soon as
-// it is created, so it never outlives the process.
+// SpillFile in `spill_dir`. A brick on disk costs RAM only for its index entry (~40 bytes), so a long
+// walk's memory grows by that alone.
 #include <cstdint>
 #include <functional>
 #include <list>
@@ -13,6 +13,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "vofusion/core/spill_file.h"
 #include "vofusion/fusion/voxel_brick.h"
 
 namespace vofusion::fusion {
@@ -49,27 +50,25 @@ class WorldModel {
   // Copies a stored brick without changing what is cached; false when there is none.
   bool read(const Eigen::Vector3i& c, Brick& out) const;
 
-  std::size_t size() const { return index_.size(); }
-  bool contains(const Eigen::Vector3i& c) const { return index_.count(key(c)) != 0; }
+  std::size_t size() const { return ram_.size() + disk_.size(); }
+  bool contains(const Eigen::Vector3i& c) const { return ram_.count(key(c)) != 0 || disk_.count(key(c)) != 0; }
   WorldModelStats stats() const;
   static std::uint64_t key(const Eigen::Vector3i& c);
 
  private:
-  struct Entry {
-    std::unique_ptr<Brick> ram;                // null when only on disk
-    std::uint64_t offset = 0;                  // of the record in the spill file (when ram is null)
-    std::uint32_t length = 0;
-    std::list<std::uint64_t>::iterator lru;    // position in lru_ (when ram is set)
+  struct Cached {
+    std::unique_ptr<Brick> brick;
+    std::list<std::uint64_t>::iterator lru;    // its place in lru_
   };
   void evict();
-  void openSpill();
-  void readRecord(const Entry& e, Brick& out) const;
+  void erase(std::uint64_t k);
+  void readRecord(SpillFile::Record r, Brick& out) const;
+  template <class F> void forEachKey(F&& f) const;
 
   std::size_t cache_bytes_;
-  std::string spill_dir_;
-  int fd_ = -1;                                // spill file (unlinked), -1 until the first eviction
-  std::uint64_t end_ = 0;                      // bytes written to it
-  std::unordered_map<std::uint64_t, Entry> index_;
+  SpillFile spill_;
+  std::unordered_map<std::uint64_t, Cached> ram_;             // the cache
+  std::unordered_map<std::uint64_t, SpillFile::Record> disk_;  // the rest, by key
   std::list<std::uint64_t> lru_;               // keys of the bricks in RAM, most recent first
   mutable WorldModelStats stats_;
 };

@@ -1,0 +1,44 @@
+#pragma once
+// An append-only scratch file for records that leave RAM (the world model's bricks, old keyframes):
+// created in `dir` (the system's temporary folder when empty or "auto") at the first append and
+// unlinked at once, so it never outlives the process. Records are read back by their place.
+// append() and read() may run on different threads (pwrite/pread at fixed offsets).
+#include <atomic>
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace vofusion {
+
+class SpillFile {
+ public:
+  // A record's place, 8 bytes (an index of millions of them stays small): up to 1 TiB of file,
+  // records up to 16 MiB.
+  struct Record {
+    std::uint64_t offset : 40;
+    std::uint64_t length : 24;
+  };
+  static constexpr std::uint64_t kMaxRecordBytes = (std::uint64_t(1) << 24) - 1;
+
+  // what: names the file in errors ("the world model's spill file").
+  SpillFile(std::string dir, std::string what);
+  ~SpillFile();
+  SpillFile(const SpillFile&) = delete;
+  SpillFile& operator=(const SpillFile&) = delete;
+
+  // Throws InputError(dir, ...) when the file cannot be created or written (disk full).
+  Record append(const std::vector<std::uint8_t>& bytes);
+  // Throws std::runtime_error when the record cannot be read whole.
+  std::vector<std::uint8_t> read(Record r) const;
+  std::uint64_t bytes() const { return end_.load(); }
+
+ private:
+  void open();
+  std::string dir_, what_;
+  std::mutex open_mu_;
+  std::atomic<int> fd_{-1};
+  std::atomic<std::uint64_t> end_{0};
+};
+
+}  // namespace vofusion
