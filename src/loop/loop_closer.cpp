@@ -5,7 +5,7 @@
 #include <mutex>
 #include <thread>
 
-#include "vofusion/loop/keyframe.h"
+#include "vofusion/loop/keyframe_store.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/loop/loop_verifier.h"
 #include "vofusion/loop/place_index.h"
@@ -21,7 +21,7 @@ struct LoopCloser::Impl {
   std::size_t keyframes_made = 0;
 
   // Owned by the worker thread.
-  std::vector<Keyframe> keyframes;
+  KeyframeStore keyframes;
   PlaceIndex index;
   std::size_t indexed = 0;  // keyframes[0, indexed) are loop candidates (in the index)
   PoseGraph graph;
@@ -36,9 +36,13 @@ struct LoopCloser::Impl {
   std::vector<KeyframePose> poses;
   std::map<std::string, std::size_t> rejections;
   StageTimes times;
+  KeyframeStoreStats store;
   std::thread worker;
 
-  explicit Impl(const LoopParams& p) : params(p), selector(p), index(p) { worker = std::thread([this] { run(); }); }
+  Impl(const LoopParams& p, const std::string& spill_dir)
+      : params(p), selector(p), keyframes(std::size_t(p.keyframe_cache_mib) << 20, spill_dir), index(p) {
+    worker = std::thread([this] { run(); });
+  }
 
   void run() {
     for (;;) {
@@ -63,8 +67,8 @@ struct LoopCloser::Impl {
   // The path only grows, so the eligible keyframes are a prefix and join the index in order.
   void indexEligible(const Keyframe& cur) {
     while (indexed < cur.id && cur.id - indexed >= std::size_t(params.recent_keyframes) &&
-           cur.path_length - keyframes[indexed].path_length >= params.min_travel) {
-      const Keyframe& k = keyframes[indexed++];
+           cur.path_length - keyframes.at(indexed).path_length >= params.min_travel) {
+      const Keyframe k = keyframes.load(indexed++);
       if (k.features) index.add(k.id, k.features->descriptors);
     }
   }
@@ -87,7 +91,7 @@ struct LoopCloser::Impl {
       graph.addEdge(e);
       graph.chainNewNode(id);
     }
-    keyframes.push_back(std::move(k));
+    keyframes.add(std::move(k));
     const Keyframe& cur = keyframes.back();
     indexEligible(cur);
     std::vector<PlaceCandidate> candidates;
@@ -100,7 +104,7 @@ struct LoopCloser::Impl {
     {
       ScopedStageTimer timer(t, "loop_verification");
       for (const PlaceCandidate& c : candidates) {
-        const Keyframe& old = keyframes[c.keyframe];
+        const Keyframe old = keyframes.load(c.keyframe);
         const LoopCheck check = verifyLoop(old, cur, params);
         if (!check.accepted) {
           ++rejected[check.reason];
@@ -136,12 +140,14 @@ struct LoopCloser::Impl {
     if (!removed.empty()) rejections["did not fit the graph after optimisation"] += removed.size();
     poses.resize(keyframes.size());
     for (std::size_t i = 0; i < keyframes.size(); ++i)
-      poses[i] = {keyframes[i].frame_index, keyframes[i].timestamp, keyframes[i].tracked, graph.pose(i)};
+      poses[i] = {keyframes.at(i).frame_index, keyframes.at(i).timestamp, keyframes.at(i).tracked, graph.pose(i)};
+    store = keyframes.stats();
     times.merge(t);
   }
 };
 
-LoopCloser::LoopCloser(const LoopParams& params) : impl_(std::make_unique<Impl>(params)) {}
+LoopCloser::LoopCloser(const LoopParams& params, const std::string& spill_dir)
+    : impl_(std::make_unique<Impl>(params, spill_dir)) {}
 
 LoopCloser::~LoopCloser() {
   {
@@ -193,6 +199,10 @@ std::vector<KeyframePose> LoopCloser::keyframes() const {
 std::map<std::string, std::size_t> LoopCloser::rejections() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   return impl_->rejections;
+}
+KeyframeStoreStats LoopCloser::storeStats() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return impl_->store;
 }
 StageTimes LoopCloser::times() const {
   std::lock_guard<std::mutex> lock(impl_->mu);

@@ -12,6 +12,7 @@ std::vector<ConfigKey> loopKeys(LoopParams& p) {
       {"keyframe_translation", &p.keyframe_translation, "m moved since the last keyframe", 0.01, 10.0},
       {"keyframe_rotation", &p.keyframe_rotation, "degrees turned since the last keyframe", 0.5, 180.0},
       {"keyframe_downsample", &p.keyframe_downsample, "keyframe depth kept at 1/n resolution (ICP)", 1.0, 16.0},
+      {"keyframe_cache_mib", &p.keyframe_cache_mib, "MiB of keyframe features and depth kept in RAM; older ones spilled to disk", 0.0, 65536.0},
       {"recent_keyframes", &p.recent_keyframes, "newest keyframes never loop candidates", 1.0, 10000.0},
       {"min_travel", &p.min_travel, "m of camera path between a loop's keyframes, at least", 0.0, 10000.0},
       {"place_descriptors", &p.place_descriptors, "descriptors per keyframe indexed and queried", 10.0, 100000.0},

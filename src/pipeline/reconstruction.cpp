@@ -75,7 +75,8 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
   impl_->loop_params.loadFromConfigFile(cfg, "loop");
   if (mode != TrackingMode::KinFu) impl_->odometry = std::make_unique<RgbdOdometry>(impl_->odo_params);
   // Place recognition needs the odometry's descriptors: mode kinfu has none.
-  if (impl_->loop_params.enabled && impl_->odometry) impl_->loops = std::make_unique<loop::LoopCloser>(impl_->loop_params);
+  if (impl_->loop_params.enabled && impl_->odometry)
+    impl_->loops = std::make_unique<loop::LoopCloser>(impl_->loop_params, impl_->kinfu_params.tsdf.work_dir);
   // The map is anchored at the first camera (world = first camera frame). Ground truth never changes
   // what the tracker or the map does; evaluation and pictures align to it afterwards.
   impl_->kinfu = std::make_unique<KinFu>(impl_->kinfu_params, mode);

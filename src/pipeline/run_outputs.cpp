@@ -182,8 +182,12 @@ json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std:
   const double front = keyframing == rec.totalTimes().seconds.end() ? 0.0 : keyframing->second;
   double back = 0.0;
   for (const auto& [stage, sec] : t.seconds) back += sec;
+  const loop::KeyframeStoreStats store = lc.storeStats();
   return {{"enabled", true},
           {"keyframes", lc.keyframes().size()},
+          {"keyframes_in_ram", store.in_ram},
+          {"keyframes_spilled", store.spilled},
+          {"keyframe_spill_mib", double(store.spill_file_bytes) / (1 << 20)},
           {"loops_accepted", active},
           {"loops_removed_after_optimisation", removed},
           {"candidates_rejected", lc.rejections()},

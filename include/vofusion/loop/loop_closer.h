@@ -19,6 +19,7 @@
 #include "vofusion/core/frame.h"
 #include "vofusion/core/timing.h"
 #include "vofusion/core/trajectory.h"
+#include "vofusion/loop/keyframe_store.h"
 #include "vofusion/loop/loop_params.h"
 #include "vofusion/odometry/rgbd_odometry.h"
 
@@ -44,7 +45,9 @@ struct KeyframePose {
 
 class LoopCloser {
  public:
-  explicit LoopCloser(const LoopParams& params);
+  // spill_dir: where old keyframes' features and depth go beyond [loop] keyframe_cache_mib (see
+  // KeyframeStore; "auto" or empty: the system's temporary folder).
+  explicit LoopCloser(const LoopParams& params, const std::string& spill_dir = "auto");
   ~LoopCloser();
 
   // Every processed frame, in order (lost ones too, well_tracked = false). Returns true when the
@@ -59,6 +62,7 @@ class LoopCloser {
   std::size_t activeLoops() const;
   std::vector<KeyframePose> keyframes() const;
   std::map<std::string, std::size_t> rejections() const;  // verification failures by reason
+  KeyframeStoreStats storeStats() const;
   StageTimes times() const;  // the thread's: "place_recognition", "loop_verification", "pose_graph" (the frame
                              // loop's keyframing is the pipeline's stage "keyframes")
 

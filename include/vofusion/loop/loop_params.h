@@ -13,6 +13,7 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   double keyframe_translation = 0.15;  // m
   double keyframe_rotation = 12.0;     // degrees
   int keyframe_downsample = 2;         // the keyframe's depth is kept at 1/n resolution for ICP
+  int keyframe_cache_mib = 16;         // newest keyframes' features and depth kept in RAM; older ones on disk
   // Place recognition: the keyframe's BRAND descriptors vote (nearest neighbour in an LSH index) for
   // the older keyframes they match; the best-voted ones are verified.
   int recent_keyframes = 8;            // the newest keyframes are not loop candidates (they are tracked)

@@ -1,0 +1,52 @@
+#pragma once
+// The run's keyframes, with memory bounded by a budget rather than by the path: every keyframe's
+// pose and path length stay in RAM (the pose graph and the candidates' eligibility need them), but
+// its features and depth (~0.2 MB) only for the newest ones within `cache_bytes`; older ones go
+// zlib-compressed to a SpillFile and are read back when a loop candidate is verified against them.
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "vofusion/core/spill_file.h"
+#include "vofusion/loop/keyframe.h"
+
+namespace vofusion::loop {
+
+// Features and depth <-> bytes (depth zlib-compressed); decode throws std::runtime_error on a bad record.
+std::vector<std::uint8_t> encodeKeyframeData(const Keyframe& k);
+void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k);
+
+struct KeyframeStoreStats {
+  std::size_t keyframes = 0, in_ram = 0;  // in_ram: keyframes whose features and depth are in RAM
+  std::size_t ram_bytes = 0;              // their features and depth
+  std::size_t spilled = 0, reloaded = 0;
+  std::uint64_t spill_file_bytes = 0;
+};
+
+class KeyframeStore {
+ public:
+  KeyframeStore(std::size_t cache_bytes, std::string spill_dir);
+  // The next keyframe (ids 0, 1, 2, ... in order); the oldest ones in RAM beyond the budget are spilled.
+  void add(Keyframe k);
+  std::size_t size() const { return keyframes_.size(); }
+  bool empty() const { return keyframes_.empty(); }
+  // The stored keyframe: its features and depth are null / empty once spilled (load() has them).
+  const Keyframe& at(std::size_t id) const { return keyframes_.at(id); }
+  const Keyframe& back() const { return keyframes_.back(); }
+  // The whole keyframe, read back from disk when spilled (not cached again: old keyframes are
+  // visited once per loop candidate).
+  Keyframe load(std::size_t id) const;
+  KeyframeStoreStats stats() const;
+
+ private:
+  std::size_t cache_bytes_;
+  SpillFile spill_;
+  std::vector<Keyframe> keyframes_;
+  std::vector<SpillFile::Record> records_;  // per keyframe, its place in spill_ (id < spilled_)
+  std::size_t spilled_ = 0;                 // keyframes [0, spilled_) are on disk
+  std::size_t ram_bytes_ = 0;
+  mutable std::size_t reloaded_ = 0;
+};
+
+}  // namespace vofusion::loop

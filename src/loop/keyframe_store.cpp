@@ -1,0 +1,130 @@
+#include "vofusion/loop/keyframe_store.h"
+
+#include <zlib.h>
+
+#include <cstring>
+#include <stdexcept>
+
+namespace vofusion::loop {
+
+namespace {
+// Little helpers over a byte vector (same machine, same run: native byte order).
+template <class T>
+void put(std::vector<std::uint8_t>& out, const T& v) {
+  const auto* p = reinterpret_cast<const std::uint8_t*>(&v);
+  out.insert(out.end(), p, p + sizeof(T));
+}
+void putBytes(std::vector<std::uint8_t>& out, const void* data, std::size_t n) {
+  const auto* p = static_cast<const std::uint8_t*>(data);
+  out.insert(out.end(), p, p + n);
+}
+
+struct Reader {
+  const std::vector<std::uint8_t>& in;
+  std::size_t at = 0;
+  const std::uint8_t* take(std::size_t n) {
+    if (n > in.size() - at) throw std::runtime_error("corrupt record in the keyframes' spill file");
+    const std::uint8_t* p = in.data() + at;
+    at += n;
+    return p;
+  }
+  template <class T>
+  T get() {
+    T v;
+    std::memcpy(&v, take(sizeof(T)), sizeof(T));
+    return v;
+  }
+};
+
+std::size_t dataBytes(const Keyframe& k) {
+  std::size_t n = k.depth.total() * k.depth.elemSize();
+  if (k.features) n += k.features->descriptors.total() * k.features->descriptors.elemSize() + k.features->points.size() * sizeof(Eigen::Vector3d);
+  return n;
+}
+}  // namespace
+
+std::vector<std::uint8_t> encodeKeyframeData(const Keyframe& k) {
+  std::vector<std::uint8_t> out;
+  const cv::Mat depth = k.depth.isContinuous() ? k.depth : k.depth.clone();
+  const std::size_t raw = depth.total() * depth.elemSize();
+  uLongf zlen = compressBound(raw);
+  std::vector<std::uint8_t> z(zlen);
+  if (raw > 0 && compress2(z.data(), &zlen, depth.data, raw, 1) != Z_OK) throw std::runtime_error("zlib: cannot compress a keyframe's depth");
+  z.resize(raw > 0 ? zlen : 0);
+  put<std::int32_t>(out, depth.rows);
+  put<std::int32_t>(out, depth.cols);
+  put<std::uint64_t>(out, z.size());
+  putBytes(out, z.data(), z.size());
+  put<std::uint8_t>(out, k.features ? 1 : 0);
+  if (k.features) {
+    const cv::Mat d = k.features->descriptors.isContinuous() ? k.features->descriptors : k.features->descriptors.clone();
+    put<std::int32_t>(out, d.rows);
+    put<std::int32_t>(out, d.cols);
+    put<std::int32_t>(out, d.type());
+    putBytes(out, d.data, d.total() * d.elemSize());
+    put<std::uint64_t>(out, k.features->points.size());
+    putBytes(out, k.features->points.data(), k.features->points.size() * sizeof(Eigen::Vector3d));
+  }
+  return out;
+}
+
+void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
+  Reader r{bytes};
+  const auto rows = r.get<std::int32_t>(), cols = r.get<std::int32_t>();
+  const auto zlen = r.get<std::uint64_t>();
+  const std::uint8_t* z = r.take(zlen);
+  if (rows < 0 || cols < 0) throw std::runtime_error("corrupt record in the keyframes' spill file");
+  k.depth.create(rows, cols, CV_16U);
+  uLongf raw = k.depth.total() * k.depth.elemSize();
+  if (raw > 0 && (uncompress(k.depth.data, &raw, z, zlen) != Z_OK || raw != k.depth.total() * k.depth.elemSize()))
+    throw std::runtime_error("corrupt depth in the keyframes' spill file");
+  k.features.reset();
+  if (r.get<std::uint8_t>() == 0) return;
+  auto f = std::make_shared<DescribedKeypoints>();
+  const auto drows = r.get<std::int32_t>(), dcols = r.get<std::int32_t>(), dtype = r.get<std::int32_t>();
+  if (drows < 0 || dcols < 0 || dtype != CV_8U) throw std::runtime_error("corrupt descriptors in the keyframes' spill file");
+  f->descriptors.create(drows, dcols, dtype);
+  std::memcpy(f->descriptors.data, r.take(f->descriptors.total()), f->descriptors.total());
+  const auto npoints = r.get<std::uint64_t>();
+  if (npoints > bytes.size() / sizeof(Eigen::Vector3d)) throw std::runtime_error("corrupt points in the keyframes' spill file");
+  f->points.resize(npoints);
+  std::memcpy(f->points.data(), r.take(npoints * sizeof(Eigen::Vector3d)), npoints * sizeof(Eigen::Vector3d));
+  k.features = std::move(f);
+}
+
+KeyframeStore::KeyframeStore(std::size_t cache_bytes, std::string spill_dir)
+    : cache_bytes_(cache_bytes), spill_(std::move(spill_dir), "the keyframes' spill file") {}
+
+void KeyframeStore::add(Keyframe k) {
+  ram_bytes_ += dataBytes(k);
+  keyframes_.push_back(std::move(k));
+  // The newest keyframe always stays (it is about to be matched); older ones leave oldest first.
+  while (ram_bytes_ > cache_bytes_ && spilled_ + 1 < keyframes_.size()) {
+    Keyframe& old = keyframes_[spilled_++];
+    records_.push_back(spill_.append(encodeKeyframeData(old)));
+    ram_bytes_ -= dataBytes(old);
+    old.features.reset();
+    old.depth.release();
+  }
+}
+
+Keyframe KeyframeStore::load(std::size_t id) const {
+  Keyframe k = keyframes_.at(id);
+  if (id >= spilled_) return k;
+  decodeKeyframeData(spill_.read(records_[id]), k);
+  ++reloaded_;
+  return k;
+}
+
+KeyframeStoreStats KeyframeStore::stats() const {
+  KeyframeStoreStats s;
+  s.keyframes = keyframes_.size();
+  s.in_ram = keyframes_.size() - spilled_;
+  s.ram_bytes = ram_bytes_;
+  s.spilled = spilled_;
+  s.reloaded = reloaded_;
+  s.spill_file_bytes = spill_.bytes();
+  return s;
+}
+
+}  // namespace vofusion::loop
