@@ -5,10 +5,13 @@
 #include <random>
 
 #include <mrpt/config/CConfigFile.h>
+#include <opencv2/features2d.hpp>
+#include <opencv2/flann.hpp>
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
 #include "vofusion/loop/keyframe.h"
+#include "vofusion/loop/keyframe_store.h"
 #include "vofusion/loop/loop_verifier.h"
 #include "vofusion/loop/place_index.h"
 #include "vofusion/loop/pose_graph.h"
@@ -128,14 +131,14 @@ TEST(LoopPlaceIndex, FindsTheKeyframeWhoseDescriptorsReturn) {
   std::mt19937 rng(3);
   std::uniform_int_distribution<int> byte(0, 255);
   std::vector<cv::Mat> kf;
-  for (int k = 0; k < 40; ++k) {  // more than one LSH batch, so both the index and the pending list answer
+  for (int k = 0; k < 40; ++k) {
     cv::Mat d(300, 32, CV_8U);
     for (int i = 0; i < d.rows; ++i)
       for (int j = 0; j < 32; ++j) d.at<uchar>(i, j) = uchar(byte(rng));
     index.add(std::size_t(k), d);
     kf.push_back(d);
   }
-  for (const int k : {5, 37}) {  // indexed, pending
+  for (const int k : {5, 37}) {
     cv::Mat q = kf[std::size_t(k)].clone();
     std::uniform_int_distribution<int> bit(0, 255);
     for (int i = 0; i < q.rows; ++i)
@@ -152,6 +155,56 @@ TEST(LoopPlaceIndex, FindsTheKeyframeWhoseDescriptorsReturn) {
   for (int i = 0; i < unrelated.rows; ++i)
     for (int j = 0; j < 32; ++j) unrelated.at<uchar>(i, j) = uchar(byte(rng));
   EXPECT_TRUE(index.query(unrelated).empty());  // random bytes are ~128 bits apart: no votes
+}
+
+// The compact index finds the nearest neighbours that OpenCV's FLANN LSH index (same tables, key
+// size and probe level) finds, on correlated descriptors like BRAND's; what either finds is never
+// nearer than the brute-force nearest.
+TEST(LoopPlaceIndex, FindsWhatFlannLshFinds) {
+  LoopParams P;
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> byte(0, 255), bit(0, 255);
+  // 60 keyframes of 300 descriptors: each a shared pattern with a third of its bytes random.
+  cv::Mat train(0, 32, CV_8U);
+  PlaceIndex index(P);
+  for (int k = 0; k < 60; ++k) {
+    cv::Mat d(300, 32, CV_8U);
+    for (int i = 0; i < d.rows; ++i)
+      for (int j = 0; j < 32; ++j) d.at<uchar>(i, j) = byte(rng) < 170 ? uchar((j * 37 + (i % 40) * 11) & 0xff) : uchar(byte(rng));
+    index.add(std::size_t(k), d);
+    train.push_back(d);
+  }
+  cv::FlannBasedMatcher flann(cv::makePtr<cv::flann::LshIndexParams>(P.lsh_tables, P.lsh_key_bits, P.lsh_probe_level));
+  flann.add(std::vector<cv::Mat>{train});
+  flann.train();
+  cv::BFMatcher brute(cv::NORM_HAMMING);
+  // Queries: 1000 indexed descriptors with 6 bits flipped (a re-observation).
+  cv::Mat q(1000, 32, CV_8U);
+  for (int i = 0; i < q.rows; ++i) {
+    train.row(int(rng() % std::uint32_t(train.rows))).copyTo(q.row(i));
+    for (int f = 0; f < 6; ++f) {
+      const int b = bit(rng);
+      q.at<uchar>(i, b / 8) ^= uchar(1 << (b % 8));
+    }
+  }
+  std::vector<cv::DMatch> truth, by_flann;
+  brute.match(q, train, truth);
+  std::vector<std::vector<cv::DMatch>> nn;
+  flann.knnMatch(q, nn, 1);
+  int ours_right = 0, flann_right = 0;
+  for (int i = 0; i < q.rows; ++i) {
+    const auto [row, dist] = index.nearest(q.ptr<std::uint8_t>(i));
+    if (row >= 0) {
+      ASSERT_GE(dist, int(truth[std::size_t(i)].distance));
+      ASSERT_EQ(dist, int(cv::norm(q.row(i), train.row(row), cv::NORM_HAMMING)));
+      ours_right += dist == int(truth[std::size_t(i)].distance);
+    }
+    if (!nn[std::size_t(i)].empty()) flann_right += nn[std::size_t(i)][0].distance == truth[std::size_t(i)].distance;
+  }
+  std::printf("nearest found: compact index %d / 1000, FLANN LSH %d / 1000\n", ours_right, flann_right);
+  EXPECT_GE(ours_right, flann_right - 30);
+  EXPECT_GT(ours_right, 800);
+  EXPECT_EQ(index.descriptors(), 60u * 300u);
 }
 
 TEST(LoopPoseGraph, TrueLoopSpreadsTheDrift) {
@@ -236,6 +289,47 @@ TEST(LoopVerifier, SamePlaceAfterALapIsAcceptedWithTheTruePose) {
   EXPECT_LT(dt, 0.015);
   EXPECT_LT(dr, 0.5);
   EXPECT_NEAR(c.correction_m, 0.2, 0.05);
+}
+
+// Keyframes beyond the RAM budget go to disk and come back bit for bit; the newest always stays in RAM.
+TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
+  sim::SimOptions o;
+  o.scene = "loop";
+  o.frames = 30;
+  const sim::SyntheticSequence seq(o);
+  const std::vector<std::size_t> frames = {0, 10, 20};
+  std::vector<Keyframe> made;
+  KeyframeStore store(0, test::tempDir("keyframe_spill"));  // no budget: all but the newest spilled
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    made.push_back(keyframeOf(seq, frames[i], pose(0.1 * double(i), 0, 0, 0), 0.1 * double(i), i));
+    store.add(made.back());
+  }
+  const KeyframeStoreStats st = store.stats();
+  EXPECT_EQ(st.keyframes, 3u);
+  EXPECT_EQ(st.spilled, 2u);
+  EXPECT_EQ(st.in_ram, 1u);
+  EXPECT_GT(st.spill_file_bytes, 0u);
+  EXPECT_TRUE(store.at(0).depth.empty());   // its RAM is released...
+  EXPECT_FALSE(store.at(0).features);
+  EXPECT_FALSE(store.back().depth.empty());
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const Keyframe k = store.load(i);          // ...and load() reads it back
+    EXPECT_TRUE(k.tracked.isApprox(made[i].tracked));
+    EXPECT_EQ(k.frame_index, made[i].frame_index);
+    ASSERT_EQ(k.depth.size(), made[i].depth.size());
+    EXPECT_EQ(cv::norm(k.depth, made[i].depth, cv::NORM_INF), 0.0);
+    ASSERT_TRUE(k.features);
+    ASSERT_EQ(k.features->descriptors.rows, made[i].features->descriptors.rows);
+    EXPECT_EQ(cv::norm(k.features->descriptors, made[i].features->descriptors, cv::NORM_HAMMING), 0.0);
+    ASSERT_EQ(k.features->points.size(), made[i].features->points.size());
+    for (std::size_t j = 0; j < k.features->points.size(); ++j) ASSERT_EQ(k.features->points[j], made[i].features->points[j]);
+  }
+  EXPECT_EQ(store.stats().reloaded, 2u);
+  // A record cut short is an error, not a keyframe with garbage in it.
+  std::vector<std::uint8_t> bytes = encodeKeyframeData(made[0]);
+  bytes.resize(bytes.size() / 2);
+  Keyframe k;
+  EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
 }
 
 // Two places 3 m apart in the look-alike corridor look the same; the camera's tracked path says they

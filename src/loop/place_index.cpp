@@ -1,14 +1,17 @@
 #include "vofusion/loop/place_index.h"
 
 #include <algorithm>
-#include <cstdint>
+#include <cstring>
 #include <map>
-
-#include <opencv2/flann.hpp>
+#include <numeric>
+#include <random>
+#include <stdexcept>
 
 namespace vofusion::loop {
 
 namespace {
+constexpr int kDescriptorBytes = 32;
+
 // At most n rows, spread evenly over the keyframe (the STAR keypoints come first, then NARF's).
 cv::Mat spreadRows(const cv::Mat& d, int n) {
   if (d.rows <= n) return d;
@@ -16,49 +19,91 @@ cv::Mat spreadRows(const cv::Mat& d, int n) {
   for (int i = 0; i < n; ++i) d.row(int(std::int64_t(i) * d.rows / n)).copyTo(out.row(i));
   return out;
 }
+
+void checkDescriptors(const cv::Mat& d) {
+  if (!d.empty() && (d.type() != CV_8U || d.cols != kDescriptorBytes))
+    throw std::invalid_argument("place index: descriptors must be CV_8U with 32 bytes a row");
+}
 }  // namespace
 
-PlaceIndex::PlaceIndex(const LoopParams& params)
-    : params_(params),
-      matcher_(cv::makePtr<cv::flann::LshIndexParams>(params.lsh_tables, params.lsh_key_bits, params.lsh_probe_level)) {}
-
-void PlaceIndex::add(std::size_t keyframe, const cv::Mat& descriptors) {
-  if (descriptors.empty()) return;
-  keyframes_.push_back(keyframe);
-  pending_.push_back(spreadRows(descriptors, params_.place_descriptors).clone());
-  if (pending_.size() < kBatch) return;
-  matcher_.add(pending_);
-  matcher_.train();  // rebuilds the whole index (hashing only)
-  indexed_ = keyframes_.size();
-  pending_.clear();
+PlaceIndex::PlaceIndex(const LoopParams& params) : params_(params) {
+  // Each table's key bits, drawn at random as FLANN's LshTable does (fixed seed: runs repeat exactly).
+  std::mt19937 rng(20121);
+  std::vector<int> all(kDescriptorBytes * 8);
+  std::iota(all.begin(), all.end(), 0);
+  for (int t = 0; t < params_.lsh_tables; ++t) {
+    std::shuffle(all.begin(), all.end(), rng);
+    table_bits_.emplace_back(all.begin(), all.begin() + params_.lsh_key_bits);
+  }
+  tables_.resize(table_bits_.size());
 }
 
-std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all) {
+PlaceIndex::Bits PlaceIndex::bitsOf(const std::uint8_t* descriptor) {
+  Bits b;
+  std::memcpy(b.data(), descriptor, kDescriptorBytes);
+  return b;
+}
+
+std::uint32_t PlaceIndex::keyOf(const Bits& d, std::size_t table) const {
+  std::uint32_t key = 0;
+  for (const int bit : table_bits_[table]) key = (key << 1) | std::uint32_t((d[std::size_t(bit / 64)] >> (bit % 64)) & 1u);
+  return key;
+}
+
+void PlaceIndex::add(std::size_t keyframe, const cv::Mat& all) {
+  checkDescriptors(all);
+  if (all.empty()) return;
+  const cv::Mat d = spreadRows(all, params_.place_descriptors);
+  const auto first = std::uint32_t(rows_.size());
+  keyframes_.push_back(keyframe);
+  for (int i = 0; i < d.rows; ++i) {
+    rows_.push_back(bitsOf(d.ptr<std::uint8_t>(i)));
+    owner_.push_back(std::uint32_t(keyframes_.size() - 1));
+  }
+  for (std::size_t t = 0; t < tables_.size(); ++t) {
+    auto& table = tables_[t];
+    const std::size_t old = table.size();
+    for (std::uint32_t r = first; r < rows_.size(); ++r) table.emplace_back(keyOf(rows_[r], t), r);
+    std::sort(table.begin() + std::ptrdiff_t(old), table.end());
+    std::inplace_merge(table.begin(), table.begin() + std::ptrdiff_t(old), table.end());
+  }
+}
+
+// Every key within `flips` more bit flips of `key` (flipping bits >= from only, so each is visited once).
+template <class Visit>
+void PlaceIndex::probe(std::uint32_t key, int flips, int from, Visit&& visit) const {
+  visit(key);
+  if (flips == 0) return;
+  for (int b = from; b < params_.lsh_key_bits; ++b) probe(key ^ (1u << b), flips - 1, b + 1, visit);
+}
+
+std::pair<int, int> PlaceIndex::nearest(const std::uint8_t* descriptor) const {
+  const Bits q = bitsOf(descriptor);
+  int best_row = -1, best = kDescriptorBytes * 8 + 1;
+  for (std::size_t t = 0; t < tables_.size(); ++t) {
+    const auto& table = tables_[t];
+    probe(keyOf(q, t), params_.lsh_probe_level, 0, [&](std::uint32_t key) {
+      auto it = std::lower_bound(table.begin(), table.end(), std::make_pair(key, std::uint32_t(0)));
+      for (; it != table.end() && it->first == key; ++it) {
+        const Bits& r = rows_[it->second];
+        const int dist = __builtin_popcountll(q[0] ^ r[0]) + __builtin_popcountll(q[1] ^ r[1]) +
+                         __builtin_popcountll(q[2] ^ r[2]) + __builtin_popcountll(q[3] ^ r[3]);
+        if (dist < best || (dist == best && int(it->second) < best_row)) best = dist, best_row = int(it->second);
+      }
+    });
+  }
+  return {best_row, best_row < 0 ? -1 : best};
+}
+
+std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all) const {
+  checkDescriptors(all);
   if (keyframes_.empty() || all.empty()) return {};
   const cv::Mat descriptors = spreadRows(all, params_.place_descriptors);
-  // Per query descriptor, the nearest in the index and among the pending keyframes: the closer votes.
-  std::vector<cv::DMatch> best(std::size_t(descriptors.rows), cv::DMatch(-1, -1, -1, 1e9f));
-  if (indexed_ > 0) {
-    std::vector<std::vector<cv::DMatch>> nn;
-    matcher_.knnMatch(descriptors, nn, 1);
-    for (const auto& m : nn)
-      if (!m.empty() && m[0].queryIdx >= 0 && m[0].queryIdx < descriptors.rows) best[std::size_t(m[0].queryIdx)] = m[0];
-  }
-  if (!pending_.empty()) {
-    cv::BFMatcher bf(cv::NORM_HAMMING);
-    bf.add(pending_);
-    std::vector<std::vector<cv::DMatch>> nn;
-    bf.knnMatch(descriptors, nn, 1);
-    for (const auto& m : nn) {
-      if (m.empty()) continue;
-      cv::DMatch& b = best[std::size_t(m[0].queryIdx)];
-      if (m[0].distance < b.distance) b = m[0], b.imgIdx += int(indexed_);
-    }
-  }
   std::map<std::size_t, int> votes;
-  for (const auto& m : best)
-    if (m.distance <= params_.max_hamming && m.imgIdx >= 0 && std::size_t(m.imgIdx) < keyframes_.size())
-      ++votes[keyframes_[std::size_t(m.imgIdx)]];
+  for (int i = 0; i < descriptors.rows; ++i) {
+    const auto [row, dist] = nearest(descriptors.ptr<std::uint8_t>(i));
+    if (row >= 0 && dist <= params_.max_hamming) ++votes[keyframeOfRow(row)];
+  }
   std::vector<PlaceCandidate> out;
   for (const auto& [kf, n] : votes)
     if (n >= params_.min_votes) out.push_back({kf, n});
