@@ -105,6 +105,22 @@ TEST(LoopKeyframes, MadeByMotionAndAfterRecovery) {
   EXPECT_NEAR(s.pathLength(), 0.14, 1e-9);
 }
 
+// A burst of frames whose ICP residual stands out from the recent ones is strained; a residual that
+// rises slowly (farther walls, more noise) is not, and frames without ICP never are.
+TEST(LoopKeyframes, ResidualBurstIsStrainedSlowRiseIsNot) {
+  ResidualMonitor m(2.0);
+  for (int i = 0; i < 60; ++i) EXPECT_FALSE(m.strained(0.003 + 0.0001 * (i % 3)));
+  int strained = 0;
+  for (int i = 0; i < 20; ++i) strained += m.strained(0.012);  // the map met twice: 4x the median
+  EXPECT_EQ(strained, 20);
+  EXPECT_FALSE(m.strained(0.0035));
+  EXPECT_FALSE(m.strained(0.0));
+  ResidualMonitor slow(2.0);
+  for (int i = 0; i < 600; ++i) EXPECT_FALSE(slow.strained(0.003 * std::pow(1.003, i))) << i;  // x6 over 20 s
+  ResidualMonitor off(0.0);
+  for (int i = 0; i < 30; ++i) EXPECT_FALSE(off.strained(i < 20 ? 0.003 : 0.1));
+}
+
 TEST(LoopKeyframes, DepthReducedWithMatchingIntrinsics) {
   sim::SimOptions o;
   o.frames = 2;

@@ -78,12 +78,13 @@ TEST(LoopScenes, LoopRoundABlockIsClosed) {
               "at most %.4f m (tracked %.4f m)\n",
               ate_tracked, ate_closed, closing, worst_closed, worst_tracked);
   // The targets are 1 cm and the ATE halved. vofusion on the same scene read from its PNG
-  // files reaches 1.26 cm and 0.0744 -> 0.0228 m; rendered straight into the pipeline, as here, the
-  // tracker drifts less and this run measured 7.8 -> 1.5 cm and 0.0275 -> 0.0240 m: this guards that.
+  // files measures 0.0656 -> 0.0229 m (README); rendered straight into the pipeline, as here, the
+  // tracker drifts less (what is left is mostly not drift a loop removes): this run measured
+  // 7.4 cm -> 4 mm between the lap's loop poses and 0.0253 -> 0.0194 m ATE.
   ASSERT_GT(closing, 0u);
-  EXPECT_LT(worst_closed, 0.02);
-  EXPECT_LT(worst_closed, 0.3 * worst_tracked);
-  EXPECT_LT(ate_closed, ate_tracked);
+  EXPECT_LT(worst_closed, 0.01);
+  EXPECT_LT(worst_closed, 0.2 * worst_tracked);
+  EXPECT_LT(ate_closed, 0.85 * ate_tracked);
 }
 
 TEST(LoopScenes, LookAlikePlacesAreNeverJoined) {

@@ -1,6 +1,8 @@
 #include "vofusion/loop/keyframe.h"
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -59,6 +61,19 @@ bool KeyframeSelector::next(const Eigen::Isometry3d& pose, bool well_tracked) {
   have_keyframe_ = true;
   recovering_ = false;
   return true;
+}
+
+bool ResidualMonitor::strained(double rms) {
+  if (rms <= 0.0 || ratio_ <= 0.0) return false;
+  bool out = false;
+  if (recent_.size() >= kMinSamples) {
+    std::vector<double> v(recent_.begin(), recent_.end());
+    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+    out = rms > ratio_ * v[v.size() / 2];
+  }
+  recent_.push_back(rms);
+  if (recent_.size() > kWindow) recent_.pop_front();
+  return out;
 }
 
 }  // namespace vofusion::loop

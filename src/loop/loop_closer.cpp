@@ -16,6 +16,8 @@ namespace vofusion::loop {
 struct LoopCloser::Impl {
   LoopParams params;
   KeyframeSelector selector;
+  ResidualMonitor residuals;
+  std::size_t strained_frames = 0;
   std::vector<std::size_t> frame_keyframe;  // per frame added: its keyframe (the last one at or before it)
   std::vector<std::size_t> keyframe_position;  // per keyframe: its frame's position among the frames added
   std::size_t keyframes_made = 0;
@@ -40,7 +42,7 @@ struct LoopCloser::Impl {
   std::thread worker;
 
   Impl(const LoopParams& p, const std::string& spill_dir)
-      : params(p), selector(p), keyframes(std::size_t(p.keyframe_cache_mib) << 20, spill_dir), index(p) {
+      : params(p), selector(p), residuals(p.strain_rms_ratio), keyframes(std::size_t(p.keyframe_cache_mib) << 20, spill_dir), index(p) {
     worker = std::thread([this] { run(); });
   }
 
@@ -159,10 +161,12 @@ LoopCloser::~LoopCloser() {
   if (impl_->worker.joinable()) impl_->worker.join();
 }
 
-bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked,
+bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked, double icp_rms,
                           std::shared_ptr<const DescribedKeypoints> features) {
   Impl& m = *impl_;
-  const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty());
+  const bool strained = m.residuals.strained(icp_rms);
+  m.strained_frames += strained;
+  const bool key = m.selector.next(tracked, well_tracked && !strained && !frame.depth.empty());
   if (key) {
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);
@@ -200,6 +204,7 @@ std::map<std::string, std::size_t> LoopCloser::rejections() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   return impl_->rejections;
 }
+std::size_t LoopCloser::strainedFrames() const { return impl_->strained_frames; }
 KeyframeStoreStats LoopCloser::storeStats() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   return impl_->store;

@@ -35,6 +35,7 @@ std::vector<ConfigKey> loopKeys(LoopParams& p) {
       {"odometry_sigma_rate", &p.odometry_sigma_rate, "keyframe edge noise, m per m and rad per rad", 0.0001, 10.0},
       {"odometry_sigma_floor", &p.odometry_sigma_floor, "keyframe edge noise floor, m and rad", 1e-5, 1.0},
       {"poor_tracking_sigma_scale", &p.poor_tracking_sigma_scale, "x keyframe edge noise across frames not well tracked", 1.0, 1e4},
+      {"strain_rms_ratio", &p.strain_rms_ratio, "a frame's ICP RMS over this x the recent median counts as not well tracked; 0 = off", 0.0, 1000.0},
       {"loop_sigma_translation", &p.loop_sigma_translation, "m, floor of a loop edge's noise", 1e-5, 10.0},
       {"loop_sigma_rotation", &p.loop_sigma_rotation, "degrees, floor of a loop edge's noise", 0.001, 90.0},
       {"max_loop_chi2", &p.max_loop_chi2, "a loop's residual after optimisation (6 DoF chi2)", 0.1, 1e6},

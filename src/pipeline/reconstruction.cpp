@@ -129,7 +129,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
   m.fused.push_back(r.tracked && !r.predicted && (!r.fell_back || m.kinfu_params.integrate_on_fallback));
   if (m.loops) {
     ScopedStageTimer t(r.times, "keyframes");
-    m.loops->addFrame(frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, r.odometry.features);
+    m.loops->addFrame(frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, f.icp_rms, r.odometry.features);
   }
   r.times.add("total", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   m.times.merge(r.times);

@@ -185,6 +185,7 @@ json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std:
   const loop::KeyframeStoreStats store = lc.storeStats();
   return {{"enabled", true},
           {"keyframes", lc.keyframes().size()},
+          {"frames_strained", lc.strainedFrames()},
           {"keyframes_in_ram", store.in_ram},
           {"keyframes_spilled", store.spilled},
           {"keyframe_spill_mib", double(store.spill_file_bytes) / (1 << 20)},

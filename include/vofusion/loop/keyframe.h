@@ -3,6 +3,7 @@
 // since the last one (or tracking just recovered). A keyframe keeps what a later revisit is verified
 // against: its tracked pose, its BRAND descriptors with their 3D points, and a reduced depth image.
 #include <cstddef>
+#include <deque>
 #include <memory>
 
 #include <Eigen/Geometry>
@@ -21,7 +22,7 @@ struct Keyframe {
   double timestamp = 0.0;       // s
   Eigen::Isometry3d tracked = Eigen::Isometry3d::Identity();  // camera-to-world, as tracked
   double path_length = 0.0;     // m the camera travelled from the first frame to this one
-  bool after_poor_tracking = false;  // frames since the previous keyframe were lost, predicted or fell back
+  bool after_poor_tracking = false;  // frames since the previous keyframe were lost, predicted, fell back or strained
   std::shared_ptr<const DescribedKeypoints> features;
   cv::Mat depth;                // CV_16U, kDepthUnitsPerMetre, 1/keyframe_downsample resolution (nearest reading)
   CameraIntrinsics camera;      // of `depth`
@@ -50,6 +51,25 @@ class KeyframeSelector {
   Eigen::Isometry3d last_keyframe_ = Eigen::Isometry3d::Identity(), last_pose_ = Eigen::Isometry3d::Identity();
   bool have_keyframe_ = false, have_pose_ = false, recovering_ = false, last_after_poor_ = false;
   double path_ = 0.0;
+};
+
+// Tells frames whose ICP residual stands out from the run's recent ones. When the camera comes back
+// to a place the map still holds (the volume, or bricks taken back from the world model) after some
+// drift, ICP meets two versions of it: its residual rises for a few dozen frames and the tracker
+// takes the drift out there, in a jump. Such frames count as poorly tracked, so that a loop puts its
+// correction at that jump instead of spreading it over the whole path.
+class ResidualMonitor {
+ public:
+  static constexpr std::size_t kWindow = 90;  // frames (3 s at 30 Hz): longer than such a jump
+  static constexpr std::size_t kMinSamples = 15;
+  explicit ResidualMonitor(double ratio) : ratio_(ratio) {}
+  // rms: this frame's ICP residual RMS (m); 0 when no ICP ran (never strained). True when it is over
+  // `ratio` x the median of the previous kWindow frames' residuals. ratio 0: never.
+  bool strained(double rms);
+
+ private:
+  double ratio_;
+  std::deque<double> recent_;
 };
 
 }  // namespace vofusion::loop

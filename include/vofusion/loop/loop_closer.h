@@ -5,7 +5,7 @@
 // never waits for that thread; finish() does, once, at the end of a run.
 //
 //   loop::LoopCloser lc(params);
-//   for each frame: lc.addFrame(frame, tracked_pose, well_tracked, odometry.features);
+//   for each frame: lc.addFrame(frame, tracked_pose, well_tracked, icp_rms, odometry.features);
 //   lc.finish();
 //   Trajectory optimised = lc.correct(tracked);   // every pose follows its keyframe
 #include <cstddef>
@@ -50,9 +50,10 @@ class LoopCloser {
   explicit LoopCloser(const LoopParams& params, const std::string& spill_dir = "auto");
   ~LoopCloser();
 
-  // Every processed frame, in order (lost ones too, well_tracked = false). Returns true when the
+  // Every processed frame, in order (lost ones too, well_tracked = false); icp_rms: the tracker's ICP
+  // residual RMS (m, 0 when none ran), see ResidualMonitor. Returns true when the
   // frame became a keyframe (its features and a reduced depth are kept; features may be null).
-  bool addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked,
+  bool addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked, double icp_rms,
                 std::shared_ptr<const DescribedKeypoints> features);
   // Waits until every queued keyframe is processed and the graph optimised.
   void finish();
@@ -63,6 +64,7 @@ class LoopCloser {
   std::vector<KeyframePose> keyframes() const;
   std::map<std::string, std::size_t> rejections() const;  // verification failures by reason
   KeyframeStoreStats storeStats() const;
+  std::size_t strainedFrames() const;  // frames whose ICP residual stood out (ResidualMonitor); frame loop only
   StageTimes times() const;  // the thread's: "place_recognition", "loop_verification", "pose_graph" (the frame
                              // loop's keyframing is the pipeline's stage "keyframes")
 

@@ -43,6 +43,8 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   double odometry_sigma_rate = 0.02;      // m per m moved, and rad per rad turned
   double odometry_sigma_floor = 0.002;    // m (and the same in rad)
   double poor_tracking_sigma_scale = 10.0;  // x the noise of an edge across frames not well tracked
+  double strain_rms_ratio = 2.0;          // a frame whose ICP residual is over this x the recent median is
+                                          // not well tracked (ResidualMonitor); 0: off
   // A loop edge's noise: its ICP's residual RMS (m; as an angle over the keyframe's mean depth), at
   // least these floors.
   double loop_sigma_translation = 0.003;  // m, floor of a loop edge's noise
