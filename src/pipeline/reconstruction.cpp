@@ -171,17 +171,21 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   const Trajectory& poses = trajectory();
   // The tracking run's statistics stay (guesses, shifts); the map and its memory are the new volume's.
   const KinFuStats tracking = m.kinfu->stats();
-  auto map = std::make_unique<KinFu>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
+  // The tracking run's map goes before the new one is made: two volumes with their world models at
+  // once were the run's peak (loop scene: 820 MiB while re-fusing, 369 MiB while tracking).
+  // If reading fails midway, the partly re-fused map is the one left (never none).
+  m.kinfu.reset();
+  m.kinfu = std::make_unique<KinFu>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
+  KinFu& map = *m.kinfu;
   std::size_t read = 0, fused = 0;
   Frame frame;
   while (read < poses.size() && next(frame)) {
     // A recording may hold frames the run never processed (dropped by the live queue): skipped.
     if (frame.timestamp < poses[read].timestamp - 1e-3) continue;
-    if (m.fused[read]) map->integrateAt(frame, poses[read].pose), ++fused;
+    if (m.fused[read]) map.integrateAt(frame, poses[read].pose), ++fused;
     ++read;
     if (progress) progress(read);
   }
-  m.kinfu = std::move(map);
   m.tracking_stats = tracking;
   m.reintegrated = true;
   return fused;
