@@ -323,3 +323,32 @@ TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
   for (const auto& f : whole.faces) b.insert(faceKey(whole, f));
   EXPECT_EQ(a, b);
 }
+
+// Fragments are judged whole across regions: a sphere that is only a few hundred faces in each region
+// it crosses stays, while two small spheres go, one inside a region and one across a seam (as the
+// whole-world cleanMesh would judge them).
+TEST(MarchingCubes, MeshByRegionJudgesFragmentsWholeAcrossSeams) {
+  const Eigen::Vector3f centre(-0.05f, 0.13f, 0.02f);
+  const SphereBricks big(centre, 0.3f, 0.01f, 0.04f);
+  // Regions of 2 bricks = 16 cm: x = 0.64 is a seam, [0.48, 0.64) x [0.32, 0.48) x [0, 0.16) one region.
+  const SphereBricks across(Eigen::Vector3f(0.64f, 0.08f, 0.08f), 0.03f, 0.01f, 0.04f);
+  const SphereBricks inside(Eigen::Vector3f(0.56f, 0.40f, 0.08f), 0.03f, 0.01f, 0.04f);
+  std::vector<BrickRef> refs = big.refs;
+  refs.insert(refs.end(), across.refs.begin(), across.refs.end());
+  refs.insert(refs.end(), inside.refs.begin(), inside.refs.end());
+  MeshCleanParams params;
+  params.max_simplify_error = 0;
+  params.max_hole_perimeter = 0;
+  params.min_component_faces = 1000;  // the big sphere has more in all, but fewer in most regions
+  params.min_component_area = 0;
+  std::size_t small_region_parts = 0;
+  marchingCubesByRegion(big.refs, 0.01f, 1, 2, [&](RegionMesh& r) { small_region_parts += r.mesh.faces.size() < 1000; });
+  ASSERT_GT(small_region_parts, 10u);
+  const RegionMeshResult r = meshByRegion(
+      [&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(refs, 0.01f, 1, 2, sink); }, params, "");
+  ASSERT_TRUE(r.report.success) << r.report.failure;
+  EXPECT_EQ(r.report.components_removed, 2u);
+  EXPECT_EQ(r.report.components_kept, 1u);
+  EXPECT_EQ(r.mesh.faces.size(), marchingCubes(big.refs, 0.01f).faces.size());
+  for (const auto& v : r.mesh.vertices) ASSERT_LT(std::fabs((v - centre).norm() - 0.3f), 0.02f);
+}

@@ -106,45 +106,17 @@ class PlyStream {
   std::size_t faces_ = 0;
 };
 
-// Connected components of the raw mesh across regions (union-find over welded vertex ids), with
-// their faces and area: cleanMesh judges fragments on the raw mesh, so must the regions.
-class RawComponents {
+// Union-find over 0..n-1 (the smaller index is the root).
+class UnionFind {
  public:
-  void add(const fusion::RegionMesh& r) {
-    const std::vector<std::uint32_t> id = ids_.add(r.mesh, r.on_seam, [&](std::size_t) {
-      parent_.push_back(std::uint32_t(parent_.size()));
-      faces_.push_back(0);
-      area_.push_back(0.f);
-    });
-    for (const auto& f : r.mesh.faces) {
-      unite(id[f[0]], id[f[1]]);
-      unite(id[f[1]], id[f[2]]);
-      const Eigen::Vector3f& a = r.mesh.vertices[f[0]];
-      ++faces_[id[f[0]]];  // tallied on a vertex, summed per component in judge()
-      area_[id[f[0]]] += 0.5f * (r.mesh.vertices[f[1]] - a).cross(r.mesh.vertices[f[2]] - a).norm();
-    }
+  std::uint32_t add() {
+    parent_.push_back(std::uint32_t(parent_.size()));
+    return parent_.back();
   }
-  // Marks the components smaller than either bound; returns how many.
-  std::size_t judge(int min_faces, double min_area) {
-    std::vector<std::uint64_t> faces(parent_.size(), 0);
-    std::vector<double> area(parent_.size(), 0.0);
-    for (std::uint32_t v = 0; v < parent_.size(); ++v) faces[find(v)] += faces_[v], area[find(v)] += area_[v];
-    small_.assign(parent_.size(), 0);
-    std::size_t n = 0;
-    for (std::uint32_t v = 0; v < parent_.size(); ++v)
-      if (find(v) == v && faces[v] > 0 &&
-          ((min_faces > 0 && faces[v] < std::uint64_t(min_faces)) || (min_area > 0 && area[v] < min_area)))
-        small_[v] = 1, ++n;
-    return n;
+  void reset(std::size_t n) {
+    parent_.resize(n);
+    for (std::uint32_t i = 0; i < n; ++i) parent_[i] = i;
   }
-  // Drops the region's faces of small components (the same region, in the same order, as add()).
-  void filter(fusion::RegionMesh& r) {
-    const std::vector<std::uint32_t> id = ids2_.add(r.mesh, r.on_seam, [](std::size_t) {});
-    auto& f = r.mesh.faces;
-    f.erase(std::remove_if(f.begin(), f.end(), [&](const auto& t) { return small_[find(id[t[0]])] != 0; }), f.end());
-  }
-
- private:
   std::uint32_t find(std::uint32_t v) {
     while (parent_[v] != v) v = parent_[v] = parent_[parent_[v]];
     return v;
@@ -153,10 +125,117 @@ class RawComponents {
     a = find(a), b = find(b);
     if (a != b) parent_[std::max(a, b)] = std::min(a, b);
   }
-  Welder ids_, ids2_;
-  std::vector<std::uint32_t> parent_, faces_;
-  std::vector<float> area_;
-  std::vector<std::uint8_t> small_;
+  std::size_t size() const { return parent_.size(); }
+
+ private:
+  std::vector<std::uint32_t> parent_;
+};
+
+// Connected components of the raw mesh across regions, with their faces and area: cleanMesh judges
+// fragments on the raw mesh, so must the regions. Inside a region components are found locally;
+// only those touching a seam are joined across regions, through their seam vertices (bit-identical
+// in the regions sharing them). Memory follows the seams, not the whole mesh: a union-find over
+// every raw vertex was the mesh stage's peak (loop scene: 6 M raw vertices, ~280 MiB).
+class RawComponents {
+ public:
+  RawComponents(int min_faces, double min_area) : min_faces_(min_faces), min_area_(min_area) {}
+
+  // Pass 1, every region in order.
+  void add(const fusion::RegionMesh& r) {
+    const Local l = local(r, true);
+    for (std::size_t c = 0; c < l.faces.size(); ++c) {
+      if (l.seam_slot[c] < 0) {
+        local_small_ += l.faces[c] > 0 && small(l.faces[c], l.area[c]);
+        continue;
+      }
+      const auto g = std::uint32_t(l.seam_slot[c]);  // tallied on one seam vertex, summed per component in judge()
+      faces_[g] += l.faces[c];
+      area_[g] += l.area[c];
+    }
+  }
+  // Marks the components that touch seams and are smaller than either bound; returns how many
+  // components are small in all.
+  std::size_t judge() {
+    std::vector<std::uint64_t> faces(seams_.size(), 0);
+    std::vector<double> area(seams_.size(), 0.0);
+    for (std::uint32_t v = 0; v < seams_.size(); ++v) faces[seams_.find(v)] += faces_[v], area[seams_.find(v)] += area_[v];
+    small_.assign(seams_.size(), 0);
+    std::size_t n = local_small_;
+    for (std::uint32_t v = 0; v < seams_.size(); ++v)
+      if (seams_.find(v) == v && faces[v] > 0 && small(faces[v], area[v])) small_[v] = 1, ++n;
+    faces_ = {};
+    area_ = {};
+    return n;
+  }
+  // Pass 2: drops the region's faces of small components.
+  void filter(fusion::RegionMesh& r) {
+    const Local l = local(r, false);
+    std::vector<std::uint8_t> drop(l.faces.size());
+    for (std::size_t c = 0; c < drop.size(); ++c)
+      drop[c] = l.seam_slot[c] < 0 ? small(l.faces[c], l.area[c]) : small_[seams_.find(std::uint32_t(l.seam_slot[c]))];
+    auto& f = r.mesh.faces;
+    f.erase(std::remove_if(f.begin(), f.end(), [&](const auto& t) { return drop[l.of_vertex[t[0]]] != 0; }), f.end());
+  }
+
+ private:
+  struct Local {
+    std::vector<std::uint32_t> of_vertex;  // vertex -> component (dense)
+    std::vector<std::uint64_t> faces;
+    std::vector<double> area;
+    std::vector<std::int64_t> seam_slot;   // per component: one of its seam vertices' slot, -1 when none
+  };
+
+  bool small(std::uint64_t faces, double area) const {
+    return (min_faces_ > 0 && faces < std::uint64_t(min_faces_)) || (min_area_ > 0 && area < min_area_);
+  }
+
+  // The region's components; in pass 1 (`first`) its seam vertices get slots and each component's
+  // seam vertices are joined, in pass 2 they are looked up.
+  Local local(const fusion::RegionMesh& r, bool first) {
+    const TriangleMesh& m = r.mesh;
+    UnionFind uf;
+    uf.reset(m.vertices.size());
+    for (const auto& f : m.faces) uf.unite(f[0], f[1]), uf.unite(f[1], f[2]);
+    Local l;
+    l.of_vertex.assign(m.vertices.size(), 0);
+    std::vector<std::int64_t> comp_of_root(m.vertices.size(), -1);
+    for (std::uint32_t v = 0; v < m.vertices.size(); ++v) {
+      std::int64_t& c = comp_of_root[uf.find(v)];
+      if (c < 0) c = std::int64_t(l.faces.size()), l.faces.push_back(0), l.area.push_back(0.0), l.seam_slot.push_back(-1);
+      l.of_vertex[v] = std::uint32_t(c);
+    }
+    for (const auto& f : m.faces) {
+      const Eigen::Vector3f& a = m.vertices[f[0]];
+      const std::uint32_t c = l.of_vertex[f[0]];
+      ++l.faces[c];
+      l.area[c] += 0.5 * double((m.vertices[f[1]] - a).cross(m.vertices[f[2]] - a).norm());
+    }
+    for (std::uint32_t v = 0; v < m.vertices.size(); ++v) {
+      if (!r.on_seam[v]) continue;
+      const std::array<float, 3> key{m.vertices[v].x(), m.vertices[v].y(), m.vertices[v].z()};
+      std::uint32_t slot;
+      if (first) {
+        const auto [it, fresh] = slot_of_.emplace(key, std::uint32_t(seams_.size()));
+        if (fresh) seams_.add(), faces_.push_back(0), area_.push_back(0.0);
+        slot = it->second;
+      } else {
+        slot = slot_of_.at(key);
+      }
+      std::int64_t& s = l.seam_slot[l.of_vertex[v]];
+      if (s < 0) s = slot;
+      else if (first) seams_.unite(std::uint32_t(s), slot);
+    }
+    return l;
+  }
+
+  int min_faces_;
+  double min_area_;
+  std::unordered_map<std::array<float, 3>, std::uint32_t, PositionHash> slot_of_;  // seam vertex -> slot
+  UnionFind seams_;                      // over slots: components joined across regions
+  std::vector<std::uint64_t> faces_;     // per slot, pass 1
+  std::vector<double> area_;
+  std::vector<std::uint8_t> small_;      // per root slot, after judge()
+  std::size_t local_small_ = 0;          // small components touching no seam
 };
 
 }  // namespace
@@ -177,9 +256,9 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   MeshCleanParams region_params = params;
   std::unique_ptr<RawComponents> fragments;
   if (params.min_component_faces > 0 || params.min_component_area > 0) {
-    fragments = std::make_unique<RawComponents>();
+    fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
     regions([&](fusion::RegionMesh& r) { fragments->add(r); });
-    out.report.components_removed = fragments->judge(params.min_component_faces, params.min_component_area);
+    out.report.components_removed = fragments->judge();
     region_params.min_component_faces = 0;
     region_params.min_component_area = 0;
   }
