@@ -7,6 +7,7 @@
 //   longrun <tum_dir|synthetic:scene> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] [--config f.ini]
 //           [--json out.json]
 // Built by CMake as build/bin/longrun (a benchmark, not a test: run it by hand, see bench/README.md).
+#include <malloc.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -35,6 +36,13 @@ double peakRssMiB() {
   rusage u{};
   ::getrusage(RUSAGE_SELF, &u);
   return u.ru_maxrss / 1024.0;  // KiB on Linux
+}
+
+// The heap as glibc sees it (all arenas): in use by the program, and free but still held (which
+// counts in RSS once touched: fragmentation, not data).
+std::pair<double, double> heapInUseAndFreeMiB() {
+  const struct mallinfo2 m = ::mallinfo2();
+  return {double(m.uordblks + m.hblkhd) / (1024.0 * 1024.0), double(m.fordblks) / (1024.0 * 1024.0)};
 }
 
 double currentRssMiB() {
@@ -106,7 +114,12 @@ int body(int argc, char** argv) {
       const std::size_t done_in_window = (k + 1) % every == 0 ? every : (k + 1) % every;
       t_last = now;
       const KinFuStats ks = rec.fusionStats();
-      nlohmann::json c = {{"frames", k + 1},
+      const auto [heap_used, heap_free] = heapInUseAndFreeMiB();
+      nlohmann::json c = {{"heap_in_use_mib", heap_used},
+                          {"heap_free_held_mib", heap_free},
+                          {"keyframes", rec.loopCloser() ? rec.loopCloser()->storeStats().keyframes : 0},
+                          {"keyframes_in_ram", rec.loopCloser() ? rec.loopCloser()->storeStats().in_ram : 0},
+                          {"frames", k + 1},
                           {"path_m", path_m},
                           {"ms_per_frame_window", 1000.0 * dt / done_in_window},
                           {"world_model_cache_mib", ks.world.ram_bytes / (1024.0 * 1024.0)},
