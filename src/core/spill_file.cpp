@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <cerrno>
 #include <cstring>
@@ -11,6 +12,21 @@
 #include "vofusion/core/errors.h"
 
 namespace vofusion {
+
+std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size) {
+  uLongf len = compressBound(uLong(size));
+  std::vector<std::uint8_t> out(len);
+  if (size > 0 && compress2(out.data(), &len, static_cast<const Bytef*>(data), uLong(size), 1) != Z_OK)
+    throw std::runtime_error("zlib: cannot compress");
+  out.resize(size > 0 ? len : 0);
+  return out;
+}
+
+bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
+  if (size == 0) return data_size == 0;
+  uLongf len = uLong(size);
+  return uncompress(static_cast<Bytef*>(out), &len, data, uLong(data_size)) == Z_OK && len == size;
+}
 
 SpillFile::SpillFile(std::string dir, std::string what) : dir_(std::move(dir)), what_(std::move(what)) {}
 

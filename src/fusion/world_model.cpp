@@ -1,7 +1,5 @@
 #include "vofusion/fusion/world_model.h"
 
-#include <zlib.h>
-
 #include <chrono>
 #include <cstring>
 #include <stdexcept>
@@ -22,18 +20,10 @@ double since(std::chrono::steady_clock::time_point t0) {
 }
 }  // namespace
 
-std::vector<std::uint8_t> compressBrick(const Brick& b) {
-  uLongf len = compressBound(kVoxelBytes);
-  std::vector<std::uint8_t> out(len);
-  if (compress2(out.data(), &len, reinterpret_cast<const Bytef*>(b.voxels), kVoxelBytes, 1) != Z_OK)
-    throw std::runtime_error("zlib: cannot compress a TSDF brick");
-  out.resize(len);
-  return out;
-}
+std::vector<std::uint8_t> compressBrick(const Brick& b) { return zlibCompress(b.voxels, kVoxelBytes); }
 
 bool decompressBrick(const std::uint8_t* data, std::size_t size, Brick& b) {
-  uLongf len = kVoxelBytes;
-  return uncompress(reinterpret_cast<Bytef*>(b.voxels), &len, data, size) == Z_OK && len == kVoxelBytes;
+  return zlibUncompress(data, size, b.voxels, kVoxelBytes);
 }
 
 std::uint64_t WorldModel::key(const Eigen::Vector3i& c) {

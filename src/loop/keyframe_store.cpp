@@ -1,7 +1,5 @@
 #include "vofusion/loop/keyframe_store.h"
 
-#include <zlib.h>
-
 #include <cstring>
 #include <stdexcept>
 
@@ -46,11 +44,7 @@ std::size_t dataBytes(const Keyframe& k) {
 std::vector<std::uint8_t> encodeKeyframeData(const Keyframe& k) {
   std::vector<std::uint8_t> out;
   const cv::Mat depth = k.depth.isContinuous() ? k.depth : k.depth.clone();
-  const std::size_t raw = depth.total() * depth.elemSize();
-  uLongf zlen = compressBound(raw);
-  std::vector<std::uint8_t> z(zlen);
-  if (raw > 0 && compress2(z.data(), &zlen, depth.data, raw, 1) != Z_OK) throw std::runtime_error("zlib: cannot compress a keyframe's depth");
-  z.resize(raw > 0 ? zlen : 0);
+  const std::vector<std::uint8_t> z = zlibCompress(depth.data, depth.total() * depth.elemSize());
   put<std::int32_t>(out, depth.rows);
   put<std::int32_t>(out, depth.cols);
   put<std::uint64_t>(out, z.size());
@@ -75,8 +69,7 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
   const std::uint8_t* z = r.take(zlen);
   if (rows < 0 || cols < 0) throw std::runtime_error("corrupt record in the keyframes' spill file");
   k.depth.create(rows, cols, CV_16U);
-  uLongf raw = k.depth.total() * k.depth.elemSize();
-  if (raw > 0 && (uncompress(k.depth.data, &raw, z, zlen) != Z_OK || raw != k.depth.total() * k.depth.elemSize()))
+  if (!zlibUncompress(z, zlen, k.depth.data, k.depth.total() * k.depth.elemSize()))
     throw std::runtime_error("corrupt depth in the keyframes' spill file");
   k.features.reset();
   if (r.get<std::uint8_t>() == 0) return;
@@ -120,7 +113,6 @@ KeyframeStoreStats KeyframeStore::stats() const {
   KeyframeStoreStats s;
   s.keyframes = keyframes_.size();
   s.in_ram = keyframes_.size() - spilled_;
-  s.ram_bytes = ram_bytes_;
   s.spilled = spilled_;
   s.reloaded = reloaded_;
   s.spill_file_bytes = spill_.bytes();

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <deque>
 #include <memory>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
@@ -70,6 +71,7 @@ class ResidualMonitor {
  private:
   double ratio_;
   std::deque<double> recent_;
+  std::vector<double> sorted_;  // scratch for the median (no allocation per frame)
 };
 
 }  // namespace vofusion::loop

@@ -19,7 +19,6 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k);
 
 struct KeyframeStoreStats {
   std::size_t keyframes = 0, in_ram = 0;  // in_ram: keyframes whose features and depth are in RAM
-  std::size_t ram_bytes = 0;              // their features and depth
   std::size_t spilled = 0, reloaded = 0;
   std::uint64_t spill_file_bytes = 0;
 };
@@ -30,7 +29,6 @@ class KeyframeStore {
   // The next keyframe (ids 0, 1, 2, ... in order); the oldest ones in RAM beyond the budget are spilled.
   void add(Keyframe k);
   std::size_t size() const { return keyframes_.size(); }
-  bool empty() const { return keyframes_.empty(); }
   // The stored keyframe: its features and depth are null / empty once spilled (load() has them).
   const Keyframe& at(std::size_t id) const { return keyframes_.at(id); }
   const Keyframe& back() const { return keyframes_.back(); }
