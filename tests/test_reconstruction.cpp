@@ -106,3 +106,32 @@ TEST(Reconstruction, AFrameWhoseOdometryFailsLosesNoMotion) {
     EXPECT_LT((end.translation() - clean.trajectory.back().pose.translation()).norm(), 0.01) << toString(mode);
   }
 }
+
+// Once meshed the map can go (RunRecorder does so before the whole-mesh repair and the pictures):
+// the trajectory and the fusion statistics stay, what needs the map says so instead of crashing.
+TEST(Reconstruction, ReleasingTheMapKeepsTrajectoryAndStatistics) {
+  const sim::SyntheticSequence seq(smallRoom());
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.write("kinfu", "volume_voxels", 256);
+  cfg.write("kinfu", "voxel_size", 0.01);
+  cfg.write("kinfu", "tracking_downsample", 1);
+  cfg.write("odometry", "keypoints", "star");
+  Reconstruction rec(cfg, TrackingMode::Joint);
+  for (std::size_t i = 0; i < 4; ++i) rec.process(seq.render(i));
+  rec.finish();
+  const KinFuStats before = rec.fusionStats();
+  const Trajectory poses = rec.trajectory();
+  ASSERT_GT(before.bricks_in_volume, 0u);
+  ASSERT_GT(rec.extractMesh().faces.size(), 1000u);
+  EXPECT_FALSE(rec.mapReleased());
+
+  rec.releaseMap();
+  EXPECT_TRUE(rec.mapReleased());
+  EXPECT_EQ(rec.fusionStats().bricks_in_volume, before.bricks_in_volume);
+  EXPECT_EQ(rec.fusionStats().memory_bytes, before.memory_bytes);
+  ASSERT_EQ(rec.trajectory().size(), poses.size());
+  EXPECT_EQ(rec.trajectory().back().pose.asVectorVal(), poses.back().pose.asVectorVal());
+  EXPECT_THROW(rec.extractMesh(), std::logic_error);
+  EXPECT_THROW(rec.saveVolume(testing::TempDir() + "/released.vfvol"), std::logic_error);
+  rec.releaseMap();  // twice is harmless
+}

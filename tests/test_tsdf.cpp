@@ -257,7 +257,11 @@ TEST(MarchingCubes, RegionByRegionGivesTheWholeWorldMeshAndClosedSeams) {
   std::multiset<std::array<Key, 3>> region_faces;
   std::map<Key, std::vector<std::uint8_t>> seam_flags;  // per position, its flag in each region having it
   int regions = 0;
+  std::size_t last_ordinal = 0, of = 0;
   marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, [&](RegionMesh& r) {
+    if (regions > 0) EXPECT_GT(r.ordinal, last_ordinal);  // in order, counting regions with bricks
+    EXPECT_LT(r.ordinal, r.regions);
+    last_ordinal = r.ordinal, of = r.regions;
     ++regions;
     ASSERT_EQ(r.on_seam.size(), r.mesh.vertices.size());
     ASSERT_EQ(r.mesh.colors.size(), r.mesh.vertices.size());
@@ -265,6 +269,7 @@ TEST(MarchingCubes, RegionByRegionGivesTheWholeWorldMeshAndClosedSeams) {
     for (std::size_t v = 0; v < r.mesh.vertices.size(); ++v) seam_flags[keyOf(r.mesh.vertices[v])].push_back(r.on_seam[v]);
   });
   EXPECT_GT(regions, 20);
+  EXPECT_GE(of, std::size_t(regions));
 
   // The same faces on the same (bit-identical) vertices, each exactly once.
   std::multiset<std::array<Key, 3>> whole_faces;
@@ -298,10 +303,15 @@ TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
   MeshCleanParams params;
   params.max_simplify_error = 0.003;
   const std::string raw_path = testing::TempDir() + "/mesh_by_region_raw.ply";
+  std::map<int, std::size_t> told;  // per pass: regions reported
+  std::size_t told_of = 0;
   const RegionMeshResult r = meshByRegion(
       [&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); }, params,
-      raw_path);
+      raw_path, [&](int pass, std::size_t done, std::size_t of) { told[pass] = done, told_of = of; });
   ASSERT_TRUE(r.report.success) << r.report.failure;
+  EXPECT_EQ(told.count(1), 1u);  // fragments judged: a first pass (min_component_faces is on by default)
+  EXPECT_GE(told[2], r.regions);  // ordinal + 1 of the last region with faces
+  EXPECT_LE(told[2], told_of);
   EXPECT_GT(r.regions, 20u);
   EXPECT_EQ(r.raw_faces, whole.faces.size());
   EXPECT_EQ(r.raw_vertices, whole.vertices.size());

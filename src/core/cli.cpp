@@ -1,12 +1,11 @@
 #include "vofusion/core/cli.h"
 
-#include <malloc.h>
-
 #include <cmath>
 #include <cstdio>
 #include <exception>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/heap.h"
 
 namespace vofusion {
 
@@ -115,11 +114,7 @@ void report(const char* app_name, const std::exception& e) {
 }  // namespace
 
 int runApp(const char* app_name, int (*body)(int, char**), int argc, char** argv) {
-  // Frame-sized buffers (MBs) are freed and allocated again every frame. By default glibc maps each
-  // one fresh and returns it to the kernel on free, which faults it back in page by page: 1.2 M page
-  // faults, 2 s of kernel time in a 300-frame paper run. Kept in the heap, they are reused.
-  mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's maximum
-  mallopt(M_TRIM_THRESHOLD, 512 << 20);
+  keepFreedHeapForFrames();
   try {
     return body(argc, argv);
   } catch (const InputError& e) {

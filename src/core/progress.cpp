@@ -6,9 +6,9 @@
 
 namespace vofusion {
 
-Progress::Progress(std::string label, std::size_t total)
-    : label_(std::move(label)), total_(total), start_(std::chrono::steady_clock::now()),
-      last_print_(start_ - std::chrono::hours(1)), tty_(::isatty(STDERR_FILENO) != 0) {}
+Progress::Progress(std::string label, std::size_t total, std::string unit)
+    : label_(std::move(label)), unit_(std::move(unit)), rate_unit_(unit_ == "frames" ? "fps" : unit_ + "/s"),
+      total_(total), start_(std::chrono::steady_clock::now()), last_print_(start_ - std::chrono::hours(1)), tty_(::isatty(STDERR_FILENO) != 0) {}
 
 double Progress::elapsedSeconds() const {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
@@ -37,17 +37,17 @@ void Progress::update(std::size_t done, const std::string& extra) {
   std::string eta = "?";
   if (total_ > 0 && rate > 0) eta = formatDuration((total_ - std::min(done, total_)) / rate);
   if (total_ > 0)
-    std::fprintf(stderr, "%s%s %zu/%zu frames  %.1f fps  ETA %s  %s%s", tty_ ? "\r\033[K" : "",
-                 label_.c_str(), done, total_, rate, eta.c_str(), extra.c_str(), tty_ ? "" : "\n");
+    std::fprintf(stderr, "%s%s %zu/%zu %s  %.1f %s  ETA %s  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done,
+                 total_, unit_.c_str(), rate, rate_unit_.c_str(), eta.c_str(), extra.c_str(), tty_ ? "" : "\n");
   else
-    std::fprintf(stderr, "%s%s %zu frames  %.1f fps  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done,
-                 rate, extra.c_str(), tty_ ? "" : "\n");
+    std::fprintf(stderr, "%s%s %zu %s  %.1f %s  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done, unit_.c_str(),
+                 rate, rate_unit_.c_str(), extra.c_str(), tty_ ? "" : "\n");
   std::fflush(stderr);
 }
 
 void Progress::finish(const std::string& extra) {
-  std::fprintf(stderr, "%s%s %zu frames in %s (%.1f fps)  %s\n", tty_ ? "\r\033[K" : "", label_.c_str(), done_,
-               formatDuration(elapsedSeconds()).c_str(), fps(), extra.c_str());
+  std::fprintf(stderr, "%s%s %zu %s in %s (%.1f %s)  %s\n", tty_ ? "\r\033[K" : "", label_.c_str(), done_,
+               unit_.c_str(), formatDuration(elapsedSeconds()).c_str(), fps(), rate_unit_.c_str(), extra.c_str());
 }
 
 }  // namespace vofusion

@@ -252,6 +252,7 @@ void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, c
     const Eigen::Vector3i r = regionOf(c, region_bricks);
     regions[{r.x(), r.y(), r.z()}].push_back(c);
   }
+  std::size_t ordinal = 0;
   for (auto& [region, own] : regions) {
     std::sort(own.begin(), own.end(), [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
       return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
@@ -271,6 +272,8 @@ void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, c
     for (std::size_t i = 0; i < list.size(); ++i) refs[i] = {list[i], fetch(list[i], scratch[i])};
     RegionMesh r;
     r.region = Eigen::Vector3i(region[0], region[1], region[2]);
+    r.ordinal = ordinal++;
+    r.regions = regions.size();
     r.mesh = extract(refs, own.size(), voxel_size, min_weight, region_bricks, &r.on_seam);
     if (!r.mesh.empty()) sink(r);
   }

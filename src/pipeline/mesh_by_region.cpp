@@ -240,7 +240,11 @@ class RawComponents {
 
 }  // namespace
 
-RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply) {
+RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
+                              const MeshProgress& progress) {
+  const auto told = [&](int pass, const fusion::RegionMesh& r) {
+    if (progress) progress(pass, r.ordinal + 1, r.regions);
+  };
   RegionMeshResult out;
   std::unique_ptr<PlyStream> raw;
   if (!raw_ply.empty()) raw = std::make_unique<PlyStream>(raw_ply);
@@ -257,7 +261,10 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   std::unique_ptr<RawComponents> fragments;
   if (params.min_component_faces > 0 || params.min_component_area > 0) {
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
-    regions([&](fusion::RegionMesh& r) { fragments->add(r); });
+    regions([&](fusion::RegionMesh& r) {
+      fragments->add(r);
+      told(1, r);
+    });
     out.report.components_removed = fragments->judge();
     region_params.min_component_faces = 0;
     region_params.min_component_area = 0;
@@ -286,6 +293,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
       if (!r.mesh.colors.empty()) merged.colors.push_back(r.mesh.colors[v]);
     });
     for (const auto& f : r.mesh.faces) merged.faces.push_back({index[f[0]], index[f[1]], index[f[2]]});
+    told(2, r);
   });
   if (merged.colors.size() != merged.vertices.size()) merged.colors.clear();
   if (simp.distance.samples) simp.distance.mean = distance_sum / double(simp.distance.samples);

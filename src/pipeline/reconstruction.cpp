@@ -45,6 +45,7 @@ struct Reconstruction::Impl {
   double max_correction = 0.0;              // m, largest tracked -> optimised pose change (finish())
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
+  KinFuStats released_stats;                // fusionStats() when releaseMap() freed the map
   std::vector<bool> fused;                  // per frame: fused into the map during tracking
   StageTimes times;
   std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
@@ -56,6 +57,10 @@ struct Reconstruction::Impl {
   FusionResult fusing_result;
   Frame fusing_frame;
 
+  KinFu& map() const {
+    if (!kinfu) throw std::logic_error("Reconstruction: the map was released (releaseMap)");
+    return *kinfu;
+  }
   void waitFusion() {
     if (!fusing_pending) return;
     fusing.wait();  // rethrows what fuse() threw
@@ -194,21 +199,27 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
 bool Reconstruction::reintegrated() const { return impl_->reintegrated; }
 void Reconstruction::saveVolume(const std::string& path) const {
   impl_->waitFusion();
-  impl_->kinfu->save(path);
+  impl_->map().save(path);
 }
-void Reconstruction::resumeVolume(const std::string& path) { impl_->kinfu->resume(path); }
+void Reconstruction::resumeVolume(const std::string& path) { impl_->map().resume(path); }
 TriangleMesh Reconstruction::extractMesh() const {
   impl_->waitFusion();
-  return impl_->kinfu->extractMesh();
+  return impl_->map().extractMesh();
 }
 void Reconstruction::extractMeshByRegion(int region_bricks, const std::function<void(fusion::RegionMesh&)>& sink) const {
   impl_->waitFusion();
-  impl_->kinfu->volume().extractMeshByRegion(region_bricks, sink);
+  impl_->map().volume().extractMeshByRegion(region_bricks, sink);
 }
 cv::Mat Reconstruction::renderView(const CameraIntrinsics& cam) const {
   impl_->waitFusion();
-  return impl_->kinfu->renderView(impl_->kinfu->pose(), cam);
+  return impl_->map().renderView(impl_->map().pose(), cam);
 }
+void Reconstruction::releaseMap() {
+  if (!impl_->kinfu) return;
+  impl_->released_stats = fusionStats();
+  impl_->kinfu.reset();
+}
+bool Reconstruction::mapReleased() const { return !impl_->kinfu; }
 const StageTimes& Reconstruction::totalTimes() const {
   impl_->waitFusion();
   return impl_->times;
@@ -221,6 +232,7 @@ std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
 KinFuStats Reconstruction::fusionStats() const {
   impl_->waitFusion();
+  if (!impl_->kinfu) return impl_->released_stats;
   if (!impl_->reintegrated) return impl_->kinfu->stats();
   KinFuStats s = impl_->tracking_stats;
   const KinFuStats map = impl_->kinfu->stats();

@@ -17,10 +17,12 @@
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/heap.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/pipeline/mesh_by_region.h"
 #include "vofusion/scene/scene_export.h"
 
@@ -240,7 +242,7 @@ void RunRecorder::add(const Frame& frame, const FrameReport& report) {
   if (impl_->rawlog) impl_->rawlog->push(frame, report);
 }
 
-json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FILE* log) {
+json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log) {
   Impl& m = *impl_;
   const OutputParams& p = m.params;
   // All or nothing across files: everything is written into a staging folder and moved into place
@@ -340,6 +342,7 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     wrote("trajectory.png", "camera path");
   }
 
+  returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
   TriangleMesh mesh;
   std::string streamed_raw;  // logged after mesh.ply, whose line then carries the meshing time
   // Region by region unless the unsimplified whole (mesh_full.ply) is asked for.
@@ -348,7 +351,19 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     const auto source = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
       rec.extractMeshByRegion(m.mesh_params.region_bricks, sink);
     };
-    RegionMeshResult r = meshByRegion(source, m.mesh_params, p.save_raw_mesh ? staged("mesh_raw.ply") : "");
+    std::unique_ptr<Progress> shown;
+    int shown_pass = 0;
+    const auto progress = [&](int pass, std::size_t done, std::size_t regions) {
+      if (pass != shown_pass) {
+        if (shown) shown->finish();
+        shown = std::make_unique<Progress>(pass == 1 ? "meshing [finding fragments]" : "meshing [repair, simplify]",
+                                           regions, "regions");
+        shown_pass = pass;
+      }
+      shown->update(done);
+    };
+    RegionMeshResult r = meshByRegion(source, m.mesh_params, p.save_raw_mesh ? staged("mesh_raw.ply") : "", progress);
+    if (shown) shown->finish();
     mesh = std::move(r.mesh);
     s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
     if (p.save_raw_mesh) streamed_raw = std::to_string(r.raw_faces) + " faces, streamed region by region";
@@ -358,6 +373,9 @@ json RunRecorder::finish(const Reconstruction& rec, const RunInfo& info, std::FI
     mesh = rec.extractMesh();
     s["mesh_raw"] = meshJson(mesh);
   }
+  // Meshed: the map's memory goes before the whole-mesh repair, the scene and the pictures.
+  rec.releaseMap();
+  returnFreedHeap();
   if (!by_region && p.save_raw_mesh) {
     writePly(staged("mesh_raw.ply"), mesh);
     wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");

@@ -10,14 +10,15 @@ class Progress {
  public:
   // total = 0 when unknown (no ETA). Output goes to stderr, redrawn at most every 0.2 s
   // (on a terminal with '\r', otherwise one line per ~2 s so logs stay short).
-  Progress(std::string label, std::size_t total);
+  // `unit` names what is counted ("frames": the rate is shown as fps, else as <unit>/s).
+  Progress(std::string label, std::size_t total, std::string unit = "frames");
   void update(std::size_t done, const std::string& extra = "");
   void finish(const std::string& extra = "");
   double elapsedSeconds() const;
   double fps() const;
 
  private:
-  std::string label_;
+  std::string label_, unit_, rate_unit_;
   std::size_t total_, done_ = 0;
   std::chrono::steady_clock::time_point start_, last_print_;
   bool tty_;

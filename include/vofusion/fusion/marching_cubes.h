@@ -19,6 +19,7 @@ struct RegionMesh {
   Eigen::Vector3i region;             // brick coordinates / region_bricks (rounded down)
   TriangleMesh mesh;                  // normals from this region's faces only
   std::vector<std::uint8_t> on_seam;  // per vertex, 1: a neighbouring region's mesh has it too
+  std::size_t ordinal = 0, regions = 0;  // this is region `ordinal` (0-based) of `regions` with bricks
 };
 
 // The same mesh as marchingCubes, one block of region_bricks^3 bricks at a time (so the whole mesh

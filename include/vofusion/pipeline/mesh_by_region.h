@@ -21,10 +21,14 @@ struct RegionMeshResult {
   std::size_t raw_vertices = 0, raw_faces = 0;  // the marching-cubes mesh (seam vertices once)
 };
 
+// Told after each region: pass 1 finds fragments (marching cubes only), pass 2 simplifies.
+using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t regions)>;
+
 // raw_ply non-empty: the raw marching-cubes mesh is also streamed there (vertices shared across
 // seams, welded by exact position: seam vertices that coincide, crossings exactly at a voxel, become
 // one; a seam vertex's normal is its first region's). Throws on I/O errors; a region CGAL fails on
 // is kept unsimplified (counted in report.failure).
-RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "");
+RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "",
+                              const MeshProgress& progress = {});
 
 }  // namespace vofusion

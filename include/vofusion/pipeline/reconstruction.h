@@ -80,6 +80,11 @@ class Reconstruction {
   // The same mesh one region of region_bricks^3 bricks at a time (fusion::marchingCubesByRegion).
   void extractMeshByRegion(int region_bricks, const std::function<void(fusion::RegionMesh&)>& sink) const;
   cv::Mat renderView(const CameraIntrinsics& cam) const;  // shaded ray-cast from the current pose
+  // Once meshed: frees the map (volume, world model and its spill file) so that what comes after
+  // (whole-mesh repair, scene, pictures) does not add to it. Trajectories and statistics stay
+  // (fusionStats() as at release); the calls above that need the map throw std::logic_error.
+  void releaseMap();
+  bool mapReleased() const;
   const StageTimes& totalTimes() const;  // accumulated over all frames, plus "total"
   std::size_t framesProcessed() const;
   std::size_t fallbacks() const;         // frames whose pose came from the odometry fallback

@@ -51,8 +51,8 @@ class RunRecorder {
   // Queues the frame for poses.rawlog (written by a background thread) and keeps its ground truth.
   void add(const Frame& frame, const FrameReport& report);
   // Writes every output and returns the summary that went into summary.json. `log` gets one line
-  // per file written (may be null).
-  nlohmann::json finish(const Reconstruction& rec, const RunInfo& info, std::FILE* log = stderr);
+  // per file written (may be null). Frees rec's map once it is meshed (Reconstruction::releaseMap).
+  nlohmann::json finish(Reconstruction& rec, const RunInfo& info, std::FILE* log = stderr);
 
  private:
   struct Impl;

@@ -1,0 +1,16 @@
+#pragma once
+// glibc heap settings for the two phases of a run. While frames stream, frame-sized buffers (MBs)
+// are freed and allocated again every frame: kept in the heap they are reused instead of being
+// mapped fresh and faulted in page by page (1.2 M page faults, 2 s of kernel time in a 300-frame
+// run). Once the frames are done, meshing and CGAL allocate hundreds of MiB one region at a time:
+// kept in the heap, what one region freed stays counted in the process's RSS through the rest.
+
+namespace vofusion {
+
+// For the frame loop (runApp calls it): large buffers from the heap, freed memory kept.
+void keepFreedHeapForFrames();
+// After the frame loop: glibc's defaults again (large blocks mapped and unmapped, the heap's top
+// trimmed) and the free memory held so far returned to the kernel now.
+void returnFreedHeap();
+
+}  // namespace vofusion
