@@ -144,6 +144,8 @@ class RawComponents {
   void add(const fusion::RegionMesh& r) {
     const Local l = local(r, true);
     for (std::size_t c = 0; c < l.faces.size(); ++c) {
+      total_faces_ += l.faces[c];
+      total_area_ += l.area[c];
       if (l.seam_slot[c] < 0) {
         local_small_ += l.faces[c] > 0 && small(l.faces[c], l.area[c]);
         continue;
@@ -153,6 +155,8 @@ class RawComponents {
       area_[g] += l.area[c];
     }
   }
+  // Mean area of a raw face (after pass 1).
+  double meanFaceArea() const { return total_faces_ ? total_area_ / double(total_faces_) : 0.0; }
   // Marks the components that touch seams and are smaller than either bound; returns how many
   // components are small in all.
   std::size_t judge() {
@@ -236,6 +240,8 @@ class RawComponents {
   std::vector<double> area_;
   std::vector<std::uint8_t> small_;      // per root slot, after judge()
   std::size_t local_small_ = 0;          // small components touching no seam
+  std::uint64_t total_faces_ = 0;        // pass 1, all regions
+  double total_area_ = 0.0;
 };
 
 }  // namespace
@@ -314,8 +320,14 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   rest.max_simplify_error = 0;
   rest.target_faces = 0;
   rest.target_edge_length = 0;
-  rest.min_component_faces = 0;  // judged on the raw mesh in pass 1
-  rest.min_component_area = 0;
+  rest.min_component_faces = 0;  // judged on the raw mesh in pass 1...
+  rest.min_component_area = params.min_component_area;
+  // ...but a region's repair can cut a sliver off a kept component where it meets a seam (the
+  // sliver's other side, in the next region, was a few degenerate or non-manifold faces): pieces
+  // with less area than half of min_component_faces raw faces (mean raw face area) go too. Area,
+  // not faces: the welded mesh is simplified.
+  if (fragments && params.min_component_faces > 0)
+    rest.min_component_area = std::max(rest.min_component_area, 0.5 * params.min_component_faces * fragments->meanFaceArea());
   const MeshSimplification regional = simp;
   const std::size_t removed = out.report.components_removed;
   if (!merged.empty()) out.report = cleanMesh(merged, rest);
