@@ -150,6 +150,45 @@ TEST(Scene, CullsTheSideFacingAwayFromTheCameras) {
   EXPECT_EQ(cull(mesh, Trajectory{}), mrpt::opengl::TCullFace::NONE);
 }
 
+// mesh.png looks in from above: the ceiling is left out (seen from above only its culled back side
+// and a few noisy faces would show, as specks), walls and floor stay.
+TEST(Scene, PictureLeavesOutTheCeilingOnly) {
+  TriangleMesh room = test::boxRoom(4, 3, 2.5, 6);  // floor z = 0, walls up to 2.5 m, cameras at 1.4 m
+  const auto base = std::uint32_t(room.vertices.size());  // and a ceiling at 2.5 m, facing down
+  for (int j = 0; j <= 6; ++j)
+    for (int i = 0; i <= 6; ++i) room.vertices.emplace_back(-2.f + 4.f * float(j) / 6, -1.5f + 3.f * float(i) / 6, 2.5f);
+  room.colors.resize(room.vertices.size(), room.colors.front());
+  for (std::uint32_t j = 0; j < 6; ++j)
+    for (std::uint32_t i = 0; i < 6; ++i) {
+      const std::uint32_t a = base + j * 7 + i, b = a + 1, c = a + 7, d = c + 1;
+      room.faces.push_back({a, b, d});
+      room.faces.push_back({a, d, c});
+    }
+  const auto top = [](const TriangleMesh& m, const std::array<std::uint32_t, 3>& f) {
+    return std::max({m.vertices[f[0]].z(), m.vertices[f[1]].z(), m.vertices[f[2]].z()});
+  };
+  const auto bottom = [](const TriangleMesh& m, const std::array<std::uint32_t, 3>& f) {
+    return std::min({m.vertices[f[0]].z(), m.vertices[f[1]].z(), m.vertices[f[2]].z()});
+  };
+  const TriangleMesh shown = withoutCeiling(room, roomPath(20), CPose3D());
+  std::size_t low = 0, ceiling = 0;
+  for (const auto& f : room.faces) low += top(room, f) < 2.0f, ceiling += bottom(room, f) > 2.49f;
+  ASSERT_GT(ceiling, 10u);
+  std::size_t shown_low = 0;
+  for (const auto& f : shown.faces) {
+    EXPECT_LT(top(shown, f), 2.45f);
+    shown_low += top(shown, f) < 2.0f;
+  }
+  EXPECT_EQ(shown_low, low);  // everything below 2 m stays
+  // No path, or no ceiling above the cameras: nothing is left out.
+  EXPECT_EQ(withoutCeiling(room, Trajectory{}, CPose3D()).faces.size(), room.faces.size());
+  TriangleMesh open_top = room;
+  open_top.faces.clear();
+  for (const auto& f : room.faces)
+    if (bottom(room, f) < 2.49f) open_top.faces.push_back(f);
+  EXPECT_EQ(withoutCeiling(open_top, roomPath(20), CPose3D()).faces.size(), open_top.faces.size());
+}
+
 TEST(Scene, UnwritablePathIsAnInputError) {
   EXPECT_THROW(exportScene("/nonexistent-dir/x/scene.3Dscene", test::boxRoom(), roomPath(3), nullptr, CameraIntrinsics{}),
                InputError);

@@ -1,6 +1,7 @@
 // Off-screen rendering of the mesh with MRPT's CFBORender (EGL; works without a display).
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -14,6 +15,41 @@
 
 namespace vofusion {
 
+// The picture looks in from above, so a ceiling goes, as in a dollhouse view. Drawn from above it
+// shows only its back side, which the scene culls, and what is left (faces whose normals noise
+// turned up, the fringe where it meets the walls) shows as specks over the room. The ceiling: the
+// height above the highest camera where the most downward-facing area lies (5 cm bins), if that is
+// at least 0.5 m^2; everything from 10 cm below it up is left out of the picture.
+TriangleMesh withoutCeiling(const TriangleMesh& mesh, const Trajectory& path, const mrpt::poses::CPose3D& up) {
+  if (path.empty() || mesh.faces.empty()) return mesh;
+  const Eigen::Matrix3d R = up.getRotationMatrix().asEigen();
+  const Eigen::Vector3d z = R.row(2).transpose();  // the display's up axis in the map's frame
+  double top = -1e30;
+  for (const auto& p : path) top = std::max(top, z.dot(Eigen::Vector3d(p.pose.x(), p.pose.y(), p.pose.z())));
+  constexpr double kBin = 0.05;
+  std::map<long, double> down_area;  // per height bin above the cameras
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3d a = mesh.vertices[f[0]].cast<double>(), b = mesh.vertices[f[1]].cast<double>(),
+                          c = mesh.vertices[f[2]].cast<double>();
+    const Eigen::Vector3d n = (b - a).cross(c - a);  // |n| = twice the area
+    const double h = z.dot(a + b + c) / 3;
+    if (h > top && z.dot(n) < -0.7 * n.norm()) down_area[std::lround(std::floor(h / kBin))] += 0.5 * n.norm();
+  }
+  const auto ceiling = std::max_element(down_area.begin(), down_area.end(),
+                                        [](const auto& x, const auto& y) { return x.second < y.second; });
+  if (ceiling == down_area.end() || ceiling->second < 0.5) return mesh;
+  const double cut = double(ceiling->first) * kBin - 0.1;
+  TriangleMesh out = mesh;
+  out.faces.clear();
+  for (const auto& f : mesh.faces) {
+    bool below = true;
+    for (std::uint32_t i : f) below = below && z.dot(mesh.vertices[i].cast<double>()) < cut;
+    if (below) out.faces.push_back(f);
+  }
+  return out;
+}
+
+
 void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width, int height,
                    const std::optional<Eigen::Vector3d>& up_vector) {
   if (width < 16 || height < 16 || width > 8192 || height > 8192)
@@ -23,12 +59,13 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   SceneOptions opt;
   opt.frustum_every_k = 0;
   opt.up_vector = up_vector;
-  const auto scene = buildScene(mesh, traj, nullptr, CameraIntrinsics{}, opt);
-  scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
-
   // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
   // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
   const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up, opt.up_vector);
+  const TriangleMesh shown = withoutCeiling(mesh, traj, up);
+  const auto scene = buildScene(shown, traj, nullptr, CameraIntrinsics{}, opt);
+  scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
+
   // Frame the bulk of the mesh (2nd to 98th percentile per axis), not its stray fragments.
   std::vector<double> axis[3];
   const auto add = [&](double x, double y, double z) {
