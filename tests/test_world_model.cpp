@@ -3,10 +3,13 @@
 #include <cstring>
 #include <fstream>
 #include <random>
+#include <set>
+#include <unordered_map>
 #include <sstream>
 
 #include "support.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/fusion/brick_index.h"
 #include "vofusion/fusion/kinfu.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/tsdf_volume.h"
@@ -79,6 +82,40 @@ double maxNearest(const TriangleMesh& a, const TriangleMesh& b, float cell) {
 }
 
 }  // namespace
+
+// The compact index of bricks on disk answers as std::unordered_map does, through many merges and
+// erasures (keys revisited, as bricks leave and re-enter the volume).
+TEST(WorldModel, BrickIndexAnswersAsAnUnorderedMap) {
+  BrickIndex index;
+  std::unordered_map<std::uint64_t, std::uint64_t> reference;  // key -> record offset
+  std::mt19937_64 rng(7);
+  std::uniform_int_distribution<std::uint64_t> key(0, 30000), op(0, 9);
+  for (int i = 0; i < 200000; ++i) {
+    const std::uint64_t k = key(rng) * 2654435761u;  // spread out, as brick keys are
+    const std::uint64_t o = op(rng);
+    if (o < 6) {
+      const SpillFile::Record r{std::uint64_t(i), std::uint64_t(1 + i % 1000)};
+      index.set(k, r);
+      reference[k] = r.offset;
+    } else if (o < 9) {
+      EXPECT_EQ(index.erase(k), reference.erase(k) == 1);
+    } else {
+      const auto found = index.find(k);
+      const auto it = reference.find(k);
+      ASSERT_EQ(found.has_value(), it != reference.end());
+      if (found) EXPECT_EQ(std::uint64_t(found->offset), it->second);
+    }
+    ASSERT_EQ(index.size(), reference.size());
+  }
+  std::set<std::uint64_t> keys;
+  index.forEachKey([&](std::uint64_t k) { EXPECT_TRUE(keys.insert(k).second) << "key listed twice"; });
+  ASSERT_EQ(keys.size(), reference.size());
+  for (const auto& [k, offset] : reference) {
+    EXPECT_EQ(keys.count(k), 1u);
+    EXPECT_EQ(std::uint64_t(index.find(k)->offset), offset);
+  }
+  EXPECT_THROW(index.set(1, SpillFile::Record{0, 0}), std::invalid_argument);
+}
 
 TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit) {
   std::mt19937 rng(7);

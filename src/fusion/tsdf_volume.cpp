@@ -102,8 +102,9 @@ std::size_t TsdfVolume::bricksInVolume() const {
 }
 
 std::size_t TsdfVolume::memoryBytes() const {
+  const WorldModelStats world = world_->stats();
   return (pool_.size() - free_ids_.size()) * sizeof(Brick) + pool_.size() * sizeof(void*) +
-         slots_.size() * (sizeof(std::int32_t) + sizeof(void*) + 1) + world_->stats().ram_bytes + world_->size() * 48;
+         slots_.size() * (sizeof(std::int32_t) + sizeof(void*) + 1) + world.ram_bytes + world.index_bytes;
 }
 
 std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, const CameraIntrinsics& cam,

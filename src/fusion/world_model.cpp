@@ -59,7 +59,7 @@ void WorldModel::evict() {
     const auto t0 = std::chrono::steady_clock::now();
     const std::uint64_t k = lru_.back();
     auto it = ram_.find(k);
-    disk_[k] = spill_.append(compressBrick(*it->second.brick));
+    disk_.set(k, spill_.append(compressBrick(*it->second.brick)));
     ram_.erase(it);
     lru_.pop_back();
     stats_.ram_bytes -= kBrickBytes;
@@ -83,19 +83,19 @@ std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
     erase(k);
     return b;
   }
-  const auto it = disk_.find(k);
-  if (it == disk_.end()) return nullptr;
+  const auto record = disk_.find(k);
+  if (!record) return nullptr;
   auto b = std::make_unique<Brick>();
-  readRecord(it->second, *b);
+  readRecord(*record, *b);
   b->coord = c;
-  disk_.erase(it);
+  disk_.erase(k);
   return b;
 }
 
 bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
   const std::uint64_t k = key(c);
   if (const auto it = ram_.find(k); it != ram_.end()) std::memcpy(out.voxels, it->second.brick->voxels, kVoxelBytes);
-  else if (const auto d = disk_.find(k); d != disk_.end()) readRecord(d->second, out);
+  else if (const auto record = disk_.find(k)) readRecord(*record, out);
   else return false;
   out.coord = c;
   return true;
@@ -104,7 +104,7 @@ bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
 template <class F>
 void WorldModel::forEachKey(F&& f) const {
   for (const auto& [k, e] : ram_) f(k);
-  for (const auto& [k, r] : disk_) f(k);
+  disk_.forEachKey(f);
 }
 
 std::vector<Eigen::Vector3i> WorldModel::coordsInBox(const Eigen::Vector3i& lo, int n) const {
@@ -127,6 +127,7 @@ WorldModelStats WorldModel::stats() const {
   WorldModelStats s = stats_;
   s.bricks = size();
   s.bricks_in_ram = lru_.size();
+  s.index_bytes = disk_.bytes() + lru_.size() * 88;  // cache: map node + bucket ~64, list node ~24
   s.spill_file_bytes = spill_.bytes();
   return s;
 }

@@ -36,6 +36,9 @@ PlaceIndex::PlaceIndex(const LoopParams& params) : params_(params) {
     table_bits_.emplace_back(all.begin(), all.begin() + params_.lsh_key_bits);
   }
   tables_.resize(table_bits_.size());
+  for (auto& t : tables_) t.reserve(kReservedRows);
+  rows_.reserve(kReservedRows);
+  owner_.reserve(kReservedRows);
 }
 
 PlaceIndex::Bits PlaceIndex::bitsOf(const std::uint8_t* descriptor) {

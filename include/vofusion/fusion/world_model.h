@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "vofusion/core/spill_file.h"
+#include "vofusion/fusion/brick_index.h"
 #include "vofusion/fusion/voxel_brick.h"
 
 namespace vofusion::fusion {
@@ -26,6 +27,7 @@ struct WorldModelStats {
   std::size_t bricks = 0;          // stored (RAM + disk)
   std::size_t bricks_in_ram = 0;
   std::size_t ram_bytes = 0;       // brick storage held in RAM (the cache)
+  std::size_t index_bytes = 0;     // the indexes of both (estimated: cache map and LRU nodes, BrickIndex)
   std::size_t spill_file_bytes = 0;  // written to the spill file, including records since taken back
   std::size_t spilled = 0, reloaded = 0;  // bricks written to / read back from the spill file
   double spill_seconds = 0.0;      // compressing + writing + reading + decompressing
@@ -51,7 +53,7 @@ class WorldModel {
   bool read(const Eigen::Vector3i& c, Brick& out) const;
 
   std::size_t size() const { return ram_.size() + disk_.size(); }
-  bool contains(const Eigen::Vector3i& c) const { return ram_.count(key(c)) != 0 || disk_.count(key(c)) != 0; }
+  bool contains(const Eigen::Vector3i& c) const { return ram_.count(key(c)) != 0 || disk_.find(key(c)).has_value(); }
   WorldModelStats stats() const;
   static std::uint64_t key(const Eigen::Vector3i& c);
 
@@ -68,7 +70,7 @@ class WorldModel {
   std::size_t cache_bytes_;
   SpillFile spill_;
   std::unordered_map<std::uint64_t, Cached> ram_;             // the cache
-  std::unordered_map<std::uint64_t, SpillFile::Record> disk_;  // the rest, by key
+  BrickIndex disk_;                            // the rest, by key
   std::list<std::uint64_t> lru_;               // keys of the bricks in RAM, most recent first
   mutable WorldModelStats stats_;
 };

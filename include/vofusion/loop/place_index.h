@@ -17,6 +17,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "vofusion/core/mapped_allocator.h"
 #include "vofusion/loop/loop_params.h"
 
 namespace vofusion::loop {
@@ -50,9 +51,14 @@ class PlaceIndex {
 
   LoopParams params_;
   std::vector<std::vector<int>> table_bits_;  // per table: the descriptor bits its key is made of
-  std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> tables_;  // per table: (key, row), sorted
-  std::vector<Bits> rows_;                    // every indexed descriptor
-  std::vector<std::uint32_t> owner_;          // row -> position in keyframes_
+  // The arrays that grow with every keyframe are mapped (core/mapped_allocator.h), with room for
+  // kReservedRows descriptors reserved up front (address space; ~10 k keyframes, 1.5 km of corridor).
+  static constexpr std::size_t kReservedRows = std::size_t(1) << 22;
+  template <class T>
+  using Growing = std::vector<T, MappedAllocator<T>>;
+  std::vector<Growing<std::pair<std::uint32_t, std::uint32_t>>> tables_;  // per table: (key, row), sorted
+  Growing<Bits> rows_;                        // every indexed descriptor
+  Growing<std::uint32_t> owner_;              // row -> position in keyframes_
   std::vector<std::size_t> keyframes_;        // keyframe ids in the order added
 };
 
