@@ -247,7 +247,7 @@ class RawComponents {
 }  // namespace
 
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
-                              const MeshProgress& progress) {
+                              const MeshProgress& progress, const std::function<void()>& regions_done) {
   const auto told = [&](int pass, const fusion::RegionMesh& r) {
     if (progress) progress(pass, r.ordinal + 1, r.regions);
   };
@@ -314,6 +314,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   }
   step.vertices_before = out.raw_vertices;
 
+  if (regions_done) regions_done();
   // The rest on the welded mesh: components are judged whole (those inside one region already
   // were, on raw faces), holes filled across seams; no second simplification.
   MeshCleanParams rest = params;

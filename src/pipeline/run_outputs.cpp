@@ -362,7 +362,13 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
       }
       shown->update(done);
     };
-    RegionMeshResult r = meshByRegion(source, m.mesh_params, p.save_raw_mesh ? staged("mesh_raw.ply") : "", progress);
+    // The map goes as soon as the last region is read, before the welded mesh's repair.
+    const auto release = [&] {
+      rec.releaseMap();
+      returnFreedHeap();
+    };
+    RegionMeshResult r =
+        meshByRegion(source, m.mesh_params, p.save_raw_mesh ? staged("mesh_raw.ply") : "", progress, release);
     if (shown) shown->finish();
     mesh = std::move(r.mesh);
     s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
@@ -374,8 +380,10 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     s["mesh_raw"] = meshJson(mesh);
   }
   // Meshed: the map's memory goes before the whole-mesh repair, the scene and the pictures.
-  rec.releaseMap();
-  returnFreedHeap();
+  if (!rec.mapReleased()) {
+    rec.releaseMap();
+    returnFreedHeap();
+  }
   if (!by_region && p.save_raw_mesh) {
     writePly(staged("mesh_raw.ply"), mesh);
     wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");

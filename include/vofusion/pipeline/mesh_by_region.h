@@ -28,7 +28,9 @@ using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t 
 // seams, welded by exact position: seam vertices that coincide, crossings exactly at a voxel, become
 // one; a seam vertex's normal is its first region's). Throws on I/O errors; a region CGAL fails on
 // is kept unsimplified (counted in report.failure).
+// `regions_done` runs once the last region was read, before the welded mesh is cleaned: the caller
+// can free what the regions came from.
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "",
-                              const MeshProgress& progress = {});
+                              const MeshProgress& progress = {}, const std::function<void()>& regions_done = {});
 
 }  // namespace vofusion
