@@ -50,11 +50,12 @@ struct Outcome {
   std::string stderr_text;
 };
 
-// Informational lines, not errors: Progress ("<label> 12/300 frames ...", "<label> 300 frames in ..."),
+// Informational lines, not errors: Progress ("<label> 12/300 frames ...", "<label> 300 frames in ...",
+// "meshing [...] 3/25 regions ..."),
 // rgbd-odometry's stage times, vofusion's start banner ("vofusion: <input>, mode joint, 4 frames -> <out>"),
 // warnings about an assumption ("warning: <file>: ...", e.g. guessed intrinsics).
 bool isProgressLine(const std::string& l) {
-  static const std::regex progress(R"(^.+ \d+(/\d+)? frames .*)");
+  static const std::regex progress(R"(^.+ \d+(/\d+)? (frames|regions) .*)");
   static const std::regex stage_times(R"(^per-stage time .*)");
   static const std::regex banner(R"(^vofusion: .+, mode [\w-]+, \d+ frames -> .*)");
   return (std::regex_match(l, progress) && l.find("error") == std::string::npos) ||

@@ -33,15 +33,18 @@ void Progress::update(std::size_t done, const std::string& extra) {
   const double since = std::chrono::duration<double>(now - last_print_).count();
   if (since < (tty_ ? 0.2 : 2.0) && done != total_) return;
   last_print_ = now;
-  const double rate = fps();
+  // No rate (nor ETA) from less than a second: the first item may have been done before the clock started.
+  const double rate = elapsedSeconds() >= 1.0 ? fps() : 0.0;
+  char rate_text[48] = "-";
+  if (rate > 0) std::snprintf(rate_text, sizeof rate_text, "%.1f", rate);
   std::string eta = "?";
   if (total_ > 0 && rate > 0) eta = formatDuration((total_ - std::min(done, total_)) / rate);
   if (total_ > 0)
-    std::fprintf(stderr, "%s%s %zu/%zu %s  %.1f %s  ETA %s  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done,
-                 total_, unit_.c_str(), rate, rate_unit_.c_str(), eta.c_str(), extra.c_str(), tty_ ? "" : "\n");
+    std::fprintf(stderr, "%s%s %zu/%zu %s  %s %s  ETA %s  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done,
+                 total_, unit_.c_str(), rate_text, rate_unit_.c_str(), eta.c_str(), extra.c_str(), tty_ ? "" : "\n");
   else
-    std::fprintf(stderr, "%s%s %zu %s  %.1f %s  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done, unit_.c_str(),
-                 rate, rate_unit_.c_str(), extra.c_str(), tty_ ? "" : "\n");
+    std::fprintf(stderr, "%s%s %zu %s  %s %s  %s%s", tty_ ? "\r\033[K" : "", label_.c_str(), done, unit_.c_str(),
+                 rate_text, rate_unit_.c_str(), extra.c_str(), tty_ ? "" : "\n");
   std::fflush(stderr);
 }
 
