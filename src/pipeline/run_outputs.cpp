@@ -19,10 +19,10 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/heap.h"
 #include "vofusion/core/pose_eigen.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/mesh/triangle_mesh.h"
-#include "vofusion/core/progress.h"
 #include "vofusion/pipeline/mesh_by_region.h"
 #include "vofusion/scene/scene_export.h"
 
@@ -343,6 +343,12 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   }
 
   returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
+  // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
+  const auto release_map = [&] {
+    if (rec.mapReleased()) return;
+    rec.releaseMap();
+    returnFreedHeap();
+  };
   TriangleMesh mesh;
   std::string streamed_raw;  // logged after mesh.ply, whose line then carries the meshing time
   // Region by region unless the unsimplified whole (mesh_full.ply) is asked for.
@@ -362,13 +368,8 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
       }
       shown->update(done);
     };
-    // The map goes as soon as the last region is read, before the welded mesh's repair.
-    const auto release = [&] {
-      rec.releaseMap();
-      returnFreedHeap();
-    };
     RegionMeshResult r =
-        meshByRegion(source, m.mesh_params, p.save_raw_mesh ? staged("mesh_raw.ply") : "", progress, release);
+        meshByRegion(source, m.mesh_params, p.save_raw_mesh ? staged("mesh_raw.ply") : "", progress, release_map);
     if (shown) shown->finish();
     mesh = std::move(r.mesh);
     s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
@@ -379,11 +380,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     mesh = rec.extractMesh();
     s["mesh_raw"] = meshJson(mesh);
   }
-  // Meshed: the map's memory goes before the whole-mesh repair, the scene and the pictures.
-  if (!rec.mapReleased()) {
-    rec.releaseMap();
-    returnFreedHeap();
-  }
+  release_map();
   if (!by_region && p.save_raw_mesh) {
     writePly(staged("mesh_raw.ply"), mesh);
     wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
