@@ -115,6 +115,8 @@ TEST(WorldModel, BrickIndexAnswersAsAnUnorderedMap) {
     EXPECT_EQ(std::uint64_t(index.find(k)->offset), offset);
   }
   EXPECT_THROW(index.set(1, SpillFile::Record{0, 0}), std::invalid_argument);
+  // What it holds, not the address space reserved for a long walk.
+  EXPECT_LE(index.bytes(), reference.size() * 16 + 4096 * 40 + 30000 * 16);
 }
 
 TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit) {

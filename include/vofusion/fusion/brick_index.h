@@ -24,8 +24,9 @@ class BrickIndex {
   std::optional<Record> find(std::uint64_t k) const;
   bool erase(std::uint64_t k);  // true when k was there
   std::size_t size() const { return size_; }
-  // RAM held: the array's capacity and ~40 bytes a recent entry (hash node and bucket).
-  std::size_t bytes() const { return sorted_.capacity() * sizeof(Entry) + recent_.size() * 40; }
+  // RAM held: the array's entries (its reserved capacity is address space, resident only once
+  // written) and ~40 bytes a recent entry (hash node and bucket).
+  std::size_t bytes() const { return sorted_.size() * sizeof(Entry) + recent_.size() * 40; }
   template <class F>
   void forEachKey(F&& f) const {
     for (const auto& [k, r] : recent_) f(k);
