@@ -282,31 +282,13 @@ void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, c
 TriangleMesh marchingCubesStreamed(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch,
                                    float voxel_size, int min_weight, int region_bricks) {
   TriangleMesh mesh;
-  // Seam vertices come out bit-identical in both regions (same voxels, same arithmetic): welded by
-  // their exact position.
-  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> seam_index;
-  const auto positionKey = [](const Eigen::Vector3f& p) {
-    std::uint32_t b[3];
-    std::memcpy(b, p.data(), sizeof b);
-    return (std::uint64_t(b[0]) * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t(b[1]) * 0xC2B2AE3D27D4EB4Full) ^ b[2];
-  };
+  SeamWelder welder;
   marchingCubesStreamedByRegion(coords, fetch, voxel_size, min_weight, std::max(1, region_bricks), [&](RegionMesh& r) {
     const TriangleMesh& part = r.mesh;
-    std::vector<std::uint32_t> to_mesh(part.vertices.size());
-    for (std::size_t v = 0; v < part.vertices.size(); ++v) {
-      if (r.on_seam[v]) {
-        auto& same = seam_index[positionKey(part.vertices[v])];
-        const auto it = std::find_if(same.begin(), same.end(), [&](std::uint32_t m) { return mesh.vertices[m] == part.vertices[v]; });
-        if (it != same.end()) {
-          to_mesh[v] = *it;
-          continue;
-        }
-        same.push_back(std::uint32_t(mesh.vertices.size()));
-      }
-      to_mesh[v] = std::uint32_t(mesh.vertices.size());
+    const std::vector<std::uint32_t> to_mesh = welder.add(part, r.on_seam, [&](std::size_t v) {
       mesh.vertices.push_back(part.vertices[v]);
       mesh.colors.push_back(part.colors[v]);
-    }
+    });
     for (const auto& f : part.faces) mesh.faces.push_back({to_mesh[f[0]], to_mesh[f[1]], to_mesh[f[2]]});
   });
   computeNormals(mesh);

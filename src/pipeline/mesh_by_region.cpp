@@ -14,47 +14,6 @@ namespace vofusion {
 
 namespace {
 
-struct PositionHash {
-  std::size_t operator()(const std::array<float, 3>& p) const {
-    std::size_t h = 1469598103934665603ull;
-    for (float f : p) {
-      std::uint32_t b;
-      std::memcpy(&b, &f, 4);
-      h = (h ^ b) * 1099511628211ull;
-    }
-    return h;
-  }
-};
-
-// Appends region meshes into one, giving seam vertices (bit-identical in the regions sharing them)
-// one index. Only seam vertices are remembered, not the whole mesh.
-class Welder {
- public:
-  // Global index of each of the part's vertices; new vertices are handed to `emit`.
-  template <typename Emit>
-  std::vector<std::uint32_t> add(const TriangleMesh& part, const std::vector<std::uint8_t>& seam, Emit&& emit) {
-    std::vector<std::uint32_t> index(part.vertices.size());
-    for (std::size_t v = 0; v < part.vertices.size(); ++v) {
-      if (seam[v]) {
-        const std::array<float, 3> key{part.vertices[v].x(), part.vertices[v].y(), part.vertices[v].z()};
-        const auto [it, fresh] = seam_index_.emplace(key, next_);
-        index[v] = it->second;
-        if (!fresh) continue;
-      } else {
-        index[v] = next_;
-      }
-      ++next_;
-      emit(v);
-    }
-    return index;
-  }
-  std::uint32_t vertices() const { return next_; }
-
- private:
-  std::unordered_map<std::array<float, 3>, std::uint32_t, PositionHash> seam_index_;
-  std::uint32_t next_ = 0;
-};
-
 // Binary PLY written as the regions come: vertex and face records go to two side files, joined
 // under the header (whose counts are known only at the end) by finish().
 class PlyStream {
@@ -102,7 +61,7 @@ class PlyStream {
  private:
   std::string path_;
   std::ofstream v_, f_;
-  Welder welder_;
+  fusion::SeamWelder welder_;
   std::size_t faces_ = 0;
 };
 
@@ -216,7 +175,7 @@ class RawComponents {
     }
     for (std::uint32_t v = 0; v < m.vertices.size(); ++v) {
       if (!r.on_seam[v]) continue;
-      const std::array<float, 3> key{m.vertices[v].x(), m.vertices[v].y(), m.vertices[v].z()};
+      const std::array<float, 3> key = fusion::exactPosition(m.vertices[v]);
       std::uint32_t slot;
       if (first) {
         const auto [it, fresh] = slot_of_.emplace(key, std::uint32_t(seams_.size()));
@@ -234,7 +193,7 @@ class RawComponents {
 
   int min_faces_;
   double min_area_;
-  std::unordered_map<std::array<float, 3>, std::uint32_t, PositionHash> slot_of_;  // seam vertex -> slot
+  std::unordered_map<std::array<float, 3>, std::uint32_t, fusion::ExactPositionHash> slot_of_;  // seam vertex -> slot
   UnionFind seams_;                      // over slots: components joined across regions
   std::vector<std::uint64_t> faces_;     // per slot, pass 1
   std::vector<double> area_;
@@ -254,7 +213,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   RegionMeshResult out;
   std::unique_ptr<PlyStream> raw;
   if (!raw_ply.empty()) raw = std::make_unique<PlyStream>(raw_ply);
-  Welder welder, raw_count;
+  fusion::SeamWelder welder, raw_count;
   TriangleMesh& merged = out.mesh;
   MeshSimplification& simp = out.report.simplification;
   MeshCleanStep step{"regions"};

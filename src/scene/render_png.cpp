@@ -20,8 +20,8 @@ namespace vofusion {
 // turned up, the fringe where it meets the walls) shows as specks over the room. The ceiling: the
 // height above the highest camera where the most downward-facing area lies (5 cm bins), if that is
 // at least 0.5 m^2; everything from 10 cm below it up is left out of the picture.
-TriangleMesh withoutCeiling(const TriangleMesh& mesh, const Trajectory& path, const mrpt::poses::CPose3D& up) {
-  if (path.empty() || mesh.faces.empty()) return mesh;
+std::optional<TriangleMesh> withoutCeiling(const TriangleMesh& mesh, const Trajectory& path, const mrpt::poses::CPose3D& up) {
+  if (path.empty() || mesh.faces.empty()) return std::nullopt;
   const Eigen::Matrix3d R = up.getRotationMatrix().asEigen();
   const Eigen::Vector3d z = R.row(2).transpose();  // the display's up axis in the map's frame
   double top = -1e30;
@@ -37,10 +37,12 @@ TriangleMesh withoutCeiling(const TriangleMesh& mesh, const Trajectory& path, co
   }
   const auto ceiling = std::max_element(down_area.begin(), down_area.end(),
                                         [](const auto& x, const auto& y) { return x.second < y.second; });
-  if (ceiling == down_area.end() || ceiling->second < 0.5) return mesh;
+  if (ceiling == down_area.end() || ceiling->second < 0.5) return std::nullopt;
   const double cut = double(ceiling->first) * kBin - 0.1;
-  TriangleMesh out = mesh;
-  out.faces.clear();
+  TriangleMesh out;
+  out.vertices = mesh.vertices;  // faces left out keep their vertices: unused ones draw nothing
+  out.normals = mesh.normals;
+  out.colors = mesh.colors;
   for (const auto& f : mesh.faces) {
     bool below = true;
     for (std::uint32_t i : f) below = below && z.dot(mesh.vertices[i].cast<double>()) < cut;
@@ -48,7 +50,6 @@ TriangleMesh withoutCeiling(const TriangleMesh& mesh, const Trajectory& path, co
   }
   return out;
 }
-
 
 void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width, int height,
                    const std::optional<Eigen::Vector3d>& up_vector) {
@@ -62,8 +63,8 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
   // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
   const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up, opt.up_vector);
-  const TriangleMesh shown = withoutCeiling(mesh, traj, up);
-  const auto scene = buildScene(shown, traj, nullptr, CameraIntrinsics{}, opt);
+  const std::optional<TriangleMesh> cut = withoutCeiling(mesh, traj, up);  // a copy only when there is a ceiling
+  const auto scene = buildScene(cut ? *cut : mesh, traj, nullptr, CameraIntrinsics{}, opt);
   scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
 
   // Frame the bulk of the mesh (2nd to 98th percentile per axis), not its stray fragments.

@@ -2,8 +2,11 @@
 // Marching cubes (Lorensen & Cline 1987) over a sparse set of TSDF bricks: one indexed mesh with
 // shared vertices (each grid edge crossing becomes exactly one vertex), vertex colours and
 // area-weighted vertex normals. Cells touching unobserved or fully truncated voxels are skipped.
+#include <array>
 #include <cstdint>
+#include <cstring>
 #include <functional>
+#include <unordered_map>
 #include <vector>
 
 #include "vofusion/fusion/voxel_brick.h"
@@ -20,6 +23,49 @@ struct RegionMesh {
   TriangleMesh mesh;                  // normals from this region's faces only
   std::vector<std::uint8_t> on_seam;  // per vertex, 1: a neighbouring region's mesh has it too
   std::size_t ordinal = 0, regions = 0;  // this is region `ordinal` (0-based) of `regions` with bricks
+};
+
+// A vertex position hashed by its exact bits: seam vertices come out bit-identical in every region
+// sharing them (same voxels, same arithmetic), so they are welded by exact position.
+struct ExactPositionHash {
+  std::size_t operator()(const std::array<float, 3>& p) const {
+    std::size_t h = 1469598103934665603ull;
+    for (float f : p) {
+      std::uint32_t b;
+      std::memcpy(&b, &f, 4);
+      h = (h ^ b) * 1099511628211ull;
+    }
+    return h;
+  }
+};
+inline std::array<float, 3> exactPosition(const Eigen::Vector3f& p) { return {p.x(), p.y(), p.z()}; }
+
+// Appends region meshes into one index space: a region's seam vertices get the index the first
+// region having them gave them, every other vertex a new one. Only seam vertices are remembered.
+class SeamWelder {
+ public:
+  // Index of each of the part's vertices; `emit(v)` is called for each of them that is new.
+  template <typename Emit>
+  std::vector<std::uint32_t> add(const TriangleMesh& part, const std::vector<std::uint8_t>& seam, Emit&& emit) {
+    std::vector<std::uint32_t> index(part.vertices.size());
+    for (std::size_t v = 0; v < part.vertices.size(); ++v) {
+      if (seam[v]) {
+        const auto [it, fresh] = seam_index_.emplace(exactPosition(part.vertices[v]), next_);
+        index[v] = it->second;
+        if (!fresh) continue;
+      } else {
+        index[v] = next_;
+      }
+      ++next_;
+      emit(v);
+    }
+    return index;
+  }
+  std::uint32_t vertices() const { return next_; }
+
+ private:
+  std::unordered_map<std::array<float, 3>, std::uint32_t, ExactPositionHash> seam_index_;
+  std::uint32_t next_ = 0;
 };
 
 // The same mesh as marchingCubes, one block of region_bricks^3 bricks at a time (so the whole mesh
