@@ -1,5 +1,8 @@
 // The out-of-core world model: bricks spilled to disk come back bit-identical, the RAM cache stays
 // within its limit, the region-by-region mesh equals the one-shot one, and a saved map resumes.
+#include <sys/mman.h>
+#include <unistd.h>
+
 #include <cstring>
 #include <fstream>
 #include <random>
@@ -9,6 +12,7 @@
 
 #include "support.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/fusion/brick_arena.h"
 #include "vofusion/fusion/brick_index.h"
 #include "vofusion/fusion/kinfu.h"
 #include "vofusion/fusion/marching_cubes.h"
@@ -117,6 +121,59 @@ TEST(WorldModel, BrickIndexAnswersAsAnUnorderedMap) {
   EXPECT_THROW(index.set(1, SpillFile::Record{0, 0}), std::invalid_argument);
   // What it holds, not the address space reserved for a long walk.
   EXPECT_LE(index.bytes(), reference.size() * 16 + 4096 * 40 + 30000 * 16);
+}
+
+// The volume's brick storage: ids stay dense (the last brick moves into a removed one's place, and
+// its old id is reported), contents survive the moves, and pages past the bricks in use are given back.
+TEST(WorldModel, BrickArenaKeepsIdsDenseAndGivesPagesBack) {
+  const std::size_t capacity = 8000;
+  BrickArena arena(capacity);
+  std::vector<std::unique_ptr<Brick>> reference;  // id -> expected brick
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> coord(-1000, 1000), op(0, 9);
+  const auto same = [](const Brick& a, const Brick& b) { return std::memcmp(&a, &b, sizeof(Brick)) == 0; };
+  for (int i = 0; i < 20000; ++i) {
+    if (op(rng) < 6 && reference.size() < capacity) {
+      const Eigen::Vector3i c(coord(rng), coord(rng), coord(rng));
+      if (op(rng) < 5) {
+        reference.push_back(randomBrick(c, rng));
+        ASSERT_EQ(arena.add(*reference.back()), std::int32_t(reference.size() - 1));
+      } else {
+        reference.push_back(std::make_unique<Brick>());
+        reference.back()->coord = c;
+        ASSERT_EQ(arena.add(c), std::int32_t(reference.size() - 1));
+      }
+    } else if (!reference.empty()) {
+      const auto id = static_cast<std::int32_t>(rng() % reference.size());
+      const std::int32_t moved = arena.remove(id);
+      const auto last = static_cast<std::int32_t>(reference.size() - 1);
+      ASSERT_EQ(moved, id == last ? -1 : last);
+      reference[id] = std::move(reference.back());
+      reference.pop_back();
+    }
+    ASSERT_EQ(arena.size(), reference.size());
+  }
+  for (std::size_t id = 0; id < reference.size(); ++id) ASSERT_TRUE(same(arena[std::int32_t(id)], *reference[id])) << id;
+  EXPECT_THROW(BrickArena(0), std::invalid_argument);
+
+  // Fill it, keep 100 bricks: only about those 100 (plus the slack) stay resident.
+  const auto page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  const auto resident = [&] {
+    const std::size_t bytes = (capacity * sizeof(Brick) + page - 1) / page * page;
+    std::vector<unsigned char> in_core(bytes / page);
+    EXPECT_EQ(::mincore(static_cast<void*>(&arena[0]), bytes, in_core.data()), 0);
+    return page * static_cast<std::size_t>(std::count_if(in_core.begin(), in_core.end(), [](unsigned char v) { return v & 1; }));
+  };
+  while (arena.size() < capacity) arena.add(Eigen::Vector3i(1, 2, 3));
+  EXPECT_THROW(arena.add(Eigen::Vector3i(1, 2, 3)), std::length_error);
+  EXPECT_GE(resident(), capacity * sizeof(Brick) - page);
+  while (arena.size() > 100) arena.remove(0);
+  arena.releaseUnusedPages();
+  EXPECT_LE(resident(), 100 * sizeof(Brick) + 2 * page);
+  // Written again after the release: zero pages come back, the bricks are as added.
+  const std::int32_t id = arena.add(Eigen::Vector3i(4, 5, 6));
+  EXPECT_EQ(arena[id].coord, Eigen::Vector3i(4, 5, 6));
+  EXPECT_EQ(arena[id].voxels[kBrickVoxels - 1].weight, 0);
 }
 
 TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit) {

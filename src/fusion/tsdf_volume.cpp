@@ -22,9 +22,17 @@ inline int modPos(int a, int n) {
 }
 }  // namespace
 
-TsdfVolume::TsdfVolume(const TsdfParams& params, const Eigen::Vector3f& centre) : params_(params) {
-  if (params_.volume_voxels < kBrickEdge || params_.volume_voxels % kBrickEdge != 0)
+namespace {
+std::size_t slotCount(const TsdfParams& p) {
+  if (p.volume_voxels < kBrickEdge || p.volume_voxels % kBrickEdge != 0)
     throw std::invalid_argument("TSDF volume_voxels must be a positive multiple of 8");
+  const auto n = static_cast<std::size_t>(p.volume_voxels / kBrickEdge);
+  return n * n * n;
+}
+}  // namespace
+
+TsdfVolume::TsdfVolume(const TsdfParams& params, const Eigen::Vector3f& centre)
+    : params_(params), bricks_(slotCount(params)) {
   if (!(params_.voxel_size > 0.f) || !(params_.truncation > 0.f))
     throw std::invalid_argument("TSDF voxel_size and truncation must be positive");
   params_.max_weight = std::clamp(params_.max_weight, 1, 255);
@@ -69,24 +77,16 @@ void TsdfVolume::setSlot(int slot, std::int32_t id) {
     else ++block_count_[blockOfSlot(slot)];
   }
   slots_[slot] = id;
-  slot_brick_[slot] = id < 0 ? nullptr : pool_[id].get();
+  slot_brick_[slot] = id < 0 ? nullptr : &bricks_[id];
 }
 
-std::int32_t TsdfVolume::allocate(int bx, int by, int bz) {
-  auto b = std::make_unique<Brick>();
-  b->coord = Eigen::Vector3i(bx, by, bz);
-  return adopt(std::move(b));
-}
-
-std::int32_t TsdfVolume::adopt(std::unique_ptr<Brick> b) {
-  if (!free_ids_.empty()) {
-    const std::int32_t id = free_ids_.back();
-    free_ids_.pop_back();
-    pool_[id] = std::move(b);
-    return id;
-  }
-  pool_.push_back(std::move(b));
-  return static_cast<std::int32_t>(pool_.size() - 1);
+void TsdfVolume::removeBrick(int slot) {
+  const std::int32_t id = slots_[slot];
+  setSlot(slot, -1);
+  if (bricks_.remove(id) < 0) return;
+  // The arena's last brick now has id `id`: repoint its slot (every brick in the arena is inside the volume).
+  const Eigen::Vector3i& c = bricks_[id].coord;
+  setSlot(slotOf(c.x(), c.y(), c.z()), id);
 }
 
 Eigen::Vector3f TsdfVolume::minCorner() const {
@@ -103,7 +103,7 @@ std::size_t TsdfVolume::bricksInVolume() const {
 
 std::size_t TsdfVolume::memoryBytes() const {
   const WorldModelStats world = world_->stats();
-  return (pool_.size() - free_ids_.size()) * sizeof(Brick) + pool_.size() * sizeof(void*) +
+  return bricks_.size() * sizeof(Brick) +
          slots_.size() * (sizeof(std::int32_t) + sizeof(void*) + 1) + world.ram_bytes + world.index_bytes;
 }
 
@@ -150,7 +150,7 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
       const int bx = origin_.x() + modPos(sx - origin_.x(), n_);
       const int by = origin_.y() + modPos(sy - origin_.y(), n_);
       const int bz = origin_.z() + modPos(sz - origin_.z(), n_);
-      setSlot(static_cast<int>(s), allocate(bx, by, bz));
+      setSlot(static_cast<int>(s), bricks_.add(Eigen::Vector3i(bx, by, bz)));
     }
     touched.push_back(slots_[s]);
   }
@@ -170,7 +170,7 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
   // Bilinear depth only where the 4 neighbours spread less than half the truncation (voxel_projection.h).
   const VoxelProjector projector(depth_c, cam, zmin, zmax, 0.5f * trunc);
   parallelFor(0, static_cast<int>(touched.size()), [&](int i) {
-    Brick& b = *pool_[touched[i]];
+    Brick& b = bricks_[touched[i]];
     std::size_t brick_updates = 0;
     const Eigen::Vector3f p0 = Rt * ((b.coord * kBrickEdge).cast<float>() * vs) + tc;
     VoxelRowSamples row;
@@ -292,20 +292,17 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
     return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all();
   };
   // Bricks leaving the volume go to the world model...
-  for (auto& id : slots_) {
-    if (id < 0) continue;
-    const Eigen::Vector3i c = pool_[id]->coord;
-    if (!inside(c)) {
-      const std::int32_t leaving = id;
-      setSlot(static_cast<int>(&id - slots_.data()), -1);
-      world_->put(std::move(pool_[leaving]));
-      free_ids_.push_back(leaving);
-    }
+  for (std::size_t s = 0; s < slots_.size(); ++s) {
+    const std::int32_t id = slots_[s];
+    if (id < 0 || inside(bricks_[id].coord)) continue;
+    world_->put(std::make_unique<Brick>(bricks_[id]));
+    removeBrick(static_cast<int>(s));
   }
   origin_ = o;
   updateCyclicTables();
   // ...and world-model bricks the volume now covers come back (camera revisiting a place).
-  for (const Eigen::Vector3i& c : world_->coordsInBox(origin_, n_)) setSlot(slotOf(c.x(), c.y(), c.z()), adopt(world_->take(c)));
+  for (const Eigen::Vector3i& c : world_->coordsInBox(origin_, n_)) setSlot(slotOf(c.x(), c.y(), c.z()), bricks_.add(*world_->take(c)));
+  bricks_.releaseUnusedPages();
 }
 
 bool TsdfVolume::shiftIfNeeded(const Eigen::Vector3f& point, float threshold) {
@@ -318,14 +315,14 @@ bool TsdfVolume::shiftIfNeeded(const Eigen::Vector3f& point, float threshold) {
 std::vector<BrickRef> TsdfVolume::volumeBricks() const {
   std::vector<BrickRef> out;
   for (std::int32_t id : slots_)
-    if (id >= 0) out.push_back({pool_[id]->coord, pool_[id].get()});
+    if (id >= 0) out.push_back({bricks_[id].coord, &bricks_[id]});
   return out;
 }
 
 std::vector<Eigen::Vector3i> TsdfVolume::allCoords() const {
   std::vector<Eigen::Vector3i> coords = world_->coords();
   for (std::int32_t id : slots_)
-    if (id >= 0) coords.push_back(pool_[id]->coord);
+    if (id >= 0) coords.push_back(bricks_[id].coord);
   return coords;
 }
 
@@ -403,8 +400,7 @@ void TsdfVolume::load(std::istream& is) {
   // Start empty at the saved origin.
   for (std::size_t s = 0; s < slots_.size(); ++s)
     if (slots_[s] >= 0) setSlot(static_cast<int>(s), -1);
-  pool_.clear();
-  free_ids_.clear();
+  bricks_.clear();
   world_ = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
                                         params_.work_dir);
   origin_ = o;
@@ -422,7 +418,7 @@ void TsdfVolume::load(std::istream& is) {
     const int s = slotOf(c.x(), c.y(), c.z());
     if (s >= 0) {
       if (slots_[s] >= 0) throw std::runtime_error("brick stored twice");
-      setSlot(s, adopt(std::move(b)));
+      setSlot(s, bricks_.add(*b));
     } else {
       world_->put(std::move(b));
     }

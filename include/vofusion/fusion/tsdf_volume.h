@@ -16,6 +16,7 @@
 
 #include "vofusion/core/camera.h"
 #include "vofusion/fusion/marching_cubes.h"
+#include "vofusion/fusion/brick_arena.h"
 #include "vofusion/fusion/voxel_brick.h"
 #include "vofusion/fusion/world_model.h"
 #include "vofusion/mesh/triangle_mesh.h"
@@ -123,8 +124,7 @@ class TsdfVolume {
   // TSDF gradient at q: the derivative of the trilinear interpolant inside q's cell (its 8 voxels;
   // central differences of trilinear samples read 48 and moved no figure of the benchmark).
   bool cellGradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const;
-  std::int32_t allocate(int bx, int by, int bz);
-  std::int32_t adopt(std::unique_ptr<Brick> b);  // a pool id for a brick from the world model
+  void removeBrick(int slot);  // the slot's brick leaves the arena (another brick may change id)
 
   TsdfParams params_;
   int n_;                        // bricks per edge
@@ -136,8 +136,7 @@ class TsdfVolume {
   // voxels); a block may also count bricks of the opposite volume end, which only makes it cautious.
   std::vector<std::uint16_t> block_count_;
   std::vector<int> block_cyclic_[3];                 // per axis: (brick - origin) -> block offset
-  std::vector<std::unique_ptr<Brick>> pool_;         // brick id -> storage (never moved); null = free
-  std::vector<std::int32_t> free_ids_;               // ids of pool_ whose brick left the volume
+  BrickArena bricks_;                                // brick id -> storage (ids dense, see brick_arena.h)
   std::unique_ptr<WorldModel> world_;                // bricks that left the volume
   std::vector<std::uint8_t> marks_;                  // per slot, scratch of integrate()
 };
