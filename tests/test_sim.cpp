@@ -1,3 +1,4 @@
+#include <filesystem>
 #include <Eigen/Dense>
 // The synthetic sequence: exact geometry, Kinect noise statistics, determinism, smooth trajectories.
 #include <cmath>
@@ -272,4 +273,28 @@ TEST(Sim, ShakeOffsetTravelsThroughATumFolder) {
   }
   EXPECT_EQ(n, 4);
   EXPECT_THROW(openFrameSource("synthetic:room:wobble", so), InputError);
+}
+
+// --colour-offset and --exposure set the shake's colour timing (0: colour taken with the depth), and
+// values out of range are one-line errors naming the flag.
+TEST(Sim, ColourOffsetAndExposureFlags) {
+  const std::string dir = test::tempDir("sim_offset_flags") + "/seq";
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir +
+                          " --trajectory shake --frames 3 --size 160x120 --colour-offset 0 --exposure 0", &log), 0)
+      << log;
+  SourceOptions so;
+  auto tum = openFrameSource(dir, so);
+  Frame f;
+  int n = 0;
+  while (tum->next(f)) {
+    EXPECT_EQ(f.colour_offset, 0.0) << n;
+    ++n;
+  }
+  EXPECT_EQ(n, 3);
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "2 --colour-offset 0.2", &log), 2);
+  EXPECT_NE(log.find("--colour-offset"), std::string::npos) << log;
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --exposure -1", &log), 2);
+  EXPECT_NE(log.find("--exposure"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(dir + "2"));
 }
