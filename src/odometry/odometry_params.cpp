@@ -22,6 +22,9 @@ std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
       ConfigKey::oneOf("depth_mode", &p.depth_mode, "of that window's valid readings", kDepthModes),
       {"references", &p.references, "frames matched: the previous one and references-1 before it", 1.0, 8.0},
       {"colour_time", &p.colour_time, "keypoints moved to the depth capture time"},
+      ConfigKey::oneOf("colour_time_velocity", &p.colour_time_velocity,
+                       "interval = the fitted interval's mean; capture = each frame's own (exact offsets)",
+                       kColourTimeVelocities),
   };
 }
 

@@ -23,6 +23,7 @@ namespace vofusion {
 inline const std::vector<std::string> kKeypointSets = {"union", "star", "narf"};
 inline const std::vector<std::string> kMotionMethods = {"paper", "robust"};
 inline const std::vector<std::string> kDepthModes = {"median", "min"};
+inline const std::vector<std::string> kColourTimeVelocities = {"interval", "capture"};
 
 struct OdometryParams : public mrpt::config::CLoadableOptions {
   // Read from the given section (normally [odometry]) plus the fixed sections [star], [narf], [brand],
@@ -40,6 +41,11 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
                                     // fit (frame to frame only, not with keyframes)
   bool colour_time = true;          // keypoints moved to their depth capture (Frame::colour_offset) at the
                                     // estimated velocity, then fitted again
+  // The velocity that move uses: "interval" (the mean over the fitted interval, from the first fit;
+  // one correction) or "capture" (each frame's own, interpolated between the motions before and after
+  // it; repeated to a fixed point). capture is exact when the offsets are (synthetic, hardware-synced
+  // sensors); TUM fr1's are arrival stamps (share/odometry.ini).
+  std::string colour_time_velocity = "interval";
   // [matching]
   int max_hamming = 80;             // bits of 256; matches farther apart are dropped (256 = no limit)
   bool use_homography = true;       // RANSAC homography between matched pixels (the paper's filter)
