@@ -119,6 +119,7 @@ int body(int argc, char** argv) {
                           {"heap_free_held_mib", heap_free},
                           {"keyframes", rec.loopCloser() ? rec.loopCloser()->storeStats().keyframes : 0},
                           {"keyframes_in_ram", rec.loopCloser() ? rec.loopCloser()->storeStats().in_ram : 0},
+                          {"max_queued_keyframes", rec.loopCloser() ? rec.loopCloser()->queueStats().first : 0},
                           {"frames", k + 1},
                           {"path_m", path_m},
                           {"ms_per_frame_window", 1000.0 * dt / done_in_window},

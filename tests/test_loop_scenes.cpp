@@ -8,6 +8,8 @@
 
 #include "support.h"
 #include "vofusion/eval/trajectory_eval.h"
+#include "vofusion/loop/loop_closer.h"
+#include "vofusion/odometry/rgbd_odometry.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
@@ -103,4 +105,38 @@ TEST(LoopScenes, LookAlikePlacesAreNeverJoined) {
   std::printf("look-alike scene: %zu loops accepted, all within 10 cm of the true relative pose; ATE %.4f m\n",
               r.loops.size(), ate(r.truth, r.closed));
   EXPECT_LE(ate(r.truth, r.closed), 1.02 * ate(r.truth, r.tracked) + 1e-3);
+}
+
+// Keyframes handed over faster than the loop thread takes them wait in a bounded queue: the frame
+// loop then waits for the thread instead of memory growing with the path; every keyframe is processed.
+TEST(LoopScenes, KeyframeQueueIsBounded) {
+  sim::SimOptions o;
+  o.scene = "corridor";
+  o.frames = 30;
+  o.camera = CameraIntrinsics{}.scaled(0.5);
+  const sim::SyntheticSequence seq(o);
+  RgbdOdometry odometry;
+  std::vector<std::pair<Frame, std::shared_ptr<const DescribedKeypoints>>> frames;
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    Frame f = seq.render(i);
+    auto features = odometry.process(f).features;
+    frames.emplace_back(std::move(f), std::move(features));
+  }
+  loop::LoopParams params;
+  params.min_travel = 0.0;  // every older keyframe is soon a candidate: the thread has work to do
+  loop::LoopCloser closer(params);
+  const std::size_t handed = 8 * frames.size();
+  for (std::size_t k = 0; k < handed; ++k) {
+    auto [frame, features] = frames[k % frames.size()];
+    frame.index = k;
+    frame.timestamp = k / 30.0;
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation().x() = 0.5 * k;  // each frame far enough on to be a keyframe
+    EXPECT_TRUE(closer.addFrame(frame, pose, true, 0.0, features));
+  }
+  closer.finish();
+  const auto [max_queued, waits] = closer.queueStats();
+  EXPECT_LE(max_queued, 16u);
+  EXPECT_GT(waits, 0u) << "the thread kept up: the bound was not exercised";
+  EXPECT_EQ(closer.keyframes().size(), handed);
 }

@@ -31,8 +31,13 @@ struct LoopCloser::Impl {
 
   // Shared with the frame loop, under `mu`.
   mutable std::mutex mu;
-  std::condition_variable wake, idle;
+  std::condition_variable wake, idle, taken;
+  // Keyframes waiting for the thread. Bounded: beyond kMaxQueued the frame loop waits for the thread
+  // (a keyframe holds its depth and features, ~0.3 MB at 640x480), so a loop thread starved of CPU
+  // slows the frame loop instead of letting memory grow with the path.
+  static constexpr std::size_t kMaxQueued = 16;
   std::deque<Keyframe> queue;
+  std::size_t max_queued = 0, frame_loop_waits = 0;
   bool busy = false, stop = false;
   std::vector<LoopRecord> loops;
   std::vector<KeyframePose> poses;
@@ -58,6 +63,7 @@ struct LoopCloser::Impl {
         k = std::move(queue.front());
         queue.pop_front();
         busy = true;
+        taken.notify_all();
       }
       process(std::move(k));
     }
@@ -171,14 +177,24 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);
     k.after_poor_tracking = m.selector.lastAfterPoorTracking();
-    std::lock_guard<std::mutex> lock(m.mu);
+    std::unique_lock<std::mutex> lock(m.mu);
+    if (m.queue.size() >= Impl::kMaxQueued) {
+      ++m.frame_loop_waits;
+      m.taken.wait(lock, [&] { return m.queue.size() < Impl::kMaxQueued; });
+    }
     m.queue.push_back(std::move(k));
+    m.max_queued = std::max(m.max_queued, m.queue.size());
     m.wake.notify_one();
     ++m.keyframes_made;
     m.keyframe_position.push_back(m.frame_keyframe.size());
   }
   m.frame_keyframe.push_back(m.keyframes_made == 0 ? 0 : m.keyframes_made - 1);
   return key;
+}
+
+std::pair<std::size_t, std::size_t> LoopCloser::queueStats() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return {impl_->max_queued, impl_->frame_loop_waits};
 }
 
 void LoopCloser::finish() {

@@ -185,7 +185,10 @@ json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std:
   double back = 0.0;
   for (const auto& [stage, sec] : t.seconds) back += sec;
   const loop::KeyframeStoreStats store = lc.storeStats();
+  const auto [max_queued, frame_loop_waits] = lc.queueStats();
   return {{"enabled", true},
+          {"max_queued_keyframes", max_queued},
+          {"frame_loop_waits_for_thread", frame_loop_waits},
           {"keyframes", lc.keyframes().size()},
           {"frames_strained", lc.strainedFrames()},
           {"keyframes_in_ram", store.in_ram},

@@ -12,6 +12,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -64,6 +65,9 @@ class LoopCloser {
   std::vector<KeyframePose> keyframes() const;
   std::map<std::string, std::size_t> rejections() const;  // verification failures by reason
   KeyframeStoreStats storeStats() const;
+  // The most keyframes that waited for the thread at once, and how often the frame loop waited for it
+  // (at most 16 wait: beyond, the frame loop blocks until the thread takes one).
+  std::pair<std::size_t, std::size_t> queueStats() const;
   std::size_t strainedFrames() const;  // frames whose ICP residual stood out (ResidualMonitor); frame loop only
   StageTimes times() const;  // the thread's: "place_recognition", "loop_verification", "pose_graph" (the frame
                              // loop's keyframing is the pipeline's stage "keyframes")
