@@ -212,58 +212,45 @@ json simplificationJson(const MeshSimplification& s, std::size_t raw_faces) {
           {"distance_samples", s.distance.samples}, {"seconds", s.seconds}};
 }
 
-}  // namespace
-
-struct RunRecorder::Impl {
-  std::string dir;
-  OutputParams params;
-  MeshCleanParams mesh_params;
-  std::unique_ptr<RawlogThread> rawlog;
-  Trajectory ground_truth;
-  Eigen::Vector3d up_sum = Eigen::Vector3d::Zero();  // accelerometer "up" of the frames, in the map
-  CameraIntrinsics camera;
-  bool have_camera = false;
-
-  std::string file(const std::string& name) const { return (fs::path(dir) / name).string(); }
-};
-
-RunRecorder::RunRecorder(const std::string& dir, const OutputParams& params, const MeshCleanParams& mesh_params)
-    : impl_(std::make_unique<Impl>()) {
-  ensureWritableDirectory(dir);
-  impl_->dir = dir;
-  impl_->params = params;
-  impl_->mesh_params = mesh_params;
-  if (params.write_rawlog) impl_->rawlog = std::make_unique<RawlogThread>(impl_->file("poses.rawlog"));
-}
-
-RunRecorder::~RunRecorder() = default;
-
-void RunRecorder::add(const Frame& frame, const FrameReport& report) {
-  if (!impl_->have_camera) impl_->camera = frame.camera, impl_->have_camera = true;
-  if (frame.groundTruth) impl_->ground_truth.push_back({frame.timestamp, *frame.groundTruth});
-  if (frame.up && report.tracked) impl_->up_sum += report.pose.getRotationMatrix().asEigen() * *frame.up;
-  if (impl_->rawlog) impl_->rawlog->push(frame, report);
-}
-
-json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log) {
-  Impl& m = *impl_;
-  const OutputParams& p = m.params;
-  // All or nothing across files: everything is written into a staging folder and moved into place
-  // only when all of it was written, so a failure (disk full) leaves an earlier run's outputs intact.
-  AtomicPath staging(m.file(".staging"));
-  std::filesystem::create_directories(staging.tmp());
-  auto staged = [&](const std::string& name) { return (std::filesystem::path(staging.tmp()) / name).string(); };
-  std::vector<std::string> written, log_lines;
-  auto last = std::chrono::steady_clock::now();
-  auto wrote = [&](const std::string& name, const std::string& what) {
+// Output files written into a staging folder and moved into place together, only once all of them
+// were written: a failure (disk full) leaves an earlier run's outputs intact. Each is logged with the
+// time since the previous one.
+class StagedOutputs {
+ public:
+  explicit StagedOutputs(std::function<std::string(const std::string&)> final_path)
+      : final_path_(std::move(final_path)), staging_(final_path_(".staging")), last_(std::chrono::steady_clock::now()) {
+    fs::create_directories(staging_.tmp());
+  }
+  std::string path(const std::string& name) const { return (fs::path(staging_.tmp()) / name).string(); }
+  // `name` is done; staged = false: it was written in place (the rawlog, committed by its writer).
+  void wrote(const std::string& name, const std::string& what, bool staged = true) {
     const auto now = std::chrono::steady_clock::now();
     char line[1024];
-    std::snprintf(line, sizeof line, "  wrote %s  (%s; %.1f s)\n", m.file(name).c_str(), what.c_str(),
-                  std::chrono::duration<double>(now - last).count());
-    log_lines.push_back(line);
-    if (name != "poses.rawlog") written.push_back(name);
-    last = now;
-  };
+    std::snprintf(line, sizeof line, "  wrote %s  (%s; %.1f s)\n", final_path_(name).c_str(), what.c_str(),
+                  std::chrono::duration<double>(now - last_).count());
+    log_lines_.push_back(line);
+    if (staged) names_.push_back(name);
+    last_ = now;
+  }
+  void commit(std::FILE* log) {
+    for (const std::string& name : names_) {
+      std::error_code ec;
+      fs::rename(path(name), final_path_(name), ec);
+      if (ec) throw InputError(final_path_(name), "cannot write: " + ec.message());
+    }
+    if (log)
+      for (const std::string& l : log_lines_) std::fputs(l.c_str(), log);
+  }
+
+ private:
+  std::function<std::string(const std::string&)> final_path_;
+  AtomicPath staging_;
+  std::chrono::steady_clock::time_point last_;
+  std::vector<std::string> names_, log_lines_;
+};
+
+// The run's counts, times and fusion statistics (the start of summary.json).
+json runSummary(const Reconstruction& rec, const RunInfo& info) {
   const std::size_t frames = rec.framesProcessed();
   json s;
   s["input"] = info.input;
@@ -288,64 +275,110 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
                                   {"bricks_reloaded", ks.world.reloaded}, {"spill_file_mib", ks.world.spill_file_bytes / 1048576.0},
                                   {"spill_seconds", ks.world.spill_seconds}}}};
   if (!info.extra.is_null()) s.update(info.extra);
+  return s;
+}
 
-  if (m.rawlog) {
-    const std::string err = m.rawlog->stop();
-    if (!err.empty()) throw InputError(m.file("poses.rawlog"), err);
-    if (!m.ground_truth.empty()) m.rawlog->writer().writeGroundTruth(m.ground_truth);
-    // Loop closure: the corrected poses follow the frames as "VOFUSION_POSE_OPTIMISED" (the tracked
-    // ones went in with each frame as "VOFUSION_POSE"), one per frame in one last sensory frame.
-    if (rec.loopCloser())
-      for (const StampedPose& sp : rec.trajectory()) {
-        mrpt::obs::CObservationRobotPose pose;
-        pose.sensorLabel = "VOFUSION_POSE_OPTIMISED";
-        pose.timestamp = mrpt::Clock::fromDouble(sp.timestamp);
-        pose.pose.mean = sp.pose;
-        m.rawlog->writer().writeObservation(pose);
-      }
-  }
+}  // namespace
 
-  writeTumTrajectory(staged("trajectory.txt"), rec.trajectory());
-  wrote("trajectory.txt", std::to_string(rec.trajectory().size()) + " poses");
+struct RunRecorder::Impl {
+  std::string dir;
+  OutputParams params;
+  MeshCleanParams mesh_params;
+  std::unique_ptr<RawlogThread> rawlog;
+  Trajectory ground_truth;
+  Eigen::Vector3d up_sum = Eigen::Vector3d::Zero();  // accelerometer "up" of the frames, in the map
+  CameraIntrinsics camera;
+  bool have_camera = false;
+
+  std::string file(const std::string& name) const { return (fs::path(dir) / name).string(); }
+
+  void finishRawlog(const Reconstruction& rec);
+  // trajectory*.txt, trajectory.png, the ATE/RPE and loop entries of s; returns the ground truth in
+  // the map's frame (empty without one).
+  Trajectory writeTrajectories(const Reconstruction& rec, const RunInfo& info, json& s, StagedOutputs& out) const;
+  // Meshes the map (region by region unless mesh_full.ply is asked for), releases it, and writes
+  // mesh_raw.ply / mesh_full.ply / mesh.ply as asked; fills the mesh entries of s.
+  TriangleMesh writeMeshes(Reconstruction& rec, json& s, StagedOutputs& out) const;
+  SceneOptions sceneOptions(const Reconstruction& rec, json& s) const;
+};
+
+RunRecorder::RunRecorder(const std::string& dir, const OutputParams& params, const MeshCleanParams& mesh_params)
+    : impl_(std::make_unique<Impl>()) {
+  ensureWritableDirectory(dir);
+  impl_->dir = dir;
+  impl_->params = params;
+  impl_->mesh_params = mesh_params;
+  if (params.write_rawlog) impl_->rawlog = std::make_unique<RawlogThread>(impl_->file("poses.rawlog"));
+}
+
+RunRecorder::~RunRecorder() = default;
+
+void RunRecorder::add(const Frame& frame, const FrameReport& report) {
+  if (!impl_->have_camera) impl_->camera = frame.camera, impl_->have_camera = true;
+  if (frame.groundTruth) impl_->ground_truth.push_back({frame.timestamp, *frame.groundTruth});
+  if (frame.up && report.tracked) impl_->up_sum += report.pose.getRotationMatrix().asEigen() * *frame.up;
+  if (impl_->rawlog) impl_->rawlog->push(frame, report);
+}
+
+void RunRecorder::Impl::finishRawlog(const Reconstruction& rec) {
+  const std::string err = rawlog->stop();
+  if (!err.empty()) throw InputError(file("poses.rawlog"), err);
+  if (!ground_truth.empty()) rawlog->writer().writeGroundTruth(ground_truth);
+  // Loop closure: the corrected poses follow the frames as "VOFUSION_POSE_OPTIMISED" (the tracked
+  // ones went in with each frame as "VOFUSION_POSE"), one per frame in one last sensory frame.
+  if (rec.loopCloser())
+    for (const StampedPose& sp : rec.trajectory()) {
+      mrpt::obs::CObservationRobotPose pose;
+      pose.sensorLabel = "VOFUSION_POSE_OPTIMISED";
+      pose.timestamp = mrpt::Clock::fromDouble(sp.timestamp);
+      pose.pose.mean = sp.pose;
+      rawlog->writer().writeObservation(pose);
+    }
+}
+
+Trajectory RunRecorder::Impl::writeTrajectories(const Reconstruction& rec, const RunInfo& info, json& s,
+                                                StagedOutputs& out) const {
+  writeTumTrajectory(out.path("trajectory.txt"), rec.trajectory());
+  out.wrote("trajectory.txt", std::to_string(rec.trajectory().size()) + " poses");
   const loop::LoopCloser* loops = rec.loopCloser();
   if (loops) {
-    writeTumTrajectory(staged("trajectory_tracked.txt"), rec.trackedTrajectory());
-    wrote("trajectory_tracked.txt", "the tracker's poses, before loop closure");
-    s["loop_closure"] = loopClosureJson(*loops, rec, frames);
-    s["loops"] = loopsJson(*loops, m.ground_truth);
+    writeTumTrajectory(out.path("trajectory_tracked.txt"), rec.trackedTrajectory());
+    out.wrote("trajectory_tracked.txt", "the tracker's poses, before loop closure");
+    s["loop_closure"] = loopClosureJson(*loops, rec, rec.framesProcessed());
+    s["loops"] = loopsJson(*loops, ground_truth);
   } else {
     s["loop_closure"] = {{"enabled", false}};
     s["loops"] = json::array();
   }
-
-  // Ground truth drawn in the map's frame (the map is anchored at the first camera): the ATE's
-  // rigid alignment (estimate -> ground truth), inverted.
+  const std::string title = "vofusion " + toString(rec.mode()) + ": " + info.input;
+  if (ground_truth.empty()) {
+    if (!rec.trajectory().empty()) {
+      plotTrajectoriesOverlay(out.path("trajectory.png"), {}, {{"estimate", rec.trajectory()}}, title);
+      out.wrote("trajectory.png", "camera path");
+    }
+    return {};
+  }
+  const AteResult ate = computeAte(ground_truth, rec.trajectory());
+  const RpeResult rpe = computeRpe(ground_truth, rec.trajectory(), params.rpe_delta);
+  if (ate.success) s["ate"] = statsJson(ate.trans);
+  if (loops) {  // the same run without loop closure, for comparison
+    const AteResult tracked = computeAte(ground_truth, rec.trackedTrajectory());
+    if (tracked.success) s["ate_tracked"] = statsJson(tracked.trans);
+  }
+  if (rpe.success) s["rpe"] = {{"delta_s", rpe.delta}, {"trans_m", statsJson(rpe.trans)}, {"rot_deg", statsJson(rpe.rot_deg)}};
+  if (!ate.success) return {};
+  plotAteReport(out.path("trajectory.png"), ate, title);
+  out.wrote("trajectory.png", "ATE RMSE " + std::to_string(ate.trans.rmse) + " m");
+  // Ground truth drawn in the map's frame (the map is anchored at the first camera): the ATE's rigid
+  // alignment (estimate -> ground truth), inverted.
   Trajectory gt_in_map;
-  if (!m.ground_truth.empty()) {
-    const AteResult ate = computeAte(m.ground_truth, rec.trajectory());
-    if (ate.success) {
-      const mrpt::poses::CPose3D to_map = -ate.alignment;
-      for (const auto& g : m.ground_truth) gt_in_map.push_back({g.timestamp, to_map + g.pose});
-    }
-    const RpeResult rpe = computeRpe(m.ground_truth, rec.trajectory(), p.rpe_delta);
-    if (ate.success) s["ate"] = statsJson(ate.trans);
-    if (loops) {  // the same run without loop closure, for comparison
-      const AteResult tracked = computeAte(m.ground_truth, rec.trackedTrajectory());
-      if (tracked.success) s["ate_tracked"] = statsJson(tracked.trans);
-    }
-    if (rpe.success) s["rpe"] = {{"delta_s", rpe.delta}, {"trans_m", statsJson(rpe.trans)}, {"rot_deg", statsJson(rpe.rot_deg)}};
-    if (ate.success) {
-      plotAteReport(staged("trajectory.png"), ate, "vofusion " + toString(rec.mode()) + ": " + info.input);
-      wrote("trajectory.png", "ATE RMSE " + std::to_string(ate.trans.rmse) + " m");
-    }
-  }
-  if (m.ground_truth.empty() && !rec.trajectory().empty()) {
-    plotTrajectoriesOverlay(staged("trajectory.png"), {}, {{"estimate", rec.trajectory()}},
-                            "vofusion " + toString(rec.mode()) + ": " + info.input);
-    wrote("trajectory.png", "camera path");
-  }
+  const mrpt::poses::CPose3D to_map = -ate.alignment;
+  for (const auto& g : ground_truth) gt_in_map.push_back({g.timestamp, to_map + g.pose});
+  return gt_in_map;
+}
 
-  returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
+TriangleMesh RunRecorder::Impl::writeMeshes(Reconstruction& rec, json& s, StagedOutputs& out) const {
+  const OutputParams& p = params;
   // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
   const auto release_map = [&] {
     if (rec.mapReleased()) return;
@@ -355,10 +388,10 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   TriangleMesh mesh;
   std::string streamed_raw;  // logged after mesh.ply, whose line then carries the meshing time
   // Region by region unless the unsimplified whole (mesh_full.ply) is asked for.
-  const bool by_region = p.clean_mesh && m.mesh_params.region_bricks > 0 && !p.save_full_mesh;
+  const bool by_region = p.clean_mesh && mesh_params.region_bricks > 0 && !p.save_full_mesh;
   if (by_region) {
     const auto source = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
-      rec.extractMeshByRegion(m.mesh_params.region_bricks, sink);
+      rec.extractMeshByRegion(mesh_params.region_bricks, sink);
     };
     std::unique_ptr<Progress> shown;
     int shown_pass = 0;
@@ -372,7 +405,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
       shown->update(done);
     };
     RegionMeshResult r =
-        meshByRegion(source, m.mesh_params, p.save_raw_mesh ? staged("mesh_raw.ply") : "", progress, release_map);
+        meshByRegion(source, mesh_params, p.save_raw_mesh ? out.path("mesh_raw.ply") : "", progress, release_map);
     if (shown) shown->finish();
     mesh = std::move(r.mesh);
     s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
@@ -385,62 +418,74 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   }
   release_map();
   if (!by_region && p.save_raw_mesh) {
-    writePly(staged("mesh_raw.ply"), mesh);
-    wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
+    writePly(out.path("mesh_raw.ply"), mesh);
+    out.wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
   }
   if (!by_region && p.clean_mesh && !mesh.empty()) {
     const std::size_t raw_faces = mesh.faces.size();
     TriangleMesh full;
-    const MeshCleanReport report = cleanMesh(mesh, m.mesh_params, p.save_full_mesh ? &full : nullptr);
+    const MeshCleanReport report = cleanMesh(mesh, mesh_params, p.save_full_mesh ? &full : nullptr);
     s["mesh_clean"] = json::parse(report.toJson());
     if (report.simplification.ran) s["mesh_simplification"] = simplificationJson(report.simplification, raw_faces);
     if (p.save_full_mesh) {
-      writePly(staged("mesh_full.ply"), full);
-      wrote("mesh_full.ply", std::to_string(full.faces.size()) + " faces");
+      writePly(out.path("mesh_full.ply"), full);
+      out.wrote("mesh_full.ply", std::to_string(full.faces.size()) + " faces");
     }
   }
   s["mesh"] = meshJson(mesh);
-  writePly(staged("mesh.ply"), mesh);
-  wrote("mesh.ply", std::to_string(mesh.faces.size()) + " faces");
-  if (!streamed_raw.empty()) wrote("mesh_raw.ply", streamed_raw);
+  writePly(out.path("mesh.ply"), mesh);
+  out.wrote("mesh.ply", std::to_string(mesh.faces.size()) + " faces");
+  if (!streamed_raw.empty()) out.wrote("mesh_raw.ply", streamed_raw);
+  return mesh;
+}
 
-  const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
-  // Up: the accelerometer's where the recording has one, else the scene finds the floor.
-  SceneOptions scene_opts;
-  scene_opts.frustum_every_k = p.frustum_every;
-  if (loops) {
+SceneOptions RunRecorder::Impl::sceneOptions(const Reconstruction& rec, json& s) const {
+  SceneOptions o;
+  o.frustum_every_k = params.frustum_every;
+  if (const loop::LoopCloser* loops = rec.loopCloser()) {
     const std::vector<loop::KeyframePose> kf = loops->keyframes();
     auto at = [&](std::size_t id) { return toMrpt(kf[id].optimised); };
-    for (const auto& k : kf) scene_opts.keyframes.push_back(toMrpt(k.optimised));
+    for (const auto& k : kf) o.keyframes.push_back(toMrpt(k.optimised));
     for (const loop::LoopRecord& l : loops->loops())
       if (l.active && l.from_keyframe < kf.size() && l.to_keyframe < kf.size())
-        scene_opts.loop_edges.push_back({at(l.from_keyframe), at(l.to_keyframe)});
+        o.loop_edges.push_back({at(l.from_keyframe), at(l.to_keyframe)});
   }
-  if (m.up_sum.norm() > 0) {
-    scene_opts.up_vector = m.up_sum.normalized();
-    s["up_from_accelerometer"] = {m.up_sum.normalized().x(), m.up_sum.normalized().y(), m.up_sum.normalized().z()};
+  // Up: the accelerometer's where the recording has one, else the scene finds the floor.
+  if (up_sum.norm() > 0) {
+    o.up_vector = up_sum.normalized();
+    s["up_from_accelerometer"] = {o.up_vector->x(), o.up_vector->y(), o.up_vector->z()};
   }
-  exportScene(staged("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam, scene_opts);
-  wrote("scene.3Dscene", "open with SceneViewer3D");
+  return o;
+}
+
+json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log) {
+  Impl& m = *impl_;
+  StagedOutputs out([&m](const std::string& name) { return m.file(name); });
+  json s = runSummary(rec, info);
+  if (m.rawlog) m.finishRawlog(rec);
+  const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
+
+  returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
+  const TriangleMesh mesh = m.writeMeshes(rec, s, out);
+
+  const SceneOptions scene_opts = m.sceneOptions(rec, s);
+  const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
+  exportScene(out.path("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam, scene_opts);
+  out.wrote("scene.3Dscene", "open with SceneViewer3D");
   if (!mesh.empty()) {
-    renderMeshPng(staged("mesh.png"), mesh, &rec.trajectory(), p.image_width, p.image_height, scene_opts.up_vector);
-    wrote("mesh.png", std::to_string(p.image_width) + "x" + std::to_string(p.image_height));
+    renderMeshPng(out.path("mesh.png"), mesh, &rec.trajectory(), m.params.image_width, m.params.image_height,
+                  scene_opts.up_vector);
+    out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height));
   }
 
   s["peak_memory_mib"] = peakMemoryMiB();
-  writeFileAtomically(staged("summary.json"), s.dump(2) + "\n");
-  wrote("summary.json", "run statistics");
+  writeFileAtomically(out.path("summary.json"), s.dump(2) + "\n");
+  out.wrote("summary.json", "run statistics");
   if (m.rawlog) {
     m.rawlog->writer().commit();
-    wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames");
+    out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);
   }
-  for (const std::string& name : written) {
-    std::error_code ec;
-    std::filesystem::rename(staged(name), m.file(name), ec);
-    if (ec) throw InputError(m.file(name), "cannot write: " + ec.message());
-  }
-  if (log)
-    for (const std::string& l : log_lines) std::fputs(l.c_str(), log);
+  out.commit(log);
   return s;
 }
 
