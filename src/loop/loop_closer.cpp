@@ -3,6 +3,7 @@
 #include <condition_variable>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "vofusion/loop/keyframe_store.h"
@@ -76,10 +77,22 @@ struct LoopCloser::Impl {
   void indexEligible(const Keyframe& cur) {
     while (indexed < cur.id && cur.id - indexed >= std::size_t(params.recent_keyframes) &&
            cur.path_length - keyframes.at(indexed).path_length >= params.min_travel) {
-      const Keyframe k = keyframes.load(indexed++);
-      if (k.features) index.add(k.id, k.features->descriptors);
+      const std::size_t id = indexed++;
+      // Keyframes 0.15 m apart mostly repeat each other's descriptors: the index takes one per
+      // index_spacing (or keyframe_rotation), so it grows half as fast along the path.
+      const Eigen::Isometry3d& pose = keyframes.at(id).tracked;
+      if (last_indexed) {
+        const Eigen::Isometry3d d = last_indexed->inverse() * pose;
+        const double angle = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
+        if (d.translation().norm() < params.index_spacing && angle < params.keyframe_rotation) continue;
+      }
+      const Keyframe k = keyframes.load(id);
+      if (!k.features) continue;
+      index.add(k.id, k.features->descriptors);
+      last_indexed = pose;
     }
   }
+  std::optional<Eigen::Isometry3d> last_indexed;  // pose of the newest keyframe in the index
 
   // One keyframe: a node chained to the previous one, then place recognition among the keyframes
   // older than the recent ones, verification, and an optimisation when a loop was accepted.

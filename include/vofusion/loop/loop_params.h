@@ -20,6 +20,9 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   double min_travel = 3.0;             // m of camera path between a loop's keyframes, at least (about the
                                        // default volume's edge: nearer revisits meet the tracker's own model)
   int place_descriptors = 300;         // descriptors per keyframe in the index and per query (evenly spread)
+  // m: a keyframe joins the place index only this far (or keyframe_rotation) from the last one that
+  // did; 0 = every keyframe. Every keyframe still queries the index and can close a loop.
+  double index_spacing = 0.3;
   int candidates = 3;                  // best-voted keyframes verified per keyframe
   int min_votes = 20;                  // descriptor votes a candidate needs
   int max_hamming = 60;                // bits of 256; a vote's descriptor distance at most
