@@ -55,4 +55,13 @@ int run(const std::string& cmd, std::string* output) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory) {
+  sim::SimOptions o;
+  o.scene = scene;
+  o.trajectory = trajectory;
+  o.frames = frames;
+  o.camera = CameraIntrinsics{}.scaled(0.5);
+  return o;
+}
+
 }  // namespace vofusion::test

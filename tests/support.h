@@ -1,8 +1,11 @@
 #pragma once
 // Shared helpers for the test suite.
+#include <cstddef>
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "vofusion/sim/synthetic_sequence.h"
 
 namespace vofusion::test {
 
@@ -30,5 +33,7 @@ std::string tempDir(const std::string& name);
 std::string app(const std::string& name);
 // Runs a shell command; returns its exit code and fills output (stdout+stderr).
 int run(const std::string& cmd, std::string* output = nullptr);
+// A synthetic sequence's options at 320x240, which keeps the suite quick.
+sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory = "smooth");
 
 }  // namespace vofusion::test

@@ -26,13 +26,7 @@ KinFuParams testParams() {
   return p;
 }
 
-sim::SimOptions simOpts(const std::string& scene, std::size_t frames) {
-  sim::SimOptions o;
-  o.scene = scene;
-  o.frames = frames;
-  o.camera = CameraIntrinsics{}.scaled(0.5);  // 320x240 keeps the suite quick
-  return o;
-}
+sim::SimOptions simOpts(const std::string& scene, std::size_t frames) { return test::quickSim(scene, frames); }
 
 // What a good RGB-D odometry delivers: the true motion plus ~1.5 mm / 0.1 deg of noise per frame; or
 // (matches > 0) that many 3D point matches on a grid of the current frame, each reading with its

@@ -351,11 +351,7 @@ TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
 // Two places 3 m apart in the look-alike corridor look the same; the camera's tracked path says they
 // are 3 m apart, so joining them is refused.
 TEST(LoopVerifier, LookAlikePlacesAreNotJoined) {
-  sim::SimOptions o;
-  o.scene = "lookalike";
-  o.frames = 300;
-  o.camera = CameraIntrinsics{}.scaled(0.5);
-  const sim::SyntheticSequence seq(o);
+  const sim::SyntheticSequence seq(test::quickSim("lookalike", 300));
   // Frames whose true x differs by one period (3 m).
   const Eigen::Isometry3d t0 = toEigen(seq.groundTruth(20));
   std::size_t j = 21;

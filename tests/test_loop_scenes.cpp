@@ -110,11 +110,7 @@ TEST(LoopScenes, LookAlikePlacesAreNeverJoined) {
 // Keyframes handed over faster than the loop thread takes them wait in a bounded queue: the frame
 // loop then waits for the thread instead of memory growing with the path; every keyframe is processed.
 TEST(LoopScenes, KeyframeQueueIsBounded) {
-  sim::SimOptions o;
-  o.scene = "corridor";
-  o.frames = 30;
-  o.camera = CameraIntrinsics{}.scaled(0.5);
-  const sim::SyntheticSequence seq(o);
+  const sim::SyntheticSequence seq(test::quickSim("corridor", 30));
   RgbdOdometry odometry;
   std::vector<std::pair<Frame, std::shared_ptr<const DescribedKeypoints>>> frames;
   for (std::size_t i = 0; i < seq.size(); ++i) {

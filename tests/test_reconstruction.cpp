@@ -64,13 +64,7 @@ void expectSame(const PipelineRun& a, const PipelineRun& b) {
 }
 
 // 12 frames of the synthetic room at 320x240.
-sim::SimOptions smallRoom() {
-  sim::SimOptions o;
-  o.scene = "room";
-  o.frames = 12;
-  o.camera = CameraIntrinsics{}.scaled(0.5);
-  return o;
-}
+sim::SimOptions smallRoom() { return test::quickSim("room", 12); }
 
 // The small room at 1 cm voxels, the odometry on STAR keypoints only (PCL's NARF is not the question).
 mrpt::config::CConfigFileMemory smallRoomConfig() {

@@ -44,12 +44,7 @@ Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::s
 // (paper-handoff 2.9, odometry 5.9, kinfu 14.6): this guards what mode joint reaches and that it beats
 // each of its own sources. The shake's colour offsets are exact, as "capture" assumes: 0.6 cm.
 TEST(Tracking, ShakeThreeSecondsHeldBetterThanEitherSource) {
-  sim::SimOptions o;
-  o.scene = "room";
-  o.trajectory = "shake";
-  o.frames = 90;
-  o.camera = CameraIntrinsics{}.scaled(0.5);
-  const sim::SyntheticSequence seq(o);
+  const sim::SyntheticSequence seq(test::quickSim("room", 90, "shake"));
   const Tracked joint = track(seq, TrackingMode::Joint);
   const Tracked kinfu = track(seq, TrackingMode::KinFu);
   const Tracked paper = track(seq, TrackingMode::PaperHandoff);

@@ -3,9 +3,12 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstring>
 #include <new>
 #include <stdexcept>
+
+#include "vofusion/core/mapped_allocator.h"
 
 namespace vofusion::fusion {
 
@@ -19,13 +22,10 @@ std::size_t roundUpToPage(std::size_t bytes) { return (bytes + pageSize() - 1) /
 
 BrickArena::BrickArena(std::size_t capacity) : capacity_(capacity) {
   if (capacity_ == 0 || capacity_ > static_cast<std::size_t>(INT32_MAX)) throw std::invalid_argument("BrickArena: capacity");
-  mapped_bytes_ = roundUpToPage(capacity_ * sizeof(Brick));
-  void* p = ::mmap(nullptr, mapped_bytes_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
-  if (p == MAP_FAILED) throw std::bad_alloc();
-  bricks_ = static_cast<Brick*>(p);
+  bricks_ = MappedAllocator<Brick>().allocate(capacity_);
 }
 
-BrickArena::~BrickArena() { ::munmap(bricks_, mapped_bytes_); }
+BrickArena::~BrickArena() { MappedAllocator<Brick>().deallocate(bricks_, capacity_); }
 
 std::int32_t BrickArena::append() {
   if (size_ == capacity_) throw std::length_error("BrickArena: more bricks than the volume has slots");

@@ -26,7 +26,8 @@ struct LoopCloser::Impl {
   // Owned by the worker thread.
   KeyframeStore keyframes;
   PlaceIndex index;
-  std::size_t indexed = 0;  // keyframes[0, indexed) are loop candidates (in the index)
+  std::size_t indexed = 0;  // keyframes[0, indexed) have been considered for the index
+  std::optional<Eigen::Isometry3d> last_indexed;  // pose of the newest keyframe in the index
   PoseGraph graph;
   std::vector<std::size_t> loop_edge_record;  // graph edge index -> loops[] index (loop edges only)
 
@@ -82,9 +83,8 @@ struct LoopCloser::Impl {
       // index_spacing (or keyframe_rotation), so it grows half as fast along the path.
       const Eigen::Isometry3d& pose = keyframes.at(id).tracked;
       if (last_indexed) {
-        const Eigen::Isometry3d d = last_indexed->inverse() * pose;
-        const double angle = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
-        if (d.translation().norm() < params.index_spacing && angle < params.keyframe_rotation) continue;
+        const auto [moved, turned] = poseDifference(*last_indexed, pose);
+        if (moved < params.index_spacing && turned < params.keyframe_rotation) continue;
       }
       const Keyframe k = keyframes.load(id);
       if (!k.features) continue;
@@ -92,7 +92,6 @@ struct LoopCloser::Impl {
       last_indexed = pose;
     }
   }
-  std::optional<Eigen::Isometry3d> last_indexed;  // pose of the newest keyframe in the index
 
   // One keyframe: a node chained to the previous one, then place recognition among the keyframes
   // older than the recent ones, verification, and an optimisation when a loop was accepted.

@@ -477,7 +477,8 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   Impl::FitVelocities velocities;
   // A fit's velocities become the reference's (final: the motions on both sides are known) and the
   // current frame's (its arrival, and its velocity until the next frame's motion is known).
-  auto keepVelocities = [&cur](FrameFeatures& ref, const Impl::FitVelocities& v) {
+  auto keepVelocities = [&cur, &m](FrameFeatures& ref, const Impl::FitVelocities& v) {
+    if (m.colour_velocity != ColourTimeVelocity::Capture) return;  // interval needs no history
     if (!ref.velocity_final) ref.velocity = v.at_reference;
     ref.velocity_final = true;
     cur.arrival = v.interval;

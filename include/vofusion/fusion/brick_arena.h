@@ -36,17 +36,14 @@ class BrickArena {
   Brick& operator[](std::int32_t id) { return bricks_[id]; }
   const Brick& operator[](std::int32_t id) const { return bricks_[id]; }
   std::size_t size() const { return size_; }
-  std::size_t capacity() const { return capacity_; }
 
   // Gives the pages past the bricks in use back to the kernel when more than kSlackBytes lie there.
   void releaseUnusedPages();
-  std::size_t touchedBytes() const { return touched_bytes_; }  // resident at most (pages written, not released)
 
  private:
   std::int32_t append();
-  Brick* bricks_ = nullptr;
+  Brick* bricks_ = nullptr;  // MappedAllocator<Brick> (core/mapped_allocator.h), capacity_ bricks
   std::size_t capacity_ = 0, size_ = 0;
-  std::size_t mapped_bytes_ = 0;
   std::size_t touched_bytes_ = 0;  // page-rounded end of the bricks written since the last release
 };
 
