@@ -53,6 +53,15 @@ namespace {
 
 
 
+// Motion m scaled to s times its length (rotation angle and translation).
+Eigen::Isometry3d scaledMotion(const Eigen::Isometry3d& m, double s) {
+  const Eigen::AngleAxisd rot(m.linear());
+  Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
+  step.linear() = Eigen::AngleAxisd(s * rot.angle(), rot.axis()).toRotationMatrix();
+  step.translation() = s * m.translation();
+  return step;
+}
+
 double seconds(std::chrono::steady_clock::time_point a) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();
 }
@@ -76,7 +85,12 @@ struct KinFu::Impl {
     cv::Mat depth, rgb, hint;
     CameraIntrinsics cam, track_cam;
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    std::vector<IntensityLevel> intensity;  // mode joint with the photometric term: the frame's pyramid,
+    std::vector<CameraIntrinsics> level_cams;  // its levels' cameras
+    Eigen::Isometry3d colour_pose = Eigen::Isometry3d::Identity();  // and where its colour was captured
   } pending;
+  // Intensity of the frame the model was last ray cast for, on the model's pixel grid (photometric term).
+  std::vector<IntensityLevel> model_intensity;
 
   // Poses of the last tracked frames by Frame::index: a prior's reference is looked up here.
   std::deque<std::pair<std::size_t, Eigen::Isometry3d>> recent;
@@ -93,12 +107,13 @@ struct KinFu::Impl {
   // The last pose moved on by the last motion, scaled to the time since the last tracked frame.
   Eigen::Isometry3d constantVelocity(double timestamp) const {
     if (!(last_motion_dt > 0)) return pose;
-    const double s = std::clamp((timestamp - last_timestamp) / last_motion_dt, 0.0, 3.0);
-    const Eigen::AngleAxisd rot(last_motion.linear());
-    Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
-    step.linear() = Eigen::AngleAxisd(s * rot.angle(), rot.axis()).toRotationMatrix();
-    step.translation() = s * last_motion.translation();
-    return pose * step;
+    return pose * scaledMotion(last_motion, std::clamp((timestamp - last_timestamp) / last_motion_dt, 0.0, 3.0));
+  }
+  // The camera's motion over `offset` seconds at the last motion's velocity (camera frame): where the
+  // colour camera was relative to the depth camera when the two were captured `offset` apart.
+  Eigen::Isometry3d colourMotion(double offset) const {
+    if (!params.joint_photometric_colour_time || !(last_motion_dt > 0) || offset == 0.0) return Eigen::Isometry3d::Identity();
+    return scaledMotion(last_motion, std::clamp(offset / last_motion_dt, -3.0, 3.0));
   }
   void remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T) {
     if (have_last && timestamp > last_timestamp) {
@@ -202,6 +217,22 @@ struct KinFu::Impl {
       if (c < params.guess_margin * best_cost) best = g, best_cost = c;
     }
     return best;
+  }
+
+  // Mode joint: the photometric term's levels when this frame and the model's reference both have an
+  // intensity pyramid on the tracking levels' grids (empty otherwise: no term).
+  PhotometricTerms photometricTerms(const std::vector<IntensityLevel>& current, const std::vector<DepthLevel>& levels) const {
+    PhotometricTerms t;
+    t.params.sigma = params.joint_photometric_sigma;
+    t.params.huber = params.joint_photometric_huber;
+    t.params.min_gradient = params.joint_photometric_min_gradient;
+    const std::size_t n = std::min({current.size(), model_intensity.size(), levels.size(), model_vertices.size()});
+    for (std::size_t l = 0; l < n; ++l) {
+      if (model_intensity[l].grey.size() != model_vertices[l].size() || current[l].grey.size() != levels[l].depth.size())
+        break;
+      t.levels.push_back({&model_intensity[l], &current[l], &model_vertices[l], levels[l].camera});
+    }
+    return t;
   }
 
   Eigen::Vector3f focusPoint(const Eigen::Isometry3d& T) const {
@@ -311,8 +342,11 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
   const Eigen::Isometry3d prior_pose = have_prior ? *ref_pose * prior->T_ref_cur : s.pose;
   const Eigen::Isometry3d velocity_pose = s.constantVelocity(frame.timestamp);
   Eigen::Isometry3d new_pose = s.pose;
+  std::vector<IntensityLevel> intensity;
 
   if (!s.have_model) {
+    if (s.mode == TrackingMode::Joint && P.joint_photometric_sigma > 0)
+      intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
     res.tracked = true;  // the first frame defines the map
   } else if (s.mode == TrackingMode::Odometry) {
     res.tracked = true;
@@ -325,6 +359,11 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
     const bool seeded = s.mode == TrackingMode::PaperHandoff && have_prior;
     IcpParams ip = s.icpParams(joint, seeded, have_prior);
     PointMatches matches;
+    if (joint && P.joint_photometric_sigma > 0) {
+      t0 = std::chrono::steady_clock::now();
+      intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
+      res.times.add("intensity", seconds(t0));
+    }
     if (joint) {
       res.guess = s.chooseGuess(levels, ip, have_prior, prior_pose, velocity_pose);
       if (have_prior) matches = s.matchesOf(*prior, *ref_pose, prior_pose);
@@ -344,6 +383,9 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
       if (s.last_motion_dt > 0 && (motion.sigma_translation > 0 || motion.sigma_rotation > 0)) terms.motion = &motion;
       if (have_prior) terms.weak_anchor = &prior_pose;
     }
+    PhotometricTerms photometric = s.photometricTerms(intensity, levels);
+    photometric.colour_motion = s.colourMotion(frame.colour_offset);
+    if (!photometric.levels.empty()) terms.photometric = &photometric;
     const IcpResult icp = projectiveIcp(levels, s.model_vertices, s.model_normals, s.model_pose, initial, ip, terms);
     res.times.add("icp", seconds(t0));
     res.icp_inliers = icp.inliers;
@@ -351,6 +393,7 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
     res.condition = icp.condition;
     res.degenerate_dims = icp.degenerate_dims;
     res.match_inliers = icp.point_inliers;
+    res.photometric_residuals = icp.photometric_residuals;
     res.reason = s.rejection(icp, joint, seeded || (joint && have_prior) ? &prior_pose : nullptr);
     if (res.reason.empty()) {
       res.tracked = true;
@@ -380,9 +423,11 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
     else ++s.stats.guess_last;
   }
   s.stats.times.merge(res.times);
-  if (res.tracked)
+  if (res.tracked) {
     s.pending = {true, P.integrate_filtered && P.tracking_downsample == 1 ? levels[0].depth : frame.depth, frame.rgb,
-                 levels[0].depth, cam, track_cam, s.pose};
+                 levels[0].depth, cam, track_cam, s.pose, std::move(intensity), {}, s.pose * s.colourMotion(frame.colour_offset)};
+    for (const DepthLevel& l : levels) s.pending.level_cams.push_back(l.camera);
+  }
   return res;
 }
 
@@ -412,6 +457,13 @@ void KinFu::fuse(FusionResult& res) {
   } else if (s.mode != TrackingMode::Odometry) {
     // Not fused (fallback or predicted pose): re-predict the model from the new pose so ICP keeps up.
     s.raycastModel(f.pose, cv::Mat(), f.track_cam, times);
+  }
+  // The ray cast was from this frame's pose: its intensity is the photometric term's reference.
+  if (s.mode == TrackingMode::Joint) {
+    s.model_intensity.clear();
+    const std::size_t n = std::min({f.intensity.size(), f.level_cams.size(), s.model_vertices.size()});
+    for (std::size_t l = 0; l < n; ++l)
+      s.model_intensity.push_back(resampleAtModel(f.intensity[l], s.model_vertices[l], f.colour_pose, f.level_cams[l]));
   }
   res.times.merge(times);
   s.stats.times.merge(times);
@@ -486,6 +538,7 @@ void KinFu::resume(const std::string& path) {
   s.last_motion_dt = 0.0;
   s.recent.clear();
   s.model_depth.release();
+  s.model_intensity.clear();
 }
 
 cv::Mat KinFu::renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam, bool coloured) const {

@@ -205,6 +205,7 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
   const PointMatches* points = joint.matches;
   const PosePrior* pose_prior = joint.motion;
   const bool have_points = points && !points->camera_points.empty();
+  const PhotometricTerms* photo = joint.photometric;
 
   for (int l = levels - 1; l >= 0; --l) {
     const DepthLevel& lv = frame[l];
@@ -227,7 +228,8 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
         res.in_view = total.in_view;
         res.rms = total.n ? std::sqrt(total.r2 / total.n) : 0.0;
       }
-      if (total.n < 6 && !have_points && !pose_prior) {
+      const bool have_photo = photo && l < static_cast<int>(photo->levels.size());
+      if (total.n < 6 && !have_points && !pose_prior && !have_photo) {
         res.solved = false;
         if (l == 0) res.condition = 0.0;
         break;
@@ -239,7 +241,7 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
       D << 1.0 / scale, 1.0 / scale, 1.0 / scale, 1.0, 1.0, 1.0;
       const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(D.asDiagonal() * A * D.asDiagonal());
       const double emax = es.eigenvalues()[5];
-      const bool other_terms = have_points || pose_prior || joint.weak_anchor;
+      const bool other_terms = have_points || pose_prior || joint.weak_anchor || have_photo;
       if (!(emax > 0.0) || !es.eigenvectors().allFinite()) {
         res.solved = false;
         break;
@@ -277,6 +279,13 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
           if (l == 0) res.point_inliers = close;
         }
         if (pose_prior) addPosePrior(*pose_prior, res.pose, At, bt);
+        if (have_photo) {
+          const PhotometricSums ps = accumulatePhotometric(photo->levels[l], res.pose, photo->params, double(1 << (2 * l)),
+                                                             photo->colour_motion);
+          At += ps.A;
+          bt += ps.b;
+          if (l == 0) res.photometric_residuals = ps.residuals;
+        }
         // Strong subspace: ICP, the matches and the motion model together.
         const Eigen::Matrix<double, 6, 6> Ss = As + Ps * D.asDiagonal() * At * D.asDiagonal() * Ps;
         const Eigen::Matrix<double, 6, 1> bb = Ps * (b_icp + D.asDiagonal() * bt);

@@ -59,6 +59,12 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
   double motion_sigma_rotation = 0.0;  // degrees per 1/30 s, same for the rotation (0 = none)
   float guess_margin = 0.8f;          // another initial guess replaces the prior's only when its
                                       // alignment cost is below this fraction of the prior's
+  // Mode joint, the photometric term (fusion/photometric.h): each textured pixel of the last frame keeps
+  // its intensity in this one.
+  double joint_photometric_sigma = 0.0;  // grey levels, noise of one finest-level residual (0 = no term)
+  double joint_photometric_huber = 1.0;  // sigmas, Huber kernel on the whitened residual
+  double joint_photometric_min_gradient = 4.0;  // grey levels per pixel, weaker reference pixels unused
+  bool joint_photometric_colour_time = true;  // each colour image placed at its capture (Frame::colour_offset)
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
@@ -91,6 +97,7 @@ struct FusionResult {
   double condition = 0.0;     // of the ICP normal matrix (0 when no ICP ran)
   int degenerate_dims = 0;    // ICP directions too weak to solve, kept from the prediction
   int match_inliers = 0;      // prior matches within 3 sigmas of the joint estimate
+  int photometric_residuals = 0;  // mode joint: pixels with a photometric residual at level 0
   double icp_sigma = 0.0;     // m, mode joint: the noise the ICP residuals were weighed with
   bool shifted = false;       // the volume moved this frame
   StageTimes times;           // preprocess, icp, integrate, raycast, shift

@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
+#include "vofusion/fusion/photometric.h"
 #include "vofusion/fusion/preprocess.h"
 
 namespace vofusion::fusion {
@@ -44,6 +45,7 @@ struct IcpResult {
   int degenerate_dims = 0;     // directions left at the initial guess at the last level-0 iteration
   bool solved = false;         // false when a linear system could not be solved
   int point_inliers = 0;       // PointMatches within 3 sigmas at the solution
+  int photometric_residuals = 0;  // level-0 pixels with a photometric residual at the last iteration
 };
 
 // A Gaussian prior on the camera pose itself (a motion model's prediction): rotation and camera
@@ -71,8 +73,14 @@ AlignmentScore scoreAlignment(const DepthLevel& frame, const cv::Mat& model_vert
 // and the matches and the motion model together (ICP residuals then need their weight,
 // params.point_to_plane_sigma > 0); its weak directions (see degenerate_ratio) move to weak_anchor
 // (the prior's pose) when given, else they keep the initial guess.
+struct PhotometricTerms {
+  std::vector<PhotometricLevel> levels;  // per tracking level, level 0 first
+  PhotometricParams params;
+  Eigen::Isometry3d colour_motion = Eigen::Isometry3d::Identity();  // see accumulatePhotometric
+};
 struct JointTerms {
   const PointMatches* matches = nullptr;
+  const PhotometricTerms* photometric = nullptr;
   const PosePrior* motion = nullptr;
   const Eigen::Isometry3d* weak_anchor = nullptr;  // camera-to-world
 };

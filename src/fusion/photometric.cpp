@@ -1,0 +1,159 @@
+#include "vofusion/fusion/photometric.h"
+
+#include <cmath>
+#include <limits>
+
+#include <opencv2/imgproc.hpp>
+
+#include "vofusion/core/parallel.h"
+
+namespace vofusion::fusion {
+
+namespace {
+
+// Levels below this many pixels run on one thread (as ICP's).
+constexpr std::size_t kParallelMinPixels = 30000;
+
+IntensityLevel withGradients(cv::Mat grey) {
+  IntensityLevel l;
+  l.grey = std::move(grey);
+  // Sobel / 8: grey levels per pixel, smoothed across the derivative as DVO's and Kintinuous' gradients.
+  cv::Sobel(l.grey, l.dx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
+  cv::Sobel(l.grey, l.dy, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
+  return l;
+}
+
+// Bilinear sample at (x, y), which the caller keeps inside [0, cols-1) x [0, rows-1).
+inline float sample(const cv::Mat& m, float x, float y) {
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const float ax = x - x0, ay = y - y0;
+  const float* r0 = m.ptr<float>(y0) + x0;
+  const float* r1 = m.ptr<float>(y0 + 1) + x0;
+  return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
+}
+
+struct Sums {
+  double A[21] = {};  // upper triangle
+  double b[6] = {};
+  double r2 = 0.0;
+  int n = 0;
+};
+
+void addSums(Sums& t, const Sums& s) {
+  for (int i = 0; i < 21; ++i) t.A[i] += s.A[i];
+  for (int i = 0; i < 6; ++i) t.b[i] += s.b[i];
+  t.r2 += s.r2;
+  t.n += s.n;
+}
+
+}  // namespace
+
+std::vector<IntensityLevel> intensityPyramid(const cv::Mat& bgr, cv::Size size, int levels) {
+  std::vector<IntensityLevel> out;
+  if (bgr.empty() || bgr.type() != CV_8UC3 || levels < 1) return out;
+  cv::Mat grey8, grey;
+  cv::cvtColor(bgr, grey8, cv::COLOR_BGR2GRAY);
+  grey8.convertTo(grey, CV_32F);
+  if (grey.size() != size) cv::resize(grey, grey, size, 0, 0, cv::INTER_AREA);
+  out.push_back(withGradients(grey));
+  for (int l = 1; l < levels; ++l) {
+    cv::Mat half;
+    cv::resize(out.back().grey, half, cv::Size(out.back().grey.cols / 2, out.back().grey.rows / 2), 0, 0, cv::INTER_AREA);
+    out.push_back(withGradients(half));
+  }
+  return out;
+}
+
+IntensityLevel resampleAtModel(const IntensityLevel& image, const cv::Mat& model_vertices, const Eigen::Isometry3d& colour_pose,
+                               const CameraIntrinsics& camera) {
+  IntensityLevel out;
+  out.grey.create(model_vertices.size(), CV_32F);
+  out.dx.create(model_vertices.size(), CV_32F);
+  out.dy.create(model_vertices.size(), CV_32F);
+  const Eigen::Isometry3f to_cam = colour_pose.inverse().cast<float>();
+  const float max_x = image.grey.cols - 1.001f, max_y = image.grey.rows - 1.001f;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  parallelFor(0, model_vertices.rows, [&](int y) {
+    const cv::Vec3f* vrow = model_vertices.ptr<cv::Vec3f>(y);
+    float* g = out.grey.ptr<float>(y);
+    float* gx = out.dx.ptr<float>(y);
+    float* gy = out.dy.ptr<float>(y);
+    for (int x = 0; x < model_vertices.cols; ++x) {
+      g[x] = nan, gx[x] = gy[x] = 0.f;
+      const cv::Vec3f& m = vrow[x];
+      if (std::isnan(m[0])) continue;
+      const Eigen::Vector3f p = to_cam * Eigen::Vector3f(m[0], m[1], m[2]);
+      if (!(p.z() > 0.f)) continue;
+      const float u = camera.fx * p.x() / p.z() + camera.cx, v = camera.fy * p.y() / p.z() + camera.cy;
+      if (!(u >= 0.f && v >= 0.f && u < max_x && v < max_y)) continue;
+      g[x] = sample(image.grey, u, v);
+      gx[x] = sample(image.dx, u, v);
+      gy[x] = sample(image.dy, u, v);
+    }
+  }, 1, model_vertices.total() >= kParallelMinPixels);
+  return out;
+}
+
+PhotometricSums accumulatePhotometric(const PhotometricLevel& level, const Eigen::Isometry3d& T,
+                                      const PhotometricParams& params, double weight, const Eigen::Isometry3d& colour_motion) {
+  PhotometricSums out;
+  const IntensityLevel& ref = *level.reference;
+  const IntensityLevel& cur = *level.current;
+  const cv::Mat& mv = *level.model_vertices;
+  if (mv.size() != ref.grey.size() || !(params.sigma > 0)) return out;
+  // Current colour camera: p = M^-1 R^T (v - c); its derivatives go back to the world by R M_R.
+  const Eigen::Isometry3f M_inv = colour_motion.inverse().cast<float>();
+  const Eigen::Matrix3f R = T.linear().cast<float>() * colour_motion.linear().cast<float>(), Rt = T.linear().cast<float>().transpose();
+  const Eigen::Vector3f c = T.translation().cast<float>();
+  const float fx = level.camera.fx, fy = level.camera.fy, cx = level.camera.cx, cy = level.camera.cy;
+  const float max_x = cur.grey.cols - 1.001f, max_y = cur.grey.rows - 1.001f;
+  const float g2 = static_cast<float>(params.min_gradient * params.min_gradient);
+  const double inv_sigma = 1.0 / params.sigma, huber = params.huber;
+  const Sums s = parallelReduce(
+      0, mv.rows, Sums{},
+      [&](int y, Sums& acc) {
+        const cv::Vec3f* vrow = mv.ptr<cv::Vec3f>(y);
+        const float* irow = ref.grey.ptr<float>(y);
+        const float* dxr = ref.dx.ptr<float>(y);
+        const float* dyr = ref.dy.ptr<float>(y);
+        for (int x = 0; x < mv.cols; ++x) {
+          if (dxr[x] * dxr[x] + dyr[x] * dyr[x] < g2 || std::isnan(irow[x])) continue;
+          const cv::Vec3f& m = vrow[x];
+          if (std::isnan(m[0])) continue;
+          const Eigen::Vector3f a = Eigen::Vector3f(m[0], m[1], m[2]) - c;  // model point about the camera centre
+          const Eigen::Vector3f p = M_inv * (Rt * a);  // in the current colour camera
+          if (!(p.z() > 0.f)) continue;
+          const float iz = 1.f / p.z();
+          const float u = fx * p.x() * iz + cx, v = fy * p.y() * iz + cy;
+          if (!(u >= 0.f && v >= 0.f && u < max_x && v < max_y)) continue;
+          const float r = sample(cur.grey, u, v) - irow[x];
+          const float gx = sample(cur.dx, u, v), gy = sample(cur.dy, u, v);
+          // d r / d p (current camera) = grad^T d pi / d p, then to the world frame.
+          const Eigen::Vector3f dp(gx * fx * iz, gy * fy * iz, -(gx * fx * p.x() + gy * fy * p.y()) * iz * iz);
+          const Eigen::Vector3f w = R * dp;
+          const Eigen::Vector3f jw = w.cross(a);
+          const double J[6] = {jw.x(), jw.y(), jw.z(), -w.x(), -w.y(), -w.z()};
+          const double e = std::abs(r) * inv_sigma;
+          const double wt = weight * (e > huber ? huber / e : 1.0);
+          int k = 0;
+          for (int i = 0; i < 6; ++i) {
+            for (int j = i; j < 6; ++j) acc.A[k++] += wt * J[i] * J[j];
+            acc.b[i] -= wt * J[i] * r;
+          }
+          acc.r2 += double(r) * r;
+          ++acc.n;
+        }
+      },
+      addSums, 16, mv.total() >= kParallelMinPixels);
+  int k = 0;
+  const double w2 = inv_sigma * inv_sigma;
+  for (int i = 0; i < 6; ++i) {
+    for (int j = i; j < 6; ++j) out.A(i, j) = out.A(j, i) = w2 * s.A[k++];
+    out.b[i] = w2 * s.b[i];
+  }
+  out.residuals = s.n;
+  out.r2 = s.r2;
+  return out;
+}
+
+}  // namespace vofusion::fusion

@@ -1,0 +1,116 @@
+// The photometric term of joint tracking: its Gauss-Newton sums are the derivative of its cost, and
+// they alone bring a textured view back to the pose it was rendered from.
+#include <cmath>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+
+#include "vofusion/fusion/photometric.h"
+
+using namespace vofusion;
+using namespace vofusion::fusion;
+
+namespace {
+
+const CameraIntrinsics kCam = [] {
+  CameraIntrinsics c;
+  c.width = 160, c.height = 120, c.fx = 150, c.fy = 150, c.cx = 79.5, c.cy = 59.5;
+  return c;
+}();
+
+// A slanted textured plane z = 2 + 0.3 x (world frame); smooth texture so that gradients are exact.
+float texture(const Eigen::Vector3d& p) {
+  return float(128 + 50 * std::sin(7 * p.x()) * std::cos(5 * p.y()) + 30 * std::sin(11 * p.y() + 3 * p.x()));
+}
+Eigen::Vector3d hitPlane(const Eigen::Isometry3d& T, double u, double v) {
+  const Eigen::Vector3d d = T.linear() * Eigen::Vector3d((u - kCam.cx) / kCam.fx, (v - kCam.cy) / kCam.fy, 1.0);
+  const Eigen::Vector3d o = T.translation();
+  const double s = (2.0 + 0.3 * o.x() - o.z()) / (d.z() - 0.3 * d.x());
+  return o + s * d;
+}
+
+// The view from T: BGR image and world-frame vertex map.
+void render(const Eigen::Isometry3d& T, cv::Mat& bgr, cv::Mat& vertices) {
+  bgr.create(kCam.height, kCam.width, CV_8UC3);
+  vertices.create(kCam.height, kCam.width, CV_32FC3);
+  for (int y = 0; y < kCam.height; ++y)
+    for (int x = 0; x < kCam.width; ++x) {
+      const Eigen::Vector3d p = hitPlane(T, x, y);
+      const uchar g = cv::saturate_cast<uchar>(texture(p));
+      bgr.at<cv::Vec3b>(y, x) = cv::Vec3b(g, g, g);
+      vertices.at<cv::Vec3f>(y, x) = cv::Vec3f(float(p.x()), float(p.y()), float(p.z()));
+    }
+}
+
+// ICP's parameters: rotation about the camera centre, then translation (world frame).
+Eigen::Isometry3d step(const Eigen::Matrix<double, 6, 1>& xi, const Eigen::Isometry3d& T) {
+  Eigen::Isometry3d inc = Eigen::Isometry3d::Identity();
+  const double a = xi.head<3>().norm();
+  if (a > 0) inc.linear() = Eigen::AngleAxisd(a, xi.head<3>() / a).toRotationMatrix();
+  const Eigen::Vector3d c = T.translation();
+  inc.translation() = c - inc.linear() * c + xi.tail<3>();
+  return inc * T;
+}
+
+Eigen::Isometry3d truth() {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(0.03, Eigen::Vector3d(0.2, 1, 0.1).normalized()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(0.04, -0.02, 0.03);
+  return T;
+}
+
+struct Pair {
+  std::vector<IntensityLevel> reference, current;
+  cv::Mat vertices;
+  PhotometricLevel level() const { return {&reference[0], &current[0], &vertices, kCam}; }
+};
+
+Pair makePair() {
+  Pair p;
+  cv::Mat ref_bgr, cur_bgr, cur_vertices;
+  render(Eigen::Isometry3d::Identity(), ref_bgr, p.vertices);
+  render(truth(), cur_bgr, cur_vertices);
+  p.reference = intensityPyramid(ref_bgr, ref_bgr.size(), 1);
+  p.current = intensityPyramid(cur_bgr, cur_bgr.size(), 1);
+  return p;
+}
+
+}  // namespace
+
+TEST(Photometric, SumsAreTheCostsDerivative) {
+  const Pair pair = makePair();
+  PhotometricParams params;
+  params.sigma = 1.0;
+  params.huber = 1e6;  // least squares: the cost is half the sum of squares
+  params.min_gradient = 1.0;
+  Eigen::Matrix<double, 6, 1> off;
+  off << 0.004, -0.003, 0.002, 0.006, 0.004, -0.005;
+  const Eigen::Isometry3d T = step(off, truth());
+  const PhotometricSums s = accumulatePhotometric(pair.level(), T, params, 1.0);
+  ASSERT_GT(s.residuals, 5000);
+  for (int i = 0; i < 6; ++i) {
+    const double eps = 1e-5;
+    Eigen::Matrix<double, 6, 1> e = Eigen::Matrix<double, 6, 1>::Zero();
+    e[i] = eps;
+    const double up = accumulatePhotometric(pair.level(), step(e, T), params, 1.0).r2;
+    const double down = accumulatePhotometric(pair.level(), step(-e, T), params, 1.0).r2;
+    const double numeric = 0.25 * (up - down) / eps;  // d(r2 / 2) / d xi_i
+    EXPECT_NEAR(-s.b[i], numeric, 0.05 * std::abs(numeric) + 1e-3 * s.b.norm()) << "parameter " << i;
+  }
+}
+
+TEST(Photometric, TextureAloneFindsThePose) {
+  const Pair pair = makePair();
+  PhotometricParams params;
+  params.sigma = 5.0;
+  Eigen::Matrix<double, 6, 1> off;
+  off << 0.01, -0.008, 0.006, 0.015, -0.01, 0.012;  // ~0.8 deg and 2 cm away
+  Eigen::Isometry3d T = step(off, truth());
+  for (int it = 0; it < 30; ++it) {
+    const PhotometricSums s = accumulatePhotometric(pair.level(), T, params, 1.0);
+    T = step(s.A.ldlt().solve(s.b), T);
+  }
+  const Eigen::Isometry3d d = truth().inverse() * T;
+  EXPECT_LT(d.translation().norm(), 0.002);
+  EXPECT_LT(Eigen::AngleAxisd(d.linear()).angle() * 180 / M_PI, 0.05);
+}
