@@ -19,14 +19,9 @@ struct Tracked {
   std::size_t lost = 0, predicted = 0;
 };
 
-Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::string& colour_time_velocity = "interval",
-              double photometric_sigma = 0.0) {
+Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::string& colour_time_velocity = "interval") {
   mrpt::config::CConfigFileMemory cfg;
   cfg.write("odometry", "colour_time_velocity", colour_time_velocity);
-  if (photometric_sigma > 0) {
-    cfg.write("kinfu", "joint_photometric_sigma", photometric_sigma);
-    cfg.write("kinfu", "joint_photometric_huber", 0.3);
-  }
   cfg.write("kinfu", "volume_voxels", 256);
   cfg.write("kinfu", "voxel_size", 0.012);
   cfg.write("kinfu", "truncation", 0.05);
@@ -45,9 +40,10 @@ Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::s
 
 }  // namespace
 
-// The target is 2 cm. With the default colour-time velocity (interval) measured 3.5 cm here
-// (paper-handoff 2.9, odometry 5.9, kinfu 14.6): this guards what mode joint reaches and that it beats
-// each of its own sources. The shake's colour offsets are exact, as "capture" assumes: 0.6 cm.
+// The target is 2 cm. With the default colour-time velocity (interval) measured 3.7 cm here
+// (3.5 without the photometric term; paper-handoff 3.2, odometry 5.9, kinfu 14.6): this guards what
+// mode joint reaches and that it beats each of its own sources. The shake's colour offsets are exact,
+// as "capture" assumes: 1.1 cm (0.6 without the photometric term).
 TEST(Tracking, ShakeThreeSecondsHeldBetterThanEitherSource) {
   const sim::SyntheticSequence seq(test::quickSim("room", 90, "shake"));
   const Tracked joint = track(seq, TrackingMode::Joint);
@@ -67,11 +63,5 @@ TEST(Tracking, ShakeThreeSecondsHeldBetterThanEitherSource) {
   EXPECT_LT(capture.ate, 0.02);
   EXPECT_LT(capture.ate, 0.5 * joint.ate);  // moving each keypoint at its own frame's velocity
   EXPECT_EQ(capture.lost, 0u);
-  const Tracked photometric = track(seq, TrackingMode::Joint, "interval", 40.0);
-  std::printf("shake, 90 frames, photometric term: ATE joint %.4f m\n", photometric.ate);
-  // The term is no help here (3.7 cm measured; it is on real fast turns), but it must not break tracking.
-  EXPECT_LT(photometric.ate, 0.05);
-  EXPECT_EQ(photometric.lost, 0u);
-  EXPECT_EQ(photometric.predicted, 0u);
 }
 

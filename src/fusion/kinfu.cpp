@@ -385,6 +385,7 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
     }
     PhotometricTerms photometric = s.photometricTerms(intensity, levels);
     photometric.colour_motion = s.colourMotion(frame.colour_offset);
+    photometric.rotation_only = P.joint_photometric_rotation_only;
     if (!photometric.levels.empty()) terms.photometric = &photometric;
     const IcpResult icp = projectiveIcp(levels, s.model_vertices, s.model_normals, s.model_pose, initial, ip, terms);
     res.times.add("icp", seconds(t0));

@@ -50,6 +50,7 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"joint_photometric_sigma", &p.joint_photometric_sigma, "grey levels, mode joint: noise of one photometric residual (last frame's intensity at the model point; 0 = no photometric term)", 0.0, 255.0},
       {"joint_photometric_huber", &p.joint_photometric_huber, "sigmas, mode joint: Huber kernel on the photometric residuals", 0.1, 100.0},
       {"joint_photometric_min_gradient", &p.joint_photometric_min_gradient, "grey levels per pixel, mode joint: weaker-gradient pixels carry no photometric residual", 0.0, 255.0},
+      {"joint_photometric_rotation_only", &p.joint_photometric_rotation_only, "mode joint: the photometric term informs the rotation only (its translation part marginalised out)"},
       {"joint_photometric_colour_time", &p.joint_photometric_colour_time, "mode joint: the photometric term places each colour image at its capture time (constant velocity)"},
       {"guess_margin", &p.guess_margin, "mode joint: another initial guess replaces the odometry's when its alignment cost is below this fraction", 0.01, 1.0},
   };

@@ -177,6 +177,22 @@ void addPosePrior(const PosePrior& pp, const Eigen::Isometry3d& T, Eigen::Matrix
   }
 }
 
+// What a term (information A, right-hand side b; rotation first) says about the rotation whatever the
+// translation: the Schur complement A_rr - A_rt A_tt^-1 A_tr, and b_r - A_rt A_tt^-1 b_t. Nothing
+// when the translation block cannot be inverted.
+void keepRotationOnly(Eigen::Matrix<double, 6, 6>& A, Eigen::Matrix<double, 6, 1>& b) {
+  const Eigen::LDLT<Eigen::Matrix3d> tt(A.bottomRightCorner<3, 3>());
+  const Eigen::Matrix3d Art = A.topRightCorner<3, 3>();
+  Eigen::Matrix<double, 6, 6> As = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> bs = Eigen::Matrix<double, 6, 1>::Zero();
+  if (tt.info() == Eigen::Success && tt.isPositive() && A.bottomRightCorner<3, 3>().trace() > 0) {
+    As.topLeftCorner<3, 3>() = A.topLeftCorner<3, 3>() - Art * tt.solve(Art.transpose());
+    bs.head<3>() = b.head<3>() - Art * tt.solve(b.tail<3>());
+  }
+  A = As;
+  b = bs;
+}
+
 }  // namespace
 
 AlignmentScore scoreAlignment(const DepthLevel& frame, const cv::Mat& model_vertices, const cv::Mat& model_normals,
@@ -282,8 +298,11 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
         if (have_photo) {
           const PhotometricSums ps = accumulatePhotometric(photo->levels[l], res.pose, photo->params, double(1 << (2 * l)),
                                                              photo->colour_motion);
-          At += ps.A;
-          bt += ps.b;
+          Eigen::Matrix<double, 6, 6> Ap = ps.A;
+          Eigen::Matrix<double, 6, 1> bp = ps.b;
+          if (photo->rotation_only) keepRotationOnly(Ap, bp);
+          At += Ap;
+          bt += bp;
           if (l == 0) res.photometric_residuals = ps.residuals;
         }
         // Strong subspace: ICP, the matches and the motion model together.

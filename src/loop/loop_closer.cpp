@@ -139,7 +139,7 @@ struct LoopCloser::Impl {
         loop_edge_record.resize(graph.edges().size() + 1, std::size_t(-1));
         loop_edge_record[graph.addEdge(e)] = loops.size() + accepted.size();
         accepted.push_back({old.frame_index, cur.frame_index, old.id, cur.id, check.matches, check.inliers, check.icp_rms,
-                            check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp, check.T_old_new});
+                            check.icp_condition, check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp, check.T_old_new});
       }
     }
     std::vector<std::size_t> removed;

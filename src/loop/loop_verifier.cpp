@@ -95,6 +95,7 @@ bool refineIcp(const Keyframe& older, const Keyframe& newer, const LoopParams& P
       fusion::projectiveIcp(frame, mv, mn, Eigen::Isometry3d::Identity(), c.T_old_new, ip, joint);
   c.icp_overlap = r.valid_pixels > 0 ? double(r.inliers) / r.valid_pixels : 0.0;
   c.icp_rms = r.rms;
+  c.icp_condition = r.condition;
   if (!r.solved) return c.reason = "ICP not solved", false;
   if (c.icp_overlap < P.min_icp_overlap) return c.reason = "ICP overlap too small", false;
   if (c.icp_rms > P.max_icp_rms) return c.reason = "ICP residual too large", false;

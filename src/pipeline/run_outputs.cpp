@@ -162,6 +162,7 @@ json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth) {
   for (const loop::LoopRecord& l : lc.loops()) {
     json j = {{"from_frame", l.from_frame}, {"to_frame", l.to_frame}, {"from_keyframe", l.from_keyframe},
               {"to_keyframe", l.to_keyframe}, {"matches", l.matches}, {"inliers", l.inliers}, {"icp_rms_m", l.icp_rms},
+              {"icp_condition", l.icp_condition},
               {"correction_m", l.correction_m}, {"correction_deg", l.correction_deg}, {"active", l.active}};
     mrpt::poses::CPose3D a_gt, b_gt;
     if (interpolatePose(ground_truth, l.from_timestamp, 0.02, a_gt) && interpolatePose(ground_truth, l.to_timestamp, 0.02, b_gt)) {

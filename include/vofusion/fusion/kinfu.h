@@ -61,9 +61,11 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
                                       // alignment cost is below this fraction of the prior's
   // Mode joint, the photometric term (fusion/photometric.h): each textured pixel of the last frame keeps
   // its intensity in this one.
-  double joint_photometric_sigma = 0.0;  // grey levels, noise of one finest-level residual (0 = no term)
-  double joint_photometric_huber = 1.0;  // sigmas, Huber kernel on the whitened residual
+  double joint_photometric_sigma = 40.0;  // grey levels, noise of one finest-level residual (0 = no term)
+  double joint_photometric_huber = 0.3;  // sigmas, Huber kernel on the whitened residual
   double joint_photometric_min_gradient = 4.0;  // grey levels per pixel, weaker reference pixels unused
+  bool joint_photometric_rotation_only = true;  // the term informs the rotation only (its translation
+                                      // part marginalised): on xyz_first300 it moved the path, not the turns
   bool joint_photometric_colour_time = true;  // each colour image placed at its capture (Frame::colour_offset)
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;

@@ -52,6 +52,7 @@ struct PhotometricSums {
   int residuals = 0;
   double r2 = 0.0;  // sum of squared residuals, grey levels^2
 };
+// Levels of 30000 pixels or more use every other pixel of every other row, each weighed for four.
 PhotometricSums accumulatePhotometric(const PhotometricLevel& level, const Eigen::Isometry3d& T,
                                       const PhotometricParams& params, double weight,
                                       const Eigen::Isometry3d& colour_motion = Eigen::Isometry3d::Identity());

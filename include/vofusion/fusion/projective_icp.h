@@ -77,6 +77,9 @@ struct PhotometricTerms {
   std::vector<PhotometricLevel> levels;  // per tracking level, level 0 first
   PhotometricParams params;
   Eigen::Isometry3d colour_motion = Eigen::Isometry3d::Identity();  // see accumulatePhotometric
+  // The term informs the rotation only: its translation part is marginalised out (Schur complement),
+  // so the camera centre comes from ICP, the matches and the motion model.
+  bool rotation_only = false;
 };
 struct JointTerms {
   const PointMatches* matches = nullptr;

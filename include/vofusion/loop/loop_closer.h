@@ -32,6 +32,7 @@ struct LoopRecord {
   std::size_t from_keyframe = 0, to_keyframe = 0;  // keyframe ids
   int matches = 0, inliers = 0;
   double icp_rms = 0.0;                            // m
+  double icp_condition = 0.0;                      // smallest / largest eigenvalue of the loop's ICP
   double correction_m = 0.0, correction_deg = 0.0;  // measured vs tracked relative pose
   bool active = true;                              // false: removed after optimisation (did not fit)
   double from_timestamp = 0.0, to_timestamp = 0.0;  // s, of the two keyframes

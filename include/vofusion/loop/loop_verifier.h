@@ -19,6 +19,7 @@ struct LoopCheck {
   int matches = 0, inliers = 0;  // descriptor matches, RANSAC inliers
   double icp_overlap = 0.0;      // ICP inliers / valid pixels
   double icp_rms = 0.0;          // m
+  double icp_condition = 0.0;    // smallest / largest eigenvalue of the ICP system (depth-scaled)
   Eigen::Isometry3d T_old_new = Eigen::Isometry3d::Identity();  // the newer keyframe in the older's camera frame
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();  // x y z yaw pitch roll
   double correction_m = 0.0, correction_deg = 0.0;  // measured vs tracked relative pose
