@@ -342,11 +342,15 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
   const Eigen::Isometry3d prior_pose = have_prior ? *ref_pose * prior->T_ref_cur : s.pose;
   const Eigen::Isometry3d velocity_pose = s.constantVelocity(frame.timestamp);
   Eigen::Isometry3d new_pose = s.pose;
+  // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
   std::vector<IntensityLevel> intensity;
+  if (s.mode == TrackingMode::Joint && P.joint_photometric_sigma > 0) {
+    t0 = std::chrono::steady_clock::now();
+    intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
+    res.times.add("intensity", seconds(t0));
+  }
 
   if (!s.have_model) {
-    if (s.mode == TrackingMode::Joint && P.joint_photometric_sigma > 0)
-      intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
     res.tracked = true;  // the first frame defines the map
   } else if (s.mode == TrackingMode::Odometry) {
     res.tracked = true;
@@ -359,11 +363,6 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
     const bool seeded = s.mode == TrackingMode::PaperHandoff && have_prior;
     IcpParams ip = s.icpParams(joint, seeded, have_prior);
     PointMatches matches;
-    if (joint && P.joint_photometric_sigma > 0) {
-      t0 = std::chrono::steady_clock::now();
-      intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
-      res.times.add("intensity", seconds(t0));
-    }
     if (joint) {
       res.guess = s.chooseGuess(levels, ip, have_prior, prior_pose, velocity_pose);
       if (have_prior) matches = s.matchesOf(*prior, *ref_pose, prior_pose);
@@ -394,7 +393,6 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
     res.condition = icp.condition;
     res.degenerate_dims = icp.degenerate_dims;
     res.match_inliers = icp.point_inliers;
-    res.photometric_residuals = icp.photometric_residuals;
     res.reason = s.rejection(icp, joint, seeded || (joint && have_prior) ? &prior_pose : nullptr);
     if (res.reason.empty()) {
       res.tracked = true;
@@ -426,7 +424,8 @@ FusionResult KinFu::track(const Frame& frame, const MotionPrior* prior, const Fr
   s.stats.times.merge(res.times);
   if (res.tracked) {
     s.pending = {true, P.integrate_filtered && P.tracking_downsample == 1 ? levels[0].depth : frame.depth, frame.rgb,
-                 levels[0].depth, cam, track_cam, s.pose, std::move(intensity), {}, s.pose * s.colourMotion(frame.colour_offset)};
+                 levels[0].depth, cam, track_cam, s.pose, std::move(intensity), {},
+                 s.pose * s.colourMotion(frame.colour_offset)};  // at the velocity this frame's motion updated
     for (const DepthLevel& l : levels) s.pending.level_cams.push_back(l.camera);
   }
   return res;

@@ -303,9 +303,8 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
           if (photo->rotation_only) keepRotationOnly(Ap, bp);
           At += Ap;
           bt += bp;
-          if (l == 0) res.photometric_residuals = ps.residuals;
         }
-        // Strong subspace: ICP, the matches and the motion model together.
+        // Strong subspace: ICP, the matches, the motion model and the photometric term together.
         const Eigen::Matrix<double, 6, 6> Ss = As + Ps * D.asDiagonal() * At * D.asDiagonal() * Ps;
         const Eigen::Matrix<double, 6, 1> bb = Ps * (b_icp + D.asDiagonal() * bt);
         const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> ej(Ss);

@@ -99,7 +99,6 @@ struct FusionResult {
   double condition = 0.0;     // of the ICP normal matrix (0 when no ICP ran)
   int degenerate_dims = 0;    // ICP directions too weak to solve, kept from the prediction
   int match_inliers = 0;      // prior matches within 3 sigmas of the joint estimate
-  int photometric_residuals = 0;  // mode joint: pixels with a photometric residual at level 0
   double icp_sigma = 0.0;     // m, mode joint: the noise the ICP residuals were weighed with
   bool shifted = false;       // the volume moved this frame
   StageTimes times;           // preprocess, icp, integrate, raycast, shift

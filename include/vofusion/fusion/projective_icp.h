@@ -45,7 +45,6 @@ struct IcpResult {
   int degenerate_dims = 0;     // directions left at the initial guess at the last level-0 iteration
   bool solved = false;         // false when a linear system could not be solved
   int point_inliers = 0;       // PointMatches within 3 sigmas at the solution
-  int photometric_residuals = 0;  // level-0 pixels with a photometric residual at the last iteration
 };
 
 // A Gaussian prior on the camera pose itself (a motion model's prediction): rotation and camera
