@@ -6,6 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/parallel.h"
+#include "vofusion/fusion/normal_equations.h"
 
 namespace vofusion::fusion {
 
@@ -34,15 +35,13 @@ inline float sample(const cv::Mat& m, float x, float y) {
 }
 
 struct Sums {
-  double A[21] = {};  // upper triangle
-  double b[6] = {};
+  NormalSums6 eq;
   double r2 = 0.0;
   int n = 0;
 };
 
 void addSums(Sums& t, const Sums& s) {
-  for (int i = 0; i < 21; ++i) t.A[i] += s.A[i];
-  for (int i = 0; i < 6; ++i) t.b[i] += s.b[i];
+  t.eq.join(s.eq);
   t.r2 += s.r2;
   t.n += s.n;
 }
@@ -141,22 +140,13 @@ PhotometricSums accumulatePhotometric(const PhotometricLevel& level, const Eigen
           const double J[6] = {jw.x(), jw.y(), jw.z(), -w.x(), -w.y(), -w.z()};
           const double e = std::abs(r) * inv_sigma;
           const double wt = pixel_weight * (e > huber ? huber / e : 1.0);
-          int k = 0;
-          for (int i = 0; i < 6; ++i) {
-            for (int j = i; j < 6; ++j) acc.A[k++] += wt * J[i] * J[j];
-            acc.b[i] -= wt * J[i] * r;
-          }
+          acc.eq.add(J, r, wt);
           acc.r2 += double(r) * r;
           ++acc.n;
         }
       },
       addSums, 16, mv.total() >= kParallelMinPixels);
-  int k = 0;
-  const double w2 = inv_sigma * inv_sigma;
-  for (int i = 0; i < 6; ++i) {
-    for (int j = i; j < 6; ++j) out.A(i, j) = out.A(j, i) = w2 * s.A[k++];
-    out.b[i] = w2 * s.b[i];
-  }
+  s.eq.unpack(inv_sigma * inv_sigma, out.A, out.b);
   out.residuals = s.n;
   out.r2 = s.r2;
   return out;

@@ -9,6 +9,7 @@
 #include <Eigen/Dense>
 
 #include "vofusion/core/parallel.h"
+#include "vofusion/fusion/normal_equations.h"
 
 namespace vofusion::fusion {
 
@@ -18,8 +19,7 @@ namespace {
 constexpr std::size_t kParallelMinPixels = 30000;
 
 struct Accum {
-  double A[21] = {};  // upper triangle of J^T J
-  double b[6] = {};
+  NormalSums6 eq;  // point-to-plane normal equations
   double r2 = 0.0;
   double d2 = 0.0;  // squared distances of the inliers from the camera centre
   double r2_truncated = 0.0;  // sum of min(r^2, truncation^2) over the inliers (alignment scores)
@@ -29,8 +29,7 @@ struct Accum {
 };
 
 void addAccum(Accum& total, const Accum& a) {
-  for (int i = 0; i < 21; ++i) total.A[i] += a.A[i];
-  for (int i = 0; i < 6; ++i) total.b[i] += a.b[i];
+  total.eq.join(a.eq);
   total.r2 += a.r2;
   total.d2 += a.d2;
   total.r2_truncated += a.r2_truncated;
@@ -82,11 +81,7 @@ Accum accumulate(const DepthLevel& lv, const cv::Mat& mv, const cv::Mat& mn, con
           const Eigen::Vector3f pc = vg - t;
           const Eigen::Vector3f rot = pc.cross(nm);
           const double J[6] = {rot.x(), rot.y(), rot.z(), nm.x(), nm.y(), nm.z()};
-          int k = 0;
-          for (int i = 0; i < 6; ++i) {
-            for (int j = i; j < 6; ++j) acc.A[k++] += J[i] * J[j];
-            acc.b[i] -= J[i] * r;
-          }
+          acc.eq.add(J, r);
           acc.r2 += static_cast<double>(r) * r;
           acc.r2_truncated += std::min(r * r, trunc2);
           acc.d2 += pc.squaredNorm();
@@ -233,11 +228,7 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
       const Accum total = accumulate(lv, model_vertices[l], model_normals[l], model_inv, res.pose.cast<float>(), params, 0.f);
       Eigen::Matrix<double, 6, 6> A;
       Eigen::Matrix<double, 6, 1> b;
-      int k = 0;
-      for (int i = 0; i < 6; ++i) {
-        for (int j = i; j < 6; ++j) A(i, j) = A(j, i) = icp_weight * total.A[k++];
-        b[i] = icp_weight * total.b[i];
-      }
+      total.eq.unpack(icp_weight, A, b);
       if (l == 0) {
         res.inliers = total.n;
         res.valid_pixels = total.valid;
