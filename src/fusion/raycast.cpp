@@ -10,6 +10,8 @@
 
 #include "vofusion/core/parallel.h"
 
+#include "tsdf_sampling.h"
+
 namespace vofusion::fusion {
 
 namespace {
