@@ -441,3 +441,10 @@ TEST(MeshClean, EmptyAndInvalidMeshes) {
   EXPECT_NE(rb.failure.find("9999"), std::string::npos) << rb.failure;
   EXPECT_EQ(bad.faces, before.faces);  // left as given
 }
+
+TEST(MeshClean, ReportJsonWritesNonFiniteFiguresAsNull) {
+  MeshCleanReport r;
+  r.success = true;
+  r.area = std::nan("");
+  EXPECT_NE(r.toJson().find("\"area\": null"), std::string::npos) << r.toJson();
+}

@@ -5,6 +5,7 @@
 #endif
 #include "vofusion/mesh/mesh_clean.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -20,6 +21,7 @@
 #include <CGAL/Polygon_mesh_processing/compute_normal.h>
 #include <CGAL/Polygon_mesh_processing/connected_components.h>
 #include <CGAL/Polygon_mesh_processing/distance.h>
+#include <CGAL/Polygon_mesh_processing/fair.h>
 #include <CGAL/Polygon_mesh_processing/manifoldness.h>
 #include <CGAL/Polygon_mesh_processing/measure.h>
 #include <CGAL/Polygon_mesh_processing/orient_polygon_soup.h>
@@ -421,14 +423,29 @@ class Cleaner {
       }
       std::vector<FD> new_faces;
       std::vector<VD> new_vertices;
-      if (p_.hole_fairing)
-        PMP::triangulate_refine_and_fair_hole(m_, start, std::back_inserter(new_faces), std::back_inserter(new_vertices));
-      else
-        PMP::triangulate_and_refine_hole(m_, start, std::back_inserter(new_faces), std::back_inserter(new_vertices));
+      PMP::triangulate_and_refine_hole(m_, start, std::back_inserter(new_faces), std::back_inserter(new_vertices));
+      if (p_.hole_fairing) fairPatch(new_vertices);
       if (new_faces.empty()) ++r_.holes_left;
       else ++r_.holes_filled;
     }
     propagateColours(m_, col_, known_);
+  }
+
+  // CGAL's fairing (what triangulate_refine_and_fair_hole runs after refining) on a patch whose border
+  // has zero-length or folded edges (repair off) can put non-finite points in it: the patch then
+  // stays flat, as refined, rather than carry NaN vertices into the mesh.
+  void fairPatch(const std::vector<VD>& patch) {
+    if (patch.empty()) return;
+    std::vector<Point> refined;
+    for (VD v : patch) refined.push_back(m_.point(v));
+    const bool faired = PMP::fair(m_, patch);
+    const auto finite = [&](VD v) {
+      const Point& q = m_.point(v);
+      return std::isfinite(q.x()) && std::isfinite(q.y()) && std::isfinite(q.z());
+    };
+    if (faired && std::all_of(patch.begin(), patch.end(), finite)) return;
+    for (std::size_t i = 0; i < patch.size(); ++i) m_.point(patch[i]) = refined[i];
+    ++r_.holes_not_faired;
   }
 
   void simplifyAndMeasure(const Mesh& before) {

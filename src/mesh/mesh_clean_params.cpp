@@ -1,5 +1,6 @@
 // [mesh] parameters and the JSON form of the cleaning report (kept apart from the CGAL unit, which
 // compiles slowly).
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -58,6 +59,7 @@ static std::string jsonString(const std::string& s) {
 }
 
 static std::string num(double v) {
+  if (!std::isfinite(v)) return "null";  // JSON has no nan / inf
   char b[32];
   std::snprintf(b, sizeof b, "%.6g", v);
   return b;
@@ -81,6 +83,7 @@ std::string MeshCleanReport::toJson() const {
     << ", \"non_manifold_vertices_split\": " << non_manifold_vertices_split
     << ", \"components_removed\": " << components_removed << ", \"components_kept\": " << components_kept
     << ", \"holes_filled\": " << holes_filled << ", \"holes_left\": " << holes_left
+    << ", \"holes_not_faired\": " << holes_not_faired
     << ", \"border_cycles_after\": " << border_cycles_after << ", \"closed\": " << (closed ? "true" : "false")
     << ", \"manifold\": " << (manifold ? "true" : "false") << ", \"area\": " << num(area);
   if (simplification.ran) {
