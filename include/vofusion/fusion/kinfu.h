@@ -50,7 +50,7 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
   // Mode joint: one Gauss-Newton over the ICP residuals and the prior's point matches.
   double joint_icp_sigma = 0.005;     // m, noise of one finest-level point-to-plane residual (smaller:
                                       // geometry outweighs the matches more)
-  double joint_rolling_shutter = 0.06;  // s, mode joint: readout time of the depth camera; a residual's
+  double joint_rolling_shutter = 0.05;  // s, mode joint: readout time of the depth camera; a residual's
                                       // noise grows by this x the turn rate x the scene depth (rows are
                                       // captured at different times, so fast turns bend the frame)
   double joint_match_cauchy = 2.0;    // sigmas, Cauchy kernel on the matches' whitened residuals
