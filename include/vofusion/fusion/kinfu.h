@@ -53,7 +53,7 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
   double joint_rolling_shutter = 0.05;  // s, mode joint: readout time of the depth camera; a residual's
                                       // noise grows by this x the turn rate x the scene depth (rows are
                                       // captured at different times, so fast turns bend the frame)
-  double joint_match_cauchy = 2.0;    // sigmas, Cauchy kernel on the matches' whitened residuals
+  double joint_match_cauchy = 1.5;    // sigmas, Cauchy kernel on the matches' whitened residuals
   double motion_sigma_translation = 0.002;  // m per 1/30 s, mode joint: how far the camera centre may
                                       // depart from the constant-velocity prediction (0 = no motion model)
   double motion_sigma_rotation = 0.0;  // degrees per 1/30 s, same for the rotation (0 = none)
