@@ -66,12 +66,7 @@ AlignmentScore scoreAlignment(const DepthLevel& frame, const cv::Mat& model_vert
                               const Eigen::Isometry3d& model_pose, const Eigen::Isometry3d& pose,
                               const IcpParams& params, double truncation);
 
-// model_vertices/normals: per level, world frame, ray-cast from model_pose (camera-to-world);
-// model_cams: their intrinsics. frame: preprocessed current frame, same number of levels.
-// What joint tracking adds to ICP. The geometry's well-constrained directions are solved from ICP
-// and the matches and the motion model together (ICP residuals then need their weight,
-// params.point_to_plane_sigma > 0); its weak directions (see degenerate_ratio) move to weak_anchor
-// (the prior's pose) when given, else they keep the initial guess.
+// Mode joint's photometric term (fusion/photometric.h), one level per tracking level.
 struct PhotometricTerms {
   std::vector<PhotometricLevel> levels;  // per tracking level, level 0 first
   PhotometricParams params;
@@ -80,6 +75,11 @@ struct PhotometricTerms {
   // so the camera centre comes from ICP, the matches and the motion model.
   bool rotation_only = false;
 };
+
+// What joint tracking adds to ICP. The geometry's well-constrained directions are solved from ICP,
+// the matches, the motion model and the photometric term together (ICP residuals then need their
+// weight, params.point_to_plane_sigma > 0); its weak directions (see degenerate_ratio) move to weak_anchor
+// (the prior's pose) when given, else they keep the initial guess.
 struct JointTerms {
   const PointMatches* matches = nullptr;
   const PhotometricTerms* photometric = nullptr;
@@ -87,6 +87,8 @@ struct JointTerms {
   const Eigen::Isometry3d* weak_anchor = nullptr;  // camera-to-world
 };
 
+// model_vertices/normals: per level, world frame, ray-cast from model_pose (camera-to-world).
+// frame: preprocessed current frame, same number of levels.
 IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<cv::Mat>& model_vertices,
                         const std::vector<cv::Mat>& model_normals, const Eigen::Isometry3d& model_pose,
                         const Eigen::Isometry3d& initial, const IcpParams& params, const JointTerms& joint = {});
