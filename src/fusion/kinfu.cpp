@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include <Eigen/Dense>
+#include <tbb/parallel_invoke.h>
 #include <mrpt/math/CMatrixFixed.h>
 #include <opencv2/imgproc.hpp>
 
@@ -207,13 +208,16 @@ struct KinFu::Impl {
       const IcpResult r = projectiveIcp(coarse, mv, mn, model_pose, T, coarse_ip);
       return scoreAlignment(coarse[0], mv[0], mn[0], model_pose, r.pose, ip, truncation).cost;
     };
+    // The candidates' coarse alignments are independent and each runs on one thread: side by side.
+    double prior_cost = 0, velocity_cost = 0, last_cost = 0;
+    tbb::parallel_invoke([&] { if (have_prior) prior_cost = cost(prior_pose); },
+                         [&] { velocity_cost = cost(velocity_pose); }, [&] { last_cost = cost(pose); });
     InitialGuess best = have_prior ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
-    double best_cost = cost(have_prior ? prior_pose : velocity_pose);
-    const std::pair<InitialGuess, const Eigen::Isometry3d*> others[] = {{InitialGuess::ConstantVelocity, &velocity_pose},
-                                                                        {InitialGuess::LastPose, &pose}};
-    for (const auto& [g, T] : others) {
+    double best_cost = have_prior ? prior_cost : velocity_cost;
+    const std::pair<InitialGuess, double> others[] = {{InitialGuess::ConstantVelocity, velocity_cost},
+                                                      {InitialGuess::LastPose, last_cost}};
+    for (const auto& [g, c] : others) {
       if (g == best) continue;
-      const double c = cost(*T);
       if (c < params.guess_margin * best_cost) best = g, best_cost = c;
     }
     return best;

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include <Eigen/Dense>
+#include <tbb/parallel_invoke.h>
 
 #include "vofusion/core/parallel.h"
 #include "vofusion/fusion/normal_equations.h"
@@ -224,8 +225,20 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
     // A pixel of level l averages 4^l finest-level readings.
     const double icp_weight =
         params.point_to_plane_sigma > 0 ? double(1 << (2 * l)) / (params.point_to_plane_sigma * params.point_to_plane_sigma) : 1.0;
+    const bool have_photo = photo && l < static_cast<int>(photo->levels.size());
     for (int it = 0; it < iters; ++it) {
-      const Accum total = accumulate(lv, model_vertices[l], model_normals[l], model_inv, res.pose.cast<float>(), params, 0.f);
+      // ICP's and the photometric term's sums at the same pose, side by side: below kParallelMinPixels
+      // each runs on one thread, and while ICP runs nothing else of the pipeline does.
+      Accum total;
+      PhotometricSums ps;
+      const auto icpSums = [&] {
+        total = accumulate(lv, model_vertices[l], model_normals[l], model_inv, res.pose.cast<float>(), params, 0.f);
+      };
+      const auto photoSums = [&] {
+        ps = accumulatePhotometric(photo->levels[l], res.pose, photo->params, double(1 << (2 * l)), photo->colour_motion);
+      };
+      if (have_photo) tbb::parallel_invoke(icpSums, photoSums);
+      else icpSums();
       Eigen::Matrix<double, 6, 6> A;
       Eigen::Matrix<double, 6, 1> b;
       total.eq.unpack(icp_weight, A, b);
@@ -235,7 +248,6 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
         res.in_view = total.in_view;
         res.rms = total.n ? std::sqrt(total.r2 / total.n) : 0.0;
       }
-      const bool have_photo = photo && l < static_cast<int>(photo->levels.size());
       if (total.n < 6 && !have_points && !pose_prior && !have_photo) {
         res.solved = false;
         if (l == 0) res.condition = 0.0;
@@ -287,8 +299,6 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
         }
         if (pose_prior) addPosePrior(*pose_prior, res.pose, At, bt);
         if (have_photo) {
-          const PhotometricSums ps = accumulatePhotometric(photo->levels[l], res.pose, photo->params, double(1 << (2 * l)),
-                                                             photo->colour_motion);
           Eigen::Matrix<double, 6, 6> Ap = ps.A;
           Eigen::Matrix<double, 6, 1> bp = ps.b;
           if (photo->rotation_only) keepRotationOnly(Ap, bp);
