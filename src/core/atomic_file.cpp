@@ -1,5 +1,6 @@
 #include "vofusion/core/atomic_file.h"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -7,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <vector>
 
 #include "vofusion/core/errors.h"
 
@@ -14,10 +16,34 @@ namespace fs = std::filesystem;
 
 namespace vofusion {
 
+namespace {
+
+// "<name>.tmp-<pid>" beside `final_path` whose process no longer runs: staging a killed run left
+// (a signal skips the destructor). A live pid's, another run's in progress, stays.
+void removeStaleStaging(const std::string& final_path) {
+  const fs::path p(final_path);
+  const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+  const std::string prefix = p.filename().string() + ".tmp-";
+  std::vector<fs::path> stale;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string n = it->path().filename().string();
+    if (n.size() <= prefix.size() || n.size() > prefix.size() + 9 || n.compare(0, prefix.size(), prefix) != 0) continue;
+    const std::string digits = n.substr(prefix.size());
+    if (digits.find_first_not_of("0123456789") != std::string::npos) continue;
+    const pid_t pid = static_cast<pid_t>(std::stol(digits));
+    if (pid > 0 && ::kill(pid, 0) != 0 && errno == ESRCH) stale.push_back(it->path());
+  }
+  for (const fs::path& s : stale) fs::remove_all(s, ec);
+}
+
+}  // namespace
+
 AtomicPath::AtomicPath(std::string final_path)
     : final_(std::move(final_path)), tmp_(final_ + ".tmp-" + std::to_string(::getpid())) {
   std::error_code ec;
   fs::remove_all(tmp_, ec);  // a leftover of a crashed run with the same pid
+  removeStaleStaging(final_);
 }
 
 AtomicPath::~AtomicPath() {

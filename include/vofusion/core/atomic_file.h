@@ -1,7 +1,8 @@
 #pragma once
 // Outputs appear whole or not at all: write to "<path>.tmp-<pid>", then rename over <path>.
 // If the writer is destroyed without commit() (an exception, Ctrl-C unwinding), the temporary is
-// removed and any earlier <path> is left untouched.
+// removed and any earlier <path> is left untouched. A run killed by a signal leaves its temporary:
+// the next AtomicPath for the same <path> removes those whose process is gone.
 #include <string>
 
 namespace vofusion {
