@@ -12,6 +12,7 @@
 
 #include "support.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/spill_file.h"
 #include "vofusion/fusion/brick_arena.h"
 #include "vofusion/fusion/brick_index.h"
 #include "vofusion/fusion/kinfu.h"
@@ -210,6 +211,58 @@ TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit
   EXPECT_EQ(wm.stats().ram_bytes, 0u);
   EXPECT_FALSE(wm.take(Eigen::Vector3i(0, 0, 0)));
   EXPECT_EQ(wm.coordsInBox(Eigen::Vector3i(-10, -10, -10), 20).size(), 0u);
+}
+
+// A released place is written again: best fit, the rest stays free, neighbours merge.
+TEST(WorldModel, SpillFileWritesReleasedPlacesAgain) {
+  SpillFile f(test::tempDir("spill_reuse"), "a test spill file");
+  const auto bytes = [](std::size_t n, std::uint8_t v) { return std::vector<std::uint8_t>(n, v); };
+  const SpillFile::Record a = f.append(bytes(100, 1)), b = f.append(bytes(50, 2)), c = f.append(bytes(80, 3));
+  const SpillFile::Record d = f.append(bytes(10, 4));
+  EXPECT_EQ(f.bytes(), 240u);
+  f.release(c);
+  f.release(a);
+  EXPECT_EQ(f.freeBytes(), 180u);
+  const SpillFile::Record e = f.append(bytes(70, 5));  // best fit: c's 80, not a's 100
+  EXPECT_EQ(e.offset, c.offset);
+  EXPECT_EQ(f.freeBytes(), 110u);
+  f.release(b);  // merges with a before it (and not with e's rest, which is not next to it)
+  const SpillFile::Record g = f.append(bytes(150, 6));
+  EXPECT_EQ(g.offset, a.offset);
+  EXPECT_EQ(f.bytes(), 240u);  // nothing appended at the end
+  EXPECT_EQ(f.freeBytes(), 10u);
+  EXPECT_EQ(f.read(g), bytes(150, 6));
+  EXPECT_EQ(f.read(e), bytes(70, 5));
+  EXPECT_EQ(f.read(d), bytes(10, 4));
+  const SpillFile::Record h = f.append(bytes(11, 7));  // larger than any free place: at the end
+  EXPECT_EQ(h.offset, 240u);
+}
+
+// Walking back and forth over the same place: every brick taken back frees its place in the spill
+// file, so the file stays at the size of one pass instead of growing by a pass each time.
+TEST(WorldModel, SpillFileStaysAtTheSizeOfWhatIsStored) {
+  std::mt19937 rng(11);
+  WorldModel wm(4 * sizeof(Brick), test::tempDir("world_model_back_and_forth"));
+  std::size_t after_first = 0;
+  for (int pass = 0; pass < 20; ++pass) {
+    std::vector<std::unique_ptr<Brick>> copies;
+    for (int i = 0; i < 60; ++i) {
+      auto b = randomBrick(Eigen::Vector3i(i, pass % 3, 0), rng);  // new contents: other sizes each pass
+      copies.push_back(std::make_unique<Brick>(*b));
+      wm.put(std::move(b));
+    }
+    for (const auto& c : copies) {
+      const auto b = wm.take(c->coord);
+      ASSERT_TRUE(b);
+      EXPECT_TRUE(sameVoxels(*b, *c)) << "pass " << pass << ", brick " << c->coord.transpose();
+    }
+    if (pass == 0) after_first = wm.stats().spill_file_bytes;
+  }
+  const WorldModelStats st = wm.stats();
+  EXPECT_GE(st.spilled, 20u * 56u);
+  EXPECT_GT(after_first, 0u);
+  EXPECT_LT(st.spill_file_bytes, 2 * after_first);  // append-only: ~20x
+  EXPECT_EQ(st.spill_free_bytes, st.spill_file_bytes);  // everything was taken back
 }
 
 TEST(WorldModel, StreamedMeshEqualsOneShotMesh) {

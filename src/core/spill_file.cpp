@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <iterator>
 #include <stdexcept>
 
 #include "vofusion/core/errors.h"
@@ -51,7 +52,7 @@ void SpillFile::open() {
 SpillFile::Record SpillFile::append(const std::vector<std::uint8_t>& bytes) {
   if (bytes.size() > kMaxRecordBytes) throw std::runtime_error(what_ + ": a record of " + std::to_string(bytes.size()) + " bytes is over 16 MiB");
   if (fd_ < 0) open();
-  const std::uint64_t at = end_.fetch_add(bytes.size());
+  const std::uint64_t at = place(bytes.size());
   std::size_t done = 0;
   while (done < bytes.size()) {
     const ssize_t w = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(at + done));
@@ -75,6 +76,61 @@ std::vector<std::uint8_t> SpillFile::read(Record r) const {
     done += static_cast<std::size_t>(n);
   }
   return bytes;
+}
+
+std::uint64_t SpillFile::place(std::uint64_t size) {
+  {
+    std::lock_guard<std::mutex> lock(free_mu_);
+    if (const auto fit = free_by_size_.lower_bound(size); size > 0 && fit != free_by_size_.end()) {
+      const std::uint64_t at = fit->second, hole = fit->first;
+      free_by_size_.erase(fit);
+      free_by_offset_.erase(at);
+      free_bytes_ -= size;
+      if (hole > size) addFree(at + size, hole - size);
+      return at;
+    }
+  }
+  return end_.fetch_add(size);
+}
+
+// Under free_mu_. Merged with the free places right before and after it.
+void SpillFile::addFree(std::uint64_t offset, std::uint64_t size) {
+  const auto unlinkBySize = [this](std::uint64_t at, std::uint64_t n) {
+    for (auto [it, end] = free_by_size_.equal_range(n); it != end; ++it)
+      if (it->second == at) {
+        free_by_size_.erase(it);
+        return;
+      }
+  };
+  auto next = free_by_offset_.lower_bound(offset);
+  if (next != free_by_offset_.begin()) {
+    const auto prev = std::prev(next);
+    if (prev->first + prev->second == offset) {
+      unlinkBySize(prev->first, prev->second);
+      offset = prev->first;
+      size += prev->second;
+      free_by_offset_.erase(prev);
+    }
+  }
+  if (next != free_by_offset_.end() && offset + size == next->first) {
+    unlinkBySize(next->first, next->second);
+    size += next->second;
+    free_by_offset_.erase(next);
+  }
+  free_by_offset_[offset] = size;
+  free_by_size_.emplace(size, offset);
+}
+
+void SpillFile::release(Record r) {
+  if (r.length == 0) return;
+  std::lock_guard<std::mutex> lock(free_mu_);
+  free_bytes_ += r.length;
+  addFree(r.offset, r.length);
+}
+
+std::uint64_t SpillFile::freeBytes() const {
+  std::lock_guard<std::mutex> lock(free_mu_);
+  return free_bytes_;
 }
 
 }  // namespace vofusion

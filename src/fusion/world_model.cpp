@@ -42,7 +42,10 @@ void WorldModel::erase(std::uint64_t k) {
     stats_.ram_bytes -= kBrickBytes;
     ram_.erase(it);
   }
-  disk_.erase(k);
+  if (const auto record = disk_.find(k)) {
+    spill_.release(*record);
+    disk_.erase(k);
+  }
 }
 
 void WorldModel::put(std::unique_ptr<Brick> brick) {
@@ -88,6 +91,7 @@ std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
   auto b = std::make_unique<Brick>();
   readRecord(*record, *b);
   b->coord = c;
+  spill_.release(*record);
   disk_.erase(k);
   return b;
 }
@@ -129,6 +133,7 @@ WorldModelStats WorldModel::stats() const {
   s.bricks_in_ram = lru_.size();
   s.index_bytes = disk_.bytes() + lru_.size() * 88;  // cache: map node + bucket ~64, list node ~24
   s.spill_file_bytes = spill_.bytes();
+  s.spill_free_bytes = spill_.freeBytes();
   return s;
 }
 

@@ -274,7 +274,7 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
                  {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0},
                  {"world_model", {{"cache_mib", ks.world.ram_bytes / 1048576.0}, {"bricks_spilled", ks.world.spilled},
                                   {"bricks_reloaded", ks.world.reloaded}, {"spill_file_mib", ks.world.spill_file_bytes / 1048576.0},
-                                  {"spill_seconds", ks.world.spill_seconds}}}};
+                                  {"spill_free_mib", ks.world.spill_free_bytes / 1048576.0}, {"spill_seconds", ks.world.spill_seconds}}}};
   if (!info.extra.is_null()) s.update(info.extra);
   return s;
 }

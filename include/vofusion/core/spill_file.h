@@ -1,10 +1,13 @@
 #pragma once
-// An append-only scratch file for records that leave RAM (the world model's bricks, old keyframes):
-// created in `dir` (the system's temporary folder when empty or "auto") at the first append and
-// unlinked at once, so it never outlives the process. Records are read back by their place.
+// A scratch file for records that leave RAM (the world model's bricks, old keyframes): created in
+// `dir` (the system's temporary folder when empty or "auto") at the first append and unlinked at
+// once, so it never outlives the process. Records are read back by their place. A released record's
+// place is written again by later appends (best fit among the free places, neighbours merged), so a
+// map walked back and forth keeps its file at the size of what is stored, not of all it ever stored.
 // append() and read() may run on different threads (pwrite/pread at fixed offsets).
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -36,14 +39,24 @@ class SpillFile {
   Record append(const std::vector<std::uint8_t>& bytes);
   // Throws std::runtime_error when the record cannot be read whole.
   std::vector<std::uint8_t> read(Record r) const;
-  std::uint64_t bytes() const { return end_.load(); }
+  // r's place may be written again: only once nothing will read r (the world model releases a brick
+  // when it takes it back, on the thread that appends).
+  void release(Record r);
+  std::uint64_t bytes() const { return end_.load(); }  // the file's size
+  std::uint64_t freeBytes() const;                      // of it, released and not written again
 
  private:
   void open();
+  std::uint64_t place(std::uint64_t size);  // where `size` bytes go: a free place, else the end
+  void addFree(std::uint64_t offset, std::uint64_t size);
   std::string dir_, what_;
   std::mutex open_mu_;
   std::atomic<int> fd_{-1};
   std::atomic<std::uint64_t> end_{0};
+  mutable std::mutex free_mu_;
+  std::map<std::uint64_t, std::uint64_t> free_by_offset_;       // offset -> size
+  std::multimap<std::uint64_t, std::uint64_t> free_by_size_;    // size -> offset
+  std::uint64_t free_bytes_ = 0;
 };
 
 }  // namespace vofusion

@@ -4,7 +4,8 @@
 // nothing else crosses. Bricks are addressed by their world brick coordinate. Up to `cache_bytes` of
 // them stay in RAM (least recently handed over first out); the rest are written zlib-compressed to a
 // SpillFile in `spill_dir`. A brick on disk costs RAM only for its index entry (~40 bytes), so a long
-// walk's memory grows by that alone.
+// walk's memory grows by that alone; a brick taken back frees its place in the file for the next.
+// put/take run on one thread; read() may run on several, but not beside put/take (places are reused).
 #include <cstdint>
 #include <functional>
 #include <list>
@@ -28,7 +29,8 @@ struct WorldModelStats {
   std::size_t bricks_in_ram = 0;
   std::size_t ram_bytes = 0;       // brick storage held in RAM (the cache)
   std::size_t index_bytes = 0;     // the indexes of both (estimated: cache map and LRU nodes, BrickIndex)
-  std::size_t spill_file_bytes = 0;  // written to the spill file, including records since taken back
+  std::size_t spill_file_bytes = 0;  // the spill file's size: the records stored, and free places
+  std::size_t spill_free_bytes = 0;  // of it, bricks taken back whose place no brick took since
   std::size_t spilled = 0, reloaded = 0;  // bricks written to / read back from the spill file
   double spill_seconds = 0.0;      // compressing + writing + reading + decompressing
 };
