@@ -231,6 +231,7 @@ TEST(WorldModel, SpillFileWritesReleasedPlacesAgain) {
   EXPECT_EQ(g.offset, a.offset);
   EXPECT_EQ(f.bytes(), 240u);  // nothing appended at the end
   EXPECT_EQ(f.freeBytes(), 10u);
+  EXPECT_EQ(f.freePlaces(), 1u);  // e's rest
   EXPECT_EQ(f.read(g), bytes(150, 6));
   EXPECT_EQ(f.read(e), bytes(70, 5));
   EXPECT_EQ(f.read(d), bytes(10, 4));

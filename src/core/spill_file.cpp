@@ -133,4 +133,9 @@ std::uint64_t SpillFile::freeBytes() const {
   return free_bytes_;
 }
 
+std::size_t SpillFile::freePlaces() const {
+  std::lock_guard<std::mutex> lock(free_mu_);
+  return free_by_offset_.size();
+}
+
 }  // namespace vofusion

@@ -131,7 +131,8 @@ WorldModelStats WorldModel::stats() const {
   WorldModelStats s = stats_;
   s.bricks = size();
   s.bricks_in_ram = lru_.size();
-  s.index_bytes = disk_.bytes() + lru_.size() * 88;  // cache: map node + bucket ~64, list node ~24
+  // cache: map node + bucket ~64, list node ~24; a free place of the spill file: two tree nodes ~96
+  s.index_bytes = disk_.bytes() + lru_.size() * 88 + spill_.freePlaces() * 96;
   s.spill_file_bytes = spill_.bytes();
   s.spill_free_bytes = spill_.freeBytes();
   return s;

@@ -44,6 +44,7 @@ class SpillFile {
   void release(Record r);
   std::uint64_t bytes() const { return end_.load(); }  // the file's size
   std::uint64_t freeBytes() const;                      // of it, released and not written again
+  std::size_t freePlaces() const;                       // the free places those bytes make up
 
  private:
   void open();
