@@ -23,7 +23,7 @@ std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
       {"references", &p.references, "frames matched: the previous one and references-1 before it", 1.0, 8.0},
       {"colour_time", &p.colour_time, "keypoints moved to the depth capture time"},
       ConfigKey::oneOf("colour_time_velocity", &p.colour_time_velocity,
-                       "interval = the fitted interval's mean; capture = each frame's own (exact offsets)",
+                       "interval = the fitted interval's mean; capture = each frame's own (exact offsets); auto = capture once the recording's frames fit it better (sign test)",
                        kColourTimeVelocities),
   };
 }

@@ -16,6 +16,7 @@
 
 #include "vofusion/features/hamming_matcher.h"
 #include "vofusion/features/keypoint_union.h"
+#include "vofusion/odometry/colour_time_evidence.h"
 
 namespace vofusion {
 
@@ -95,7 +96,7 @@ namespace {
 // The string keys, resolved once (the key table has checked them): nothing compares strings per frame.
 enum class KeypointSet { Union, Star, Narf };
 enum class MotionMethod { Paper, Robust };
-enum class ColourTimeVelocity { Interval, Capture };
+enum class ColourTimeVelocity { Interval, Capture, Auto };
 
 KeypointSet keypointSetOf(const OdometryParams& p) {
   checkChoice("odometry", "keypoints", p.keypoints, kKeypointSets);
@@ -107,6 +108,7 @@ MotionMethod motionMethodOf(const OdometryParams& p) {
 }
 ColourTimeVelocity colourTimeVelocityOf(const OdometryParams& p) {
   checkChoice("odometry", "colour_time_velocity", p.colour_time_velocity, kColourTimeVelocities);
+  if (p.colour_time_velocity == "auto") return ColourTimeVelocity::Auto;
   return p.colour_time_velocity == "capture" ? ColourTimeVelocity::Capture : ColourTimeVelocity::Interval;
 }
 bool nearestDepthOf(const OdometryParams& p) {
@@ -122,6 +124,13 @@ struct RgbdOdometry::Impl {
   const bool nearest_depth;  // depth_mode min: a keypoint's depth is its window's nearest reading
   const ColourTimeVelocity colour_velocity;
   BrandExtractor brand;
+  // auto: which velocity the recording's frames have fitted better so far; the correction follows it.
+  ColourTimeEvidence evidence;
+  bool vote_this_frame = false;  // auto: whether this frame's fit is compared (ColourTimeEvidence::wantsVote)
+  ColourTimeVelocity activeVelocity() const {
+    if (colour_velocity != ColourTimeVelocity::Auto) return colour_velocity;
+    return evidence.captureFitsBetter() ? ColourTimeVelocity::Capture : ColourTimeVelocity::Interval;
+  }
   // The keyframe new frames are matched against, and the last frame with a pose relative to it
   // (T_kf_last); with keyframes off both are the previous usable frame.
   std::optional<FrameFeatures> reference, last;
@@ -172,7 +181,24 @@ struct RgbdOdometry::Impl {
   struct FitVelocities {
     CameraVelocity interval, at_reference, at_current;
   };
-  FitVelocities velocitiesOf(const FrameFeatures& ref, const FrameFeatures& cur, const Eigen::Isometry3d& T_ref_cur) const;
+  FitVelocities velocitiesOf(const FrameFeatures& ref, const FrameFeatures& cur, const Eigen::Isometry3d& T_ref_cur,
+                             ColourTimeVelocity mode) const;
+  // A correspondence: a current keypoint and a keypoint of ref or of an older frame (whose pose in
+  // ref's coordinates is T_ref_frame).
+  struct Corr {
+    const FrameFeatures* frame;
+    Eigen::Isometry3d T_ref_frame;
+    int query, train;
+  };
+  // Every correspondence's two points at their frames' depth captures (src: current frame, dst: in
+  // ref's coordinates), moved at the velocities of the motion T_ref_cur that `mode` takes.
+  void placeAtDepthTime(const FrameFeatures& ref, const FrameFeatures& cur, const std::vector<Corr>& corr,
+                        const Eigen::Isometry3d& T_ref_cur, ColourTimeVelocity mode, Points3& src, Points3& dst) const;
+  // auto: whether capture's correction leaves a smaller median residual than interval's. Both start from
+  // the fit before any correction and refine on its inliers (Gauss-Newton, no second RANSAC), so neither
+  // is favoured by being the one the frame's fit used.
+  bool captureFitsBetter(const FrameFeatures& ref, const FrameFeatures& cur, const std::vector<Corr>& corr,
+                         const RigidFit& uncorrected) const;
   bool estimate(const FrameFeatures& ref, const std::vector<OlderFrame>& older, const FrameFeatures& cur,
                 std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r, RigidFit& fit,
                 FitVelocities& velocities) const;
@@ -323,12 +349,13 @@ std::string RgbdOdometry::Impl::matchPair(const FrameFeatures& ref, const FrameF
 }
 
 RgbdOdometry::Impl::FitVelocities RgbdOdometry::Impl::velocitiesOf(const FrameFeatures& ref, const FrameFeatures& cur,
-                                                                  const Eigen::Isometry3d& T_ref_cur) const {
+                                                                  const Eigen::Isometry3d& T_ref_cur,
+                                                                  ColourTimeVelocity mode) const {
   const double dt = cur.timestamp - ref.timestamp;
   FitVelocities v;
   v.interval = CameraVelocity::over(T_ref_cur, dt);
   v.at_reference = v.at_current = v.interval;
-  if (colour_velocity == ColourTimeVelocity::Interval) return v;
+  if (mode != ColourTimeVelocity::Capture) return v;
   if (ref.velocity_final) {
     v.at_reference = *ref.velocity;
   } else if (ref.arrival && ref.arrival_seconds > 0) {
@@ -339,6 +366,50 @@ RgbdOdometry::Impl::FitVelocities RgbdOdometry::Impl::velocitiesOf(const FrameFe
     v.at_reference = ref.arrival->towards(v.interval, gap, 0.5 * ref.arrival_seconds);
   }
   return v;
+}
+
+void RgbdOdometry::Impl::placeAtDepthTime(const FrameFeatures& ref, const FrameFeatures& cur, const std::vector<Corr>& corr,
+                                          const Eigen::Isometry3d& T_ref_cur, ColourTimeVelocity mode, Points3& src,
+                                          Points3& dst) const {
+  const FitVelocities v = velocitiesOf(ref, cur, T_ref_cur, mode);
+  const bool own = mode == ColourTimeVelocity::Capture;
+  const auto drift = [&](const FrameFeatures& f) {  // f's colour-time camera in its depth-time camera
+    const CameraVelocity& at = &f == &ref ? v.at_reference : own && f.velocity ? *f.velocity : v.interval;
+    return at.motionOver(f.colour_offset);
+  };
+  const Eigen::Isometry3d dc = v.at_current.motionOver(cur.colour_offset);
+  for (std::size_t k = 0; k < corr.size(); ++k) {
+    const Corr& c = corr[k];
+    src[k] = atDepthTime(cur, c.query, dc);
+    dst[k] = c.T_ref_frame * atDepthTime(*c.frame, c.train, drift(*c.frame));
+  }
+}
+
+namespace {
+// Median over all correspondences of |T src - dst|, each divided by max(1, z^2) (the Kinect noise's
+// growth, as the inlier threshold): which placement of the points the data agree with.
+double medianResidualAt1m(const Points3& src, const Points3& dst, const Eigen::Isometry3d& T) {
+  if (src.empty()) return 0.0;
+  std::vector<double> e(src.size());
+  for (std::size_t k = 0; k < src.size(); ++k) e[k] = (T * src[k] - dst[k]).norm() / std::max(1.0, src[k].z() * src[k].z());
+  std::nth_element(e.begin(), e.begin() + std::ptrdiff_t(e.size() / 2), e.end());
+  return e[e.size() / 2];
+}
+}  // namespace
+
+bool RgbdOdometry::Impl::captureFitsBetter(const FrameFeatures& ref, const FrameFeatures& cur, const std::vector<Corr>& corr,
+                                           const RigidFit& uncorrected) const {
+  const RobustFitOptions& o = params.robust;
+  const auto residualAfter = [&](ColourTimeVelocity mode, int passes) {
+    Points3 src(corr.size()), dst(corr.size());
+    Eigen::Isometry3d T = uncorrected.T;
+    for (int pass = 0; pass < passes; ++pass) {
+      placeAtDepthTime(ref, cur, corr, T, mode, src, dst);
+      T = refineGaussNewton(src, dst, uncorrected.inliers, T, std::max(1, o.gauss_newton_iterations), nullptr, o.ray_noise, o.cauchy);
+    }
+    return medianResidualAt1m(src, dst, T);
+  };
+  return residualAfter(ColourTimeVelocity::Capture, 3) < residualAfter(ColourTimeVelocity::Interval, 1);
 }
 
 bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<OlderFrame>& older,
@@ -353,11 +424,6 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   r.rms_error = 0.0;
   // Correspondences: current point -> a reference point in the reference frame's coordinates. Older
   // frames' points come through their pose in the reference frame, so one fit sees every match.
-  struct Corr {
-    const FrameFeatures* frame;
-    Eigen::Isometry3d T_ref_frame;
-    int query, train;
-  };
   std::vector<Corr> corr;
   std::vector<cv::DMatch> matches;
   split.resize(1 + older.size());
@@ -375,6 +441,8 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
     src[k] = cur.points[corr[k].query];
     dst[k] = corr[k].T_ref_frame * corr[k].frame->points[corr[k].train];
   }
+  const ColourTimeVelocity mode = activeVelocity();
+  std::optional<RigidFit> uncorrected;  // the fit before the colour-time correction, when there was one
   {
     ScopedStageTimer t(r.times, "motion");
     auto fitMotion = [&] { return motion == MotionMethod::Paper ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust); };
@@ -386,25 +454,23 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
     const bool offsets = cur.colour_offset != 0.0 ||
                          std::any_of(corr.begin(), corr.end(), [](const Corr& c) { return c.frame->colour_offset != 0.0; });
     if (P.colour_time && offsets && cur.timestamp > ref.timestamp) {
-      const int passes = colour_velocity == ColourTimeVelocity::Capture ? 3 : 1;
+      uncorrected = fit;
+      const int passes = mode == ColourTimeVelocity::Capture ? 3 : 1;
       for (int pass = 0; pass < passes && fit.ok; ++pass) {
-        const FitVelocities v = velocitiesOf(ref, cur, fit.T);
-        const bool own = colour_velocity == ColourTimeVelocity::Capture;
-        const auto drift = [&](const FrameFeatures& f) {  // f's colour-time camera in its depth-time camera
-          const CameraVelocity& at = &f == &ref ? v.at_reference : own && f.velocity ? *f.velocity : v.interval;
-          return at.motionOver(f.colour_offset);
-        };
-        const Eigen::Isometry3d dc = v.at_current.motionOver(cur.colour_offset);
-        for (std::size_t k = 0; k < corr.size(); ++k) {
-          const Corr& c = corr[k];
-          src[k] = atDepthTime(cur, c.query, dc);
-          dst[k] = c.T_ref_frame * atDepthTime(*c.frame, c.train, drift(*c.frame));
-        }
+        placeAtDepthTime(ref, cur, corr, fit.T, mode, src, dst);
         fit = fitMotion();
       }
     }
   }
-  if (fit.ok && cur.timestamp > ref.timestamp) velocities = velocitiesOf(ref, cur, fit.T);
+  r.colour_time_capture = mode == ColourTimeVelocity::Capture;
+  // Offsets under a millisecond move no keypoint measurably: no evidence either way.
+  const bool informative = std::max(std::abs(cur.colour_offset), std::abs(ref.colour_offset)) >= ColourTimeEvidence::kMinOffset;
+  if (vote_this_frame && uncorrected && uncorrected->ok && fit.ok && informative) {
+    ScopedStageTimer t(r.times, "colour_time_vote");
+    r.capture_fitted_better = captureFitsBetter(ref, cur, corr, *uncorrected);
+  }
+  // The history capture needs (kept whatever the mode: auto may switch to capture).
+  if (fit.ok && cur.timestamp > ref.timestamp) velocities = velocitiesOf(ref, cur, fit.T, ColourTimeVelocity::Capture);
   r.matches = int(corr.size());
   r.inliers = int(fit.inliers.size());
   r.rms_error = fit.rms;
@@ -478,13 +544,13 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   // A fit's velocities become the reference's (final: the motions on both sides are known) and the
   // current frame's (its arrival, and its velocity until the next frame's motion is known).
   auto keepVelocities = [&cur, &m](FrameFeatures& ref, const Impl::FitVelocities& v) {
-    if (m.colour_velocity != ColourTimeVelocity::Capture) return;  // interval needs no history
     if (!ref.velocity_final) ref.velocity = v.at_reference;
     ref.velocity_final = true;
     cur.arrival = v.interval;
     cur.arrival_seconds = cur.timestamp - ref.timestamp;
     cur.velocity = v.at_current;
   };
+  m.vote_this_frame = m.colour_velocity == ColourTimeVelocity::Auto && m.evidence.wantsVote();
   bool ok = m.estimate(*m.reference, older, cur, split, r, fit, velocities);
   if (ok) keepVelocities(*m.reference, velocities);
   Eigen::Isometry3d T_last_cur = m.T_kf_last.inverse() * fit.T;
@@ -504,6 +570,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
     T_last_cur = fit2.T;
     T_last_fitref.setIdentity();
     r.matches = r2.matches, r.inliers = r2.inliers, r.rms_error = r2.rms_error, r.failure = r2.failure;
+    r.colour_time_capture = r2.colour_time_capture, r.capture_fitted_better = r2.capture_fitted_better;
     r.inlier_current = std::move(r2.inlier_current);
     r.inlier_reference = std::move(r2.inlier_reference);
     ok = ok2;
@@ -526,6 +593,9 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
     return fail(r.failure);
   }
   m.failed.reset();
+  if (r.capture_fitted_better) m.evidence.add(*r.capture_fitted_better);
+  r.velocity_votes = m.evidence.compared();
+  r.capture_votes = m.evidence.captureBetter();
   for (auto& p : r.inlier_reference) p = T_last_fitref * p;
   if (keep_keyframe) {
     m.T_kf_last = fit.T;

@@ -49,6 +49,7 @@ struct Reconstruction::Impl {
   std::vector<bool> fused;                  // per frame: fused into the map during tracking
   StageTimes times;
   std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
+  ColourTimeStats colour_time;
   std::map<std::string, std::size_t> rejections;  // why ICP was rejected (reason without its figures)
   // The fusion of the last frame (integrate + ray cast), running beside the next frame's odometry
   // and image loading when overlap_fusion is on; `fusing_frame` keeps its images alive and unchanged.
@@ -100,6 +101,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
     r.odometry = m.odometry->process(frame);
     // The very first frame has no motion to estimate: not a failure.
     if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
+    if (r.odometry.success) m.colour_time = {r.odometry.colour_time_capture, r.odometry.velocity_votes, r.odometry.capture_votes};
   }
   m.waitFusion();
   fusion::MotionPrior prior;
@@ -230,6 +232,7 @@ std::size_t Reconstruction::predictedFrames() const { return impl_->predicted; }
 const std::map<std::string, std::size_t>& Reconstruction::icpRejections() const { return impl_->rejections; }
 std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
+ColourTimeStats Reconstruction::colourTime() const { return impl_->colour_time; }
 KinFuStats Reconstruction::fusionStats() const {
   impl_->waitFusion();
   if (!impl_->kinfu) return impl_->released_stats;

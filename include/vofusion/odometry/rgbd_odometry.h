@@ -2,6 +2,7 @@
 // 6D RGB-D odometry (Figueroa et al., §3.1): frame-to-frame motion from colour + depth keypoints.
 // CONTRACT used by fusion/ and the apps; implemented in src/odometry/.
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,7 +24,7 @@ namespace vofusion {
 inline const std::vector<std::string> kKeypointSets = {"union", "star", "narf"};
 inline const std::vector<std::string> kMotionMethods = {"paper", "robust"};
 inline const std::vector<std::string> kDepthModes = {"median", "min"};
-inline const std::vector<std::string> kColourTimeVelocities = {"interval", "capture"};
+inline const std::vector<std::string> kColourTimeVelocities = {"interval", "capture", "auto"};
 
 struct OdometryParams : public mrpt::config::CLoadableOptions {
   // Read from the given section (normally [odometry]) plus the fixed sections [star], [narf], [brand],
@@ -42,10 +43,11 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   bool colour_time = true;          // keypoints moved to their depth capture (Frame::colour_offset) at the
                                     // estimated velocity, then fitted again
   // The velocity that move uses: "interval" (the mean over the fitted interval, from the first fit;
-  // one correction) or "capture" (each frame's own, interpolated between the motions before and after
-  // it; repeated to a fixed point). capture is exact when the offsets are (synthetic, hardware-synced
-  // sensors); TUM fr1's are arrival stamps (share/odometry.ini).
-  std::string colour_time_velocity = "interval";
+  // one correction), "capture" (each frame's own, interpolated between the motions before and after
+  // it; repeated to a fixed point) or "auto" (interval until the recording's own frames show that
+  // capture fits them better: ColourTimeEvidence). capture is exact when the offsets are (synthetic,
+  // hardware-synced sensors); TUM fr1's are partly arrival stamps (share/odometry.ini).
+  std::string colour_time_velocity = "auto";
   // [matching]
   int max_hamming = 80;             // bits of 256; matches farther apart are dropped (256 = no limit)
   bool use_homography = true;       // RANSAC homography between matched pixels (the paper's filter)
@@ -103,6 +105,12 @@ struct OdometryResult {
   // The frame's own keypoints (all of them, not only the inliers; null on "empty frame"): loop
   // closure keeps them for keyframes.
   std::shared_ptr<const DescribedKeypoints> features;
+  // The colour-time correction: whether this frame's keypoints were moved at each frame's own velocity
+  // (capture) rather than the interval's; with colour_time_velocity auto, whether capture fitted this
+  // frame better (unset when not compared), and the recording's votes so far (ColourTimeEvidence).
+  bool colour_time_capture = false;
+  std::optional<bool> capture_fitted_better;
+  int velocity_votes = 0, capture_votes = 0;
 };
 
 class RgbdOdometry {

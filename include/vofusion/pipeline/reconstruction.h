@@ -40,6 +40,13 @@ struct FrameReport {
   StageTimes times;           // this frame's wall time: odometry, preprocess, icp, integrate, raycast, ...
 };
 
+// The odometry's colour-time correction ([odometry] colour_time_velocity): whether the stamps were
+// taken as capture times at the last frame, and the frames that voted on it (ColourTimeEvidence).
+struct ColourTimeStats {
+  bool capture = false;
+  int compared = 0, capture_better = 0;
+};
+
 // The sections every stage reads ([odometry...], [kinfu], [loop]), with the stages' defaults: for
 // checkConfigKeys() and dumpConfig().
 std::vector<ConfigSection> reconstructionConfigSections();
@@ -92,6 +99,7 @@ class Reconstruction {
   const std::map<std::string, std::size_t>& icpRejections() const;  // why ICP was rejected, how often
   std::size_t lostFrames() const;
   std::size_t odometryFailures() const;
+  ColourTimeStats colourTime() const;  // the odometry's colour-time correction at the last frame
   KinFuStats fusionStats() const;
 
  private:
