@@ -265,8 +265,9 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
   s["icp_rejections"] = rec.icpRejections();
   s["odometry_failures"] = rec.odometryFailures();
   const ColourTimeStats ct = rec.colourTime();
-  s["colour_time"] = {{"velocity", ct.capture ? "capture" : "interval"}, {"frames_compared", ct.compared},
-                      {"capture_fitted_better", ct.capture_better}};
+  if (ct.known)
+    s["colour_time"] = {{"velocity", ct.capture ? "capture" : "interval"}, {"frames_compared", ct.compared},
+                        {"capture_fitted_better", ct.capture_better}};
   s["seconds"] = info.seconds;
   s["fps"] = info.seconds > 0 ? frames / info.seconds : 0.0;
   s["stages"] = timesJson(rec.totalTimes(), frames);

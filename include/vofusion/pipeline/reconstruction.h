@@ -43,6 +43,7 @@ struct FrameReport {
 // The odometry's colour-time correction ([odometry] colour_time_velocity): whether the stamps were
 // taken as capture times at the last frame, and the frames that voted on it (ColourTimeEvidence).
 struct ColourTimeStats {
+  bool known = false;  // false until the odometry has estimated a motion (never in mode kinfu)
   bool capture = false;
   int compared = 0, capture_better = 0;
 };
