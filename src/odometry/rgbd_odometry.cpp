@@ -405,7 +405,8 @@ bool RgbdOdometry::Impl::captureFitsBetter(const FrameFeatures& ref, const Frame
     Eigen::Isometry3d T = uncorrected.T;
     for (int pass = 0; pass < passes; ++pass) {
       placeAtDepthTime(ref, cur, corr, T, mode, src, dst);
-      T = refineGaussNewton(src, dst, uncorrected.inliers, T, std::max(1, o.gauss_newton_iterations), nullptr, o.ray_noise, o.cauchy);
+      T = refineGaussNewton(src, dst, uncorrected.inliers, T, std::max(1, o.gauss_newton_iterations), nullptr, o.ray_noise, o.cauchy,
+                            true);
     }
     return medianResidualAt1m(src, dst, T);
   };
