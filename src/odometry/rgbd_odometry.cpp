@@ -446,21 +446,23 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   std::optional<RigidFit> uncorrected;  // the fit before the colour-time correction, when there was one
   {
     ScopedStageTimer t(r.times, "motion");
-    auto fitMotion = [&] { return motion == MotionMethod::Paper ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust); };
-    fit = fitMotion();
+    // Only the last fit's covariance is reported: the fits before it skip computing theirs.
+    auto fitMotion = [&](bool last) {
+      return motion == MotionMethod::Paper ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust, last);
+    };
     // Bearings are from colour, depths from depth images taken up to 20 ms apart: move every point to
     // its frame's depth capture at the camera's velocity and fit again. The velocities come from the
     // fit they correct: "capture" repeats the correction on its own result (three passes; the shake's
     // ATE is 0.0129 / 0.0095 / 0.0084 m in mode odometry after 2 / 3 / 4); "interval" corrects once.
     const bool offsets = cur.colour_offset != 0.0 ||
                          std::any_of(corr.begin(), corr.end(), [](const Corr& c) { return c.frame->colour_offset != 0.0; });
-    if (P.colour_time && offsets && cur.timestamp > ref.timestamp) {
-      uncorrected = fit;
-      const int passes = mode == ColourTimeVelocity::Capture ? 3 : 1;
-      for (int pass = 0; pass < passes && fit.ok; ++pass) {
-        placeAtDepthTime(ref, cur, corr, fit.T, mode, src, dst);
-        fit = fitMotion();
-      }
+    const bool correct = P.colour_time && offsets && cur.timestamp > ref.timestamp;
+    const int passes = !correct ? 0 : mode == ColourTimeVelocity::Capture ? 3 : 1;
+    fit = fitMotion(passes == 0);
+    if (correct) uncorrected = fit;
+    for (int pass = 0; pass < passes && fit.ok; ++pass) {
+      placeAtDepthTime(ref, cur, corr, fit.T, mode, src, dst);
+      fit = fitMotion(pass == passes - 1);
     }
   }
   r.colour_time_capture = mode == ColourTimeVelocity::Capture;

@@ -236,7 +236,7 @@ double rmsAtOneMetre(const Eigen::Isometry3d& T, const Points3& src, const Point
   return std::sqrt(sum / in.size());
 }
 
-RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& o) {
+RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& o, bool with_covariance) {
   RigidFit fit;
   const int n = int(src.size());
   if (n < 3) {
@@ -284,7 +284,8 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
     best_in = in;
     T = umeyamaRigid(src, dst, best_in);
   }
-  T = refineGaussNewton(src, dst, best_in, T, o.gauss_newton_iterations, &fit.covariance, o.ray_noise, o.cauchy);
+  T = refineGaussNewton(src, dst, best_in, T, o.gauss_newton_iterations, with_covariance ? &fit.covariance : nullptr, o.ray_noise,
+                        o.cauchy);
   inliersOf(T, in);
   if (in.size() >= 3) best_in = in;
   fit.T = T;

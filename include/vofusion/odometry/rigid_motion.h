@@ -50,7 +50,8 @@ struct RobustFitOptions {
                                    // viewing rays (axial 0.0012 + 0.0019 (z-0.4)^2, lateral 1 px); else isotropic
   std::uint32_t seed = 1;
 };
-RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& opts);
+// with_covariance false: RigidFit::covariance stays identity (a fit that only seeds the next one).
+RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& opts, bool with_covariance = true);
 
 // Spread of a point set: sqrt of the second largest eigenvalue of its covariance (m). Small means the
 // points are (nearly) collinear or coincident and a rotation about their line is unobservable.
