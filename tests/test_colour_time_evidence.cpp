@@ -1,4 +1,4 @@
-// ColourTimeEvidence: the sign test that decides whether a recording's colour offsets are capture times.
+// ColourTimeEvidence: the sign test that decides which velocity corrects a recording's colour offsets.
 #include <gtest/gtest.h>
 
 #include "vofusion/odometry/colour_time_evidence.h"

@@ -405,8 +405,7 @@ bool RgbdOdometry::Impl::captureFitsBetter(const FrameFeatures& ref, const Frame
     Eigen::Isometry3d T = uncorrected.T;
     for (int pass = 0; pass < passes; ++pass) {
       placeAtDepthTime(ref, cur, corr, T, mode, src, dst);
-      T = refineGaussNewton(src, dst, uncorrected.inliers, T, std::max(1, o.gauss_newton_iterations), nullptr, o.ray_noise, o.cauchy,
-                            true);
+      T = refineGaussNewton(src, dst, uncorrected.inliers, T, std::max(1, o.gauss_newton_iterations), nullptr, o.ray_noise, o.cauchy);
     }
     return medianResidualAt1m(src, dst, T);
   };
@@ -597,8 +596,8 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   }
   m.failed.reset();
   if (r.capture_fitted_better) m.evidence.add(*r.capture_fitted_better);
-  r.velocity_votes = m.evidence.compared();
-  r.capture_votes = m.evidence.captureBetter();
+  r.colour_time_votes = m.evidence.compared();
+  r.colour_time_capture_votes = m.evidence.captureBetter();
   for (auto& p : r.inlier_reference) p = T_last_fitref * p;
   if (keep_keyframe) {
     m.T_kf_last = fit.T;

@@ -102,8 +102,7 @@ double secondaryExtent(const Points3& pts, const std::vector<int>& subset) {
 
 Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
                                     const Eigen::Isometry3d& T0, int iterations,
-                                    Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise, double cauchy,
-                                    bool analytic_jacobian) {
+                                    Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise, double cauchy) {
   const std::vector<int> idx = subset.empty() ? allIndices(src.size()) : subset;
   Eigen::Matrix<double, 6, 1> p = toVector(T0);
   // Whitening of each residual T s - d: the inverse Cholesky factor of R C_s R^T + C_d (R from T0).
@@ -142,33 +141,14 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
     reweight(p);
     residuals(p, r);
     chi2 = r.squaredNorm();
-    if (it == iterations && !covariance) break;  // the last pass only evaluates H at the solution
-    if (analytic_jacobian) {
-      // R = Rz(yaw) Ry(pitch) Rx(roll): d(R s)/d yaw = [z]x R s, d/d pitch = Rz [y]x Ry Rx s,
-      // d/d roll = Rz Ry [x]x Rx s; d(T s)/d translation = I.
-      const Eigen::Matrix3d Rz = Eigen::AngleAxisd(p[3], Eigen::Vector3d::UnitZ()).toRotationMatrix();
-      const Eigen::Matrix3d Ry = Eigen::AngleAxisd(p[4], Eigen::Vector3d::UnitY()).toRotationMatrix();
-      const Eigen::Matrix3d Rx = Eigen::AngleAxisd(p[5], Eigen::Vector3d::UnitX()).toRotationMatrix();
-      const Eigen::Matrix3d R = Rz * Ry * Rx;
-      for (std::size_t k = 0; k < idx.size(); ++k) {
-        const Eigen::Vector3d& s = src[idx[k]];
-        const Eigen::Vector3d xs = Rx * s, yxs = Ry * xs;
-        Eigen::Matrix<double, 3, 6> D;
-        D.leftCols<3>().setIdentity();
-        D.col(3) = Eigen::Vector3d::UnitZ().cross(R * s);
-        D.col(4) = Rz * Eigen::Vector3d::UnitY().cross(yxs);
-        D.col(5) = Rz * Ry * Eigen::Vector3d::UnitX().cross(xs);
-        J.middleRows<3>(3 * std::ptrdiff_t(k)) = sw[k] * (w[k] * D);
-      }
-    } else {
-      // Central-difference Jacobian: 12 cheap evaluations, exact enough for 6 parameters.
-      for (int j = 0; j < 6; ++j) {
-        const double h = j < 3 ? 1e-6 : 1e-7;
-        Eigen::Matrix<double, 6, 1> q = p;
-        q[j] += h; residuals(q, rp);
-        q[j] -= 2 * h; residuals(q, rm);
-        J.col(j) = (rp - rm) / (2 * h);
-      }
+    if (it == iterations && !covariance) break;  // H at the solution is only for the covariance
+    // Central-difference Jacobian: 12 cheap evaluations, exact enough for 6 parameters.
+    for (int j = 0; j < 6; ++j) {
+      const double h = j < 3 ? 1e-6 : 1e-7;
+      Eigen::Matrix<double, 6, 1> q = p;
+      q[j] += h; residuals(q, rp);
+      q[j] -= 2 * h; residuals(q, rm);
+      J.col(j) = (rp - rm) / (2 * h);
     }
     H = J.transpose() * J;
     if (it == iterations) break;  // last pass only evaluates H at the solution

@@ -101,7 +101,8 @@ FrameReport Reconstruction::process(const Frame& frame) {
     r.odometry = m.odometry->process(frame);
     // The very first frame has no motion to estimate: not a failure.
     if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
-    if (r.odometry.success) m.colour_time = {true, r.odometry.colour_time_capture, r.odometry.velocity_votes, r.odometry.capture_votes};
+    if (r.odometry.success)
+      m.colour_time = {true, r.odometry.colour_time_capture, r.odometry.colour_time_votes, r.odometry.colour_time_capture_votes};
   }
   m.waitFusion();
   fusion::MotionPrior prior;

@@ -110,7 +110,7 @@ struct OdometryResult {
   // frame better (unset when not compared), and the recording's votes so far (ColourTimeEvidence).
   bool colour_time_capture = false;
   std::optional<bool> capture_fitted_better;
-  int velocity_votes = 0, capture_votes = 0;
+  int colour_time_votes = 0, colour_time_capture_votes = 0;
 };
 
 class RgbdOdometry {

@@ -59,12 +59,11 @@ double secondaryExtent(const Points3& pts, const std::vector<int>& subset = {});
 
 // Gauss-Newton on weighted point residuals, parameters (x y z yaw pitch roll); returns the refined T and
 // fills the covariance (inverse Hessian scaled by the reduced chi-square). cauchy > 0: iteratively
-// reweighted with a Cauchy kernel of that scale on the whitened residuals. analytic_jacobian: the
-// Jacobian in closed form (~4x faster) instead of central differences (the fits' own, kept so their
-// results stay as measured); the two agree to ~1e-9 (tests/test_rigid_motion.cpp).
+// reweighted with a Cauchy kernel of that scale on the whitened residuals. Without a covariance the
+// Hessian at the solution is not evaluated.
 Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
                                     const Eigen::Isometry3d& T0, int iterations,
                                     Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise = false,
-                                    double cauchy = 0.0, bool analytic_jacobian = false);
+                                    double cauchy = 0.0);
 
 }  // namespace vofusion

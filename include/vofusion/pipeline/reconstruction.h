@@ -40,8 +40,8 @@ struct FrameReport {
   StageTimes times;           // this frame's wall time: odometry, preprocess, icp, integrate, raycast, ...
 };
 
-// The odometry's colour-time correction ([odometry] colour_time_velocity): whether the stamps were
-// taken as capture times at the last frame, and the frames that voted on it (ColourTimeEvidence).
+// The odometry's colour-time correction ([odometry] colour_time_velocity): whether its last frame moved
+// the keypoints at each frame's own velocity (capture), and the frames compared (ColourTimeEvidence).
 struct ColourTimeStats {
   bool known = false;  // false until the odometry has estimated a motion (never in mode kinfu)
   bool capture = false;
