@@ -2,6 +2,8 @@
 // arrays: local planes -> border scores in 4 directions -> propagation to neighbours -> shadow
 // borders -> classification (obstacle / shadow / veil) -> border directions -> surface changes.
 // Constants are PCL's defaults; operations keep PCL's order so that the floats come out the same.
+// The per-pixel passes run on every core (each pixel reads only the previous passes' results); the
+// shadow-border scan and the classification change values as they go and stay serial, as in PCL.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -12,6 +14,8 @@
 #include <pcl/common/vector_average.h>
 
 #include "vofusion/features/narf_fast.h"
+
+#include "vofusion/core/parallel.h"
 
 namespace vofusion::narf {
 
@@ -284,21 +288,24 @@ RangeImage::RangeImage(const cv::Mat& depth, const CameraIntrinsics& camera)
 Borders extractBorders(const RangeImage& im) {
   const int w = im.width, h = im.height, size = w * h;
   std::vector<Surface> surf(size);
-  for (int y = 0; y < h; ++y)
+  parallelFor(0, h, [&](int y) {
     for (int x = 0; x < w; ++x)
       if (im.valid(y * w + x)) surf[y * w + x] = localSurface(im, x, y);
+  });
 
   // Border scores per direction, then the neighbour bonus (computed from the unchanged scores).
-  std::array<std::vector<float>, 4> score;
-  for (int d = 0; d < 4; ++d) {
-    std::vector<float> raw(size, 0.0f);
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x)
-        if (surf[y * w + x].ok) raw[y * w + x] = distanceChangeScore(im, surf[y * w + x], x, y, kDx[d], kDy[d], kRadiusBorders);
-    score[d].resize(size);
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) score[d][y * w + x] = propagatedScore(im, raw, x, y);
-  }
+  std::array<std::vector<float>, 4> raw, score;
+  for (int d = 0; d < 4; ++d) raw[d].assign(size, 0.0f), score[d].resize(size);
+  parallelFor(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x)
+      if (surf[y * w + x].ok)
+        for (int d = 0; d < 4; ++d)
+          raw[d][y * w + x] = distanceChangeScore(im, surf[y * w + x], x, y, kDx[d], kDy[d], kRadiusBorders);
+  });
+  parallelFor(0, h, [&](int y) {
+    for (int d = 0; d < 4; ++d)
+      for (int x = 0; x < w; ++x) score[d][y * w + x] = propagatedScore(im, raw[d], x, y);
+  });
 
   // Shadow borders: one raster scan, the four directions in PCL's order, scores changed in place.
   std::vector<std::array<int, 4>> shadow(size);
@@ -329,7 +336,7 @@ Borders extractBorders(const RangeImage& im) {
   const float min_cos = std::cos(pcl::deg2rad(120.0f));
   std::vector<Eigen::Vector3f> avg_dir(size);
   std::vector<std::uint8_t> has_avg(size, 0);
-  for (int y = 0; y < h; ++y)
+  parallelFor(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       const int i = y * w + x;
       if (!has_dir[i]) continue;
@@ -349,11 +356,12 @@ Borders extractBorders(const RangeImage& im) {
       avg_dir[i] = sum.normalized();
       has_avg[i] = 1;
     }
+  });
 
   // Surface changes: 1 along the border direction on borders, else the main principal curvature.
   b.change_score.assign(size, 0.0f);
   b.change_dir.assign(size, Eigen::Vector3f::Zero());
-  for (int y = 0; y < h; ++y)
+  parallelFor(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       const int i = y * w + x;
       if (b.traits[i] & (kVeil | kShadow)) continue;
@@ -364,6 +372,7 @@ Borders extractBorders(const RangeImage& im) {
         b.change_score[i] = 0.0f;
       }
     }
+  });
   return b;
 }
 

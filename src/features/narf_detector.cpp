@@ -25,7 +25,7 @@ std::vector<ConfigKey> narfKeys(NarfParams& p) {
       {"min_interest_value", &p.min_interest_value, "[0,1]", 0.0, 1.0},
       {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)", 1.0, 64.0},
       {"recursive_scale_reduction", &p.recursive_scale_reduction, "implementation pcl only; no effect in PCL 1.13 (sparse interest image)"},
-      ConfigKey::oneOf("implementation", &p.implementation, "fast = PCL's steps, one thread; pcl = pcl::NarfKeypoint",
+      ConfigKey::oneOf("implementation", &p.implementation, "fast = PCL's steps on flat arrays; pcl = pcl::NarfKeypoint",
                        {"fast", "pcl"}),
   };
 }
@@ -95,36 +95,60 @@ std::vector<int> pclInterestPoints(cv::Mat& d, const CameraIntrinsics& cam, cons
 }
 }  // namespace
 
-std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
+struct NarfPrepared {
+  NarfParams params;
+  CameraIntrinsics camera;  // full resolution
+  cv::Mat reduced;          // continuous
+  CameraIntrinsics reduced_camera;
+  std::unique_ptr<narf::RangeImage> range;  // implementation fast
+  narf::Borders borders;
+};
+void NarfPreparedDeleter::operator()(NarfPrepared* p) const { delete p; }
+
+NarfPreparation prepareNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
+  NarfPreparation out(new NarfPrepared);
   const int f = std::max(1, p.downsample);
   const cv::Mat small = downsampleDepth(depth, f);
-  const CameraIntrinsics cam = f > 1 ? camera.scaled(1.0 / f) : camera;
-  cv::Mat d = small.isContinuous() ? small : small.clone();
+  out->params = p;
+  out->camera = camera;
+  out->reduced_camera = f > 1 ? camera.scaled(1.0 / f) : camera;
+  out->reduced = small.isContinuous() ? small : small.clone();
+  if (p.implementation == "fast") {
+    out->range = std::make_unique<narf::RangeImage>(out->reduced, out->reduced_camera);
+    out->borders = narf::extractBorders(*out->range);
+  }
+  return out;
+}
 
+std::vector<cv::KeyPoint> detectNarf(const NarfPrepared& prep) {
+  const NarfParams& p = prep.params;
+  cv::Mat d = prep.reduced;
   std::vector<float> interest;
   std::vector<int> indices;
-  if (p.implementation == "fast") {
-    const narf::RangeImage range(d, cam);
-    const narf::Borders borders = narf::extractBorders(range);
+  if (prep.range) {
     const narf::KeypointParams kp{float(p.support_size), float(p.min_interest_value), p.max_points};
-    indices = narf::interestPoints(range, borders, kp, interest);
+    indices = narf::interestPoints(*prep.range, prep.borders, kp, interest);
   } else {
-    indices = pclInterestPoints(d, cam, p, interest);
+    indices = pclInterestPoints(d, prep.reduced_camera, p, interest);
   }
 
   std::vector<cv::KeyPoint> out;
   out.reserve(indices.size());
-  const float scale = float(f);
+  const float scale = float(std::max(1, p.downsample));
   for (int idx : indices) {
     const int x = idx % d.cols, y = idx / d.cols;
     const float z = d.at<float>(y, x);
     if (!(z > 0.f)) continue;
     // Back to full-resolution pixel centres.
     const float u = (x + 0.5f) * scale - 0.5f, v = (y + 0.5f) * scale - 0.5f;
-    const float size_px = float(p.support_size * camera.fx / z);
+    const float size_px = float(p.support_size * prep.camera.fx / z);
     out.emplace_back(u, v, size_px, -1.f, interest[idx], 0, 1 /*class: NARF*/);
   }
   return out;
+}
+
+std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
+  return detectNarf(*prepareNarf(depth, camera, p));
 }
 
 }  // namespace vofusion

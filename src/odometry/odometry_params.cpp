@@ -14,7 +14,7 @@ std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
       ConfigKey::oneOf("keypoints", &p.keypoints, "union = STAR + NARF (the paper)", kKeypointSets),
       ConfigKey::oneOf("motion_method", &p.motion_method, "paper = Algorithm 1; robust = RANSAC + LS + Gauss-Newton",
                        kMotionMethods),
-      {"narf_concurrent", &p.narf_concurrent, "NARF on a second thread"},
+      {"narf_concurrent", &p.narf_concurrent, "NARF beside STAR, normals and smoothing"},
       {"union_radius", &p.union_radius, "pixels, duplicate radius", 0.0, 50.0},
       {"keyframe_min_inliers", &p.keyframe_min_inliers, "keep the keyframe while this many inliers, 0 = off", 0.0, 100000.0},
       {"undistort", &p.undistort, "undistort keypoints before 3D/homography"},

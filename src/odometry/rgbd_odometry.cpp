@@ -211,13 +211,20 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
   f.colour_offset = frame.colour_offset;
   f.depth = frame.depth;
   f.camera = frame.camera;
-  // NARF is the slow part: start it first, on its own thread, when asked to.
-  if (keypoints != KeypointSet::Star && params.narf_concurrent)
-    ex.narf_job = std::async(std::launch::async, [&frame, this] {
+  // NARF is the longest chain: its border extraction first, on every core, then its interest search
+  // (serial) on its own thread beside everything else.
+  if (keypoints != KeypointSet::Star && params.narf_concurrent) {
+    NarfPreparation prepared;
+    {
+      ScopedStageTimer t(times, "narf_prepare");
+      prepared = prepareNarf(frame.depth, frame.camera, params.narf);
+    }
+    ex.narf_job = std::async(std::launch::async, [prepared = std::move(prepared)] {
       const auto t0 = std::chrono::steady_clock::now();
-      auto k = detectNarf(frame.depth, frame.camera, params.narf);
+      auto k = detectNarf(*prepared);
       return std::make_pair(std::move(k), secondsSince(t0));
     });
+  }
 
   cv::Mat gray;
   {

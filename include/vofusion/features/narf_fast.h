@@ -2,7 +2,8 @@
 // NARF interest points (Steder et al., ICRA 2011) computed as pcl::NarfKeypoint with
 // pcl::RangeImageBorderExtractor compute them (PCL 1.13, default parameters, sparse interest image,
 // no polynomial refinement), step for step and constant for constant, but for our case: one small
-// planar range image, one thread, flat per-pixel arrays instead of PCL's per-pixel heap objects.
+// planar range image, flat per-pixel arrays instead of PCL's per-pixel heap objects; the border
+// extraction's per-pixel passes on every core, the interest search on one (as PCL must for stable results).
 // The float operations follow PCL's order so that the keypoints come out the same.
 #include <cstdint>
 #include <limits>

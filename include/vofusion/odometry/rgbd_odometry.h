@@ -32,7 +32,8 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   // [odometry]
   std::string keypoints = "union";  // "union" (STAR + NARF, the paper), "star" or "narf"
   std::string motion_method = "robust";  // "paper" (Algorithm 1) or "robust" (RANSAC + LS + Gauss-Newton)
-  bool narf_concurrent = true;      // NARF on a second thread while STAR, normals and smoothing run
+  bool narf_concurrent = true;      // NARF beside STAR, normals and smoothing: its border extraction
+                                    // first on every core, its interest search on a second thread
   double union_radius = 3.0;        // pixels; a NARF keypoint this close to a STAR one is a duplicate
   int keyframe_min_inliers = 0;     // match against a keyframe while it keeps this many inliers (0 = frame to frame)
   bool undistort = true;            // undistort keypoint pixels (CameraIntrinsics::dist) before 3D and homography
