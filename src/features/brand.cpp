@@ -51,6 +51,20 @@ BrandExtractor::BrandExtractor(const BrandParams& params) : params_(params) {
     if (std::abs(px) > 0.5 || std::abs(py) > 0.5) continue;
     pattern_.emplace_back(float(px), float(py));
   }
+  // Patch radii R = max(2, int(S / 2)) with S at most patch_size (the depth scale is at most 1).
+  const int max_radius = std::max(2, params_.patch_size / 2 + 1);
+  orientation_taps_.resize(max_radius + 1);
+  for (int R = 2; R <= max_radius; ++R) orientation_taps_[R] = orientationTaps(R);
+}
+
+std::vector<BrandExtractor::OrientationTap> BrandExtractor::orientationTaps(int R) {
+  std::vector<OrientationTap> taps;
+  const int step = std::max(1, R / 8);
+  const float inv2s2 = 1.f / (2.f * (0.5f * R) * (0.5f * R));
+  for (int dy = -R; dy <= R; dy += step)
+    for (int dx = -R; dx <= R; dx += step)
+      if (dx * dx + dy * dy <= R * R) taps.push_back({dx, dy, std::exp(-(dx * dx + dy * dy) * inv2s2)});
+  return taps;
 }
 
 double BrandExtractor::scaleForDepth(double d) { return std::max(0.2, (3.8 - 0.4 * std::max(2.0, d)) / 3.0); }
@@ -90,19 +104,14 @@ void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, 
     if (params_.oriented) {
       // Canonical orientation: direction of the Gaussian-weighted sum of intensity gradients.
       const int R = std::max(2, int(S * 0.5f));
-      const int step = std::max(1, R / 8);
-      const float inv2s2 = 1.f / (2.f * (0.5f * R) * (0.5f * R));
+      std::vector<OrientationTap> beyond;  // a radius the table lacks (none while the depth scale is <= 1)
+      const auto& taps = R < int(orientation_taps_.size()) ? orientation_taps_[R] : (beyond = orientationTaps(R));
       double gx = 0, gy = 0;
-      for (int dy = -R; dy <= R; dy += step) {
-        const uint8_t* r0 = img.ptr<uint8_t>(ky + dy);
-        const uint8_t* ru = img.ptr<uint8_t>(ky + dy - 1);
-        const uint8_t* rd = img.ptr<uint8_t>(ky + dy + 1);
-        for (int dx = -R; dx <= R; dx += step) {
-          if (dx * dx + dy * dy > R * R) continue;
-          const float wgt = std::exp(-(dx * dx + dy * dy) * inv2s2);
-          gx += wgt * (int(r0[kx + dx + 1]) - int(r0[kx + dx - 1]));
-          gy += wgt * (int(rd[kx + dx]) - int(ru[kx + dx]));
-        }
+      const std::size_t stride = img.step;
+      for (const OrientationTap& t : taps) {
+        const uint8_t* p = img.ptr<uint8_t>(ky + t.dy) + kx + t.dx;
+        gx += t.weight * (int(p[1]) - int(p[-1]));
+        gy += t.weight * (int(p[stride]) - int(p[-std::ptrdiff_t(stride)]));
       }
       angle = float(std::atan2(gy, gx));
     }
