@@ -136,15 +136,22 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
 
       Eigen::Vector3f g;
       const auto normalAt = [&](const Eigen::Vector3f& q) { return cellGradient(q, g) && g.squaredNorm() > 0.f; };
-      bool found = false;
+      bool found = false, settled = false;
       if (use_hint && hrow[x] > 0.f) {
         const float zh = hrow[x];
-        found = march(std::max(z0, zh - 0.5f * trunc), std::min(z1, zh + 2.f * trunc), true) == March::Hit &&
-                normalAt(oq + dq * zs);
+        const March hinted = march(std::max(z0, zh - 0.5f * trunc), std::min(z1, zh + 2.f * trunc), true);
+        found = hinted == March::Hit && normalAt(oq + dq * zs);
+        // For tracking, a band that starts in observed free space and holds no surface settles the
+        // ray: the model has nothing there for this reading to pair with. Searching such rays again
+        // from min_depth (8 % of the rays, 1 in 17 finding a surface far in front of the reading)
+        // took a third of the ray cast's samples; without it the frame loop runs 10-28 % faster
+        // (xyz_first300, rpy_first100, the synthetic scenes), ATE xyz 0.01194 -> 0.01193 m,
+        // rpy 0.01664 -> 0.01645, synthetic room 0.0101 -> 0.0102, shake 0.0182 -> 0.0189.
+        settled = hinted_only && hinted == March::Miss;
       }
       // Whatever the hinted search could not settle, the full search decides; for tracking only up to
       // the hint's band (a surface farther behind the reading is hidden by it and would not pair).
-      if (!found) {
+      if (!found && !settled) {
         const float zend = hinted_only ? std::min(z1, hrow[x] + 2.f * trunc) : z1;
         found = march(z0, zend, false) == March::Hit && normalAt(oq + dq * zs);
       }
