@@ -37,7 +37,7 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
                                      const NarfParams& params = {});
 
 // The same in two steps, for a caller with other work (the odometry): prepareNarf does the part that
-// runs on every core (the reduced depth, the range image, the border extraction: ~45 % of the CPU);
+// runs on every core (the reduced depth, the range image, the border extraction: about half the CPU);
 // detectNarf(prepared) the interest search, which runs on one, beside that other work. Same keypoints.
 struct NarfPrepared;
 struct NarfPreparedDeleter {
