@@ -51,8 +51,8 @@ BrandExtractor::BrandExtractor(const BrandParams& params) : params_(params) {
     if (std::abs(px) > 0.5 || std::abs(py) > 0.5) continue;
     pattern_.emplace_back(float(px), float(py));
   }
-  // Patch radii R = max(2, int(S / 2)) with S at most patch_size (the depth scale is at most 1).
-  const int max_radius = std::max(2, params_.patch_size / 2 + 1);
+  // Every patch radius R = max(2, int(S / 2)) there is: S is at most patch_size (the depth scale at most 1).
+  const int max_radius = std::max(2, params_.patch_size / 2);
   orientation_taps_.resize(max_radius + 1);
   for (int R = 2; R <= max_radius; ++R) orientation_taps_[R] = orientationTaps(R);
 }
@@ -104,11 +104,9 @@ void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, 
     if (params_.oriented) {
       // Canonical orientation: direction of the Gaussian-weighted sum of intensity gradients.
       const int R = std::max(2, int(S * 0.5f));
-      std::vector<OrientationTap> beyond;  // a radius the table lacks (none while the depth scale is <= 1)
-      const auto& taps = R < int(orientation_taps_.size()) ? orientation_taps_[R] : (beyond = orientationTaps(R));
       double gx = 0, gy = 0;
       const std::size_t stride = img.step;
-      for (const OrientationTap& t : taps) {
+      for (const OrientationTap& t : orientation_taps_.at(R)) {
         const uint8_t* p = img.ptr<uint8_t>(ky + t.dy) + kx + t.dx;
         gx += t.weight * (int(p[1]) - int(p[-1]));
         gy += t.weight * (int(p[stride]) - int(p[-std::ptrdiff_t(stride)]));

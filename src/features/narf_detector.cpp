@@ -95,27 +95,17 @@ std::vector<int> pclInterestPoints(cv::Mat& d, const CameraIntrinsics& cam, cons
 }
 }  // namespace
 
-struct NarfPrepared {
-  NarfParams params;
-  CameraIntrinsics camera;  // full resolution
-  cv::Mat reduced;          // continuous
-  CameraIntrinsics reduced_camera;
-  std::unique_ptr<narf::RangeImage> range;  // implementation fast
-  narf::Borders borders;
-};
-void NarfPreparedDeleter::operator()(NarfPrepared* p) const { delete p; }
-
-NarfPreparation prepareNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
-  NarfPreparation out(new NarfPrepared);
+NarfPrepared prepareNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
+  NarfPrepared out;
   const int f = std::max(1, p.downsample);
   const cv::Mat small = downsampleDepth(depth, f);
-  out->params = p;
-  out->camera = camera;
-  out->reduced_camera = f > 1 ? camera.scaled(1.0 / f) : camera;
-  out->reduced = small.isContinuous() ? small : small.clone();
+  out.params = p;
+  out.camera = camera;
+  out.reduced_camera = f > 1 ? camera.scaled(1.0 / f) : camera;
+  out.reduced = small.isContinuous() ? small : small.clone();
   if (p.implementation == "fast") {
-    out->range = std::make_unique<narf::RangeImage>(out->reduced, out->reduced_camera);
-    out->borders = narf::extractBorders(*out->range);
+    out.range.emplace(out.reduced, out.reduced_camera);
+    out.borders = narf::extractBorders(*out.range);
   }
   return out;
 }
@@ -148,7 +138,7 @@ std::vector<cv::KeyPoint> detectNarf(const NarfPrepared& prep) {
 }
 
 std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& p) {
-  return detectNarf(*prepareNarf(depth, camera, p));
+  return detectNarf(prepareNarf(depth, camera, p));
 }
 
 }  // namespace vofusion

@@ -214,14 +214,14 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
   // NARF is the longest chain: its border extraction first, on every core, then its interest search
   // (serial) on its own thread beside everything else.
   if (keypoints != KeypointSet::Star && params.narf_concurrent) {
-    NarfPreparation prepared;
+    NarfPrepared prepared;
     {
       ScopedStageTimer t(times, "narf_prepare");
       prepared = prepareNarf(frame.depth, frame.camera, params.narf);
     }
     ex.narf_job = std::async(std::launch::async, [prepared = std::move(prepared)] {
       const auto t0 = std::chrono::steady_clock::now();
-      auto k = detectNarf(*prepared);
+      auto k = detectNarf(prepared);
       return std::make_pair(std::move(k), secondsSince(t0));
     });
   }

@@ -4,7 +4,7 @@
 // implementation of PCL's steps (narf_fast.h, same keypoints in half the time), or by PCL itself.
 // NARF costs seconds per frame at 640x480, so it runs on a depth image reduced by `downsample` and
 // keypoints are mapped back.
-#include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -12,6 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "vofusion/core/camera.h"
+#include "vofusion/features/narf_fast.h"
 
 namespace vofusion {
 
@@ -39,12 +40,15 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
 // The same in two steps, for a caller with other work (the odometry): prepareNarf does the part that
 // runs on every core (the reduced depth, the range image, the border extraction: about half the CPU);
 // detectNarf(prepared) the interest search, which runs on one, beside that other work. Same keypoints.
-struct NarfPrepared;
-struct NarfPreparedDeleter {
-  void operator()(NarfPrepared* p) const;
+struct NarfPrepared {
+  NarfParams params;
+  CameraIntrinsics camera;          // full resolution
+  cv::Mat reduced;                  // the reduced depth, continuous
+  CameraIntrinsics reduced_camera;
+  std::optional<narf::RangeImage> range;  // implementation fast (pcl builds its own in the search)
+  narf::Borders borders;
 };
-using NarfPreparation = std::unique_ptr<NarfPrepared, NarfPreparedDeleter>;
-NarfPreparation prepareNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& params = {});
+NarfPrepared prepareNarf(const cv::Mat& depth, const CameraIntrinsics& camera, const NarfParams& params = {});
 std::vector<cv::KeyPoint> detectNarf(const NarfPrepared& prepared);
 
 // Depth image reduced by an integer factor, each output pixel the nearest valid reading of its block
