@@ -1,5 +1,5 @@
 // rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake] [--frames N] [--fps F]
-//               [--no-noise] [--seed S] [--size WxH] [--exposure S] [--colour-offset S]
+//               [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
 #include <cstdio>
@@ -22,7 +22,7 @@ namespace fs = std::filesystem;
 namespace {
 const char* kUsage =
     "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake]\n"
-    "                     [--frames N] [--fps F] [--no-noise] [--seed S] [--size WxH] [--exposure S] [--colour-offset S]\n"
+    "                     [--frames N] [--fps F] [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S]\n"
     "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/)\n"
     "  --scene    room (default), corridor (long, camera travels along it), bare_wall (flat textured wall),\n"
     "             loop (a corridor around a block, walked once round: loop closure), lookalike (a corridor repeating every 3 m:\n"
@@ -33,6 +33,7 @@ const char* kUsage =
     "             folder keeps that offset in rgb.txt; a rawlog has no place for it)\n"
     "  --frames   number of frames (default 300); --fps frame rate (default 30)\n"
     "  --no-noise exact depth instead of the Kinect v1 noise model; --seed S random seed (default 1)\n"
+    "  --plain    every surface one plain colour, no texture: only shading shows the geometry (white walls)\n"
     "  --size     image size (default 640x480; intrinsics scaled from fx=fy=525)\n"
     "  --exposure S, --colour-offset S  shake only: colour exposure time (default 0.012 s, [0, 0.1]) and the\n"
     "             largest colour-to-depth capture offset (default 0.015 s, [0, 0.05])\n";
@@ -105,7 +106,7 @@ void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--size", "--exposure",
                                      "--colour-offset"},
-                       {"--no-noise", "--help"});
+                       {"--no-noise", "--plain", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
     return 0;
@@ -116,6 +117,7 @@ int body(int argc, char** argv) {
   o.frames = cl.count("--frames", o.frames, 1);
   o.seed = std::uint32_t(cl.count("--seed", o.seed));
   o.noise = !cl.flag("--no-noise");
+  o.textured = !cl.flag("--plain");
   o.fps = cl.number("--fps", o.fps, 0.0, 1000.0);
   o.exposure = cl.number("--exposure", o.exposure);            // range checked by SyntheticSequence
   o.colour_offset_max = cl.number("--colour-offset", o.colour_offset_max);

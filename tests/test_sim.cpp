@@ -143,6 +143,42 @@ TEST(Sim, ColourIsTexturedEverywhere) {
   }
 }
 
+// --plain (SimOptions::textured = false), white walls: the same geometry and depth, and colour
+// that changes only where the surface turns (shading) -- nothing in between for colour keypoints.
+TEST(Sim, PlainSurfacesKeepTheGeometryAndLoseTheTexture) {
+  for (const char* scene : {"room", "corridor"}) {
+    SimOptions o = small(scene, true);
+    const Frame textured = SyntheticSequence(o).render(3);
+    o.textured = false;
+    const Frame plain = SyntheticSequence(o).render(3);
+    EXPECT_EQ(cv::norm(textured.depth, plain.depth, cv::NORM_INF), 0.0) << scene;
+    const auto strongGradients = [](const cv::Mat& rgb) {
+      cv::Mat gray, gx, gy;
+      cv::cvtColor(rgb, gray, cv::COLOR_BGR2GRAY);
+      cv::Sobel(gray, gx, CV_32F, 1, 0);
+      cv::Sobel(gray, gy, CV_32F, 0, 1);
+      const cv::Mat mag = cv::abs(gx) + cv::abs(gy);
+      return cv::countNonZero(mag > 80) / double(mag.total());
+    };
+    EXPECT_GT(strongGradients(textured.rgb), 0.04) << scene;
+    EXPECT_LT(strongGradients(plain.rgb), 0.01) << scene;  // the edges between walls, floor and boxes
+    cv::Mat grey;
+    cv::cvtColor(plain.rgb, grey, cv::COLOR_BGR2GRAY);
+    EXPECT_GT(cv::mean(grey, plain.depth > 0)[0], 120.0) << scene;  // light, not black
+  }
+  // The flag reaches the app: one light grey, a few shades of it.
+  const std::string dir = test::tempDir("sim_plain") + "/seq";
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + " --plain --frames 2 --size 160x120", &log), 0) << log;
+  SourceOptions so;
+  auto tum = openFrameSource(dir, so);
+  Frame f;
+  ASSERT_TRUE(tum->next(f));
+  cv::Mat gray;
+  cv::cvtColor(f.rgb, gray, cv::COLOR_BGR2GRAY);
+  EXPECT_LT(cv::countNonZero(cv::abs(gray - cv::mean(gray)[0]) > 40) / double(gray.total()), 0.05);
+}
+
 TEST(Sim, TrajectoriesAreSmoothAndHandHeld) {
   for (const char* scene : {"room", "corridor", "bare_wall"}) {
     SimOptions o;

@@ -218,6 +218,7 @@ struct SyntheticSequence::Impl {
   // Layered procedural texture: at each scale the surface is tiled in cells, a hashed share of which
   // hold a rectangle, a disc or a checker patch of a random colour; finer layers paint over coarser.
   std::array<double, 3> texture(int surface, double tu, double tv) const {
+    if (!opts.textured) return {0.72, 0.74, 0.76};  // painted walls: a light grey, the same everywhere
     const std::uint64_t sid = hash(opts.seed, 77, std::uint64_t(surface));
     std::array<double, 3> col = hsvToBgr(unit(mix(sid)), 0.25 + 0.3 * unit(mix(sid + 1)), 0.45 + 0.3 * unit(mix(sid + 2)));
     static const double kCell[] = {0.9, 0.42, 0.2, 0.09};

@@ -57,6 +57,7 @@ struct SimOptions {
   double fps = 30.0;            // Hz; timestamps start at 0
   CameraIntrinsics camera;      // default 640x480, fx=fy=525
   bool noise = true;            // Kinect-like depth: disparity quantisation, noise growing with range, holes
+  bool textured = true;         // false: every surface one plain colour (only shading shows the geometry)
   double max_range = 4.5;       // m; farther surfaces read 0
   std::uint32_t seed = 1;
 };
