@@ -1,5 +1,5 @@
 // rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake] [--frames N] [--fps F]
-//               [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S]
+//               [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
 #include <cstdio>
@@ -22,7 +22,7 @@ namespace fs = std::filesystem;
 namespace {
 const char* kUsage =
     "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake]\n"
-    "                     [--frames N] [--fps F] [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S]\n"
+    "                     [--frames N] [--fps F] [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]\n"
     "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/)\n"
     "  --scene    room (default), corridor (long, camera travels along it), bare_wall (flat textured wall),\n"
     "             loop (a corridor around a block, walked once round: loop closure), lookalike (a corridor repeating every 3 m:\n"
@@ -36,7 +36,9 @@ const char* kUsage =
     "  --plain    every surface one plain colour, no texture: only shading shows the geometry (white walls)\n"
     "  --size     image size (default 640x480; intrinsics scaled from fx=fy=525)\n"
     "  --exposure S, --colour-offset S  shake only: colour exposure time (default 0.012 s, [0, 0.1]) and the\n"
-    "             largest colour-to-depth capture offset (default 0.015 s, [0, 0.05])\n";
+    "             largest colour-to-depth capture offset (default 0.015 s, [0, 0.05])\n"
+    "  --depth-readout S  depth rows read one after another over S seconds, top first (rolling shutter;\n"
+    "             Kinect v1 ~0.03; default 0: all at once, [0, 0.1]); ground truth at the middle row's time\n";
 
 // "WxH" with a 4:3 aspect: the default camera scaled to that size.
 CameraIntrinsics cameraForSize(const std::string& size) {
@@ -104,7 +106,7 @@ void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
   progress.finish("-> " + path);
 }
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--size", "--exposure",
+  const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--size", "--exposure", "--depth-readout",
                                      "--colour-offset"},
                        {"--no-noise", "--plain", "--help"});
   if (cl.flag("--help")) {
@@ -121,6 +123,7 @@ int body(int argc, char** argv) {
   o.fps = cl.number("--fps", o.fps, 0.0, 1000.0);
   o.exposure = cl.number("--exposure", o.exposure);            // range checked by SyntheticSequence
   o.colour_offset_max = cl.number("--colour-offset", o.colour_offset_max);
+  o.depth_readout = cl.number("--depth-readout", o.depth_readout);  // range checked by SyntheticSequence
   if (const auto size = cl.value("--size")) o.camera = cameraForSize(*size);
   if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "' (see --help)");
   const std::string out = cl.value("--out", "");

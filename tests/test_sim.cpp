@@ -256,6 +256,40 @@ TEST(Sim, ShakeTurnsUpToAHundredFiftyDegreesPerSecond) {
   EXPECT_THROW(SyntheticSequence{o}, InputError);
 }
 
+// --depth-readout: each depth row is read at its own time (a rolling shutter, top row first), the
+// ground truth stays the middle row's. With a frame rate that puts the first row's time on the previous
+// frame's and the last row's on the next frame's, those rows are exactly what a global shutter would
+// have read at those frames.
+TEST(Sim, DepthReadoutReadsEachRowAtItsOwnTime) {
+  SimOptions o = small("room", false);
+  o.trajectory = "shake";
+  o.depth_readout = 0.1;
+  const int h = o.camera.height;
+  o.fps = 1.0 / (o.depth_readout * (0.5 - 0.5 / h));  // row 0 at t - 1/fps, row h-1 at t + 1/fps
+  const SyntheticSequence seq(o);
+  const Frame f = seq.render(5);
+  int compared = 0;
+  double moved = 0;
+  for (int u = 0; u < o.camera.width; u += 5) {
+    for (const auto& [row, frame] : {std::pair{0, 4}, std::pair{h - 1, 6}}) {
+      const float read = f.depth.at<float>(row, u);
+      if (!(read > 0)) continue;  // beyond the sensor's range
+      EXPECT_NEAR(read, seq.exactDepth(seq.groundTruth(frame), u, row), 1e-5) << u << "," << row;
+      moved += std::abs(read - seq.exactDepth(seq.groundTruth(5), u, row));
+      ++compared;
+    }
+  }
+  ASSERT_GT(compared, 80);
+  EXPECT_GT(moved / compared, 0.005);  // the turn shows: those rows are not the frame time's
+  o.depth_readout = 0;                 // off: every row at the frame's time
+  const Frame global = SyntheticSequence(o).render(5);
+  for (int u = 0; u < o.camera.width; u += 9)
+    if (global.depth.at<float>(0, u) > 0)
+      EXPECT_NEAR(global.depth.at<float>(0, u), seq.exactDepth(seq.groundTruth(5), u, 0), 1e-5) << u;
+  o.depth_readout = 0.2;
+  EXPECT_THROW(SyntheticSequence{o}, InputError);
+}
+
 // Shake: the colour image is exposed over 12 ms around its own capture time, up to 15 ms from the
 // depth capture (Frame::colour_offset); smooth trajectories keep sharp colour taken with depth.
 TEST(Sim, ShakeBlursColourAndOffsetsItFromDepth) {

@@ -381,6 +381,7 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   }
   if (!(o.exposure >= 0 && o.exposure <= 0.1)) throw InputError("--exposure", "must be in [0, 0.1] s");
   if (!(o.colour_offset_max >= 0 && o.colour_offset_max <= 0.05)) throw InputError("--colour-offset", "must be in [0, 0.05] s");
+  if (!(o.depth_readout >= 0 && o.depth_readout <= 0.1)) throw InputError("--depth-readout", "must be in [0, 0.1] s");
   impl_ = impl;
 }
 
@@ -420,22 +421,36 @@ Frame SyntheticSequence::render(std::size_t i) const {
     double* zrow = truth.ptr<double>(v);
     unsigned char* grow = grazing.ptr<unsigned char>(v);
     cv::Vec3b* crow = f.rgb.ptr<cv::Vec3b>(v);
+    // A rolling-shutter depth camera reads this row at its own time; the ground truth is the pose at
+    // the middle row's. The colour stays at the frame's time.
+    Eigen::Matrix3d R_row = R;
+    Vec3 org_row = org;
+    if (o.depth_readout > 0) {
+      const mrpt::poses::CPose3D p = m.pose(f.timestamp + o.depth_readout * ((v + 0.5) / c.height - 0.5));
+      R_row = p.getRotationMatrix().asEigen();
+      org_row = Vec3(p.x(), p.y(), p.z());
+    }
     for (int u = 0; u < c.width; ++u) {
       const Vec3 dc((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0);
       const Vec3 dw = R * dc;
       const Hit h = m.cast(org, dw);
       if (!std::isfinite(h.s)) {
+        crow[u] = cv::Vec3b(0, 0, 0);
+      } else {
+        // Lambert-like shading with a fixed light: depends on the surface only, not on the view.
+        const double shade = 0.72 + 0.28 * std::abs(h.n.dot(light));
+        const auto col = m.texture(h.surface, h.tu, h.tv);
+        for (int k = 0; k < 3; ++k) crow[u][k] = cv::saturate_cast<unsigned char>(255.0 * col[k] * shade);
+      }
+      const Vec3 dw_row = R_row * dc;
+      const Hit hd = o.depth_readout > 0 ? m.cast(org_row, dw_row) : h;
+      if (!std::isfinite(hd.s)) {
         zrow[u] = 0;
         grow[u] = 1;
-        crow[u] = cv::Vec3b(0, 0, 0);
         continue;
       }
-      zrow[u] = h.s;
-      grow[u] = std::abs(h.n.dot(dw.normalized())) < 0.12;
-      // Lambert-like shading with a fixed light: depends on the surface only, not on the view.
-      const double shade = 0.72 + 0.28 * std::abs(h.n.dot(light));
-      const auto col = m.texture(h.surface, h.tu, h.tv);
-      for (int k = 0; k < 3; ++k) crow[u][k] = cv::saturate_cast<unsigned char>(255.0 * col[k] * shade);
+      zrow[u] = hd.s;
+      grow[u] = std::abs(hd.n.dot(dw_row.normalized())) < 0.12;
     }
   }, 4);
   // Shake: the colour camera's own capture time and exposure (the depth and the pose stay at the

@@ -53,6 +53,8 @@ struct SimOptions {
                                 // +-colour_offset_max from the depth capture (Frame::colour_offset)
   double exposure = 0.012;        // s, colour exposure of the shake trajectory
   double colour_offset_max = 0.015;  // s
+  double depth_readout = 0.0;     // s: depth rows read one after another over this time (rolling
+                                  // shutter, top row first; Kinect v1 ~0.03); 0: all rows at once
   std::size_t frames = 300;
   double fps = 30.0;            // Hz; timestamps start at 0
   CameraIntrinsics camera;      // default 640x480, fx=fy=525
