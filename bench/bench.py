@@ -46,6 +46,9 @@ SYNTHETIC = {
     "synthetic_corridor": ["--scene", "corridor"],
     "synthetic_bare_wall": ["--scene", "bare_wall"],
     "synthetic_shake": ["--scene", "room", "--trajectory", "shake"],
+    # The same motion on another seed, the depth read row by row over 30 ms as Kinect v1 does (what
+    # [kinfu] joint_rolling_shutter assumes): one shake seed alone is not a measure.
+    "synthetic_shake_rs": ["--scene", "room", "--trajectory", "shake", "--seed", "2", "--depth-readout", "0.03"],
 }
 
 # Settings shared by every run: no poses.rawlog (PNG encoding would dominate the fps of the fast modes)
