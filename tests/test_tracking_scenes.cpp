@@ -48,8 +48,8 @@ Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::s
 
 // The target is 2 cm. The shake's colour offsets are exact (the simulator's capture times); the
 // default colour-time velocity (auto) finds from the frames that each frame's own velocity (capture)
-// fits them better and switches to it: measured 1.03 cm here (interval 3.37; paper-handoff 0.91,
-// odometry 1.24, kinfu 14.6): this guards what mode joint reaches and that it beats its own sources
+// fits them better and switches to it: measured 0.95 cm here (interval 3.38; paper-handoff 0.92,
+// odometry 1.24, kinfu 17.5): this guards what mode joint reaches and that it beats its own sources
 // on this seed (1). It is one seed, not a general claim: on seeds 2-5 (rgbd-simulate --size 320x240
 // --frames 90 --trajectory shake --seed N) joint measured 2.3-5.2 cm, paper-handoff 0.7-4.9 and the
 // odometry 1.6-4.7 (2026-11-26; README, "Results").
