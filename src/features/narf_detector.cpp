@@ -61,7 +61,7 @@ cv::Mat downsampleDepth(const cv::Mat& depth, int factor) {
 
 namespace {
 // The reference: pcl::NarfKeypoint with pcl::RangeImageBorderExtractor on a RangeImagePlanar.
-std::vector<int> pclInterestPoints(cv::Mat& d, const CameraIntrinsics& cam, const NarfParams& p,
+std::vector<int> pclInterestPoints(const cv::Mat& d, const CameraIntrinsics& cam, const NarfParams& p,
                                    std::vector<float>& interest) {
   pcl::RangeImagePlanar range;
   range.setDepthImage(d.ptr<float>(), d.cols, d.rows, float(cam.cx), float(cam.cy), float(cam.fx), float(cam.fy));
@@ -112,7 +112,7 @@ NarfPrepared prepareNarf(const cv::Mat& depth, const CameraIntrinsics& camera, c
 
 std::vector<cv::KeyPoint> detectNarf(const NarfPrepared& prep) {
   const NarfParams& p = prep.params;
-  cv::Mat d = prep.reduced;
+  const cv::Mat& d = prep.reduced;  // read only: the prepared input may be searched again
   std::vector<float> interest;
   std::vector<int> indices;
   if (prep.range) {
