@@ -1,5 +1,6 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/colour_registration.h"
+#include "vofusion/io/external_files.h"
 
 #include <cerrno>
 #include <cstdint>
@@ -314,8 +315,9 @@ bool RawlogSource::next(Frame& frame) {
   if (pos_ >= count_) return false;
   auto obs = reader_->next3D(nullptr);
   if (!obs) return false;
-  // External images and range matrices are relative to the rawlog's "_Images" folder.
-  mrpt::img::CImage::setImagesPathBase(images_dir_);
+  // External images and range matrices are named relative to the rawlog's "_Images" folder: made
+  // absolute here, never through MRPT's process-wide images folder (io/external_files.h).
+  resolveExternalFiles(*obs, images_dir_);
   std::optional<CameraIntrinsics> cam;
   if (opts_.intrinsics) cam = CameraIntrinsics::parse(*opts_.intrinsics);
   frame = frameFromObservation(*obs, path_, cam);
@@ -447,11 +449,7 @@ void RawlogWriter::write(const Frame& frame) {
     if (!f || std::fclose(f) != 0 || !ok)
       throw InputError(impl_->images.path() + "/" + png, std::string("cannot write image: ") + std::strerror(f && ok ? errno : err));
     obs->intensityImage.setExternalStorage(png);
-    try {
-      obs->rangeImage_convertToExternalStorage(std::string(stem) + "_DEPTH.bin", dir + "/");
-    } catch (const std::exception&) {
-      throw InputError(impl_->images.path(), "cannot write range image");
-    }
+    writeRangeImageExternally(*obs, std::string(stem) + "_DEPTH.bin", dir);
     impl_->images_used = true;
   }
   std::vector<mrpt::obs::CObservation::Ptr> obs_list{obs};

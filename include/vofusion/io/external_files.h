@@ -1,0 +1,30 @@
+#pragma once
+// A rawlog's external files (images in "<name>_Images/") without MRPT's process-wide images folder.
+//
+// MRPT resolves every relative external file name (CImage::setExternalStorage, a range image's .bin)
+// against one global folder (CImage::setImagesPathBase), and CObservation3DRangeScan::
+// rangeImage_convertToExternalStorage swaps that folder while it writes. With a reader, a prefetch
+// thread and a writer in one process, each resolved the others' files (issue 34: one run in five read
+// an image from its own output's folder). These functions never read or change that folder:
+// - a record read gets absolute file names (resolveExternalFiles), so loading it reads no global;
+// - a record written keeps MRPT's relative names (the rawlog stays relocatable) but its range image is
+//   written here, into an explicit folder (writeRangeImageExternally).
+#include <string>
+
+#include <mrpt/obs/CObservation3DRangeScan.h>
+
+namespace vofusion {
+
+// Every relative external file of `obs` (intensity, confidence, range image, 3D points) becomes
+// images_dir/<name>, with images_dir made absolute: obs.load() and the images' pixels then read no
+// global state. Absolute names are kept as they are.
+void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::string& images_dir);
+
+// Writes obs.rangeImage to dir/file_name in MRPT's external format (gzip: rows, cols as uint32, then
+// the uint16 ranges, little-endian) and marks it externally stored under the relative file_name,
+// releasing the matrix. What rangeImage_convertToExternalStorage(file_name, dir) writes, without its
+// global. Throws InputError(dir/file_name, ...) when the file cannot be written.
+void writeRangeImageExternally(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name,
+                               const std::string& dir);
+
+}  // namespace vofusion

@@ -1,0 +1,145 @@
+// Readers and writers of different rawlogs in one process (issue 34): each resolves its own external
+// files, never through MRPT's process-wide images folder, so none reads or writes another's images.
+#include <filesystem>
+#include <thread>
+#include <vector>
+
+#include <mrpt/img/CImage.h>
+#include <mrpt/io/CFileGZInputStream.h>
+#include <mrpt/io/lazy_load_path.h>
+#include <opencv2/core.hpp>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/io/external_files.h"
+#include "vofusion/io/prefetching_source.h"
+#include "vofusion/io/rawlog.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+// A small frame whose every pixel says which recording and which frame it is. Every recording uses the
+// same timestamps, so the same image file names ("KINECT_000007_1.233333_INTENSITY.png").
+Frame markedFrame(int recording, std::size_t i) {
+  Frame f;
+  f.index = i;
+  f.timestamp = 1.0 + i / 30.0;
+  f.camera = CameraIntrinsics{}.scaled(0.05);  // 32x24
+  f.rgb.create(f.camera.height, f.camera.width, CV_8UC3);
+  f.depth.create(f.camera.height, f.camera.width, CV_32F);
+  for (int r = 0; r < f.rgb.rows; ++r)
+    for (int c = 0; c < f.rgb.cols; ++c) {
+      f.rgb.at<cv::Vec3b>(r, c) = cv::Vec3b(uchar(40 * recording + r), uchar(i % 256), uchar(i / 256 + c));
+      f.depth.at<float>(r, c) = float((5000 + 700 * recording + (i % 600) + r + c) * 2e-4);  // exact in 2e-4 m units
+    }
+  return f;
+}
+
+// Whether a frame read back is exactly frame i of `recording` (depth to its 0.2 mm quantum).
+bool isMarkedFrame(const Frame& f, int recording, std::size_t i) {
+  const Frame e = markedFrame(recording, i);
+  return f.rgb.size() == e.rgb.size() && cv::norm(f.rgb, e.rgb, cv::NORM_INF) == 0 &&
+         cv::norm(f.depth, e.depth, cv::NORM_INF) < 1e-4;
+}
+
+void writeMarked(const std::string& path, int recording, std::size_t frames) {
+  RawlogWriter w(path);
+  for (std::size_t i = 0; i < frames; ++i) w.write(markedFrame(recording, i));
+  w.commit();
+}
+
+// Reads the rawlog `passes` times (through the prefetch thread, as the apps do); counts wrong frames.
+// A frame that cannot be read at all (its image looked for in another folder) ends the pass: the frames
+// left count as wrong, and `error` keeps the message.
+std::size_t readMarked(const std::string& path, int recording, int passes, std::string* error = nullptr) {
+  std::size_t wrong = 0;
+  for (int p = 0; p < passes; ++p) {
+    PrefetchingSource src(std::make_unique<RawlogSource>(path, SourceOptions{}));
+    Frame f;
+    std::size_t i = 0;
+    try {
+      for (; src.next(f); ++i) wrong += !isMarkedFrame(f, recording, i);
+    } catch (const InputError& e) {
+      if (error) *error = e.what();
+    }
+    wrong += src.size() - i;
+  }
+  return wrong;
+}
+
+std::vector<unsigned char> gunzip(const std::string& path) {
+  mrpt::io::CFileGZInputStream in(path);
+  std::vector<unsigned char> bytes, buf(1 << 16);
+  for (std::size_t n; (n = in.Read(buf.data(), buf.size())) > 0;) bytes.insert(bytes.end(), buf.begin(), buf.begin() + n);
+  return bytes;
+}
+}  // namespace
+
+// Three readers (each with its prefetch thread) and two writers, five recordings in five folders with
+// the same image names, 3000 frames in all: every image read is its own recording's, every run.
+TEST(RawlogThreads, ReadersAndWritersOfDifferentRawlogsReadOnlyTheirOwnImages) {
+  const std::string dir = test::tempDir("rawlog_threads");
+  constexpr std::size_t kFrames = 300;
+  constexpr int kReaders = 3, kWriters = 2, kPasses = 2;
+  auto rawlog = [&](int k) { return dir + "/rec" + std::to_string(k) + "/rec.rawlog"; };
+  for (int k = 0; k < kReaders + kWriters; ++k) fs::create_directories(fs::path(rawlog(k)).parent_path());
+  for (int k = 0; k < kReaders; ++k) writeMarked(rawlog(k), k, kFrames);
+
+  std::vector<std::size_t> wrong(kReaders, 0);
+  std::vector<std::string> errors(kReaders);
+  std::vector<std::thread> threads;
+  for (int k = 0; k < kReaders; ++k)
+    threads.emplace_back([&, k] { wrong[k] = readMarked(rawlog(k), k, kPasses, &errors[k]); });
+  for (int k = kReaders; k < kReaders + kWriters; ++k)
+    threads.emplace_back([&, k] {
+      for (int p = 0; p < kPasses; ++p) writeMarked(rawlog(k), k, kFrames);
+    });
+  for (auto& t : threads) t.join();
+
+  for (int k = 0; k < kReaders; ++k) EXPECT_EQ(wrong[k], 0u) << "reader " << k << " read other images: " << errors[k];
+  for (int k = kReaders; k < kReaders + kWriters; ++k)
+    EXPECT_EQ(readMarked(rawlog(k), k, 1), 0u) << "writer " << k << " wrote into another recording's folder";
+}
+
+// Reading a rawlog neither needs MRPT's images folder nor changes it.
+TEST(RawlogThreads, ReadingLeavesMrptsImagesFolderAlone) {
+  const std::string dir = test::tempDir("rawlog_images_folder");
+  writeMarked(dir + "/a.rawlog", 1, 5);
+  const std::string before = mrpt::img::CImage::getImagesPathBase();
+  mrpt::img::CImage::setImagesPathBase(dir + "/no_such_folder");
+  const std::size_t wrong = readMarked(dir + "/a.rawlog", 1, 1);
+  EXPECT_EQ(mrpt::img::CImage::getImagesPathBase(), dir + "/no_such_folder");
+  mrpt::img::CImage::setImagesPathBase(before);
+  EXPECT_EQ(wrong, 0u);
+}
+
+// The range image file is MRPT's own format: the same bytes as rangeImage_convertToExternalStorage,
+// and MRPT's load() reads it back.
+TEST(RawlogThreads, RangeImageFileIsMrptsFormat) {
+  const std::string dir = test::tempDir("range_image_format");
+  auto ours = observationFromFrame(markedFrame(2, 77));
+  auto mrpts = observationFromFrame(markedFrame(2, 77));
+  const auto expected = ours->rangeImage;
+  writeRangeImageExternally(*ours, "ours_DEPTH.bin", dir);
+  mrpts->rangeImage_convertToExternalStorage("mrpt_DEPTH.bin", dir + "/");
+  EXPECT_TRUE(ours->rangeImage_isExternallyStored());
+  EXPECT_EQ(ours->rangeImage_getExternalStorageFile(""), "ours_DEPTH.bin");  // relative: the rawlog can move
+  EXPECT_EQ(ours->rangeImage.size(), 0u);
+  EXPECT_EQ(gunzip(dir + "/ours_DEPTH.bin"), gunzip(dir + "/mrpt_DEPTH.bin"));
+
+  resolveExternalFiles(*ours, dir);
+  EXPECT_EQ(ours->rangeImage_getExternalStorageFile(""), (fs::absolute(dir) / "ours_DEPTH.bin").string());
+  ours->load();
+  EXPECT_EQ(ours->rangeImage.asEigen(), expected.asEigen());
+}
+
+TEST(RawlogThreads, RangeImageThatCannotBeWrittenNamesTheFile) {
+  auto obs = observationFromFrame(markedFrame(0, 0));
+  try {
+    writeRangeImageExternally(*obs, "x_DEPTH.bin", "/nonexistent_folder_vofusion");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent_folder_vofusion/x_DEPTH.bin: "), std::string::npos) << e.what();
+  }
+}
