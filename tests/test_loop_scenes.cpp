@@ -80,7 +80,7 @@ TEST(LoopScenes, LoopRoundABlockIsClosed) {
               "at most %.4f m (tracked %.4f m)\n",
               ate_tracked, ate_closed, closing, worst_closed, worst_tracked);
   // The targets are 1 cm and the ATE halved. vofusion on the same scene read from its PNG
-  // files measures 0.0656 -> 0.0229 m (README); rendered straight into the pipeline, as here, the
+  // files measures 0.0656 -> 0.0229 m (docs/loop-closure.md); rendered straight into the pipeline, as here, the
   // tracker drifts less (what is left is mostly not drift a loop removes): this run measured
   // 7.4 cm -> 4 mm between the lap's loop poses and 0.0253 -> 0.0194 m ATE.
   ASSERT_GT(closing, 0u);

@@ -52,7 +52,7 @@ Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::s
 // odometry 1.24, kinfu 17.5): this guards what mode joint reaches and that it beats its own sources
 // on this seed (1). It is one seed, not a general claim: on seeds 2-5 (rgbd-simulate --size 320x240
 // --frames 90 --trajectory shake --seed N) joint measured 2.3-5.2 cm, paper-handoff 0.7-4.9 and the
-// odometry 1.6-4.7 (2026-11-26; README, "Results").
+// odometry 1.6-4.7 (2026-11-26; docs/tracking.md).
 TEST(Tracking, ShakeThreeSecondsHeldBetterThanEitherSource) {
   const sim::SyntheticSequence seq(test::quickSim("room", 90, "shake"));
   const Tracked joint = track(seq, TrackingMode::Joint);
