@@ -18,6 +18,7 @@
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/odometry/odometry_source.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 

@@ -20,9 +20,10 @@
 #include "vofusion/live/live_loop.h"
 #include "vofusion/live/live_source.h"
 #include "vofusion/live/live_viewer.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
+#include "vofusion/sim/any_source.h"
 
 namespace fs = std::filesystem;
 using namespace vofusion;

@@ -12,7 +12,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/mesh/mesh_clean.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/mesh/mesh_io.h"
 #include "vofusion/scene/scene_export.h"
 
 using namespace vofusion;

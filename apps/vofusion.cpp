@@ -14,11 +14,12 @@
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
-#include "vofusion/io/default_recording.h"
+#include "vofusion/sim/default_recording.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/prefetching_source.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 

@@ -27,6 +27,7 @@
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/tum_source.h"
 #include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 

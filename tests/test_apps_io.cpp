@@ -13,6 +13,7 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/tum_source.h"
 #include "vofusion/sim/synthetic_sequence.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;

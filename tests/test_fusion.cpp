@@ -9,7 +9,7 @@
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/fusion/kinfu.h"
-#include "vofusion/odometry/rigid_motion.h"
+#include "vofusion/registration/rigid_motion.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
 using namespace vofusion;

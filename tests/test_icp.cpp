@@ -2,8 +2,8 @@
 #include <Eigen/Dense>
 
 #include "support.h"
-#include "vofusion/fusion/preprocess.h"
-#include "vofusion/fusion/projective_icp.h"
+#include "vofusion/registration/preprocess.h"
+#include "vofusion/registration/projective_icp.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
 using namespace vofusion;

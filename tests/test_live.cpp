@@ -13,6 +13,7 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/live/live_loop.h"
 #include "vofusion/live/live_source.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;

@@ -8,6 +8,7 @@
 
 #include "support.h"
 #include "vofusion/io/frame_source.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;

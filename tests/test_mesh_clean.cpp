@@ -10,6 +10,7 @@
 #include "support.h"
 #include "test_mesh_fixtures.h"
 #include "vofusion/mesh/mesh_clean.h"
+#include "vofusion/mesh/mesh_io.h"
 
 using namespace vofusion;
 using test::colourAt;

@@ -5,7 +5,7 @@
 #include <map>
 #include <utility>
 
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 
 namespace vofusion::test {
 

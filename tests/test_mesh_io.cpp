@@ -7,7 +7,7 @@
 #include "support.h"
 #include "test_mesh_fixtures.h"
 #include "vofusion/core/errors.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/mesh/mesh_io.h"
 
 using namespace vofusion;
 

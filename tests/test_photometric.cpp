@@ -5,7 +5,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
-#include "vofusion/fusion/photometric.h"
+#include "vofusion/registration/photometric.h"
 
 using namespace vofusion;
 using namespace vofusion::fusion;

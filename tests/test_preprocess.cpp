@@ -3,7 +3,7 @@
 #include <random>
 
 #include "support.h"
-#include "vofusion/fusion/preprocess.h"
+#include "vofusion/registration/preprocess.h"
 
 using namespace vofusion;
 using namespace vofusion::fusion;

@@ -17,6 +17,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/sim/synthetic_sequence.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;

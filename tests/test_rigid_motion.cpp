@@ -5,7 +5,7 @@
 #include <Eigen/Dense>
 
 #include "support.h"
-#include "vofusion/odometry/rigid_motion.h"
+#include "vofusion/registration/rigid_motion.h"
 
 using namespace vofusion;
 

@@ -12,6 +12,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/io/seven_scenes_source.h"
 #include "vofusion/io/tum_source.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;

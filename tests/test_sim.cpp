@@ -11,6 +11,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/sim/synthetic_sequence.h"
+#include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
 using namespace vofusion::sim;

@@ -10,6 +10,7 @@
 #include "support.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/tsdf_volume.h"
+#include "vofusion/mesh/mesh_io.h"
 #include "vofusion/pipeline/mesh_by_region.h"
 
 using namespace vofusion;

@@ -14,7 +14,7 @@
 #include "vofusion/core/trajectory.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/mesh/mesh_clean.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/mesh/mesh_io.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;

@@ -1,34 +1,11 @@
 #include "vofusion/io/frame_source.h"
 
-#include <filesystem>
-
-#include "vofusion/core/errors.h"
-#include "vofusion/io/rawlog.h"
-#include "vofusion/io/seven_scenes_source.h"
-#include "vofusion/io/tum_source.h"
-#include "vofusion/sim/synthetic_source.h"
-
-namespace fs = std::filesystem;
-
 namespace vofusion {
 
 bool IndexedFrameSource::next(Frame& frame) {
   if (pos_ >= size()) return false;
   frame = read(pos_++);
   return true;
-}
-
-std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts) {
-  if (path.rfind("synthetic", 0) == 0 && !fs::exists(path))
-    return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));
-  if (fs::is_directory(path)) {
-    if (fs::exists(fs::path(path) / "rgb.txt")) return std::make_unique<TumFolderSource>(path, opts);
-    if (SevenScenesSource::looksLike(path)) return std::make_unique<SevenScenesSource>(path, opts);
-    throw InputError(path, "folder is not a TUM RGB-D sequence (no rgb.txt) nor a 7-Scenes one (no frame-XXXXXX.depth.png)");
-  }
-  if (!fs::exists(path)) throw InputError(path, "no such file or folder");
-  if (fs::path(path).extension() == ".rawlog") return std::make_unique<RawlogSource>(path, opts);
-  throw InputError(path, "unknown input type (expected a TUM folder, a .rawlog file or 'synthetic')");
 }
 
 }  // namespace vofusion

@@ -5,9 +5,9 @@
 
 #include "vofusion/core/depth_noise.h"
 #include "vofusion/features/hamming_matcher.h"
-#include "vofusion/fusion/preprocess.h"
-#include "vofusion/fusion/projective_icp.h"
-#include "vofusion/odometry/rigid_motion.h"
+#include "vofusion/registration/preprocess.h"
+#include "vofusion/registration/projective_icp.h"
+#include "vofusion/registration/rigid_motion.h"
 
 namespace vofusion::loop {
 

@@ -11,7 +11,7 @@
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/mesh/mesh_io.h"
 
 namespace vofusion {
 namespace {

@@ -22,7 +22,7 @@
 #include "vofusion/core/progress.h"
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/io/rawlog.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/mesh/mesh_io.h"
 #include "vofusion/pipeline/mesh_by_region.h"
 #include "vofusion/scene/scene_export.h"
 
@@ -64,6 +64,14 @@ double peakMemoryMiB() {
 }
 
 namespace {
+
+// A recording as titles name it: its folder or file name ("rgbd_dataset_freiburg1_xyz", "loop7.rawlog",
+// "synthetic:room"), never the absolute path.
+std::string recordingName(const std::string& input) {
+  fs::path p(input);
+  if (!p.has_filename()) p = p.parent_path();  // "folder/" names "folder"
+  return p.filename().empty() ? input : p.filename().string();
+}
 
 // poses.rawlog is written on its own thread: PNG encoding must not slow the frame loop down.
 class RawlogThread {
@@ -355,7 +363,7 @@ Trajectory RunRecorder::Impl::writeTrajectories(const Reconstruction& rec, const
     s["loop_closure"] = {{"enabled", false}};
     s["loops"] = json::array();
   }
-  const std::string title = "vofusion " + toString(rec.mode()) + ": " + info.input;
+  const std::string title = "vofusion " + toString(rec.mode()) + ": " + recordingName(info.input);
   if (ground_truth.empty()) {
     if (!rec.trajectory().empty()) {
       plotTrajectoriesOverlay(out.path("trajectory.png"), {}, {{"estimate", rec.trajectory()}}, title);

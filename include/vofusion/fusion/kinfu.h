@@ -16,11 +16,11 @@
 
 #include "vofusion/core/frame.h"
 #include "vofusion/core/timing.h"
-#include "vofusion/fusion/motion_prior.h"
-#include "vofusion/fusion/preprocess.h"
-#include "vofusion/fusion/projective_icp.h"
+#include "vofusion/registration/motion_prior.h"
+#include "vofusion/registration/preprocess.h"
+#include "vofusion/registration/projective_icp.h"
 #include "vofusion/fusion/tsdf_volume.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 
 namespace vofusion {
 
@@ -59,7 +59,7 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
   double motion_sigma_rotation = 0.0;  // degrees per 1/30 s, same for the rotation (0 = none)
   float guess_margin = 0.8f;          // another initial guess replaces the prior's only when its
                                       // alignment cost is below this fraction of the prior's
-  // Mode joint, the photometric term (fusion/photometric.h): each textured pixel of the last frame keeps
+  // Mode joint, the photometric term (registration/photometric.h): each textured pixel of the last frame keeps
   // its intensity in this one.
   double joint_photometric_sigma = 40.0;  // grey levels, noise of one finest-level residual (0 = no term)
   double joint_photometric_huber = 0.3;  // sigmas, Huber kernel on the whitened residual

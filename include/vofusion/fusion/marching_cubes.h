@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "vofusion/fusion/voxel_brick.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 
 namespace vofusion::fusion {
 

@@ -19,7 +19,7 @@
 #include "vofusion/fusion/brick_arena.h"
 #include "vofusion/fusion/voxel_brick.h"
 #include "vofusion/fusion/world_model.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 
 namespace vofusion::fusion {
 

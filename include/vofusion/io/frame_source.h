@@ -1,5 +1,6 @@
 #pragma once
-// Where frames come from: a TUM folder, an MRPT rawlog, a synthetic scene, or a live sensor.
+// Where frames come from: a TUM folder, an MRPT rawlog, a synthetic scene, or a live sensor. The one
+// function that opens any of them by name is vofusion/sim/any_source.h (it knows the synthetic kind).
 #include <cstddef>
 #include <memory>
 #include <optional>
@@ -44,9 +45,5 @@ struct SourceOptions {
   double max_time_diff = 0.02;            // s, colour<->depth association (TUM benchmark tolerance)
   bool unique_depth = false;              // TUM: one-to-one pairs (associate.py), else nearest colour per depth frame
 };
-
-// Detects the kind of input: a directory with rgb.txt/depth.txt (TUM), a *.rawlog file, or the
-// word "synthetic[:scene]". Throws InputError naming the path when it is none of these.
-std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts = {});
 
 }  // namespace vofusion

@@ -13,7 +13,7 @@
 #include "vofusion/core/camera.h"
 #include "vofusion/core/frame.h"
 #include "vofusion/loop/loop_params.h"
-#include "vofusion/odometry/rgbd_odometry.h"
+#include "vofusion/core/described_keypoints.h"
 
 namespace vofusion::loop {
 

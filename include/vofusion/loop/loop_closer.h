@@ -22,7 +22,7 @@
 #include "vofusion/core/trajectory.h"
 #include "vofusion/loop/keyframe_store.h"
 #include "vofusion/loop/loop_params.h"
-#include "vofusion/odometry/rgbd_odometry.h"
+#include "vofusion/core/described_keypoints.h"
 
 namespace vofusion::loop {
 

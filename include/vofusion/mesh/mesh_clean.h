@@ -8,7 +8,7 @@
 
 #include <mrpt/config/CLoadableOptions.h>
 
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 
 namespace vofusion {
 

@@ -10,13 +10,14 @@
 #include <mrpt/math/CMatrixFixed.h>
 #include <mrpt/poses/CPose3D.h>
 
+#include "vofusion/core/described_keypoints.h"
 #include "vofusion/core/frame.h"
 #include "vofusion/core/point_maps.h"
 #include "vofusion/core/timing.h"
 #include "vofusion/features/brand.h"
 #include "vofusion/features/narf_detector.h"
 #include "vofusion/features/star_detector.h"
-#include "vofusion/odometry/rigid_motion.h"
+#include "vofusion/registration/rigid_motion.h"
 
 namespace vofusion {
 
@@ -74,13 +75,6 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
 
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
-};
-
-// A frame's described keypoints, as place recognition indexes them: BRAND descriptors (CV_8U, 32
-// bytes a row) and each keypoint's 3D point in the camera frame (m), row for row.
-struct DescribedKeypoints {
-  cv::Mat descriptors;
-  Points3 points;
 };
 
 struct OdometryResult {

@@ -23,7 +23,7 @@
 #include "vofusion/fusion/kinfu.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/loop/loop_closer.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 #include "vofusion/odometry/rgbd_odometry.h"
 
 namespace vofusion {

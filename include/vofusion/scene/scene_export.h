@@ -23,7 +23,7 @@
 
 #include "vofusion/core/camera.h"
 #include "vofusion/core/trajectory.h"
-#include "vofusion/mesh/triangle_mesh.h"
+#include "vofusion/core/triangle_mesh.h"
 
 namespace vofusion {
 

@@ -1,4 +1,4 @@
-#include "vofusion/fusion/photometric.h"
+#include "vofusion/registration/photometric.h"
 
 #include <cmath>
 #include <limits>
@@ -6,7 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/parallel.h"
-#include "vofusion/fusion/normal_equations.h"
+#include "vofusion/registration/normal_equations.h"
 
 namespace vofusion::fusion {
 

@@ -8,8 +8,8 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
-#include "vofusion/fusion/photometric.h"
-#include "vofusion/fusion/preprocess.h"
+#include "vofusion/registration/photometric.h"
+#include "vofusion/registration/preprocess.h"
 
 namespace vofusion::fusion {
 
@@ -66,7 +66,7 @@ AlignmentScore scoreAlignment(const DepthLevel& frame, const cv::Mat& model_vert
                               const Eigen::Isometry3d& model_pose, const Eigen::Isometry3d& pose,
                               const IcpParams& params, double truncation);
 
-// Mode joint's photometric term (fusion/photometric.h), one level per tracking level.
+// Mode joint's photometric term (registration/photometric.h), one level per tracking level.
 struct PhotometricTerms {
   std::vector<PhotometricLevel> levels;  // per tracking level, level 0 first
   PhotometricParams params;

@@ -1,4 +1,4 @@
-#include "vofusion/fusion/preprocess.h"
+#include "vofusion/registration/preprocess.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/parallel.h"
-#include "vofusion/fusion/projective_icp.h"
+#include "vofusion/registration/projective_icp.h"
 
 namespace vofusion::fusion {
 

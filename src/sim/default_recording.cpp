@@ -1,4 +1,4 @@
-#include "vofusion/io/default_recording.h"
+#include "vofusion/sim/default_recording.h"
 
 #include <cstdio>
 #include <filesystem>

@@ -13,9 +13,9 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-namespace vofusion {
+#include "vofusion/core/described_keypoints.h"  // Points3
 
-using Points3 = std::vector<Eigen::Vector3d>;
+namespace vofusion {
 
 struct RigidFit {
   bool ok = false;

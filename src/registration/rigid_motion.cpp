@@ -1,4 +1,4 @@
-#include "vofusion/odometry/rigid_motion.h"
+#include "vofusion/registration/rigid_motion.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,7 +1,7 @@
 // Point-to-plane ICP with projective data association (KinectFusion §3.5). The 6x6 system is built
 // around the current camera centre (rotation about it, then translation), which keeps its
 // eigenvalues comparable between rotation and translation for the degeneracy test.
-#include "vofusion/fusion/projective_icp.h"
+#include "vofusion/registration/projective_icp.h"
 
 #include <cmath>
 #include <limits>
@@ -10,7 +10,7 @@
 #include <tbb/parallel_invoke.h>
 
 #include "vofusion/core/parallel.h"
-#include "vofusion/fusion/normal_equations.h"
+#include "vofusion/registration/normal_equations.h"
 
 namespace vofusion::fusion {
 
