@@ -8,7 +8,7 @@
 
 #include "support.h"
 #include "vofusion/core/errors.h"
-#include "vofusion/fusion/kinfu.h"
+#include "vofusion/tracking/tracker.h"
 #include "vofusion/registration/rigid_motion.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
@@ -72,9 +72,9 @@ struct RunSummary {
 };
 
 RunSummary runSequence(const sim::SyntheticSequence& seq, TrackingMode mode, const KinFuParams& p,
-                       double odo_sigma_t = 0.0015, KinFu** keep = nullptr, int matches = 0) {
+                       double odo_sigma_t = 0.0015, Tracker** keep = nullptr, int matches = 0) {
   std::mt19937 rng(7);
-  auto* kf = new KinFu(p, mode, seq.groundTruth(0));
+  auto* kf = new Tracker(p, mode, seq.groundTruth(0));
   RunSummary s;
   for (std::size_t i = 0; i < seq.size(); ++i) {
     const Frame f = seq.render(i);
@@ -122,7 +122,7 @@ TEST(KinFu, JointModeWithoutPriorTracksLikeKinFu) {
   sim::SimOptions exact = simOpts("room", 30);
   exact.noise = false;
   const sim::SyntheticSequence seq(exact);
-  KinFu kf(testParams(), TrackingMode::Joint, seq.groundTruth(0));
+  Tracker kf(testParams(), TrackingMode::Joint, seq.groundTruth(0));
   double max_error = 0;
   for (std::size_t i = 0; i < seq.size(); ++i) {
     const FusionResult r = kf.process(seq.render(i), nullptr);
@@ -174,10 +174,10 @@ TEST(KinFu, CorridorMeshWithShiftingCoversWhatABigVolumeCovers) {
   KinFuParams big = small;
   big.tsdf.volume_voxels = 1024;  // 20 m: the whole corridor, never shifts
   big.shift_threshold = 100.f;
-  KinFu *ks = nullptr, *kb = nullptr;
+  Tracker *ks = nullptr, *kb = nullptr;
   const RunSummary rs = runSequence(seq, TrackingMode::Odometry, small, 0.0, &ks);
   const RunSummary rb = runSequence(seq, TrackingMode::Odometry, big, 0.0, &kb);
-  std::unique_ptr<KinFu> hold_s(ks), hold_b(kb);
+  std::unique_ptr<Tracker> hold_s(ks), hold_b(kb);
   EXPECT_GT(rs.stats.shifts, 3u);
   EXPECT_EQ(rb.stats.shifts, 0u);
   EXPECT_GT(rs.stats.bricks_in_world_model, 0u);

@@ -37,7 +37,7 @@ struct Reconstruction::Impl {
   OdometryParams odo_params;
   KinFuParams kinfu_params;
   std::unique_ptr<RgbdOdometry> odometry;  // null in mode kinfu: ICP alone, as KinFu LS
-  std::unique_ptr<KinFu> kinfu;
+  std::unique_ptr<Tracker> kinfu;
   Trajectory trajectory;  // tracked
   loop::LoopParams loop_params;
   std::unique_ptr<loop::LoopCloser> loops;  // null: loop closure off
@@ -50,7 +50,7 @@ struct Reconstruction::Impl {
   StageTimes times;
   std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
   ColourTimeStats colour_time;
-  std::map<std::string, std::size_t> rejections;  // why ICP was rejected (reason without its figures)
+  std::map<Rejection, std::size_t> rejections;  // why ICP was rejected
   // The fusion of the last frame (integrate + ray cast), running beside the next frame's odometry
   // and image loading when overlap_fusion is on; `fusing_frame` keeps its images alive and unchanged.
   tbb::task_group fusing;
@@ -58,7 +58,7 @@ struct Reconstruction::Impl {
   FusionResult fusing_result;
   Frame fusing_frame;
 
-  KinFu& map() const {
+  Tracker& map() const {
     if (!kinfu) throw std::logic_error("Reconstruction: the map was released (releaseMap)");
     return *kinfu;
   }
@@ -85,7 +85,7 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
     impl_->loops = std::make_unique<loop::LoopCloser>(impl_->loop_params, impl_->kinfu_params.tsdf.work_dir);
   // The map is anchored at the first camera (world = first camera frame). Ground truth never changes
   // what the tracker or the map does; evaluation and pictures align to it afterwards.
-  impl_->kinfu = std::make_unique<KinFu>(impl_->kinfu_params, mode);
+  impl_->kinfu = std::make_unique<Tracker>(impl_->kinfu_params, mode);
 }
 
 Reconstruction::~Reconstruction() = default;
@@ -127,7 +127,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
   r.fell_back = f.fell_back;
   r.predicted = f.predicted;
   r.note = f.reason;
-  if (!f.reason.empty()) ++m.rejections[f.reason.substr(0, f.reason.find(" ("))];
+  if (f.rejection != Rejection::None) ++m.rejections[f.rejection];
   r.pose = f.pose;
   if (f.fell_back) ++m.fallbacks;
   if (f.predicted) ++m.predicted;
@@ -183,8 +183,8 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   // once were the run's peak (loop scene: 820 MiB while re-fusing, 369 MiB while tracking).
   // If reading fails midway, the partly re-fused map is the one left (never none).
   m.kinfu.reset();
-  m.kinfu = std::make_unique<KinFu>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
-  KinFu& map = *m.kinfu;
+  m.kinfu = std::make_unique<Tracker>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
+  Tracker& map = *m.kinfu;
   std::size_t read = 0, fused = 0;
   Frame frame;
   while (read < poses.size() && next(frame)) {
@@ -230,7 +230,7 @@ const StageTimes& Reconstruction::totalTimes() const {
 std::size_t Reconstruction::framesProcessed() const { return impl_->frames; }
 std::size_t Reconstruction::fallbacks() const { return impl_->fallbacks; }
 std::size_t Reconstruction::predictedFrames() const { return impl_->predicted; }
-const std::map<std::string, std::size_t>& Reconstruction::icpRejections() const { return impl_->rejections; }
+const std::map<Rejection, std::size_t>& Reconstruction::icpRejections() const { return impl_->rejections; }
 std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
 ColourTimeStats Reconstruction::colourTime() const { return impl_->colour_time; }

@@ -270,7 +270,9 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
   s["lost_frames"] = rec.lostFrames();
   s["icp_fallbacks_to_odometry"] = rec.fallbacks();
   s["predicted_frames"] = rec.predictedFrames();
-  s["icp_rejections"] = rec.icpRejections();
+  json rejections = json::object();
+  for (const auto& [why, n] : rec.icpRejections()) rejections[toString(why)] = n;
+  s["icp_rejections"] = rejections;
   s["odometry_failures"] = rec.odometryFailures();
   const ColourTimeStats ct = rec.colourTime();
   if (ct.known)

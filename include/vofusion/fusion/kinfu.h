@@ -1,22 +1,25 @@
 #pragma once
-// KinectFusion on the CPU (Figueroa et al. §3.2, after Newcombe et al. 2011 and KinFu Large Scale):
-// depth preprocessing, frame-to-model ICP weighed together with a motion prior (the 6D RGB-D
-// odometry's matches), weighted TSDF with a weight cap and colour, ray casting, a cyclic volume that
-// follows the camera, marching cubes.
+// KinectFusion's map on the CPU (Figueroa et al. §3.2, after Newcombe et al. 2011 and KinFu Large Scale):
+// a weighted TSDF with a weight cap and colour in a cyclic volume that follows the camera (a world
+// model keeps what it left), the model ray-cast from the last fused pose for the next frame's tracking,
+// marching cubes. Which pose a frame gets is the tracker's (vofusion/tracking/tracker.h): it reads the
+// predicted model (model()) and hands back each tracked frame to fuse().
 //
-//   KinFu kf(params, TrackingMode::Joint);
-//   for each frame: FusionResult r = kf.process(frame, have_prior ? &prior : nullptr);
-//   TriangleMesh m = kf.extractMesh();
+//   KinFu map(params, first_pose, {true, false});
+//   per frame: track against map.model(), then map.fuse(frame_to_fuse, times);
+//   TriangleMesh m = map.extractMesh();
 #include <memory>
 #include <string>
+#include <vector>
 
+#include <Eigen/Geometry>
 #include <mrpt/config/CLoadableOptions.h>
 #include <mrpt/poses/CPose3D.h>
 #include <opencv2/core.hpp>
 
 #include "vofusion/core/frame.h"
 #include "vofusion/core/timing.h"
-#include "vofusion/registration/motion_prior.h"
+#include "vofusion/registration/photometric.h"
 #include "vofusion/registration/preprocess.h"
 #include "vofusion/registration/projective_icp.h"
 #include "vofusion/fusion/tsdf_volume.h"
@@ -24,7 +27,8 @@
 
 namespace vofusion {
 
-// INI section [kinfu]; every key in share/kinfu.ini.
+// INI section [kinfu]: the map's keys and the tracker's (vofusion/tracking/tracker.h); every key in
+// share/kinfu.ini.
 struct KinFuParams : public mrpt::config::CLoadableOptions {
   fusion::TsdfParams tsdf;            // volume_voxels, voxel_size, truncation, max_weight,
                                       // integrate_min_depth/max_depth, mark_step
@@ -72,88 +76,71 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
 };
 
-enum class TrackingMode {
-  Joint,         // ICP and the prior's matches in one estimate, from the best-scoring initial guess
-  PaperHandoff,  // the paper: ICP seeded by the prior; the prior's pose when ICP fails
-  KinFu,         // ICP alone from the previous pose (KinFu LS); a failure is a lost frame
-  Odometry,      // no ICP: pose = the prior's
-};
-// "joint", "paper-handoff" (also "paper"), "kinfu", "odometry"; throws InputError(origin, ...) otherwise.
-TrackingMode parseTrackingMode(const std::string& s, const std::string& origin = "--mode");
-std::string toString(TrackingMode m);
-
-// Where the tracker started from.
-enum class InitialGuess { Prior, ConstantVelocity, LastPose };
-std::string toString(InitialGuess g);
-
-struct FusionResult {
-  bool tracked = false;       // a pose was obtained for this frame (ICP, the prior, or a prediction)
-  bool fell_back = false;     // ICP rejected, pose taken from the prior
-  bool predicted = false;     // neither ICP nor a prior: pose from the constant-velocity prediction
-  InitialGuess guess = InitialGuess::LastPose;
-  bool integrated = false;    // the frame was fused into the TSDF
-  std::string reason;         // why ICP was rejected / tracking lost ("" when ICP was accepted)
-  mrpt::poses::CPose3D pose;  // camera-to-world after this frame (unchanged when lost)
-  int icp_inliers = 0;
-  double icp_rms = 0.0;       // m
-  double condition = 0.0;     // of the ICP normal matrix (0 when no ICP ran)
-  int degenerate_dims = 0;    // ICP directions too weak to solve, kept from the prediction
-  int match_inliers = 0;      // prior matches within 3 sigmas of the joint estimate
-  double icp_sigma = 0.0;     // m, mode joint: the noise the ICP residuals were weighed with
-  bool shifted = false;       // the volume moved this frame
-  StageTimes times;           // preprocess, icp, integrate, raycast, shift
+// What the map predicts for tracking the next frame: the model ray-cast from `pose` after the last
+// fusion, one vertex and normal map per tracking level (NaN where no surface), and, when asked for,
+// the intensity of the frame fused last resampled at the model's points (the photometric term's
+// reference).
+struct ModelPrediction {
+  std::vector<cv::Mat> vertices, normals;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  std::vector<fusion::IntensityLevel> intensity;
 };
 
-struct KinFuStats {
-  std::size_t frames = 0, tracked = 0, fell_back = 0, predicted = 0, lost = 0, shifts = 0;
-  std::size_t guess_prior = 0, guess_velocity = 0, guess_last = 0;  // initial guesses chosen (ICP modes)
-  std::size_t degenerate = 0;    // frames whose ICP left some direction at the prediction
+// A tracked frame as the map takes it. The images must stay unchanged until fuse() returns.
+struct FrameToFuse {
+  bool integrate = true;         // false: not fused (a fallback or predicted pose), the model only re-predicted
+  cv::Mat depth, rgb;            // what is fused (full resolution)
+  cv::Mat hint;                  // the finest tracking level's depth: where the next ray cast looks first
+  CameraIntrinsics cam, track_cam;  // of depth, and of the tracking levels' finest
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // camera-to-world
+  std::vector<fusion::IntensityLevel> intensity;  // the frame's intensity pyramid (photometric reference)
+  std::vector<CameraIntrinsics> level_cams;        // its levels' cameras
+  Eigen::Isometry3d colour_pose = Eigen::Isometry3d::Identity();  // where its colour was captured
+};
+
+struct MapStats {
   std::size_t bricks_in_volume = 0, bricks_in_world_model = 0;
   std::size_t memory_bytes = 0;  // TSDF storage in RAM (volume + the world model's cache)
   fusion::WorldModelStats world;  // the world model: cache, spill file, time spent spilling
-  StageTimes times;              // accumulated over all frames
 };
 
 class KinFu {
  public:
-  // initial_pose: camera-to-world of the first frame (world = first camera frame by default).
-  KinFu(const KinFuParams& params, TrackingMode mode,
-        const mrpt::poses::CPose3D& initial_pose = mrpt::poses::CPose3D());
+  // What the map keeps predicting after each fusion: the model's surfaces (for ICP; not in mode
+  // odometry, where nothing reads them) and the fused frame's intensity on them (photometric term).
+  struct Prediction {
+    bool surfaces = true;
+    bool intensity = false;
+  };
+  // initial_pose: camera-to-world of the first frame; the volume is placed around it.
+  KinFu(const KinFuParams& params, const Eigen::Isometry3d& initial_pose, Prediction predict);
   ~KinFu();
 
-  // prior: the motion from an earlier frame (by Frame::index) to this one, nullptr when there is none.
-  // geometry: the frame's point and normal maps when another stage computed them (the odometry, for
-  // BRAND): ICP then reads them instead of filtering the depth again; nullptr: KinectFusion's own
-  // bilateral filter and pyramid.
-  FusionResult process(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry = nullptr);
-
-  // process() in two halves, for a caller that overlaps fusing frame k with the odometry of frame
-  // k+1: track() estimates the frame's pose (it needs the previous frame's fuse() done); fuse()
-  // integrates that frame and ray-casts the model for the next one, adding its stage times to res.
-  // The frame's images must stay unchanged until fuse() returns.
-  FusionResult track(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry = nullptr);
-  void fuse(FusionResult& res);
-
+  // A frame was fused (or a map resumed): there is a model to track against.
+  bool hasModel() const;
+  const ModelPrediction& model() const;
+  // After resume(): the model ray cast (unhinted) from `pose` at the tracking resolution, once.
+  void predictIfStale(const Eigen::Isometry3d& pose, const CameraIntrinsics& track_cam, StageTimes& times);
+  // Fuses a tracked frame, moves the volume with the camera and predicts the model from its pose
+  // (stage times "shift", "integrate", "raycast" into `times`). Returns whether the volume shifted.
+  bool fuse(const FrameToFuse& frame, StageTimes& times);
   // Fuses a frame at a pose known from elsewhere (re-integration with loop-closed poses): the volume
-  // follows the camera as in tracking; no ICP, no ray cast.
-  void integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
+  // follows the camera as in tracking; no ray cast. Returns whether the volume shifted.
+  bool integrateAt(const Frame& frame, const Eigen::Isometry3d& cam_to_world, StageTimes& times);
 
-  mrpt::poses::CPose3D pose() const;
-  // The map (volume + world model) and the camera pose to one file, atomically (KinFu LS's world
-  // save); a later run resumes from it with resume().
-  void save(const std::string& path) const;
-  // Replaces the map and the pose by a saved one: the next frame is tracked from the saved pose
-  // against the saved map, in its frame. Throws InputError(path, ...) for a bad or truncated file.
-  void resume(const std::string& path);
+  // The map and the camera pose to one file, atomically (KinFu LS's world save).
+  void save(const std::string& path, const Eigen::Isometry3d& pose) const;
+  // Replaces the map by a saved one and returns its camera pose; the model is predicted again before
+  // the next frame is tracked (predictIfStale). Throws InputError(path, ...) for a bad or truncated file.
+  Eigen::Isometry3d resume(const std::string& path);
   // Whole world model + current volume.
   TriangleMesh extractMesh() const;
   // Shaded (Lambert, light at the camera) ray-cast image of the model from a pose (BGR).
   cv::Mat renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam,
                      bool coloured = false) const;
-  KinFuStats stats() const;
+  MapStats stats() const;
   const fusion::TsdfVolume& volume() const;
   const KinFuParams& params() const;
-  TrackingMode mode() const;
 
  private:
   struct Impl;

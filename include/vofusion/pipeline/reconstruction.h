@@ -20,7 +20,7 @@
 #include "vofusion/core/frame.h"
 #include "vofusion/core/timing.h"
 #include "vofusion/core/trajectory.h"
-#include "vofusion/fusion/kinfu.h"
+#include "vofusion/tracking/tracker.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/loop/loop_closer.h"
 #include "vofusion/core/triangle_mesh.h"
@@ -80,9 +80,9 @@ class Reconstruction {
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
                           const std::function<void(std::size_t)>& progress = nullptr);
   bool reintegrated() const;
-  // The map and the current pose to a file (KinFu::save), after the fusion in flight finished.
+  // The map and the current pose to a file (Tracker::save), after the fusion in flight finished.
   void saveVolume(const std::string& path) const;
-  // Before the first frame: continue from a saved map and pose (KinFu::resume).
+  // Before the first frame: continue from a saved map and pose (Tracker::resume).
   void resumeVolume(const std::string& path);
   TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model
   // The same mesh one region of region_bricks^3 bricks at a time (fusion::marchingCubesByRegion).
@@ -97,7 +97,7 @@ class Reconstruction {
   std::size_t framesProcessed() const;
   std::size_t fallbacks() const;         // frames whose pose came from the odometry fallback
   std::size_t predictedFrames() const;   // frames whose pose came from the constant-velocity prediction
-  const std::map<std::string, std::size_t>& icpRejections() const;  // why ICP was rejected, how often
+  const std::map<Rejection, std::size_t>& icpRejections() const;  // why ICP was rejected, how often
   std::size_t lostFrames() const;
   std::size_t odometryFailures() const;
   ColourTimeStats colourTime() const;  // the odometry's colour-time correction at the last frame

@@ -1,0 +1,47 @@
+#pragma once
+// The camera's recent path as the tracker predicts from it: the last pose, the poses of the last
+// frames by Frame::index (a motion prior's reference is looked up there), and the last motion per
+// second for the constant-velocity prediction.
+#include <cstddef>
+#include <deque>
+#include <utility>
+
+#include <Eigen/Geometry>
+
+namespace vofusion {
+
+// Motion m scaled to s times its length (rotation angle and translation).
+Eigen::Isometry3d scaledMotion(const Eigen::Isometry3d& m, double s);
+
+class MotionHistory {
+ public:
+  explicit MotionHistory(const Eigen::Isometry3d& pose) : pose_(pose) {}
+
+  const Eigen::Isometry3d& pose() const { return pose_; }
+  // Pose of a recent frame (the last 32), nullptr when it has none.
+  const Eigen::Isometry3d* poseOf(std::size_t index) const;
+  // The last pose moved on by the last motion, scaled to the time since the last tracked frame.
+  Eigen::Isometry3d constantVelocity(double timestamp) const;
+  // The camera's motion over `offset` seconds at the last motion's velocity (camera frame): where the
+  // colour camera was relative to the depth camera when the two were captured `offset` apart.
+  Eigen::Isometry3d motionOver(double offset) const;
+  // Whether a last motion is known (two tracked frames), and the time since the last tracked frame.
+  bool hasMotion() const { return last_motion_dt_ > 0; }
+  bool hasLast() const { return have_last_; }
+  double lastTimestamp() const { return last_timestamp_; }
+  // Frame `index` at `timestamp` was placed at T.
+  void remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T);
+  // Placed at T from elsewhere (loop-closed re-fusion): no motion is learnt from it.
+  void setPose(const Eigen::Isometry3d& T) { pose_ = T; }
+  // A new start at T (a resumed map): no recent frames, no motion.
+  void restart(const Eigen::Isometry3d& T);
+
+ private:
+  Eigen::Isometry3d pose_;  // camera-to-world of the last frame
+  std::deque<std::pair<std::size_t, Eigen::Isometry3d>> recent_;
+  Eigen::Isometry3d last_motion_ = Eigen::Isometry3d::Identity();  // over the last two tracked frames
+  double last_motion_dt_ = 0.0, last_timestamp_ = 0.0;
+  bool have_last_ = false;
+};
+
+}  // namespace vofusion

@@ -1,0 +1,122 @@
+#include "joint_policy.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <tbb/parallel_invoke.h>
+
+#include "vofusion/core/depth_noise.h"
+
+namespace vofusion::tracking {
+
+using namespace fusion;
+
+IcpParams icpParams(const KinFuParams& P, bool joint, bool seeded, bool have_prior) {
+  IcpParams ip = P.icp;
+  if (!seeded && !(joint && have_prior)) ip.degenerate_ratio = std::min(ip.degenerate_ratio, P.min_condition);
+  if (joint) ip.point_to_plane_sigma = P.joint_icp_sigma;
+  return ip;
+}
+
+PointMatches matchesOf(const KinFuParams& P, const MotionPrior& prior, const Eigen::Isometry3d& T_world_ref,
+                       const Eigen::Isometry3d& guess) {
+  PointMatches pm;
+  pm.cauchy = P.joint_match_cauchy;
+  const std::size_t n = std::min(prior.current_points.size(), prior.reference_points.size());
+  const Eigen::Matrix3d Rr = T_world_ref.linear(), Rc = guess.linear();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d& p = prior.current_points[i];
+    const Eigen::Vector3d& q = prior.reference_points[i];
+    const Eigen::Matrix3d C = Rc * rayCovariance(p) * Rc.transpose() + Rr * rayCovariance(q) * Rr.transpose();
+    pm.camera_points.push_back(p);
+    pm.world_points.push_back(T_world_ref * q);
+    pm.information.push_back(C.inverse());
+  }
+  return pm;
+}
+
+double rollingShutterSigma(const KinFuParams& P, const MotionHistory& history, const std::vector<DepthLevel>& levels,
+                           const Eigen::Isometry3d& initial, double timestamp) {
+  if (!(P.joint_rolling_shutter > 0) || !history.hasLast() || !(timestamp > history.lastTimestamp())) return 0.0;
+  const double turn =
+      Eigen::AngleAxisd((history.pose().inverse() * initial).linear()).angle() / (timestamp - history.lastTimestamp());
+  const cv::Mat& d = levels.back().depth;
+  return P.joint_rolling_shutter * turn * cv::mean(d, d > 0)[0];
+}
+
+PosePrior motionModel(const KinFuParams& P, const MotionHistory& history, const Eigen::Isometry3d& velocity_pose,
+                      double timestamp) {
+  PosePrior m;
+  m.pose = velocity_pose;
+  const double frames_since = history.hasLast() ? std::max(1.0, (timestamp - history.lastTimestamp()) * 30.0) : 1.0;
+  m.sigma_translation = P.motion_sigma_translation * frames_since;
+  m.sigma_rotation = P.motion_sigma_rotation * M_PI / 180.0 * frames_since;
+  return m;
+}
+
+InitialGuess chooseGuess(const KinFuParams& P, const ModelPrediction& model, const Eigen::Isometry3d& last_pose,
+                         const std::vector<DepthLevel>& levels, const IcpParams& ip, bool have_prior,
+                         const Eigen::Isometry3d& prior_pose, const Eigen::Isometry3d& velocity_pose) {
+  const std::size_t L = std::min(levels.size(), model.vertices.size()) - 1;
+  const std::vector<DepthLevel> coarse{levels[L]};
+  const std::vector<cv::Mat> mv{model.vertices[L]}, mn{model.normals[L]};
+  IcpParams coarse_ip = ip;
+  coarse_ip.iterations = {3, 3, 3};
+  coarse_ip.point_to_plane_sigma = 0;
+  const double truncation = 0.5 * ip.max_distance;
+  auto cost = [&](const Eigen::Isometry3d& T) {
+    const IcpResult r = projectiveIcp(coarse, mv, mn, model.pose, T, coarse_ip);
+    return scoreAlignment(coarse[0], mv[0], mn[0], model.pose, r.pose, ip, truncation).cost;
+  };
+  // The candidates' coarse alignments are independent and each runs on one thread: side by side.
+  double prior_cost = 0, velocity_cost = 0, last_cost = 0;
+  tbb::parallel_invoke([&] { if (have_prior) prior_cost = cost(prior_pose); },
+                       [&] { velocity_cost = cost(velocity_pose); }, [&] { last_cost = cost(last_pose); });
+  InitialGuess best = have_prior ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
+  double best_cost = have_prior ? prior_cost : velocity_cost;
+  const std::pair<InitialGuess, double> others[] = {{InitialGuess::ConstantVelocity, velocity_cost},
+                                                    {InitialGuess::LastPose, last_cost}};
+  for (const auto& [g, c] : others) {
+    if (g == best) continue;
+    if (c < P.guess_margin * best_cost) best = g, best_cost = c;
+  }
+  return best;
+}
+
+PhotometricTerms photometricTerms(const KinFuParams& P, const ModelPrediction& model,
+                                  const std::vector<IntensityLevel>& current, const std::vector<DepthLevel>& levels) {
+  PhotometricTerms t;
+  t.params.sigma = P.joint_photometric_sigma;
+  t.params.huber = P.joint_photometric_huber;
+  t.params.min_gradient = P.joint_photometric_min_gradient;
+  const std::size_t n = std::min({current.size(), model.intensity.size(), levels.size(), model.vertices.size()});
+  for (std::size_t l = 0; l < n; ++l) {
+    if (model.intensity[l].grey.size() != model.vertices[l].size() || current[l].grey.size() != levels[l].depth.size())
+      break;
+    t.levels.push_back({&model.intensity[l], &current[l], &model.vertices[l], levels[l].camera});
+  }
+  return t;
+}
+
+std::pair<Rejection, std::string> judge(const KinFuParams& P, const IcpResult& icp, bool joint,
+                                        const Eigen::Isometry3d* prior_pose) {
+  const int judged = joint ? icp.in_view : icp.valid_pixels;
+  if (!icp.solved) return {Rejection::NotSolvable, toString(Rejection::NotSolvable)};
+  if (icp.inliers < P.min_inlier_ratio * std::max(1, judged))
+    return {Rejection::TooFewInliers, toString(Rejection::TooFewInliers) + " (" + std::to_string(icp.inliers) + " of " +
+                                          std::to_string(judged) + ")"};
+  if (!joint && icp.condition < P.min_condition)
+    return {Rejection::IllConditioned,
+            toString(Rejection::IllConditioned) + " (eigenvalue ratio " + std::to_string(icp.condition) + ")"};
+  if (prior_pose) {
+    const Eigen::Isometry3d d = prior_pose->inverse() * icp.pose;
+    const double dt = d.translation().norm();
+    const double da = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
+    if (dt > P.max_jump_translation || da > P.max_jump_rotation)
+      return {Rejection::JumpedFromPrior,
+              toString(Rejection::JumpedFromPrior) + " (" + std::to_string(dt) + " m / " + std::to_string(da) + " deg)"};
+  }
+  return {Rejection::None, ""};
+}
+
+}  // namespace vofusion::tracking

@@ -1,0 +1,50 @@
+#include "vofusion/tracking/motion_history.h"
+
+#include <algorithm>
+
+namespace vofusion {
+
+Eigen::Isometry3d scaledMotion(const Eigen::Isometry3d& m, double s) {
+  const Eigen::AngleAxisd rot(m.linear());
+  Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
+  step.linear() = Eigen::AngleAxisd(s * rot.angle(), rot.axis()).toRotationMatrix();
+  step.translation() = s * m.translation();
+  return step;
+}
+
+const Eigen::Isometry3d* MotionHistory::poseOf(std::size_t index) const {
+  for (const auto& [i, T] : recent_)
+    if (i == index) return &T;
+  return nullptr;
+}
+
+Eigen::Isometry3d MotionHistory::constantVelocity(double timestamp) const {
+  if (!(last_motion_dt_ > 0)) return pose_;
+  return pose_ * scaledMotion(last_motion_, std::clamp((timestamp - last_timestamp_) / last_motion_dt_, 0.0, 3.0));
+}
+
+Eigen::Isometry3d MotionHistory::motionOver(double offset) const {
+  if (!(last_motion_dt_ > 0) || offset == 0.0) return Eigen::Isometry3d::Identity();
+  return scaledMotion(last_motion_, std::clamp(offset / last_motion_dt_, -3.0, 3.0));
+}
+
+void MotionHistory::remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T) {
+  if (have_last_ && timestamp > last_timestamp_) {
+    last_motion_ = pose_.inverse() * T;
+    last_motion_dt_ = timestamp - last_timestamp_;
+  }
+  pose_ = T;
+  last_timestamp_ = timestamp;
+  have_last_ = true;
+  recent_.emplace_back(index, T);
+  if (recent_.size() > 32) recent_.pop_front();
+}
+
+void MotionHistory::restart(const Eigen::Isometry3d& T) {
+  pose_ = T;
+  have_last_ = false;
+  last_motion_dt_ = 0.0;
+  recent_.clear();
+}
+
+}  // namespace vofusion

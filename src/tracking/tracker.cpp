@@ -1,0 +1,272 @@
+#include "vofusion/tracking/tracker.h"
+
+#include <algorithm>
+#include <chrono>
+#include <optional>
+#include <tuple>
+
+#include "joint_policy.h"
+#include "vofusion/core/pose_eigen.h"
+#include "vofusion/tracking/motion_history.h"
+
+namespace vofusion {
+
+using namespace fusion;
+
+namespace {
+double seconds(std::chrono::steady_clock::time_point a) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();
+}
+}  // namespace
+
+struct Tracker::Impl {
+  KinFuParams params;
+  TrackingMode mode;
+  KinFu map;
+  MotionHistory history;
+  KinFuStats stats;  // the tracking counts and stage times (the map's own figures are added by stats())
+  // What track() leaves for fuse(): the frame as the map takes it.
+  std::optional<FrameToFuse> pending;
+
+  Impl(const KinFuParams& p, TrackingMode m, const Eigen::Isometry3d& initial)
+      : params(p), mode(m), map(p, initial, {m != TrackingMode::Odometry, m == TrackingMode::Joint}), history(initial) {}
+
+  // Where the colour camera was relative to the depth camera (mode joint's photometric term).
+  Eigen::Isometry3d colourMotion(double offset) const {
+    return params.joint_photometric_colour_time ? history.motionOver(offset) : Eigen::Isometry3d::Identity();
+  }
+  std::vector<DepthLevel> trackingLevels(const Frame& frame, const FrameGeometry* geometry, const CameraIntrinsics& cam,
+                                         CameraIntrinsics& track_cam) const;
+  // Mode odometry: the prior's pose, else the constant-velocity prediction.
+  Eigen::Isometry3d trackOdometry(const Frame& frame, const MotionPrior* prior, FusionResult& res) const;
+  // Modes with ICP: the frame's pose from ICP against the map's model, or the fallback the mode allows.
+  Eigen::Isometry3d trackIcp(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels,
+                             const std::vector<IntensityLevel>& intensity, FusionResult& res);
+  void count(const FusionResult& res, bool had_model);
+  void keepForFusion(const Frame& frame, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
+                     const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity, const FusionResult& res);
+};
+
+// Tracking at half resolution: a quarter of the filtering, ray casting and ICP work; the finest ICP
+// level is then 320x240, which KinFu-style coarse-to-fine tracking hardly misses.
+std::vector<DepthLevel> Tracker::Impl::trackingLevels(const Frame& frame, const FrameGeometry* geometry,
+                                                      const CameraIntrinsics& cam, CameraIntrinsics& track_cam) const {
+  const KinFuParams& P = params;
+  track_cam = cam;
+  if (geometry && geometry->points.size() == frame.depth.size() && geometry->normals.size() == frame.depth.size()) {
+    // The frame's shared maps, averaged down: one back-projection and normal map serve BRAND and ICP.
+    std::vector<DepthLevel> levels = levelsFromGeometry(*geometry, frame.depth, cam, P.tracking_downsample, P.preprocess);
+    track_cam = levels[0].camera;
+    return levels;
+  }
+  if (P.tracking_downsample == 2) {
+    PreprocessParams pp = P.preprocess;
+    pp.sigma_spatial *= 0.5f;
+    pp.kernel = std::max(3, ((pp.kernel + 1) / 2) | 1);
+    if (P.preprocess.kernel <= 1) pp.kernel = P.preprocess.kernel;
+    track_cam = cam.scaled(0.5);
+    return preprocessDepth(downsampleDepth(clipDepth(frame.depth, pp.min_depth, pp.max_depth), pp.sigma_depth), track_cam, pp);
+  }
+  return preprocessDepth(frame.depth, cam, P.preprocess);
+}
+
+Eigen::Isometry3d Tracker::Impl::trackOdometry(const Frame& frame, const MotionPrior* prior, FusionResult& res) const {
+  const Eigen::Isometry3d* ref_pose = prior ? history.poseOf(prior->reference_index) : nullptr;
+  res.tracked = true;
+  res.guess = ref_pose ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
+  res.predicted = !ref_pose;
+  if (ref_pose) return *ref_pose * prior->T_ref_cur;
+  res.rejection = prior ? Rejection::PriorReferenceUnknown : Rejection::NoPrior;
+  res.reason = toString(res.rejection);
+  return history.constantVelocity(frame.timestamp);
+}
+
+Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels,
+                                          const std::vector<IntensityLevel>& intensity, FusionResult& res) {
+  const KinFuParams& P = params;
+  // The prior counts only when its reference frame has a pose here.
+  const Eigen::Isometry3d* ref_pose = prior ? history.poseOf(prior->reference_index) : nullptr;
+  const bool have_prior = ref_pose != nullptr;
+  const Eigen::Isometry3d prior_pose = have_prior ? *ref_pose * prior->T_ref_cur : history.pose();
+  const Eigen::Isometry3d velocity_pose = history.constantVelocity(frame.timestamp);
+  const bool joint = mode == TrackingMode::Joint;
+  const bool seeded = mode == TrackingMode::PaperHandoff && have_prior;
+  IcpParams ip = tracking::icpParams(P, joint, seeded, have_prior);
+  PointMatches matches;
+  if (joint) {
+    res.guess = tracking::chooseGuess(P, map.model(), history.pose(), levels, ip, have_prior, prior_pose, velocity_pose);
+    if (have_prior) matches = tracking::matchesOf(P, *prior, *ref_pose, prior_pose);
+  } else {
+    res.guess = seeded ? InitialGuess::Prior : InitialGuess::LastPose;
+  }
+  const Eigen::Isometry3d& initial = res.guess == InitialGuess::Prior              ? prior_pose
+                                     : res.guess == InitialGuess::ConstantVelocity ? velocity_pose
+                                                                                   : history.pose();
+  if (joint) ip.point_to_plane_sigma += tracking::rollingShutterSigma(P, history, levels, initial, frame.timestamp);
+  res.icp_sigma = ip.point_to_plane_sigma;
+  const auto t0 = std::chrono::steady_clock::now();
+  const PosePrior motion = tracking::motionModel(P, history, velocity_pose, frame.timestamp);
+  JointTerms terms;
+  if (joint) {
+    if (!matches.camera_points.empty()) terms.matches = &matches;
+    if (history.hasMotion() && (motion.sigma_translation > 0 || motion.sigma_rotation > 0)) terms.motion = &motion;
+    if (have_prior) terms.weak_anchor = &prior_pose;
+  }
+  PhotometricTerms photometric = tracking::photometricTerms(P, map.model(), intensity, levels);
+  photometric.colour_motion = colourMotion(frame.colour_offset);
+  photometric.rotation_only = P.joint_photometric_rotation_only;
+  if (!photometric.levels.empty()) terms.photometric = &photometric;
+  const ModelPrediction& model = map.model();
+  const IcpResult icp = projectiveIcp(levels, model.vertices, model.normals, model.pose, initial, ip, terms);
+  res.times.add("icp", seconds(t0));
+  res.icp_inliers = icp.inliers;
+  res.icp_rms = icp.rms;
+  res.condition = icp.condition;
+  res.degenerate_dims = icp.degenerate_dims;
+  res.match_inliers = icp.point_inliers;
+  std::tie(res.rejection, res.reason) = tracking::judge(P, icp, joint, seeded || (joint && have_prior) ? &prior_pose : nullptr);
+  if (res.rejection == Rejection::None) {
+    res.tracked = true;
+    return icp.pose;
+  }
+  if (mode != TrackingMode::KinFu && have_prior) {
+    res.tracked = res.fell_back = true;
+    return prior_pose;
+  }
+  if (joint) {
+    // No motion is dropped: without ICP and without a prior the frame moves on at constant velocity.
+    res.tracked = res.predicted = true;
+    return velocity_pose;
+  }
+  return history.pose();
+}
+
+void Tracker::Impl::count(const FusionResult& res, bool had_model) {
+  ++stats.frames;
+  if (res.tracked) ++stats.tracked;
+  if (res.fell_back) ++stats.fell_back;
+  if (res.predicted) ++stats.predicted;
+  if (res.degenerate_dims > 0 && res.reason.empty()) ++stats.degenerate;
+  if (!res.tracked) ++stats.lost;
+  if (had_model && mode != TrackingMode::Odometry) {
+    if (res.guess == InitialGuess::Prior) ++stats.guess_prior;
+    else if (res.guess == InitialGuess::ConstantVelocity) ++stats.guess_velocity;
+    else ++stats.guess_last;
+  }
+  stats.times.merge(res.times);
+}
+
+void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
+                                  const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity,
+                                  const FusionResult& res) {
+  FrameToFuse f;
+  // A constant-velocity guess is not fused: nothing measured where the camera was.
+  f.integrate = !res.predicted && (!res.fell_back || params.integrate_on_fallback);
+  f.depth = params.integrate_filtered && params.tracking_downsample == 1 ? levels[0].depth : frame.depth;
+  f.rgb = frame.rgb;
+  f.hint = levels[0].depth;
+  f.cam = cam;
+  f.track_cam = track_cam;
+  f.pose = history.pose();
+  f.intensity = std::move(intensity);
+  for (const DepthLevel& l : levels) f.level_cams.push_back(l.camera);
+  f.colour_pose = history.pose() * colourMotion(frame.colour_offset);  // at the velocity this frame's motion updated
+  pending = std::move(f);
+}
+
+Tracker::Tracker(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose)
+    : impl_(std::make_unique<Impl>(params, mode, toEigen(initial_pose))) {}
+
+Tracker::~Tracker() = default;
+
+FusionResult Tracker::process(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry) {
+  FusionResult res = track(frame, prior, geometry);
+  fuse(res);
+  return res;
+}
+
+FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry) {
+  Impl& s = *impl_;
+  s.pending.reset();
+  FusionResult res;
+  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) {
+    res.rejection = Rejection::NoDepth;
+    res.reason = toString(res.rejection);
+    res.pose = toMrpt(s.history.pose());
+    ++s.stats.frames;
+    ++s.stats.lost;
+    return res;
+  }
+  CameraIntrinsics cam = frame.camera, track_cam;
+  cam.width = frame.depth.cols;
+  cam.height = frame.depth.rows;
+  auto t0 = std::chrono::steady_clock::now();
+  const std::vector<DepthLevel> levels = s.trackingLevels(frame, geometry, cam, track_cam);
+  res.times.add("preprocess", seconds(t0));
+  s.map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
+  // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
+  std::vector<IntensityLevel> intensity;
+  if (s.mode == TrackingMode::Joint && s.params.joint_photometric_sigma > 0) {
+    t0 = std::chrono::steady_clock::now();
+    intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
+    res.times.add("intensity", seconds(t0));
+  }
+  const bool had_model = s.map.hasModel();
+  Eigen::Isometry3d new_pose = s.history.pose();
+  if (!had_model) {
+    res.tracked = true;  // the first frame defines the map
+  } else if (s.mode == TrackingMode::Odometry) {
+    new_pose = s.trackOdometry(frame, prior, res);
+  } else {
+    new_pose = s.trackIcp(frame, prior, levels, intensity, res);
+  }
+  if (res.tracked) s.history.remember(frame.index, frame.timestamp, new_pose);
+  res.pose = toMrpt(s.history.pose());
+  s.count(res, had_model);
+  if (res.tracked) s.keepForFusion(frame, levels, cam, track_cam, std::move(intensity), res);
+  return res;
+}
+
+void Tracker::fuse(FusionResult& res) {
+  Impl& s = *impl_;
+  if (!s.pending) return;
+  StageTimes times;
+  res.shifted = s.map.fuse(*s.pending, times);
+  res.integrated = s.pending->integrate;
+  s.pending.reset();
+  if (res.shifted) ++s.stats.shifts;
+  res.times.merge(times);
+  s.stats.times.merge(times);
+}
+
+void Tracker::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world) {
+  Impl& s = *impl_;
+  ++s.stats.frames;
+  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) return;
+  s.history.setPose(toEigen(cam_to_world));
+  StageTimes times;
+  if (s.map.integrateAt(frame, s.history.pose(), times)) ++s.stats.shifts;
+  ++s.stats.tracked;
+  s.stats.times.merge(times);
+}
+
+mrpt::poses::CPose3D Tracker::pose() const { return toMrpt(impl_->history.pose()); }
+
+void Tracker::save(const std::string& path) const { impl_->map.save(path, impl_->history.pose()); }
+
+void Tracker::resume(const std::string& path) { impl_->history.restart(impl_->map.resume(path)); }
+
+KinFuStats Tracker::stats() const {
+  KinFuStats st = impl_->stats;
+  const MapStats map = impl_->map.stats();
+  st.bricks_in_volume = map.bricks_in_volume;
+  st.bricks_in_world_model = map.bricks_in_world_model;
+  st.memory_bytes = map.memory_bytes;
+  st.world = map.world;
+  return st;
+}
+
+const KinFu& Tracker::map() const { return impl_->map; }
+TrackingMode Tracker::mode() const { return impl_->mode; }
+
+}  // namespace vofusion
