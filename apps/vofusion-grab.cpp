@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <optional>
 #include <sstream>
@@ -23,6 +24,7 @@
 #include "vofusion/core/triangle_mesh.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
+#include "vofusion/pipeline/run_session.h"
 #include "vofusion/sim/any_source.h"
 
 namespace fs = std::filesystem;
@@ -147,134 +149,100 @@ std::string summaryText(const LiveStats& s, const std::string& source, std::size
   return o.str();
 }
 
-int run(const Args& args) {
-  // Configuration: the sensor's file (rawlog-grabber format) plus our [vofusion-grab] section.
-  std::string config = args.config;
-  if (config.empty() && args.replay.empty()) config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
-  const auto cfg = loadConfig(config);
+// What a grab was asked for: the sensor's configuration file (rawlog-grabber format) with our
+// [vofusion-grab], [output] and [mesh] sections, checked; reconstruction settings fail now, not mid-run.
+struct GrabPlan {
+  std::string config;
+  mrpt::config::CConfigFileMemory cfg;
   LiveOptions opts;
-  const OutputParams default_out;
-  const MeshCleanParams default_mesh;
-  const auto known = ownSections(opts, default_out, default_mesh);
-  if (args.dump) {
-    std::fputs(dumpConfig(known).c_str(), stdout);
-    return 0;
-  }
-  checkOwnSections(cfg, config, known);
-  opts.loadFromConfigFile(cfg, kSection);
   OutputParams out_params;
   MeshCleanParams mesh_params;
-  out_params.loadFromConfigFile(cfg, "output");
-  mesh_params.loadFromConfigFile(cfg, "mesh");
-  if (args.max_frames) opts.max_frames = *args.max_frames;
-  if (args.queue) opts.queue_capacity = *args.queue;
-  if (args.speed) opts.replay_speed = *args.speed;
+  std::optional<TrackingMode> mode;  // --live
+};
 
-  // Reconstruction settings come from the same file; mistakes there fail now, not mid-run.
-  std::optional<TrackingMode> mode;
-  if (args.live) mode = parseTrackingMode(args.mode, "--mode");
+GrabPlan planGrab(const Args& args) {
+  GrabPlan plan;
+  plan.config = args.config;
+  if (plan.config.empty() && args.replay.empty()) plan.config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
+  plan.cfg = loadConfig(plan.config);
+  checkOwnSections(plan.cfg, plan.config, ownSections(LiveOptions(), OutputParams(), MeshCleanParams()));
+  plan.opts.loadFromConfigFile(plan.cfg, kSection);
+  plan.out_params.loadFromConfigFile(plan.cfg, "output");
+  plan.mesh_params.loadFromConfigFile(plan.cfg, "mesh");
+  if (args.max_frames) plan.opts.max_frames = *args.max_frames;
+  if (args.queue) plan.opts.queue_capacity = *args.queue;
+  if (args.speed) plan.opts.replay_speed = *args.speed;
+  if (args.live) plan.mode = parseTrackingMode(args.mode, "--mode");
+  return plan;
+}
 
-  ensureWritableDirectory(args.out);
-
-  // The source: a replay, or the sensor (fails here, in one line, when none can be opened).
-  std::unique_ptr<LiveSource> source;
-  std::string label = "KINECT";
+// A replay, or the sensor (fails here, in one line, when none can be opened); `label` gets the
+// sensor's label for the recording.
+std::unique_ptr<LiveSource> openLiveSource(const Args& args, const GrabPlan& plan, std::string& label) {
   if (!args.replay.empty()) {
     SourceOptions so;
     so.depth_scale = args.depth_scale;
-    source = std::make_unique<ReplaySource>(openFrameSource(args.replay, so), opts.replay_speed);
-  } else {
-    const std::string section = findSensorSection(cfg, args.sensor, config);
-    label = cfg.read_string(section, "sensorLabel", label);
-    source = std::make_unique<SensorSource>(cfg, section, opts.sensor_timeout, config, args.verbose);
+    return std::make_unique<ReplaySource>(openFrameSource(args.replay, so), plan.opts.replay_speed);
   }
+  const std::string section = findSensorSection(plan.cfg, args.sensor, plan.config);
+  label = plan.cfg.read_string(section, "sensorLabel", label);
+  return std::make_unique<SensorSource>(plan.cfg, section, plan.opts.sensor_timeout, plan.config, args.verbose);
+}
 
-  std::unique_ptr<RawlogWriter> writer;
-  if (args.record) {
-    RawlogWriterOptions wopts;
-    wopts.sensor_label = label;
-    writer = std::make_unique<RawlogWriter>((fs::path(args.out) / "grab.rawlog").string(), wopts);
-  }
+// The consumer: the reconstruction when --live, else nothing (recording happens on the grab thread).
+// --simulate-work-ms adds a fixed cost per frame (tests force drops with it).
+struct LiveConsumer {
+  const Args& args;
+  RunSession* run;       // null without --live
+  LiveViewer* viewer;    // null without a window
+  const LiveStats& latest;
+  std::size_t loops_shown = 0;
 
-  std::unique_ptr<Reconstruction> rec;
-  std::unique_ptr<RunRecorder> outputs;  // the same outputs as vofusion, for what was reconstructed
-  if (args.live) {
-    rec = std::make_unique<Reconstruction>(cfg, *mode);
-    outputs = std::make_unique<RunRecorder>(args.out, out_params, mesh_params);
-  }
-  std::unique_ptr<LiveViewer> viewer;
-  if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source->name());
-
-  std::signal(SIGINT, onSignal);
-  std::signal(SIGTERM, onSignal);
-
-  // The consumer: the reconstruction when --live, else nothing (recording happens on the grab
-  // thread). --simulate-work-ms adds a fixed cost per frame (tests force drops with it).
-  LiveStats latest;
-  std::size_t lost_in_a_row = 0, loops_shown = 0;
-  FrameConsumer consumer = [&](const Frame& frame) {
+  void operator()(const Frame& frame) {
     if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
-    if (!rec) return;
-    const FrameReport r = rec->process(frame);
-    outputs->add(frame, r);
-    lost_in_a_row = r.tracked ? 0 : lost_in_a_row + 1;
-    if (viewer) {
-      LiveView view;
-      view.image = rec->renderView(frame.camera);
-      view.pose = r.pose;
-      view.tracking = r.tracked ? (r.fell_back ? "tracking (odometry fallback)" : "tracking")
-                                : "LOST" + (r.note.empty() ? std::string() : ": " + r.note);
-      if (const loop::LoopCloser* lc = rec->loopCloser()) addNewLoops(*lc, loops_shown, view);
-      viewer->show(view, latest);
-      if (!viewer->isOpen()) g_stop = true;  // closing the window ends the run
-    }
-  };
+    if (!run) return;
+    const FrameReport r = run->process(frame);
+    if (!viewer) return;
+    const Reconstruction& rec = run->reconstruction();
+    LiveView view;
+    view.image = rec.renderView(frame.camera);
+    view.pose = r.pose;
+    view.tracking = r.tracked ? (r.fell_back ? "tracking (odometry fallback)" : "tracking")
+                              : "LOST" + (r.note.empty() ? std::string() : ": " + r.note);
+    if (const loop::LoopCloser* lc = rec.loopCloser()) addNewLoops(*lc, loops_shown, view);
+    viewer->show(view, latest);
+    if (!viewer->isOpen()) g_stop = true;  // closing the window ends the run
+  }
+};
 
-  LiveHooks hooks;
-  hooks.stop = &g_stop;
-  if (writer) hooks.on_grabbed = [&](const Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { writer->write(f); };
-  std::size_t total = source->size();
-  if (opts.max_frames > 0 && (total == 0 || total > opts.max_frames)) total = opts.max_frames;
-  Progress progress(args.live ? "live" : "recording", total);
-  hooks.on_tick = [&](const LiveStats& s) {
-    latest = s;
-    progress.update(s.played, "processed " + std::to_string(s.processed) + "  dropped " + std::to_string(s.dropped));
-    if (viewer) viewer->status(s);
-  };
+// The reconstruction's end: the same outputs as vofusion, the map fused again from grab.rawlog when
+// loops moved the poses and the run recorded.
+void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, const std::string& source_name,
+                const std::string& out, std::size_t recorded) {
+  if (run.reconstruction().framesProcessed() == 0) return;
+  RunInfo info;
+  info.app = "vofusion-grab";
+  info.input = source_name;
+  info.config = plan.config;
+  info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
+  info.seconds = stats.seconds;
+  info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
+                          {"queue_capacity", plan.opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
+  RunSession::Reopen reopen;
+  if (recorded > 0)
+    reopen = [out] { return openFrameSource((fs::path(out) / "grab.rawlog").string(), SourceOptions{}); };
+  run.finish(info, reopen);
+}
 
-  std::fprintf(stderr, "vofusion-grab: %s from %s (queue %zu, Ctrl-C to stop)\n",
-               args.live ? "reconstructing" : "recording", source->name().c_str(), opts.queue_capacity);
-  const LiveStats stats = runLive(*source, consumer, opts, hooks);
-  progress.finish("processed " + std::to_string(stats.processed) + "  dropped " + std::to_string(stats.dropped) +
-                  "  (" + stopReasonName(stats.stop) + ")");
-
-  // Everything recorded so far is written, whatever stopped the run.
+// Everything recorded so far is written, whatever stopped the run; then the reconstruction's outputs
+// and grab-summary.txt.
+int finishGrab(const LiveStats& stats, const GrabPlan& plan, const LiveSource& source, RawlogWriter* writer,
+               RunSession* session, const Args& args) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   if (writer) writer->commit();
-  if (rec && rec->framesProcessed() > 0) {
-    // Loop closure: the poses are corrected now; the map, fused live at the tracked poses, is fused
-    // again at the corrected ones from the recording when there is one.
-    rec->finish();
-    std::optional<std::size_t> refused;
-    if (rec->mapNeedsReintegration() && recorded > 0) {
-      auto again = openFrameSource((fs::path(args.out) / "grab.rawlog").string(), SourceOptions{});
-      refused = rec->reintegrate([&](Frame& f) { return again->next(f); });
-    } else if (rec->mapNeedsReintegration()) {
-      std::fprintf(stderr, "vofusion-grab: loops corrected the trajectory; the mesh keeps the tracked poses "
-                           "(record with the reconstruction to have it fused again at the corrected ones)\n");
-    }
-    RunInfo info;
-    info.input = source->name();
-    info.config = config;
-    info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
-    info.seconds = stats.seconds;
-    info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
-                            {"queue_capacity", opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
-    if (refused) info.extra["loop_closure_reintegration"] = {{"frames_fused", *refused}, {"from", "grab.rawlog"}};
-    outputs->finish(*rec, info);
-  }
+  if (session) finishLive(*session, stats, plan, source.name(), args.out, recorded);
   writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
-                      summaryText(stats, source->name(), recorded, opts.queue_capacity));
+                      summaryText(stats, source.name(), recorded, plan.opts.queue_capacity));
   std::fprintf(stderr, "vofusion-grab: %zu played, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,
                stats.processed, stats.dropped, recorded, args.out.c_str());
   if (!stats.ok()) {
@@ -282,6 +250,49 @@ int run(const Args& args) {
     return 1;
   }
   return 0;
+}
+
+int run(const Args& args) {
+  if (args.dump) {
+    std::fputs(dumpConfig(ownSections(LiveOptions(), OutputParams(), MeshCleanParams())).c_str(), stdout);
+    return 0;
+  }
+  const GrabPlan plan = planGrab(args);
+  ensureWritableDirectory(args.out);
+  std::string label = "KINECT";
+  const std::unique_ptr<LiveSource> source = openLiveSource(args, plan, label);
+  std::unique_ptr<RawlogWriter> writer;
+  if (args.record) {
+    RawlogWriterOptions wopts;
+    wopts.sensor_label = label;
+    writer = std::make_unique<RawlogWriter>((fs::path(args.out) / "grab.rawlog").string(), wopts);
+  }
+  std::unique_ptr<RunSession> session;  // the same outputs as vofusion, for what was reconstructed
+  if (plan.mode) session = std::make_unique<RunSession>(plan.cfg, *plan.mode, args.out, plan.out_params, plan.mesh_params);
+  std::unique_ptr<LiveViewer> viewer;
+  if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source->name());
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  LiveStats latest;
+  LiveConsumer consumer{args, session.get(), viewer.get(), latest};
+  LiveHooks hooks;
+  hooks.stop = &g_stop;
+  if (writer) hooks.on_grabbed = [&](const Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { writer->write(f); };
+  std::size_t total = source->size();
+  if (plan.opts.max_frames > 0 && (total == 0 || total > plan.opts.max_frames)) total = plan.opts.max_frames;
+  Progress progress(args.live ? "live" : "recording", total);
+  hooks.on_tick = [&](const LiveStats& s) {
+    latest = s;
+    progress.update(s.played, "processed " + std::to_string(s.processed) + "  dropped " + std::to_string(s.dropped));
+    if (viewer) viewer->status(s);
+  };
+  std::fprintf(stderr, "vofusion-grab: %s from %s (queue %zu, Ctrl-C to stop)\n",
+               args.live ? "reconstructing" : "recording", source->name().c_str(), plan.opts.queue_capacity);
+  const LiveStats stats = runLive(*source, std::ref(consumer), plan.opts, hooks);
+  progress.finish("processed " + std::to_string(stats.processed) + "  dropped " + std::to_string(stats.dropped) +
+                  "  (" + stopReasonName(stats.stop) + ")");
+  return finishGrab(stats, plan, *source, writer.get(), session.get(), args);
 }
 
 }  // namespace

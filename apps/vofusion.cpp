@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
@@ -19,6 +20,7 @@
 #include "vofusion/io/prefetching_source.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
+#include "vofusion/pipeline/run_session.h"
 #include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
@@ -50,6 +52,87 @@ std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanP
   return sections;
 }
 
+// What one run was asked for: the command line and the configuration it names, checked.
+struct RunPlan {
+  std::string out_dir, config_path, input, default_work;
+  mrpt::config::CConfigFileMemory cfg;
+  TrackingMode mode = TrackingMode::Joint;
+  OutputParams out_params;
+  MeshCleanParams mesh_params;
+  SourceOptions src_opts;
+  std::optional<std::string> resume, save_volume;
+};
+
+// The configuration file with the command line's overrides; out-of-range values name the file.
+void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
+  plan.cfg = loadConfig(plan.config_path);
+  checkConfigKeys(plan.cfg, plan.config_path, allSections(OutputParams(), MeshCleanParams()));
+  auto& cfg = plan.cfg;
+  if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
+  // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.
+  plan.default_work = (std::filesystem::path(plan.out_dir) / ".tmp").string();
+  if (cl.value("--work-dir")) cfg.write("kinfu", "work_dir", *cl.value("--work-dir"));
+  else if (const std::string w = cfg.read_string("kinfu", "work_dir", "auto"); w.empty() || w == "auto")
+    cfg.write("kinfu", "work_dir", plan.default_work);
+  try {
+    plan.out_params.loadFromConfigFile(cfg, "output");
+    plan.mesh_params.loadFromConfigFile(cfg, "mesh");
+    OdometryParams().loadFromConfigFile(cfg, "odometry");
+    KinFuParams().loadFromConfigFile(cfg, "kinfu");
+    loop::LoopParams().loadFromConfigFile(cfg, "loop");
+  } catch (const InputError& e) {
+    if (plan.config_path.empty()) throw;
+    throw InputError(plan.config_path, e.what());
+  }
+  if (cl.flag("--raw-mesh")) plan.out_params.save_raw_mesh = true;
+}
+
+RunPlan planRun(const CommandLine& cl) {
+  if (cl.positional().size() > 1) throw InputError("usage", "more than one input given");
+  const auto out_dir = cl.value("--out");
+  if (!out_dir) throw InputError("usage", "--out <dir> is required");
+  RunPlan plan;
+  plan.out_dir = *out_dir;
+  plan.config_path = cl.value("--config", "");
+  loadConfiguration(cl, plan);
+  plan.mode = parseTrackingMode(cl.value("--mode", "joint"));
+  plan.src_opts.max_frames = cl.count("--max-frames", 0);
+  plan.src_opts.intrinsics = cl.value("--intrinsics");
+  if (cl.value("--depth-scale")) plan.src_opts.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
+  plan.input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
+  plan.resume = cl.value("--resume");
+  plan.save_volume = cl.value("--save-volume");
+  return plan;
+}
+
+struct FrameLoop {
+  std::size_t done = 0, frames_with_depth = 0;
+  bool interrupted = false;
+  double seconds = 0.0;
+};
+
+// Every frame of the source through the run, with progress, until the end or Ctrl-C.
+FrameLoop reconstructFrames(FrameSource& source, RunSession& run, TrackingMode mode) {
+  const Reconstruction& rec = run.reconstruction();
+  std::signal(SIGINT, onSigint);
+  Progress progress("vofusion [" + toString(mode) + "]", source.size());
+  FrameLoop loop;
+  Frame frame;
+  while (!g_stop && source.next(frame)) {
+    if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
+    run.process(frame);
+    ++loop.done;
+    std::string status = "fallbacks " + std::to_string(rec.fallbacks()) + "  lost " + std::to_string(rec.lostFrames());
+    if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
+    progress.update(loop.done, status);
+  }
+  loop.interrupted = g_stop;
+  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C while writing outputs kills as usual
+  progress.finish(loop.interrupted ? "(interrupted: writing what was built so far)" : "");
+  loop.seconds = progress.elapsedSeconds();
+  return loop;
+}
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale", "--work-dir",
                         "--save-volume", "--resume"},
@@ -58,100 +141,38 @@ int body(int argc, char** argv) {
     std::cout << kUsage;
     return 0;
   }
-  const OutputParams default_out;
-  const MeshCleanParams default_mesh;
   if (cl.flag("--dump-config")) {
-    std::cout << dumpConfig(allSections(default_out, default_mesh));
+    std::cout << dumpConfig(allSections(OutputParams(), MeshCleanParams()));
     return 0;
   }
-  if (cl.positional().size() > 1) throw InputError("usage", "more than one input given");
-  const auto out_dir = cl.value("--out");
-  if (!out_dir) throw InputError("usage", "--out <dir> is required");
-
-  const std::string config_path = cl.value("--config", "");
-  auto cfg = loadConfig(config_path);
-  checkConfigKeys(cfg, config_path, allSections(default_out, default_mesh));
-  if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
-  // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.
-  const std::string default_work = (std::filesystem::path(*out_dir) / ".tmp").string();
-  if (cl.value("--work-dir")) cfg.write("kinfu", "work_dir", *cl.value("--work-dir"));
-  else if (const std::string w = cfg.read_string("kinfu", "work_dir", "auto"); w.empty() || w == "auto")
-    cfg.write("kinfu", "work_dir", default_work);
-  const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
-  OutputParams out_params;
-  MeshCleanParams mesh_params;
-  try {  // out-of-range values: name the file they came from
-    out_params.loadFromConfigFile(cfg, "output");
-    mesh_params.loadFromConfigFile(cfg, "mesh");
-    OdometryParams().loadFromConfigFile(cfg, "odometry");
-    KinFuParams().loadFromConfigFile(cfg, "kinfu");
-    loop::LoopParams().loadFromConfigFile(cfg, "loop");
-  } catch (const InputError& e) {
-    if (config_path.empty()) throw;
-    throw InputError(config_path, e.what());
-  }
-  if (cl.flag("--raw-mesh")) out_params.save_raw_mesh = true;
-
-  SourceOptions src_opts;
-  src_opts.max_frames = cl.count("--max-frames", 0);
-  src_opts.intrinsics = cl.value("--intrinsics");
-  if (cl.value("--depth-scale")) src_opts.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
-  const std::string input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
-  auto source = std::make_unique<PrefetchingSource>(openFrameSource(input, src_opts));
-  Reconstruction rec(cfg, mode);
-  if (cl.value("--resume")) rec.resumeVolume(*cl.value("--resume"));
-  RunRecorder recorder(*out_dir, out_params, mesh_params);
-
-  std::signal(SIGINT, onSigint);
-  std::fprintf(stderr, "vofusion: %s, mode %s, %zu frames -> %s\n", source->name().c_str(), toString(mode).c_str(),
-               source->size(), out_dir->c_str());
-  Progress progress("vofusion [" + toString(mode) + "]", source->size());
-  Frame frame;
-  std::size_t done = 0, frames_with_depth = 0;
-  while (!g_stop && source->next(frame)) {
-    if (cv::countNonZero(frame.depth > 0) > 0) ++frames_with_depth;
-    const FrameReport report = rec.process(frame);
-    recorder.add(frame, report);
-    ++done;
-    std::string status = "fallbacks " + std::to_string(rec.fallbacks()) + "  lost " + std::to_string(rec.lostFrames());
-    if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
-    progress.update(done, status);
-  }
-  const bool interrupted = g_stop;
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C while writing outputs kills as usual
-  progress.finish(interrupted ? "(interrupted: writing what was built so far)" : "");
-  if (done == 0) throw InputError(source->name(), "no frames to process");
-  if (frames_with_depth == 0 && !interrupted)
+  const RunPlan plan = planRun(cl);
+  auto source = std::make_unique<PrefetchingSource>(openFrameSource(plan.input, plan.src_opts));
+  RunSession run(plan.cfg, plan.mode, plan.out_dir, plan.out_params, plan.mesh_params);
+  if (plan.resume) run.reconstruction().resumeVolume(*plan.resume);
+  std::fprintf(stderr, "vofusion: %s, mode %s, %zu frames -> %s\n", source->name().c_str(), toString(plan.mode).c_str(),
+               source->size(), plan.out_dir.c_str());
+  const FrameLoop loop = reconstructFrames(*source, run, plan.mode);
+  if (loop.done == 0) throw InputError(source->name(), "no frames to process");
+  if (loop.frames_with_depth == 0 && !loop.interrupted)
     throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
-  const std::string source_name = source->name();
-  source.reset();
-  rec.finish();
   RunInfo info;
-  if (rec.mapNeedsReintegration() && !interrupted) {
-    // Loops moved the poses: the map, fused at the tracked ones, is fused again at the corrected ones
-    // (reading the recording a second time rather than keeping every frame in memory).
-    auto again = std::make_unique<PrefetchingSource>(openFrameSource(input, src_opts));
-    Progress refuse("vofusion [re-fusing at the loop-closed poses]", done);
-    const std::size_t fused = rec.reintegrate([&](Frame& f) { return again->next(f); },
-                                              [&](std::size_t n) { refuse.update(n); });
-    refuse.finish();
-    info.extra["loop_closure_reintegration"] = {{"frames_fused", fused}, {"seconds", refuse.elapsedSeconds()}};
-  }
-
-  if (cl.value("--save-volume")) rec.saveVolume(*cl.value("--save-volume"));
-
-  info.input = source_name;
-  info.config = config_path;
-  info.interrupted = interrupted;
-  info.seconds = progress.elapsedSeconds();
-  const auto summary = recorder.finish(rec, info);
-  std::fprintf(stderr, "vofusion: %zu frames, %.1f fps, %zu fallbacks, %zu lost", done, summary.value("fps", 0.0),
+  info.input = source->name();
+  info.config = plan.config_path;
+  info.interrupted = loop.interrupted;
+  info.seconds = loop.seconds;
+  source.reset();
+  RunSession::Reopen reopen;  // an interrupted run is not fused again: the user asked it to stop
+  if (!loop.interrupted)
+    reopen = [&] { return std::make_unique<PrefetchingSource>(openFrameSource(plan.input, plan.src_opts)); };
+  const auto summary = run.finish(info, reopen, plan.save_volume);
+  const Reconstruction& rec = run.reconstruction();
+  std::fprintf(stderr, "vofusion: %zu frames, %.1f fps, %zu fallbacks, %zu lost", loop.done, summary.value("fps", 0.0),
                rec.fallbacks(), rec.lostFrames());
   if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
   std::fprintf(stderr, "\n");
   std::error_code ec;
-  std::filesystem::remove(default_work, ec);  // only when empty: the spill file was never a name there
-  return interrupted ? 130 : 0;
+  std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
+  return loop.interrupted ? 130 : 0;
 }
 
 }  // namespace

@@ -35,6 +35,7 @@ struct OutputParams : public mrpt::config::CLoadableOptions {
 };
 
 struct RunInfo {
+  std::string app = "vofusion";  // names the run in messages
   std::string input;           // what was reconstructed
   std::string config;          // the config file used ("" = defaults)
   bool interrupted = false;    // stopped early (Ctrl-C, sensor lost): outputs hold what was built
