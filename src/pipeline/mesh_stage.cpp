@@ -1,0 +1,77 @@
+#include "mesh_stage.h"
+
+#include <memory>
+
+#include "run_summary.h"
+#include "vofusion/core/heap.h"
+#include "vofusion/core/progress.h"
+#include "vofusion/mesh/mesh_io.h"
+#include "vofusion/pipeline/mesh_by_region.h"
+
+using nlohmann::json;
+
+namespace vofusion {
+
+TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshCleanParams& mesh_params, json& s,
+                         StagedOutputs& out) {
+  // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
+  const auto release_map = [&] {
+    if (rec.mapReleased()) return;
+    rec.releaseMap();
+    returnFreedHeap();
+  };
+  TriangleMesh mesh;
+  std::string streamed_raw;  // logged after mesh.ply, whose line then carries the meshing time
+  // Region by region unless the unsimplified whole (mesh_full.ply) is asked for.
+  const bool by_region = p.clean_mesh && mesh_params.region_bricks > 0 && !p.save_full_mesh;
+  if (by_region) {
+    const auto source = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
+      rec.extractMeshByRegion(mesh_params.region_bricks, sink);
+    };
+    std::unique_ptr<Progress> shown;
+    int shown_pass = 0;
+    const auto progress = [&](int pass, std::size_t done, std::size_t regions) {
+      if (pass != shown_pass) {
+        if (shown) shown->finish();
+        shown = std::make_unique<Progress>(pass == 1 ? "meshing [finding fragments]" : "meshing [repair, simplify]",
+                                           regions, "regions");
+        shown_pass = pass;
+      }
+      shown->update(done);
+    };
+    RegionMeshResult r =
+        meshByRegion(source, mesh_params, p.save_raw_mesh ? out.path("mesh_raw.ply") : "", progress, release_map);
+    if (shown) shown->finish();
+    mesh = std::move(r.mesh);
+    s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
+    if (p.save_raw_mesh) streamed_raw = std::to_string(r.raw_faces) + " faces, streamed region by region";
+    s["mesh_clean"] = json::parse(r.report.toJson());
+    if (r.report.simplification.ran) s["mesh_simplification"] = simplificationJson(r.report.simplification, r.raw_faces);
+  } else {
+    mesh = rec.extractMesh();
+    s["mesh_raw"] = meshJson(mesh);
+  }
+  release_map();
+  if (!by_region && p.save_raw_mesh) {
+    writePly(out.path("mesh_raw.ply"), mesh);
+    out.wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
+  }
+  if (!by_region && p.clean_mesh && !mesh.empty()) {
+    const std::size_t raw_faces = mesh.faces.size();
+    TriangleMesh full;
+    const MeshCleanReport report = cleanMesh(mesh, mesh_params, p.save_full_mesh ? &full : nullptr);
+    s["mesh_clean"] = json::parse(report.toJson());
+    if (report.simplification.ran) s["mesh_simplification"] = simplificationJson(report.simplification, raw_faces);
+    if (p.save_full_mesh) {
+      writePly(out.path("mesh_full.ply"), full);
+      out.wrote("mesh_full.ply", std::to_string(full.faces.size()) + " faces");
+    }
+  }
+  s["mesh"] = meshJson(mesh);
+  writePly(out.path("mesh.ply"), mesh);
+  out.wrote("mesh.ply", std::to_string(mesh.faces.size()) + " faces");
+  if (!streamed_raw.empty()) out.wrote("mesh_raw.ply", streamed_raw);
+  return mesh;
+}
+
+}  // namespace vofusion

@@ -1,0 +1,18 @@
+#pragma once
+// The run's meshing stage. Private to src/pipeline/.
+#include <nlohmann/json.hpp>
+
+#include "vofusion/core/triangle_mesh.h"
+#include "vofusion/mesh/mesh_clean.h"
+#include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/pipeline/run_outputs.h"
+#include "staged_outputs.h"
+
+namespace vofusion {
+
+// Meshes the map (region by region unless mesh_full.ply is asked for), releases it, and writes
+// mesh_raw.ply / mesh_full.ply / mesh.ply as asked; fills the mesh entries of s.
+TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& params, const MeshCleanParams& mesh_params,
+                         nlohmann::json& s, StagedOutputs& out);
+
+}  // namespace vofusion

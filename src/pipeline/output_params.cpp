@@ -1,0 +1,36 @@
+// [output] INI section: one table lists every key, so loading and saving can never disagree.
+#include <mrpt/config/CConfigFileBase.h>
+
+#include "vofusion/core/config.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/pipeline/run_outputs.h"
+
+namespace vofusion {
+
+namespace {
+// Every [output] key, once: loading and saving both walk this list.
+std::vector<ConfigKey> outputKeys(OutputParams& p) {
+  return {
+      {"write_rawlog", &p.write_rawlog, "poses.rawlog: observations + odometry actions + fused poses"},
+      {"save_raw_mesh", &p.save_raw_mesh, "also mesh_raw.ply (marching cubes before CGAL post-processing)"},
+      {"clean_mesh", &p.clean_mesh, "CGAL post-processing with the [mesh] parameters"},
+      {"save_full_mesh", &p.save_full_mesh, "also mesh_full.ply (post-processed but not simplified)"},
+      {"frustum_every", &p.frustum_every, "frames between camera frustums in scene.3Dscene", 0.0, 100000.0},
+      {"image_width", &p.image_width, "px, mesh.png and trajectory.png", 16.0, 8192.0},
+      {"image_height", &p.image_height, "px", 16.0, 8192.0},
+      {"rpe_delta", &p.rpe_delta, "s, pose-pair spacing of the relative pose error in summary.json", 0.01, 100.0},
+  };
+}
+}  // namespace
+
+void OutputParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, const std::string& s) {
+  loadKeys(c, s, outputKeys(*this));
+  if (frustum_every < 1 || image_width < 64 || image_height < 64 || !(rpe_delta > 0))
+    throw InputError("[" + s + "]", "out-of-range value (frustum_every >= 1, image size >= 64 px, rpe_delta > 0)");
+}
+
+void OutputParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
+  saveKeys(c, s, outputKeys(const_cast<OutputParams&>(*this)));
+}
+
+}  // namespace vofusion

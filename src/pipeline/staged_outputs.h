@@ -1,0 +1,52 @@
+#pragma once
+// The run's outputs staged and moved into place together. Private to src/pipeline/.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+// Output files written into a staging folder and moved into place together, only once all of them
+// were written: a failure (disk full) leaves an earlier run's outputs intact. Each is logged with the
+// time since the previous one.
+class StagedOutputs {
+ public:
+  explicit StagedOutputs(std::function<std::string(const std::string&)> final_path)
+      : final_path_(std::move(final_path)), staging_(final_path_(".staging")), last_(std::chrono::steady_clock::now()) {
+    std::filesystem::create_directories(staging_.tmp());
+  }
+  std::string path(const std::string& name) const { return (std::filesystem::path(staging_.tmp()) / name).string(); }
+  // `name` is done; staged = false: it was written in place (the rawlog, committed by its writer).
+  void wrote(const std::string& name, const std::string& what, bool staged = true) {
+    const auto now = std::chrono::steady_clock::now();
+    char line[1024];
+    std::snprintf(line, sizeof line, "  wrote %s  (%s; %.1f s)\n", final_path_(name).c_str(), what.c_str(),
+                  std::chrono::duration<double>(now - last_).count());
+    log_lines_.push_back(line);
+    if (staged) names_.push_back(name);
+    last_ = now;
+  }
+  void commit(std::FILE* log) {
+    for (const std::string& name : names_) {
+      std::error_code ec;
+      std::filesystem::rename(path(name), final_path_(name), ec);
+      if (ec) throw InputError(final_path_(name), "cannot write: " + ec.message());
+    }
+    if (log)
+      for (const std::string& l : log_lines_) std::fputs(l.c_str(), log);
+  }
+
+ private:
+  std::function<std::string(const std::string&)> final_path_;
+  AtomicPath staging_;
+  std::chrono::steady_clock::time_point last_;
+  std::vector<std::string> names_, log_lines_;
+};
+
+}  // namespace vofusion
