@@ -13,6 +13,7 @@
 #include "vofusion/loop/keyframe.h"
 #include "vofusion/loop/keyframe_store.h"
 #include "vofusion/loop/loop_verifier.h"
+#include "vofusion/tracking/residual_monitor.h"
 #include "vofusion/loop/place_index.h"
 #include "vofusion/loop/pose_graph.h"
 #include "vofusion/odometry/rgbd_odometry.h"

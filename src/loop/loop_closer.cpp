@@ -1,4 +1,5 @@
 #include "vofusion/loop/loop_closer.h"
+#include "vofusion/tracking/residual_monitor.h"
 
 #include <condition_variable>
 #include <deque>
