@@ -285,16 +285,13 @@ RangeImage::RangeImage(const cv::Mat& depth, const CameraIntrinsics& camera)
   }
 }
 
-Borders extractBorders(const RangeImage& im) {
-  const int w = im.width, h = im.height, size = w * h;
-  std::vector<Surface> surf(size);
-  parallelFor(0, h, [&](int y) {
-    for (int x = 0; x < w; ++x)
-      if (im.valid(y * w + x)) surf[y * w + x] = localSurface(im, x, y);
-  });
+namespace {
+using Scores = std::array<std::vector<float>, 4>;
 
-  // Border scores per direction, then the neighbour bonus (computed from the unchanged scores).
-  std::array<std::vector<float>, 4> raw, score;
+// Border scores per direction, then the neighbour bonus (computed from the unchanged scores).
+Scores borderScores(const RangeImage& im, const std::vector<Surface>& surf) {
+  const int w = im.width, h = im.height, size = w * h;
+  Scores raw, score;
   for (int d = 0; d < 4; ++d) raw[d].assign(size, 0.0f), score[d].resize(size);
   parallelFor(0, h, [&](int y) {
     for (int x = 0; x < w; ++x)
@@ -306,36 +303,44 @@ Borders extractBorders(const RangeImage& im) {
     for (int d = 0; d < 4; ++d)
       for (int x = 0; x < w; ++x) score[d][y * w + x] = propagatedScore(im, raw[d], x, y);
   });
+  return score;
+}
 
-  // Shadow borders: one raster scan, the four directions in PCL's order, scores changed in place.
+// Shadow borders (one raster scan, the four directions in PCL's order, scores changed in place), then
+// obstacle borders at the maxima, their shadow borders and the veil points in between.
+std::vector<std::uint8_t> borderTraits(const RangeImage& im, Scores& score) {
+  const int w = im.width, h = im.height, size = w * h;
   std::vector<std::array<int, 4>> shadow(size);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
       for (int d = 0; d < 4; ++d) shadow[y * w + x][d] = shadowBorder(im, x, y, d, score[d], score[kOpposite[d]]);
-
-  // Obstacle borders at the maxima, their shadow borders and the veil points in between.
-  Borders b;
-  b.traits.assign(size, 0);
+  std::vector<std::uint8_t> traits(size, 0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
       for (int d = 0; d < 4; ++d) {
         const int i = y * w + x, s = shadow[i][d];
         if (s < 0 || !isMaximum(im, x, y, d, score[d], s)) continue;
-        b.traits[i] |= kObstacle | kSide[d];
-        b.traits[s] |= kShadow;
+        traits[i] |= kObstacle | kSide[d];
+        traits[s] |= kShadow;
         const int step = kDx[d] + kDy[d] * w;
-        for (int j = i + step; j != s; j += step) b.traits[j] |= kVeil;
+        for (int j = i + step; j != s; j += step) traits[j] |= kVeil;
       }
+  return traits;
+}
 
-  // Border directions, then averaged over consistent neighbours (calculateBorderDirections).
+// Border directions, averaged over consistent neighbours (calculateBorderDirections); has_avg marks
+// the pixels that have one.
+std::vector<Eigen::Vector3f> borderDirections(const RangeImage& im, const std::vector<Surface>& surf,
+                                              const std::vector<std::uint8_t>& traits, std::vector<std::uint8_t>& has_avg) {
+  const int w = im.width, h = im.height, size = w * h;
   std::vector<Eigen::Vector3f> dir(size);
   std::vector<std::uint8_t> has_dir(size, 0);
   for (int i = 0; i < size; ++i)
-    if (b.traits[i] & kObstacle) has_dir[i] = borderDirection(im, surf[i], i % w, i / w, b.traits[i], dir[i]);
+    if (traits[i] & kObstacle) has_dir[i] = borderDirection(im, surf[i], i % w, i / w, traits[i], dir[i]);
   const int r = kRadiusBorderDirection, min_weight = r + 1;
   const float min_cos = std::cos(pcl::deg2rad(120.0f));
   std::vector<Eigen::Vector3f> avg_dir(size);
-  std::vector<std::uint8_t> has_avg(size, 0);
+  has_avg.assign(size, 0);
   parallelFor(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       const int i = y * w + x;
@@ -357,6 +362,22 @@ Borders extractBorders(const RangeImage& im) {
       has_avg[i] = 1;
     }
   });
+  return avg_dir;
+}
+}  // namespace
+
+Borders extractBorders(const RangeImage& im) {
+  const int w = im.width, h = im.height, size = w * h;
+  std::vector<Surface> surf(size);
+  parallelFor(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x)
+      if (im.valid(y * w + x)) surf[y * w + x] = localSurface(im, x, y);
+  });
+  Scores score = borderScores(im, surf);
+  Borders b;
+  b.traits = borderTraits(im, score);
+  std::vector<std::uint8_t> has_avg;
+  const std::vector<Eigen::Vector3f> avg_dir = borderDirections(im, surf, b.traits, has_avg);
 
   // Surface changes: 1 along the border direction on borders, else the main principal curvature.
   b.change_score.assign(size, 0.0f);

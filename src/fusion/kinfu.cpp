@@ -17,12 +17,6 @@ namespace vofusion {
 
 using namespace fusion;
 
-namespace {
-double seconds(std::chrono::steady_clock::time_point a) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();
-}
-}  // namespace
-
 struct KinFu::Impl {
   KinFuParams params;
   Prediction predict;
@@ -39,10 +33,10 @@ struct KinFu::Impl {
                  StageTimes& times) {
     auto t0 = std::chrono::steady_clock::now();
     const bool shifted = volume->shiftIfNeeded(focusPoint(pose), params.shift_threshold);
-    times.add("shift", seconds(t0));
+    times.add("shift", secondsSince(t0));
     t0 = std::chrono::steady_clock::now();
     volume->integrate(depth, rgb, cam, pose.cast<float>());
-    times.add("integrate", seconds(t0));
+    times.add("integrate", secondsSince(t0));
     return shifted;
   }
 
@@ -81,7 +75,7 @@ struct KinFu::Impl {
       downsampleMaps(model.vertices[l - 1], model.normals[l - 1], model.vertices[l], model.normals[l]);
     model.pose = from;
     have_model = true;
-    times.add("raycast", seconds(t0));
+    times.add("raycast", secondsSince(t0));
   }
 };
 

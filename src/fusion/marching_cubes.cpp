@@ -91,21 +91,15 @@ void computeNormals(TriangleMesh& mesh) {
   }
 }
 
-// Marching cubes over the cells of bricks[0, owned); the later bricks only lend voxels and the
-// vertices on edges they own. region_bricks > 0: `seam` flags the vertices that cells of another
-// region also use (those of edges owned by a later brick, or on a face the region shares).
-TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, float voxel_size, int min_weight,
-                     int region_bricks, std::vector<std::uint8_t>* seam) {
-  TriangleMesh mesh;
-  if (bricks.empty()) return mesh;
-  min_weight = std::max(1, min_weight);
-  const Grid grid(bricks);
-  std::vector<BrickVertices> verts(bricks.size());
-  std::vector<std::array<int, 8>> nbs(bricks.size());
+// Whether the crossing on the edge at voxel (x,y,z) of brick i along `axis` is one another region's
+// cells also use: cells using that edge lie at the voxel minus 0 or 1 along each other axis, another
+// region's when the voxel is on the region's low face there (or the brick is not one this pass owns).
+struct SeamTest {
+  const std::vector<BrickRef>& bricks;
+  std::size_t owned;
+  int region_bricks;
 
-  // Cells using the edge at voxel (x,y,z) of brick i along `axis` lie at that voxel minus 0 or 1
-  // along each other axis: another region's when the voxel is on the region's low face there.
-  const auto onSeam = [&](std::size_t i, int x, int y, int z, int axis) -> std::uint8_t {
+  std::uint8_t operator()(std::size_t i, int x, int y, int z, int axis) const {
     if (i >= owned) return 1;
     const int local[3] = {x, y, z};
     for (int k = 0; k < 3; ++k)
@@ -113,36 +107,38 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
           regionOf(bricks[i].coord - Eigen::Vector3i::Unit(k), region_bricks) != regionOf(bricks[i].coord, region_bricks))
         return 1;
     return 0;
-  };
+  }
+};
 
-  // Pass 1: the vertices on the edges each brick owns.
-  parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
-    int* nb = nbs[i].data();
-    grid.neighbours(i, nb);
-    BrickVertices& bv = verts[i];
-    const Eigen::Vector3i o = bricks[i].coord * kBrickEdge;
-    for (int z = 0; z < kBrickEdge; ++z)
-      for (int y = 0; y < kBrickEdge; ++y)
-        for (int x = 0; x < kBrickEdge; ++x) {
-          const Voxel* a = grid.voxel(nb, x, y, z);
-          if (!usable(a, min_weight)) continue;
-          for (int axis = 0; axis < 3; ++axis) {
-            const Voxel* b = grid.voxel(nb, x + (axis == 0), y + (axis == 1), z + (axis == 2));
-            if (!usable(b, min_weight) || ((a->tsdf < 0) == (b->tsdf < 0))) continue;
-            const float fa = a->tsdf, fb = b->tsdf;
-            const float t = fa / (fa - fb);
-            Eigen::Vector3f p((o.x() + x) * voxel_size, (o.y() + y) * voxel_size, (o.z() + z) * voxel_size);
-            p[axis] += t * voxel_size;
-            bv.edges.push_back(static_cast<std::uint16_t>(Brick::index(x, y, z) * 3 + axis));
-            if (seam) bv.seam.push_back(onSeam(i, x, y, z, axis));
-            bv.points.push_back(p);
-            const auto mix = [t](std::uint8_t u, std::uint8_t v) {
-              return static_cast<std::uint8_t>(std::lround(u + t * (static_cast<float>(v) - u)));
-            };
-            bv.colours.push_back({mix(a->r, b->r), mix(a->g, b->g), mix(a->b, b->b)});
-          }
+// Pass 1, one brick: the vertices on the edges it owns (from each voxel along +x, +y, +z).
+void edgeVertices(const Grid& grid, const int* nb, std::size_t i, const Eigen::Vector3i& coord, float voxel_size,
+                  int min_weight, const SeamTest* seam, BrickVertices& bv) {
+  const Eigen::Vector3i o = coord * kBrickEdge;
+  for (int z = 0; z < kBrickEdge; ++z)
+    for (int y = 0; y < kBrickEdge; ++y)
+      for (int x = 0; x < kBrickEdge; ++x) {
+        const Voxel* a = grid.voxel(nb, x, y, z);
+        if (!usable(a, min_weight)) continue;
+        for (int axis = 0; axis < 3; ++axis) {
+          const Voxel* b = grid.voxel(nb, x + (axis == 0), y + (axis == 1), z + (axis == 2));
+          if (!usable(b, min_weight) || ((a->tsdf < 0) == (b->tsdf < 0))) continue;
+          const float fa = a->tsdf, fb = b->tsdf;
+          const float t = fa / (fa - fb);
+          Eigen::Vector3f p((o.x() + x) * voxel_size, (o.y() + y) * voxel_size, (o.z() + z) * voxel_size);
+          p[axis] += t * voxel_size;
+          bv.edges.push_back(static_cast<std::uint16_t>(Brick::index(x, y, z) * 3 + axis));
+          if (seam) bv.seam.push_back((*seam)(i, x, y, z, axis));
+          bv.points.push_back(p);
+          const auto mix = [t](std::uint8_t u, std::uint8_t v) {
+            return static_cast<std::uint8_t>(std::lround(u + t * (static_cast<float>(v) - u)));
+          };
+          bv.colours.push_back({mix(a->r, b->r), mix(a->g, b->g), mix(a->b, b->b)});
         }
-  }, 8);
+      }
+}
+
+// The bricks' vertices one after another into the mesh (each brick's base index set).
+void gatherVertices(std::vector<BrickVertices>& verts, TriangleMesh& mesh, std::vector<std::uint8_t>* seam) {
   std::uint32_t total = 0;
   for (auto& bv : verts) bv.base = total, total += static_cast<std::uint32_t>(bv.points.size());
   mesh.vertices.reserve(total);
@@ -152,58 +148,54 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
     mesh.colors.insert(mesh.colors.end(), bv.colours.begin(), bv.colours.end());
     if (seam) seam->insert(seam->end(), bv.seam.begin(), bv.seam.end());
   }
+}
 
-  // Pass 2: triangles of every cell whose 8 corners are usable.
-  std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(owned);
-  parallelFor(0, static_cast<int>(owned), [&](int i) {
-    const int* nb = nbs[i].data();
-    auto vertexOf = [&](int cx, int cy, int cz, int axis) -> std::int64_t {
-      const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
-      const int bi = nb[which];
-      if (bi < 0) return -1;
-      const auto& e = verts[bi].edges;
-      const auto id = static_cast<std::uint16_t>(Brick::index(cx & 7, cy & 7, cz & 7) * 3 + axis);
-      const auto it = std::lower_bound(e.begin(), e.end(), id);
-      if (it == e.end() || *it != id) return -1;
-      return verts[bi].base + static_cast<std::uint32_t>(it - e.begin());
-    };
-    for (int z = 0; z < kBrickEdge; ++z)
-      for (int y = 0; y < kBrickEdge; ++y)
-        for (int x = 0; x < kBrickEdge; ++x) {
-          const Voxel* c[8];
-          int cube = 0;
-          bool ok = true;
-          for (int k = 0; k < 8 && ok; ++k) {
-            c[k] = grid.voxel(nb, x + kCorner[k][0], y + kCorner[k][1], z + kCorner[k][2]);
-            ok = usable(c[k], min_weight);
-            if (ok && c[k]->tsdf < 0) cube |= 1 << k;
-          }
-          if (!ok || pcl::edgeTable[cube] == 0) continue;
-          std::int64_t ev[12];
-          for (int e = 0; e < 12; ++e) {
-            ev[e] = -1;
-            if (!(pcl::edgeTable[cube] & (1 << e))) continue;
-            const int* a = kCorner[kEdgeCorners[e][0]];
-            const int* b = kCorner[kEdgeCorners[e][1]];
-            const int lx = std::min(a[0], b[0]), ly = std::min(a[1], b[1]), lz = std::min(a[2], b[2]);
-            const int axis = a[0] != b[0] ? 0 : (a[1] != b[1] ? 1 : 2);
-            ev[e] = vertexOf(x + lx, y + ly, z + lz, axis);
-          }
-          for (int k = 0; pcl::triTable[cube][k] != -1; k += 3) {
-            const std::int64_t i0 = ev[pcl::triTable[cube][k]], i1 = ev[pcl::triTable[cube][k + 1]],
-                               i2 = ev[pcl::triTable[cube][k + 2]];
-            if (i0 < 0 || i1 < 0 || i2 < 0 || i0 == i1 || i1 == i2 || i0 == i2) continue;
-            faces[i].push_back({static_cast<std::uint32_t>(i0), static_cast<std::uint32_t>(i1),
-                                static_cast<std::uint32_t>(i2)});
-          }
+// Pass 2, one brick: the triangles of every cell whose 8 corners are usable.
+void cellFaces(const Grid& grid, const int* nb, const std::vector<BrickVertices>& verts, int min_weight,
+               std::vector<std::array<std::uint32_t, 3>>& faces) {
+  auto vertexOf = [&](int cx, int cy, int cz, int axis) -> std::int64_t {
+    const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
+    const int bi = nb[which];
+    if (bi < 0) return -1;
+    const auto& e = verts[bi].edges;
+    const auto id = static_cast<std::uint16_t>(Brick::index(cx & 7, cy & 7, cz & 7) * 3 + axis);
+    const auto it = std::lower_bound(e.begin(), e.end(), id);
+    if (it == e.end() || *it != id) return -1;
+    return verts[bi].base + static_cast<std::uint32_t>(it - e.begin());
+  };
+  for (int z = 0; z < kBrickEdge; ++z)
+    for (int y = 0; y < kBrickEdge; ++y)
+      for (int x = 0; x < kBrickEdge; ++x) {
+        const Voxel* c[8];
+        int cube = 0;
+        bool ok = true;
+        for (int k = 0; k < 8 && ok; ++k) {
+          c[k] = grid.voxel(nb, x + kCorner[k][0], y + kCorner[k][1], z + kCorner[k][2]);
+          ok = usable(c[k], min_weight);
+          if (ok && c[k]->tsdf < 0) cube |= 1 << k;
         }
-  }, 8);
-  std::size_t nf = 0;
-  for (const auto& f : faces) nf += f.size();
-  mesh.faces.reserve(nf);
-  for (const auto& f : faces) mesh.faces.insert(mesh.faces.end(), f.begin(), f.end());
+        if (!ok || pcl::edgeTable[cube] == 0) continue;
+        std::int64_t ev[12];
+        for (int e = 0; e < 12; ++e) {
+          ev[e] = -1;
+          if (!(pcl::edgeTable[cube] & (1 << e))) continue;
+          const int* a = kCorner[kEdgeCorners[e][0]];
+          const int* b = kCorner[kEdgeCorners[e][1]];
+          const int lx = std::min(a[0], b[0]), ly = std::min(a[1], b[1]), lz = std::min(a[2], b[2]);
+          const int axis = a[0] != b[0] ? 0 : (a[1] != b[1] ? 1 : 2);
+          ev[e] = vertexOf(x + lx, y + ly, z + lz, axis);
+        }
+        for (int k = 0; pcl::triTable[cube][k] != -1; k += 3) {
+          const std::int64_t i0 = ev[pcl::triTable[cube][k]], i1 = ev[pcl::triTable[cube][k + 1]],
+                             i2 = ev[pcl::triTable[cube][k + 2]];
+          if (i0 < 0 || i1 < 0 || i2 < 0 || i0 == i1 || i1 == i2 || i0 == i2) continue;
+          faces.push_back({static_cast<std::uint32_t>(i0), static_cast<std::uint32_t>(i1), static_cast<std::uint32_t>(i2)});
+        }
+      }
+}
 
-  // Drop crossings no triangle uses (edges whose cells touch unobserved voxels).
+// Drop crossings no triangle uses (edges whose cells touch unobserved voxels).
+void dropUnusedVertices(TriangleMesh& mesh, std::vector<std::uint8_t>* seam) {
   std::vector<std::uint32_t> remap(mesh.vertices.size(), UINT32_MAX);
   for (const auto& f : mesh.faces)
     for (std::uint32_t v : f) remap[v] = 0;
@@ -221,6 +213,32 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
   if (seam) seam->resize(kept);
   for (auto& f : mesh.faces)
     for (auto& v : f) v = remap[v];
+}
+
+// Marching cubes over the cells of bricks[0, owned); the later bricks only lend voxels and the
+// vertices on edges they own. region_bricks > 0: `seam` flags the vertices that cells of another
+// region also use (those of edges owned by a later brick, or on a face the region shares).
+TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, float voxel_size, int min_weight,
+                     int region_bricks, std::vector<std::uint8_t>* seam) {
+  TriangleMesh mesh;
+  if (bricks.empty()) return mesh;
+  min_weight = std::max(1, min_weight);
+  const Grid grid(bricks);
+  std::vector<BrickVertices> verts(bricks.size());
+  std::vector<std::array<int, 8>> nbs(bricks.size());
+  const SeamTest seam_test{bricks, owned, region_bricks};
+  parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
+    grid.neighbours(i, nbs[i].data());
+    edgeVertices(grid, nbs[i].data(), i, bricks[i].coord, voxel_size, min_weight, seam ? &seam_test : nullptr, verts[i]);
+  }, 8);
+  gatherVertices(verts, mesh, seam);
+  std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(owned);
+  parallelFor(0, static_cast<int>(owned), [&](int i) { cellFaces(grid, nbs[i].data(), verts, min_weight, faces[i]); }, 8);
+  std::size_t nf = 0;
+  for (const auto& f : faces) nf += f.size();
+  mesh.faces.reserve(nf);
+  for (const auto& f : faces) mesh.faces.insert(mesh.faces.end(), f.begin(), f.end());
+  dropUnusedVertices(mesh, seam);
   computeNormals(mesh);
   return mesh;
 }

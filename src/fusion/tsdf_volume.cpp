@@ -111,7 +111,12 @@ std::size_t TsdfVolume::memoryBytes() const {
 std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, const CameraIntrinsics& cam,
                                   const Eigen::Isometry3f& cam_to_world) {
   CV_Assert(depth.type() == CV_32FC1);
-  const bool colour = !bgr.empty() && bgr.type() == CV_8UC3 && bgr.size() == depth.size();
+  markTouchedBricks(depth, cam, cam_to_world);
+  return updateVoxels(allocateTouchedBricks(), depth, bgr, cam, cam_to_world);
+}
+
+// 1. Bricks touched by the truncation band [z - trunc, z + trunc] of (a subsample of) the readings.
+void TsdfVolume::markTouchedBricks(const cv::Mat& depth, const CameraIntrinsics& cam, const Eigen::Isometry3f& cam_to_world) {
   const float vs = params_.voxel_size, trunc = params_.truncation;
   const float zmin = params_.min_depth, zmax = params_.max_depth;
   const float fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
@@ -122,8 +127,6 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
   // Sampled readings must lie closer than half a brick apart even at the far end of the range.
   const int step = std::max(1, std::min(params_.mark_step,
                                         static_cast<int>(0.5f * kBrickEdge * vs * std::min(fx, fy) / zmax)));
-
-  // 1. Bricks touched by the truncation band [z - trunc, z + trunc] of (a subsample of) the readings.
   std::fill(marks_.begin(), marks_.end(), 0);
   parallelFor(0, (h + step - 1) / step, [&](int row_index) {
     const int y = row_index * step;
@@ -141,8 +144,10 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
       }
     }
   });
+}
 
-  // 2. Allocate the touched bricks that are new (serial: the pool grows).
+// 2. Allocate the touched bricks that are new (serial: the pool grows); returns the touched bricks' ids.
+std::vector<std::int32_t> TsdfVolume::allocateTouchedBricks() {
   std::vector<std::int32_t> touched;
   for (std::size_t s = 0; s < marks_.size(); ++s) {
     if (!marks_[s]) continue;
@@ -155,8 +160,17 @@ std::size_t TsdfVolume::integrate(const cv::Mat& depth, const cv::Mat& bgr, cons
     }
     touched.push_back(slots_[s]);
   }
+  return touched;
+}
 
-  // 3. Update the voxels of those bricks: projective signed distance, weighted running average.
+// 3. Update the voxels of those bricks: projective signed distance, weighted running average.
+std::size_t TsdfVolume::updateVoxels(const std::vector<std::int32_t>& touched, const cv::Mat& depth, const cv::Mat& bgr,
+                                     const CameraIntrinsics& cam, const Eigen::Isometry3f& cam_to_world) {
+  const bool colour = !bgr.empty() && bgr.type() == CV_8UC3 && bgr.size() == depth.size();
+  const float vs = params_.voxel_size, trunc = params_.truncation;
+  const float zmin = params_.min_depth, zmax = params_.max_depth;
+  const Eigen::Matrix3f R = cam_to_world.linear();
+  const Eigen::Vector3f t = cam_to_world.translation();
   const Eigen::Matrix3f Rt = R.transpose();
   const Eigen::Vector3f tc = -Rt * t;
   const Eigen::Vector3f dx = Rt.col(0) * vs, dy = Rt.col(1) * vs, dz = Rt.col(2) * vs;

@@ -1,5 +1,6 @@
 // PLY reading (ASCII, binary little/big endian) and binary little-endian writing for TriangleMesh.
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -7,6 +8,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "vofusion/core/atomic_file.h"
@@ -117,18 +119,54 @@ int indexOf(const Element& e, const std::string& name) {
   return -1;
 }
 
-}  // namespace
+// Builds the error for a bad header line, naming the file and the line.
+struct HeaderError {
+  const std::string& path;
+  int line_no;
+  InputError operator()(const std::string& what) const {
+    return InputError(path, "header line " + std::to_string(line_no) + ": " + what);
+  }
+};
 
-TriangleMesh readPly(const std::string& path) {
-  const std::string data = slurp(path);
-  if (data.compare(0, 3, "ply") != 0 || data.size() < 4 || (data[3] != '\n' && data[3] != '\r'))
-    throw InputError(path, "not a PLY file (missing 'ply' magic)");
-
-  // Header: line by line up to "end_header".
-  std::size_t pos = 0;
+struct Header {
   Format fmt = Format::Ascii;
-  bool have_format = false, ended = false;
   std::vector<Element> elements;
+  std::size_t body = 0;  // offset of the first byte after the end_header line
+};
+
+// The rest of a "format <encoding> <version>" line.
+Format parseFormat(std::istringstream& ls, const HeaderError& bad) {
+  std::string f, ver;
+  ls >> f >> ver;
+  if (f == "ascii") return Format::Ascii;
+  if (f == "binary_little_endian") return Format::BinaryLE;
+  if (f == "binary_big_endian") return Format::BinaryBE;
+  throw bad("unknown format '" + f + "'");
+}
+
+// The rest of a "property <type> <name>" or "property list <count type> <value type> <name>" line.
+Property parseProperty(std::istringstream& ls, const HeaderError& bad) {
+  Property p;
+  std::string t;
+  ls >> t;
+  if (t == "list") {
+    std::string ct, vt;
+    ls >> ct >> vt >> p.name;
+    if (!parseScalar(ct, p.count_type) || !parseScalar(vt, p.type)) throw bad("unknown list type");
+    p.is_list = true;
+  } else {
+    if (!parseScalar(t, p.type)) throw bad("unknown property type '" + t + "'");
+    ls >> p.name;
+  }
+  if (p.name.empty()) throw bad("property without a name");
+  return p;
+}
+
+// Header: line by line up to "end_header".
+Header readHeader(const std::string& path, const std::string& data) {
+  Header h;
+  std::size_t pos = 0;
+  bool have_format = false, ended = false;
   for (int line_no = 1; pos < data.size(); ++line_no) {
     std::size_t eol = data.find('\n', pos);
     if (eol == std::string::npos) eol = data.size();
@@ -138,147 +176,171 @@ TriangleMesh readPly(const std::string& path) {
     std::istringstream ls(line);
     std::string kw;
     ls >> kw;
-    const auto bad = [&](const std::string& what) {
-      return InputError(path, "header line " + std::to_string(line_no) + ": " + what);
-    };
+    const HeaderError bad{path, line_no};
     if (kw == "ply" || kw == "comment" || kw == "obj_info" || kw.empty()) continue;
     if (kw == "end_header") { ended = true; break; }
     if (kw == "format") {
-      std::string f, ver;
-      ls >> f >> ver;
-      if (f == "ascii") fmt = Format::Ascii;
-      else if (f == "binary_little_endian") fmt = Format::BinaryLE;
-      else if (f == "binary_big_endian") fmt = Format::BinaryBE;
-      else throw bad("unknown format '" + f + "'");
+      h.fmt = parseFormat(ls, bad);
       have_format = true;
     } else if (kw == "element") {
       Element e;
       long long n = -1;
       if (!(ls >> e.name >> n) || n < 0) throw bad("expected 'element <name> <count>'");
       e.count = static_cast<std::size_t>(n);
-      elements.push_back(e);
+      h.elements.push_back(e);
     } else if (kw == "property") {
-      if (elements.empty()) throw bad("property before any element");
-      Property p;
-      std::string t;
-      ls >> t;
-      if (t == "list") {
-        std::string ct, vt;
-        ls >> ct >> vt >> p.name;
-        if (!parseScalar(ct, p.count_type) || !parseScalar(vt, p.type)) throw bad("unknown list type");
-        p.is_list = true;
-      } else {
-        if (!parseScalar(t, p.type)) throw bad("unknown property type '" + t + "'");
-        ls >> p.name;
-      }
-      if (p.name.empty()) throw bad("property without a name");
-      elements.back().props.push_back(p);
+      if (h.elements.empty()) throw bad("property before any element");
+      h.elements.back().props.push_back(parseProperty(ls, bad));
     } else {
       throw bad("unknown keyword '" + kw + "'");
     }
   }
   if (!ended) throw InputError(path, "PLY header has no end_header");
   if (!have_format) throw InputError(path, "PLY header has no format line");
+  h.body = pos;
+  return h;
+}
 
-  TriangleMesh mesh;
-  BodyReader body(path, data, pos, fmt);
-  bool have_vertices = false;
-  for (const Element& e : elements) {
-    if (e.name == "vertex") {
-      const int ix = indexOf(e, "x"), iy = indexOf(e, "y"), iz = indexOf(e, "z");
-      if (ix < 0 || iy < 0 || iz < 0) throw InputError(path, "vertex element lacks x, y or z");
-      const int inx = indexOf(e, "nx"), iny = indexOf(e, "ny"), inz = indexOf(e, "nz");
-      int ir = indexOf(e, "red"), ig = indexOf(e, "green"), ib = indexOf(e, "blue");
-      if (ir < 0) { ir = indexOf(e, "r"); ig = indexOf(e, "g"); ib = indexOf(e, "b"); }
-      const bool normals = inx >= 0 && iny >= 0 && inz >= 0;
-      // PCL-style packed colour: "rgb" (float or uint bits 0x00RRGGBB) or "rgba" (uint 0xAARRGGBB).
-      int ipacked = indexOf(e, "rgb");
-      if (ipacked < 0) ipacked = indexOf(e, "rgba");
-      const bool packed = ir < 0 && ipacked >= 0 && !e.props[ipacked].is_list &&
-                          scalarSize(e.props[ipacked].type) == 4;
-      const bool colors = (ir >= 0 && ig >= 0 && ib >= 0) || packed;
-      // Guard against absurd counts before reserving memory: each vertex needs >= 1 byte.
-      if (e.count > data.size()) throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " vertices)");
-      mesh.vertices.resize(e.count);
-      if (normals) mesh.normals.resize(e.count);
-      if (colors) mesh.colors.resize(e.count);
-      std::vector<double> v(e.props.size());
-      for (std::size_t i = 0; i < e.count; ++i) {
-        for (std::size_t k = 0; k < e.props.size(); ++k) {
-          const Property& p = e.props[k];
-          if (p.is_list) {  // unusual on vertices, but skip it properly
-            const auto n = static_cast<long long>(body.read(p.count_type, "vertex list"));
-            for (long long j = 0; j < n; ++j) body.read(p.type, "vertex list");
-            v[k] = 0;
-          } else {
-            v[k] = body.read(p.type, "vertices");
-          }
-        }
-        mesh.vertices[i] = Eigen::Vector3f(float(v[ix]), float(v[iy]), float(v[iz]));
-        if (!mesh.vertices[i].allFinite())
-          throw InputError(path, "vertex " + std::to_string(i) + " has a non-finite coordinate");
-        if (normals) mesh.normals[i] = Eigen::Vector3f(float(v[inx]), float(v[iny]), float(v[inz]));
-        if (colors) {
-          const bool unit = !packed && (e.props[ir].type == Scalar::Float32 || e.props[ir].type == Scalar::Float64);
-          const auto to8 = [&](double c) {
-            const double s = unit ? c * 255.0 : c;
-            return static_cast<std::uint8_t>(std::lround(std::min(255.0, std::max(0.0, s))));
-          };
-          if (packed) {
-            std::uint32_t bits;
-            if (e.props[ipacked].type == Scalar::Float32) {
-              const float f = static_cast<float>(v[ipacked]);
-              std::memcpy(&bits, &f, 4);
-            } else {
-              bits = static_cast<std::uint32_t>(static_cast<std::int64_t>(v[ipacked]));
-            }
-            mesh.colors[i] = {std::uint8_t(bits >> 16), std::uint8_t(bits >> 8), std::uint8_t(bits)};
-          } else {
-            mesh.colors[i] = {to8(v[ir]), to8(v[ig]), to8(v[ib])};
-          }
-        }
-      }
-      have_vertices = true;
-    } else if (e.name == "face") {
-      int il = indexOf(e, "vertex_indices");
-      if (il < 0) il = indexOf(e, "vertex_index");
-      if (il < 0 || !e.props[il].is_list) throw InputError(path, "face element lacks a vertex_indices list");
-      if (e.count > data.size()) throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " faces)");
-      mesh.faces.reserve(e.count);
-      std::vector<std::uint32_t> poly;
-      for (std::size_t i = 0; i < e.count; ++i) {
-        for (std::size_t k = 0; k < e.props.size(); ++k) {
-          const Property& p = e.props[k];
-          if (!p.is_list) { body.read(p.type, "faces"); continue; }
-          const double nd = body.read(p.count_type, "faces");
-          if (nd < 0 || nd > 1e6) throw InputError(path, "face " + std::to_string(i) + " has a bad vertex count");
-          const auto n = static_cast<std::size_t>(nd);
-          poly.clear();
-          for (std::size_t j = 0; j < n; ++j) {
-            const double idx = body.read(p.type, "faces");
-            if (static_cast<int>(k) != il) continue;
-            if (idx < 0 || idx >= static_cast<double>(mesh.vertices.size()) || !have_vertices)
-              throw InputError(path, "face " + std::to_string(i) + " references vertex " +
-                                         std::to_string(static_cast<long long>(idx)) + " out of range");
-            poly.push_back(static_cast<std::uint32_t>(idx));
-          }
-          if (static_cast<int>(k) != il) continue;
-          if (n < 3) throw InputError(path, "face " + std::to_string(i) + " has fewer than 3 vertices");
-          for (std::size_t j = 1; j + 1 < n; ++j) mesh.faces.push_back({poly[0], poly[j], poly[j + 1]});  // fan
-        }
-      }
+// Which properties of a vertex element hold the coordinates, normals and colours (-1: none).
+struct VertexLayout {
+  int ix, iy, iz, inx, iny, inz, ir, ig, ib, ipacked;
+  bool normals, packed, colors;
+};
+
+VertexLayout vertexLayout(const std::string& path, const Element& e) {
+  VertexLayout l;
+  l.ix = indexOf(e, "x"); l.iy = indexOf(e, "y"); l.iz = indexOf(e, "z");
+  if (l.ix < 0 || l.iy < 0 || l.iz < 0) throw InputError(path, "vertex element lacks x, y or z");
+  l.inx = indexOf(e, "nx"); l.iny = indexOf(e, "ny"); l.inz = indexOf(e, "nz");
+  l.ir = indexOf(e, "red"); l.ig = indexOf(e, "green"); l.ib = indexOf(e, "blue");
+  if (l.ir < 0) { l.ir = indexOf(e, "r"); l.ig = indexOf(e, "g"); l.ib = indexOf(e, "b"); }
+  l.normals = l.inx >= 0 && l.iny >= 0 && l.inz >= 0;
+  // PCL-style packed colour: "rgb" (float or uint bits 0x00RRGGBB) or "rgba" (uint 0xAARRGGBB).
+  l.ipacked = indexOf(e, "rgb");
+  if (l.ipacked < 0) l.ipacked = indexOf(e, "rgba");
+  l.packed = l.ir < 0 && l.ipacked >= 0 && !e.props[l.ipacked].is_list &&
+             scalarSize(e.props[l.ipacked].type) == 4;
+  l.colors = (l.ir >= 0 && l.ig >= 0 && l.ib >= 0) || l.packed;
+  return l;
+}
+
+// A vertex's colour from its property values `v`: packed bits, or channels in 0..255 (0..1 when float).
+std::array<std::uint8_t, 3> vertexColour(const Element& e, const VertexLayout& l, const std::vector<double>& v) {
+  const bool unit = !l.packed && (e.props[l.ir].type == Scalar::Float32 || e.props[l.ir].type == Scalar::Float64);
+  const auto to8 = [&](double c) {
+    const double s = unit ? c * 255.0 : c;
+    return static_cast<std::uint8_t>(std::lround(std::min(255.0, std::max(0.0, s))));
+  };
+  if (l.packed) {
+    std::uint32_t bits;
+    if (e.props[l.ipacked].type == Scalar::Float32) {
+      const float f = static_cast<float>(v[l.ipacked]);
+      std::memcpy(&bits, &f, 4);
     } else {
-      // Unknown element (edges, materials...): read and discard.
-      for (std::size_t i = 0; i < e.count; ++i)
-        for (const Property& p : e.props) {
-          if (!p.is_list) { body.read(p.type, e.name.c_str()); continue; }
-          const auto n = static_cast<long long>(body.read(p.count_type, e.name.c_str()));
-          for (long long j = 0; j < n; ++j) body.read(p.type, e.name.c_str());
+      bits = static_cast<std::uint32_t>(static_cast<std::int64_t>(v[l.ipacked]));
+    }
+    return {std::uint8_t(bits >> 16), std::uint8_t(bits >> 8), std::uint8_t(bits)};
+  }
+  return {to8(v[l.ir]), to8(v[l.ig]), to8(v[l.ib])};
+}
+
+// Reads the body element by element into a mesh.
+struct BodyParser {
+  BodyParser(const std::string& path, const std::string& data, const Header& h)
+      : path(path), data(data), body(path, data, h.body, h.fmt) {}
+
+  const std::string& path;
+  const std::string& data;
+  BodyReader body;
+  TriangleMesh mesh;
+  bool have_vertices = false;
+
+  void readVertices(const Element& e) {
+    const VertexLayout l = vertexLayout(path, e);
+    // Guard against absurd counts before reserving memory: each vertex needs >= 1 byte.
+    if (e.count > data.size())
+      throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " vertices)");
+    mesh.vertices.resize(e.count);
+    if (l.normals) mesh.normals.resize(e.count);
+    if (l.colors) mesh.colors.resize(e.count);
+    std::vector<double> v(e.props.size());
+    for (std::size_t i = 0; i < e.count; ++i) {
+      for (std::size_t k = 0; k < e.props.size(); ++k) {
+        const Property& p = e.props[k];
+        if (p.is_list) {  // unusual on vertices, but skip it properly
+          const auto n = static_cast<long long>(body.read(p.count_type, "vertex list"));
+          for (long long j = 0; j < n; ++j) body.read(p.type, "vertex list");
+          v[k] = 0;
+        } else {
+          v[k] = body.read(p.type, "vertices");
         }
+      }
+      mesh.vertices[i] = Eigen::Vector3f(float(v[l.ix]), float(v[l.iy]), float(v[l.iz]));
+      if (!mesh.vertices[i].allFinite())
+        throw InputError(path, "vertex " + std::to_string(i) + " has a non-finite coordinate");
+      if (l.normals) mesh.normals[i] = Eigen::Vector3f(float(v[l.inx]), float(v[l.iny]), float(v[l.inz]));
+      if (l.colors) mesh.colors[i] = vertexColour(e, l, v);
+    }
+    have_vertices = true;
+  }
+
+  void readFaces(const Element& e) {
+    int il = indexOf(e, "vertex_indices");
+    if (il < 0) il = indexOf(e, "vertex_index");
+    if (il < 0 || !e.props[il].is_list) throw InputError(path, "face element lacks a vertex_indices list");
+    if (e.count > data.size())
+      throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " faces)");
+    mesh.faces.reserve(e.count);
+    std::vector<std::uint32_t> poly;
+    for (std::size_t i = 0; i < e.count; ++i) {
+      for (std::size_t k = 0; k < e.props.size(); ++k) {
+        const Property& p = e.props[k];
+        if (!p.is_list) { body.read(p.type, "faces"); continue; }
+        const double nd = body.read(p.count_type, "faces");
+        if (nd < 0 || nd > 1e6) throw InputError(path, "face " + std::to_string(i) + " has a bad vertex count");
+        const auto n = static_cast<std::size_t>(nd);
+        poly.clear();
+        for (std::size_t j = 0; j < n; ++j) {
+          const double idx = body.read(p.type, "faces");
+          if (static_cast<int>(k) != il) continue;
+          if (idx < 0 || idx >= static_cast<double>(mesh.vertices.size()) || !have_vertices)
+            throw InputError(path, "face " + std::to_string(i) + " references vertex " +
+                                       std::to_string(static_cast<long long>(idx)) + " out of range");
+          poly.push_back(static_cast<std::uint32_t>(idx));
+        }
+        if (static_cast<int>(k) != il) continue;
+        if (n < 3) throw InputError(path, "face " + std::to_string(i) + " has fewer than 3 vertices");
+        for (std::size_t j = 1; j + 1 < n; ++j) mesh.faces.push_back({poly[0], poly[j], poly[j + 1]});  // fan
+      }
     }
   }
-  if (!have_vertices) throw InputError(path, "PLY has no vertex element");
-  return mesh;
+
+  // Unknown element (edges, materials...): read and discard.
+  void skipElement(const Element& e) {
+    for (std::size_t i = 0; i < e.count; ++i)
+      for (const Property& p : e.props) {
+        if (!p.is_list) { body.read(p.type, e.name.c_str()); continue; }
+        const auto n = static_cast<long long>(body.read(p.count_type, e.name.c_str()));
+        for (long long j = 0; j < n; ++j) body.read(p.type, e.name.c_str());
+      }
+  }
+};
+
+}  // namespace
+
+TriangleMesh readPly(const std::string& path) {
+  const std::string data = slurp(path);
+  if (data.compare(0, 3, "ply") != 0 || data.size() < 4 || (data[3] != '\n' && data[3] != '\r'))
+    throw InputError(path, "not a PLY file (missing 'ply' magic)");
+  const Header header = readHeader(path, data);
+  BodyParser parser(path, data, header);
+  for (const Element& e : header.elements) {
+    if (e.name == "vertex") parser.readVertices(e);
+    else if (e.name == "face") parser.readFaces(e);
+    else parser.skipElement(e);
+  }
+  if (!parser.have_vertices) throw InputError(path, "PLY has no vertex element");
+  return std::move(parser.mesh);
 }
 
 void writePly(const std::string& path, const TriangleMesh& mesh) {

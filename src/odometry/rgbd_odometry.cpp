@@ -22,10 +22,6 @@ namespace vofusion {
 
 namespace {
 
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 // A camera's velocity at one instant, in its own coordinates: the colour-time correction moves a
 // keypoint over the frame's colour offset with it.
 struct CameraVelocity {
@@ -202,6 +198,30 @@ struct RgbdOdometry::Impl {
   bool estimate(const FrameFeatures& ref, const std::vector<OlderFrame>& older, const FrameFeatures& cur,
                 std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r, RigidFit& fit,
                 FitVelocities& velocities) const;
+
+  // process()'s steps. The frame's features, its STAR part matched against the references while NARF
+  // runs (split[0]: the reference, split[1 + i]: older[i]); the result's keypoint counts and shared maps.
+  FrameFeatures extract(const Frame& frame, const std::vector<OlderFrame>& older,
+                        std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r) const;
+  // The motion of the current frame relative to the last frame with a pose, as far as it got.
+  struct Motion {
+    bool ok = false;
+    bool keep_keyframe = false;  // the keyframe matched well: it stays the reference
+    RigidFit fit;
+    Eigen::Isometry3d T_last_cur = Eigen::Isometry3d::Identity();
+    Eigen::Isometry3d T_last_fitref = Eigen::Isometry3d::Identity();  // the fit's reference coordinates -> last's
+  };
+  // Against the keyframe first; a failed or weak keyframe match falls back to the last frame, and after
+  // a failure to the failed frame (which then becomes the reference).
+  Motion estimateMotion(FrameFeatures& cur, const std::vector<OlderFrame>& older_frames,
+                        std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r);
+  // Another reference when the first did not do: the motion and the correspondences come from it.
+  bool tryReference(FrameFeatures& other, FrameFeatures& cur, Motion& mo, OdometryResult& r) const;
+  // A fit's velocities become the reference's (final: the motions on both sides are known) and the
+  // current frame's (its arrival, and its velocity until the next frame's motion is known).
+  static void keepVelocities(FrameFeatures& ref, FrameFeatures& cur, const FitVelocities& v);
+  // After a motion: the current frame becomes the last frame or the new reference.
+  void advance(FrameFeatures cur, const Motion& mo);
 };
 
 FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, StageTimes& times) const {
@@ -497,38 +517,118 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   return true;
 }
 
+namespace {
+OdometryResult failed(OdometryResult& r, const std::string& why) {
+  r.success = false;
+  r.failure = why;
+  return r;
+}
+}  // namespace
+
+FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, const std::vector<OlderFrame>& older,
+                                          std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r) const {
+  Extraction ex;
+  FrameFeatures cur = begin(frame, ex, r.times);
+  split = std::vector<CrossCheckedHammingMatcher>(1 + older.size());
+  if (reference && ex.narf_job.valid()) {
+    ScopedStageTimer t(r.times, "matching");
+    split[0].add(cur.descriptors, reference->descriptors);
+    for (std::size_t i = 0; i < older.size(); ++i) split[1 + i].add(cur.descriptors, older[i].features->descriptors);
+  }
+  finish(frame, ex, cur, r.times);
+  if (params.brand.use_geometry) r.geometry = std::make_shared<const FrameGeometry>(FrameGeometry{ex.points, ex.normals});
+  r.features = std::make_shared<const DescribedKeypoints>(DescribedKeypoints{cur.descriptors, cur.points});
+  r.keypoints = int(cur.keypoints.size());
+  r.star_keypoints = cur.star;
+  r.narf_keypoints = cur.narf;
+  return cur;
+}
+
+void RgbdOdometry::Impl::keepVelocities(FrameFeatures& ref, FrameFeatures& cur, const FitVelocities& v) {
+  if (!ref.velocity_final) ref.velocity = v.at_reference;
+  ref.velocity_final = true;
+  cur.arrival = v.interval;
+  cur.arrival_seconds = cur.timestamp - ref.timestamp;
+  cur.velocity = v.at_current;
+}
+
+bool RgbdOdometry::Impl::tryReference(FrameFeatures& other, FrameFeatures& cur, Motion& mo, OdometryResult& r) const {
+  OdometryResult r2;
+  RigidFit fit2;
+  FitVelocities velocities2;
+  std::vector<CrossCheckedHammingMatcher> fresh;
+  const bool ok2 = estimate(other, {}, cur, fresh, r2, fit2, velocities2);
+  r.times.merge(r2.times);
+  if (!ok2 && mo.ok) return false;
+  if (ok2) keepVelocities(other, cur, velocities2);
+  mo.fit = fit2;
+  mo.T_last_cur = fit2.T;
+  mo.T_last_fitref.setIdentity();
+  r.matches = r2.matches, r.inliers = r2.inliers, r.rms_error = r2.rms_error, r.failure = r2.failure;
+  r.colour_time_capture = r2.colour_time_capture, r.capture_fitted_better = r2.capture_fitted_better;
+  r.inlier_current = std::move(r2.inlier_current);
+  r.inlier_reference = std::move(r2.inlier_reference);
+  mo.ok = ok2;
+  return ok2;
+}
+
+RgbdOdometry::Impl::Motion RgbdOdometry::Impl::estimateMotion(FrameFeatures& cur, const std::vector<OlderFrame>& older_frames,
+                                                              std::vector<CrossCheckedHammingMatcher>& split,
+                                                              OdometryResult& r) {
+  Motion mo;
+  FitVelocities velocities;
+  vote_this_frame = colour_velocity == ColourTimeVelocity::Auto && evidence.wantsVote();
+  mo.ok = estimate(*reference, older_frames, cur, split, r, mo.fit, velocities);
+  if (mo.ok) keepVelocities(*reference, cur, velocities);
+  mo.T_last_cur = T_kf_last.inverse() * mo.fit.T;
+  mo.T_last_fitref = T_kf_last.inverse();
+  mo.keep_keyframe = params.keyframe_min_inliers > 0 && mo.ok && r.inliers >= params.keyframe_min_inliers;
+  if (!mo.keep_keyframe && last) tryReference(*last, cur, mo, r);
+  // The last good reference no longer matches after a failure: try the failed frame (the caller knows
+  // its pose from elsewhere, e.g. ICP); it becomes the reference.
+  if (!mo.ok && failed && tryReference(*failed, cur, mo, r)) {
+    r.reference_index = failed->index;
+    r.reference_timestamp = failed->timestamp;
+    reference = std::move(*failed);
+    older.clear();
+    last.reset();
+    T_kf_last.setIdentity();
+  }
+  return mo;
+}
+
+void RgbdOdometry::Impl::advance(FrameFeatures cur, const Motion& mo) {
+  if (mo.keep_keyframe) {
+    T_kf_last = mo.fit.T;
+    last = std::move(cur);
+    return;
+  }
+  // The previous frame joins the older ones, all re-expressed in the current frame.
+  std::deque<std::pair<FrameFeatures, Eigen::Isometry3d>> next;
+  const Eigen::Isometry3d T_cur_last = mo.T_last_cur.inverse();
+  if (params.keyframe_min_inliers <= 0 && params.references > 1) {
+    next.emplace_back(std::move(*reference), T_cur_last);
+    for (auto& [f, T] : older)
+      if (int(next.size()) < params.references - 1) next.emplace_back(std::move(f), T_cur_last * T);
+  }
+  older = std::move(next);
+  reference = std::move(cur);
+  last.reset();
+  T_kf_last.setIdentity();
+}
+
 OdometryResult RgbdOdometry::process(const Frame& frame) {
   OdometryResult r;
   r.covariance.setIdentity();
   const OdometryParams& P = impl_->params;
   Impl& m = *impl_;
-  auto fail = [&r](const std::string& why) {
-    r.success = false;
-    r.failure = why;
-    return r;
-  };
-  if (!frame.valid()) return fail("empty frame");
-
+  if (!frame.valid()) return failed(r, "empty frame");
   // Frame to frame, the frames before the previous one join the fit (references > 1).
-  const bool keyframes = P.keyframe_min_inliers > 0;
   std::vector<Impl::OlderFrame> older;
-  if (!keyframes)
+  if (P.keyframe_min_inliers <= 0)
     for (const auto& [f, T] : m.older) older.push_back({&f, T});
-  Impl::Extraction ex;
-  FrameFeatures cur = m.begin(frame, ex, r.times);
-  // While NARF runs: match the STAR part against the reference and the older frames.
-  std::vector<CrossCheckedHammingMatcher> split(1 + older.size());
-  if (m.reference && ex.narf_job.valid()) {
-    ScopedStageTimer t(r.times, "matching");
-    split[0].add(cur.descriptors, m.reference->descriptors);
-    for (std::size_t i = 0; i < older.size(); ++i) split[1 + i].add(cur.descriptors, older[i].features->descriptors);
-  }
-  m.finish(frame, ex, cur, r.times);
-  if (P.brand.use_geometry) r.geometry = std::make_shared<const FrameGeometry>(FrameGeometry{ex.points, ex.normals});
-  r.features = std::make_shared<const DescribedKeypoints>(DescribedKeypoints{cur.descriptors, cur.points});
-  r.keypoints = int(cur.keypoints.size());
-  r.star_keypoints = cur.star;
-  r.narf_keypoints = cur.narf;
+  std::vector<CrossCheckedHammingMatcher> split;
+  FrameFeatures cur = m.extract(frame, older, split, r);
   if (!m.reference) {
     m.older.clear();
     m.reference = std::move(cur);
@@ -536,7 +636,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
     m.T_kf_last.setIdentity();
     r.reference_index = frame.index;
     r.reference_timestamp = frame.timestamp;
-    return fail("first frame");
+    return failed(r, "first frame");
   }
   // `motion` is relative to the last frame with a pose (the previous one unless that failed).
   const FrameFeatures& last = m.last ? *m.last : *m.reference;
@@ -544,95 +644,28 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   r.reference_timestamp = last.timestamp;
   // A frame with almost nothing to match (textureless, no depth) cannot be anyone's reference:
   // keep the last good one so the next frame can bridge the gap.
-  if (int(cur.keypoints.size()) < P.min_matches) return fail("too few keypoints (textureless or no depth)");
-
-  // Against the keyframe first; a failed or weak keyframe match falls back to the last frame and
-  // the current frame becomes the new keyframe.
-  RigidFit fit;
-  Impl::FitVelocities velocities;
-  // A fit's velocities become the reference's (final: the motions on both sides are known) and the
-  // current frame's (its arrival, and its velocity until the next frame's motion is known).
-  auto keepVelocities = [&cur, &m](FrameFeatures& ref, const Impl::FitVelocities& v) {
-    if (!ref.velocity_final) ref.velocity = v.at_reference;
-    ref.velocity_final = true;
-    cur.arrival = v.interval;
-    cur.arrival_seconds = cur.timestamp - ref.timestamp;
-    cur.velocity = v.at_current;
-  };
-  m.vote_this_frame = m.colour_velocity == ColourTimeVelocity::Auto && m.evidence.wantsVote();
-  bool ok = m.estimate(*m.reference, older, cur, split, r, fit, velocities);
-  if (ok) keepVelocities(*m.reference, velocities);
-  Eigen::Isometry3d T_last_cur = m.T_kf_last.inverse() * fit.T;
-  Eigen::Isometry3d T_last_fitref = m.T_kf_last.inverse();  // the fit's reference coordinates -> last's
-  const bool keep_keyframe = P.keyframe_min_inliers > 0 && ok && r.inliers >= P.keyframe_min_inliers;
-  // Another reference when the first did not do: the motion and the correspondences come from it.
-  auto tryReference = [&](FrameFeatures& other) {
-    OdometryResult r2;
-    RigidFit fit2;
-    Impl::FitVelocities velocities2;
-    std::vector<CrossCheckedHammingMatcher> fresh;
-    const bool ok2 = m.estimate(other, {}, cur, fresh, r2, fit2, velocities2);
-    r.times.merge(r2.times);
-    if (!ok2 && ok) return false;
-    if (ok2) keepVelocities(other, velocities2);
-    fit = fit2;
-    T_last_cur = fit2.T;
-    T_last_fitref.setIdentity();
-    r.matches = r2.matches, r.inliers = r2.inliers, r.rms_error = r2.rms_error, r.failure = r2.failure;
-    r.colour_time_capture = r2.colour_time_capture, r.capture_fitted_better = r2.capture_fitted_better;
-    r.inlier_current = std::move(r2.inlier_current);
-    r.inlier_reference = std::move(r2.inlier_reference);
-    ok = ok2;
-    return ok2;
-  };
-  if (!keep_keyframe && m.last) tryReference(*m.last);
-  // The last good reference no longer matches after a failure: try the failed frame (the caller knows
-  // its pose from elsewhere, e.g. ICP); it becomes the reference.
-  if (!ok && m.failed && tryReference(*m.failed)) {
-    r.reference_index = m.failed->index;
-    r.reference_timestamp = m.failed->timestamp;
-    m.reference = std::move(*m.failed);
-    m.older.clear();
-    m.last.reset();
-    m.T_kf_last.setIdentity();
-  }
-  if (!ok) {
+  if (int(cur.keypoints.size()) < P.min_matches) return failed(r, "too few keypoints (textureless or no depth)");
+  const Impl::Motion mo = m.estimateMotion(cur, older, split, r);
+  if (!mo.ok) {
     // The last good frame stays the reference (its pose is known): the next frame bridges the gap.
     m.failed = std::move(cur);
-    return fail(r.failure);
+    return failed(r, r.failure);
   }
   m.failed.reset();
   if (r.capture_fitted_better) m.evidence.add(*r.capture_fitted_better);
   r.colour_time_votes = m.evidence.compared();
   r.colour_time_capture_votes = m.evidence.captureBetter();
-  for (auto& p : r.inlier_reference) p = T_last_fitref * p;
-  if (keep_keyframe) {
-    m.T_kf_last = fit.T;
-    m.last = std::move(cur);
-  } else {
-    // The previous frame joins the older ones, all re-expressed in the current frame.
-    std::deque<std::pair<FrameFeatures, Eigen::Isometry3d>> next;
-    const Eigen::Isometry3d T_cur_last = T_last_cur.inverse();
-    if (!keyframes && P.references > 1) {
-      next.emplace_back(std::move(*m.reference), T_cur_last);
-      for (auto& [f, T] : m.older)
-        if (int(next.size()) < P.references - 1) next.emplace_back(std::move(f), T_cur_last * T);
-    }
-    m.older = std::move(next);
-    m.reference = std::move(cur);
-    m.last.reset();
-    m.T_kf_last.setIdentity();
-  }
+  for (auto& p : r.inlier_reference) p = mo.T_last_fitref * p;
+  m.advance(std::move(cur), mo);
 
-  Eigen::Matrix4d M = T_last_cur.matrix();
   mrpt::math::CMatrixDouble44 Mm;
   for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) Mm(i, j) = M(i, j);
+    for (int j = 0; j < 4; ++j) Mm(i, j) = mo.T_last_cur.matrix()(i, j);
   r.motion = mrpt::poses::CPose3D(Mm);
   // The covariance is the one of the fit that gave the motion (keyframe-to-current when a keyframe
   // was kept: an upper bound on the frame-to-frame uncertainty).
   for (int i = 0; i < 6; ++i)
-    for (int j = 0; j < 6; ++j) r.covariance(i, j) = fit.covariance(i, j);
+    for (int j = 0; j < 6; ++j) r.covariance(i, j) = mo.fit.covariance(i, j);
   r.failure.clear();
   r.success = true;
   return r;

@@ -203,6 +203,62 @@ class RawComponents {
   double total_area_ = 0.0;
 };
 
+// Pass 2's running sums: each region simplified and welded into the merged mesh.
+struct RegionMerge {
+  RegionMerge(TriangleMesh& m, MeshSimplification& s) : merged(m), simp(s) {}
+  TriangleMesh& merged;
+  MeshSimplification& simp;
+  fusion::SeamWelder welder;
+  double distance_sum = 0.0;
+  std::size_t failed = 0;
+  std::string failure;
+
+  void add(fusion::RegionMesh& r, const MeshCleanParams& region_params) {
+    const MeshCleanReport rr = simplifyRegion(r.mesh, r.on_seam, region_params);
+    if (!rr.success) ++failed, failure = rr.failure;  // the region stays as marching cubes made it
+    const MeshSimplification& s = rr.simplification;
+    if (s.ran) {
+      simp.ran = true;
+      simp.faces_before += s.faces_before;
+      simp.faces_after += s.faces_after;
+      simp.distance.samples += s.distance.samples;
+      distance_sum += s.distance.mean * double(s.distance.samples);
+      simp.distance.max = std::max(simp.distance.max, s.distance.max);
+    }
+    const std::vector<std::uint32_t> index = welder.add(r.mesh, r.on_seam, [&](std::size_t v) {
+      merged.vertices.push_back(r.mesh.vertices[v]);
+      if (!r.mesh.colors.empty()) merged.colors.push_back(r.mesh.colors[v]);
+    });
+    for (const auto& f : r.mesh.faces) merged.faces.push_back({index[f[0]], index[f[1]], index[f[2]]});
+  }
+};
+
+// The rest on the welded mesh: components are judged whole (those inside one region already were, on
+// raw faces), holes filled across seams; no second simplification.
+void cleanWelded(RegionMeshResult& out, const MeshCleanParams& params, const RawComponents* fragments,
+                 const MeshCleanStep& step, const RegionMerge& merge) {
+  MeshCleanParams rest = params;
+  rest.max_simplify_error = 0;
+  rest.target_faces = 0;
+  rest.target_edge_length = 0;
+  rest.min_component_faces = 0;  // judged on the raw mesh in pass 1...
+  rest.min_component_area = params.min_component_area;
+  // ...but a region's repair can cut a sliver off a kept component where it meets a seam (the
+  // sliver's other side, in the next region, was a few degenerate or non-manifold faces): pieces
+  // with less area than half of min_component_faces raw faces (mean raw face area) go too. Area,
+  // not faces: the welded mesh is simplified.
+  if (fragments && params.min_component_faces > 0)
+    rest.min_component_area = std::max(rest.min_component_area, 0.5 * params.min_component_faces * fragments->meanFaceArea());
+  const MeshSimplification regional = out.report.simplification;
+  const std::size_t removed = out.report.components_removed;
+  if (!out.mesh.empty()) out.report = cleanMesh(out.mesh, rest);
+  else out.report.success = true;
+  out.report.simplification = regional;
+  out.report.components_removed += removed;
+  out.report.steps.insert(out.report.steps.begin(), step);
+  if (merge.failed) out.report.failure = std::to_string(merge.failed) + " region(s) left unsimplified: " + merge.failure;
+}
+
 }  // namespace
 
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
@@ -213,13 +269,9 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   RegionMeshResult out;
   std::unique_ptr<PlyStream> raw;
   if (!raw_ply.empty()) raw = std::make_unique<PlyStream>(raw_ply);
-  fusion::SeamWelder welder, raw_count;
-  TriangleMesh& merged = out.mesh;
-  MeshSimplification& simp = out.report.simplification;
+  fusion::SeamWelder raw_count;
+  RegionMerge merge(out.mesh, out.report.simplification);
   MeshCleanStep step{"regions"};
-  double distance_sum = 0.0;
-  std::size_t failed = 0;
-  std::string failure;
   const auto t0 = std::chrono::steady_clock::now();
   // Pass 1 (marching cubes only): which fragments are too small, judged whole across seams.
   MeshCleanParams region_params = params;
@@ -242,26 +294,13 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     out.raw_faces += r.mesh.faces.size();
     step.faces_before += r.mesh.faces.size();
     if (fragments) fragments->filter(r);
-    const MeshCleanReport rr = simplifyRegion(r.mesh, r.on_seam, region_params);
-    if (!rr.success) ++failed, failure = rr.failure;  // the region stays as marching cubes made it
-    const MeshSimplification& s = rr.simplification;
-    if (s.ran) {
-      simp.ran = true;
-      simp.faces_before += s.faces_before;
-      simp.faces_after += s.faces_after;
-      simp.distance.samples += s.distance.samples;
-      distance_sum += s.distance.mean * double(s.distance.samples);
-      simp.distance.max = std::max(simp.distance.max, s.distance.max);
-    }
-    const std::vector<std::uint32_t> index = welder.add(r.mesh, r.on_seam, [&](std::size_t v) {
-      merged.vertices.push_back(r.mesh.vertices[v]);
-      if (!r.mesh.colors.empty()) merged.colors.push_back(r.mesh.colors[v]);
-    });
-    for (const auto& f : r.mesh.faces) merged.faces.push_back({index[f[0]], index[f[1]], index[f[2]]});
+    merge.add(r, region_params);
     told(2, r);
   });
+  TriangleMesh& merged = out.mesh;
+  MeshSimplification& simp = out.report.simplification;
   if (merged.colors.size() != merged.vertices.size()) merged.colors.clear();
-  if (simp.distance.samples) simp.distance.mean = distance_sum / double(simp.distance.samples);
+  if (simp.distance.samples) simp.distance.mean = merge.distance_sum / double(simp.distance.samples);
   step.faces_after = merged.faces.size();
   step.vertices_after = merged.vertices.size();
   step.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -272,32 +311,8 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     out.raw_vertices = raw->vertices();
   }
   step.vertices_before = out.raw_vertices;
-
   if (regions_done) regions_done();
-  // The rest on the welded mesh: components are judged whole (those inside one region already
-  // were, on raw faces), holes filled across seams; no second simplification.
-  MeshCleanParams rest = params;
-  rest.max_simplify_error = 0;
-  rest.target_faces = 0;
-  rest.target_edge_length = 0;
-  rest.min_component_faces = 0;  // judged on the raw mesh in pass 1...
-  rest.min_component_area = params.min_component_area;
-  // ...but a region's repair can cut a sliver off a kept component where it meets a seam (the
-  // sliver's other side, in the next region, was a few degenerate or non-manifold faces): pieces
-  // with less area than half of min_component_faces raw faces (mean raw face area) go too. Area,
-  // not faces: the welded mesh is simplified.
-  if (fragments && params.min_component_faces > 0)
-    rest.min_component_area = std::max(rest.min_component_area, 0.5 * params.min_component_faces * fragments->meanFaceArea());
-  const MeshSimplification regional = simp;
-  const std::size_t removed = out.report.components_removed;
-  if (!merged.empty()) out.report = cleanMesh(merged, rest);
-  else out.report.success = true;
-  out.report.simplification = regional;
-  out.report.components_removed += removed;
-  out.report.steps.insert(out.report.steps.begin(), step);
-  if (failed) {
-    out.report.failure = std::to_string(failed) + " region(s) left unsimplified: " + failure;
-  }
+  cleanWelded(out, params, fragments.get(), step, merge);
   return out;
 }
 

@@ -51,23 +51,16 @@ std::optional<TriangleMesh> withoutCeiling(const TriangleMesh& mesh, const Traje
   return out;
 }
 
-void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width, int height,
-                   const std::optional<Eigen::Vector3d>& up_vector) {
-  if (width < 16 || height < 16 || width > 8192 || height > 8192)
-    throw InputError(png, "unreasonable image size " + std::to_string(width) + "x" + std::to_string(height));
-  const Trajectory empty;
-  const Trajectory& traj = path ? *path : empty;
-  SceneOptions opt;
-  opt.frustum_every_k = 0;
-  opt.up_vector = up_vector;
-  // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
-  // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
-  const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up, opt.up_vector);
-  const std::optional<TriangleMesh> cut = withoutCeiling(mesh, traj, up);  // a copy only when there is a ceiling
-  const auto scene = buildScene(cut ? *cut : mesh, traj, nullptr, CameraIntrinsics{}, opt);
-  scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
+namespace {
 
-  // Frame the bulk of the mesh (2nd to 98th percentile per axis), not its stray fragments.
+// Axis-aligned box in the z-up display frame.
+struct Bounds {
+  Eigen::Vector3d lo, hi;
+};
+
+// Frame the bulk of the mesh (2nd to 98th percentile per axis), not its stray fragments, and the
+// camera path; the path alone when there is no mesh.
+Bounds framedBounds(const TriangleMesh& mesh, const Trajectory& traj, const mrpt::poses::CPose3D& up) {
   std::vector<double> axis[3];
   const auto add = [&](double x, double y, double z) {
     double g[3];
@@ -95,6 +88,12 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
       lo = lo.cwiseMin(Eigen::Vector3d(g[0], g[1], g[2]));
       hi = hi.cwiseMax(Eigen::Vector3d(g[0], g[1], g[2]));
     }
+  return {lo, hi};
+}
+
+// The cameras' mean viewing direction projected on the ground (display frame), unit length;
+// diagonal when there are no cameras or they look straight down.
+Eigen::Vector2d meanGroundForward(const Trajectory& traj, const mrpt::poses::CPose3D& up) {
   Eigen::Vector2d forward(1, 1);
   if (!traj.empty()) {
     Eigen::Vector3d f = Eigen::Vector3d::Zero();
@@ -105,10 +104,17 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
     if (f.head<2>().norm() > 1e-6) forward = f.head<2>();
   }
   forward.normalize();
-  const Eigen::Vector3d centre = 0.5 * (lo + hi);
-  const double radius = std::max(0.05, 0.5 * (hi - lo).norm());
+  return forward;
+}
+
+// Looks at the centre of `b` from 40 deg above and behind the cameras, far enough back for all of
+// it to fit a width x height picture.
+void aimCamera(mrpt::opengl::COpenGLScene& scene, const Bounds& b, const Eigen::Vector2d& forward, int width,
+               int height) {
+  const Eigen::Vector3d centre = 0.5 * (b.lo + b.hi);
+  const double radius = std::max(0.05, 0.5 * (b.hi - b.lo).norm());
   const float fov_deg = 45.f;
-  auto& cam = scene->getViewport()->getCamera();
+  auto& cam = scene.getViewport()->getCamera();
   cam.setProjectiveFOVdeg(fov_deg);
   cam.setPointingAt(float(centre.x()), float(centre.y()), float(centre.z()));
   // The eye sits opposite to where the cameras look (azimuth is measured from the target to the eye).
@@ -119,13 +125,17 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   cam.setZoomDistance(float(distance));
   // Tight clip planes: the default near plane (1 cm) leaves too little depth resolution at a few
   // metres and lets the grid under the floor show through it.
-  scene->getViewport()->setViewportClipDistances(float(std::max(0.05, 0.1 * distance)), float(distance + 20 * radius));
+  scene.getViewport()->setViewportClipDistances(float(std::max(0.05, 0.1 * distance)), float(distance + 20 * radius));
+}
 
+// Renders the scene off-screen through its viewport's camera and writes it to `png`.
+void writeRenderedPng(const std::string& png, mrpt::opengl::COpenGLScene& scene, int width, int height) {
+  const auto& cam = scene.getViewport()->getCamera();
   mrpt::img::CImage img;
   try {
     mrpt::opengl::CFBORender fbo(static_cast<unsigned>(width), static_cast<unsigned>(height));
-    fbo.setCamera(*scene, cam);
-    fbo.render_RGB(*scene, img);
+    fbo.setCamera(scene, cam);
+    fbo.render_RGB(scene, img);
   } catch (const std::exception& e) {
     std::string msg = e.what();
     msg = msg.substr(0, msg.find('\n'));
@@ -135,6 +145,29 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   std::vector<uchar> bytes;
   if (m.empty() || !cv::imencode(".png", m, bytes)) throw InputError(png, "cannot encode the rendered image");
   writeFileAtomically(png, std::string(bytes.begin(), bytes.end()));
+}
+
+}  // namespace
+
+void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width, int height,
+                   const std::optional<Eigen::Vector3d>& up_vector) {
+  if (width < 16 || height < 16 || width > 8192 || height > 8192)
+    throw InputError(png, "unreasonable image size " + std::to_string(width) + "x" + std::to_string(height));
+  const Trajectory empty;
+  const Trajectory& traj = path ? *path : empty;
+  SceneOptions opt;
+  opt.frustum_every_k = 0;
+  opt.up_vector = up_vector;
+  // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
+  // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
+  const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up, opt.up_vector);
+  const std::optional<TriangleMesh> cut = withoutCeiling(mesh, traj, up);  // a copy only when there is a ceiling
+  const auto scene = buildScene(cut ? *cut : mesh, traj, nullptr, CameraIntrinsics{}, opt);
+  scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
+  const Bounds bounds = framedBounds(mesh, traj, up);
+  const Eigen::Vector2d forward = meanGroundForward(traj, up);
+  aimCamera(*scene, bounds, forward, width, height);
+  writeRenderedPng(png, *scene, width, height);
 }
 
 }  // namespace vofusion

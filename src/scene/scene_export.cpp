@@ -161,66 +161,69 @@ static int frontFacesCameras(const TriangleMesh& mesh, const Trajectory& path) {
   return vote > 0 ? 1 : -1;
 }
 
-std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh, const Trajectory& path_est,
-                                                        const Trajectory* ground_truth, const CameraIntrinsics& cam,
-                                                        const SceneOptions& opt) {
-  auto scene = std::make_shared<mrpt::opengl::COpenGLScene>();
-  const CPose3D up = sceneUpRotation(path_est.empty() && ground_truth ? *ground_truth : path_est, &mesh, opt.up, opt.up_vector);
+namespace {
 
-  auto world = mrpt::opengl::CSetOfObjects::Create();
-  world->setName("world");
-  world->setPose(up);
-  if (!mesh.empty()) {
-    auto tris = meshTriangles(mesh);
-    if (opt.cull_hidden_side) {
-      const int side = frontFacesCameras(mesh, path_est);
-      if (side != 0) tris->cullFaces(side > 0 ? mrpt::opengl::TCullFace::BACK : mrpt::opengl::TCullFace::FRONT);
-    }
-    world->insert(tris);
-    if (!mesh.colors.empty()) {
-      // The colours already carry the scene's shading: light softly so they read true.
-      auto& light = scene->getViewport()->lightParameters();
-      light.ambient = mrpt::img::TColorf(0.6f, 0.6f, 0.6f, 1.f);
-      light.diffuse = mrpt::img::TColorf(0.5f, 0.5f, 0.5f, 1.f);
-      light.specular = mrpt::img::TColorf(0.f, 0.f, 0.f, 1.f);
-    }
+// The mesh, its hidden side culled when asked, lit softly when its colours carry the shading.
+void insertMesh(mrpt::opengl::COpenGLScene& scene, mrpt::opengl::CSetOfObjects& world, const TriangleMesh& mesh,
+                const Trajectory& path_est, const SceneOptions& opt) {
+  auto tris = meshTriangles(mesh);
+  if (opt.cull_hidden_side) {
+    const int side = frontFacesCameras(mesh, path_est);
+    if (side != 0) tris->cullFaces(side > 0 ? mrpt::opengl::TCullFace::BACK : mrpt::opengl::TCullFace::FRONT);
   }
-  if (!path_est.empty()) world->insert(pathLines(path_est, "path", mrpt::img::TColor(20, 60, 230)));
-  if (ground_truth && !ground_truth->empty())
-    world->insert(pathLines(*ground_truth, "ground_truth", mrpt::img::TColor(20, 170, 40)));
-  if (opt.frustum_every_k > 0 && !path_est.empty()) {
-    auto frustums = mrpt::opengl::CSetOfObjects::Create();
-    frustums->setName("frustums");
-    const double hfov = 2 * std::atan(0.5 * cam.width / cam.fx) * 180 / M_PI;
-    const double vfov = 2 * std::atan(0.5 * cam.height / cam.fy) * 180 / M_PI;
-    for (std::size_t i = 0; i < path_est.size(); i += std::size_t(opt.frustum_every_k)) {
-      auto f = mrpt::opengl::CFrustum::Create(0.005f, float(opt.frustum_depth), float(hfov), float(vfov), 1.5f, true,
-                                              false);
-      f->setColor_u8(mrpt::img::TColor(230, 60, 20));
-      f->setPose(frustumPose(path_est[i].pose));
-      frustums->insert(f);
-    }
-    world->insert(frustums);
+  world.insert(tris);
+  if (!mesh.colors.empty()) {
+    // The colours already carry the scene's shading: light softly so they read true.
+    auto& light = scene.getViewport()->lightParameters();
+    light.ambient = mrpt::img::TColorf(0.6f, 0.6f, 0.6f, 1.f);
+    light.diffuse = mrpt::img::TColorf(0.5f, 0.5f, 0.5f, 1.f);
+    light.specular = mrpt::img::TColorf(0.f, 0.f, 0.f, 1.f);
   }
-  if (!opt.keyframes.empty()) {
-    auto kf = mrpt::opengl::CPointCloud::Create();
-    kf->setName("keyframes");
-    kf->setColor_u8(mrpt::img::TColor(250, 150, 20));
-    kf->setPointSize(6.f);
-    for (const auto& k : opt.keyframes) kf->insertPoint(float(k.x()), float(k.y()), float(k.z()));
-    world->insert(kf);
-  }
-  if (!opt.loop_edges.empty()) {
-    auto lines = mrpt::opengl::CSetOfLines::Create();
-    lines->setName("loop_edges");
-    lines->setColor_u8(mrpt::img::TColor(220, 20, 20));
-    lines->setLineWidth(3.f);
-    for (const auto& [a, b] : opt.loop_edges) lines->appendLine(a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
-    world->insert(lines);
-  }
-  scene->insert(world);
+}
 
-  // Extent of everything in the z-up display frame, for the grid and the default camera.
+// A camera frustum every opt.frustum_every_k poses of the path.
+mrpt::opengl::CSetOfObjects::Ptr frustumMarkers(const Trajectory& path_est, const CameraIntrinsics& cam,
+                                                const SceneOptions& opt) {
+  auto frustums = mrpt::opengl::CSetOfObjects::Create();
+  frustums->setName("frustums");
+  const double hfov = 2 * std::atan(0.5 * cam.width / cam.fx) * 180 / M_PI;
+  const double vfov = 2 * std::atan(0.5 * cam.height / cam.fy) * 180 / M_PI;
+  for (std::size_t i = 0; i < path_est.size(); i += std::size_t(opt.frustum_every_k)) {
+    auto f = mrpt::opengl::CFrustum::Create(0.005f, float(opt.frustum_depth), float(hfov), float(vfov), 1.5f, true,
+                                            false);
+    f->setColor_u8(mrpt::img::TColor(230, 60, 20));
+    f->setPose(frustumPose(path_est[i].pose));
+    frustums->insert(f);
+  }
+  return frustums;
+}
+
+mrpt::opengl::CPointCloud::Ptr keyframeMarkers(const SceneOptions& opt) {
+  auto kf = mrpt::opengl::CPointCloud::Create();
+  kf->setName("keyframes");
+  kf->setColor_u8(mrpt::img::TColor(250, 150, 20));
+  kf->setPointSize(6.f);
+  for (const auto& k : opt.keyframes) kf->insertPoint(float(k.x()), float(k.y()), float(k.z()));
+  return kf;
+}
+
+mrpt::opengl::CSetOfLines::Ptr loopEdgeLines(const SceneOptions& opt) {
+  auto lines = mrpt::opengl::CSetOfLines::Create();
+  lines->setName("loop_edges");
+  lines->setColor_u8(mrpt::img::TColor(220, 20, 20));
+  lines->setLineWidth(3.f);
+  for (const auto& [a, b] : opt.loop_edges) lines->appendLine(a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+  return lines;
+}
+
+// Axis-aligned box, in the z-up display frame.
+struct Extent {
+  Eigen::Vector3d lo, hi;
+};
+
+// Extent of everything in the z-up display frame, for the grid and the default camera.
+Extent displayExtent(const CPose3D& up, const TriangleMesh& mesh, const Trajectory& path_est,
+                     const Trajectory* ground_truth) {
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e30), hi = -lo;
   const auto grow = [&](double x, double y, double z) {
     double gx, gy, gz;
@@ -233,24 +236,57 @@ std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh,
   if (ground_truth)
     for (const auto& p : *ground_truth) grow(p.pose.x(), p.pose.y(), p.pose.z());
   if (lo.x() > hi.x()) lo = hi = Eigen::Vector3d::Zero();
+  return {lo, hi};
+}
 
-  if (opt.grid) {
-    const double s = opt.grid_spacing > 0 ? opt.grid_spacing : 0.5;
-    const auto down = [s](double v) { return std::floor(v / s) * s - s; };
-    const auto upr = [s](double v) { return std::ceil(v / s) * s + s; };
-    auto grid = mrpt::opengl::CGridPlaneXY::Create(float(down(lo.x())), float(upr(hi.x())), float(down(lo.y())),
-                                                   float(upr(hi.y())), float(lo.z() - 0.02 - 0.01 * (hi - lo).norm()), float(s), 1.0f);
-    grid->setName("grid");
-    grid->setColor_u8(mrpt::img::TColor(150, 150, 150, 160));
-    scene->insert(grid);
-  }
+// A ground grid under everything, one cell margin around it.
+mrpt::opengl::CGridPlaneXY::Ptr groundGrid(const Extent& e, const SceneOptions& opt) {
+  const Eigen::Vector3d& lo = e.lo;
+  const Eigen::Vector3d& hi = e.hi;
+  const double s = opt.grid_spacing > 0 ? opt.grid_spacing : 0.5;
+  const auto down = [s](double v) { return std::floor(v / s) * s - s; };
+  const auto upr = [s](double v) { return std::ceil(v / s) * s + s; };
+  auto grid = mrpt::opengl::CGridPlaneXY::Create(float(down(lo.x())), float(upr(hi.x())), float(down(lo.y())),
+                                                 float(upr(hi.y())), float(lo.z() - 0.02 - 0.01 * (hi - lo).norm()),
+                                                 float(s), 1.0f);
+  grid->setName("grid");
+  grid->setColor_u8(mrpt::img::TColor(150, 150, 150, 160));
+  return grid;
+}
 
-  auto& camera = scene->getViewport()->getCamera();
-  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+// The default view: the whole extent, seen obliquely from above.
+void aimDefaultCamera(mrpt::opengl::COpenGLScene& scene, const Extent& e) {
+  auto& camera = scene.getViewport()->getCamera();
+  const Eigen::Vector3d centre = 0.5 * (e.lo + e.hi);
   camera.setPointingAt(float(centre.x()), float(centre.y()), float(centre.z()));
-  camera.setZoomDistance(float(std::max(1.0, 1.8 * (hi - lo).norm())));
+  camera.setZoomDistance(float(std::max(1.0, 1.8 * (e.hi - e.lo).norm())));
   camera.setAzimuthDegrees(-135.f);
   camera.setElevationDegrees(35.f);
+}
+
+}  // namespace
+
+std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh, const Trajectory& path_est,
+                                                        const Trajectory* ground_truth, const CameraIntrinsics& cam,
+                                                        const SceneOptions& opt) {
+  auto scene = std::make_shared<mrpt::opengl::COpenGLScene>();
+  const CPose3D up = sceneUpRotation(path_est.empty() && ground_truth ? *ground_truth : path_est, &mesh, opt.up, opt.up_vector);
+
+  auto world = mrpt::opengl::CSetOfObjects::Create();
+  world->setName("world");
+  world->setPose(up);
+  if (!mesh.empty()) insertMesh(*scene, *world, mesh, path_est, opt);
+  if (!path_est.empty()) world->insert(pathLines(path_est, "path", mrpt::img::TColor(20, 60, 230)));
+  if (ground_truth && !ground_truth->empty())
+    world->insert(pathLines(*ground_truth, "ground_truth", mrpt::img::TColor(20, 170, 40)));
+  if (opt.frustum_every_k > 0 && !path_est.empty()) world->insert(frustumMarkers(path_est, cam, opt));
+  if (!opt.keyframes.empty()) world->insert(keyframeMarkers(opt));
+  if (!opt.loop_edges.empty()) world->insert(loopEdgeLines(opt));
+  scene->insert(world);
+
+  const Extent extent = displayExtent(up, mesh, path_est, ground_truth);
+  if (opt.grid) scene->insert(groundGrid(extent, opt));
+  aimDefaultCamera(*scene, extent);
   return scene;
 }
 

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -253,6 +254,20 @@ struct SyntheticSequence::Impl {
     }
     return col;
   }
+
+  // Scene set-up, one per --scene value: geometry and the hand-held path (waves) through it.
+  void buildScene(const std::string& scene, std::uint32_t s, double duration);
+  void buildRoom(std::uint32_t s);
+  void buildCorridor(std::uint32_t s, double duration);
+  void buildBareWall(std::uint32_t s);
+  void buildLoop(std::uint32_t s, double duration);
+  void buildLookalike(std::uint32_t s, double duration);
+  void buildLongwalk(std::uint32_t s, double duration);
+  void buildTrajectory(const std::string& trajectory, std::uint32_t s);
+
+  // Ray-casts the frame at time t seen from `camera` (its pose at t): colour, exact depth (truth,
+  // 0 = nothing hit) and the grazing-angle mask (1 = the depth camera reads nothing there).
+  void trace(double t, const mrpt::poses::CPose3D& camera, cv::Mat& rgb, cv::Mat& truth, cv::Mat& grazing) const;
 };
 
 static Wave wave(double c0, double rate, double a0, double f0, double a1, double f1, std::uint32_t seed, int k) {
@@ -265,6 +280,136 @@ static Wave wave(double c0, double rate, double a0, double f0, double a1, double
   return w;
 }
 
+void SyntheticSequence::Impl::buildScene(const std::string& scene, std::uint32_t s, double duration) {
+  // Velocity bounds (sum of amp*freq per axis) keep speed <= ~0.45 m/s and turn rate <= ~30 deg/s.
+  if (scene == "room") buildRoom(s);
+  else if (scene == "corridor") buildCorridor(s, duration);
+  else if (scene == "bare_wall") buildBareWall(s);
+  else if (scene == "loop") buildLoop(s, duration);
+  else if (scene == "lookalike") buildLookalike(s, duration);
+  else if (scene == "longwalk") buildLongwalk(s, duration);
+  else
+    throw InputError("--scene",
+                     "unknown scene '" + scene + "' (expected room, corridor, bare_wall, loop, lookalike or longwalk)");
+}
+
+void SyntheticSequence::Impl::buildRoom(std::uint32_t s) {
+  boxes = {{{-2.5, -2.0, 0.0}, {2.5, 2.0, 3.0}, true},
+           {{1.2, -1.5, 0.0}, {2.2, -0.6, 0.8}, false},
+           {{1.6, 0.5, 0.0}, {2.5, 1.4, 1.2}, false},
+           {{-0.5, 1.3, 0.0}, {0.3, 2.0, 0.6}, false},
+           {{0.9, -0.3, 0.0}, {1.4, 0.3, 0.45}, false},
+           {{-2.5, -1.0, 0.0}, {-1.8, 0.0, 1.8}, false}};
+  x = wave(-0.2, 0, 0.5, 0.45, 0.1, 1.1, s, 0);
+  y = wave(0, 0, 0.35, 0.35, 0.08, 1.3, s, 1);
+  z = wave(1.4, 0, 0.1, 0.6, 0.03, 1.7, s, 2);
+  yaw = wave(0, 0, 0.9, 0.25, 0.08, 1.2, s, 3);
+  pitch = wave(-0.12, 0, 0.12, 0.4, 0.04, 1.5, s, 4);
+  roll = wave(0, 0, 0.06, 0.5, 0.03, 1.9, s, 5);
+}
+
+void SyntheticSequence::Impl::buildCorridor(std::uint32_t s, double duration) {
+  boxes = {{{-1.0, -1.1, 0.0}, {12.0, 1.1, 2.6}, true},
+           {{2.0, 0.6, 0.0}, {2.6, 1.1, 1.0}, false},
+           {{4.0, -1.1, 0.0}, {4.5, -0.5, 1.4}, false},
+           {{6.5, 0.5, 0.0}, {7.2, 1.1, 0.7}, false},
+           {{8.5, -1.1, 0.0}, {9.0, -0.6, 1.8}, false},
+           {{10.5, 0.7, 0.0}, {11.0, 1.1, 1.2}, false}};
+  const double speed = std::min(0.4, 9.5 / duration);
+  x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
+  y = wave(0, 0, 0.2, 0.4, 0.04, 1.3, s, 1);
+  z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+  yaw = wave(0, 0, 0.35, 0.3, 0.06, 1.1, s, 3);
+  pitch = wave(-0.05, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
+  roll = wave(0, 0, 0.05, 0.5, 0.02, 1.8, s, 5);
+}
+
+void SyntheticSequence::Impl::buildBareWall(std::uint32_t s) {
+  planes = {{Vec3(0, 1, 0), kBareWallY, Vec3(1, 0, 0), Vec3(0, 0, 1)}};
+  x = wave(0, 0.2, 0.3, 0.5, 0.03, 1.3, s, 0);
+  y = wave(0, 0, 0.1, 0.4, 0.02, 1.1, s, 1);
+  z = wave(1.4, 0, 0.15, 0.45, 0.02, 1.5, s, 2);
+  yaw = wave(M_PI / 2, 0, 0.1, 0.35, 0.02, 1.2, s, 3);
+  pitch = wave(0, 0, 0.06, 0.5, 0.02, 1.4, s, 4);
+  roll = wave(0, 0, 0.04, 0.6, 0.02, 1.7, s, 5);
+}
+
+void SyntheticSequence::Impl::buildLoop(std::uint32_t s, double duration) {
+  // A corridor 2 m wide around a 6 x 4 m block (outer walls 10 x 8 m), walked once around and on
+  // for another 15 % of a lap, facing along it: the end sees again what the start saw, after a
+  // 26 m loop's drift.
+  boxes = {{{-5.0, -4.0, 0.0}, {5.0, 4.0, 2.6}, true},
+           {{-3.0, -2.0, 0.0}, {3.0, 2.0, 2.6}, false},
+           {{1.0, -4.0, 0.0}, {1.6, -3.5, 1.2}, false},
+           {{4.4, -1.0, 0.0}, {5.0, 0.2, 0.9}, false},
+           {{-0.5, 3.4, 0.0}, {0.5, 4.0, 1.5}, false},
+           {{-5.0, 1.0, 0.0}, {-4.5, 1.8, 0.7}, false},
+           {{-2.0, -2.5, 0.0}, {-1.4, -2.0, 1.0}, false}};
+  ring_a = 4.0;
+  ring_b = 3.0;
+  ring_r = 1.0;
+  laps = 1.15;
+  this->duration = duration;
+  x = wave(0, 0, 0.06, 0.7, 0.02, 1.9, s, 0);
+  y = wave(0, 0, 0.06, 0.6, 0.02, 1.7, s, 1);
+  z = wave(1.4, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+  yaw = wave(0, 0, 0.12, 0.5, 0.03, 1.3, s, 3);
+  pitch = wave(-0.1, 0, 0.06, 0.45, 0.03, 1.4, s, 4);
+  roll = wave(0, 0, 0.04, 0.5, 0.02, 1.8, s, 5);
+}
+
+void SyntheticSequence::Impl::buildLookalike(std::uint32_t s, double duration) {
+  // A corridor whose walls and furniture repeat every 3 m (same texture, same boxes): the camera
+  // slides along one wall for more than a period, so it sees a place that looks exactly like
+  // one 3 m behind. Joining the two would be a false loop.
+  const double P = 3.0;
+  texture_period_x = P;
+  boxes = {{{-1.0, -1.5, 0.0}, {3 * P + 1.0, 1.5, 2.6}, true}};
+  for (int k = 0; k < 4; ++k) {
+    boxes.push_back({{0.4 + k * P, 0.9, 0.0}, {1.1 + k * P, 1.5, 0.8}, false, 1});
+    boxes.push_back({{1.9 + k * P, 1.1, 0.0}, {2.3 + k * P, 1.5, 1.6}, false, 2});
+  }
+  const double speed = std::min(0.4, 1.6 * P / duration);
+  x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
+  y = wave(-0.3, 0, 0.1, 0.4, 0.03, 1.3, s, 1);
+  z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+  yaw = wave(M_PI / 2, 0, 0.25, 0.35, 0.05, 1.1, s, 3);  // facing the +y wall
+  pitch = wave(-0.1, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
+  roll = wave(0, 0, 0.04, 0.5, 0.02, 1.8, s, 5);
+}
+
+void SyntheticSequence::Impl::buildLongwalk(std::uint32_t s, double duration) {
+  // A straight corridor 2.2 m wide walked at 1 m/s for the whole sequence (30 m per 900 frames at
+  // 30 fps: 100 m = 3000 frames), furniture every ~1.5 m on alternating sides: a map that only grows,
+  // for memory bounded by the volume rather than by the area walked (bench/longrun).
+  const double speed = 1.0, length = speed * duration + 6.0;
+  boxes = {{{-1.0, -1.1, 0.0}, {length, 1.1, 2.6}, true}};
+  for (int k = 0; 1.0 + 1.5 * k < length - 1.0; ++k) {
+    const double x0 = 1.0 + 1.5 * k + 0.6 * unit(hash(s, 600, k, 0)), w = 0.3 + 0.4 * unit(hash(s, 600, k, 1));
+    const double d = 0.3 + 0.3 * unit(hash(s, 600, k, 2)), h = 0.4 + 1.4 * unit(hash(s, 600, k, 3));
+    if (k % 2 == 0) boxes.push_back({{x0, 1.1 - d, 0.0}, {x0 + w, 1.1, h}, false});
+    else boxes.push_back({{x0, -1.1, 0.0}, {x0 + w, -1.1 + d, h}, false});
+  }
+  x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
+  y = wave(0, 0, 0.2, 0.4, 0.04, 1.3, s, 1);
+  z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
+  yaw = wave(0, 0, 0.35, 0.3, 0.06, 1.1, s, 3);
+  pitch = wave(-0.05, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
+  roll = wave(0, 0, 0.05, 0.5, 0.02, 1.8, s, 5);
+}
+
+void SyntheticSequence::Impl::buildTrajectory(const std::string& trajectory, std::uint32_t s) {
+  if (trajectory == "shake") {
+    // Hand shake on top of the path: each angle gets two faster sinusoids (rad, rad/s); with the
+    // path's own turns the camera turns at ~80 deg/s on average and up to ~150 deg/s.
+    shake = {wave(0, 0, 0.19, 6.0, 0.06, 13.0, s, 10),   // yaw
+             wave(0, 0, 0.12, 7.5, 0.05, 15.0, s, 11),   // pitch
+             wave(0, 0, 0.085, 9.0, 0.035, 17.0, s, 12)};  // roll
+  } else if (trajectory != "smooth") {
+    throw InputError("--trajectory", "unknown trajectory '" + trajectory + "' (expected smooth or shake)");
+  }
+}
+
 SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   auto impl = std::make_shared<Impl>();
   impl->opts = o;
@@ -273,112 +418,8 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   if (!(o.max_range > kKinectMinRange)) throw InputError("--max-range", "must exceed 0.4 m");
   const std::uint32_t s = o.seed;
   const double duration = std::max(1.0, double(o.frames) / o.fps);
-  // Velocity bounds (sum of amp*freq per axis) keep speed <= ~0.45 m/s and turn rate <= ~30 deg/s.
-  if (o.scene == "room") {
-    impl->boxes = {{{-2.5, -2.0, 0.0}, {2.5, 2.0, 3.0}, true},
-                   {{1.2, -1.5, 0.0}, {2.2, -0.6, 0.8}, false},
-                   {{1.6, 0.5, 0.0}, {2.5, 1.4, 1.2}, false},
-                   {{-0.5, 1.3, 0.0}, {0.3, 2.0, 0.6}, false},
-                   {{0.9, -0.3, 0.0}, {1.4, 0.3, 0.45}, false},
-                   {{-2.5, -1.0, 0.0}, {-1.8, 0.0, 1.8}, false}};
-    impl->x = wave(-0.2, 0, 0.5, 0.45, 0.1, 1.1, s, 0);
-    impl->y = wave(0, 0, 0.35, 0.35, 0.08, 1.3, s, 1);
-    impl->z = wave(1.4, 0, 0.1, 0.6, 0.03, 1.7, s, 2);
-    impl->yaw = wave(0, 0, 0.9, 0.25, 0.08, 1.2, s, 3);
-    impl->pitch = wave(-0.12, 0, 0.12, 0.4, 0.04, 1.5, s, 4);
-    impl->roll = wave(0, 0, 0.06, 0.5, 0.03, 1.9, s, 5);
-  } else if (o.scene == "corridor") {
-    impl->boxes = {{{-1.0, -1.1, 0.0}, {12.0, 1.1, 2.6}, true},
-                   {{2.0, 0.6, 0.0}, {2.6, 1.1, 1.0}, false},
-                   {{4.0, -1.1, 0.0}, {4.5, -0.5, 1.4}, false},
-                   {{6.5, 0.5, 0.0}, {7.2, 1.1, 0.7}, false},
-                   {{8.5, -1.1, 0.0}, {9.0, -0.6, 1.8}, false},
-                   {{10.5, 0.7, 0.0}, {11.0, 1.1, 1.2}, false}};
-    const double speed = std::min(0.4, 9.5 / duration);
-    impl->x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
-    impl->y = wave(0, 0, 0.2, 0.4, 0.04, 1.3, s, 1);
-    impl->z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
-    impl->yaw = wave(0, 0, 0.35, 0.3, 0.06, 1.1, s, 3);
-    impl->pitch = wave(-0.05, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
-    impl->roll = wave(0, 0, 0.05, 0.5, 0.02, 1.8, s, 5);
-  } else if (o.scene == "bare_wall") {
-    impl->planes = {{Vec3(0, 1, 0), kBareWallY, Vec3(1, 0, 0), Vec3(0, 0, 1)}};
-    impl->x = wave(0, 0.2, 0.3, 0.5, 0.03, 1.3, s, 0);
-    impl->y = wave(0, 0, 0.1, 0.4, 0.02, 1.1, s, 1);
-    impl->z = wave(1.4, 0, 0.15, 0.45, 0.02, 1.5, s, 2);
-    impl->yaw = wave(M_PI / 2, 0, 0.1, 0.35, 0.02, 1.2, s, 3);
-    impl->pitch = wave(0, 0, 0.06, 0.5, 0.02, 1.4, s, 4);
-    impl->roll = wave(0, 0, 0.04, 0.6, 0.02, 1.7, s, 5);
-  } else if (o.scene == "loop") {
-    // A corridor 2 m wide around a 6 x 4 m block (outer walls 10 x 8 m), walked once around and on
-    // for another 15 % of a lap, facing along it: the end sees again what the start saw, after a
-    // 26 m loop's drift.
-    impl->boxes = {{{-5.0, -4.0, 0.0}, {5.0, 4.0, 2.6}, true},
-                   {{-3.0, -2.0, 0.0}, {3.0, 2.0, 2.6}, false},
-                   {{1.0, -4.0, 0.0}, {1.6, -3.5, 1.2}, false},
-                   {{4.4, -1.0, 0.0}, {5.0, 0.2, 0.9}, false},
-                   {{-0.5, 3.4, 0.0}, {0.5, 4.0, 1.5}, false},
-                   {{-5.0, 1.0, 0.0}, {-4.5, 1.8, 0.7}, false},
-                   {{-2.0, -2.5, 0.0}, {-1.4, -2.0, 1.0}, false}};
-    impl->ring_a = 4.0;
-    impl->ring_b = 3.0;
-    impl->ring_r = 1.0;
-    impl->laps = 1.15;
-    impl->duration = duration;
-    impl->x = wave(0, 0, 0.06, 0.7, 0.02, 1.9, s, 0);
-    impl->y = wave(0, 0, 0.06, 0.6, 0.02, 1.7, s, 1);
-    impl->z = wave(1.4, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
-    impl->yaw = wave(0, 0, 0.12, 0.5, 0.03, 1.3, s, 3);
-    impl->pitch = wave(-0.1, 0, 0.06, 0.45, 0.03, 1.4, s, 4);
-    impl->roll = wave(0, 0, 0.04, 0.5, 0.02, 1.8, s, 5);
-  } else if (o.scene == "lookalike") {
-    // A corridor whose walls and furniture repeat every 3 m (same texture, same boxes): the camera
-    // slides along one wall for more than a period, so it sees a place that looks exactly like
-    // one 3 m behind. Joining the two would be a false loop.
-    const double P = 3.0;
-    impl->texture_period_x = P;
-    impl->boxes = {{{-1.0, -1.5, 0.0}, {3 * P + 1.0, 1.5, 2.6}, true}};
-    for (int k = 0; k < 4; ++k) {
-      impl->boxes.push_back({{0.4 + k * P, 0.9, 0.0}, {1.1 + k * P, 1.5, 0.8}, false, 1});
-      impl->boxes.push_back({{1.9 + k * P, 1.1, 0.0}, {2.3 + k * P, 1.5, 1.6}, false, 2});
-    }
-    const double speed = std::min(0.4, 1.6 * P / duration);
-    impl->x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
-    impl->y = wave(-0.3, 0, 0.1, 0.4, 0.03, 1.3, s, 1);
-    impl->z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
-    impl->yaw = wave(M_PI / 2, 0, 0.25, 0.35, 0.05, 1.1, s, 3);  // facing the +y wall
-    impl->pitch = wave(-0.1, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
-    impl->roll = wave(0, 0, 0.04, 0.5, 0.02, 1.8, s, 5);
-  } else if (o.scene == "longwalk") {
-    // A straight corridor 2.2 m wide walked at 1 m/s for the whole sequence (30 m per 900 frames at
-    // 30 fps: 100 m = 3000 frames), furniture every ~1.5 m on alternating sides: a map that only grows,
-    // for memory bounded by the volume rather than by the area walked (bench/longrun).
-    const double speed = 1.0, length = speed * duration + 6.0;
-    impl->boxes = {{{-1.0, -1.1, 0.0}, {length, 1.1, 2.6}, true}};
-    for (int k = 0; 1.0 + 1.5 * k < length - 1.0; ++k) {
-      const double x0 = 1.0 + 1.5 * k + 0.6 * unit(hash(s, 600, k, 0)), w = 0.3 + 0.4 * unit(hash(s, 600, k, 1));
-      const double d = 0.3 + 0.3 * unit(hash(s, 600, k, 2)), h = 0.4 + 1.4 * unit(hash(s, 600, k, 3));
-      if (k % 2 == 0) impl->boxes.push_back({{x0, 1.1 - d, 0.0}, {x0 + w, 1.1, h}, false});
-      else impl->boxes.push_back({{x0, -1.1, 0.0}, {x0 + w, -1.1 + d, h}, false});
-    }
-    impl->x = wave(0, speed, 0.05, 0.9, 0.0, 1.0, s, 0);
-    impl->y = wave(0, 0, 0.2, 0.4, 0.04, 1.3, s, 1);
-    impl->z = wave(1.3, 0, 0.08, 0.5, 0.02, 1.6, s, 2);
-    impl->yaw = wave(0, 0, 0.35, 0.3, 0.06, 1.1, s, 3);
-    impl->pitch = wave(-0.05, 0, 0.08, 0.4, 0.03, 1.4, s, 4);
-    impl->roll = wave(0, 0, 0.05, 0.5, 0.02, 1.8, s, 5);
-  } else {
-    throw InputError("--scene", "unknown scene '" + o.scene + "' (expected room, corridor, bare_wall, loop, lookalike or longwalk)");
-  }
-  if (o.trajectory == "shake") {
-    // Hand shake on top of the path: each angle gets two faster sinusoids (rad, rad/s); with the
-    // path's own turns the camera turns at ~80 deg/s on average and up to ~150 deg/s.
-    impl->shake = {wave(0, 0, 0.19, 6.0, 0.06, 13.0, s, 10),   // yaw
-                   wave(0, 0, 0.12, 7.5, 0.05, 15.0, s, 11),   // pitch
-                   wave(0, 0, 0.085, 9.0, 0.035, 17.0, s, 12)};  // roll
-  } else if (o.trajectory != "smooth") {
-    throw InputError("--trajectory", "unknown trajectory '" + o.trajectory + "' (expected smooth or shake)");
-  }
+  impl->buildScene(o.scene, s, duration);
+  impl->buildTrajectory(o.trajectory, s);
   if (!(o.exposure >= 0 && o.exposure <= 0.1)) throw InputError("--exposure", "must be in [0, 0.1] s");
   if (!(o.colour_offset_max >= 0 && o.colour_offset_max <= 0.05)) throw InputError("--colour-offset", "must be in [0, 0.05] s");
   if (!(o.depth_readout >= 0 && o.depth_readout <= 0.1)) throw InputError("--depth-readout", "must be in [0, 0.1] s");
@@ -400,50 +441,44 @@ double SyntheticSequence::exactDepth(const mrpt::poses::CPose3D& pose, double u,
   return std::isfinite(h.s) ? h.s : 0.0;
 }
 
-Frame SyntheticSequence::render(std::size_t i) const {
-  const Impl& m = *impl_;
-  const SimOptions& o = m.opts;
+void SyntheticSequence::Impl::trace(double t, const mrpt::poses::CPose3D& camera, cv::Mat& rgb, cv::Mat& truth,
+                                    cv::Mat& grazing) const {
+  const SimOptions& o = opts;
   const CameraIntrinsics& c = o.camera;
-  Frame f;
-  f.index = i;
-  f.timestamp = double(i) / o.fps;
-  f.camera = c;
-  const mrpt::poses::CPose3D pose = m.pose(f.timestamp);
-  f.groundTruth = pose;
-  const Eigen::Matrix3d R = pose.getRotationMatrix().asEigen();
-  const Vec3 org(pose.x(), pose.y(), pose.z());
+  const Eigen::Matrix3d R = camera.getRotationMatrix().asEigen();
+  const Vec3 org(camera.x(), camera.y(), camera.z());
   const Vec3 light = Vec3(0.3, 0.5, 0.8).normalized();
 
-  cv::Mat truth(c.height, c.width, CV_64F);
-  cv::Mat grazing(c.height, c.width, CV_8U);
-  f.rgb.create(c.height, c.width, CV_8UC3);
+  truth.create(c.height, c.width, CV_64F);
+  grazing.create(c.height, c.width, CV_8U);
+  rgb.create(c.height, c.width, CV_8UC3);
   parallelFor(0, c.height, [&](int v) {
     double* zrow = truth.ptr<double>(v);
     unsigned char* grow = grazing.ptr<unsigned char>(v);
-    cv::Vec3b* crow = f.rgb.ptr<cv::Vec3b>(v);
+    cv::Vec3b* crow = rgb.ptr<cv::Vec3b>(v);
     // A rolling-shutter depth camera reads this row at its own time; the ground truth is the pose at
     // the middle row's. The colour stays at the frame's time.
     Eigen::Matrix3d R_row = R;
     Vec3 org_row = org;
     if (o.depth_readout > 0) {
-      const mrpt::poses::CPose3D p = m.pose(f.timestamp + o.depth_readout * ((v + 0.5) / c.height - 0.5));
+      const mrpt::poses::CPose3D p = pose(t + o.depth_readout * ((v + 0.5) / c.height - 0.5));
       R_row = p.getRotationMatrix().asEigen();
       org_row = Vec3(p.x(), p.y(), p.z());
     }
     for (int u = 0; u < c.width; ++u) {
       const Vec3 dc((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0);
       const Vec3 dw = R * dc;
-      const Hit h = m.cast(org, dw);
+      const Hit h = cast(org, dw);
       if (!std::isfinite(h.s)) {
         crow[u] = cv::Vec3b(0, 0, 0);
       } else {
         // Lambert-like shading with a fixed light: depends on the surface only, not on the view.
         const double shade = 0.72 + 0.28 * std::abs(h.n.dot(light));
-        const auto col = m.texture(h.surface, h.tu, h.tv);
+        const auto col = texture(h.surface, h.tu, h.tv);
         for (int k = 0; k < 3; ++k) crow[u][k] = cv::saturate_cast<unsigned char>(255.0 * col[k] * shade);
       }
       const Vec3 dw_row = R_row * dc;
-      const Hit hd = o.depth_readout > 0 ? m.cast(org_row, dw_row) : h;
+      const Hit hd = o.depth_readout > 0 ? cast(org_row, dw_row) : h;
       if (!std::isfinite(hd.s)) {
         zrow[u] = 0;
         grow[u] = 1;
@@ -453,21 +488,34 @@ Frame SyntheticSequence::render(std::size_t i) const {
       grow[u] = std::abs(hd.n.dot(dw_row.normalized())) < 0.12;
     }
   }, 4);
-  // Shake: the colour camera's own capture time and exposure (the depth and the pose stay at the
-  // depth capture).
-  if (!m.shake.empty()) {
-    f.colour_offset = o.colour_offset_max * (2.0 * unit(hash(o.seed, 902, i)) - 1.0);
-    f.rgb = m.blurredColour(f.timestamp + f.colour_offset);
-  }
-  // Slight optical blur as a real lens has; also tames aliasing of the sharp texture edges.
-  cv::GaussianBlur(f.rgb, f.rgb, cv::Size(3, 3), 0.6);
+}
 
-  f.depth.create(c.height, c.width, CV_32F);
+namespace {
+
+// Shadow of a depth discontinuity at pixel (u, v) of exact depth z: a neighbour with no surface, or
+// one more than 3 % nearer, hides it from the projector (projector/camera parallax).
+bool inDepthShadow(const cv::Mat& truth, const CameraIntrinsics& c, int u, int v, double z) {
+  bool edge = false;
+  for (int dv = -1; dv <= 1 && !edge; ++dv)
+    for (int du = -1; du <= 1; ++du) {
+      const int uu = u + du, vv = v + dv;
+      if (uu < 0 || vv < 0 || uu >= c.width || vv >= c.height) continue;
+      const double zn = truth.at<double>(vv, uu);
+      if (zn <= 0 || z - zn > 0.03 * z) { edge = true; break; }
+    }
+  return edge;
+}
+
+// Frame i's depth image as a Kinect v1 reads the exact depth `truth` (see the header): range limits,
+// and with noise on, dropout, holes, Gaussian noise and disparity quantisation.
+cv::Mat kinectDepth(const SimOptions& o, std::size_t i, const cv::Mat& truth, const cv::Mat& grazing) {
+  const CameraIntrinsics& c = o.camera;
+  cv::Mat depth(c.height, c.width, CV_32F);
   const double kinect_f = c.fx * 640.0 / c.width;  // disparity measured on a 640 px wide sensor
   const std::uint64_t frame_key = hash(o.seed, 901, i);
   parallelFor(0, c.height, [&](int v) {
     const double* zrow = truth.ptr<double>(v);
-    float* out = f.depth.ptr<float>(v);
+    float* out = depth.ptr<float>(v);
     for (int u = 0; u < c.width; ++u) {
       const double z = zrow[u];
       out[u] = 0.f;
@@ -478,16 +526,7 @@ Frame SyntheticSequence::render(std::size_t i) const {
       }
       const std::uint64_t key = hash(frame_key, std::uint64_t(v), std::uint64_t(u));
       if (unit(key) < 0.02 || grazing.at<unsigned char>(v, u)) continue;  // random dropout, grazing angles
-      // Shadow of a depth discontinuity: the far side loses its reading (projector/camera parallax).
-      bool edge = false;
-      for (int dv = -1; dv <= 1 && !edge; ++dv)
-        for (int du = -1; du <= 1; ++du) {
-          const int uu = u + du, vv = v + dv;
-          if (uu < 0 || vv < 0 || uu >= c.width || vv >= c.height) continue;
-          const double zn = truth.at<double>(vv, uu);
-          if (zn <= 0 || z - zn > 0.03 * z) { edge = true; break; }
-        }
-      if (edge) continue;
+      if (inDepthShadow(truth, c, u, v, z)) continue;
       const double noisy = z + kinectNoiseSigma(z) * gaussian(key);
       const double disparity = kinect_f * kKinectBaseline / noisy;
       const double quantised = std::round(disparity * kDisparitySubpixel) / kDisparitySubpixel;
@@ -495,6 +534,32 @@ Frame SyntheticSequence::render(std::size_t i) const {
       if (zq >= kKinectMinRange && zq <= o.max_range) out[u] = float(zq);
     }
   });
+  return depth;
+}
+
+}  // namespace
+
+Frame SyntheticSequence::render(std::size_t i) const {
+  const Impl& m = *impl_;
+  const SimOptions& o = m.opts;
+  const CameraIntrinsics& c = o.camera;
+  Frame f;
+  f.index = i;
+  f.timestamp = double(i) / o.fps;
+  f.camera = c;
+  const mrpt::poses::CPose3D pose = m.pose(f.timestamp);
+  f.groundTruth = pose;
+  cv::Mat truth, grazing;
+  m.trace(f.timestamp, pose, f.rgb, truth, grazing);
+  // Shake: the colour camera's own capture time and exposure (the depth and the pose stay at the
+  // depth capture).
+  if (!m.shake.empty()) {
+    f.colour_offset = o.colour_offset_max * (2.0 * unit(hash(o.seed, 902, i)) - 1.0);
+    f.rgb = m.blurredColour(f.timestamp + f.colour_offset);
+  }
+  // Slight optical blur as a real lens has; also tames aliasing of the sharp texture edges.
+  cv::GaussianBlur(f.rgb, f.rgb, cv::Size(3, 3), 0.6);
+  f.depth = kinectDepth(o, i, truth, grazing);
   return f;
 }
 

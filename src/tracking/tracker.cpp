@@ -13,12 +13,6 @@ namespace vofusion {
 
 using namespace fusion;
 
-namespace {
-double seconds(std::chrono::steady_clock::time_point a) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();
-}
-}  // namespace
-
 struct Tracker::Impl {
   KinFuParams params;
   TrackingMode mode;
@@ -118,7 +112,7 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
   if (!photometric.levels.empty()) terms.photometric = &photometric;
   const ModelPrediction& model = map.model();
   const IcpResult icp = projectiveIcp(levels, model.vertices, model.normals, model.pose, initial, ip, terms);
-  res.times.add("icp", seconds(t0));
+  res.times.add("icp", secondsSince(t0));
   res.icp_inliers = icp.inliers;
   res.icp_rms = icp.rms;
   res.condition = icp.condition;
@@ -202,14 +196,14 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   cam.height = frame.depth.rows;
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<DepthLevel> levels = s.trackingLevels(frame, geometry, cam, track_cam);
-  res.times.add("preprocess", seconds(t0));
+  res.times.add("preprocess", secondsSince(t0));
   s.map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
   // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
   std::vector<IntensityLevel> intensity;
   if (s.mode == TrackingMode::Joint && s.params.joint_photometric_sigma > 0) {
     t0 = std::chrono::steady_clock::now();
     intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
-    res.times.add("intensity", seconds(t0));
+    res.times.add("intensity", secondsSince(t0));
   }
   const bool had_model = s.map.hasModel();
   Eigen::Isometry3d new_pose = s.history.pose();

@@ -17,13 +17,18 @@ struct StageTimes {
   }
 };
 
+// Seconds of wall time since `start`.
+inline double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
 // Adds the lifetime of this object to times[stage].
 class ScopedStageTimer {
  public:
   ScopedStageTimer(StageTimes& times, std::string stage)
       : times_(times), stage_(std::move(stage)), start_(std::chrono::steady_clock::now()) {}
   ~ScopedStageTimer() {
-    times_.add(stage_, std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count());
+    times_.add(stage_, secondsSince(start_));
   }
 
  private:

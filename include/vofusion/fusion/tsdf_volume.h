@@ -125,6 +125,18 @@ class TsdfVolume {
   // central differences of trilinear samples read 48 and moved no figure of the benchmark).
   bool cellGradient(const Eigen::Vector3f& q, Eigen::Vector3f& g) const;
   void removeBrick(int slot);  // the slot's brick leaves the arena (another brick may change id)
+  // integrate()'s three steps (tsdf_volume.cpp).
+  void markTouchedBricks(const cv::Mat& depth, const CameraIntrinsics& cam, const Eigen::Isometry3f& cam_to_world);
+  std::vector<std::int32_t> allocateTouchedBricks();
+  std::size_t updateVoxels(const std::vector<std::int32_t>& touched, const cv::Mat& depth, const cv::Mat& bgr,
+                           const CameraIntrinsics& cam, const Eigen::Isometry3f& cam_to_world);
+  // Ray casting (raycast.cpp): one pixel's ray in voxel units, marched through the field.
+  struct Ray;
+  enum class March { Hit, Miss, Untrusted };
+  March marchRay(const Ray& ray, float z, float zend, bool need_free_start, float& zs) const;
+  float pastUnallocated(const Ray& ray, int ix, int iy, int iz, float z) const;
+  bool castRay(const Ray& ray, float z0, float z1, float hint, bool hinted_only, float& zs, Eigen::Vector3f& g) const;
+  cv::Vec3b colourAt(const Eigen::Vector3f& q) const;  // the nearest voxel's colour (BGR), black when none
 
   TsdfParams params_;
   int n_;                        // bricks per edge
