@@ -232,6 +232,10 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   if (recorded > 0)
     reopen = [out] { return openFrameSource((fs::path(out) / "grab.rawlog").string(), SourceOptions{}); };
   run.finish(info, reopen);
+  const Reconstruction& rec = run.reconstruction();
+  if (rec.mapNeedsReintegration() && !rec.reintegrated())
+    std::fprintf(stderr, "vofusion-grab: loops corrected the trajectory; the mesh keeps the tracked poses "
+                         "(record with the reconstruction to have it fused again at the corrected ones)\n");
 }
 
 // Everything recorded so far is written, whatever stopped the run; then the reconstruction's outputs

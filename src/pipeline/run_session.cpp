@@ -22,13 +22,8 @@ FrameReport RunSession::process(const Frame& frame) {
 // Loops moved the poses: the map, fused at the tracked ones, is fused again at the corrected ones,
 // reading the recording a second time rather than keeping every frame in memory.
 void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
-  if (!rec_.mapNeedsReintegration()) return;
-  if (!reopen) {
-    std::fprintf(stderr, "%s: loops corrected the trajectory; the mesh keeps the tracked poses "
-                         "(record with the reconstruction to have it fused again at the corrected ones)\n",
-                 info.app.c_str());
-    return;
-  }
+  // No recording to read again (vofusion interrupted, vofusion-grab without one): the app says why.
+  if (!rec_.mapNeedsReintegration() || !reopen) return;
   auto again = reopen();
   Progress progress(info.app + " [re-fusing at the loop-closed poses]", rec_.framesProcessed());
   const std::size_t fused =

@@ -35,7 +35,7 @@ class RunSession {
   // The frame through the reconstruction, then queued for poses.rawlog.
   FrameReport process(const Frame& frame);
   // The end of the run, once: loop closure finished, the map fused again at the corrected poses when
-  // loops moved them (from reopen(); without one the mesh keeps the tracked poses, said in a line),
+  // loops moved them (from reopen(); without one the mesh keeps the tracked poses),
   // saved to save_volume when given, and every output written. Returns summary.json's content.
   nlohmann::json finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume = std::nullopt);
 
