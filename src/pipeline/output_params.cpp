@@ -12,6 +12,7 @@ namespace {
 std::vector<ConfigKey> outputKeys(OutputParams& p) {
   return {
       {"write_rawlog", &p.write_rawlog, "poses.rawlog: observations + odometry actions + fused poses"},
+      {"mesh", &p.write_mesh, "mesh.ply, mesh.png, the mesh in scene.3Dscene; false: path and summary only (benchmarks)"},
       {"save_raw_mesh", &p.save_raw_mesh, "also mesh_raw.ply (marching cubes before CGAL post-processing)"},
       {"clean_mesh", &p.clean_mesh, "CGAL post-processing with the [mesh] parameters"},
       {"save_full_mesh", &p.save_full_mesh, "also mesh_full.ply (post-processed but not simplified)"},

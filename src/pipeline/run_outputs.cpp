@@ -132,7 +132,9 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
 
   returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
-  const TriangleMesh mesh = writeMeshes(rec, m.params, m.mesh_params, s, out);
+  TriangleMesh mesh;
+  if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out);
+  else rec.releaseMap();
 
   const SceneOptions scene_opts = m.sceneOptions(rec, s);
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();

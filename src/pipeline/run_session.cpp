@@ -9,7 +9,7 @@ namespace vofusion {
 
 RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode, const std::string& out_dir,
                        const OutputParams& out_params, const MeshCleanParams& mesh_params)
-    : rec_(cfg, mode), recorder_(out_dir, out_params, mesh_params) {}
+    : rec_(cfg, mode), recorder_(out_dir, out_params, mesh_params), write_mesh_(out_params.write_mesh) {}
 
 RunSession::~RunSession() = default;
 
@@ -35,7 +35,7 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
 
 nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume) {
   rec_.finish();
-  refuse(info, reopen);
+  if (write_mesh_ || save_volume) refuse(info, reopen);  // the map is not used otherwise
   if (save_volume) rec_.saveVolume(*save_volume);
   return recorder_.finish(rec_, info);
 }

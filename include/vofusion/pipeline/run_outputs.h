@@ -22,6 +22,9 @@ namespace vofusion {
 // INI section [output].
 struct OutputParams : public mrpt::config::CLoadableOptions {
   bool write_rawlog = true;      // poses.rawlog (costs PNG encoding per frame, on a writer thread)
+  // mesh.ply, mesh.png and the mesh in scene.3Dscene (and the re-fusion after loops that feeds them);
+  // false: the path and the statistics only, for trajectory benchmarks
+  bool write_mesh = true;
   bool save_raw_mesh = false;    // also mesh_raw.ply, the marching-cubes mesh before post-processing
   bool clean_mesh = true;        // CGAL post-processing with the [mesh] parameters
   bool save_full_mesh = false;   // also mesh_full.ply, post-processed but not simplified

@@ -44,6 +44,7 @@ class RunSession {
 
   Reconstruction rec_;
   RunRecorder recorder_;
+  bool write_mesh_;  // the map is used at all after the frame loop
 };
 
 }  // namespace vofusion
