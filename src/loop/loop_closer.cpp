@@ -151,6 +151,19 @@ struct LoopCloser::Impl {
     publish(accepted, removed, rejected, t);
   }
 
+  // At the end of the run, with the thread idle: one optimisation over every loop found (loops
+  // removed when they came may fit the ones after them), so the last word is the whole graph's.
+  void finalOptimisation() {
+    const std::vector<std::size_t> removed = graph.optimiseAll(params.max_loop_chi2, params.max_chain_chi2);
+    std::lock_guard<std::mutex> lock(mu);
+    for (LoopRecord& l : loops) l.active = true;
+    rejections.erase("did not fit the graph after optimisation");
+    for (const std::size_t e : removed)
+      if (e < loop_edge_record.size() && loop_edge_record[e] < loops.size()) loops[loop_edge_record[e]].active = false;
+    if (!removed.empty()) rejections["did not fit the graph after optimisation"] = removed.size();
+    for (std::size_t i = 0; i < poses.size(); ++i) poses[i].optimised = graph.pose(i);
+  }
+
   void publish(const std::vector<LoopRecord>& accepted, const std::vector<std::size_t>& removed,
                const std::map<std::string, std::size_t>& rejected, const StageTimes& t) {
     std::lock_guard<std::mutex> lock(mu);
@@ -211,8 +224,14 @@ std::pair<std::size_t, std::size_t> LoopCloser::queueStats() const {
 }
 
 void LoopCloser::finish() {
-  std::unique_lock<std::mutex> lock(impl_->mu);
-  impl_->idle.wait(lock, [&] { return impl_->queue.empty() && !impl_->busy; });
+  bool any_loop = false;
+  {
+    std::unique_lock<std::mutex> lock(impl_->mu);
+    impl_->idle.wait(lock, [&] { return impl_->queue.empty() && !impl_->busy; });
+    any_loop = !impl_->loops.empty();
+  }
+  // The thread waits for keyframes that no longer come: the graph is the caller's now.
+  if (any_loop) impl_->finalOptimisation();
 }
 
 std::vector<LoopRecord> LoopCloser::loops() const {

@@ -10,11 +10,13 @@
 namespace vofusion::loop {
 
 namespace {
-// Residual of an edge at the current poses, as (x y z yaw pitch roll) of measurement^-1 * estimate.
+// Residual of an edge at the current poses, in the coordinates MRPT's optimiser weighs it in:
+// translation and rotation vector of measurement^-1 * estimate (SE(3)'s pseudo-logarithm).
 Eigen::Matrix<double, 6, 1> residual(const GraphEdge& e, const std::vector<Eigen::Isometry3d>& nodes) {
-  const mrpt::poses::CPose3D d = toMrpt(e.T_from_to.inverse() * nodes[e.from].inverse() * nodes[e.to]);
+  const Eigen::Isometry3d d = e.T_from_to.inverse() * nodes[e.from].inverse() * nodes[e.to];
+  const Eigen::AngleAxisd a(d.linear());
   Eigen::Matrix<double, 6, 1> r;
-  r << d.x(), d.y(), d.z(), d.yaw(), d.pitch(), d.roll();
+  r << d.translation(), a.angle() * a.axis();
   return r;
 }
 }  // namespace
@@ -93,6 +95,11 @@ std::vector<std::size_t> PoseGraph::optimise(double max_loop_chi2, double max_ch
     removed.push_back(worst);
     nodes_ = start;
   }
+}
+
+std::vector<std::size_t> PoseGraph::optimiseAll(double max_loop_chi2, double max_chain_chi2) {
+  for (GraphEdge& e : edges_) e.active = true;
+  return optimise(max_loop_chi2, max_chain_chi2);
 }
 
 }  // namespace vofusion::loop

@@ -12,7 +12,7 @@
 
 namespace vofusion::loop {
 
-using Matrix6 = Eigen::Matrix<double, 6, 6>;  // x y z yaw pitch roll, as MRPT's 3D pose PDFs
+using Matrix6 = Eigen::Matrix<double, 6, 6>;  // translation, rotation vector: MRPT levmarq's edge coordinates
 
 struct GraphEdge {
   std::size_t from = 0, to = 0;                            // node ids
@@ -32,6 +32,9 @@ class PoseGraph {
   // edge's exceeds max_chain_chi2, removes that loop and optimises again from the poses before.
   // Returns the indices of the edges removed this time.
   std::vector<std::size_t> optimise(double max_loop_chi2, double max_chain_chi2);
+  // The same over every loop ever added, those removed before included: a loop that did not fit
+  // while it was alone may agree with the loops that came after it. Returns the loops removed now.
+  std::vector<std::size_t> optimiseAll(double max_loop_chi2, double max_chain_chi2);
   const Eigen::Isometry3d& pose(std::size_t node) const { return nodes_[node]; }
   std::size_t nodes() const { return nodes_.size(); }
   const std::vector<GraphEdge>& edges() const { return edges_; }
