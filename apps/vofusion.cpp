@@ -1,7 +1,7 @@
 // vofusion: an RGB-D recording in, a trajectory, a clean coloured mesh and an MRPT 3D scene out.
 //   vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]
 //            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
-//            [--depth-scale S] [--no-loop-closure]
+//            [--depth-scale S] [--no-loop-closure] [--strict]
 //            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--resume f]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
@@ -18,6 +18,7 @@
 #include "vofusion/sim/default_recording.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/prefetching_source.h"
+#include "vofusion/io/skipping_source.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
 #include "vofusion/pipeline/run_session.h"
@@ -33,8 +34,11 @@ void onSigint(int) { g_stop = true; }
 const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]\n"
     "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
-    "                [--depth-scale S] [--no-loop-closure] [--raw-mesh] [--dump-config]\n"
+    "                [--depth-scale S] [--no-loop-closure] [--strict] [--raw-mesh] [--dump-config]\n"
     "                [--work-dir d] [--save-volume f] [--resume f]\n"
+    "  --strict       stop at the first damaged frame (missing or corrupt image, unreadable record) or at a\n"
+    "                 recording cut short; by default such a frame is skipped with one line naming its file,\n"
+    "                 counted in summary.json (frames_skipped), and the run goes on\n"
     "  --depth-scale  TUM-layout folders: depth PNG units per metre (default: the folder's intrinsics.txt /\n"
     "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n"
     "  --no-loop-closure  keyframes, place recognition and the pose graph off ([loop] enabled = false);\n"
@@ -61,7 +65,34 @@ struct RunPlan {
   MeshCleanParams mesh_params;
   SourceOptions src_opts;
   std::optional<std::string> resume, save_volume;
+  bool strict = false;  // stop at the first damaged frame
 };
+
+// The input's frames, read ahead on another thread, damaged ones skipped unless --strict.
+struct Input {
+  std::unique_ptr<PrefetchingSource> source;
+  const SkippingSource* frames = nullptr;  // owned by source: the frames skipped
+};
+
+// warn: one line per frame skipped (false for the second reading of the recording, re-fusion).
+Input openInput(const RunPlan& plan, bool warn) {
+  auto say = [](const std::string& line) { printAboveProgress("warning: " + line); };
+  auto skipping = std::make_unique<SkippingSource>(openFrameSource(plan.input, plan.src_opts), plan.strict,
+                                                   warn ? std::function<void(const std::string&)>(say) : nullptr);
+  Input in;
+  in.frames = skipping.get();
+  in.source = std::make_unique<PrefetchingSource>(std::move(skipping));
+  return in;
+}
+
+// summary.json's account of the damaged frames.
+void reportSkipped(const SkippingSource& frames, RunInfo& info) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const SkippedFrame& s : frames.skipped()) list.push_back({{"frame", s.position}, {"file", s.file}, {"problem", s.problem}});
+  info.extra["frames_skipped"] = frames.skipped().size();
+  info.extra["skipped_frames"] = list;
+  if (!frames.cutShort().empty()) info.extra["recording_cut_short"] = frames.cutShort();
+}
 
 // The configuration file with the command line's overrides; out-of-range values name the file.
 void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
@@ -101,6 +132,7 @@ RunPlan planRun(const CommandLine& cl) {
   if (cl.value("--depth-scale")) plan.src_opts.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   plan.input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
   plan.resume = cl.value("--resume");
+  plan.strict = cl.flag("--strict");
   plan.save_volume = cl.value("--save-volume");
   return plan;
 }
@@ -136,7 +168,7 @@ FrameLoop reconstructFrames(FrameSource& source, RunSession& run, TrackingMode m
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale", "--work-dir",
                         "--save-volume", "--resume"},
-                       {"--raw-mesh", "--dump-config", "--no-loop-closure", "--help"});
+                       {"--raw-mesh", "--dump-config", "--no-loop-closure", "--strict", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
     return 0;
@@ -146,7 +178,8 @@ int body(int argc, char** argv) {
     return 0;
   }
   const RunPlan plan = planRun(cl);
-  auto source = std::make_unique<PrefetchingSource>(openFrameSource(plan.input, plan.src_opts));
+  Input input = openInput(plan, true);
+  auto& source = input.source;
   RunSession run(plan.cfg, plan.mode, plan.out_dir, plan.out_params, plan.mesh_params);
   if (plan.resume) run.reconstruction().resumeVolume(*plan.resume);
   std::fprintf(stderr, "vofusion: %s, mode %s, %zu frames -> %s\n", source->name().c_str(), toString(plan.mode).c_str(),
@@ -160,14 +193,16 @@ int body(int argc, char** argv) {
   info.config = plan.config_path;
   info.interrupted = loop.interrupted;
   info.seconds = loop.seconds;
+  reportSkipped(*input.frames, info);
   source.reset();
   RunSession::Reopen reopen;  // an interrupted run is not fused again: the user asked it to stop
   if (!loop.interrupted)
-    reopen = [&] { return std::make_unique<PrefetchingSource>(openFrameSource(plan.input, plan.src_opts)); };
+    reopen = [&]() -> std::unique_ptr<FrameSource> { return openInput(plan, false).source; };
   const auto summary = run.finish(info, reopen, plan.save_volume);
   const Reconstruction& rec = run.reconstruction();
   std::fprintf(stderr, "vofusion: %zu frames, %.1f fps, %zu fallbacks, %zu lost", loop.done, summary.value("fps", 0.0),
                rec.fallbacks(), rec.lostFrames());
+  if (const std::size_t skipped = summary.value("frames_skipped", std::size_t(0))) std::fprintf(stderr, ", %zu skipped", skipped);
   if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
   std::fprintf(stderr, "\n");
   std::error_code ec;

@@ -5,17 +5,20 @@
 // output folder (no *.tmp-*), an earlier result there unchanged byte for byte.
 //
 // Apps: rgbd-odometry and tum2rawlog (every input kind), rgbd-eval (trajectories), and vofusion,
-// the main app, for the cases it shares (skipped locally until it is built, required under CI).
+// the main app, for the cases it shares (skipped locally until it is built, required under CI), with
+// --strict: by default vofusion skips a damaged frame and goes on ("Damaged frames" at the end).
 #include <sys/mount.h>
 #include <sys/wait.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <regex>
 #include <sstream>
 
 #include <mrpt/core/Clock.h>
+#include <nlohmann/json.hpp>
 #include <mrpt/io/CFileGZOutputStream.h>
 #include <mrpt/obs/CObservationOdometry.h>
 #include <mrpt/serialization/CArchive.h>
@@ -136,8 +139,9 @@ std::string fastVofusionConfig() {
 std::string trackCmd(const std::string& app, const std::string& input, const std::string& out,
                      const std::string& extra = "") {
   std::string cmd = quote(app) + " " + quote(input) + " --out " + quote(out) + " --max-frames 5 " + extra;
-  if (fs::path(app).filename() == "vofusion" && extra.find("--config") == std::string::npos)
-    cmd += " --config " + quote(fastVofusionConfig());
+  if (fs::path(app).filename() != "vofusion") return cmd;
+  if (extra.find("--config") == std::string::npos) cmd += " --config " + quote(fastVofusionConfig());
+  cmd += " --strict";  // the first damaged frame stops the run, as for the other apps
   return cmd;
 }
 
@@ -536,4 +540,123 @@ TEST(FaultsOutput, DiskFullTmpfs) {
   writeText(mnt + "/x.rawlog", kEarlier);
   expectCleanFailure(quote(test::app("tum2rawlog")) + " " + quote(f.dir) + " " + quote(mnt + "/x.rawlog"),
                      mnt + "/x_Images/", "write|No space left", mnt);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Damaged frames: vofusion skips them (one warning line each), counts them in summary.json and
+// writes every output; the path is as good as the clean run's.
+
+namespace {
+
+struct SkipRun {
+  int code = 0;
+  std::string log;
+  nlohmann::json summary;
+  std::size_t poses = 0;
+};
+
+SkipRun runSkipping(const std::string& input, const std::string& name, std::size_t frames) {
+  const std::string out = test::tempDir(name);
+  const std::string cfg = test::tempDir(name + "_cfg") + "/path_only.ini";
+  writeText(cfg, "[output]\nmesh = false\nwrite_rawlog = false\n[loop]\nenabled = false\n");
+  SkipRun r;
+  r.code = test::run(quote(test::app("vofusion")) + " " + quote(input) + " --out " + quote(out) + " --max-frames " +
+                         std::to_string(frames) + " --config " + quote(cfg),
+                     &r.log);
+  if (r.code != 0) return r;
+  for (const char* f : {"trajectory.txt", "scene.3Dscene", "summary.json"})
+    EXPECT_TRUE(fs::exists(out + "/" + f)) << f << " missing\n" << r.log;
+  r.summary = nlohmann::json::parse(readAll(out + "/summary.json"));
+  r.poses = readTumTrajectory(out + "/trajectory.txt").size();
+  return r;
+}
+
+double ateOf(const SkipRun& r) { return r.summary["ate"]["rmse"].get<double>(); }
+
+// Damages frame i of the fixture: its depth image missing, or its colour image truncated or garbage.
+std::string damage(TumFixture& f, std::size_t i, int kind) {
+  if (kind == 0) {
+    const std::string gone = f.dir + "/depth/gone" + std::to_string(i) + ".png";
+    f.pairs[i].depth.file = gone;
+    f.writeLists();
+    return gone;
+  }
+  return replaceImage(f, i, false, [kind](const std::string& dst, const std::string& src) {
+    const std::string bytes = readAll(src);
+    writeText(dst, kind == 1 ? bytes.substr(0, bytes.size() / 3) : std::string(bytes.size(), '\x5a'));
+  });
+}
+
+}  // namespace
+
+TEST(DamagedFrames, EachCostsOneFrameAndThePathStaysAsGood) {
+  REQUIRE_TUM();
+  constexpr std::size_t kFrames = 60;
+  const TumFixture clean_fixture = makeTum("damaged_clean", kFrames);
+  const SkipRun clean = runSkipping(clean_fixture.dir, "damaged_clean_out", kFrames);
+  ASSERT_EQ(clean.code, 0) << clean.log;
+  EXPECT_EQ(clean.summary["frames_skipped"], 0);
+  const std::vector<std::size_t> positions{0, 14, 29, 44, kFrames - 1};
+  for (std::size_t k = 0; k < positions.size(); ++k) {
+    TumFixture f = makeTum("damaged_one", kFrames);
+    const std::string file = damage(f, positions[k], int(k % 3));
+    const SkipRun r = runSkipping(f.dir, "damaged_one_out", kFrames);
+    SCOPED_TRACE(file);
+    ASSERT_EQ(r.code, 0) << r.log;
+    EXPECT_NE(r.log.find("warning: " + file), std::string::npos) << r.log;
+    EXPECT_NE(r.log.find("(frame " + std::to_string(positions[k]) + " skipped)"), std::string::npos) << r.log;
+    EXPECT_EQ(r.summary["frames_skipped"], 1);
+    EXPECT_EQ(r.summary["skipped_frames"][0]["frame"], positions[k]);
+    EXPECT_EQ(r.summary["skipped_frames"][0]["file"], file);
+    EXPECT_EQ(r.poses, kFrames - 1);
+    std::printf("frame %zu damaged: ATE %.5f m, clean %.5f m\n", positions[k], ateOf(r), ateOf(clean));
+    EXPECT_LT(std::abs(ateOf(r) - ateOf(clean)), 0.001);
+  }
+  // All five in one run.
+  TumFixture f = makeTum("damaged_five", kFrames);
+  for (std::size_t k = 0; k < positions.size(); ++k) damage(f, positions[k], int(k % 3));
+  const SkipRun r = runSkipping(f.dir, "damaged_five_out", kFrames);
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_EQ(r.summary["frames_skipped"], positions.size());
+  EXPECT_EQ(r.poses, kFrames - positions.size());
+}
+
+TEST(DamagedFrames, MoreThanOneInFiveStopsTheRun) {
+  REQUIRE_TUM();
+  TumFixture f = makeTum("damaged_many", 20);
+  for (std::size_t i = 3; i < 8; ++i) damage(f, i, 0);
+  const std::string out = outWithEarlierResult("damaged_many_out");
+  const Outcome o = runSplit(quote(test::app("vofusion")) + " " + quote(f.dir) + " --out " + quote(out) + " --config " +
+                             quote(fastVofusionConfig()));
+  EXPECT_NE(o.code, 0) << o.stderr_text;
+  EXPECT_FALSE(o.crashed);
+  ASSERT_FALSE(o.error_lines.empty()) << o.stderr_text;
+  EXPECT_NE(o.error_lines.back().find("5 of 20 frames are damaged"), std::string::npos) << o.stderr_text;
+  EXPECT_EQ(readAll(out + "/trajectory.txt"), kEarlier);
+}
+
+// A rawlog cut off anywhere (a crash while recording): read to its last whole frame, with a warning.
+TEST(DamagedFrames, RawlogCutAtRandomOffsetsIsReadToItsLastWholeFrame) {
+  REQUIRE_TUM();
+  const std::string good = makeRawlog("damaged_rawlog");
+  const std::string bytes = readAll(good);
+  const std::string in = fs::path(good).parent_path().string() + "/cut.rawlog";
+  std::mt19937 rng(7);
+  std::size_t read_at_least_one = 0;
+  for (int i = 0; i < 10; ++i) {
+    const std::size_t at = 1000 + rng() % (bytes.size() - 1000);
+    writeText(in, bytes.substr(0, at));
+    SCOPED_TRACE("cut at byte " + std::to_string(at) + " of " + std::to_string(bytes.size()));
+    const SkipRun r = runSkipping(in, "damaged_rawlog_out", 100);
+    if (r.code != 0) {  // cut inside the first frame: nothing to reconstruct, one clear line
+      EXPECT_NE(r.log.find("truncated"), std::string::npos) << r.log;
+      continue;
+    }
+    ++read_at_least_one;
+    EXPECT_GE(r.poses, 1u);
+    EXPECT_LE(r.poses, 5u);
+    EXPECT_TRUE(r.summary.contains("recording_cut_short")) << r.log;
+    EXPECT_NE(r.log.find("warning: " + in), std::string::npos) << r.log;
+  }
+  EXPECT_GT(read_at_least_one, 5u);
 }

@@ -53,4 +53,8 @@ void Progress::finish(const std::string& extra) {
                unit_.c_str(), formatDuration(elapsedSeconds()).c_str(), fps(), rate_unit_.c_str(), extra.c_str());
 }
 
+void printAboveProgress(const std::string& line) {
+  std::fprintf(stderr, "%s%s\n", ::isatty(STDERR_FILENO) ? "\r\033[K" : "", line.c_str());
+}
+
 }  // namespace vofusion

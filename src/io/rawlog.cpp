@@ -286,9 +286,16 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
   // One pass to count the frames and collect embedded ground truth (no image decoding needed).
   Reader scan(path);
   Trajectory embedded_gt;
-  while (scan.next3D(&embedded_gt)) {
-    ++count_;
-    if (opts.max_frames > 0 && count_ >= opts.max_frames) break;
+  try {
+    while (scan.next3D(&embedded_gt)) {
+      ++count_;
+      if (opts.max_frames > 0 && count_ >= opts.max_frames) break;
+    }
+  } catch (const InputError& e) {
+    // A recording cut off (a crash while recording) or damaged from some entry on: its frames up to
+    // there are good. The format has no markers to find the next whole entry after a damaged one.
+    if (count_ == 0) throw;
+    cut_short_ = e.problem();
   }
   if (count_ == 0)
     throw InputError(path, "contains no CObservation3DRangeScan with a range image (" +
@@ -312,7 +319,10 @@ void RawlogSource::rewind() {
 }
 
 bool RawlogSource::next(Frame& frame) {
-  if (pos_ >= count_) return false;
+  if (pos_ >= count_) {
+    if (!cut_short_.empty()) throw RecordingCutShort(path_, cut_short_);
+    return false;
+  }
   auto obs = reader_->next3D(nullptr);
   if (!obs) return false;
   // External images and range matrices are named relative to the rawlog's "_Images" folder: made
@@ -320,8 +330,13 @@ bool RawlogSource::next(Frame& frame) {
   resolveExternalFiles(*obs, images_dir_);
   std::optional<CameraIntrinsics> cam;
   if (opts_.intrinsics) cam = CameraIntrinsics::parse(*opts_.intrinsics);
-  frame = frameFromObservation(*obs, path_, cam);
-  frame.index = pos_++;
+  const std::size_t index = pos_++;
+  try {
+    frame = frameFromObservation(*obs, path_, cam);
+  } catch (const InputError& e) {
+    throw DamagedFrame(e);  // this record's images; the next record is read as usual
+  }
+  frame.index = index;
   mrpt::poses::CPose3D gt;
   if (interpolatePose(gt_, frame.timestamp, 0.05, gt)) frame.groundTruth = gt;
   return true;

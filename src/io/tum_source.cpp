@@ -250,12 +250,20 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   depth_scale_ = opts.depth_scale > 0 ? opts.depth_scale : file && file->depth_scale > 0 ? file->depth_scale : 5000.0;
   // A unit mix-up shows in the first frame's median reading (indoor RGB-D: 0.4-5 m; millimetres read
   // as TUM's units land at a fifth, TUM's read as millimetres at five times).
-  if (!pairs_.empty()) {
-    const std::string d0 = (fs::path(folder) / pairs_[0].depth.file).string();
-    const double median = medianRaw(loadRawDepthPng(d0, width, height)) / depth_scale_;
+  // The first depth image that loads: a damaged one is the reader's to report, frame by frame.
+  for (std::size_t i = 0; i < std::min<std::size_t>(pairs_.size(), 10); ++i) {
+    const std::string d = (fs::path(folder) / pairs_[i].depth.file).string();
+    cv::Mat raw;
+    try {
+      raw = loadRawDepthPng(d, width, height);
+    } catch (const InputError&) {
+      continue;
+    }
+    const double median = medianRaw(raw) / depth_scale_;
     if (median > 5.0 || (median > 0 && median < 0.4))
-      warn(d0, cv::format("median depth %.2f m at %g depth units per metre: another unit? (--depth-scale: 1000 for "
-                          "millimetres, 5000 for TUM)", median, depth_scale_));
+      warn(d, cv::format("median depth %.2f m at %g depth units per metre: another unit? (--depth-scale: 1000 for "
+                         "millimetres, 5000 for TUM)", median, depth_scale_));
+    break;
   }
 
   const std::string gt = (fs::path(folder) / "groundtruth.txt").string();

@@ -6,6 +6,10 @@
 
 namespace vofusion {
 
+// One line on stderr of its own (a warning during a long job): on a terminal it first clears the
+// progress line being redrawn, which the next update() draws again below it.
+void printAboveProgress(const std::string& line);
+
 class Progress {
  public:
   // total = 0 when unknown (no ETA). Output goes to stderr, redrawn at most every 0.2 s

@@ -7,14 +7,33 @@
 #include <string>
 
 #include "vofusion/core/camera.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/core/frame.h"
 
 namespace vofusion {
 
+// One frame that cannot be read while the frames after it can (a missing, truncated or corrupt
+// image, a record whose images do not load): the source has moved past it, and next() goes on with
+// the frame after. SkippingSource skips such frames.
+class DamagedFrame : public InputError {
+ public:
+  using InputError::InputError;
+  explicit DamagedFrame(const InputError& e) : InputError(e.file(), e.problem()) {}
+};
+
+// The recording ends early: the rest of it cannot be read (a rawlog cut off inside a record, as a
+// crash while recording leaves it). Thrown in place of the end, after the frames before the damage.
+class RecordingCutShort : public InputError {
+ public:
+  using InputError::InputError;
+};
+
 class FrameSource {
  public:
   virtual ~FrameSource() = default;
-  // Fills the next frame; false at the end. Throws InputError on unreadable data.
+  // Fills the next frame; false at the end. Throws DamagedFrame for a frame that cannot be read
+  // (the next call reads the one after), RecordingCutShort after the last frame of a recording whose
+  // rest is damaged, InputError when nothing more can be read.
   virtual bool next(Frame& frame) = 0;
   // Number of frames if known in advance, else 0.
   virtual std::size_t size() const = 0;

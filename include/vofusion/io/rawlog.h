@@ -52,6 +52,7 @@ class RawlogSource : public FrameSource {
  private:
   struct Reader;
   std::string path_, images_dir_;
+  std::string cut_short_;  // why the frames end before the file does (RecordingCutShort)
   SourceOptions opts_;
   std::size_t count_ = 0, pos_ = 0;
   Trajectory gt_;

@@ -1,0 +1,56 @@
+#pragma once
+// A damaged frame costs that frame, not the run: wraps a source and steps over the frames it cannot
+// read (DamagedFrame), each reported once; a recording cut short is read to its last whole frame.
+// The tracker sees the gap as a longer step between two frames. Strict mode stops at the first
+// damage instead, and more than one damaged frame in five stops the run: such a recording needs
+// looking at, not a reconstruction.
+//
+//   SkippingSource src(openFrameSource(path, opts), strict, [](const std::string& line) { warn(line); });
+//   while (src.next(frame)) ...;
+//   for (const SkippedFrame& s : src.skipped()) ...;   // summary.json "skipped_frames"
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "vofusion/io/frame_source.h"
+
+namespace vofusion {
+
+struct SkippedFrame {
+  std::size_t position = 0;  // 0-based position of the frame in the recording
+  std::string file;          // what could not be read
+  std::string problem;
+};
+
+class SkippingSource : public FrameSource {
+ public:
+  // More damaged frames than this share of the recording (of the frames met so far when its length is
+  // unknown, from 10 on) stop the run.
+  static constexpr double kMaxDamagedShare = 0.2;
+
+  // warn: one line for each frame skipped ("<file>: <problem> (frame N skipped)") and for a recording
+  // cut short; null: silent (a second reading of the same recording).
+  SkippingSource(std::unique_ptr<FrameSource> inner, bool strict, std::function<void(const std::string&)> warn = nullptr);
+
+  bool next(Frame& frame) override;
+  std::size_t size() const override { return inner_->size(); }
+  void rewind() override;
+  std::string name() const override { return inner_->name(); }
+
+  const std::vector<SkippedFrame>& skipped() const { return skipped_; }
+  // Why the recording ended before its end (RecordingCutShort's problem); empty when it did not.
+  const std::string& cutShort() const { return cut_short_; }
+
+ private:
+  void skip(const DamagedFrame& e);
+  std::unique_ptr<FrameSource> inner_;
+  bool strict_;
+  std::function<void(const std::string&)> warn_;
+  std::vector<SkippedFrame> skipped_;
+  std::string cut_short_;
+  std::size_t met_ = 0;  // frames read or skipped
+  bool ended_ = false;
+};
+
+}  // namespace vofusion

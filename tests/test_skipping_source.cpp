@@ -1,0 +1,104 @@
+// SkippingSource: a damaged frame costs that frame (reported once), a recording cut short ends at its
+// last whole frame, strict mode stops at the first damage, and more than one frame in five damaged
+// stops the run. Also through PrefetchingSource, as the apps read.
+#include <gtest/gtest.h>
+
+#include <set>
+#include <vector>
+
+#include "vofusion/io/prefetching_source.h"
+#include "vofusion/io/skipping_source.h"
+
+using namespace vofusion;
+
+namespace {
+// n frames; those in `damaged` throw as an unreadable image would; with `cut`, the recording ends with
+// RecordingCutShort instead of its clean end.
+class Damaged : public IndexedFrameSource {
+ public:
+  Damaged(std::size_t n, std::set<std::size_t> damaged, bool cut = false) : n_(n), damaged_(std::move(damaged)), cut_(cut) {}
+  Frame read(std::size_t i) const override {
+    if (damaged_.count(i)) throw InputError("depth/" + std::to_string(i) + ".png", "depth image is missing");
+    Frame f;
+    f.index = i;
+    return f;
+  }
+  bool next(Frame& f) override {
+    if (!IndexedFrameSource::next(f)) {
+      if (cut_) throw RecordingCutShort("rec.rawlog", "truncated rawlog (ends inside entry 9)");
+      return false;
+    }
+    return true;
+  }
+  std::size_t size() const override { return n_; }
+  std::string name() const override { return "recording"; }
+
+ private:
+  std::size_t n_;
+  std::set<std::size_t> damaged_;
+  bool cut_;
+};
+
+std::vector<std::size_t> indicesRead(FrameSource& src) {
+  std::vector<std::size_t> out;
+  Frame f;
+  while (src.next(f)) out.push_back(f.index);
+  return out;
+}
+}  // namespace
+
+TEST(SkippingSource, DamagedFramesAreSkippedAndReportedOnce) {
+  std::vector<std::string> lines;
+  auto skipping = std::make_unique<SkippingSource>(std::make_unique<Damaged>(10, std::set<std::size_t>{0, 4}), false,
+                                                   [&](const std::string& l) { lines.push_back(l); });
+  const SkippingSource& s = *skipping;
+  PrefetchingSource src(std::move(skipping));
+  EXPECT_EQ(indicesRead(src), (std::vector<std::size_t>{1, 2, 3, 5, 6, 7, 8, 9}));
+  ASSERT_EQ(s.skipped().size(), 2u);
+  EXPECT_EQ(s.skipped()[1].position, 4u);
+  EXPECT_EQ(s.skipped()[1].file, "depth/4.png");
+  EXPECT_EQ(s.skipped()[1].problem, "depth image is missing");
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_EQ(lines[1], "depth/4.png: depth image is missing (frame 4 skipped)");
+  EXPECT_TRUE(s.cutShort().empty());
+}
+
+TEST(SkippingSource, StrictStopsAtTheFirstDamage) {
+  SkippingSource src(std::make_unique<Damaged>(10, std::set<std::size_t>{4}), true);
+  Frame f;
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(src.next(f));
+  try {
+    src.next(f);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "depth/4.png: depth image is missing");
+  }
+}
+
+TEST(SkippingSource, ARecordingCutShortEndsAtItsLastWholeFrame) {
+  std::vector<std::string> lines;
+  SkippingSource src(std::make_unique<Damaged>(6, std::set<std::size_t>{}, true), false,
+                     [&](const std::string& l) { lines.push_back(l); });
+  EXPECT_EQ(indicesRead(src).size(), 6u);
+  EXPECT_EQ(src.cutShort(), "truncated rawlog (ends inside entry 9)");
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_EQ(lines[0], "rec.rawlog: truncated rawlog (ends inside entry 9) (the 6 frames before it are read)");
+  SkippingSource strict(std::make_unique<Damaged>(6, std::set<std::size_t>{}, true), true);
+  Frame f;
+  for (int i = 0; i < 6; ++i) ASSERT_TRUE(strict.next(f));
+  EXPECT_THROW(strict.next(f), InputError);
+}
+
+TEST(SkippingSource, MoreThanOneFrameInFiveDamagedStopsTheRun) {
+  // 2 of 10 damaged: one in five, not more.
+  SkippingSource fine(std::make_unique<Damaged>(10, std::set<std::size_t>{2, 3}), false);
+  EXPECT_EQ(indicesRead(fine).size(), 8u);
+  SkippingSource bad(std::make_unique<Damaged>(10, std::set<std::size_t>{2, 3, 7}), false);
+  try {
+    indicesRead(bad);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "recording");
+    EXPECT_NE(std::string(e.what()).find("3 of 10 frames are damaged"), std::string::npos) << e.what();
+  }
+}
