@@ -243,10 +243,19 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
 int finishGrab(const LiveStats& stats, const GrabPlan& plan, const LiveSource& source, RawlogWriter* writer,
                RunSession* session, const Args& args) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
-  if (writer) writer->commit();
-  if (session) finishLive(*session, stats, plan, source.name(), args.out, recorded);
-  writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
-                      summaryText(stats, source.name(), recorded, plan.opts.queue_capacity));
+  try {
+    if (writer) writer->commit();
+    if (session) finishLive(*session, stats, plan, source.name(), args.out, recorded);
+    writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
+                        summaryText(stats, source.name(), recorded, plan.opts.queue_capacity));
+  } catch (const InputError&) {
+    if (stats.ok()) throw;
+    // What stopped the run (a full disk) stops the outputs after it too: that first cause is the one
+    // line; the recording, written frame by frame, holds every frame before it.
+    std::fprintf(stderr, "vofusion-grab: stopped: %s (the recording holds the %zu frames before)\n", stats.error.c_str(),
+                 recorded);
+    return 2;
+  }
   std::fprintf(stderr, "vofusion-grab: %zu played, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,
                stats.processed, stats.dropped, recorded, args.out.c_str());
   if (!stats.ok()) {
@@ -269,6 +278,7 @@ int run(const Args& args) {
   if (args.record) {
     RawlogWriterOptions wopts;
     wopts.sensor_label = label;
+    wopts.in_place = true;  // a recording: valid to its last frame whatever stops the program
     writer = std::make_unique<RawlogWriter>((fs::path(args.out) / "grab.rawlog").string(), wopts);
   }
   std::unique_ptr<RunSession> session;  // the same outputs as vofusion, for what was reconstructed

@@ -1,10 +1,14 @@
 // vofusion-grab end to end: replay through the live path, outputs written and readable, and the
 // no-sensor failure is one line, quick and non-zero (no hardware on the test machines).
+#include <sys/mount.h>
+
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
+
+#include <opencv2/core.hpp>
 
 #include "support.h"
 #include "vofusion/io/frame_source.h"
@@ -127,6 +131,82 @@ TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   Frame f;
   while (back->next(f)) ++n;
   EXPECT_EQ(long(n), played);
+}
+
+// A recording is valid at every moment: kill -9 at random moments of a replayed live session leaves a
+// grab.rawlog under its final name that vofusion reconstructs and rawlog-edit reads, every frame whole.
+TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string cfg = test::tempDir("grab_app_kill_cfg") + "/path_only.ini";
+  std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  std::srand(11);
+  for (int i = 0; i < 10; ++i) {
+    const std::string out = test::tempDir("grab_app_kill") + "/run" + std::to_string(i);
+    const double after = 1.0 + 3.0 * double(std::rand()) / RAND_MAX;  // s, past start-up
+    SCOPED_TRACE("killed after " + std::to_string(after) + " s");
+    std::string log;
+    test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out +
+                  " --live --no-gui & pid=$!; sleep " + std::to_string(after) + "; kill -9 $pid; wait $pid'",
+              &log);
+    ASSERT_TRUE(fs::exists(out + "/grab.rawlog")) << log;
+    EXPECT_FALSE(fs::exists(out + "/grab_Images.tmp-")) << "no temporary name";
+    // Every frame decodes, depth and colour.
+    auto back = openFrameSource(out + "/grab.rawlog");
+    std::size_t frames = 0;
+    Frame f;
+    while (back->next(f)) {
+      EXPECT_TRUE(f.valid());
+      EXPECT_GT(cv::countNonZero(f.depth > 0), 1000);
+      ++frames;
+    }
+    EXPECT_GT(frames, 0u);
+    std::string info;
+    ASSERT_EQ(test::run("rawlog-edit --info -i " + out + "/grab.rawlog", &info), 0) << info;
+    EXPECT_NE(info.find("KINECT /     " + std::to_string(frames) + " /"), std::string::npos) << info;
+    std::string rec;
+    ASSERT_EQ(test::run(test::app("vofusion") + " " + out + "/grab.rawlog --out " + out + "/rec --config " + cfg, &rec), 0)
+        << rec;
+    EXPECT_NE(rec.find("vofusion: " + std::to_string(frames) + " frames"), std::string::npos) << rec;
+  }
+}
+
+// An earlier recording in the output folder is never overwritten: the grab refuses in one line.
+TEST(GrabApp, AnEarlierRecordingIsNeverOverwritten) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string out = test::tempDir("grab_app_keep");
+  std::ofstream(out + "/grab.rawlog") << "an earlier recording";
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay " + tum + " --out " + out + " --max-frames 5", &log), 2);
+  EXPECT_NE(log.find("a recording is already there"), std::string::npos) << log;
+  std::ifstream in(out + "/grab.rawlog");
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()), "an earlier recording");
+}
+
+// A full disk stops the recording with one line naming the file it could not write; what was
+// recorded before stays readable.
+TEST(GrabApp, AFullDiskStopsTheRecordingAndKeepsWhatWasWritten) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string mnt = test::tempDir("grab_app_tmpfs");
+  if (::mount("tmpfs", mnt.c_str(), "tmpfs", 0, "size=6m") != 0) GTEST_SKIP() << "cannot mount a tmpfs here";
+  struct Unmount {
+    std::string m;
+    ~Unmount() { ::umount(m.c_str()); }
+  } unmount{mnt};
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay " + tum + " --out " + mnt + "/g --no-gui 2>&1 | grep -v '^recording '",
+                      &log),
+            0);  // grep's status: the line is there
+  EXPECT_EQ(countLines(log), 2u) << log;  // the banner and the one error line
+  EXPECT_NE(log.find("No space left on device"), std::string::npos) << log;
+  auto back = openFrameSource(mnt + "/g/grab.rawlog");
+  std::size_t n = 0;
+  Frame f;
+  while (back->next(f)) n += f.valid();
+  EXPECT_GT(n, 3u);
+  EXPECT_NE(log.find("holds the " + std::to_string(n) + " frames before"), std::string::npos) << log;
 }
 
 TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {

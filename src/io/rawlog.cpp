@@ -1,6 +1,7 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/colour_registration.h"
 #include "vofusion/io/external_files.h"
+#include "record_file.h"
 
 #include <cerrno>
 #include <cstdint>
@@ -400,34 +401,55 @@ std::string RawlogWriter::groundTruthPathFor(const std::string& rawlog_path) {
 }
 
 struct RawlogWriter::Impl {
-  AtomicPath rawlog, images;
+  std::optional<AtomicPath> rawlog, images;  // unless in place
+  std::string rawlog_file, images_dir;       // where the bytes go
   mrpt::io::CFileGZOutputStream gz;
+  std::unique_ptr<RecordFile> records;       // in place
   std::unique_ptr<mrpt::serialization::CArchive> arch;
   mrpt::obs::CActionCollection pending_actions;
   std::vector<mrpt::obs::CObservation::Ptr> pending_obs;
   std::optional<Trajectory> gt;
   bool images_used = false;
 
-  Impl(const std::string& path) : rawlog(path), images(imagesDirFor(path)) {}
+  void openAtomic(const std::string& path) {
+    rawlog.emplace(path);
+    images.emplace(imagesDirFor(path));
+    rawlog_file = rawlog->tmp();
+    images_dir = images->tmp();
+    std::string err;
+    if (!gz.open(rawlog_file, 1, err)) throw InputError(path, "cannot write: " + err);
+    arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<mrpt::io::CFileGZOutputStream>>(gz);
+  }
+  void openInPlace(const std::string& path) {
+    rawlog_file = path;
+    images_dir = imagesDirFor(path);
+    if (fs::exists(rawlog_file) || fs::exists(images_dir))
+      throw InputError(path, "a recording is already there; recordings are never overwritten: choose another folder");
+    records = std::make_unique<RecordFile>(rawlog_file);
+    arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<RecordFile>>(*records);
+  }
+  // The record just serialised is complete (in place: appended to the file now).
+  void endRecord() {
+    if (records) records->endRecord();
+  }
 };
 
 RawlogWriter::RawlogWriter(const std::string& path, const RawlogWriterOptions& opts) : path_(path), opts_(opts) {
   const fs::path parent = fs::absolute(path).parent_path();
   ensureWritableDirectory(parent.string());
   if (fs::is_directory(path)) throw InputError(path, "output path is a folder, expected a .rawlog file name");
-  impl_ = std::make_unique<Impl>(path);
-  std::string err;
-  if (!impl_->gz.open(impl_->rawlog.tmp(), 1, err)) throw InputError(path, "cannot write: " + err);
-  impl_->arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<mrpt::io::CFileGZOutputStream>>(impl_->gz);
+  impl_ = std::make_unique<Impl>();
+  if (opts.in_place) impl_->openInPlace(path);
+  else impl_->openAtomic(path);
   if (opts.external_images) {
     std::error_code ec;
-    fs::create_directories(impl_->images.tmp(), ec);
-    if (ec) throw InputError(impl_->images.path(), "cannot create: " + ec.message());
+    fs::create_directories(impl_->images_dir, ec);
+    if (ec) throw InputError(imagesDirFor(path), "cannot create: " + ec.message());
   }
 }
 
 RawlogWriter::~RawlogWriter() {
-  if (impl_) impl_->gz.close();  // before AtomicPath removes the temporary
+  if (impl_ && !impl_->records) impl_->gz.close();  // before AtomicPath removes the temporary
 }
 
 void RawlogWriter::writeAction(const mrpt::obs::CAction& action) {
@@ -438,8 +460,12 @@ void RawlogWriter::writeAction(const mrpt::obs::CAction& action) {
 
 void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
   auto copy = std::dynamic_pointer_cast<mrpt::obs::CObservation>(obs.duplicateGetSmartPtr());
-  if (opts_.format == RawlogWriterOptions::Format::Observations) *impl_->arch << *copy;
-  else impl_->pending_obs.push_back(copy);
+  if (opts_.format == RawlogWriterOptions::Format::Observations) {
+    *impl_->arch << *copy;
+    impl_->endRecord();
+  } else {
+    impl_->pending_obs.push_back(copy);
+  }
 }
 
 void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
@@ -450,19 +476,19 @@ void RawlogWriter::write(const Frame& frame) {
     char stem[128];
     std::snprintf(stem, sizeof stem, "%s_%06zu_%.6f", opts_.sensor_label.c_str(), frames_, frame.timestamp);
     const std::string png = std::string(stem) + "_INTENSITY.png";
-    const std::string dir = impl_->images.tmp();
+    const std::string dir = impl_->images_dir;
     std::vector<uchar> bytes;
     // A TUM/7-Scenes colour PNG is copied as it is: encoding it again was ~25 ms of CPU per frame.
     if (!readPlainRgbPng(frame.colour_file, frame.rgb.cols, frame.rgb.rows, bytes)) {
       // Encoded in memory and written here: on a full disk libpng would print its own error line.
       if (!cv::imencode(".png", frame.rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, opts_.png_compression}))
-        throw InputError(impl_->images.path() + "/" + png, "cannot encode image");
+        throw InputError(imagesDirFor(path_) + "/" + png, "cannot encode image");
     }
     std::FILE* f = std::fopen((dir + "/" + png).c_str(), "wb");
     const bool ok = f && std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
     const int err = errno;
     if (!f || std::fclose(f) != 0 || !ok)
-      throw InputError(impl_->images.path() + "/" + png, std::string("cannot write image: ") + std::strerror(f && ok ? errno : err));
+      throw InputError(imagesDirFor(path_) + "/" + png, std::string("cannot write image: ") + std::strerror(f && ok ? errno : err));
     obs->intensityImage.setExternalStorage(png);
     writeRangeImageExternally(*obs, std::string(stem) + "_DEPTH.bin", dir);
     impl_->images_used = true;
@@ -487,6 +513,9 @@ void RawlogWriter::write(const Frame& frame) {
       impl_->pending_actions.clear();
       impl_->pending_obs.clear();
     }
+    impl_->endRecord();  // images first, then the record that names them
+  } catch (const InputError&) {
+    throw;
   } catch (const std::exception& e) {
     throw InputError(path_, "write failed (disk full?)");
   }
@@ -500,11 +529,16 @@ void RawlogWriter::commit() {
     mrpt::obs::CSensoryFrame sf;
     for (const auto& o : impl_->pending_obs) sf.insert(o);
     *impl_->arch << impl_->pending_actions << sf;
+    impl_->endRecord();
+  }
+  if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
+  if (impl_->records) {
+    impl_->records->sync();
+    return;
   }
   impl_->gz.close();
-  if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
-  if (opts_.external_images) impl_->images.commit();
-  impl_->rawlog.commit();
+  if (opts_.external_images) impl_->images->commit();
+  impl_->rawlog->commit();
 }
 
 }  // namespace vofusion

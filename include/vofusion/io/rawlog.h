@@ -85,13 +85,18 @@ struct RawlogWriterOptions {
   std::string sensor_label = "KINECT";
   bool ground_truth_observations = true; // CObservationRobotPose "GROUND_TRUTH" for frames with groundTruth
   int png_compression = 1;               // 0..9, external colour PNGs (1 = fast)
+  // A recording (vofusion-grab) rather than a result: written under its final names, each frame's
+  // images and then its record on disk before the next frame, so that a crash, a kill or a full disk
+  // leaves a rawlog that reads to its last frame (plain, not gzip; synced to the disk once a second).
+  // Never replaces an existing recording. Default: a temporary name renamed whole by commit().
+  bool in_place = false;
 };
 
 class RawlogWriter {
  public:
   // Throws InputError(path, ...) if the output cannot be created.
   explicit RawlogWriter(const std::string& path, const RawlogWriterOptions& opts = {});
-  ~RawlogWriter();  // without commit(): temporaries removed, an earlier output left untouched
+  ~RawlogWriter();  // without commit(): temporaries removed, an earlier output left untouched (in place: kept)
   RawlogWriter(const RawlogWriter&) = delete;
   RawlogWriter& operator=(const RawlogWriter&) = delete;
 

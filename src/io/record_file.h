@@ -1,0 +1,38 @@
+#pragma once
+// The stream of a rawlog recorded in place (RawlogWriterOptions::in_place): every record MRPT
+// serialises is gathered in memory and appended with one write(2) by endRecord(), so the file only
+// ever ends between two whole records and a killed recorder leaves a rawlog readable to its last
+// frame. The kernel has the bytes as soon as write(2) returns; they go to the disk at most once a
+// second (fdatasync), so a power cut costs at most the last second. Plain, not gzip: a gzip stream
+// is only readable up to its last flush, and a record without its images is small.
+#include <chrono>
+#include <string>
+
+#include <mrpt/io/CStream.h>
+
+namespace vofusion {
+
+class RecordFile : public mrpt::io::CStream {
+ public:
+  explicit RecordFile(const std::string& path);  // created (an existing file is an error); throws InputError
+  ~RecordFile() override;
+
+  size_t Write(const void* bytes, size_t n) override;
+  size_t Read(void*, size_t) override;
+  uint64_t Seek(int64_t, TSeekOrigin) override;
+  uint64_t getTotalBytesCount() const override { return written_ + record_.size(); }
+  uint64_t getPosition() const override { return written_ + record_.size(); }
+
+  // Appends the record gathered since the last call; throws InputError (a full disk) with the file
+  // left at its last whole record.
+  void endRecord();
+  void sync();  // to the disk now
+
+ private:
+  std::string path_, record_;
+  int fd_ = -1;
+  uint64_t written_ = 0;
+  std::chrono::steady_clock::time_point last_sync_;
+};
+
+}  // namespace vofusion
