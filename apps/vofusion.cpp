@@ -193,6 +193,7 @@ int body(int argc, char** argv) {
   info.config = plan.config_path;
   info.interrupted = loop.interrupted;
   info.seconds = loop.seconds;
+  source->stop();  // the read ahead of a stopped run is done before its skipped frames are counted
   reportSkipped(*input.frames, info);
   source.reset();
   RunSession::Reopen reopen;  // an interrupted run is not fused again: the user asked it to stop

@@ -29,6 +29,12 @@ bool PrefetchingSource::next(Frame& frame) {
   return true;
 }
 
+void PrefetchingSource::stop() {
+  if (ahead_.valid()) ahead_.wait();
+  ahead_ = {};
+  ended_ = true;
+}
+
 void PrefetchingSource::rewind() {
   if (ahead_.valid()) ahead_.wait();
   ahead_ = {};

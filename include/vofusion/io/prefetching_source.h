@@ -17,6 +17,9 @@ class PrefetchingSource : public FrameSource {
   bool next(Frame& frame) override;
   std::size_t size() const override { return inner_->size(); }
   void rewind() override;
+  // Waits for the frame being read ahead, and ends: the wrapped source is then still and can be asked
+  // what it read (a run stopped early; what the read ahead threw is dropped).
+  void stop();
   std::string name() const override { return inner_->name(); }
 
  private:
