@@ -1,5 +1,6 @@
 #include "support.h"
 
+#include <sys/mount.h>
 #include <sys/wait.h>
 
 #include <array>
@@ -62,6 +63,14 @@ sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std
   o.frames = frames;
   o.camera = CameraIntrinsics{}.scaled(0.5);
   return o;
+}
+
+ScopedTmpfs::ScopedTmpfs(const std::string& dir, const std::string& size) : dir_(dir) {
+  mounted_ = ::mount("tmpfs", dir.c_str(), "tmpfs", 0, ("size=" + size).c_str()) == 0;
+}
+
+ScopedTmpfs::~ScopedTmpfs() {
+  if (mounted_) ::umount(dir_.c_str());
 }
 
 }  // namespace vofusion::test

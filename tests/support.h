@@ -33,6 +33,21 @@ std::string tempDir(const std::string& name);
 std::string app(const std::string& name);
 // Runs a shell command; returns its exit code and fills output (stdout+stderr).
 int run(const std::string& cmd, std::string* output = nullptr);
+
+// A tmpfs of `size` (mount's option, e.g. "300k") on dir while the object lives: a disk that fills up.
+// mounted() is false where this machine does not allow it (not root): the test then skips.
+class ScopedTmpfs {
+ public:
+  ScopedTmpfs(const std::string& dir, const std::string& size);
+  ~ScopedTmpfs();
+  ScopedTmpfs(const ScopedTmpfs&) = delete;
+  ScopedTmpfs& operator=(const ScopedTmpfs&) = delete;
+  bool mounted() const { return mounted_; }
+
+ private:
+  std::string dir_;
+  bool mounted_ = false;
+};
 // A synthetic sequence's options at 320x240, which keeps the suite quick.
 sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory = "smooth");
 

@@ -7,7 +7,6 @@
 // Apps: rgbd-odometry and tum2rawlog (every input kind), rgbd-eval (trajectories), and vofusion,
 // the main app, for the cases it shares (skipped locally until it is built, required under CI), with
 // --strict: by default vofusion skips a damaged frame and goes on ("Damaged frames" at the end).
-#include <sys/mount.h>
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -525,11 +524,8 @@ TEST(FaultsOutput, DiskFullFileSizeLimit) {
 TEST(FaultsOutput, DiskFullTmpfs) {
   REQUIRE_TUM();
   const std::string mnt = test::tempDir("faults_tmpfs");
-  if (::mount("tmpfs", mnt.c_str(), "tmpfs", 0, "size=300k") != 0) GTEST_SKIP() << "cannot mount a tmpfs here";
-  struct Unmount {
-    std::string m;
-    ~Unmount() { ::umount(m.c_str()); }
-  } unmount{mnt};
+  const test::ScopedTmpfs tmpfs(mnt, "300k");
+  if (!tmpfs.mounted()) GTEST_SKIP() << "cannot mount a tmpfs here";
   TumFixture f = makeTum("faults_tmpfs_in");
   for (const auto& app : trackers()) {
     const std::string out = mnt + "/out";

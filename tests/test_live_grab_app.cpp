@@ -1,7 +1,5 @@
 // vofusion-grab end to end: replay through the live path, outputs written and readable, and the
 // no-sensor failure is one line, quick and non-zero (no hardware on the test machines).
-#include <sys/mount.h>
-
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -190,11 +188,8 @@ TEST(GrabApp, AFullDiskStopsTheRecordingAndKeepsWhatWasWritten) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);
   const std::string mnt = test::tempDir("grab_app_tmpfs");
-  if (::mount("tmpfs", mnt.c_str(), "tmpfs", 0, "size=6m") != 0) GTEST_SKIP() << "cannot mount a tmpfs here";
-  struct Unmount {
-    std::string m;
-    ~Unmount() { ::umount(m.c_str()); }
-  } unmount{mnt};
+  const test::ScopedTmpfs tmpfs(mnt, "6m");
+  if (!tmpfs.mounted()) GTEST_SKIP() << "cannot mount a tmpfs here";
   std::string log;
   EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay " + tum + " --out " + mnt + "/g --no-gui 2>&1 | grep -v '^recording '",
                       &log),
