@@ -127,7 +127,7 @@ def markdown(rows, command):
         if ok:
             mw = sum(r["ate_with"] for r in ok) / len(ok)
             mo = sum(r["ate_without"] for r in ok) / len(ok)
-            out.append("| %d | mean | %s | %s | %s | | | | %s | |" % (
+            out.append("| %d | mean (lap end: worst) | %s | %s | %s | | | | %s | |" % (
                 frames, fmt(mo), fmt(mw), fmt(mw / mo, 2), fmt(max(r["lap_end_with_m"] for r in ok))))
     return "\n".join(out) + "\n"
 
