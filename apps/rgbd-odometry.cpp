@@ -19,6 +19,7 @@
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/io/skipping_source.h"
 #include "vofusion/odometry/odometry_source.h"
 #include "vofusion/sim/any_source.h"
 
@@ -32,6 +33,7 @@ const char* kUsage =
     "  --depth-scale S    TUM-layout folders: depth PNG units per metre (default: the folder's camera file, else 5000)\n"
     "  --set S.K=V        override one key, e.g. --set odometry.motion_method=paper\n"
     "  --no-rawlog        write only trajectory.txt\n"
+    "  --strict           stop at the first damaged frame (default: skip it with one warning line and go on)\n"
     "  --dump-config      print the defaults as INI and exit\n";
 
 // The command line's options besides --help, --dump-config and --depth-scale.
@@ -141,7 +143,7 @@ void printAccuracy(const Trajectory& gt, const Trajectory& est) {
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--max-frames", "--set", "--depth-scale"},
-                       {"--no-rawlog", "--dump-config", "--help"});
+                       {"--no-rawlog", "--dump-config", "--strict", "--help"});
   const OdometryParams defaults;
   const std::vector<ConfigSection> known{{"odometry", &defaults}};
   if (cl.flag("--help")) {
@@ -158,14 +160,16 @@ int body(int argc, char** argv) {
   SourceOptions so;
   so.max_frames = args.max_frames;
   if (cl.value("--depth-scale")) so.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
-  auto source = openFrameSource(args.input, so);
+  // A damaged frame costs that frame (io/skipping_source.h), unless --strict.
+  SkippingSource source(openFrameSource(args.input, so), cl.flag("--strict"),
+                        [](const std::string& line) { printAboveProgress("warning: " + line); });
   ensureWritableDirectory(args.out);
   const std::string traj_path = (std::filesystem::path(args.out) / "trajectory.txt").string();
   std::unique_ptr<RawlogWriter> writer;
   if (args.rawlog) writer = openOdometryRawlog(args.out);
 
   OdometrySource odo(params);
-  const RunStats run = runOdometry(*source, odo, writer.get());
+  const RunStats run = runOdometry(source, odo, writer.get());
   if (run.est.empty()) throw InputError(args.input, "no frames");
   if (run.frames_with_depth == 0)
     throw InputError(args.input, "no depth readings in any frame (all depth images are zero)");
@@ -174,6 +178,7 @@ int body(int argc, char** argv) {
     if (!run.gt.empty()) writer->writeGroundTruth(run.gt);
     writer->commit();
   }
+  if (!source.skipped().empty()) std::fprintf(stderr, "%zu damaged frames skipped\n", source.skipped().size());
   printTimes(odo, run);
   printAccuracy(run.gt, run.est);
   return 0;

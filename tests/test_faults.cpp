@@ -5,8 +5,8 @@
 // output folder (no *.tmp-*), an earlier result there unchanged byte for byte.
 //
 // Apps: rgbd-odometry and tum2rawlog (every input kind), rgbd-eval (trajectories), and vofusion,
-// the main app, for the cases it shares (skipped locally until it is built, required under CI), with
-// --strict: by default vofusion skips a damaged frame and goes on ("Damaged frames" at the end).
+// the main app, for the cases it shares (skipped locally until it is built, required under CI); the
+// trackers with --strict: by default they skip a damaged frame and go on ("Damaged frames" at the end).
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -138,9 +138,9 @@ std::string fastVofusionConfig() {
 std::string trackCmd(const std::string& app, const std::string& input, const std::string& out,
                      const std::string& extra = "") {
   std::string cmd = quote(app) + " " + quote(input) + " --out " + quote(out) + " --max-frames 5 " + extra;
-  if (fs::path(app).filename() != "vofusion") return cmd;
-  if (extra.find("--config") == std::string::npos) cmd += " --config " + quote(fastVofusionConfig());
-  cmd += " --strict";  // the first damaged frame stops the run, as for the other apps
+  const std::string name = fs::path(app).filename().string();
+  if (name == "vofusion" && extra.find("--config") == std::string::npos) cmd += " --config " + quote(fastVofusionConfig());
+  if (name == "vofusion" || name == "rgbd-odometry") cmd += " --strict";  // the first damaged frame stops the run
   return cmd;
 }
 
@@ -655,4 +655,16 @@ TEST(DamagedFrames, RawlogCutAtRandomOffsetsIsReadToItsLastWholeFrame) {
     EXPECT_NE(r.log.find("warning: " + in), std::string::npos) << r.log;
   }
   EXPECT_GT(read_at_least_one, 5u);
+}
+
+TEST(DamagedFrames, RgbdOdometrySkipsThemToo) {
+  REQUIRE_TUM();
+  TumFixture f = makeTum("damaged_odometry", 10);
+  const std::string file = damage(f, 4, 0);
+  const std::string out = test::tempDir("damaged_odometry_out");
+  std::string log;
+  ASSERT_EQ(test::run(quote(test::app("rgbd-odometry")) + " " + quote(f.dir) + " --out " + quote(out) + " --no-rawlog", &log), 0)
+      << log;
+  EXPECT_NE(log.find("warning: " + file + ": depth image is missing (frame 4 skipped)"), std::string::npos) << log;
+  EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), 9u);
 }
