@@ -18,6 +18,7 @@
 #include "vofusion/core/progress.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/io/skipping_source.h"
 #include "vofusion/live/live_loop.h"
 #include "vofusion/live/live_source.h"
 #include "vofusion/live/live_viewer.h"
@@ -182,7 +183,10 @@ std::unique_ptr<LiveSource> openLiveSource(const Args& args, const GrabPlan& pla
   if (!args.replay.empty()) {
     SourceOptions so;
     so.depth_scale = args.depth_scale;
-    return std::make_unique<ReplaySource>(openFrameSource(args.replay, so), plan.opts.replay_speed);
+    // A damaged frame of the recording costs that frame, as in vofusion (io/skipping_source.h).
+    auto frames = std::make_unique<SkippingSource>(openFrameSource(args.replay, so), false,
+                                                   [](const std::string& line) { printAboveProgress("warning: " + line); });
+    return std::make_unique<ReplaySource>(std::move(frames), plan.opts.replay_speed);
   }
   const std::string section = findSensorSection(plan.cfg, args.sensor, plan.config);
   label = plan.cfg.read_string(section, "sensorLabel", label);

@@ -1,10 +1,12 @@
 // vofusion-grab end to end: replay through the live path, outputs written and readable, and the
 // no-sensor failure is one line, quick and non-zero (no hardware on the test machines).
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -167,6 +169,27 @@ TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
         << rec;
     EXPECT_NE(rec.find("vofusion: " + std::to_string(frames) + " frames"), std::string::npos) << rec;
   }
+}
+
+// Replaying a damaged recording: the damaged frame is skipped with one warning, the rest recorded.
+TEST(GrabApp, ReplaySkipsADamagedFrame) {
+  const std::string dir = test::tempDir("grab_app_damaged");
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 20 --size 320x240"), 0);
+  std::vector<fs::path> depth;
+  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
+  std::sort(depth.begin(), depth.end());
+  ASSERT_EQ(depth.size(), 20u);
+  fs::remove(depth[7]);
+  std::string log;
+  ASSERT_EQ(test::run(test::app("vofusion-grab") + " --replay " + dir + "/rec --out " + dir + "/out --no-gui --speed 4", &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("warning: " + depth[7].string() + ": depth image is missing (frame 7 skipped)"), std::string::npos) << log;
+  auto back = openFrameSource(dir + "/out/grab.rawlog");
+  std::size_t n = 0;
+  Frame f;
+  while (back->next(f)) ++n;
+  EXPECT_EQ(n, 19u);
 }
 
 // An earlier recording in the output folder is never overwritten: the grab refuses in one line.
