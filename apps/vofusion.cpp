@@ -76,9 +76,8 @@ struct Input {
 
 // warn: one line per frame skipped (false for the second reading of the recording, re-fusion).
 Input openInput(const RunPlan& plan, bool warn) {
-  auto say = [](const std::string& line) { printAboveProgress("warning: " + line); };
   auto skipping = std::make_unique<SkippingSource>(openFrameSource(plan.input, plan.src_opts), plan.strict,
-                                                   warn ? std::function<void(const std::string&)>(say) : nullptr);
+                                                   warn ? printWarning : nullptr);
   Input in;
   in.frames = skipping.get();
   in.source = std::make_unique<PrefetchingSource>(std::move(skipping));

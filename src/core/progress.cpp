@@ -57,4 +57,6 @@ void printAboveProgress(const std::string& line) {
   std::fprintf(stderr, "%s%s\n", ::isatty(STDERR_FILENO) ? "\r\033[K" : "", line.c_str());
 }
 
+void printWarning(const std::string& line) { printAboveProgress("warning: " + line); }
+
 }  // namespace vofusion

@@ -12,6 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/core/text_file.h"
 
 namespace fs = std::filesystem;
@@ -182,9 +183,7 @@ CameraFile readCameraYaml(const std::string& path) {
 
 namespace {
 
-void warn(const std::string& origin, const std::string& what) {
-  std::fprintf(stderr, "warning: %s: %s\n", origin.c_str(), what.c_str());
-}
+void warn(const std::string& origin, const std::string& what) { printWarning(origin + ": " + what); }
 
 // The median reading of a depth PNG in its own units (0 when it has none).
 double medianRaw(const cv::Mat& raw) {
