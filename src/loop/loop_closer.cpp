@@ -151,8 +151,8 @@ struct LoopCloser::Impl {
     publish(accepted, removed, rejected, t);
   }
 
-  // At the end of the run, with the thread idle: one optimisation over every loop found (loops
-  // removed when they came may fit the ones after them), so the last word is the whole graph's.
+  // At the end of the run, with the thread idle and some loop removed: one optimisation over every
+  // loop found (loops removed when they came may fit the ones after them).
   void finalOptimisation() {
     const std::vector<std::size_t> removed = graph.optimiseAll(params.max_loop_chi2, params.max_chain_chi2);
     std::lock_guard<std::mutex> lock(mu);
@@ -224,14 +224,15 @@ std::pair<std::size_t, std::size_t> LoopCloser::queueStats() const {
 }
 
 void LoopCloser::finish() {
-  bool any_loop = false;
+  bool any_removed = false;
   {
     std::unique_lock<std::mutex> lock(impl_->mu);
     impl_->idle.wait(lock, [&] { return impl_->queue.empty() && !impl_->busy; });
-    any_loop = !impl_->loops.empty();
+    for (const LoopRecord& l : impl_->loops) any_removed |= !l.active;
   }
-  // The thread waits for keyframes that no longer come: the graph is the caller's now.
-  if (any_loop) impl_->finalOptimisation();
+  // With every loop in, the last optimisation already was over all of them. Otherwise: the thread
+  // waits for keyframes that no longer come, and the graph is the caller's now.
+  if (any_removed) impl_->finalOptimisation();
 }
 
 std::vector<LoopRecord> LoopCloser::loops() const {
