@@ -184,8 +184,7 @@ std::unique_ptr<LiveSource> openLiveSource(const Args& args, const GrabPlan& pla
     SourceOptions so;
     so.depth_scale = args.depth_scale;
     // A damaged frame of the recording costs that frame, as in vofusion (io/skipping_source.h).
-    auto frames = std::make_unique<SkippingSource>(openFrameSource(args.replay, so), false,
-                                                   [](const std::string& line) { printAboveProgress("warning: " + line); });
+    auto frames = std::make_unique<SkippingSource>(openFrameSource(args.replay, so), false, printWarning);
     return std::make_unique<ReplaySource>(std::move(frames), plan.opts.replay_speed);
   }
   const std::string section = findSensorSection(plan.cfg, args.sensor, plan.config);
@@ -237,7 +236,7 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
     reopen = [out] { return openFrameSource((fs::path(out) / "grab.rawlog").string(), SourceOptions{}); };
   run.finish(info, reopen);
   const Reconstruction& rec = run.reconstruction();
-  if (rec.mapNeedsReintegration() && !rec.reintegrated())
+  if (plan.out_params.write_mesh && rec.mapNeedsReintegration() && !rec.reintegrated())
     std::fprintf(stderr, "vofusion-grab: loops corrected the trajectory; the mesh keeps the tracked poses "
                          "(record with the reconstruction to have it fused again at the corrected ones)\n");
 }
