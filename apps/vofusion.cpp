@@ -2,7 +2,7 @@
 //   vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]
 //            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
 //            [--depth-scale S] [--no-loop-closure] [--strict]
-//            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--resume f]
+//            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
 #include <csignal>
@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <iostream>
 #include <optional>
+#include <sstream>
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
@@ -35,7 +36,7 @@ const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]\n"
     "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
     "                [--depth-scale S] [--no-loop-closure] [--strict] [--raw-mesh] [--dump-config]\n"
-    "                [--work-dir d] [--save-volume f] [--resume f]\n"
+    "                [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]\n"
     "  --strict       stop at the first damaged frame (missing or corrupt image, unreadable record) or at a\n"
     "                 recording cut short; by default such a frame is skipped with one line naming its file,\n"
     "                 counted in summary.json (frames_skipped), and the run goes on\n"
@@ -46,8 +47,12 @@ const char* kUsage =
     "  --work-dir     folder of the spill file of bricks that left the volume beyond [kinfu] world_cache_mib\n"
     "                 (default <out>/.tmp; the file is deleted as soon as it is created, so it never stays)\n"
     "  --save-volume  at the end, the map (volume + world model) and the camera pose to file f\n"
-    "  --resume       start from a map saved with --save-volume: the camera continues from the saved pose,\n"
-    "                 the map keeps its frame (the input should continue where the saved run stopped)\n";
+    "  --checkpoint-every  every S seconds of the frame loop (and at Ctrl-C), the whole run so far to\n"
+    "                 <out>/checkpoint, atomically (the map, every stage's state, the position in the input);\n"
+    "                 deleted when the run ends with its outputs written\n"
+    "  --resume       a checkpoint: the same command goes on from it, to the trajectory and mesh an\n"
+    "                 uninterrupted run gives. A map saved with --save-volume: the camera continues from the\n"
+    "                 saved pose, the map keeps its frame (the input should continue where the saved run stopped)\n";
 
 std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanParams& mesh) {
   auto sections = reconstructionConfigSections();
@@ -66,7 +71,25 @@ struct RunPlan {
   SourceOptions src_opts;
   std::optional<std::string> resume, save_volume;
   bool strict = false;  // stop at the first damaged frame
+  double checkpoint_every = 0.0;  // s; 0: no checkpoints
+  std::string checkpoint_path;    // <out>/checkpoint
+  std::string origin;             // what a checkpoint of this run is for (checked when resuming)
 };
+
+// What a checkpoint belongs to: the input and everything that changes what is computed from it.
+// The work folder is left out: it holds only scratch files.
+std::string runOrigin(const RunPlan& plan, const CommandLine& cl) {
+  std::error_code ec;
+  const auto input = std::filesystem::weakly_canonical(plan.input, ec);
+  std::string o = "input " + (ec || !std::filesystem::exists(plan.input) ? plan.input : input.string()) + "\n";
+  o += "mode " + toString(plan.mode) + "\nmax-frames " + std::to_string(plan.src_opts.max_frames) + "\n";
+  o += "intrinsics " + cl.value("--intrinsics", "") + "\ndepth-scale " + cl.value("--depth-scale", "") + "\n";
+  o += std::string("strict ") + (plan.strict ? "yes" : "no") + "\n";
+  std::istringstream config(plan.cfg.getContent());
+  for (std::string line; std::getline(config, line);)
+    if (line.rfind("work_dir", 0) != 0) o += line + "\n";
+  return o;
+}
 
 // The input's frames, read ahead on another thread, damaged ones skipped unless --strict.
 struct Input {
@@ -133,40 +156,71 @@ RunPlan planRun(const CommandLine& cl) {
   plan.resume = cl.value("--resume");
   plan.strict = cl.flag("--strict");
   plan.save_volume = cl.value("--save-volume");
+  plan.checkpoint_every = cl.number("--checkpoint-every", 0.0, -1e-9, 1e6);
+  plan.checkpoint_path = (std::filesystem::path(plan.out_dir) / "checkpoint").string();
+  plan.origin = runOrigin(plan, cl);
   return plan;
 }
 
 struct FrameLoop {
   std::size_t done = 0, frames_with_depth = 0;
   bool interrupted = false;
-  double seconds = 0.0;
+  double seconds = 0.0;  // of the frame loop, a resumed checkpoint's included
+  std::size_t checkpoints = 0;
 };
 
-// Every frame of the source through the run, with progress, until the end or Ctrl-C.
-FrameLoop reconstructFrames(FrameSource& source, RunSession& run, TrackingMode mode) {
+// --resume <checkpoint>: the run's state from it, and the frames it had processed read again for the
+// outputs (poses.rawlog, ground truth): the loop then goes on with the next frame.
+FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession& run) {
+  const RunSession::Checkpoint c = run.resume(*plan.resume, plan.origin);
+  Progress progress("vofusion [resuming: reading the checkpoint's frames again]", c.frames);
+  FrameLoop loop;
+  Frame frame;
+  while (run.replaying()) {
+    if (!source.next(frame))
+      throw InputError(*plan.resume, "the input ends before frame " + std::to_string(c.frames) + ", where the checkpoint was made");
+    if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
+    run.replay(frame);
+    progress.update(++loop.done);
+  }
+  progress.finish();
+  loop.seconds = c.seconds;
+  return loop;
+}
+
+// Every frame of the source through the run, with progress and checkpoints, until the end or Ctrl-C.
+void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run, FrameLoop& loop) {
   const Reconstruction& rec = run.reconstruction();
   std::signal(SIGINT, onSigint);
-  Progress progress("vofusion [" + toString(mode) + "]", source.size());
-  FrameLoop loop;
+  Progress progress("vofusion [" + toString(plan.mode) + "]", source.size());
+  progress.startAt(loop.done);
+  const double before = loop.seconds;
+  double last_checkpoint = 0.0;
+  const auto checkpoint = [&] {
+    run.saveCheckpoint(plan.checkpoint_path, plan.origin, before + progress.elapsedSeconds());
+    last_checkpoint = progress.elapsedSeconds();
+    ++loop.checkpoints;
+  };
   Frame frame;
   while (!g_stop && source.next(frame)) {
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
     run.process(frame);
     ++loop.done;
+    if (plan.checkpoint_every > 0 && progress.elapsedSeconds() - last_checkpoint >= plan.checkpoint_every) checkpoint();
     std::string status = "fallbacks " + std::to_string(rec.fallbacks()) + "  lost " + std::to_string(rec.lostFrames());
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
     progress.update(loop.done, status);
   }
   loop.interrupted = g_stop;
+  if (loop.interrupted && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
   std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C while writing outputs kills as usual
   progress.finish(loop.interrupted ? "(interrupted: writing what was built so far)" : "");
-  loop.seconds = progress.elapsedSeconds();
-  return loop;
+  loop.seconds = before + progress.elapsedSeconds();
 }
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale", "--work-dir",
-                        "--save-volume", "--resume"},
+                        "--save-volume", "--resume", "--checkpoint-every"},
                        {"--raw-mesh", "--dump-config", "--no-loop-closure", "--strict", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
@@ -180,10 +234,13 @@ int body(int argc, char** argv) {
   Input input = openInput(plan, true);
   auto& source = input.source;
   RunSession run(plan.cfg, plan.mode, plan.out_dir, plan.out_params, plan.mesh_params);
-  if (plan.resume) run.reconstruction().resumeVolume(*plan.resume);
   std::fprintf(stderr, "vofusion: %s, mode %s, %zu frames -> %s\n", source->name().c_str(), toString(plan.mode).c_str(),
                source->size(), plan.out_dir.c_str());
-  const FrameLoop loop = reconstructFrames(*source, run, plan.mode);
+  FrameLoop loop;
+  if (plan.resume && RunSession::isCheckpoint(*plan.resume)) loop = resumeCheckpoint(plan, *source, run);
+  else if (plan.resume) run.reconstruction().resumeVolume(*plan.resume);
+  const std::size_t resumed_at = loop.done;
+  reconstructFrames(plan, *source, run, loop);
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");
   if (loop.frames_with_depth == 0 && !loop.interrupted)
     throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
@@ -192,6 +249,9 @@ int body(int argc, char** argv) {
   info.config = plan.config_path;
   info.interrupted = loop.interrupted;
   info.seconds = loop.seconds;
+  if (plan.checkpoint_every > 0 || resumed_at)
+    info.extra["checkpoints"] = {{"every_seconds", plan.checkpoint_every}, {"written", loop.checkpoints},
+                                 {"resumed_at_frame", resumed_at}};
   source->stop();  // the read ahead of a stopped run is done before its skipped frames are counted
   reportSkipped(*input.frames, info);
   source.reset();
@@ -206,6 +266,8 @@ int body(int argc, char** argv) {
   if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
   std::fprintf(stderr, "\n");
   std::error_code ec;
+  // The outputs are whole: a checkpoint of this run has nothing left to resume.
+  if (!loop.interrupted) std::filesystem::remove(plan.checkpoint_path, ec);
   std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
   return loop.interrupted ? 130 : 0;
 }

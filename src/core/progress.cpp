@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 
 namespace vofusion {
@@ -14,9 +15,11 @@ double Progress::elapsedSeconds() const {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
 }
 
+void Progress::startAt(std::size_t done) { done_ = start_done_ = done; }
+
 double Progress::fps() const {
   const double t = elapsedSeconds();
-  return t > 0 ? done_ / t : 0.0;
+  return t > 0 ? (done_ - std::min(done_, start_done_)) / t : 0.0;
 }
 
 static std::string formatDuration(double s) {

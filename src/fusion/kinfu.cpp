@@ -12,6 +12,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/parallel.h"
 #include "vofusion/core/pose_eigen.h"
+#include "vofusion/core/state_archive.h"
 
 namespace vofusion {
 
@@ -174,6 +175,49 @@ Eigen::Isometry3d KinFu::resume(const std::string& path) {
   Eigen::Isometry3d pose;
   pose.matrix() = T;
   return pose;
+}
+
+void KinFu::saveState(std::ostream& os) const {
+  const Impl& s = *impl_;
+  {
+    auto a = state::archiveOf(os);
+    state::tag(a, "map");
+    a << s.have_model << s.model_stale;
+    state::write(a, s.model.vertices);
+    state::write(a, s.model.normals);
+    state::write(a, s.model.pose);
+    a << uint64_t(s.model.intensity.size());
+    for (const IntensityLevel& l : s.model.intensity) {
+      state::write(a, l.grey);
+      state::write(a, l.dx);
+      state::write(a, l.dy);
+    }
+    state::write(a, s.model_depth);
+  }
+  s.volume->save(os);
+}
+
+void KinFu::loadState(std::istream& is) {
+  Impl& s = *impl_;
+  {
+    auto a = state::archiveOf(is);
+    state::expectTag(a, "map");
+    a >> s.have_model >> s.model_stale;
+    state::read(a, s.model.vertices);
+    state::read(a, s.model.normals);
+    state::read(a, s.model.pose);
+    uint64_t n = 0;
+    a >> n;
+    if (n > 64) throw std::runtime_error("checkpoint: bad intensity levels");
+    s.model.intensity.resize(n);
+    for (IntensityLevel& l : s.model.intensity) {
+      state::read(a, l.grey);
+      state::read(a, l.dx);
+      state::read(a, l.dy);
+    }
+    state::read(a, s.model_depth);
+  }
+  s.volume->load(is);
 }
 
 cv::Mat KinFu::renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam, bool coloured) const {

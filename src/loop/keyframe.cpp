@@ -63,4 +63,16 @@ bool KeyframeSelector::next(const Eigen::Isometry3d& pose, bool well_tracked) {
   return true;
 }
 
+void KeyframeSelector::saveState(state::Archive& a) const {
+  state::write(a, last_keyframe_);
+  state::write(a, last_pose_);
+  a << have_keyframe_ << have_pose_ << recovering_ << last_after_poor_ << path_;
+}
+
+void KeyframeSelector::loadState(state::Archive& a) {
+  state::read(a, last_keyframe_);
+  state::read(a, last_pose_);
+  a >> have_keyframe_ >> have_pose_ >> recovering_ >> last_after_poor_ >> path_;
+}
+
 }  // namespace vofusion::loop

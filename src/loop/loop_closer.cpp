@@ -9,6 +9,7 @@
 
 #include "vofusion/loop/keyframe_store.h"
 #include "vofusion/core/pose_eigen.h"
+#include "vofusion/core/state_archive.h"
 #include "vofusion/loop/loop_verifier.h"
 #include "vofusion/loop/place_index.h"
 #include "vofusion/loop/pose_graph.h"
@@ -164,6 +165,23 @@ struct LoopCloser::Impl {
     for (std::size_t i = 0; i < poses.size(); ++i) poses[i].optimised = graph.pose(i);
   }
 
+  // To the thread; beyond kMaxQueued waiting keyframes the caller waits for it (counted when that is
+  // the frame loop, not a checkpoint's keyframes being handed over again).
+  void enqueue(Keyframe k, bool from_frame_loop = true) {
+    std::unique_lock<std::mutex> lock(mu);
+    if (queue.size() >= kMaxQueued) {
+      frame_loop_waits += from_frame_loop;
+      taken.wait(lock, [&] { return queue.size() < kMaxQueued; });
+    }
+    queue.push_back(std::move(k));
+    if (from_frame_loop) max_queued = std::max(max_queued, queue.size());
+    wake.notify_one();
+  }
+  void waitIdle() {
+    std::unique_lock<std::mutex> lock(mu);
+    idle.wait(lock, [&] { return queue.empty() && !busy; });
+  }
+
   void publish(const std::vector<LoopRecord>& accepted, const std::vector<std::size_t>& removed,
                const std::map<std::string, std::size_t>& rejected, const StageTimes& t) {
     std::lock_guard<std::mutex> lock(mu);
@@ -203,19 +221,64 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);
     k.after_poor_tracking = m.selector.lastAfterPoorTracking();
-    std::unique_lock<std::mutex> lock(m.mu);
-    if (m.queue.size() >= Impl::kMaxQueued) {
-      ++m.frame_loop_waits;
-      m.taken.wait(lock, [&] { return m.queue.size() < Impl::kMaxQueued; });
-    }
-    m.queue.push_back(std::move(k));
-    m.max_queued = std::max(m.max_queued, m.queue.size());
-    m.wake.notify_one();
+    m.enqueue(std::move(k));
     ++m.keyframes_made;
     m.keyframe_position.push_back(m.frame_keyframe.size());
   }
   m.frame_keyframe.push_back(m.keyframes_made == 0 ? 0 : m.keyframes_made - 1);
   return key;
+}
+
+void LoopCloser::saveState(std::ostream& os) const {
+  Impl& m = *impl_;
+  m.waitIdle();  // the thread's store is the caller's to read until the next addFrame
+  auto a = state::archiveOf(os);
+  state::tag(a, "loop");
+  m.selector.saveState(a);
+  m.residuals.saveState(a);
+  a << uint64_t(m.strained_frames) << uint64_t(m.keyframes_made);
+  a << std::vector<uint64_t>(m.frame_keyframe.begin(), m.frame_keyframe.end());
+  a << std::vector<uint64_t>(m.keyframe_position.begin(), m.keyframe_position.end());
+  a << uint64_t(m.keyframes.size());
+  for (std::size_t id = 0; id < m.keyframes.size(); ++id) {
+    const Keyframe k = m.keyframes.load(id);
+    a << uint64_t(k.id) << uint64_t(k.frame_index) << k.timestamp << k.path_length << k.after_poor_tracking;
+    state::write(a, k.tracked);
+    state::write(a, k.camera);
+    a << encodeKeyframeData(k);
+  }
+}
+
+void LoopCloser::loadState(std::istream& is) {
+  Impl& m = *impl_;
+  auto a = state::archiveOf(is);
+  state::expectTag(a, "loop");
+  m.selector.loadState(a);
+  m.residuals.loadState(a);
+  uint64_t strained = 0, made = 0, count = 0;
+  a >> strained >> made;
+  m.strained_frames = strained;
+  m.keyframes_made = made;
+  std::vector<uint64_t> frame_keyframe, keyframe_position;
+  a >> frame_keyframe >> keyframe_position;
+  m.frame_keyframe.assign(frame_keyframe.begin(), frame_keyframe.end());
+  m.keyframe_position.assign(keyframe_position.begin(), keyframe_position.end());
+  a >> count;
+  if (count != made) throw std::runtime_error("checkpoint: keyframe count does not match");
+  std::vector<uint8_t> bytes;
+  for (uint64_t i = 0; i < count; ++i) {
+    Keyframe k;
+    uint64_t id = 0, frame_index = 0;
+    a >> id >> frame_index >> k.timestamp >> k.path_length >> k.after_poor_tracking;
+    if (id != i) throw std::runtime_error("checkpoint: keyframes out of order");
+    k.id = id;
+    k.frame_index = frame_index;
+    state::read(a, k.tracked);
+    state::read(a, k.camera);
+    a >> bytes;
+    decodeKeyframeData(bytes, k);
+    m.enqueue(std::move(k), false);
+  }
 }
 
 std::pair<std::size_t, std::size_t> LoopCloser::queueStats() const {
@@ -225,9 +288,9 @@ std::pair<std::size_t, std::size_t> LoopCloser::queueStats() const {
 
 void LoopCloser::finish() {
   bool any_removed = false;
+  impl_->waitIdle();
   {
-    std::unique_lock<std::mutex> lock(impl_->mu);
-    impl_->idle.wait(lock, [&] { return impl_->queue.empty() && !impl_->busy; });
+    std::lock_guard<std::mutex> lock(impl_->mu);
     for (const LoopRecord& l : impl_->loops) any_removed |= !l.active;
   }
   // With every loop in, the last optimisation already was over all of them. Otherwise: the thread

@@ -26,4 +26,14 @@ void ColourTimeEvidence::add(bool capture_fitted_better) {
   else if (z() < -kSwitchZ) capture_ = false;
 }
 
+void ColourTimeEvidence::saveState(state::Archive& a) const {
+  a << int32_t(compared_) << int32_t(capture_better_) << int32_t(skipped_) << capture_;
+}
+
+void ColourTimeEvidence::loadState(state::Archive& a) {
+  int32_t compared = 0, better = 0, skipped = 0;
+  a >> compared >> better >> skipped >> capture_;
+  compared_ = compared, capture_better_ = better, skipped_ = skipped;
+}
+
 }  // namespace vofusion

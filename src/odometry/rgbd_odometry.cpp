@@ -17,6 +17,7 @@
 #include "vofusion/features/hamming_matcher.h"
 #include "vofusion/features/keypoint_union.h"
 #include "vofusion/odometry/colour_time_evidence.h"
+#include "vofusion/core/state_archive.h"
 
 namespace vofusion {
 
@@ -669,6 +670,86 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   r.failure.clear();
   r.success = true;
   return r;
+}
+
+
+// Checkpoints ----------------------------------------------------------------------------------------
+
+namespace {
+
+void writeVelocity(state::Archive& a, const CameraVelocity& v) {
+  state::write(a, v.angular);
+  state::write(a, v.linear);
+}
+void readVelocity(state::Archive& a, CameraVelocity& v) {
+  state::read(a, v.angular);
+  state::read(a, v.linear);
+}
+
+void writeFeatures(state::Archive& a, const FrameFeatures& f) {
+  state::write(a, f.keypoints);
+  state::write(a, f.pixels);
+  state::write(a, f.descriptors);
+  state::write(a, f.points);
+  a << uint64_t(f.index) << f.timestamp << f.colour_offset;
+  state::write(a, f.depth);
+  state::write(a, f.camera);
+  state::writeOptional(a, f.arrival, [&](const CameraVelocity& v) { writeVelocity(a, v); });
+  state::writeOptional(a, f.velocity, [&](const CameraVelocity& v) { writeVelocity(a, v); });
+  a << f.arrival_seconds << f.velocity_final << int32_t(f.star) << int32_t(f.narf);
+}
+
+void readFeatures(state::Archive& a, FrameFeatures& f) {
+  state::read(a, f.keypoints);
+  state::read(a, f.pixels);
+  state::read(a, f.descriptors);
+  state::read(a, f.points);
+  uint64_t index = 0;
+  a >> index >> f.timestamp >> f.colour_offset;
+  f.index = index;
+  state::read(a, f.depth);
+  state::read(a, f.camera);
+  state::readOptional(a, f.arrival, [&](CameraVelocity& v) { readVelocity(a, v); });
+  state::readOptional(a, f.velocity, [&](CameraVelocity& v) { readVelocity(a, v); });
+  int32_t star = 0, narf = 0;
+  a >> f.arrival_seconds >> f.velocity_final >> star >> narf;
+  f.star = star, f.narf = narf;
+}
+
+}  // namespace
+
+void RgbdOdometry::saveState(std::ostream& os) const {
+  const Impl& s = *impl_;
+  auto a = state::archiveOf(os);
+  state::tag(a, "odometry");
+  s.evidence.saveState(a);
+  for (const auto* f : {&s.reference, &s.last, &s.failed})
+    state::writeOptional(a, *f, [&](const FrameFeatures& x) { writeFeatures(a, x); });
+  a << uint64_t(s.older.size());
+  for (const auto& [f, T] : s.older) {
+    writeFeatures(a, f);
+    state::write(a, T);
+  }
+  state::write(a, s.T_kf_last);
+}
+
+void RgbdOdometry::loadState(std::istream& is) {
+  Impl& s = *impl_;
+  auto a = state::archiveOf(is);
+  state::expectTag(a, "odometry");
+  s.evidence.loadState(a);
+  for (auto* f : {&s.reference, &s.last, &s.failed})
+    state::readOptional(a, *f, [&](FrameFeatures& x) { readFeatures(a, x); });
+  uint64_t n = 0;
+  a >> n;
+  if (n > 1024) throw std::runtime_error("checkpoint: bad odometry history");
+  s.older.clear();
+  for (uint64_t i = 0; i < n; ++i) {
+    s.older.emplace_back();
+    readFeatures(a, s.older.back().first);
+    state::read(a, s.older.back().second);
+  }
+  state::read(a, s.T_kf_last);
 }
 
 }  // namespace vofusion

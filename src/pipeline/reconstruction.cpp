@@ -1,5 +1,6 @@
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/core/pose_eigen.h"
+#include "vofusion/core/state_archive.h"
 
 #include <chrono>
 #include <map>
@@ -205,6 +206,72 @@ void Reconstruction::saveVolume(const std::string& path) const {
   impl_->map().save(path);
 }
 void Reconstruction::resumeVolume(const std::string& path) { impl_->map().resume(path); }
+void Reconstruction::saveState(std::ostream& os) const {
+  Impl& m = *impl_;
+  if (m.finished) throw std::logic_error("Reconstruction::saveState after finish()");
+  m.waitFusion();
+  {
+    auto a = state::archiveOf(os);
+    state::tag(a, "reconstruction");
+    a << int32_t(m.mode) << uint64_t(m.trajectory.size());
+    for (const StampedPose& p : m.trajectory) {
+      a << p.timestamp;
+      state::write(a, toEigen(p.pose));
+    }
+    a << m.fused;
+    for (std::size_t n : {m.frames, m.fallbacks, m.predicted, m.lost, m.odo_failures}) a << uint64_t(n);
+    a << m.colour_time.known << m.colour_time.capture << int32_t(m.colour_time.compared) << int32_t(m.colour_time.capture_better);
+    std::map<int32_t, uint64_t> rejections;
+    for (const auto& [why, n] : m.rejections) rejections[int32_t(why)] = n;
+    a << rejections;
+    state::write(a, m.times);
+    a << bool(m.odometry) << bool(m.loops);
+  }
+  if (m.odometry) m.odometry->saveState(os);
+  m.map().saveState(os);
+  if (m.loops) m.loops->saveState(os);
+}
+
+void Reconstruction::loadState(std::istream& is) {
+  Impl& m = *impl_;
+  if (m.frames > 0 || m.finished) throw std::logic_error("Reconstruction::loadState after the first frame");
+  {
+    auto a = state::archiveOf(is);
+    state::expectTag(a, "reconstruction");
+    int32_t mode = 0;
+    uint64_t n = 0;
+    a >> mode >> n;
+    if (mode != int32_t(m.mode)) throw std::runtime_error("the checkpoint was made in another tracking mode");
+    m.trajectory.resize(n);
+    for (StampedPose& p : m.trajectory) {
+      Eigen::Isometry3d T;
+      a >> p.timestamp;
+      state::read(a, T);
+      p.pose = toMrpt(T);
+    }
+    a >> m.fused;
+    for (std::size_t* c : {&m.frames, &m.fallbacks, &m.predicted, &m.lost, &m.odo_failures}) {
+      a >> n;
+      *c = n;
+    }
+    int32_t compared = 0, better = 0;
+    a >> m.colour_time.known >> m.colour_time.capture >> compared >> better;
+    m.colour_time.compared = compared, m.colour_time.capture_better = better;
+    std::map<int32_t, uint64_t> rejections;
+    a >> rejections;
+    m.rejections.clear();
+    for (const auto& [why, count] : rejections) m.rejections[Rejection(why)] = count;
+    state::read(a, m.times);
+    bool odometry = false, loops = false;
+    a >> odometry >> loops;
+    if (odometry != bool(m.odometry) || loops != bool(m.loops))
+      throw std::runtime_error(std::string("the checkpoint was made with loop closure ") + (loops ? "on" : "off"));
+  }
+  if (m.odometry) m.odometry->loadState(is);
+  m.map().loadState(is);
+  if (m.loops) m.loops->loadState(is);
+}
+
 TriangleMesh Reconstruction::extractMesh() const {
   impl_->waitFusion();
   return impl_->map().extractMesh();

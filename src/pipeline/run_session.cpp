@@ -1,11 +1,61 @@
 #include "vofusion/pipeline/run_session.h"
 
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 
+#include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/state_archive.h"
 
 namespace vofusion {
+
+namespace {
+
+constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-1\n";
+
+// What poses.rawlog and the summary take from a frame's report.
+FrameReport outputsPart(const FrameReport& r) {
+  FrameReport s;
+  s.index = r.index;
+  s.timestamp = r.timestamp;
+  s.tracked = r.tracked;
+  s.fell_back = r.fell_back;
+  s.predicted = r.predicted;
+  s.pose = r.pose;
+  s.odometry.success = r.odometry.success;
+  s.odometry.motion = r.odometry.motion;
+  s.odometry.covariance = r.odometry.covariance;
+  return s;
+}
+
+void writeReport(state::Archive& a, const FrameReport& r) {
+  a << uint64_t(r.index) << r.timestamp << r.tracked << r.fell_back << r.predicted << r.odometry.success;
+  state::write(a, toEigen(r.pose));
+  state::write(a, toEigen(r.odometry.motion));
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) a << r.odometry.covariance(i, j);
+}
+
+FrameReport readReport(state::Archive& a) {
+  FrameReport r;
+  uint64_t index = 0;
+  a >> index >> r.timestamp >> r.tracked >> r.fell_back >> r.predicted >> r.odometry.success;
+  r.index = index;
+  Eigen::Isometry3d T;
+  state::read(a, T);
+  r.pose = toMrpt(T);
+  state::read(a, T);
+  r.odometry.motion = toMrpt(T);
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) a >> r.odometry.covariance(i, j);
+  return r;
+}
+
+}  // namespace
 
 RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode, const std::string& out_dir,
                        const OutputParams& out_params, const MeshCleanParams& mesh_params)
@@ -14,9 +64,81 @@ RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mo
 RunSession::~RunSession() = default;
 
 FrameReport RunSession::process(const Frame& frame) {
+  if (replaying()) throw std::logic_error("RunSession::process before the checkpoint's frames were replayed");
   const FrameReport report = rec_.process(frame);
   recorder_.add(frame, report);
+  reports_.push_back(outputsPart(report));
   return report;
+}
+
+void RunSession::saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const {
+  AtomicPath out(path);
+  {
+    std::ofstream os(out.tmp(), std::ios::binary);
+    if (!os) throw InputError(path, "cannot write the checkpoint");
+    os.write(kCheckpointMagic, sizeof(kCheckpointMagic) - 1);
+    {
+      auto a = state::archiveOf(os);
+      a << origin << uint64_t(reports_.size()) << seconds;
+      for (const FrameReport& r : reports_) writeReport(a, r);
+    }
+    rec_.saveState(os);
+    auto a = state::archiveOf(os);
+    state::tag(a, "end");
+    os.close();
+    if (!os) throw InputError(path, "cannot write the checkpoint (disk full?)");
+  }
+  out.commit();
+}
+
+bool RunSession::isCheckpoint(const std::string& path) {
+  std::ifstream is(path, std::ios::binary);
+  char magic[sizeof(kCheckpointMagic) - 1];
+  return is.read(magic, sizeof(magic)) && std::memcmp(magic, kCheckpointMagic, sizeof(magic)) == 0;
+}
+
+RunSession::Checkpoint RunSession::resume(const std::string& path, const std::string& origin) {
+  if (!isCheckpoint(path)) throw InputError(path, "not a vofusion checkpoint (written by --checkpoint-every)");
+  std::ifstream is(path, std::ios::binary);
+  is.seekg(sizeof(kCheckpointMagic) - 1);
+  Checkpoint c;
+  try {
+    {
+      auto a = state::archiveOf(is);
+      std::string saved_origin;
+      uint64_t frames = 0;
+      a >> saved_origin;
+      if (saved_origin != origin)
+        throw InputError(path, "made by another run (" + saved_origin.substr(0, saved_origin.find('\n')) +
+                                   "): resume with the same input, --config, --mode and options");
+      a >> frames >> c.seconds;
+      c.frames = frames;
+      reports_.clear();
+      for (uint64_t i = 0; i < frames; ++i) reports_.push_back(readReport(a));
+    }
+    rec_.loadState(is);
+    auto a = state::archiveOf(is);
+    state::expectTag(a, "end");
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw InputError(path, std::string("truncated or corrupt checkpoint: ") + e.what());
+  }
+  resumed_frames_ = c.frames;
+  replayed_ = 0;
+  resumed_from_ = path;
+  return c;
+}
+
+void RunSession::replay(const Frame& frame) {
+  if (!replaying()) throw std::logic_error("RunSession::replay past the checkpoint's frames");
+  const FrameReport& r = reports_[replayed_];
+  if (frame.index != r.index || std::abs(frame.timestamp - r.timestamp) > 1e-6)
+    throw InputError(resumed_from_, "the input's frame " + std::to_string(frame.index) +
+                                        " is not the one the checkpoint processed there (frame " + std::to_string(r.index) +
+                                        "): resume with the same input");
+  recorder_.add(frame, r);
+  ++replayed_;
 }
 
 // Loops moved the poses: the map, fused at the tracked ones, is fused again at the corrected ones,
@@ -34,6 +156,7 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
 }
 
 nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume) {
+  if (replaying()) throw std::logic_error("RunSession::finish before the checkpoint's frames were replayed");
   rec_.finish();
   if (write_mesh_ || save_volume) refuse(info, reopen);  // the map is not used otherwise
   if (save_volume) rec_.saveVolume(*save_volume);

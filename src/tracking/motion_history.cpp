@@ -1,6 +1,7 @@
 #include "vofusion/tracking/motion_history.h"
 
 #include <algorithm>
+#include <stdexcept>
 
 namespace vofusion {
 
@@ -45,6 +46,34 @@ void MotionHistory::restart(const Eigen::Isometry3d& T) {
   have_last_ = false;
   last_motion_dt_ = 0.0;
   recent_.clear();
+}
+
+void MotionHistory::saveState(state::Archive& a) const {
+  state::write(a, pose_);
+  a << uint64_t(recent_.size());
+  for (const auto& [i, T] : recent_) {
+    a << uint64_t(i);
+    state::write(a, T);
+  }
+  state::write(a, last_motion_);
+  a << last_motion_dt_ << last_timestamp_ << have_last_;
+}
+
+void MotionHistory::loadState(state::Archive& a) {
+  state::read(a, pose_);
+  uint64_t n = 0;
+  a >> n;
+  if (n > 32) throw std::runtime_error("checkpoint: bad motion history");
+  recent_.clear();
+  for (uint64_t k = 0; k < n; ++k) {
+    uint64_t i = 0;
+    a >> i;
+    Eigen::Isometry3d T;
+    state::read(a, T);
+    recent_.emplace_back(i, T);
+  }
+  state::read(a, last_motion_);
+  a >> last_motion_dt_ >> last_timestamp_ >> have_last_;
 }
 
 }  // namespace vofusion

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <optional>
+#include <stdexcept>
 #include <tuple>
 
 #include "joint_policy.h"
 #include "vofusion/core/pose_eigen.h"
+#include "vofusion/core/state_archive.h"
 #include "vofusion/tracking/motion_history.h"
 
 namespace vofusion {
@@ -249,6 +251,41 @@ mrpt::poses::CPose3D Tracker::pose() const { return toMrpt(impl_->history.pose()
 void Tracker::save(const std::string& path) const { impl_->map.save(path, impl_->history.pose()); }
 
 void Tracker::resume(const std::string& path) { impl_->history.restart(impl_->map.resume(path)); }
+
+void Tracker::saveState(std::ostream& os) const {
+  const Impl& s = *impl_;
+  if (s.pending) throw std::logic_error("Tracker::saveState: a tracked frame was not fused yet");
+  {
+    auto a = state::archiveOf(os);
+    state::tag(a, "tracker");
+    s.history.saveState(a);
+    const KinFuStats& st = s.stats;
+    for (std::size_t n : {st.frames, st.tracked, st.fell_back, st.predicted, st.lost, st.shifts, st.guess_prior,
+                          st.guess_velocity, st.guess_last, st.degenerate})
+      a << uint64_t(n);
+    state::write(a, st.times);
+  }
+  s.map.saveState(os);
+}
+
+void Tracker::loadState(std::istream& is) {
+  Impl& s = *impl_;
+  {
+    auto a = state::archiveOf(is);
+    state::expectTag(a, "tracker");
+    s.history.loadState(a);
+    KinFuStats& st = s.stats;
+    for (std::size_t* n : {&st.frames, &st.tracked, &st.fell_back, &st.predicted, &st.lost, &st.shifts, &st.guess_prior,
+                           &st.guess_velocity, &st.guess_last, &st.degenerate}) {
+      uint64_t v = 0;
+      a >> v;
+      *n = v;
+    }
+    state::read(a, st.times);
+  }
+  s.map.loadState(is);
+  s.pending.reset();
+}
 
 KinFuStats Tracker::stats() const {
   KinFuStats st = impl_->stats;

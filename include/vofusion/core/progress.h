@@ -19,13 +19,16 @@ class Progress {
   // `unit` names what is counted ("frames": the rate is shown as fps, else as <unit>/s).
   Progress(std::string label, std::size_t total, std::string unit = "frames");
   void update(std::size_t done, const std::string& extra = "");
+  // The job continues one done earlier (a resumed run): the count starts at `done`, the rate and the
+  // ETA count only what this one does.
+  void startAt(std::size_t done);
   void finish(const std::string& extra = "");
   double elapsedSeconds() const;
   double fps() const;
 
  private:
   std::string label_, unit_, rate_unit_;
-  std::size_t total_, done_ = 0;
+  std::size_t total_, done_ = 0, start_done_ = 0;
   std::chrono::steady_clock::time_point start_, last_print_;
   bool tty_;
 };

@@ -8,6 +8,7 @@
 //   KinFu map(params, first_pose, {true, false});
 //   per frame: track against map.model(), then map.fuse(frame_to_fuse, times);
 //   TriangleMesh m = map.extractMesh();
+#include <iosfwd>
 #include <memory>
 #include <string>
 #include <vector>
@@ -133,6 +134,10 @@ class KinFu {
   // Replaces the map by a saved one and returns its camera pose; the model is predicted again before
   // the next frame is tracked (predictIfStale). Throws InputError(path, ...) for a bad or truncated file.
   Eigen::Isometry3d resume(const std::string& path);
+  // Checkpoints: the map and the model last predicted from it (surfaces, intensity, the ray cast's
+  // depth), so the next frame is tracked exactly as it would have been without the interruption.
+  void saveState(std::ostream& os) const;
+  void loadState(std::istream& is);
   // Whole world model + current volume.
   TriangleMesh extractMesh() const;
   // Shaded (Lambert, light at the camera) ray-cast image of the model from a pose (BGR).

@@ -12,6 +12,7 @@
 
 #include "vofusion/core/camera.h"
 #include "vofusion/core/frame.h"
+#include "vofusion/core/state_archive.h"
 #include "vofusion/loop/loop_params.h"
 #include "vofusion/core/described_keypoints.h"
 
@@ -46,6 +47,9 @@ class KeyframeSelector {
   double pathLength() const { return path_; }
   // The keyframe just made follows frames that were not well tracked (its edge to the previous one is weak).
   bool lastAfterPoorTracking() const { return last_after_poor_; }
+  // Checkpoints: where the last keyframe and the last pose were, and the path so far.
+  void saveState(state::Archive& a) const;
+  void loadState(state::Archive& a);
 
  private:
   LoopParams params_;

@@ -9,6 +9,7 @@
 //   lc.finish();
 //   Trajectory optimised = lc.correct(tracked);   // every pose follows its keyframe
 #include <cstddef>
+#include <iosfwd>
 #include <map>
 #include <memory>
 #include <string>
@@ -57,6 +58,12 @@ class LoopCloser {
   // frame became a keyframe (its features and a reduced depth are kept; features may be null).
   bool addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked, double icp_rms,
                 std::shared_ptr<const DescribedKeypoints> features);
+  // Checkpoints. saveState waits for the thread to take in every queued keyframe, then writes the
+  // frame loop's side (keyframe selection, residuals, which keyframe each frame follows) and every
+  // keyframe. loadState, on a new loop closer with the same parameters, hands those keyframes to its
+  // thread again: place recognition, verification and the graph are rebuilt as they were, in order.
+  void saveState(std::ostream& os) const;
+  void loadState(std::istream& is);
   // Waits until every queued keyframe is processed and the graph optimised.
   void finish();
 

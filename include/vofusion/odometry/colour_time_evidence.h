@@ -9,6 +9,8 @@
 // rpy_first100: 0.4-0.5 ms per frame on both).
 // Measured: capture wins the shake (exact offsets; also with another frame's offsets) and
 // xyz_first300, interval rpy_first100 (19 of 63 votes for capture), where capture's ATE is worse.
+#include "vofusion/core/state_archive.h"
+
 namespace vofusion {
 
 class ColourTimeEvidence {
@@ -25,6 +27,9 @@ class ColourTimeEvidence {
   bool captureFitsBetter() const { return capture_; }  // what the votes say so far (false until shown)
   int compared() const { return compared_; }
   int captureBetter() const { return capture_better_; }
+  // Checkpoints: the votes so far.
+  void saveState(state::Archive& a) const;
+  void loadState(state::Archive& a);
 
  private:
   double z() const;  // the sign test's statistic: > 0 when capture fits better more often than not

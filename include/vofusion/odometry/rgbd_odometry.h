@@ -1,6 +1,7 @@
 #pragma once
 // 6D RGB-D odometry (Figueroa et al., §3.1): frame-to-frame motion from colour + depth keypoints.
 // CONTRACT used by fusion/ and the apps; implemented in src/odometry/.
+#include <iosfwd>
 #include <memory>
 #include <optional>
 #include <string>
@@ -117,6 +118,11 @@ class RgbdOdometry {
   // the first frame (or the first after reset()) returns success=false with failure "first frame".
   OdometryResult process(const Frame& frame);
   void reset();
+  // Checkpoints: what the next frame is matched against (the reference, the older frames, the last
+  // failed frame, their velocities) and the colour-time votes. An odometry with the same parameters
+  // that loads the state continues exactly as the saved one would have.
+  void saveState(std::ostream& os) const;
+  void loadState(std::istream& is);
 
  private:
   struct Impl;

@@ -84,6 +84,11 @@ class Reconstruction {
   void saveVolume(const std::string& path) const;
   // Before the first frame: continue from a saved map and pose (Tracker::resume).
   void resumeVolume(const std::string& path);
+  // Checkpoints, between frames: every stage's state (odometry, tracker and map, loop closer) and the
+  // run's poses and counts so far. A reconstruction made with the same configuration and mode that
+  // loads it (before its first frame) goes on exactly as the saved one would have.
+  void saveState(std::ostream& os) const;
+  void loadState(std::istream& is);
   TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model
   // The same mesh one region of region_bricks^3 bricks at a time (fusion::marchingCubesByRegion).
   void extractMeshByRegion(int region_bricks, const std::function<void(fusion::RegionMesh&)>& sink) const;

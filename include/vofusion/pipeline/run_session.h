@@ -11,6 +11,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <mrpt/config/CConfigFileBase.h>
 #include <nlohmann/json.hpp>
@@ -39,12 +40,36 @@ class RunSession {
   // saved to save_volume when given, and every output written. Returns summary.json's content.
   nlohmann::json finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume = std::nullopt);
 
+  // Checkpoints (vofusion --checkpoint-every, --resume <checkpoint>). `origin` names what the run
+  // reads (input, configuration, mode); a checkpoint made by another run is refused.
+  struct Checkpoint {
+    std::size_t frames = 0;  // frames processed before it
+    double seconds = 0.0;    // the frame loop's wall time before it
+  };
+  // Between frames: the run so far (every stage's state and each frame's report for the outputs) to
+  // `path`, atomically: an earlier checkpoint there is replaced only by a whole new one.
+  void saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const;
+  // Whether `path` starts like a checkpoint (else, e.g., a map saved with --save-volume).
+  static bool isCheckpoint(const std::string& path);
+  // Before the first frame: the run goes on from the checkpoint. The caller reads the checkpoint's
+  // frames from the input again and hands each to replay() (the outputs keep their images and ground
+  // truth), then goes on with process(). Throws InputError(path, ...) for a bad or foreign checkpoint.
+  Checkpoint resume(const std::string& path, const std::string& origin);
+  // The next of the checkpoint's frames; throws InputError when it is not the one processed then.
+  void replay(const Frame& frame);
+  bool replaying() const { return replayed_ < resumed_frames_; }
+
  private:
   void refuse(RunInfo& info, const Reopen& reopen);
 
   Reconstruction rec_;
   RunRecorder recorder_;
   bool write_mesh_;  // the map is used at all after the frame loop
+  // Each processed frame's report as the outputs need it (no images, matches or maps): a checkpoint
+  // keeps them, so that a resumed run writes poses.rawlog for every frame.
+  std::vector<FrameReport> reports_;
+  std::size_t resumed_frames_ = 0, replayed_ = 0;
+  std::string resumed_from_;
 };
 
 }  // namespace vofusion

@@ -8,6 +8,8 @@
 
 #include <Eigen/Geometry>
 
+#include "vofusion/core/state_archive.h"
+
 namespace vofusion {
 
 // Motion m scaled to s times its length (rotation angle and translation).
@@ -35,6 +37,9 @@ class MotionHistory {
   void setPose(const Eigen::Isometry3d& T) { pose_ = T; }
   // A new start at T (a resumed map): no recent frames, no motion.
   void restart(const Eigen::Isometry3d& T);
+  // Checkpoints: all of it.
+  void saveState(state::Archive& a) const;
+  void loadState(state::Archive& a);
 
  private:
   Eigen::Isometry3d pose_;  // camera-to-world of the last frame

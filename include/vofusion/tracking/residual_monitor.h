@@ -3,6 +3,8 @@
 #include <deque>
 #include <vector>
 
+#include "vofusion/core/state_archive.h"
+
 namespace vofusion {
 
 // Tells frames whose ICP residual stands out from the run's recent ones. When the camera comes back
@@ -18,6 +20,9 @@ class ResidualMonitor {
   // rms: this frame's ICP residual RMS (m); 0 when no ICP ran (never strained). True when it is over
   // `ratio` x the median of the previous kWindow frames' residuals. ratio 0: never.
   bool strained(double rms);
+  // Checkpoints: the recent residuals.
+  void saveState(state::Archive& a) const { a << recent_; }
+  void loadState(state::Archive& a) { a >> recent_; }
 
  private:
   double ratio_;

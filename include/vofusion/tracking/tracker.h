@@ -6,6 +6,7 @@
 //   Tracker t(params, TrackingMode::Joint);
 //   for each frame: FusionResult r = t.process(frame, have_prior ? &prior : nullptr);
 //   TriangleMesh m = t.extractMesh();
+#include <iosfwd>
 #include <memory>
 #include <string>
 
@@ -79,6 +80,11 @@ class Tracker {
   // the next frame is tracked from the saved pose against the saved map, in its frame.
   void save(const std::string& path) const;
   void resume(const std::string& path);
+  // Checkpoints: the map, the model predicted from it, the camera's recent motion and the counts.
+  // A tracker with the same parameters that loads the state tracks the next frame exactly as the
+  // saved one would have. Call between frames (after fuse()).
+  void saveState(std::ostream& os) const;
+  void loadState(std::istream& is);
   TriangleMesh extractMesh() const { return map().extractMesh(); }
   cv::Mat renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam, bool coloured = false) const {
     return map().renderView(cam_to_world, cam, coloured);
