@@ -10,7 +10,6 @@
 #include <filesystem>
 #include <iostream>
 #include <optional>
-#include <sstream>
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
@@ -76,18 +75,11 @@ struct RunPlan {
   std::string origin;             // what a checkpoint of this run is for (checked when resuming)
 };
 
-// What a checkpoint belongs to: the input and everything that changes what is computed from it.
-// The work folder is left out: it holds only scratch files.
+// What a checkpoint belongs to (RunSession::checkpointOrigin), and how the frames are read.
 std::string runOrigin(const RunPlan& plan, const CommandLine& cl) {
-  std::error_code ec;
-  const auto input = std::filesystem::weakly_canonical(plan.input, ec);
-  std::string o = "input " + (ec || !std::filesystem::exists(plan.input) ? plan.input : input.string()) + "\n";
-  o += "mode " + toString(plan.mode) + "\nmax-frames " + std::to_string(plan.src_opts.max_frames) + "\n";
-  o += "intrinsics " + cl.value("--intrinsics", "") + "\ndepth-scale " + cl.value("--depth-scale", "") + "\n";
-  o += std::string("strict ") + (plan.strict ? "yes" : "no") + "\n";
-  std::istringstream config(plan.cfg.getContent());
-  for (std::string line; std::getline(config, line);)
-    if (line.rfind("work_dir", 0) != 0) o += line + "\n";
+  std::string o = RunSession::checkpointOrigin(plan.input, plan.mode, plan.cfg);
+  for (const char* option : {"--intrinsics", "--depth-scale"})
+    if (cl.value(option)) o += std::string(option) + " " + *cl.value(option) + "\n";
   return o;
 }
 
@@ -167,6 +159,7 @@ struct FrameLoop {
   bool interrupted = false;
   double seconds = 0.0;  // of the frame loop, a resumed checkpoint's included
   std::size_t checkpoints = 0;
+  double checkpoint_seconds = 0.0;  // writing them
 };
 
 // --resume <checkpoint>: the run's state from it, and the frames it had processed read again for the
@@ -179,8 +172,8 @@ FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession&
   while (run.replaying()) {
     if (!source.next(frame))
       throw InputError(*plan.resume, "the input ends before frame " + std::to_string(c.frames) + ", where the checkpoint was made");
+    if (!run.replay(frame)) continue;
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
-    run.replay(frame);
     progress.update(++loop.done);
   }
   progress.finish();
@@ -197,8 +190,10 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   const double before = loop.seconds;
   double last_checkpoint = 0.0;
   const auto checkpoint = [&] {
-    run.saveCheckpoint(plan.checkpoint_path, plan.origin, before + progress.elapsedSeconds());
+    const double start = progress.elapsedSeconds();
+    run.saveCheckpoint(plan.checkpoint_path, plan.origin, before + start);
     last_checkpoint = progress.elapsedSeconds();
+    loop.checkpoint_seconds += last_checkpoint - start;
     ++loop.checkpoints;
   };
   Frame frame;
@@ -251,7 +246,7 @@ int body(int argc, char** argv) {
   info.seconds = loop.seconds;
   if (plan.checkpoint_every > 0 || resumed_at)
     info.extra["checkpoints"] = {{"every_seconds", plan.checkpoint_every}, {"written", loop.checkpoints},
-                                 {"resumed_at_frame", resumed_at}};
+                                 {"seconds_writing", loop.checkpoint_seconds}, {"resumed_at_frame", resumed_at}};
   source->stop();  // the read ahead of a stopped run is done before its skipped frames are counted
   reportSkipped(*input.frames, info);
   source.reset();

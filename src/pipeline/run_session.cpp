@@ -4,6 +4,9 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
+
+#include <mrpt/config/CConfigFileMemory.h>
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
@@ -55,6 +58,15 @@ FrameReport readReport(state::Archive& a) {
   return r;
 }
 
+// MRPT's exceptions span several lines (message, location, call stack): the message alone.
+std::string oneLine(const std::string& what) {
+  std::string s = what;
+  if (const auto m = s.find("Message:"); m != std::string::npos) s = s.substr(m + 8);
+  s = s.substr(0, s.find('\n'));
+  const auto first = s.find_first_not_of(' ');
+  return first == std::string::npos ? "unreadable" : s.substr(first);
+}
+
 }  // namespace
 
 RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode, const std::string& out_dir,
@@ -97,6 +109,23 @@ bool RunSession::isCheckpoint(const std::string& path) {
   return is.read(magic, sizeof(magic)) && std::memcmp(magic, kCheckpointMagic, sizeof(magic)) == 0;
 }
 
+std::optional<RunSession::Checkpoint> RunSession::peek(const std::string& path) {
+  if (!isCheckpoint(path)) return std::nullopt;
+  std::ifstream is(path, std::ios::binary);
+  is.seekg(sizeof(kCheckpointMagic) - 1);
+  try {
+    auto a = state::archiveOf(is);
+    std::string origin;
+    uint64_t frames = 0;
+    Checkpoint c;
+    a >> origin >> frames >> c.seconds;
+    c.frames = frames;
+    return c;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
 RunSession::Checkpoint RunSession::resume(const std::string& path, const std::string& origin) {
   if (!isCheckpoint(path)) throw InputError(path, "not a vofusion checkpoint (written by --checkpoint-every)");
   std::ifstream is(path, std::ios::binary);
@@ -122,7 +151,7 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
   } catch (const InputError&) {
     throw;
   } catch (const std::exception& e) {
-    throw InputError(path, std::string("truncated or corrupt checkpoint: ") + e.what());
+    throw InputError(path, "truncated or corrupt checkpoint: " + oneLine(e.what()));
   }
   resumed_frames_ = c.frames;
   replayed_ = 0;
@@ -130,15 +159,37 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
   return c;
 }
 
-void RunSession::replay(const Frame& frame) {
+bool RunSession::replay(const Frame& frame) {
   if (!replaying()) throw std::logic_error("RunSession::replay past the checkpoint's frames");
   const FrameReport& r = reports_[replayed_];
-  if (frame.index != r.index || std::abs(frame.timestamp - r.timestamp) > 1e-6)
-    throw InputError(resumed_from_, "the input's frame " + std::to_string(frame.index) +
-                                        " is not the one the checkpoint processed there (frame " + std::to_string(r.index) +
-                                        "): resume with the same input");
+  if (frame.timestamp < r.timestamp - 1e-6) return false;  // recorded, not processed (live drops)
+  if (frame.timestamp > r.timestamp + 1e-6)
+    throw InputError(resumed_from_, "the input has no frame at " + std::to_string(r.timestamp) + " s (frame " +
+                                        std::to_string(replayed_) + " the checkpoint processed): resume with the same input");
   recorder_.add(frame, r);
   ++replayed_;
+  return true;
+}
+
+std::string RunSession::checkpointOrigin(const std::string& input, TrackingMode mode, const mrpt::config::CConfigFileBase& cfg) {
+  std::error_code ec;
+  const bool file = std::filesystem::exists(input, ec);
+  std::string o = "input " + (file ? std::filesystem::weakly_canonical(input, ec).string() : input) + "\n";
+  o += "mode " + toString(mode) + "\n";
+  mrpt::config::CConfigFileMemory canonical;
+  OdometryParams odometry;
+  KinFuParams kinfu;
+  loop::LoopParams loop;
+  odometry.loadFromConfigFile(cfg, "odometry");
+  kinfu.loadFromConfigFile(cfg, "kinfu");
+  loop.loadFromConfigFile(cfg, "loop");
+  odometry.saveToConfigFile(canonical, "odometry");
+  kinfu.saveToConfigFile(canonical, "kinfu");
+  loop.saveToConfigFile(canonical, "loop");
+  std::istringstream text(canonical.getContent());
+  for (std::string line; std::getline(text, line);)
+    if (line.find("work_dir") == std::string::npos) o += line + "\n";
+  return o;
 }
 
 // Loops moved the poses: the map, fused at the tracked ones, is fused again at the corrected ones,

@@ -40,8 +40,8 @@ class RunSession {
   // saved to save_volume when given, and every output written. Returns summary.json's content.
   nlohmann::json finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume = std::nullopt);
 
-  // Checkpoints (vofusion --checkpoint-every, --resume <checkpoint>). `origin` names what the run
-  // reads (input, configuration, mode); a checkpoint made by another run is refused.
+  // Checkpoints (vofusion --checkpoint-every, --resume <checkpoint>; vofusion-grab --live). `origin`
+  // names what the run reads (checkpointOrigin); a checkpoint made by another run is refused.
   struct Checkpoint {
     std::size_t frames = 0;  // frames processed before it
     double seconds = 0.0;    // the frame loop's wall time before it
@@ -49,14 +49,22 @@ class RunSession {
   // Between frames: the run so far (every stage's state and each frame's report for the outputs) to
   // `path`, atomically: an earlier checkpoint there is replaced only by a whole new one.
   void saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const;
+  // The recording (its absolute path), the tracking mode and the settings that decide what is computed
+  // from it: [odometry] (and the detectors' sections), [kinfu] and [loop] as the stages read them,
+  // defaults included, the scratch folder left out. vofusion-grab --live and vofusion reading its
+  // grab.rawlog agree on it, so a live session's checkpoint is resumed offline from its recording.
+  static std::string checkpointOrigin(const std::string& input, TrackingMode mode, const mrpt::config::CConfigFileBase& cfg);
   // Whether `path` starts like a checkpoint (else, e.g., a map saved with --save-volume).
   static bool isCheckpoint(const std::string& path);
+  // A checkpoint's frames and seconds without loading it; nullopt when `path` is not one.
+  static std::optional<Checkpoint> peek(const std::string& path);
   // Before the first frame: the run goes on from the checkpoint. The caller reads the checkpoint's
   // frames from the input again and hands each to replay() (the outputs keep their images and ground
   // truth), then goes on with process(). Throws InputError(path, ...) for a bad or foreign checkpoint.
   Checkpoint resume(const std::string& path, const std::string& origin);
-  // The next of the checkpoint's frames; throws InputError when it is not the one processed then.
-  void replay(const Frame& frame);
+  // The next frame of the input while replaying: false for a frame the run did not process (a live
+  // run dropped it), skipped; throws InputError when the input lacks the next processed frame.
+  bool replay(const Frame& frame);
   bool replaying() const { return replayed_ < resumed_frames_; }
 
  private:

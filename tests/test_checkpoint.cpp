@@ -1,0 +1,246 @@
+// Checkpoints (vofusion --checkpoint-every, --resume <checkpoint>): a run saved between any two frames
+// and resumed in a fresh process ends exactly as if it had never stopped: every pose bit for bit,
+// the same mesh, the same loop closer; a damaged or foreign checkpoint is refused in one line.
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <thread>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <mrpt/config/CConfigFileMemory.h>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/loop/loop_closer.h"
+#include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/pipeline/run_session.h"
+#include "vofusion/sim/synthetic_sequence.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+
+// The synthetic room at 320x240 and 1 cm voxels, STAR keypoints only, loop closure on with keyframes
+// every 5 cm, so that the loop closer's state is more than empty.
+mrpt::config::CConfigFileMemory roomConfig() {
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.write("kinfu", "volume_voxels", 256);
+  cfg.write("kinfu", "voxel_size", 0.01);
+  cfg.write("kinfu", "tracking_downsample", 1);
+  cfg.write("odometry", "keypoints", "star");
+  cfg.write("loop", "keyframe_translation", 0.05);
+  return cfg;
+}
+
+struct Ending {
+  Trajectory tracked, closed;
+  std::size_t faces = 0, fallbacks = 0, keyframes = 0;
+};
+
+// Frames [from, to) of seq through rec; finish() and what the run ends with when to is the end.
+void feed(Reconstruction& rec, const sim::SyntheticSequence& seq, std::size_t from, std::size_t to) {
+  for (std::size_t i = from; i < to; ++i) rec.process(seq.render(i));
+}
+
+Ending finish(Reconstruction& rec) {
+  rec.finish();
+  Ending e;
+  e.tracked = rec.trackedTrajectory();
+  e.closed = rec.trajectory();
+  e.faces = rec.extractMesh().faces.size();
+  e.fallbacks = rec.fallbacks();
+  e.keyframes = rec.loopCloser() ? rec.loopCloser()->keyframes().size() : 0;
+  return e;
+}
+
+void expectIdentical(const Trajectory& a, const Trajectory& b, const std::string& what) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].timestamp, b[i].timestamp) << what << " frame " << i;
+    EXPECT_EQ(a[i].pose.asVectorVal(), b[i].pose.asVectorVal()) << what << " frame " << i;
+  }
+}
+
+}  // namespace
+
+// The fast hand-held shake: fallbacks, colour-time evidence and keyframes all carry state across.
+TEST(Checkpoint, AReconstructionResumedAtAnyFrameEndsBitForBitAsAnUninterruptedOne) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 30, "shake"));
+  const auto cfg = roomConfig();
+  Reconstruction whole(cfg, TrackingMode::Joint);
+  feed(whole, seq, 0, seq.size());
+  const Ending clean = finish(whole);
+  ASSERT_GT(clean.faces, 1000u);
+  ASSERT_GT(clean.keyframes, 2u) << "the loop closer should hold keyframes to carry over";
+  for (const std::size_t at : {std::size_t(1), std::size_t(13), seq.size() - 1}) {
+    std::stringstream saved;
+    {
+      Reconstruction first(cfg, TrackingMode::Joint);
+      feed(first, seq, 0, at);
+      first.saveState(saved);
+    }  // the first half's process-wide state (its loop thread, its spill files) is gone
+    Reconstruction second(cfg, TrackingMode::Joint);
+    second.loadState(saved);
+    feed(second, seq, at, seq.size());
+    const Ending resumed = finish(second);
+    const std::string what = "resumed at frame " + std::to_string(at);
+    expectIdentical(clean.tracked, resumed.tracked, what + ", tracked");
+    expectIdentical(clean.closed, resumed.closed, what + ", loop-closed");
+    EXPECT_EQ(clean.faces, resumed.faces) << what;
+    EXPECT_EQ(clean.fallbacks, resumed.fallbacks) << what;
+    EXPECT_EQ(clean.keyframes, resumed.keyframes) << what;
+  }
+}
+
+TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 6));
+  const auto cfg = roomConfig();
+  const std::string dir = test::tempDir("checkpoint_refused");
+  const std::string path = dir + "/checkpoint";
+  {
+    RunSession run(cfg, TrackingMode::Joint, dir + "/out", OutputParams(), MeshCleanParams());
+    for (std::size_t i = 0; i < 4; ++i) run.process(seq.render(i));
+    run.saveCheckpoint(path, "input room\n", 1.5);
+  }
+  const auto peek = RunSession::peek(path);
+  ASSERT_TRUE(peek.has_value());
+  EXPECT_EQ(peek->frames, 4u);
+  EXPECT_EQ(peek->seconds, 1.5);
+
+  const auto refusal = [&](const std::string& file, const std::string& origin) -> std::string {
+    RunSession run(cfg, TrackingMode::Joint, dir + "/again", OutputParams(), MeshCleanParams());
+    try {
+      run.resume(file, origin);
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), file);
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+      return e.problem();
+    }
+    return "";
+  };
+  EXPECT_NE(refusal(path, "input corridor\n").find("made by another run"), std::string::npos);
+  // Cut short anywhere past the header, or a map saved with --save-volume instead.
+  const std::string bytes = [&] {
+    std::ifstream is(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(is), {});
+  }();
+  for (const double share : {0.01, 0.3, 0.99}) {
+    const std::string cut = dir + "/cut";
+    std::ofstream(cut, std::ios::binary) << bytes.substr(0, std::size_t(bytes.size() * share));
+    const std::string why = refusal(cut, "input room\n");
+    EXPECT_NE(why, "") << "cut at " << share;
+    if (share > 0.1) EXPECT_NE(why.find("truncated or corrupt checkpoint"), std::string::npos) << why;
+  }
+  std::ofstream(dir + "/map", std::ios::binary) << "VOFUSION-MAP";
+  EXPECT_FALSE(RunSession::isCheckpoint(dir + "/map"));
+  EXPECT_NE(refusal(dir + "/map", "input room\n").find("not a vofusion checkpoint"), std::string::npos);
+}
+
+namespace {
+
+std::string slurp(const std::string& path) {
+  std::ifstream is(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(is), {});
+}
+
+// The test at a tenth of its length: the first 60 frames of xyz_first300, checkpointed after
+// every frame; the checkpoints at 50 %, 90 % and 99 % (the first one seen at or past each) are kept as
+// a kill would have left them, and each resumed run must write the clean run's trajectory, mesh and
+// poses.rawlog byte for byte.
+constexpr std::size_t kFrames = 60;
+
+std::string vofusionCommand(const std::string& out, const std::string& extra) {
+  return test::app("vofusion") + " " + test::tumFirst300() + " --out " + out + " --max-frames " + std::to_string(kFrames) +
+         " --checkpoint-every 0.000001 " + extra;
+}
+
+}  // namespace
+
+namespace {
+
+// The run's checkpoints copied as it passes each of `targets` frames (a copy holds the file it opened,
+// whole: a checkpoint is replaced by rename), into dir/at<frames>.
+std::vector<std::string> watchCheckpoints(const std::string& path, const std::vector<std::size_t>& targets,
+                                          const std::string& dir, const std::function<void()>& run) {
+  std::vector<std::string> kept;
+  std::atomic<bool> done{false};
+  std::thread watcher([&] {
+    std::size_t next = 0;
+    while (next < targets.size() && !done) {
+      const auto c = RunSession::peek(path);
+      if (c && c->frames >= targets[next]) {
+        const std::string copy = dir + "/at" + std::to_string(targets[next]);
+        std::error_code ec;
+        fs::copy_file(path, copy, fs::copy_options::overwrite_existing, ec);
+        const auto copied = RunSession::peek(copy);
+        if (!ec && copied && copied->frames >= targets[next]) {
+          kept.push_back(copy);
+          ++next;
+          continue;
+        }
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  });
+  run();
+  done = true;
+  watcher.join();
+  return kept;
+}
+
+void expectSameOutputs(const std::string& clean, const std::string& out) {
+  for (const char* file : {"trajectory.txt", "mesh.ply", "poses.groundtruth.txt", "poses.rawlog"})
+    EXPECT_TRUE(slurp(clean + "/" + file) == slurp(out + "/" + file)) << file << " of " << out << " differs from the clean run's";
+}
+
+}  // namespace
+
+// Checkpoints kept at 50 %, 90 % and 99 % of a clean run, as a kill would have left them; then a
+// run really killed (-9) while checkpointing after every frame. Every resumed run writes the clean
+// run's trajectory, mesh and poses.rawlog byte for byte.
+TEST(Checkpoint, RunsResumedFromTheirLastCheckpointWriteTheCleanRunsOutputs) {
+  VOFUSION_REQUIRE_DATA(test::tumFirst300());
+  const std::string dir = test::tempDir("checkpoint_app");
+  const std::string clean = dir + "/clean";
+  const std::vector<std::size_t> targets = {kFrames / 2, kFrames * 9 / 10, kFrames * 99 / 100};
+  const auto kept = watchCheckpoints(clean + "/checkpoint", targets, dir, [&] {
+    std::string log;
+    ASSERT_EQ(test::run(vofusionCommand(clean, ""), &log), 0) << log;
+  });
+  EXPECT_FALSE(fs::exists(clean + "/checkpoint")) << "a finished run leaves no checkpoint";
+  ASSERT_EQ(kept.size(), targets.size()) << "checkpoints seen at or past frames 30, 54, 59";
+  for (const std::string& checkpoint : kept) {
+    std::string log;
+    ASSERT_EQ(test::run(vofusionCommand(checkpoint + "_out", "--resume " + checkpoint), &log), 0) << log;
+    expectSameOutputs(clean, checkpoint + "_out");
+  }
+
+  const std::string killed = dir + "/killed";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string cmd = "exec " + vofusionCommand(killed, "") + " >/dev/null 2>&1";
+    execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Once a third of the frames are in, while a checkpoint is being written as likely as not.
+  for (int i = 0; i < 60000; ++i) {
+    const auto c = RunSession::peek(killed + "/checkpoint");
+    if (c && c->frames >= kFrames / 3) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ::kill(pid, SIGKILL);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(RunSession::peek(killed + "/checkpoint").has_value());
+  std::string log;
+  ASSERT_EQ(test::run(vofusionCommand(killed, "--resume " + killed + "/checkpoint"), &log), 0) << log;
+  expectSameOutputs(clean, killed);
+}
