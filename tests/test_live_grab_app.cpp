@@ -11,6 +11,8 @@
 #include <opencv2/core.hpp>
 
 #include "support.h"
+#include <nlohmann/json.hpp>
+#include "vofusion/pipeline/run_session.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/sim/any_source.h"
 
@@ -233,9 +235,10 @@ TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {
   const std::string out = test::tempDir("grab_app_live");
   std::string log;
   const int rc = test::run(test::app("vofusion-grab") + " --replay " + tum + " --live --no-gui --max-frames 20 --out " +
-                               out,
+                               out + " --checkpoint-every 0.1",
                            &log);
   ASSERT_EQ(rc, 0) << log;
+  EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "a session that ended normally has nothing to resume";
   for (const char* f : {"grab.rawlog", "trajectory.txt", "mesh.ply", "scene.3Dscene", "summary.json", "poses.rawlog"})
     EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f << "\n" << log;
   const auto kv = readSummary(out + "/grab-summary.txt");
@@ -251,4 +254,45 @@ TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {
   long poses = 0;
   while (std::getline(traj, line)) poses += !line.empty() && line[0] != '#';
   EXPECT_EQ(poses, processed);
+}
+
+// A live session killed (-9) mid-run: its recording and its last checkpoint let vofusion finish the
+// reconstruction offline from where the checkpoint was made, with every recorded frame after it.
+TEST(GrabApp, AKilledLiveSessionIsFinishedOfflineFromItsCheckpoint) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string dir = test::tempDir("grab_app_checkpoint");
+  const std::string cfg = dir + "/path_only.ini", out = dir + "/live";
+  std::ofstream(cfg) << "[output]\nmesh = false\n";
+  std::string log;
+  // Killed 1.5 s after its first checkpoint (waited for up to a minute).
+  test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out + " --config " + cfg +
+                " --live --no-gui --checkpoint-every 0.3 & pid=$!; for i in $(seq 600); do sleep 0.1; " +
+                "[ -s " + out + "/checkpoint ] && break; done; " +
+                "sleep 1.5; kill -9 $pid; wait $pid'",
+            &log);
+  const auto checkpoint = RunSession::peek(out + "/checkpoint");
+  ASSERT_TRUE(checkpoint.has_value()) << log;
+  ASSERT_GT(checkpoint->frames, 0u);
+  std::size_t recorded = 0;
+  {
+    auto rec = openFrameSource(out + "/grab.rawlog");
+    Frame f;
+    while (rec->next(f)) ++recorded;
+  }
+  ASSERT_GT(recorded, checkpoint->frames);
+  ASSERT_EQ(test::run(test::app("vofusion") + " " + out + "/grab.rawlog --out " + out + " --config " + cfg +
+                          " --resume " + out + "/checkpoint",
+                      &log),
+            0)
+      << log;
+  std::ifstream summary_file(out + "/summary.json");
+  const auto summary = nlohmann::json::parse(summary_file);
+  EXPECT_EQ(summary["checkpoints"]["resumed_at_frame"].get<std::size_t>(), checkpoint->frames);
+  // The checkpoint's frames, then every recorded frame after the last of them; tracked throughout.
+  const std::size_t poses = summary["frames"].get<std::size_t>();
+  EXPECT_GT(poses, checkpoint->frames);
+  EXPECT_LE(poses, recorded);
+  EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.03);
+  EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "the finished run deleted it";
 }
