@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""Checkpoints on a shared sequence (issue 32's test at full length):
+
+    bench/run --checkpoints [--sequence DIR] [--build DIR] [--every S]
+
+1. A clean run of the whole sequence (default config, mesh on) with a checkpoint after every frame; the
+   checkpoint is copied as the run passes 50 %, 90 % and 99 % of the frames, as a kill would leave it.
+2. Each copy resumed (`vofusion <seq> --out o --checkpoint-every 1e-6 --resume copy`, the clean run's own
+   command): trajectory.txt, mesh.ply and poses.rawlog compared byte for byte with the clean run's.
+3. A run killed (-9) after a third of the frames while checkpointing, resumed, compared the same way.
+4. The cost: the same sequence with --checkpoint-every S (default 5) against none, back to back: frame-loop
+   seconds, checkpoints written, seconds spent writing them, the last checkpoint's size.
+Writes bench/results/checkpoints.md.
+"""
+import filecmp
+import json
+import os
+import shutil
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+MAGIC = b"VOFUSION-CHECKPOINT-1\n"
+
+
+def log(msg):
+    print("[bench checkpoints] " + msg, file=sys.stderr, flush=True)
+
+
+def checkpoint_frames(path):
+    """Frames processed before the checkpoint at path (its header), None when there is none."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC) + 4)
+            if len(head) < len(MAGIC) + 4 or not head.startswith(MAGIC):
+                return None
+            (n,) = struct.unpack("<I", head[len(MAGIC):])
+            f.seek(len(MAGIC) + 4 + n)
+            (frames,) = struct.unpack("<Q", f.read(8))
+            return frames
+    except (OSError, struct.error):
+        return None
+
+
+def vofusion(build, seq, out, extra):
+    return [os.path.join(build, "bin", "vofusion"), seq, "--out", out] + extra
+
+
+def run(cmd):
+    t = time.time()
+    p = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if p.returncode != 0:
+        sys.exit("failed: " + " ".join(cmd) + "\n" + p.stderr[-2000:])
+    return time.time() - t
+
+
+def same_outputs(a, b):
+    return {f: filecmp.cmp(os.path.join(a, f), os.path.join(b, f), shallow=False)
+            for f in ("trajectory.txt", "mesh.ply", "poses.rawlog")}
+
+
+def summary(d):
+    with open(os.path.join(d, "summary.json")) as f:
+        return json.load(f)
+
+
+def main():
+    args = sys.argv[1:]
+    opt = lambda name, default: args[args.index(name) + 1] if name in args else default
+    root = os.path.dirname(HERE)
+    seq = opt("--sequence", os.path.join(root, "..", "shared", "data", "tum", "rgbd_dataset_freiburg1_xyz_first300"))
+    build = os.path.abspath(opt("--build", os.path.join(root, "build")))
+    every = opt("--every", "5")
+    work = os.path.join(build, "bench-checkpoints")
+    shutil.rmtree(work, ignore_errors=True)
+    os.makedirs(work)
+    total = len([l for l in open(os.path.join(seq, "rgb.txt")) if l.strip() and not l.startswith("#")])
+    each = ["--checkpoint-every", "0.000001"]
+
+    clean = os.path.join(work, "clean")
+    targets = [total // 2, total * 9 // 10, total * 99 // 100]
+    kept = []
+    done = threading.Event()
+
+    def watch():
+        path = os.path.join(clean, "checkpoint")
+        for target in targets:
+            while not done.is_set():
+                n = checkpoint_frames(path)
+                if n is not None and n >= target:
+                    copy = os.path.join(work, "at%d" % target)
+                    try:
+                        with open(path, "rb") as src, open(copy, "wb") as dst:
+                            shutil.copyfileobj(src, dst)
+                    except OSError:
+                        continue
+                    if (checkpoint_frames(copy) or 0) >= target:
+                        kept.append((checkpoint_frames(copy), copy))
+                        break
+                time.sleep(0.002)
+
+    log("clean run, %d frames, a checkpoint after every frame" % total)
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    clean_s = run(vofusion(build, seq, clean, each))
+    done.set()
+    watcher.join()
+    rows = []
+    for frames, copy in kept:
+        log("resuming from frame %d" % frames)
+        out = copy + "_out"
+        secs = run(vofusion(build, seq, out, each + ["--resume", copy]))
+        rows.append(("checkpoint at frame %d (%.0f %%)" % (frames, 100.0 * frames / total), secs, same_outputs(clean, out)))
+
+    killed = os.path.join(work, "killed")
+    log("killed run")
+    p = subprocess.Popen(vofusion(build, seq, killed, each), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    while (checkpoint_frames(os.path.join(killed, "checkpoint")) or 0) < total // 3 and p.poll() is None:
+        time.sleep(0.001)
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    at = checkpoint_frames(os.path.join(killed, "checkpoint"))
+    secs = run(vofusion(build, seq, killed, each + ["--resume", os.path.join(killed, "checkpoint")]))
+    rows.append(("killed (-9), its last checkpoint at frame %d" % at, secs, same_outputs(clean, killed)))
+
+    log("cost: --checkpoint-every %s against none, back to back" % every)
+    cost = []
+    for label, extra in (("none", []), ("every %s s" % every, ["--checkpoint-every", every])):
+        out = os.path.join(work, "cost_" + label.replace(" ", "_"))
+        run(vofusion(build, seq, out, extra))
+        s = summary(out)
+        c = s.get("checkpoints", {})
+        cost.append((label, s.get("frames"), s.get("seconds", 0.0), c.get("written", 0), c.get("seconds_writing", 0.0)))
+    # The last checkpoint's size: the one a run with checkpoints leaves when interrupted at its end.
+    size_run = os.path.join(work, "size")
+    p = subprocess.Popen(vofusion(build, seq, size_run, each), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    while (checkpoint_frames(os.path.join(size_run, "checkpoint")) or 0) < total - 1 and p.poll() is None:
+        time.sleep(0.002)
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    size_mib = os.path.getsize(os.path.join(size_run, "checkpoint")) / 2**20
+
+    lines = ["# Checkpoints: %s" % os.path.basename(os.path.normpath(seq)), "",
+             "Command: `bench/run --checkpoints` (bench/checkpoints.py); default config, mesh on.", "",
+             "Clean run with a checkpoint after every frame: %.1f s. Each resumed run below is the same command with "
+             "`--resume <checkpoint>`, compared byte for byte with the clean run." % clean_s, "",
+             "| resumed from | run time (s) | trajectory.txt | mesh.ply | poses.rawlog |", "|---|---|---|---|---|"]
+    for label, secs, same in rows:
+        lines.append("| %s | %.1f | %s | %s | %s |" % (label, secs, *["identical" if same[f] else "**differs**"
+                                                                     for f in ("trajectory.txt", "mesh.ply", "poses.rawlog")]))
+    lines += ["", "Cost (same sequence, back to back):", "",
+              "| checkpoints | frames | frame loop (s) | written | writing them (s) |", "|---|---|---|---|---|"]
+    for label, frames, secs, written, writing in cost:
+        lines.append("| %s | %s | %.1f | %d | %.2f |" % (label, frames, secs, written, writing))
+    lines += ["", "A checkpoint at frame %d holds %.1f MiB." % (total - 1, size_mib)]
+    os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
+    with open(os.path.join(HERE, "results", "checkpoints.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    if not all(all(same.values()) for _, _, same in rows):
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
