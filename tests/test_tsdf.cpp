@@ -6,6 +6,7 @@
 #include <set>
 
 #include <Eigen/Geometry>
+#include <tbb/task_arena.h>
 
 #include "support.h"
 #include "vofusion/fusion/marching_cubes.h"
@@ -337,6 +338,28 @@ TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
   for (const auto& f : raw.faces) a.insert(faceKey(raw, f));
   for (const auto& f : whole.faces) b.insert(faceKey(whole, f));
   EXPECT_EQ(a, b);
+}
+
+// The regions are simplified a batch at a time on every core, and welded in region order: the mesh is
+// the one a single core gives, vertex for vertex.
+TEST(MarchingCubes, MeshByRegionOnEveryCoreGivesTheSingleCoreMesh) {
+  const SphereBricks sphere(Eigen::Vector3f(-0.05f, 0.13f, 0.02f), 0.3f, 0.01f, 0.04f);
+  MeshCleanParams params;
+  params.max_simplify_error = 0.003;
+  const auto mesh = [&] {
+    return meshByRegion([&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); },
+                        params, "", nullptr, nullptr);
+  };
+  const RegionMeshResult parallel = mesh();
+  RegionMeshResult single;
+  tbb::task_arena one(1);
+  one.execute([&] { single = mesh(); });
+  ASSERT_GT(parallel.regions, 20u);
+  ASSERT_EQ(parallel.mesh.faces.size(), single.mesh.faces.size());
+  ASSERT_EQ(parallel.mesh.vertices.size(), single.mesh.vertices.size());
+  EXPECT_TRUE(parallel.mesh.faces == single.mesh.faces);
+  EXPECT_TRUE(parallel.mesh.vertices == single.mesh.vertices);
+  EXPECT_EQ(parallel.report.simplification.faces_after, single.report.simplification.faces_after);
 }
 
 // Fragments are judged whole across regions: a sphere that is only a few hundred faces in each region

@@ -3,10 +3,14 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <deque>
 #include <fstream>
 #include <algorithm>
 #include <memory>
 #include <unordered_map>
+
+#include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include "vofusion/core/errors.h"
 
@@ -203,7 +207,7 @@ class RawComponents {
   double total_area_ = 0.0;
 };
 
-// Pass 2's running sums: each region simplified and welded into the merged mesh.
+// Pass 2's running sums: each region, once simplified, welded into the merged mesh in region order.
 struct RegionMerge {
   RegionMerge(TriangleMesh& m, MeshSimplification& s) : merged(m), simp(s) {}
   TriangleMesh& merged;
@@ -213,8 +217,7 @@ struct RegionMerge {
   std::size_t failed = 0;
   std::string failure;
 
-  void add(fusion::RegionMesh& r, const MeshCleanParams& region_params) {
-    const MeshCleanReport rr = simplifyRegion(r.mesh, r.on_seam, region_params);
+  void add(fusion::RegionMesh& r, const MeshCleanReport& rr) {
     if (!rr.success) ++failed, failure = rr.failure;  // the region stays as marching cubes made it
     const MeshSimplification& s = rr.simplification;
     if (s.ran) {
@@ -286,17 +289,42 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     region_params.min_component_faces = 0;
     region_params.min_component_area = 0;
   }
-  // Pass 2: the same regions again, simplified one at a time.
-  regions([&](fusion::RegionMesh& r) {
-    ++out.regions;
-    if (raw) raw->add(r);
-    else raw_count.add(r.mesh, r.on_seam, [](std::size_t) {});
-    out.raw_faces += r.mesh.faces.size();
-    step.faces_before += r.mesh.faces.size();
-    if (fragments) fragments->filter(r);
-    merge.add(r, region_params);
-    told(2, r);
-  });
+  // Pass 2: the same regions again, each simplified on a task of its own as soon as it is made (CGAL
+  // works on the region's own mesh) while the next regions are marched, and welded in region order,
+  // so the mesh is the one a single core gives. At most two regions per core wait at a time.
+  struct InFlight {
+    fusion::RegionMesh region;
+    MeshCleanReport report;
+    tbb::task_group task;
+  };
+  const std::size_t max_in_flight = 2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+  std::deque<std::unique_ptr<InFlight>> in_flight;
+  const auto weldFront = [&] {
+    InFlight& f = *in_flight.front();
+    f.task.wait();
+    merge.add(f.region, f.report);
+    told(2, f.region);
+    in_flight.pop_front();
+  };
+  try {
+    regions([&](fusion::RegionMesh& r) {
+      ++out.regions;
+      if (raw) raw->add(r);
+      else raw_count.add(r.mesh, r.on_seam, [](std::size_t) {});
+      out.raw_faces += r.mesh.faces.size();
+      step.faces_before += r.mesh.faces.size();
+      if (fragments) fragments->filter(r);
+      in_flight.push_back(std::make_unique<InFlight>());
+      InFlight& f = *in_flight.back();
+      f.region = std::move(r);
+      f.task.run([&f, &region_params] { f.report = simplifyRegion(f.region.mesh, f.region.on_seam, region_params); });
+      while (in_flight.size() >= max_in_flight) weldFront();
+    });
+    while (!in_flight.empty()) weldFront();
+  } catch (...) {
+    for (auto& f : in_flight) f->task.wait();  // no task outlives the regions it reads
+    throw;
+  }
   TriangleMesh& merged = out.mesh;
   MeshSimplification& simp = out.report.simplification;
   if (merged.colors.size() != merged.vertices.size()) merged.colors.clear();
