@@ -1,0 +1,125 @@
+#!/usr/bin/env python3
+"""Real time on two cores, back to back against an earlier build (issue 31's figures):
+
+    bench/run --realtime [--baseline REV] [--build DIR] [--sequences DIR,DIR]
+
+For each shared sequence, the earlier build and this one run one after the other (this machine's speed
+drifts by ~25 %: only runs side by side in time compare):
+  - `vofusion <seq> --out o` (default config): frame-loop fps (summary.json), end-to-end fps (frames /
+    wall time of the process, to the last output written), the time from the last frame to the last
+    output against the frame loop's, ATE RMSE, peak RSS;
+  - `vofusion-grab --replay <seq> --out o --live --no-gui` (recording included, at the recorded rate):
+    frames processed of those played.
+The earlier build (default 618a78c, the build issue 31 was filed on) is checked out with `git worktree`
+and built (apps only) under <build>/bench-baseline/, once. Writes bench/results/realtime.md.
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+
+def log(msg):
+    print("[bench realtime] " + msg, file=sys.stderr, flush=True)
+
+
+def run_timed(cmd, log_path):
+    """(exit code, wall s, peak RSS MiB) of cmd, its output to log_path."""
+    with open(log_path, "w") as f:
+        t0 = time.monotonic()
+        p = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(p.pid, 0)
+        return os.waitstatus_to_exitcode(status), time.monotonic() - t0, usage.ru_maxrss / 1024.0
+
+
+def baseline_build(rev, build):
+    base = os.path.join(build, "bench-baseline")
+    src, out = os.path.join(base, "src-" + rev), os.path.join(base, "build-" + rev)
+    bins = [os.path.join(out, "bin", a) for a in ("vofusion", "vofusion-grab")]
+    if all(os.path.exists(b) for b in bins):
+        return os.path.join(out, "bin")
+    os.makedirs(base, exist_ok=True)
+    if not os.path.exists(src):
+        subprocess.run(["git", "-C", ROOT, "worktree", "add", "-f", "--detach", src, rev], check=True)
+    log("building %s (apps only) in %s" % (rev, out))
+    subprocess.run(["cmake", "-S", src, "-B", out, "-G", "Ninja", "-DCMAKE_BUILD_TYPE=Release", "-DVOFUSION_BUILD_TESTS=OFF"],
+                   check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(["cmake", "--build", out, "-j2", "--target", "vofusion", "vofusion-grab"], check=True, stdout=subprocess.DEVNULL)
+    return os.path.join(out, "bin")
+
+
+def offline(bin_dir, seq, out):
+    shutil.rmtree(out, ignore_errors=True)
+    rc, wall, rss = run_timed([os.path.join(bin_dir, "vofusion"), seq, "--out", out], out + ".log")
+    if rc != 0:
+        sys.exit("vofusion failed, see " + out + ".log")
+    with open(os.path.join(out, "summary.json")) as f:
+        s = json.load(f)
+    frames, loop_s = s["frames"], s["seconds"]
+    return {"loop_fps": s["fps"], "e2e_fps": frames / wall, "loop_s": loop_s, "tail_s": wall - loop_s,
+            "ate": s.get("ate", {}).get("rmse"), "rss": rss, "frames": frames}
+
+
+def live(bin_dir, seq, out):
+    shutil.rmtree(out, ignore_errors=True)
+    rc, _, _ = run_timed([os.path.join(bin_dir, "vofusion-grab"), "--replay", seq, "--out", out, "--live", "--no-gui"],
+                         out + ".log")
+    if rc != 0:
+        sys.exit("vofusion-grab failed, see " + out + ".log")
+    kv = dict(l.split(": ", 1) for l in open(os.path.join(out, "grab-summary.txt")).read().splitlines() if ": " in l)
+    return {"played": int(kv["frames_played"]), "processed": int(kv["frames_processed"])}
+
+
+def main():
+    args = sys.argv[1:]
+    opt = lambda name, default: args[args.index(name) + 1] if name in args else default
+    build = os.path.abspath(opt("--build", os.path.join(ROOT, "build")))
+    rev = opt("--baseline", "618a78c")
+    tum = os.path.join(ROOT, "..", "shared", "data", "tum")
+    seqs = opt("--sequences", ",".join(os.path.join(tum, d) for d in
+                                        ("rgbd_dataset_freiburg1_xyz_first300", "rgbd_dataset_freiburg1_rpy_first100"))).split(",")
+    builds = [(rev, baseline_build(rev, build)), ("this build", os.path.join(build, "bin"))]
+    work = os.path.join(build, "bench-realtime")
+    os.makedirs(work, exist_ok=True)
+    head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    lines = ["# Real time, back to back: %s against this build (%s)" % (rev, head), "",
+             "Command: `bench/run --realtime` (bench/realtime.py); default config, 2 cores. Each sequence is run by "
+             "both builds one after the other. End to end: frames / wall time of the process to its last output; "
+             "tail: from the last frame to the last output. Live: `vofusion-grab --replay <seq> --live --no-gui`, "
+             "recording included, frames processed of those played.", ""]
+    for seq in seqs:
+        name = os.path.basename(os.path.normpath(seq))
+        res = {}
+        for label, bins in builds:
+            tag = "base" if label == rev else "this"
+            log("%s: %s offline" % (name, label))
+            r = offline(bins, seq, os.path.join(work, "%s_%s" % (name, tag)))
+            log("%s: %s live" % (name, label))
+            r.update(live(bins, seq, os.path.join(work, "%s_%s_live" % (name, tag))))
+            res[label] = r
+        b, t = res[rev], res["this build"]
+        ratio = lambda k: "%.2fx" % (t[k] / b[k]) if b[k] else "-"
+        lines += ["## %s (%d frames)" % (name, t["frames"]), "",
+                  "| | %s | this build | this / %s | target |" % (rev, rev), "|---|---:|---:|---:|---|",
+                  "| frame loop, fps | %.1f | %.1f | %s | >= 30 and >= 1.3x |" % (b["loop_fps"], t["loop_fps"], ratio("loop_fps")),
+                  "| end to end, fps | %.1f | %.1f | %s | |" % (b["e2e_fps"], t["e2e_fps"], ratio("e2e_fps")),
+                  "| tail after the last frame, s (share of the frame loop) | %.1f (%.0f %%) | %.1f (%.0f %%) | | <= 25 %% |" % (
+                      b["tail_s"], 100 * b["tail_s"] / b["loop_s"], t["tail_s"], 100 * t["tail_s"] / t["loop_s"]),
+                  "| live: processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
+                      b["processed"], b["played"], 100.0 * b["processed"] / b["played"],
+                      t["processed"], t["played"], 100.0 * t["processed"] / t["played"]),
+                  "| ATE RMSE, m | %.4f | %.4f | %s | within +2 %% |" % (b["ate"], t["ate"], ratio("ate")),
+                  "| peak RSS, MiB | %.0f | %.0f | | <= 700 |" % (b["rss"], t["rss"]), ""]
+    os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
+    with open(os.path.join(HERE, "results", "realtime.md"), "w") as f:
+        f.write("\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
