@@ -1,5 +1,6 @@
 // rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake] [--frames N] [--fps F]
 //               [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]
+//               [--blackout T:S]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
 #include <cstdio>
@@ -23,6 +24,7 @@ namespace {
 const char* kUsage =
     "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake]\n"
     "                     [--frames N] [--fps F] [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]\n"
+    "                     [--blackout T:S]\n"
     "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/)\n"
     "  --scene    room (default), corridor (long, camera travels along it), bare_wall (flat textured wall),\n"
     "             loop (a corridor around a block, walked once round: loop closure), lookalike (a corridor repeating every 3 m:\n"
@@ -38,7 +40,8 @@ const char* kUsage =
     "  --exposure S, --colour-offset S  shake only: colour exposure time (default 0.012 s, [0, 0.1]) and the\n"
     "             largest colour-to-depth capture offset (default 0.015 s, [0, 0.05])\n"
     "  --depth-readout S  depth rows read one after another over S seconds, top first (rolling shutter;\n"
-    "             Kinect v1 ~0.03; default 0: all at once, [0, 0.1]); ground truth at the middle row's time\n";
+    "             Kinect v1 ~0.03; default 0: all at once, [0, 0.1]); ground truth at the middle row's time\n"
+    "  --blackout T:S  the camera covered from T s for S s: no depth, black colour, while the path goes on\n";
 
 // "WxH" with a 4:3 aspect: the default camera scaled to that size.
 CameraIntrinsics cameraForSize(const std::string& size) {
@@ -107,7 +110,7 @@ void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
 }
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--size", "--exposure", "--depth-readout",
-                                     "--colour-offset"},
+                                     "--colour-offset", "--blackout"},
                        {"--no-noise", "--plain", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
@@ -125,6 +128,11 @@ int body(int argc, char** argv) {
   o.colour_offset_max = cl.number("--colour-offset", o.colour_offset_max);
   o.depth_readout = cl.number("--depth-readout", o.depth_readout);  // range checked by SyntheticSequence
   if (const auto size = cl.value("--size")) o.camera = cameraForSize(*size);
+  if (const auto blackout = cl.value("--blackout")) {
+    char tail = 0;
+    if (std::sscanf(blackout->c_str(), "%lf:%lf%c", &o.blackout_start, &o.blackout_seconds, &tail) != 2)
+      throw InputError("--blackout", "expected T:S (start and length in s), e.g. 4:1.5, got '" + *blackout + "'");
+  }
   if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "' (see --help)");
   const std::string out = cl.value("--out", "");
   if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");

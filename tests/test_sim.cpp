@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <filesystem>
 #include <Eigen/Dense>
 // The synthetic sequence: exact geometry, Kinect noise statistics, determinism, smooth trajectories.
@@ -369,4 +370,31 @@ TEST(Sim, ColourOffsetAndExposureFlags) {
   EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --exposure -1", &log), 2);
   EXPECT_NE(log.find("--exposure"), std::string::npos) << log;
   EXPECT_FALSE(std::filesystem::exists(dir + "2"));
+}
+
+// --blackout T:S covers the camera from T for S seconds: no depth and black colour on exactly those
+// frames, while the ground truth goes on along the path; a malformed value is a one-line error.
+TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
+  const std::string dir = test::tempDir("sim_blackout") + "/seq";
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + " --frames 8 --size 160x120 --fps 10 --blackout 0.2:0.3", &log), 0)
+      << log;
+  auto tum = openFrameSource(dir, SourceOptions());
+  Frame f;
+  std::vector<mrpt::poses::CPose3D> truth;
+  while (tum->next(f)) {
+    const bool covered = f.index >= 2 && f.index < 5;  // t = 0.2, 0.3, 0.4
+    if (covered) EXPECT_EQ(cv::countNonZero(f.depth), 0) << f.index;
+    else EXPECT_GT(cv::countNonZero(f.depth), 1000) << f.index;
+    cv::Mat grey;
+    cv::cvtColor(f.rgb, grey, cv::COLOR_BGR2GRAY);
+    EXPECT_EQ(cv::countNonZero(grey) == 0, covered) << f.index;
+    ASSERT_TRUE(f.groundTruth.has_value());
+    truth.push_back(*f.groundTruth);
+  }
+  ASSERT_EQ(truth.size(), 8u);
+  for (std::size_t i = 1; i < truth.size(); ++i) EXPECT_GT(truth[i].distanceTo(truth[i - 1]), 1e-4) << "the path goes on at " << i;
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "2 --blackout 3", &log), 2);
+  EXPECT_NE(log.find("--blackout"), std::string::npos) << log;
+  EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;
 }

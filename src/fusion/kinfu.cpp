@@ -90,6 +90,14 @@ KinFu::KinFu(const KinFuParams& params, const Eigen::Isometry3d& initial_pose, P
 KinFu::~KinFu() = default;
 
 bool KinFu::hasModel() const { return impl_->have_model; }
+
+void KinFu::predictAgain(const Eigen::Isometry3d& pose) {
+  if (!impl_->have_model) return;
+  impl_->volume->shiftIfNeeded(impl_->focusPoint(pose), impl_->params.shift_threshold);
+  impl_->model_stale = true;
+  impl_->model_depth.release();
+  impl_->model.intensity.clear();
+}
 const ModelPrediction& KinFu::model() const { return impl_->model; }
 
 void KinFu::predictIfStale(const Eigen::Isometry3d& pose, const CameraIntrinsics& track_cam, StageTimes& times) {

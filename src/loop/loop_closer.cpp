@@ -2,6 +2,7 @@
 #include "vofusion/tracking/residual_monitor.h"
 
 #include <condition_variable>
+#include <algorithm>
 #include <deque>
 #include <mutex>
 #include <optional>
@@ -281,6 +282,32 @@ void LoopCloser::loadState(std::istream& is) {
   }
 }
 
+std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::shared_ptr<const DescribedKeypoints> features) {
+  Impl& m = *impl_;
+  if (!features || features->points.empty() || frame.depth.empty()) return std::nullopt;
+  // Idle, the thread waits for the next keyframe, which only this (the frame loop's) thread gives it:
+  // until then its keyframes and index are this thread's to read.
+  m.waitIdle();
+  const std::size_t n = m.keyframes.size();
+  if (n == 0) return std::nullopt;
+  const Keyframe view = makeKeyframe(n, frame, Eigen::Isometry3d::Identity(), 0.0, features, m.params.keyframe_downsample);
+  // The newest keyframes first (a short loss: the camera is near them; the index leaves them out),
+  // then the place index's candidates for older places.
+  std::vector<std::size_t> candidates;
+  for (std::size_t k = 0; k < std::min<std::size_t>(n, std::size_t(m.params.recent_keyframes)); ++k) candidates.push_back(n - 1 - k);
+  for (const PlaceCandidate& c : m.index.query(features->descriptors))
+    if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
+  std::optional<Relocalisation> best;
+  for (const std::size_t id : candidates) {
+    const Keyframe known = m.keyframes.load(id);
+    if (!known.features) continue;
+    const LoopCheck check = verifyRelocalisation(known, view, m.params);
+    if (!check.accepted || (best && check.inliers <= best->inliers)) continue;
+    best = Relocalisation{frame.index, known.id, known.frame_index, check.inliers, check.icp_rms, known.tracked * check.T_old_new};
+  }
+  return best;
+}
+
 std::pair<std::size_t, std::size_t> LoopCloser::queueStats() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   return {impl_->max_queued, impl_->frame_loop_waits};
@@ -317,6 +344,7 @@ std::map<std::string, std::size_t> LoopCloser::rejections() const {
   return impl_->rejections;
 }
 std::size_t LoopCloser::strainedFrames() const { return impl_->strained_frames; }
+std::size_t LoopCloser::keyframesMade() const { return impl_->keyframes_made; }
 KeyframeStoreStats LoopCloser::storeStats() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   return impl_->store;

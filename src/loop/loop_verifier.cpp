@@ -108,6 +108,17 @@ bool refineIcp(const Keyframe& older, const Keyframe& newer, const LoopParams& P
 
 }  // namespace
 
+LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, const LoopParams& P) {
+  LoopCheck c;
+  fusion::PointMatches inliers;
+  // No overlap bound: the view is usually a step away from the keyframe (the camera moved on while
+  // lost) and the tracker checks the pose against the whole map right after.
+  LoopParams relaxed = P;
+  relaxed.min_icp_overlap = 0.0;
+  c.accepted = fitFeatures(keyframe, view, relaxed, c, inliers) && refineIcp(keyframe, view, relaxed, c, inliers);
+  return c;
+}
+
 LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& P) {
   LoopCheck c;
   fusion::PointMatches inliers;

@@ -52,6 +52,12 @@ struct Reconstruction::Impl {
   std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
   ColourTimeStats colour_time;
   std::map<Rejection, std::size_t> rejections;  // why ICP was rejected
+  // Relocalisation: lost after a frame without a pose or kLostAfterPredicted predicted ones in a row;
+  // then each frame is matched against the keyframes before it is tracked (loop closure on only).
+  static constexpr std::size_t kLostAfterPredicted = 3;  // 0.1 s at constant velocity: a guess beyond
+  bool searching = false;
+  std::size_t predicted_run = 0;
+  std::vector<loop::Relocalisation> relocalisations;
   // The fusion of the last frame (integrate + ray cast), running beside the next frame's odometry
   // and image loading when overlap_fusion is on; `fusing_frame` keeps its images alive and unchanged.
   tbb::task_group fusing;
@@ -71,6 +77,26 @@ struct Reconstruction::Impl {
   }
   ~Impl() {
     if (fusing_pending) fusing.wait();
+  }
+  // The frame tracked against the map and fused (beside the next frame's odometry when overlap_fusion).
+  FusionResult track(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry) {
+    if (!kinfu_params.overlap_fusion) return kinfu->process(frame, prior, geometry);
+    // The caller may refill its frame's buffers before the fusion has read them.
+    fusing_frame = frame;
+    fusing_frame.depth = frame.depth.clone();
+    fusing_frame.rgb = frame.rgb.clone();
+    FusionResult f = kinfu->track(fusing_frame, prior, geometry);
+    fusing_result = f;
+    fusing_result.times = StageTimes();
+    fusing_pending = true;
+    fusing.run([this] { kinfu->fuse(fusing_result); });
+    return f;
+  }
+  // Lost once a frame had no pose, or kLostAfterPredicted were guessed in a row; found only by
+  // relocalisation, so only with loop closure's keyframes (none yet: the frame starts the map).
+  void updateLost(const FrameReport& r) {
+    predicted_run = r.predicted ? predicted_run + 1 : 0;
+    if (loops && loops->keyframesMade() > 0 && (!r.tracked || predicted_run >= kLostAfterPredicted)) searching = true;
   }
 };
 
@@ -106,22 +132,30 @@ FrameReport Reconstruction::process(const Frame& frame) {
       m.colour_time = {true, r.odometry.colour_time_capture, r.odometry.colour_time_votes, r.odometry.colour_time_capture_votes};
   }
   m.waitFusion();
+  // Lost: the frame is tracked only once a keyframe places it (from there, as its prior: not from a
+  // frame before the loss), and counts when the map agrees; until then it stays lost, its pose held,
+  // never guessed (ICP from the held pose may converge anywhere once the camera has moved on).
+  const bool searching = m.searching;
+  const mrpt::poses::CPose3D held = m.kinfu->pose();
+  std::optional<loop::Relocalisation> found;
+  if (searching) found = m.loops->relocalise(frame, r.odometry.features);
+  if (found) m.kinfu->relocalise(toMrpt(found->pose), true);
   fusion::MotionPrior prior;
-  if (r.odometry.success) prior = motionPriorOf(r.odometry);
-  const fusion::MotionPrior* have_prior = r.odometry.success ? &prior : nullptr;
+  const bool use_prior = r.odometry.success && !searching;
+  if (use_prior) prior = motionPriorOf(r.odometry);
   FusionResult f;
-  if (m.kinfu_params.overlap_fusion) {
-    // The caller may refill its frame's buffers before the fusion has read them.
-    m.fusing_frame = frame;
-    m.fusing_frame.depth = frame.depth.clone();
-    m.fusing_frame.rgb = frame.rgb.clone();
-    f = m.kinfu->track(m.fusing_frame, have_prior, r.odometry.geometry.get());
-    m.fusing_result = f;
-    m.fusing_result.times = StageTimes();
-    m.fusing_pending = true;
-    m.fusing.run([&m] { m.kinfu->fuse(m.fusing_result); });
-  } else {
-    f = m.kinfu->process(frame, have_prior, r.odometry.geometry.get());
+  if (!searching || found) f = m.track(frame, use_prior ? &prior : nullptr, r.odometry.geometry.get());
+  if (searching && found && f.tracked && !f.predicted) {
+    m.searching = false;
+    m.relocalisations.push_back(*found);
+  } else if (searching) {
+    if (found) m.waitFusion(), m.kinfu->relocalise(held);
+    FusionResult lost;
+    lost.rejection = Rejection::NotRelocalised;
+    lost.reason = toString(lost.rejection) + (f.reason.empty() ? "" : " (" + f.reason + ")");
+    lost.pose = held;
+    lost.times = f.times;
+    f = lost;
   }
   r.times.merge(f.times);
   r.tracked = f.tracked || m.frames == 0;
@@ -133,6 +167,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
   if (f.fell_back) ++m.fallbacks;
   if (f.predicted) ++m.predicted;
   if (!r.tracked) ++m.lost;
+  m.updateLost(r);
   ++m.frames;
   m.trajectory.push_back({frame.timestamp, f.pose});
   m.fused.push_back(r.tracked && !r.predicted && (!r.fell_back || m.kinfu_params.integrate_on_fallback));
@@ -225,6 +260,11 @@ void Reconstruction::saveState(std::ostream& os) const {
     for (const auto& [why, n] : m.rejections) rejections[int32_t(why)] = n;
     a << rejections;
     state::write(a, m.times);
+    a << m.searching << uint64_t(m.predicted_run) << uint64_t(m.relocalisations.size());
+    for (const loop::Relocalisation& l : m.relocalisations) {
+      a << uint64_t(l.frame) << uint64_t(l.keyframe) << uint64_t(l.keyframe_frame) << int32_t(l.inliers) << l.icp_rms;
+      state::write(a, l.pose);
+    }
     a << bool(m.odometry) << bool(m.loops);
   }
   if (m.odometry) m.odometry->saveState(os);
@@ -262,6 +302,17 @@ void Reconstruction::loadState(std::istream& is) {
     m.rejections.clear();
     for (const auto& [why, count] : rejections) m.rejections[Rejection(why)] = count;
     state::read(a, m.times);
+    uint64_t predicted_run = 0, relocalisations = 0;
+    a >> m.searching >> predicted_run >> relocalisations;
+    m.predicted_run = predicted_run;
+    m.relocalisations.resize(relocalisations);
+    for (loop::Relocalisation& l : m.relocalisations) {
+      uint64_t frame = 0, keyframe = 0, keyframe_frame = 0;
+      int32_t inliers = 0;
+      a >> frame >> keyframe >> keyframe_frame >> inliers >> l.icp_rms;
+      l.frame = frame, l.keyframe = keyframe, l.keyframe_frame = keyframe_frame, l.inliers = inliers;
+      state::read(a, l.pose);
+    }
     bool odometry = false, loops = false;
     a >> odometry >> loops;
     if (odometry != bool(m.odometry) || loops != bool(m.loops))
@@ -299,6 +350,7 @@ std::size_t Reconstruction::fallbacks() const { return impl_->fallbacks; }
 std::size_t Reconstruction::predictedFrames() const { return impl_->predicted; }
 const std::map<Rejection, std::size_t>& Reconstruction::icpRejections() const { return impl_->rejections; }
 std::size_t Reconstruction::lostFrames() const { return impl_->lost; }
+const std::vector<loop::Relocalisation>& Reconstruction::relocalisations() const { return impl_->relocalisations; }
 std::size_t Reconstruction::odometryFailures() const { return impl_->odo_failures; }
 ColourTimeStats Reconstruction::colourTime() const { return impl_->colour_time; }
 KinFuStats Reconstruction::fusionStats() const {

@@ -96,6 +96,10 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
   s["interrupted"] = info.interrupted;
   s["frames"] = frames;
   s["lost_frames"] = rec.lostFrames();
+  s["relocalisations"] = nlohmann::json::array();
+  for (const loop::Relocalisation& l : rec.relocalisations())
+    s["relocalisations"].push_back({{"frame", l.frame}, {"keyframe", l.keyframe}, {"keyframe_frame", l.keyframe_frame},
+                                    {"inliers", l.inliers}, {"icp_rms_m", l.icp_rms}});
   s["icp_fallbacks_to_odometry"] = rec.fallbacks();
   s["predicted_frames"] = rec.predictedFrames();
   json rejections = json::object();

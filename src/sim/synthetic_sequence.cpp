@@ -423,6 +423,7 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   if (!(o.exposure >= 0 && o.exposure <= 0.1)) throw InputError("--exposure", "must be in [0, 0.1] s");
   if (!(o.colour_offset_max >= 0 && o.colour_offset_max <= 0.05)) throw InputError("--colour-offset", "must be in [0, 0.05] s");
   if (!(o.depth_readout >= 0 && o.depth_readout <= 0.1)) throw InputError("--depth-readout", "must be in [0, 0.1] s");
+  if (!(o.blackout_start >= 0 && o.blackout_seconds >= 0)) throw InputError("--blackout", "T:S must be two non-negative times in s");
   impl_ = impl;
 }
 
@@ -549,6 +550,11 @@ Frame SyntheticSequence::render(std::size_t i) const {
   f.camera = c;
   const mrpt::poses::CPose3D pose = m.pose(f.timestamp);
   f.groundTruth = pose;
+  if (f.timestamp >= o.blackout_start && f.timestamp < o.blackout_start + o.blackout_seconds) {
+    f.rgb = cv::Mat::zeros(c.height, c.width, CV_8UC3);  // covered: the sensor sees nothing, the path goes on
+    f.depth = cv::Mat::zeros(c.height, c.width, CV_32FC1);
+    return f;
+  }
   cv::Mat truth, grazing;
   m.trace(f.timestamp, pose, f.rgb, truth, grazing);
   // Shake: the colour camera's own capture time and exposure (the depth and the pose stay at the

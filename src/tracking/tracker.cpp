@@ -23,6 +23,8 @@ struct Tracker::Impl {
   KinFuStats stats;  // the tracking counts and stage times (the map's own figures are added by stats())
   // What track() leaves for fuse(): the frame as the map takes it.
   std::optional<FrameToFuse> pending;
+  // relocalise(): where the next frame is, as its prior (ICP starts there and may not jump from it).
+  std::optional<Eigen::Isometry3d> placed;
 
   Impl(const KinFuParams& p, TrackingMode m, const Eigen::Isometry3d& initial)
       : params(p), mode(m), map(p, initial, {m != TrackingMode::Odometry, m == TrackingMode::Joint}), history(initial) {}
@@ -82,8 +84,8 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
   const KinFuParams& P = params;
   // The prior counts only when its reference frame has a pose here.
   const Eigen::Isometry3d* ref_pose = prior ? history.poseOf(prior->reference_index) : nullptr;
-  const bool have_prior = ref_pose != nullptr;
-  const Eigen::Isometry3d prior_pose = have_prior ? *ref_pose * prior->T_ref_cur : history.pose();
+  const bool have_prior = ref_pose != nullptr || placed;
+  const Eigen::Isometry3d prior_pose = ref_pose ? *ref_pose * prior->T_ref_cur : placed ? *placed : history.pose();
   const Eigen::Isometry3d velocity_pose = history.constantVelocity(frame.timestamp);
   const bool joint = mode == TrackingMode::Joint;
   const bool seeded = mode == TrackingMode::PaperHandoff && have_prior;
@@ -91,7 +93,7 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
   PointMatches matches;
   if (joint) {
     res.guess = tracking::chooseGuess(P, map.model(), history.pose(), levels, ip, have_prior, prior_pose, velocity_pose);
-    if (have_prior) matches = tracking::matchesOf(P, *prior, *ref_pose, prior_pose);
+    if (ref_pose) matches = tracking::matchesOf(P, *prior, *ref_pose, prior_pose);
   } else {
     res.guess = seeded ? InitialGuess::Prior : InitialGuess::LastPose;
   }
@@ -185,7 +187,8 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   Impl& s = *impl_;
   s.pending.reset();
   FusionResult res;
-  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) {
+  // No reading at all (a covered lens, a sensor glitch): nothing to track, the frame is lost.
+  if (frame.depth.empty() || frame.depth.type() != CV_32FC1 || cv::countNonZero(frame.depth) == 0) {
     res.rejection = Rejection::NoDepth;
     res.reason = toString(res.rejection);
     res.pose = toMrpt(s.history.pose());
@@ -218,6 +221,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   }
   if (res.tracked) s.history.remember(frame.index, frame.timestamp, new_pose);
   res.pose = toMrpt(s.history.pose());
+  s.placed.reset();
   s.count(res, had_model);
   if (res.tracked) s.keepForFusion(frame, levels, cam, track_cam, std::move(intensity), res);
   return res;
@@ -247,6 +251,13 @@ void Tracker::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to
 }
 
 mrpt::poses::CPose3D Tracker::pose() const { return toMrpt(impl_->history.pose()); }
+
+void Tracker::relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior) {
+  impl_->history.restart(toEigen(cam_to_world));
+  impl_->map.predictAgain(impl_->history.pose());
+  impl_->placed.reset();
+  if (as_prior) impl_->placed = impl_->history.pose();
+}
 
 void Tracker::save(const std::string& path) const { impl_->map.save(path, impl_->history.pose()); }
 

@@ -41,6 +41,7 @@ std::string toString(Rejection r) {
     case Rejection::JumpedFromPrior: return "ICP jumped from the prior";
     case Rejection::NoPrior: return "no motion prior";
     case Rejection::PriorReferenceUnknown: return "prior's reference frame has no pose";
+    case Rejection::NotRelocalised: return "lost, not relocalised";
   }
   return "?";
 }

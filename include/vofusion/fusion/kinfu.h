@@ -120,7 +120,10 @@ class KinFu {
   // A frame was fused (or a map resumed): there is a model to track against.
   bool hasModel() const;
   const ModelPrediction& model() const;
-  // After resume(): the model ray cast (unhinted) from `pose` at the tracking resolution, once.
+  // The camera was placed anew at `pose` (relocalisation): the volume moves there and the model is ray
+  // cast again (unhinted) before the next frame is tracked.
+  void predictAgain(const Eigen::Isometry3d& pose);
+  // After resume() or predictAgain(): the model ray cast (unhinted) from `pose` at the tracking resolution, once.
   void predictIfStale(const Eigen::Isometry3d& pose, const CameraIntrinsics& track_cam, StageTimes& times);
   // Fuses a tracked frame, moves the volume with the camera and predicts the model from its pose
   // (stage times "shift", "integrate", "raycast" into `times`). Returns whether the volume shifted.

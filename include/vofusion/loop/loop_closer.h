@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <iosfwd>
 #include <map>
+#include <optional>
 #include <memory>
 #include <string>
 #include <utility>
@@ -40,6 +41,16 @@ struct LoopRecord {
   Eigen::Isometry3d measured = Eigen::Isometry3d::Identity();  // the newer keyframe in the older's camera frame
 };
 
+// Tracking found again (LoopCloser::relocalise): the keyframe the frame was matched with and the
+// frame's camera-to-world pose in the tracker's coordinates (the keyframe's tracked pose, moved by
+// the verified relative pose). summary.json "relocalisations".
+struct Relocalisation {
+  std::size_t frame = 0;                 // Frame::index of the relocalised frame
+  std::size_t keyframe = 0, keyframe_frame = 0;  // keyframe id and its Frame::index
+  int inliers = 0;                       // RANSAC inliers of the match
+  double icp_rms = 0.0;                  // m
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+};
 struct KeyframePose {
   std::size_t frame_index = 0;
   double timestamp = 0.0;
@@ -64,6 +75,10 @@ class LoopCloser {
   // thread again: place recognition, verification and the graph are rebuilt as they were, in order.
   void saveState(std::ostream& os) const;
   void loadState(std::istream& is);
+  // Relocalisation, when the tracker has lost the camera: the frame matched against the keyframes (the
+  // newest ones, then the place index's candidates) and verified as a loop is, without the drift bound.
+  // Waits for the thread to take in the queued keyframes first. nullopt: no keyframe verified.
+  std::optional<Relocalisation> relocalise(const Frame& frame, std::shared_ptr<const DescribedKeypoints> features);
   // Waits until every queued keyframe is processed and the graph optimised.
   void finish();
 
@@ -71,6 +86,7 @@ class LoopCloser {
   std::vector<LoopRecord> loops() const;
   std::size_t activeLoops() const;
   std::vector<KeyframePose> keyframes() const;
+  std::size_t keyframesMade() const;  // frames that became keyframes so far (frame loop: not waiting for the thread)
   std::map<std::string, std::size_t> rejections() const;  // verification failures by reason
   KeyframeStoreStats storeStats() const;
   // The most keyframes that waited for the thread at once, and how often the frame loop waited for it

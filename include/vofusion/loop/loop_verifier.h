@@ -26,6 +26,10 @@ struct LoopCheck {
 };
 
 LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& params);
+// The same features and ICP for relocalisation, without the drift bound (the view's own pose is what
+// is sought) nor the overlap bound (the tracker verifies the pose against the map next). T_old_new:
+// the view in the keyframe's camera frame.
+LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, const LoopParams& params);
 
 // Translation (m) and rotation (degrees) of the pose difference a^-1 b.
 std::pair<double, double> poseDifference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b);

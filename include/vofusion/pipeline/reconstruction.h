@@ -104,6 +104,8 @@ class Reconstruction {
   std::size_t predictedFrames() const;   // frames whose pose came from the constant-velocity prediction
   const std::map<Rejection, std::size_t>& icpRejections() const;  // why ICP was rejected, how often
   std::size_t lostFrames() const;
+  // Where tracking was found again after it was lost (loop closure on: matched against its keyframes).
+  const std::vector<loop::Relocalisation>& relocalisations() const;
   std::size_t odometryFailures() const;
   ColourTimeStats colourTime() const;  // the odometry's colour-time correction at the last frame
   KinFuStats fusionStats() const;

@@ -62,6 +62,9 @@ struct SimOptions {
   bool textured = true;         // false: every surface one plain colour (only shading shows the geometry)
   double max_range = 4.5;       // m; farther surfaces read 0
   std::uint32_t seed = 1;
+  // The camera covered (a hand over the lens) from blackout_start for blackout_seconds: no depth, black
+  // colour, while the path goes on (relocalisation). blackout_seconds = 0: never.
+  double blackout_start = 0.0, blackout_seconds = 0.0;
 };
 
 class SyntheticSequence {

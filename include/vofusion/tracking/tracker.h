@@ -76,6 +76,11 @@ class Tracker {
   void integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
 
   mrpt::poses::CPose3D pose() const;
+  // Tracking found again elsewhere (relocalisation): the camera is at `cam_to_world` (the map's frame),
+  // with no recent motion; the model is predicted from there before the next frame is tracked.
+  // as_prior: that pose is the next frame's prior (ICP starts there and may not jump from it; when it
+  // does, the frame takes that pose as a fallback), as the odometry's motion is otherwise.
+  void relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior = false);
   // The map and the camera pose to one file, atomically; a later run resumes from it with resume():
   // the next frame is tracked from the saved pose against the saved map, in its frame.
   void save(const std::string& path) const;

@@ -29,6 +29,7 @@ enum class Rejection {
   JumpedFromPrior,         // ICP's pose beyond max_jump_* from the prior's
   NoPrior,                 // mode odometry: no motion prior for this frame
   PriorReferenceUnknown,   // mode odometry: the prior's reference frame has no pose here
+  NotRelocalised,          // tracking was lost and no keyframe matched this frame yet
 };
 // The reason as summary.json counts it ("too few ICP inliers", ...); "" for None.
 std::string toString(Rejection r);
