@@ -56,6 +56,15 @@ int run(const std::string& cmd, std::string* output) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+mrpt::config::CConfigFileMemory quickRoomConfig() {
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.write("kinfu", "volume_voxels", 256);
+  cfg.write("kinfu", "voxel_size", 0.01);
+  cfg.write("kinfu", "tracking_downsample", 1);
+  cfg.write("odometry", "keypoints", "star");
+  return cfg;
+}
+
 sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory) {
   sim::SimOptions o;
   o.scene = scene;

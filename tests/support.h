@@ -4,6 +4,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <mrpt/config/CConfigFileMemory.h>
 
 #include "vofusion/sim/synthetic_sequence.h"
 
@@ -50,5 +51,8 @@ class ScopedTmpfs {
 };
 // A synthetic sequence's options at 320x240, which keeps the suite quick.
 sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory = "smooth");
+// The pipeline's settings for quickSim's room: 1 cm voxels in a 2.56 m volume, tracking at the frames'
+// own resolution (already 320x240), the odometry on STAR keypoints only (PCL's NARF is not the question).
+mrpt::config::CConfigFileMemory quickRoomConfig();
 
 }  // namespace vofusion::test

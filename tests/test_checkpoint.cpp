@@ -27,14 +27,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// The synthetic room at 320x240 and 1 cm voxels, STAR keypoints only, loop closure on with keyframes
-// every 5 cm, so that the loop closer's state is more than empty.
+// quickRoomConfig with loop keyframes every 5 cm, so that the loop closer's state is more than empty.
 mrpt::config::CConfigFileMemory roomConfig() {
-  mrpt::config::CConfigFileMemory cfg;
-  cfg.write("kinfu", "volume_voxels", 256);
-  cfg.write("kinfu", "voxel_size", 0.01);
-  cfg.write("kinfu", "tracking_downsample", 1);
-  cfg.write("odometry", "keypoints", "star");
+  mrpt::config::CConfigFileMemory cfg = test::quickRoomConfig();
   cfg.write("loop", "keyframe_translation", 0.05);
   return cfg;
 }

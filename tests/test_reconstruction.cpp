@@ -66,16 +66,6 @@ void expectSame(const PipelineRun& a, const PipelineRun& b) {
 // 12 frames of the synthetic room at 320x240.
 sim::SimOptions smallRoom() { return test::quickSim("room", 12); }
 
-// The small room at 1 cm voxels, the odometry on STAR keypoints only (PCL's NARF is not the question).
-mrpt::config::CConfigFileMemory smallRoomConfig() {
-  mrpt::config::CConfigFileMemory cfg;
-  cfg.write("kinfu", "volume_voxels", 256);
-  cfg.write("kinfu", "voxel_size", 0.01);
-  cfg.write("kinfu", "tracking_downsample", 1);
-  cfg.write("odometry", "keypoints", "star");
-  return cfg;
-}
-
 // The first `frames` frames, then finish().
 void fuse(Reconstruction& rec, const sim::SyntheticSequence& seq, std::size_t frames) {
   for (std::size_t i = 0; i < frames && i < seq.size(); ++i) rec.process(seq.render(i));
@@ -121,7 +111,7 @@ TEST(Reconstruction, AFrameWhoseOdometryFailsLosesNoMotion) {
 // Once meshed the map can go (RunRecorder does so before the whole-mesh repair and the pictures):
 // the trajectory and the fusion statistics stay, what needs the map says so instead of crashing.
 TEST(Reconstruction, ReleasingTheMapKeepsTrajectoryAndStatistics) {
-  Reconstruction rec(smallRoomConfig(), TrackingMode::Joint);
+  Reconstruction rec(test::quickRoomConfig(), TrackingMode::Joint);
   fuse(rec, sim::SyntheticSequence(smallRoom()), 4);
   const KinFuStats before = rec.fusionStats();
   const Trajectory poses = rec.trajectory();
@@ -144,7 +134,7 @@ TEST(Reconstruction, ReleasingTheMapKeepsTrajectoryAndStatistics) {
 // no slivers left where a region's repair cut a kept surface at a seam (they were the specks along
 // the bundled room's wall tops in mesh.png).
 TEST(Reconstruction, MeshByRegionLeavesNoSeamSlivers) {
-  Reconstruction rec(smallRoomConfig(), TrackingMode::Joint);
+  Reconstruction rec(test::quickRoomConfig(), TrackingMode::Joint);
   fuse(rec, sim::SyntheticSequence(smallRoom()), smallRoom().frames);
   MeshCleanParams params;  // defaults: repair, fragments under 50 faces, error-bounded simplification
   TriangleMesh whole = rec.extractMesh();

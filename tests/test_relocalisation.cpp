@@ -11,17 +11,6 @@ using namespace vofusion;
 
 namespace {
 
-// The room at 320x240 and 1 cm voxels, STAR keypoints only; loop closure on (its keyframes are what
-// the camera is found again against).
-mrpt::config::CConfigFileMemory roomConfig() {
-  mrpt::config::CConfigFileMemory cfg;
-  cfg.write("kinfu", "volume_voxels", 256);
-  cfg.write("kinfu", "voxel_size", 0.01);
-  cfg.write("kinfu", "tracking_downsample", 1);
-  cfg.write("odometry", "keypoints", "star");
-  return cfg;
-}
-
 mrpt::poses::CPose3D truth(const sim::SyntheticSequence& seq, std::size_t i) { return seq.groundTruth(i) - seq.groundTruth(0); }
 
 }  // namespace
@@ -31,7 +20,7 @@ TEST(Relocalisation, ACoveredCameraIsFoundAgainInTheSameMapAndTheGapIsReportedLo
   o.blackout_start = 1.5;  // frames 45..74 covered while the camera moves on
   o.blackout_seconds = 1.0;
   const sim::SyntheticSequence seq(o);
-  Reconstruction rec(roomConfig(), TrackingMode::Joint);
+  Reconstruction rec(test::quickRoomConfig(), TrackingMode::Joint);  // loop closure on: its keyframes find the camera
   std::vector<FrameReport> reports;
   for (std::size_t i = 0; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
   rec.finish();
