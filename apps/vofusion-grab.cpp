@@ -85,7 +85,7 @@ struct Args {
   double checkpoint_every;  // s; 0: none
 };
 
-// --live with a recording: a checkpoint a minute. One costs the frame loop ~0.2 s for a desk-sized
+// --live with a recording: a checkpoint a minute. One stops the frame loop ~0.3 s for a desk-sized
 // map (xyz_first300: frames dropped then, never recorded ones); a crash costs at most a minute of
 // reconstruction, done again offline from grab.rawlog.
 constexpr double kDefaultCheckpointSeconds = 60.0;

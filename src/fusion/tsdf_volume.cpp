@@ -314,17 +314,21 @@ void TsdfVolume::save(std::ostream& os) const {
   const std::vector<Eigen::Vector3i> world = world_->coords();
   const std::vector<BrickRef> vol = volumeBricks();
   put<std::uint64_t>(os, world.size() + vol.size());
-  const auto write = [&](const Brick& b) {
-    for (int i = 0; i < 3; ++i) put<std::int32_t>(os, b.coord[i]);
-    const std::vector<std::uint8_t> z = compressBrick(b);
+  const auto write = [&](const Eigen::Vector3i& coord, const std::vector<std::uint8_t>& z) {
+    for (int i = 0; i < 3; ++i) put<std::int32_t>(os, coord[i]);
     put<std::uint32_t>(os, static_cast<std::uint32_t>(z.size()));
     os.write(reinterpret_cast<const char*>(z.data()), static_cast<std::streamsize>(z.size()));
   };
-  for (const BrickRef& r : vol) write(*r.brick);
+  // zlib is most of a save's time (a checkpoint stops the frame loop): the volume's bricks are
+  // compressed on every core, then written in order; the world model's are read one by one.
+  std::vector<std::vector<std::uint8_t>> packed(vol.size());
+  parallelFor(0, int(vol.size()), [&](int i) { packed[std::size_t(i)] = compressBrick(*vol[std::size_t(i)].brick); }, 16);
+  for (std::size_t i = 0; i < vol.size(); ++i) write(vol[i].brick->coord, packed[i]);
+  packed.clear();
   Brick scratch;
   for (const Eigen::Vector3i& c : world) {
     world_->read(c, scratch);
-    write(scratch);
+    write(scratch.coord, compressBrick(scratch));
   }
   os.write("END\n", 4);
   if (!os) throw std::runtime_error("write failed");
