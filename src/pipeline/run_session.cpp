@@ -58,15 +58,6 @@ FrameReport readReport(state::Archive& a) {
   return r;
 }
 
-// MRPT's exceptions span several lines (message, location, call stack): the message alone.
-std::string oneLine(const std::string& what) {
-  std::string s = what;
-  if (const auto m = s.find("Message:"); m != std::string::npos) s = s.substr(m + 8);
-  s = s.substr(0, s.find('\n'));
-  const auto first = s.find_first_not_of(' ');
-  return first == std::string::npos ? "unreadable" : s.substr(first);
-}
-
 }  // namespace
 
 RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode, const std::string& out_dir,
@@ -151,7 +142,7 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
   } catch (const InputError&) {
     throw;
   } catch (const std::exception& e) {
-    throw InputError(path, "truncated or corrupt checkpoint: " + oneLine(e.what()));
+    throw InputError(path, "truncated or corrupt checkpoint: " + oneLineMessage(e));
   }
   resumed_frames_ = c.frames;
   replayed_ = 0;

@@ -17,4 +17,8 @@ class InputError : public std::runtime_error {
   std::string file_, problem_;
 };
 
+// An exception's message on one line: MRPT's span several (message, location, call stack), and only
+// the message is kept.
+std::string oneLineMessage(const std::exception& e);
+
 }  // namespace vofusion

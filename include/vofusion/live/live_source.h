@@ -82,9 +82,6 @@ std::string findSensorSection(const mrpt::config::CConfigFileBase& cfg, const st
 // delivers no colour, no depth, or unregistered depth.
 Frame sensorObservationToFrame(const mrpt::obs::CObservation3DRangeScan& obs, const std::string& origin);
 
-// An MRPT exception's what() spans many lines (message, location, backtrace): its message alone.
-std::string oneLineMessage(const std::exception& e);
-
 // Why OpenNI2 sees no device, from the USB bus and the OpenNI2 driver folder (one line).
 std::string diagnoseOpenNI2();
 
