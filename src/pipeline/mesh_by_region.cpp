@@ -6,6 +6,9 @@
 #include <deque>
 #include <fstream>
 #include <algorithm>
+#include <atomic>
+#include <exception>
+#include <functional>
 #include <memory>
 #include <unordered_map>
 
@@ -264,6 +267,81 @@ void cleanWelded(RegionMeshResult& out, const MeshCleanParams& params, const Raw
 
 }  // namespace
 
+// Simplifies regions on every core as they come and hands them to `weld` in region order. Only
+// regions not simplified yet count against the limit (two per core), so a large region on one core
+// does not hold up the smaller ones behind it on the other: waiting for the oldest in order left a
+// core idle for seconds (xyz_first300: 4.3 s for its largest region, with four regions in flight).
+class OrderedRegionSimplifier {
+ public:
+  using Weld = std::function<void(fusion::RegionMesh&, const MeshCleanReport&)>;
+  OrderedRegionSimplifier(const MeshCleanParams& params, Weld weld)
+      : params_(params), weld_(std::move(weld)),
+        limit_(2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()))) {}
+  ~OrderedRegionSimplifier() {
+    for (auto& item : queue_) item->task.wait();  // no task outlives the region it reads
+  }
+
+  // Starts simplifying r; meanwhile welds what is ready, and waits while `limit_` regions are unsimplified.
+  void add(fusion::RegionMesh r) {
+    queue_.push_back(std::make_unique<Item>());
+    Item& item = *queue_.back();
+    item.region = std::move(r);
+    item.task.run([&item, this] {
+      try {
+        item.report = simplifyRegion(item.region.mesh, item.region.on_seam, params_);
+      } catch (...) {
+        item.error = std::current_exception();
+      }
+      item.done.store(true, std::memory_order_release);
+    });
+    weldReady();
+    while (unsimplified() >= limit_) {
+      // The newest unfinished one: this thread simplifies queued regions while it waits (TBB), and
+      // returns as soon as that one is done, not when the slowest is.
+      for (auto it = queue_.rbegin(); it != queue_.rend(); ++it)
+        if (!(*it)->done.load(std::memory_order_acquire)) {
+          (*it)->task.wait();
+          break;
+        }
+      weldReady();
+    }
+  }
+  // Waits for every region and welds the rest; rethrows what a region's simplification threw.
+  void finish() {
+    while (!queue_.empty()) {
+      queue_.front()->task.wait();
+      weldReady();
+    }
+  }
+
+ private:
+  struct Item {
+    fusion::RegionMesh region;
+    MeshCleanReport report;
+    std::exception_ptr error;
+    std::atomic<bool> done{false};
+    tbb::task_group task;
+  };
+  std::size_t unsimplified() const {
+    return std::size_t(std::count_if(queue_.begin(), queue_.end(),
+                                     [](const auto& i) { return !i->done.load(std::memory_order_acquire); }));
+  }
+  void weldReady() {
+    while (!queue_.empty() && queue_.front()->done.load(std::memory_order_acquire)) {
+      std::unique_ptr<Item> item = std::move(queue_.front());
+      queue_.pop_front();
+      item->task.wait();  // done: returns at once
+      if (item->error) std::rethrow_exception(item->error);
+      weld_(item->region, item->report);
+    }
+  }
+
+  const MeshCleanParams& params_;
+  Weld weld_;
+  std::size_t limit_;
+  std::deque<std::unique_ptr<Item>> queue_;  // region order; the front is welded next
+};
+
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
                               const MeshProgress& progress, const std::function<void()>& regions_done) {
   const auto told = [&](int pass, const fusion::RegionMesh& r) {
@@ -291,40 +369,21 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   }
   // Pass 2: the same regions again, each simplified on a task of its own as soon as it is made (CGAL
   // works on the region's own mesh) while the next regions are marched, and welded in region order,
-  // so the mesh is the one a single core gives. At most two regions per core wait at a time.
-  struct InFlight {
-    fusion::RegionMesh region;
-    MeshCleanReport report;
-    tbb::task_group task;
-  };
-  const std::size_t max_in_flight = 2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
-  std::deque<std::unique_ptr<InFlight>> in_flight;
-  const auto weldFront = [&] {
-    InFlight& f = *in_flight.front();
-    f.task.wait();
-    merge.add(f.region, f.report);
-    told(2, f.region);
-    in_flight.pop_front();
-  };
-  try {
-    regions([&](fusion::RegionMesh& r) {
-      ++out.regions;
-      if (raw) raw->add(r);
-      else raw_count.add(r.mesh, r.on_seam, [](std::size_t) {});
-      out.raw_faces += r.mesh.faces.size();
-      step.faces_before += r.mesh.faces.size();
-      if (fragments) fragments->filter(r);
-      in_flight.push_back(std::make_unique<InFlight>());
-      InFlight& f = *in_flight.back();
-      f.region = std::move(r);
-      f.task.run([&f, &region_params] { f.report = simplifyRegion(f.region.mesh, f.region.on_seam, region_params); });
-      while (in_flight.size() >= max_in_flight) weldFront();
-    });
-    while (!in_flight.empty()) weldFront();
-  } catch (...) {
-    for (auto& f : in_flight) f->task.wait();  // no task outlives the regions it reads
-    throw;
-  }
+  // so the mesh is the one a single core gives.
+  OrderedRegionSimplifier simplifier(region_params, [&](fusion::RegionMesh& r, const MeshCleanReport& report) {
+    merge.add(r, report);
+    told(2, r);
+  });
+  regions([&](fusion::RegionMesh& r) {
+    ++out.regions;
+    if (raw) raw->add(r);
+    else raw_count.add(r.mesh, r.on_seam, [](std::size_t) {});
+    out.raw_faces += r.mesh.faces.size();
+    step.faces_before += r.mesh.faces.size();
+    if (fragments) fragments->filter(r);
+    simplifier.add(std::move(r));
+  });
+  simplifier.finish();
   TriangleMesh& merged = out.mesh;
   MeshSimplification& simp = out.report.simplification;
   if (merged.colors.size() != merged.vertices.size()) merged.colors.clear();
