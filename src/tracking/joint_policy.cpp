@@ -68,18 +68,21 @@ InitialGuess chooseGuess(const KinFuParams& P, const ModelPrediction& model, con
     const IcpResult r = projectiveIcp(coarse, mv, mn, model.pose, T, coarse_ip);
     return scoreAlignment(coarse[0], mv[0], mn[0], model.pose, r.pose, ip, truncation).cost;
   };
+  // The last pose is the ray cast's own viewpoint: there each pixel pairs with the model pixel it was
+  // cast from, so sliding along walls costs nothing and the pixel grids coincide; its coarse cost
+  // comes out 2-5x below the true pose's whenever the camera moves along planes (a corridor at 3 m/s:
+  // chosen on 89 of 300 frames, 18 of them ending 2-10 cm off the odometry). Beside an odometry
+  // prior it is no fair candidate; without one it is still the fallback against constant velocity.
+  const bool last_is_candidate = !have_prior;
   // The candidates' coarse alignments are independent and each runs on one thread: side by side.
   double prior_cost = 0, velocity_cost = 0, last_cost = 0;
   tbb::parallel_invoke([&] { if (have_prior) prior_cost = cost(prior_pose); },
-                       [&] { velocity_cost = cost(velocity_pose); }, [&] { last_cost = cost(last_pose); });
+                       [&] { velocity_cost = cost(velocity_pose); },
+                       [&] { if (last_is_candidate) last_cost = cost(last_pose); });
   InitialGuess best = have_prior ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
   double best_cost = have_prior ? prior_cost : velocity_cost;
-  const std::pair<InitialGuess, double> others[] = {{InitialGuess::ConstantVelocity, velocity_cost},
-                                                    {InitialGuess::LastPose, last_cost}};
-  for (const auto& [g, c] : others) {
-    if (g == best) continue;
-    if (c < P.guess_margin * best_cost) best = g, best_cost = c;
-  }
+  if (have_prior && velocity_cost < P.guess_margin * best_cost) best = InitialGuess::ConstantVelocity, best_cost = velocity_cost;
+  if (last_is_candidate && last_cost < P.guess_margin * best_cost) best = InitialGuess::LastPose;
   return best;
 }
 

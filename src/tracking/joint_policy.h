@@ -38,7 +38,8 @@ fusion::PosePrior motionModel(const KinFuParams& P, const MotionHistory& history
 
 // Mode joint: the candidate that explains the frame clearly best after a few ICP steps at the
 // coarsest level (so errors ICP corrects anyway do not count); the prior wins ties (where geometry
-// cannot tell, e.g. sliding along a wall).
+// cannot tell, e.g. sliding along a wall). The last pose competes only without a prior: the model
+// was cast from it, which biases its cost low.
 InitialGuess chooseGuess(const KinFuParams& P, const ModelPrediction& model, const Eigen::Isometry3d& last_pose,
                          const std::vector<fusion::DepthLevel>& levels, const fusion::IcpParams& ip, bool have_prior,
                          const Eigen::Isometry3d& prior_pose, const Eigen::Isometry3d& velocity_pose);
