@@ -359,11 +359,15 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   std::unique_ptr<RawComponents> fragments;
   if (params.min_component_faces > 0 || params.min_component_area > 0) {
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
+    std::size_t region_count = 0;
     regions([&](fusion::RegionMesh& r) {
       fragments->add(r);
       told(1, r);
+      region_count = r.regions;
     });
     out.report.components_removed = fragments->judge();
+    // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
+    if (progress && region_count) progress(2, 0, region_count);
     region_params.min_component_faces = 0;
     region_params.min_component_area = 0;
   }
