@@ -149,7 +149,10 @@ FrameReport Reconstruction::process(const Frame& frame) {
     m.searching = false;
     m.relocalisations.push_back(*found);
   } else if (searching) {
-    if (found) m.waitFusion(), m.kinfu->relocalise(held);
+    if (found) {  // the keyframe's pose did not hold: back to the held pose, once the fusion task is done
+      m.waitFusion();
+      m.kinfu->relocalise(held);
+    }
     FusionResult lost;
     lost.rejection = Rejection::NotRelocalised;
     lost.reason = toString(lost.rejection) + (f.reason.empty() ? "" : " (" + f.reason + ")");
