@@ -1,4 +1,4 @@
-// rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake] [--frames N] [--fps F]
+// rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake] [--frames N] [--fps F] [--pace X]
 //               [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]
 //               [--blackout T:S]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
@@ -23,7 +23,7 @@ namespace fs = std::filesystem;
 namespace {
 const char* kUsage =
     "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake]\n"
-    "                     [--frames N] [--fps F] [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]\n"
+    "                     [--frames N] [--fps F] [--pace X] [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]\n"
     "                     [--blackout T:S]\n"
     "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/)\n"
     "  --scene    room (default), corridor (long, camera travels along it), bare_wall (flat textured wall),\n"
@@ -34,6 +34,7 @@ const char* kUsage =
     "             ~150 deg/s), motion-blurred colour taken up to 15 ms off the depth capture (a TUM\n"
     "             folder keeps that offset in rgb.txt; a rawlog has no place for it)\n"
     "  --frames   number of frames (default 300); --fps frame rate (default 30)\n"
+    "  --pace X   the path played X times as fast (default 1, (0, 4]): at 2 the room turns up to ~37 deg/s\n"
     "  --no-noise exact depth instead of the Kinect v1 noise model; --seed S random seed (default 1)\n"
     "  --plain    every surface one plain colour, no texture: only shading shows the geometry (white walls)\n"
     "  --size     image size (default 640x480; intrinsics scaled from fx=fy=525)\n"
@@ -109,7 +110,7 @@ void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
   progress.finish("-> " + path);
 }
 int body(int argc, char** argv) {
-  const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--size", "--exposure", "--depth-readout",
+  const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--pace", "--size", "--exposure", "--depth-readout",
                                      "--colour-offset", "--blackout"},
                        {"--no-noise", "--plain", "--help"});
   if (cl.flag("--help")) {
@@ -124,6 +125,7 @@ int body(int argc, char** argv) {
   o.noise = !cl.flag("--no-noise");
   o.textured = !cl.flag("--plain");
   o.fps = cl.number("--fps", o.fps, 0.0, 1000.0);
+  o.pace = cl.number("--pace", o.pace);  // range checked by SyntheticSequence
   o.exposure = cl.number("--exposure", o.exposure);            // range checked by SyntheticSequence
   o.colour_offset_max = cl.number("--colour-offset", o.colour_offset_max);
   o.depth_readout = cl.number("--depth-readout", o.depth_readout);  // range checked by SyntheticSequence

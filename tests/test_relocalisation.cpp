@@ -42,3 +42,84 @@ TEST(Relocalisation, ACoveredCameraIsFoundAgainInTheSameMapAndTheGapIsReportedLo
     EXPECT_LT((rec.trackedTrajectory()[i].pose.translation() - truth(seq, i).translation()).norm(), 0.03) << i;
   }
 }
+
+namespace {
+
+// The first second-long stretch from frame `from` on in which the camera turns at least 30 deg and
+// moves at least 0.3 m (issue 30's blackout), as its first frame; 0 when there is none.
+std::size_t briskSecond(const sim::SyntheticSequence& seq, std::size_t from, std::size_t frames_per_second) {
+  for (std::size_t i = from; i + frames_per_second < seq.size(); ++i) {
+    const mrpt::poses::CPose3D d = seq.groundTruth(i + frames_per_second) - seq.groundTruth(i);
+    const double turn = Eigen::AngleAxisd(d.getRotationMatrix().asEigen()).angle() * 180.0 / M_PI;
+    if (turn >= 30.0 && d.norm() >= 0.3) return i;
+  }
+  return 0;
+}
+
+// A wall fused from poses within the issue's 2 cm of the truth, in 1 cm voxels, lies within 3 cm of
+// the scene; a wall fused a second time from a wrong relocalisation puts that wall's vertices beyond
+// it. Measured on seeds 1-5 (default settings): 0.06-0.71 % of the vertices are, 1 % is allowed.
+constexpr double kOneSurface = 0.03;
+
+struct BlackoutRun {
+  std::size_t view_back = 0, resumed = 0;  // first frame with a view again, first tracked frame after it
+  double ate_after = 0;                    // m, RMSE of the positions from `resumed` on, in the map's frame
+  double off_surface = 0;                  // share of mesh vertices more than kOneSurface from every surface
+};
+
+BlackoutRun runBlackout(std::uint32_t seed) {
+  sim::SimOptions o;  // full size and the default settings: the place index's features need the full image
+  o.pace = 2.5;  // the room's path turns up to ~46 deg/s
+  o.seed = seed;
+  const std::size_t second = std::size_t(o.fps);
+  const std::size_t start = briskSecond(sim::SyntheticSequence(o), 45, second);  // 1.5 s of map first
+  if (start == 0) {
+    ADD_FAILURE() << "seed " << seed << ": no second with a 30 deg turn and 0.3 m of travel";
+    return {0, 0, 1.0, 1.0};
+  }
+  o.blackout_start = double(start) / o.fps;
+  o.blackout_seconds = 1.0;
+  o.frames = start + 3 * second;  // the covered second and two seconds after it
+  const sim::SyntheticSequence seq(o);
+  Reconstruction rec(mrpt::config::CConfigFileMemory(), TrackingMode::Joint);
+  std::vector<FrameReport> reports;
+  for (std::size_t i = 0; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
+  rec.finish();
+  if (rec.mapNeedsReintegration()) {
+    std::size_t next = 0;
+    rec.reintegrate([&](Frame& f) { return next < seq.size() ? (f = seq.render(next++), true) : false; }, [](std::size_t) {});
+  }
+  BlackoutRun r;
+  r.view_back = start + second;
+  r.resumed = r.view_back;
+  while (r.resumed < seq.size() && !reports[r.resumed].tracked) ++r.resumed;
+  double sq = 0;
+  for (std::size_t i = r.resumed; i < seq.size(); ++i)
+    sq += (rec.trajectory()[i].pose.translation() - truth(seq, i).translation()).sqrNorm();
+  r.ate_after = std::sqrt(sq / std::max<std::size_t>(1, seq.size() - r.resumed));
+  const TriangleMesh mesh = rec.extractMesh();
+  const mrpt::poses::CPose3D map_to_scene = seq.groundTruth(0);
+  std::size_t off = 0;
+  for (const Eigen::Vector3f& v : mesh.vertices) {
+    const mrpt::math::TPoint3D p = map_to_scene.composePoint(mrpt::math::TPoint3D(v.x(), v.y(), v.z()));
+    if (seq.distanceToSurface(Eigen::Vector3d(p.x, p.y, p.z)) > kOneSurface) ++off;
+  }
+  r.off_surface = double(off) / std::max<std::size_t>(1, mesh.vertices.size());
+  return r;
+}
+
+}  // namespace
+
+// Issue 30's blackout: the camera covered for a second while it turns 30 deg and moves 0.3 m (the
+// room's path at 2.5x its pace), seeds 1-5 at full size: the place index needs full-size features
+// (at 320x240 the best keyframe had 19 inliers of the 30 a relocalisation needs).
+TEST(Relocalisation, ABriskSecondUnderCoverResumesWithinTenFramesInOneMap) {
+  for (std::uint32_t seed = 1; seed <= 5; ++seed) {
+    const BlackoutRun r = runBlackout(seed);
+    std::printf("seed %u: resumed %zu frames after the view came back, ATE after %.4f m, %.4f of the mesh off the scene\n",
+                seed, r.resumed - r.view_back, r.ate_after, r.off_surface);
+    EXPECT_LE(r.resumed - r.view_back, 10u) << "seed " << seed;
+    EXPECT_LE(r.ate_after, 0.02) << "seed " << seed;
+    EXPECT_LE(r.off_surface, 0.01) << "seed " << seed;
+  }
+}

@@ -398,3 +398,27 @@ TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
   EXPECT_NE(log.find("--blackout"), std::string::npos) << log;
   EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;
 }
+
+// --pace plays the scene's path faster: frame i at pace 2 is where frame 2i is at pace 1.
+TEST(Sim, PacePlaysThePathFaster) {
+  SimOptions o = test::quickSim("room", 40);
+  const SyntheticSequence normal(o);
+  o.pace = 2.0;
+  const SyntheticSequence brisk(o);
+  for (std::size_t i = 0; i < 20; ++i)
+    EXPECT_LT(brisk.groundTruth(i).distanceTo(normal.groundTruth(2 * i)), 1e-9) << i;
+  std::string log;
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + test::tempDir("sim_pace") + "/seq --pace 0", &log), 2);
+  EXPECT_NE(log.find("--pace"), std::string::npos) << log;
+}
+
+// The room's walls and boxes, measured from points beside them.
+TEST(Sim, DistanceToTheNearestSurface) {
+  const SyntheticSequence room(test::quickSim("room", 2));
+  EXPECT_NEAR(room.distanceToSurface({0.0, 0.0, 0.1}), 0.1, 1e-12);   // above the floor
+  EXPECT_NEAR(room.distanceToSurface({-2.4, 1.0, 1.5}), 0.1, 1e-12);  // beside the wall at x = -2.5
+  EXPECT_NEAR(room.distanceToSurface({1.15, 0.0, 0.55}), 0.1, 1e-12); // above a box 0.45 m high
+  EXPECT_NEAR(room.distanceToSurface({1.15, 0.0, 0.40}), 0.05, 1e-12); // inside that box, under its top
+  const SyntheticSequence wall(test::quickSim("bare_wall", 2));
+  EXPECT_NEAR(wall.distanceToSurface({0.3, 1.0, 1.0}), kBareWallY - 1.0, 1e-12);
+}

@@ -125,6 +125,7 @@ struct SyntheticSequence::Impl {
   double ringPerimeter() const { return 4 * (ring_a - ring_r) + 4 * (ring_b - ring_r) + 2 * M_PI * ring_r; }
 
   mrpt::poses::CPose3D pose(double t) const {
+    t *= opts.pace;
     // Body frame (x forward, y left, z up) then the optical frame (z forward, x right, y down).
     const double dyaw = shake.empty() ? 0 : shake[0].at(t), dpitch = shake.empty() ? 0 : shake[1].at(t),
                  droll = shake.empty() ? 0 : shake[2].at(t);
@@ -415,6 +416,7 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   impl->opts = o;
   o.camera.validate("--intrinsics");
   if (!(o.fps > 0)) throw InputError("--fps", "must be positive");
+  if (!(o.pace > 0 && o.pace <= 4)) throw InputError("--pace", "must be in (0, 4]");
   if (!(o.max_range > kKinectMinRange)) throw InputError("--max-range", "must exceed 0.4 m");
   const std::uint32_t s = o.seed;
   const double duration = std::max(1.0, double(o.frames) / o.fps);
@@ -440,6 +442,19 @@ double SyntheticSequence::exactDepth(const mrpt::poses::CPose3D& pose, double u,
   const Vec3 o(pose.x(), pose.y(), pose.z());
   const Hit h = impl_->cast(o, R * Vec3((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0));
   return std::isfinite(h.s) ? h.s : 0.0;
+}
+
+double SyntheticSequence::distanceToSurface(const Eigen::Vector3d& p) const {
+  double best = std::numeric_limits<double>::infinity();
+  for (const Box& b : impl_->boxes) {
+    const Vec3 below = b.lo - p, above = p - b.hi;
+    const Vec3 outside = below.cwiseMax(above).cwiseMax(0.0);
+    // Outside: the distance to the box; inside: to its nearest face.
+    const double inside = std::min(below.cwiseMax(above).maxCoeff(), 0.0);
+    best = std::min(best, outside.norm() + std::abs(inside));
+  }
+  for (const Plane& pl : impl_->planes) best = std::min(best, std::abs(pl.n.dot(p) - pl.d));
+  return best;
 }
 
 void SyntheticSequence::Impl::trace(double t, const mrpt::poses::CPose3D& camera, cv::Mat& rgb, cv::Mat& truth,

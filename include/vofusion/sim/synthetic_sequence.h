@@ -57,6 +57,8 @@ struct SimOptions {
                                   // shutter, top row first; Kinect v1 ~0.03); 0: all rows at once
   std::size_t frames = 300;
   double fps = 30.0;            // Hz; timestamps start at 0
+  double pace = 1.0;            // the scene's path (shake included) played this many times as fast: at 2 the
+                                // room turns up to ~37 deg/s and moves up to ~0.9 m/s (a brisk sweep)
   CameraIntrinsics camera;      // default 640x480, fx=fy=525
   bool noise = true;            // Kinect-like depth: disparity quantisation, noise growing with range, holes
   bool textured = true;         // false: every surface one plain colour (only shading shows the geometry)
@@ -78,6 +80,9 @@ class SyntheticSequence {
   // Exact depth (m, 0 = nothing hit) along pixel (u, v) of a camera at `pose`: the analytic value
   // without noise or range limits (tests and stage checks).
   double exactDepth(const mrpt::poses::CPose3D& pose, double u, double v) const;
+  // Distance (m) from a point in the scene's frame to the nearest surface (a mesh checked against the
+  // scene: a wall fused twice shows as vertices off every surface).
+  double distanceToSurface(const Eigen::Vector3d& point) const;
  private:
   struct Impl;
   std::shared_ptr<const Impl> impl_;
