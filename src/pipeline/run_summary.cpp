@@ -115,6 +115,7 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
   s["stages"] = timesJson(rec.totalTimes(), frames);
   const KinFuStats ks = rec.fusionStats();
   s["fusion"] = {{"volume_shifts", ks.shifts}, {"icp_degenerate_frames", ks.degenerate},
+                 {"model_overruled_frames", ks.model_overruled},
                  {"initial_guess", {{"odometry", ks.guess_prior}, {"constant_velocity", ks.guess_velocity}, {"last_pose", ks.guess_last}}},
                  {"bricks_in_volume", ks.bricks_in_volume},
                  {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0},

@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <tuple>
 
+#include "frame_check.h"
 #include "joint_policy.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/state_archive.h"
@@ -25,6 +26,8 @@ struct Tracker::Impl {
   std::optional<FrameToFuse> pending;
   // relocalise(): where the next frame is, as its prior (ICP starts there and may not jump from it).
   std::optional<Eigen::Isometry3d> placed;
+  // Mode joint: the last tracked frame, which checks the model's pull (frame_check.h).
+  std::optional<tracking::ReferenceFrame> reference;
 
   Impl(const KinFuParams& p, TrackingMode m, const Eigen::Isometry3d& initial)
       : params(p), mode(m), map(p, initial, {m != TrackingMode::Odometry, m == TrackingMode::Joint}), history(initial) {}
@@ -125,6 +128,13 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
   std::tie(res.rejection, res.reason) = tracking::judge(P, icp, joint, seeded || (joint && have_prior) ? &prior_pose : nullptr);
   if (res.rejection == Rejection::None) {
     res.tracked = true;
+    if (joint && ref_pose && reference && history.hasMotion() && tracking::worthChecking(P, icp.pose, prior_pose)) {
+      const auto t1 = std::chrono::steady_clock::now();
+      const IcpResult own = tracking::trackAgainstFrame(*reference, levels, prior_pose, ip);
+      res.times.add("frame_check", secondsSince(t1));
+      res.model_overruled = own.solved && tracking::modelPulledAway(P, icp.pose, own.pose, prior_pose);
+      if (res.model_overruled) return own.pose;
+    }
     return icp.pose;
   }
   if (mode != TrackingMode::KinFu && have_prior) {
@@ -143,6 +153,7 @@ void Tracker::Impl::count(const FusionResult& res, bool had_model) {
   ++stats.frames;
   if (res.tracked) ++stats.tracked;
   if (res.fell_back) ++stats.fell_back;
+  if (res.model_overruled) ++stats.model_overruled;
   if (res.predicted) ++stats.predicted;
   if (res.degenerate_dims > 0 && res.reason.empty()) ++stats.degenerate;
   if (!res.tracked) ++stats.lost;
@@ -220,6 +231,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
     new_pose = s.trackIcp(frame, prior, levels, intensity, res);
   }
   if (res.tracked) s.history.remember(frame.index, frame.timestamp, new_pose);
+  if (s.mode == TrackingMode::Joint) s.reference = res.tracked ? std::optional(tracking::ReferenceFrame{levels, new_pose}) : std::nullopt;
   res.pose = toMrpt(s.history.pose());
   s.placed.reset();
   s.count(res, had_model);
@@ -256,12 +268,16 @@ void Tracker::relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior
   impl_->history.restart(toEigen(cam_to_world));
   impl_->map.predictAgain(impl_->history.pose());
   impl_->placed.reset();
+  impl_->reference.reset();
   if (as_prior) impl_->placed = impl_->history.pose();
 }
 
 void Tracker::save(const std::string& path) const { impl_->map.save(path, impl_->history.pose()); }
 
-void Tracker::resume(const std::string& path) { impl_->history.restart(impl_->map.resume(path)); }
+void Tracker::resume(const std::string& path) {
+  impl_->history.restart(impl_->map.resume(path));
+  impl_->reference.reset();
+}
 
 void Tracker::saveState(std::ostream& os) const {
   const Impl& s = *impl_;
@@ -272,9 +288,18 @@ void Tracker::saveState(std::ostream& os) const {
     s.history.saveState(a);
     const KinFuStats& st = s.stats;
     for (std::size_t n : {st.frames, st.tracked, st.fell_back, st.predicted, st.lost, st.shifts, st.guess_prior,
-                          st.guess_velocity, st.guess_last, st.degenerate})
+                          st.guess_velocity, st.guess_last, st.degenerate, st.model_overruled})
       a << uint64_t(n);
     state::write(a, st.times);
+    a << s.reference.has_value();
+    if (s.reference) {
+      state::write(a, s.reference->pose);
+      a << uint64_t(s.reference->levels.size());
+      for (const DepthLevel& l : s.reference->levels) {
+        state::write(a, l.depth), state::write(a, l.vertices), state::write(a, l.normals);
+        state::write(a, l.camera);
+      }
+    }
   }
   s.map.saveState(os);
 }
@@ -287,12 +312,27 @@ void Tracker::loadState(std::istream& is) {
     s.history.loadState(a);
     KinFuStats& st = s.stats;
     for (std::size_t* n : {&st.frames, &st.tracked, &st.fell_back, &st.predicted, &st.lost, &st.shifts, &st.guess_prior,
-                           &st.guess_velocity, &st.guess_last, &st.degenerate}) {
+                           &st.guess_velocity, &st.guess_last, &st.degenerate, &st.model_overruled}) {
       uint64_t v = 0;
       a >> v;
       *n = v;
     }
     state::read(a, st.times);
+    bool has_reference = false;
+    a >> has_reference;
+    s.reference.reset();
+    if (has_reference) {
+      tracking::ReferenceFrame ref;
+      state::read(a, ref.pose);
+      uint64_t n = 0;
+      a >> n;
+      ref.levels.resize(n);
+      for (DepthLevel& l : ref.levels) {
+        state::read(a, l.depth), state::read(a, l.vertices), state::read(a, l.normals);
+        state::read(a, l.camera);
+      }
+      s.reference = std::move(ref);
+    }
   }
   s.map.loadState(is);
   s.pending.reset();

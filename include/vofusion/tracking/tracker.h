@@ -38,6 +38,8 @@ struct FusionResult {
   int degenerate_dims = 0;    // ICP directions too weak to solve, kept from the prediction
   int match_inliers = 0;      // prior matches within 3 sigmas of the joint estimate
   double icp_sigma = 0.0;     // m, mode joint: the noise the ICP residuals were weighed with
+  bool model_overruled = false;  // mode joint: the pose is the frame-to-frame estimate's, the model had
+                                 // pulled the frame away from it and the odometry (an earlier pass's surface)
   bool shifted = false;       // the volume moved this frame
   StageTimes times;           // preprocess, icp, integrate, raycast, shift
 };
@@ -46,6 +48,7 @@ struct KinFuStats {
   std::size_t frames = 0, tracked = 0, fell_back = 0, predicted = 0, lost = 0, shifts = 0;
   std::size_t guess_prior = 0, guess_velocity = 0, guess_last = 0;  // initial guesses chosen (ICP modes)
   std::size_t degenerate = 0;    // frames whose ICP left some direction at the prediction
+  std::size_t model_overruled = 0;  // mode joint: frames posed frame to frame, the model's pull refused
   std::size_t bricks_in_volume = 0, bricks_in_world_model = 0;
   std::size_t memory_bytes = 0;  // TSDF storage in RAM (volume + the world model's cache)
   fusion::WorldModelStats world;  // the world model: cache, spill file, time spent spilling
