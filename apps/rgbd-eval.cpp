@@ -24,8 +24,8 @@ std::string statsJson(const ErrorStats& s) {
   char b[400];
   std::snprintf(b, sizeof b,
                 "{\"count\": %zu, \"rmse\": %.9g, \"mean\": %.9g, \"median\": %.9g, \"std\": %.9g, \"min\": %.9g, "
-                "\"max\": %.9g}",
-                s.count, s.rmse, s.mean, s.median, s.std, s.min, s.max);
+                "\"max\": %.9g, \"p95\": %.9g}",
+                s.count, s.rmse, s.mean, s.median, s.std, s.min, s.max, s.p95);
   return b;
 }
 
@@ -70,6 +70,7 @@ int body(int argc, char** argv) {
     row("Median", ate.trans.median, rpe.trans.median, rpe.rot_deg.median);
     row("RMS", ate.trans.rmse, rpe.trans.rmse, rpe.rot_deg.rmse);
     row("Mean", ate.trans.mean, rpe.trans.mean, rpe.rot_deg.mean);
+    row("P95", ate.trans.p95, rpe.trans.p95, rpe.rot_deg.p95);
     row("Max", ate.trans.max, rpe.trans.max, rpe.rot_deg.max);
     if (!rpe.success) std::printf("RPE: %s\n", rpe.message.c_str());
   }

@@ -33,6 +33,10 @@ TEST(Eval, StatsByHand) {
   EXPECT_DOUBLE_EQ(s.std, std::sqrt(1.25));
   EXPECT_DOUBLE_EQ(s.max, 4);
   EXPECT_DOUBLE_EQ(s.min, 1);
+  EXPECT_DOUBLE_EQ(s.p95, 4);  // nearest rank: ceil(0.95 * 4) = the 4th
+  std::vector<double> twenty;
+  for (int i = 20; i >= 1; --i) twenty.push_back(i);
+  EXPECT_DOUBLE_EQ(computeStats(twenty).p95, 19);  // 19 of 20 at or below it
 }
 
 TEST(Eval, RigidlyMovedCopyHasZeroAteAndRpe) {

@@ -63,6 +63,12 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   EXPECT_EQ(summary["mode"].get<std::string>(), "joint");
   ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.05);
+  // Over 50 ms: about one pair per frame, their 95th percentile between the median and the largest.
+  ASSERT_TRUE(summary.contains("rpe_50ms")) << summary.dump(2);
+  const auto& frame_rpe = summary["rpe_50ms"]["trans_m"];
+  EXPECT_GT(frame_rpe["count"].get<int>(), 5);
+  EXPECT_LE(frame_rpe["p95"].get<double>(), frame_rpe["max"].get<double>());
+  EXPECT_GE(frame_rpe["p95"].get<double>(), frame_rpe["median"].get<double>());
   EXPECT_GT(summary["mesh_raw"]["faces"].get<int>(), 1000);
   // The default mesh is simplified within its error bound (flat walls: to a small fraction).
   const auto& simp = summary["mesh_simplification"];

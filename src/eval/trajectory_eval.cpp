@@ -49,6 +49,7 @@ ErrorStats computeStats(const std::vector<double>& e) {
   std::sort(sorted.begin(), sorted.end());
   const std::size_t n = sorted.size();
   s.median = n % 2 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+  s.p95 = sorted[std::size_t(std::ceil(0.95 * double(n))) - 1];
   s.min = sorted.front();
   s.max = sorted.back();
   return s;

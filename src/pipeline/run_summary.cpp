@@ -18,7 +18,7 @@ double peakMemoryMiB() {
 }
 
 json statsJson(const ErrorStats& s) {
-  return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std}, {"max", s.max}, {"count", s.count}};
+  return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std}, {"max", s.max}, {"p95", s.p95}, {"count", s.count}};
 }
 
 json timesJson(const StageTimes& t, std::size_t frames) {

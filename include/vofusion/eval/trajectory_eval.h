@@ -15,6 +15,7 @@ namespace vofusion {
 struct ErrorStats {
   std::size_t count = 0;
   double rmse = 0, mean = 0, median = 0, std = 0, min = 0, max = 0;  // std: population (numpy.std)
+  double p95 = 0;  // 95th percentile, nearest rank (the smallest value with 95 % of the errors at or below it)
 };
 ErrorStats computeStats(const std::vector<double>& errors);
 
