@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 
+#include "vofusion/core/state_archive.h"
 #include "vofusion/fusion/kinfu.h"
 #include "vofusion/registration/preprocess.h"
 #include "vofusion/registration/projective_icp.h"
@@ -20,6 +21,11 @@ struct ReferenceFrame {
   std::vector<fusion::DepthLevel> levels;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // camera-to-world
 };
+
+// Checkpoints: the reference (or none), bit for bit, so a resumed run checks the next frame as the
+// saved one would have.
+void write(state::Archive& a, const std::optional<ReferenceFrame>& ref);
+void read(state::Archive& a, std::optional<ReferenceFrame>& ref);
 
 // Whether the joint estimate left the odometry's pose by more than one residual's noise
 // (joint_icp_sigma): only then is a second estimate worth its ICP.

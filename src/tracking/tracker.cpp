@@ -291,15 +291,7 @@ void Tracker::saveState(std::ostream& os) const {
                           st.guess_velocity, st.guess_last, st.degenerate, st.model_overruled})
       a << uint64_t(n);
     state::write(a, st.times);
-    a << s.reference.has_value();
-    if (s.reference) {
-      state::write(a, s.reference->pose);
-      a << uint64_t(s.reference->levels.size());
-      for (const DepthLevel& l : s.reference->levels) {
-        state::write(a, l.depth), state::write(a, l.vertices), state::write(a, l.normals);
-        state::write(a, l.camera);
-      }
-    }
+    tracking::write(a, s.reference);
   }
   s.map.saveState(os);
 }
@@ -318,21 +310,7 @@ void Tracker::loadState(std::istream& is) {
       *n = v;
     }
     state::read(a, st.times);
-    bool has_reference = false;
-    a >> has_reference;
-    s.reference.reset();
-    if (has_reference) {
-      tracking::ReferenceFrame ref;
-      state::read(a, ref.pose);
-      uint64_t n = 0;
-      a >> n;
-      ref.levels.resize(n);
-      for (DepthLevel& l : ref.levels) {
-        state::read(a, l.depth), state::read(a, l.vertices), state::read(a, l.normals);
-        state::read(a, l.camera);
-      }
-      s.reference = std::move(ref);
-    }
+    tracking::read(a, s.reference);
   }
   s.map.loadState(is);
   s.pending.reset();
