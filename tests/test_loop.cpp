@@ -238,6 +238,32 @@ TEST(LoopPoseGraph, TrueLoopSpreadsTheDrift) {
   EXPECT_LT((g.pose(39).translation() - c.truth[39].translation()).norm(), 0.05);
 }
 
+// A straight path of keyframes 1 m apart, the cameras looking sideways (their x along the path): the
+// tracker measured it 10 cm too long. One edge says it is unsure along the camera's x; a loop gives the
+// true length. Only an optimiser that weighs each residual by its information puts the correction there.
+TEST(LoopPoseGraph, AnEdgeUnsureAlongTheCameraTakesTheCorrectionAlongIt) {
+  PoseGraph g;
+  const int n = 6, unsure = 3;
+  for (int i = 0; i < n; ++i) g.addNode(pose(0, i + (i >= unsure ? 0.1 : 0.0), 0, 90));
+  for (int i = 1; i < n; ++i) {
+    GraphEdge e;
+    e.from = i - 1;
+    e.to = i;
+    e.T_from_to = g.pose(i - 1).inverse() * g.pose(i);
+    Matrix6 cov = Matrix6::Identity() * 1e-6;  // 1 mm, 1 mrad
+    if (i == unsure) cov(0, 0) = 0.05 * 0.05;    // 5 cm along the camera's x: the world's y, the path
+    e.information = cov.inverse();
+    g.addEdge(e);
+  }
+  g.addEdge(loopEdge(0, n - 1, pose(0, 0, 0, 90).inverse() * pose(0, n - 1, 0, 90)));
+  EXPECT_TRUE(g.optimise(1e6, 1e6).empty());
+  const double step = (g.pose(unsure).translation() - g.pose(unsure - 1).translation()).norm();
+  EXPECT_NEAR(step, 1.0, 0.001) << "the unsure edge took the 10 cm";
+  EXPECT_NEAR((g.pose(n - 1).translation() - g.pose(0).translation()).norm(), n - 1, 0.001);  // the loop's 3 mm against 5 cm
+  for (int i = 1; i < n; ++i)
+    if (i != unsure) EXPECT_NEAR((g.pose(i).translation() - g.pose(i - 1).translation()).norm(), 1.0, 0.001);
+}
+
 TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
   const LoopParams P;
   const Circle c = circle(40, 3.0, 0.05);  // little drift

@@ -1,16 +1,16 @@
 #include "vofusion/loop/pose_graph.h"
 
 #include <algorithm>
+#include <array>
 
-#include <mrpt/graphs/CNetworkOfPoses.h>
-#include <mrpt/graphslam/levmarq.h>
-#include <mrpt/poses/CPose3D.h>
+#include <Eigen/Cholesky>
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
 
-#include "vofusion/core/pose_eigen.h"
 namespace vofusion::loop {
 
 namespace {
-// Residual of an edge at the current poses, in the coordinates MRPT's optimiser weighs it in:
+// Residual of an edge at the current poses, in the coordinates its information is given in:
 // translation and rotation vector of measurement^-1 * estimate (SE(3)'s pseudo-logarithm).
 Eigen::Matrix<double, 6, 1> residual(const GraphEdge& e, const std::vector<Eigen::Isometry3d>& nodes) {
   const Eigen::Isometry3d d = e.T_from_to.inverse() * nodes[e.from].inverse() * nodes[e.to];
@@ -19,6 +19,36 @@ Eigen::Matrix<double, 6, 1> residual(const GraphEdge& e, const std::vector<Eigen
   r << d.translation(), a.angle() * a.axis();
   return r;
 }
+
+// An edge's residual for Ceres: the same as residual() above (translation and rotation vector of
+// measurement^-1 * from^-1 * to), whitened by the edge's information (its Cholesky factor).
+struct EdgeResidual {
+  explicit EdgeResidual(const GraphEdge& e)
+      : measured_t(e.T_from_to.translation()), measured_q(Eigen::Quaterniond(e.T_from_to.linear()).normalized()),
+        whiten(Eigen::LLT<Matrix6>(e.information).matrixU()) {}
+
+  template <typename T>
+  bool operator()(const T* t_from, const T* q_from, const T* t_to, const T* q_to, T* out) const {
+    using Vec3 = Eigen::Matrix<T, 3, 1>;
+    const Eigen::Map<const Vec3> pa(t_from), pb(t_to);
+    const Eigen::Map<const Eigen::Quaternion<T>> qa(q_from), qb(q_to);
+    const Eigen::Quaternion<T> qm_inv = measured_q.conjugate().template cast<T>();
+    const Eigen::Quaternion<T> qd = qm_inv * (qa.conjugate() * qb);
+    const Vec3 pd = qm_inv * (qa.conjugate() * (pb - pa) - measured_t.template cast<T>());
+    const T qd_wxyz[4] = {qd.w(), qd.x(), qd.y(), qd.z()};
+    T rotation[3];
+    ceres::QuaternionToAngleAxis(qd_wxyz, rotation);
+    Eigen::Matrix<T, 6, 1> r;
+    r << pd, rotation[0], rotation[1], rotation[2];
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> whitened(out);
+    whitened = whiten.template cast<T>() * r;
+    return true;
+  }
+
+  Eigen::Vector3d measured_t;
+  Eigen::Quaterniond measured_q;
+  Matrix6 whiten;
+};
 }  // namespace
 
 Matrix6 odometryInformation(const Eigen::Isometry3d& T, double rate, double floor) {
@@ -47,23 +77,39 @@ void PoseGraph::chainNewNode(std::size_t node) {
     }
 }
 
-void PoseGraph::runSpa() {
-  mrpt::graphs::CNetworkOfPoses3DInf g;
-  g.root = 0;
-  for (std::size_t i = 0; i < nodes_.size(); ++i) g.nodes[i] = toMrpt(nodes_[i]);
+void PoseGraph::solve() {
+  // Each node: its camera centre and orientation (Eigen's x, y, z, w), kept unit by the manifold.
+  std::vector<std::array<double, 3>> t(nodes_.size());
+  std::vector<std::array<double, 4>> q(nodes_.size());
+  for (std::size_t i = 0; i < nodes_.size(); ++i) {
+    Eigen::Map<Eigen::Vector3d>(t[i].data()) = nodes_[i].translation();
+    Eigen::Map<Eigen::Quaterniond>(q[i].data()) = Eigen::Quaterniond(nodes_[i].linear()).normalized();
+  }
+  ceres::Problem problem;
   for (const GraphEdge& e : edges_) {
     if (!e.active) continue;
-    mrpt::poses::CPose3DPDFGaussianInf m;
-    m.mean = toMrpt(e.T_from_to);
-    for (int i = 0; i < 6; ++i)
-      for (int j = 0; j < 6; ++j) m.cov_inv(i, j) = e.information(i, j);
-    g.insertEdge(e.from, e.to, m);
+    auto* cost = new ceres::AutoDiffCostFunction<EdgeResidual, 6, 3, 4, 3, 4>(new EdgeResidual(e));
+    problem.AddResidualBlock(cost, nullptr, t[e.from].data(), q[e.from].data(), t[e.to].data(), q[e.to].data());
   }
-  mrpt::graphslam::TResultInfoSpaLevMarq info;
-  mrpt::containers::yaml params = mrpt::containers::yaml::Map();
-  params["max_iterations"] = 100;
-  mrpt::graphslam::optimize_graph_spa_levmarq(g, info, nullptr, params);
-  for (std::size_t i = 0; i < nodes_.size(); ++i) nodes_[i] = toEigen(g.nodes.at(i));
+  for (std::size_t i = 0; i < nodes_.size(); ++i) {
+    if (!problem.HasParameterBlock(t[i].data())) continue;
+    problem.SetManifold(q[i].data(), new ceres::EigenQuaternionManifold);
+    if (i == 0) problem.SetParameterBlockConstant(t[i].data()), problem.SetParameterBlockConstant(q[i].data());
+  }
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.max_num_iterations = 100;
+  options.function_tolerance = 1e-12;
+  options.gradient_tolerance = 1e-14;
+  options.parameter_tolerance = 1e-12;
+  options.num_threads = 1;  // the loop thread's own; the frame loop has the other core
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  for (std::size_t i = 0; i < nodes_.size(); ++i) {
+    if (i == 0 || !problem.HasParameterBlock(t[i].data())) continue;
+    nodes_[i].linear() = Eigen::Map<const Eigen::Quaterniond>(q[i].data()).normalized().toRotationMatrix();
+    nodes_[i].translation() = Eigen::Map<const Eigen::Vector3d>(t[i].data());
+  }
 }
 
 void PoseGraph::updateChi2() {
@@ -77,7 +123,7 @@ std::vector<std::size_t> PoseGraph::optimise(double max_loop_chi2, double max_ch
   std::vector<std::size_t> removed;
   const std::vector<Eigen::Isometry3d> start = nodes_;
   for (;;) {
-    runSpa();
+    solve();
     updateChi2();
     // A false loop shows either in its own residual or, when it is trusted more than the chain, in
     // the chain it bent: a tracker edge far beyond its noise. Either way the worst loop goes.

@@ -1,6 +1,10 @@
 #pragma once
-// The keyframe pose graph on MRPT: mrpt::graphs::CNetworkOfPoses3DInf optimised by
-// mrpt::graphslam::optimize_graph_spa_levmarq (sparse pose adjustment, Levenberg-Marquardt).
+// The keyframe pose graph, optimised by Ceres (Levenberg-Marquardt, sparse Cholesky) with each
+// edge's residual whitened by its information. MRPT 2.5's optimize_graph_spa_levmarq was used until
+// 2026-11-27: it accepts or rejects a step by the unweighted squared error, so with edges of unequal
+// information it refuses steps towards the weighted optimum and then stops on a failed factorisation
+// update (a 10 cm correction left 8 % short where one edge was 50x less sure; the loop scene's lap end
+// half corrected). Test: LoopPoseGraph.AnEdgeUnsureAlongTheCameraTakesTheCorrectionAlongIt.
 // Edges between consecutive keyframes come from the tracker, loop edges from verification. Robust
 // to a false loop that passed verification: after optimising, the loop edge that fits worst is
 // removed while its residual, or the strain it leaves on the tracker's chain, is too large, and the
@@ -12,7 +16,7 @@
 
 namespace vofusion::loop {
 
-using Matrix6 = Eigen::Matrix<double, 6, 6>;  // translation, rotation vector: MRPT levmarq's edge coordinates
+using Matrix6 = Eigen::Matrix<double, 6, 6>;  // translation, rotation vector: an edge's residual coordinates
 
 struct GraphEdge {
   std::size_t from = 0, to = 0;                            // node ids
@@ -42,7 +46,7 @@ class PoseGraph {
   void chainNewNode(std::size_t node);
 
  private:
-  void runSpa();
+  void solve();
   void updateChi2();
   std::vector<Eigen::Isometry3d> nodes_;
   std::vector<GraphEdge> edges_;
