@@ -18,35 +18,31 @@ double distance(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) { return
 }  // namespace
 
 void write(state::Archive& a, const std::optional<ReferenceFrame>& ref) {
-  a << ref.has_value();
-  if (!ref) return;
-  state::write(a, ref->pose);
-  a << uint64_t(ref->levels.size());
-  for (const DepthLevel& l : ref->levels) {
-    state::write(a, l.depth);
-    state::write(a, l.vertices);
-    state::write(a, l.normals);
-    state::write(a, l.camera);
-  }
+  state::writeOptional(a, ref, [&](const ReferenceFrame& r) {
+    state::write(a, r.pose);
+    a << uint64_t(r.levels.size());
+    for (const DepthLevel& l : r.levels) {
+      state::write(a, l.depth);
+      state::write(a, l.vertices);
+      state::write(a, l.normals);
+      state::write(a, l.camera);
+    }
+  });
 }
 
 void read(state::Archive& a, std::optional<ReferenceFrame>& ref) {
-  bool present = false;
-  a >> present;
-  ref.reset();
-  if (!present) return;
-  ReferenceFrame r;
-  state::read(a, r.pose);
-  uint64_t levels = 0;
-  a >> levels;
-  r.levels.resize(levels);
-  for (DepthLevel& l : r.levels) {
-    state::read(a, l.depth);
-    state::read(a, l.vertices);
-    state::read(a, l.normals);
-    state::read(a, l.camera);
-  }
-  ref = std::move(r);
+  state::readOptional(a, ref, [&](ReferenceFrame& r) {
+    state::read(a, r.pose);
+    uint64_t levels = 0;
+    a >> levels;
+    r.levels.resize(levels);
+    for (DepthLevel& l : r.levels) {
+      state::read(a, l.depth);
+      state::read(a, l.vertices);
+      state::read(a, l.normals);
+      state::read(a, l.camera);
+    }
+  });
 }
 
 bool worthChecking(const KinFuParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& prior_pose) {
