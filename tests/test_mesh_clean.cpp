@@ -11,6 +11,7 @@
 #include "test_mesh_fixtures.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/mesh_io.h"
+#include "vofusion/mesh/quadric_simplify.h"
 
 using namespace vofusion;
 using test::colourAt;
@@ -239,7 +240,9 @@ TriangleMesh planeAndSphere() {
   return m;
 }
 
-TEST(MeshClean, ErrorBoundedSimplificationStaysWithinItsBound) {
+// meshoptimizer's error is a collapse's area-weighted RMS distance to the merged faces' planes, not a
+// bound on each of them: on this sphere the largest distance is 1.6-1.8x the target, the mean 0.26-0.30x.
+TEST(MeshClean, QuadricSimplificationStaysNearItsErrorTarget) {
   const TriangleMesh ref = planeAndSphere();
   for (const double bound : {0.001, 0.004}) {
     TriangleMesh m = ref, full;
@@ -254,9 +257,11 @@ TEST(MeshClean, ErrorBoundedSimplificationStaysWithinItsBound) {
     EXPECT_LT(m.faces.size(), ref.faces.size() / 10) << bound;  // the plane collapses to a few faces
     // Measured both ways (simplified -> original, original -> simplified), independently of the report.
     const MeshDistance there = meshDistance(m, ref), back = meshDistance(ref, m);
-    EXPECT_LE(there.max, bound) << bound;
-    EXPECT_LE(back.max, bound) << bound;
-    EXPECT_LE(r.simplification.distance.max, bound);
+    EXPECT_LE(there.mean, 0.5 * bound) << bound;
+    EXPECT_LE(back.mean, 0.5 * bound) << bound;
+    EXPECT_LE(there.max, 2 * bound) << bound;
+    EXPECT_LE(back.max, 2 * bound) << bound;
+    EXPECT_LE(r.simplification.distance.max, 2 * bound);
     EXPECT_NEAR(r.simplification.distance.mean, there.mean, 0.2 * there.mean + 1e-6);
     EXPECT_GT(r.simplification.distance.samples, 10000u);
     // The sphere is curved: it keeps more of its faces with the tighter bound, and stays round.
@@ -264,11 +269,48 @@ TEST(MeshClean, ErrorBoundedSimplificationStaysWithinItsBound) {
     for (std::size_t i = 0; i < m.vertices.size(); ++i) {
       if (m.vertices[i].z() < 0.15f) continue;
       ++sphere_vertices;
-      EXPECT_NEAR((m.vertices[i] - Eigen::Vector3f(0, 0, 0.5f)).norm(), 0.3f, bound);
+      EXPECT_NEAR((m.vertices[i] - Eigen::Vector3f(0, 0, 0.5f)).norm(), 0.3f, 1e-6);  // vertices are kept, not moved
       for (int k = 0; k < 3; ++k) EXPECT_NEAR(m.colors[i][k], colourAt(m.vertices[i])[k], 12);
     }
     EXPECT_GT(sphere_vertices, bound < 0.002 ? 1000u : 100u) << bound;
   }
+}
+
+// A region's seam: its vertices on one border are locked and stay, bit for bit, so the neighbouring
+// region welds to them; its other borders are not, and collapse along themselves.
+TEST(MeshClean, QuadricSimplificationKeepsLockedVerticesOnly) {
+  const int n = 40;
+  TriangleMesh m;
+  std::vector<std::uint8_t> locked;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      m.vertices.emplace_back(float(i) / n, float(j) / n, 0.f);
+      m.colors.push_back({std::uint8_t(i), std::uint8_t(j), 0});
+      locked.push_back(i == n);  // the right border is the seam
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const std::uint32_t a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      m.faces.push_back({a, b, d});
+      m.faces.push_back({a, d, c});
+    }
+  const TriangleMesh before = m;
+  ASSERT_TRUE(simplifyByQuadrics(m, 0.001, 0, locked));
+  ASSERT_EQ(locked.size(), m.vertices.size());
+  std::size_t seam = 0, left_border = 0;
+  for (std::size_t v = 0; v < m.vertices.size(); ++v) {
+    const Eigen::Vector3f& p = m.vertices[v];
+    seam += locked[v] != 0;
+    EXPECT_EQ(locked[v] != 0, p.x() == 1.f) << v;
+    left_border += p.x() == 0.f;
+    // Kept vertices keep their position and colour.
+    EXPECT_EQ(m.colors[v][0], std::uint8_t(std::lround(p.x() * n)));
+    EXPECT_EQ(m.colors[v][1], std::uint8_t(std::lround(p.y() * n)));
+  }
+  EXPECT_EQ(seam, std::size_t(n + 1));
+  EXPECT_LE(left_border, 4u);  // the unlocked border collapsed along itself, to its corners
+  EXPECT_LT(m.faces.size(), before.faces.size() / 10);
+  EXPECT_NEAR(meshDistance(before, m).max, 0.0, 1e-6);  // a plane stays the plane
 }
 
 TEST(MeshClean, FaceBudgetStillStopsErrorBoundedSimplification) {

@@ -4,6 +4,7 @@
 #define CGAL_EIGEN3_ENABLED 1  // Eigen sparse solvers for hole fairing and shape smoothing
 #endif
 #include "vofusion/mesh/mesh_clean.h"
+#include "vofusion/mesh/quadric_simplify.h"
 
 #include <algorithm>
 #include <chrono>
@@ -35,10 +36,8 @@
 #include <CGAL/Polygon_mesh_processing/tangential_relaxation.h>
 #include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
 #include <CGAL/Surface_mesh.h>
-#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_placement.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Edge_length_cost.h>
-#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/GarlandHeckbert_plane_policies.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/LindstromTurk_placement.h>
 #include <CGAL/Surface_mesh_simplification/Edge_collapse_visitor_base.h>
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
@@ -151,16 +150,14 @@ std::size_t borderCycleCount(const Mesh& m) {
   return cycles.size();
 }
 
-// Stops edge collapse at a face budget, once the shortest remaining edge reaches a length (length
-// order), or before the cheapest collapse costs more than a bound (Garland-Heckbert order).
+// Stops edge collapse (shortest edges first) at a face budget or once the shortest remaining edge
+// reaches a length.
 struct StopAtTarget {
   std::size_t target_edges = 0;  // 0: unused
   double min_sq_length = 0.0;    // m^2, 0: unused
-  double max_cost = 0.0;         // m^2, 0: unused
   template <typename F, typename Profile>
-  bool operator()(const F& cost, const Profile& profile, std::size_t, std::size_t current_edges) const {
+  bool operator()(const F&, const Profile& profile, std::size_t, std::size_t current_edges) const {
     if (target_edges && current_edges <= target_edges) return true;
-    if (max_cost > 0 && cost > max_cost) return true;
     return min_sq_length > 0 && CGAL::squared_distance(profile.p0(), profile.p1()) >= min_sq_length;
   }
 };
@@ -240,22 +237,6 @@ struct BlendColoursOnCollapse : SMS::Edge_collapse_visitor_base<Mesh> {
   void OnCollapsed(const Profile&, VD kept) {
     col[kept] = pending;
     if (fixed) fixed[kept] = pending_fixed;
-  }
-};
-
-// Placement that never moves a fixed vertex: an edge with one fixed end collapses onto it, one with
-// two is not collapsed. The cost is then the quadric error at the fixed point, so the bound holds.
-template <typename Base>
-struct KeepFixedPlacement {
-  Base base;
-  Mesh::Property_map<VD, bool> fixed;
-  template <typename Profile>
-  boost::optional<typename Profile::Point> operator()(const Profile& p) const {
-    const bool f0 = fixed[p.v0()], f1 = fixed[p.v1()];
-    if (f0 && f1) return boost::none;
-    if (f0) return p.p0();
-    if (f1) return p.p1();
-    return base(p);
   }
 };
 
@@ -462,41 +443,72 @@ class Cleaner {
 
   void simplify() {
     if (!CGAL::is_triangle_mesh(m_) || m_.is_empty()) return;
+    if (p_.max_simplify_error > 0 && p_.target_edge_length > 0)
+      throw std::invalid_argument("target_edge_length works only with max_simplify_error = 0 (shortest edges first)");
+    if (p_.max_simplify_error > 0) {
+      collapseByQuadrics();
+      return;
+    }
     StopAtTarget stop;
     if (p_.target_faces > 0 && m_.number_of_faces() > std::size_t(p_.target_faces))
       // Edges per face is nearly constant under collapse (3/2 on a closed surface).
       stop.target_edges = std::size_t(double(p_.target_faces) * m_.number_of_edges() / m_.number_of_faces());
-    if (p_.max_simplify_error > 0 && p_.target_edge_length > 0)
-      throw std::invalid_argument("target_edge_length works only with max_simplify_error = 0 (shortest edges first)");
-    if (p_.max_simplify_error > 0) {
-      // Garland-Heckbert: the cost of a collapse is the sum of squared distances from the new vertex
-      // to the planes of every face merged into it, so stopping at max_error^2 keeps each of them
-      // within max_error of the new vertex (a conservative bound: the planes overlap).
-      stop.max_cost = p_.max_simplify_error * p_.max_simplify_error;
-      // Normal flips are refused by a filter, checked only on the edge about to collapse: the
-      // placement wrapper checked every edge each time its cost was updated (most of the time).
-      SMS::GarlandHeckbert_plane_policies<Mesh, Kernel> gh(m_);
-      const auto params = CGAL::parameters::get_cost(gh.get_cost())
-                              .filter(SMS::Bounded_normal_change_filter<>())
-                              .visitor(BlendColoursOnCollapse(col_, fixed_));
-      if (seam_) {
-        using Placement = std::decay_t<decltype(gh.get_placement())>;
-        SMS::edge_collapse(m_, stop, params.get_placement(KeepFixedPlacement<Placement>{gh.get_placement(), fixed_}));
-      } else {
-        SMS::edge_collapse(m_, stop, params.get_placement(gh.get_placement()));
-      }
-    } else {
-      stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
-      if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
-      // Shortest edges first, placed by Lindstrom-Turk, refusing collapses that flip normals. The
-      // surviving vertex of a collapse keeps its colour.
-      SMS::Bounded_normal_change_placement<SMS::LindstromTurk_placement<Mesh>> placement;
-      SMS::edge_collapse(m_, stop,
-                         CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
-                             .get_placement(placement)
-                             .visitor(BlendColoursOnCollapse(col_, fixed_)));
-    }
+    stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
+    if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
+    // Shortest edges first, placed by Lindstrom-Turk, refusing collapses that flip normals. The
+    // surviving vertex of a collapse keeps its colour.
+    SMS::Bounded_normal_change_placement<SMS::LindstromTurk_placement<Mesh>> placement;
+    SMS::edge_collapse(m_, stop,
+                       CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
+                           .get_placement(placement)
+                           .visitor(BlendColoursOnCollapse(col_, fixed_)));
     m_.collect_garbage();
+  }
+
+  // Quadric collapse (quadric_simplify.h) on the mesh as a triangle list, rebuilt after: a collapse
+  // may leave two faces on one triangle or pinch two fans at a vertex, so duplicates go and pinched
+  // vertices are doubled where they are.
+  void collapseByQuadrics() {
+    m_.collect_garbage();
+    TriangleMesh t;
+    std::vector<std::uint8_t> locked;
+    for (VD v : m_.vertices()) {
+      const Point& q = m_.point(v);
+      t.vertices.emplace_back(float(q.x()), float(q.y()), float(q.z()));
+      t.colors.push_back(col_[v]);
+      if (seam_) locked.push_back(fixed_[v]);
+    }
+    for (FD f : m_.faces()) {
+      const HD h = m_.halfedge(f);
+      t.faces.push_back({std::uint32_t(m_.source(h).idx()), std::uint32_t(m_.target(h).idx()),
+                         std::uint32_t(m_.target(m_.next(h)).idx())});
+    }
+    if (!simplifyByQuadrics(t, p_.max_simplify_error, std::size_t(p_.target_faces), locked))
+      throw std::runtime_error("simplification would move a seam vertex");
+    std::vector<Point> points;
+    for (const auto& v : t.vertices) points.emplace_back(v.x(), v.y(), v.z());
+    std::vector<std::array<std::size_t, 3>> triangles;
+    for (const auto& f : t.faces) triangles.push_back({f[0], f[1], f[2]});
+    PMP::merge_duplicate_polygons_in_polygon_soup(points, triangles);
+    const std::size_t before = points.size();
+    PMP::orient_polygon_soup(points, triangles);  // doubled points go after the others, copies of one of them
+    r_.non_manifold_vertices_split += points.size() - before;
+    std::unordered_map<Point, std::size_t, PointHash> first_at;
+    for (std::size_t i = 0; i < before; ++i) first_at.emplace(points[i], i);
+    Mesh out;
+    PMP::polygon_soup_to_polygon_mesh(points, triangles, out);
+    auto col = out.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
+    out.add_property_map<VD, bool>("v:rgb_known", true);
+    auto fixed = seam_ ? out.add_property_map<VD, bool>("v:fixed_seam", false).first : Mesh::Property_map<VD, bool>();
+    for (VD v : out.vertices()) {  // the soup's points, in order
+      const std::size_t was = v.idx() < before ? v.idx() : first_at.at(points[v.idx()]);
+      col[v] = t.colors[was];
+      if (seam_) fixed[v] = locked[was] != 0;
+    }
+    m_ = std::move(out);
+    col_ = m_.property_map<VD, Rgb>("v:rgb").first;
+    known_ = m_.property_map<VD, bool>("v:rgb_known").first;
+    if (seam_) fixed_ = m_.property_map<VD, bool>("v:fixed_seam").first;
   }
 
   void smooth() {
@@ -584,13 +596,34 @@ MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& se
   p.recompute_normals = false;  // normals come after welding
   TriangleMesh work = mesh;
   std::vector<std::uint8_t> work_seam = seam;
+  // Samples in proportion to the faces: spread over regions about as over the whole mesh.
+  const std::size_t samples = std::max<std::size_t>(100, mesh.faces.size() / 8);
+  const auto t0 = std::chrono::steady_clock::now();
+  // Quadric collapse first, on marching cubes' own triangles: it needs no repair, and the repair
+  // after it has a tenth of the faces (rpy_first100: repair 5.3 s of CPU before, docs/mesh.md).
+  const bool quadrics = p.max_simplify_error > 0;
+  if (quadrics) {
+    if (!simplifyByQuadrics(work, p.max_simplify_error, std::size_t(p.target_faces), work_seam)) {
+      report.failure = "simplification would move a seam vertex";
+      return report;
+    }
+    p.max_simplify_error = 0;
+    p.target_faces = 0;
+  }
   try {
-    // Samples in proportion to the faces: spread over regions about as over the whole mesh.
-    Cleaner(p, report, nullptr, &work_seam, std::max<std::size_t>(100, mesh.faces.size() / 8)).run(work);
+    Cleaner(p, report, nullptr, &work_seam, samples).run(work);
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
     return report;
+  }
+  if (quadrics) {
+    MeshSimplification& s = report.simplification;
+    s.ran = true;
+    s.faces_before = mesh.faces.size();
+    s.faces_after = work.faces.size();
+    if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(work), soupOf(mesh), samples);
+    s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   mesh = std::move(work);
   seam = std::move(work_seam);

@@ -24,10 +24,10 @@ struct MeshCleanParams : public mrpt::config::CLoadableOptions {
   int max_hole_edges = 200;            // edges
   bool hole_fairing = true;            // smooth (fair) the patch; falls back to a flat refined patch
   // Simplification by edge collapse (0 disables each stop criterion; all 0: no simplification).
-  // max_simplify_error > 0: Garland-Heckbert order (cheapest quadric error first), stopping before the
+  // max_simplify_error > 0: quadric collapse by meshoptimizer (quadric_simplify.h), stopping before the
   // first collapse whose error exceeds it, or at target_faces if that comes first. Otherwise shortest
-  // edges first, stopping at target_faces or target_edge_length (length order only).
-  double max_simplify_error = 0.03;    // m (measured choice: share/mesh.ini)
+  // edges first (CGAL), stopping at target_faces or target_edge_length (length order only).
+  double max_simplify_error = 0.003;   // m: half a 6 mm voxel (share/mesh.ini)
   int target_faces = 0;                // faces
   double target_edge_length = 0.0;     // m; stop when no edge is shorter than this
   // Smoothing: curvature-flow shape smoothing, then tangential relaxation (triangle quality).
