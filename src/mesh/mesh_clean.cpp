@@ -602,15 +602,13 @@ MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& se
   // Quadric collapse first, on marching cubes' own triangles: it needs no repair, and the repair
   // after it has a tenth of the faces (rpy_first100: repair 5.3 s of CPU before, docs/mesh.md).
   const bool quadrics = p.max_simplify_error > 0;
-  if (quadrics) {
-    if (!simplifyByQuadrics(work, p.max_simplify_error, std::size_t(p.target_faces), work_seam)) {
-      report.failure = "simplification would move a seam vertex";
-      return report;
-    }
-    p.max_simplify_error = 0;
-    p.target_faces = 0;
-  }
   try {
+    if (quadrics) {
+      if (!simplifyByQuadrics(work, p.max_simplify_error, std::size_t(p.target_faces), work_seam))
+        throw std::runtime_error("simplification would move a seam vertex");
+      p.max_simplify_error = 0;
+      p.target_faces = 0;
+    }
     Cleaner(p, report, nullptr, &work_seam, samples).run(work);
   } catch (const std::exception& e) {
     report.success = false;

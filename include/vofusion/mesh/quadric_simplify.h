@@ -1,6 +1,6 @@
 #pragma once
-// Quadric edge collapse (Garland-Heckbert) by meshoptimizer: a region of 100 k faces in ~0.1 s, about
-// 18x CGAL's edge_collapse on the same budget (rpy_first100, docs/mesh.md).
+// Quadric edge collapse (Garland-Heckbert) by meshoptimizer: rpy_first100's regions in 0.9 s of CPU,
+// where CGAL's edge_collapse took 16.8 s (docs/mesh.md).
 #include <cstdint>
 #include <vector>
 
