@@ -313,6 +313,18 @@ TEST(MeshClean, QuadricSimplificationKeepsLockedVerticesOnly) {
   EXPECT_NEAR(meshDistance(before, m).max, 0.0, 1e-6);  // a plane stays the plane
 }
 
+// Known answers: every point of a unit sphere is 0.1 from a sphere of radius 0.9 (the queries start
+// from the last one's answer; a start that is not the nearest must not stick).
+TEST(MeshClean, MeshDistanceIsTheDistanceToTheNearestSurface) {
+  const TriangleMesh outer = icosphere(4), inner = icosphere(6, 0.9f);
+  const MeshDistance d = meshDistance(outer, inner, 20000);
+  EXPECT_EQ(d.samples, 20000u);
+  // Both are flat-faced: a point mid-face on the outer one lies up to ~1 mm inside its radius, the
+  // inner one's faces a few hundredths of a millimetre inside theirs.
+  EXPECT_NEAR(d.mean, 0.1, 0.001);
+  EXPECT_LT(d.max, 0.1 + 0.0002);
+}
+
 TEST(MeshClean, FaceBudgetStillStopsErrorBoundedSimplification) {
   MeshCleanParams p;
   p.max_simplify_error = 0.5;  // m, on a unit sphere: far below 500 faces on its own

@@ -205,10 +205,19 @@ MeshDistance distanceBetween(const Soup& from, const Soup& to, std::size_t sampl
   for (const auto& t : to.triangles) triangles.emplace_back(to.points[t[0]], to.points[t[1]], to.points[t[2]]);
   using Primitive = CGAL::AABB_triangle_primitive<Kernel, std::vector<Kernel::Triangle_3>::const_iterator>;
   CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>> tree(triangles.cbegin(), triangles.cend());
-  tree.accelerate_distance_queries();
+  tree.build();
+  // Samples in space order (5 cm cells), each query starting from the last one's answer, a point on
+  // `to` nearby. CGAL's own start, a kd-tree over `to`'s points (accelerate_distance_queries), took
+  // a quarter of the regions' CPU to build (rpy_first100: measurement 3.2 -> 2.4 s; the same distances).
+  const auto cell = [](const Point& q) {
+    return std::array<long, 3>{long(std::floor(q.x() / 0.05)), long(std::floor(q.y() / 0.05)), long(std::floor(q.z() / 0.05))};
+  };
+  std::sort(points.begin(), points.end(), [&](const Point& a, const Point& b) { return cell(a) < cell(b); });
+  auto nearest = tree.any_reference_point_and_id();
   double sum = 0.0;
   for (const Point& p : points) {
-    const double e = std::sqrt(tree.squared_distance(p));
+    nearest = tree.closest_point_and_primitive(p, nearest);
+    const double e = std::sqrt(CGAL::squared_distance(p, nearest.first));
     sum += e;
     d.max = std::max(d.max, e);
   }
