@@ -476,25 +476,24 @@ class Cleaner {
 
   // Quadric collapse (quadric_simplify.h) on the mesh as a triangle list, rebuilt after: a collapse
   // may leave two faces on one triangle or pinch two fans at a vertex, so duplicates go and pinched
-  // vertices are doubled where they are.
+  // vertices are doubled where they are. Whole meshes only: simplifyRegion collapses a region, seams
+  // locked, before its repair.
   void collapseByQuadrics() {
     m_.collect_garbage();
+    std::vector<Point> points;
     TriangleMesh t;
-    std::vector<std::uint8_t> locked;
     for (VD v : m_.vertices()) {
       const Point& q = m_.point(v);
       t.vertices.emplace_back(float(q.x()), float(q.y()), float(q.z()));
       t.colors.push_back(col_[v]);
-      if (seam_) locked.push_back(fixed_[v]);
     }
     for (FD f : m_.faces()) {
       const HD h = m_.halfedge(f);
       t.faces.push_back({std::uint32_t(m_.source(h).idx()), std::uint32_t(m_.target(h).idx()),
                          std::uint32_t(m_.target(m_.next(h)).idx())});
     }
-    if (!simplifyByQuadrics(t, p_.max_simplify_error, std::size_t(p_.target_faces), locked))
-      throw std::runtime_error("simplification would move a seam vertex");
-    std::vector<Point> points;
+    std::vector<std::uint8_t> no_locks;
+    simplifyByQuadrics(t, p_.max_simplify_error, std::size_t(p_.target_faces), no_locks);
     for (const auto& v : t.vertices) points.emplace_back(v.x(), v.y(), v.z());
     std::vector<std::array<std::size_t, 3>> triangles;
     for (const auto& f : t.faces) triangles.push_back({f[0], f[1], f[2]});
@@ -508,16 +507,11 @@ class Cleaner {
     PMP::polygon_soup_to_polygon_mesh(points, triangles, out);
     auto col = out.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
     out.add_property_map<VD, bool>("v:rgb_known", true);
-    auto fixed = seam_ ? out.add_property_map<VD, bool>("v:fixed_seam", false).first : Mesh::Property_map<VD, bool>();
-    for (VD v : out.vertices()) {  // the soup's points, in order
-      const std::size_t was = v.idx() < before ? v.idx() : first_at.at(points[v.idx()]);
-      col[v] = t.colors[was];
-      if (seam_) fixed[v] = locked[was] != 0;
-    }
+    for (VD v : out.vertices())  // the soup's points, in order
+      col[v] = t.colors[v.idx() < before ? v.idx() : first_at.at(points[v.idx()])];
     m_ = std::move(out);
     col_ = m_.property_map<VD, Rgb>("v:rgb").first;
     known_ = m_.property_map<VD, bool>("v:rgb_known").first;
-    if (seam_) fixed_ = m_.property_map<VD, bool>("v:fixed_seam").first;
   }
 
   void smooth() {
