@@ -10,18 +10,10 @@
 namespace vofusion::loop {
 
 namespace {
-// Residual of an edge at the current poses, in the coordinates its information is given in:
-// translation and rotation vector of measurement^-1 * estimate (SE(3)'s pseudo-logarithm).
-Eigen::Matrix<double, 6, 1> residual(const GraphEdge& e, const std::vector<Eigen::Isometry3d>& nodes) {
-  const Eigen::Isometry3d d = e.T_from_to.inverse() * nodes[e.from].inverse() * nodes[e.to];
-  const Eigen::AngleAxisd a(d.linear());
-  Eigen::Matrix<double, 6, 1> r;
-  r << d.translation(), a.angle() * a.axis();
-  return r;
-}
-
-// An edge's residual for Ceres: the same as residual() above (translation and rotation vector of
-// measurement^-1 * from^-1 * to), whitened by the edge's information (its Cholesky factor).
+// An edge's residual at the current poses: translation and rotation vector of measurement^-1 * from^-1
+// * to (SE(3)'s pseudo-logarithm, in the coordinates its information is given in), whitened by the
+// edge's information (its Cholesky factor), so its squared norm is the edge's chi2. Ceres minimises
+// it; updateChi2 evaluates it.
 struct EdgeResidual {
   explicit EdgeResidual(const GraphEdge& e)
       : measured_t(e.T_from_to.translation()), measured_q(Eigen::Quaterniond(e.T_from_to.linear()).normalized()),
@@ -114,8 +106,12 @@ void PoseGraph::solve() {
 
 void PoseGraph::updateChi2() {
   for (GraphEdge& e : edges_) {
-    const auto r = residual(e, nodes_);
-    e.chi2 = r.dot(e.information * r);
+    const Eigen::Vector3d ta = nodes_[e.from].translation(), tb = nodes_[e.to].translation();
+    const Eigen::Quaterniond qa(nodes_[e.from].linear()), qb(nodes_[e.to].linear());  // coeffs: x, y, z, w
+    Eigen::Matrix<double, 6, 1> whitened;
+    const EdgeResidual edge(e);
+    edge(ta.data(), qa.coeffs().data(), tb.data(), qb.coeffs().data(), whitened.data());
+    e.chi2 = whitened.squaredNorm();
   }
 }
 
