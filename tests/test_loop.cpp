@@ -174,6 +174,46 @@ TEST(LoopPlaceIndex, FindsTheKeyframeWhoseDescriptorsReturn) {
   EXPECT_TRUE(index.query(unrelated).empty());  // random bytes are ~128 bits apart: no votes
 }
 
+// A place seen again splits its votes between neighbouring indexed keyframes: together they make a
+// candidate, named by the better-voted one; the same votes on keyframes far apart along the path do not.
+TEST(LoopPlaceIndex, APlaceIsAKeyframeWithItsNeighboursInTheIndex) {
+  LoopParams P;
+  ASSERT_EQ(P.min_votes, 20);
+  PlaceIndex index(P);
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> byte(0, 255), bit(0, 255);
+  const auto random = [&](int rows) {
+    cv::Mat d(rows, 32, CV_8U);
+    for (int i = 0; i < d.rows; ++i)
+      for (int j = 0; j < 32; ++j) d.at<uchar>(i, j) = uchar(byte(rng));
+    return d;
+  };
+  std::vector<cv::Mat> kf;
+  for (int k = 0; k < 40; ++k) {
+    kf.push_back(random(300));
+    index.add(std::size_t(100 + k), kf.back());
+  }
+  // 16 re-observed descriptors (3 bits flipped) of each of two keyframes, the rest unrelated.
+  const auto query = [&](int a, int b) {
+    cv::Mat q = random(300);
+    for (int i = 0; i < 32; ++i) {
+      const cv::Mat& from = kf[std::size_t(i < 16 ? a : b)];
+      from.row(i * 7).copyTo(q.row(i * 9));
+      for (int f = 0; f < 3; ++f) {
+        const int x = bit(rng);
+        q.at<uchar>(i * 9, x / 8) ^= uchar(1 << (x % 8));
+      }
+    }
+    return index.query(q);
+  };
+  const auto together = query(10, 11);
+  ASSERT_FALSE(together.empty());
+  EXPECT_TRUE(together[0].keyframe == 110 || together[0].keyframe == 111) << together[0].keyframe;
+  EXPECT_GE(together[0].votes, P.min_votes);
+  EXPECT_LE(together[0].votes, 32);
+  EXPECT_TRUE(query(10, 30).empty());
+}
+
 // The compact index finds the nearest neighbours that OpenCV's FLANN LSH index (same tables, key
 // size and probe level) finds, on correlated descriptors like BRAND's; what either finds is never
 // nearer than the brute-force nearest.

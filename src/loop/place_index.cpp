@@ -102,18 +102,43 @@ std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all) const {
   checkDescriptors(all);
   if (keyframes_.empty() || all.empty()) return {};
   const cv::Mat descriptors = spreadRows(all, params_.place_descriptors);
-  std::map<std::size_t, int> votes;
+  std::vector<int> votes(keyframes_.size(), 0);  // by position in the index
   for (int i = 0; i < descriptors.rows; ++i) {
     const auto [row, dist] = nearest(descriptors.ptr<std::uint8_t>(i));
-    if (row >= 0 && dist <= params_.max_hamming) ++votes[keyframeOfRow(row)];
+    if (row >= 0 && dist <= params_.max_hamming) ++votes[owner_[std::size_t(row)]];
   }
-  std::vector<PlaceCandidate> out;
-  for (const auto& [kf, n] : votes)
-    if (n >= params_.min_votes) out.push_back({kf, n});
-  std::sort(out.begin(), out.end(), [](const PlaceCandidate& a, const PlaceCandidate& b) {
-    return a.votes != b.votes ? a.votes > b.votes : a.keyframe < b.keyframe;
+  return placesByVotes(votes);
+}
+
+// Indexed keyframes are index_spacing apart along the path and see much of the same scene, so each
+// descriptor's vote goes to whichever of them holds its nearest neighbour: a place seen again splits
+// its votes among two or three of them (on the loop scene 16 + 5 where one keyframe alone would have
+// had 20). As ORB-SLAM scores a loop candidate with its covisible keyframes (DBoW2's islands), a
+// place is an indexed keyframe with its neighbours in the index, scored by their votes together, and
+// verified through its best-voted keyframe.
+std::vector<PlaceCandidate> PlaceIndex::placesByVotes(const std::vector<int>& votes) const {
+  const std::size_t n = votes.size();
+  std::vector<PlaceCandidate> places;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (votes[i] == 0) continue;
+    const std::size_t lo = i > 0 ? i - 1 : 0, hi = std::min(n - 1, i + 1);
+    int place = 0;
+    std::size_t best = i;
+    for (std::size_t j = lo; j <= hi; ++j) {
+      place += votes[j];
+      if (votes[j] > votes[best]) best = j;
+    }
+    if (place >= params_.min_votes) places.push_back({best, place});
+  }
+  std::sort(places.begin(), places.end(), [&](const PlaceCandidate& a, const PlaceCandidate& b) {
+    return a.votes != b.votes ? a.votes > b.votes : votes[a.keyframe] != votes[b.keyframe] ? votes[a.keyframe] > votes[b.keyframe] : a.keyframe < b.keyframe;
   });
-  if (out.size() > std::size_t(params_.candidates)) out.resize(std::size_t(params_.candidates));
+  std::vector<PlaceCandidate> out;
+  for (const PlaceCandidate& p : places) {
+    if (out.size() == std::size_t(params_.candidates)) break;
+    const bool seen = std::any_of(out.begin(), out.end(), [&](const PlaceCandidate& o) { return o.keyframe == keyframes_[p.keyframe]; });
+    if (!seen) out.push_back({keyframes_[p.keyframe], p.votes});
+  }
   return out;
 }
 

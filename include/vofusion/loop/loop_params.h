@@ -23,8 +23,8 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   // m: a keyframe joins the place index only this far (or keyframe_rotation) from the last one that
   // did; 0 = every keyframe. Every keyframe still queries the index and can close a loop.
   double index_spacing = 0.3;
-  int candidates = 3;                  // best-voted keyframes verified per keyframe
-  int min_votes = 20;                  // descriptor votes a candidate needs
+  int candidates = 3;                  // best-voted places verified per keyframe
+  int min_votes = 20;                  // descriptor votes a place (indexed keyframe and neighbours) needs
   int max_hamming = 60;                // bits of 256; a vote's descriptor distance at most
   int lsh_tables = 4, lsh_key_bits = 24, lsh_probe_level = 0;  // FLANN LSH index
   // Verification: RANSAC rigid motion on the matched descriptors' 3D points, then ICP of the two depths.

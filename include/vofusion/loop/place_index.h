@@ -1,7 +1,8 @@
 #pragma once
 // Place recognition: the BRAND descriptors of keyframes in a multi-table LSH index (binary
 // descriptors, Hamming distance). A query keyframe's descriptors each vote for the keyframe holding
-// their nearest neighbour; the keyframes with most votes are the loop candidates.
+// their nearest neighbour; the places (an indexed keyframe with its neighbours in the index) with most
+// votes are the loop candidates.
 //
 // The hashing is FLANN's (LshIndexParams: each table keys a descriptor by lsh_key_bits of its 256
 // bits, chosen at random; multi-probe visits keys up to lsh_probe_level bits away), but the tables
@@ -34,8 +35,9 @@ class PlaceIndex {
   void add(std::size_t keyframe, const cv::Mat& descriptors);
   std::size_t size() const { return keyframes_.size(); }
   std::size_t descriptors() const { return owner_.size(); }
-  // Keyframes with at least min_votes votes from `descriptors` (nearest neighbours within max_hamming),
-  // most votes first, at most `candidates` of them.
+  // Places with at least min_votes votes from `descriptors` (nearest neighbours within max_hamming)
+  // on an indexed keyframe and its two neighbours in the index, most votes first, at most `candidates`
+  // of them; each names its best-voted keyframe and the place's votes.
   std::vector<PlaceCandidate> query(const cv::Mat& descriptors) const;
   // The indexed row nearest to a 32-byte descriptor found through the tables (LSH: may miss the
   // true nearest), as (row, Hamming distance); row -1 when no table's bucket held any.
@@ -48,6 +50,8 @@ class PlaceIndex {
   static Bits bitsOf(const std::uint8_t* descriptor);
   std::uint32_t keyOf(const Bits& d, std::size_t table) const;
   template <class Visit> void probe(std::uint32_t key, int flips, int from, Visit&& visit) const;
+  // votes: per position in the index. Candidates as query() returns them.
+  std::vector<PlaceCandidate> placesByVotes(const std::vector<int>& votes) const;
 
   LoopParams params_;
   std::vector<std::vector<int>> table_bits_;  // per table: the descriptor bits its key is made of
