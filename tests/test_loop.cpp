@@ -362,7 +362,8 @@ TEST(LoopVerifier, SamePlaceAfterALapIsAcceptedWithTheTruePose) {
   const Eigen::Isometry3d drifted = t0.inverse() * t1 * pose(0.2, 0, 0, 4);  // relative pose as tracked
   const Keyframe older = keyframeOf(seq, 0, Eigen::Isometry3d::Identity(), 0.0, 0);
   const Keyframe newer = keyframeOf(seq, 200, drifted, 26.0, 1);
-  const LoopCheck c = verifyLoop(older, newer, LoopParams());
+  PyramidCache pyramids(2);
+  const LoopCheck c = verifyLoop(older, newer, LoopParams(), pyramids);
   ASSERT_TRUE(c.accepted) << c.reason << " (" << c.matches << " matches, " << c.inliers << " inliers, ICP overlap "
                           << c.icp_overlap << ", rms " << c.icp_rms << ")";
   const auto [dt, dr] = poseDifference(c.T_old_new, t0.inverse() * t1);
@@ -372,6 +373,18 @@ TEST(LoopVerifier, SamePlaceAfterALapIsAcceptedWithTheTruePose) {
   EXPECT_LT(dt, 0.015);
   EXPECT_LT(dr, 0.5);
   EXPECT_NEAR(c.correction_m, 0.2, 0.05);
+  // Verified again through the same cache: both pyramids are reused, the answer is the same.
+  EXPECT_EQ(pyramids.misses(), 2u);
+  const LoopCheck again = verifyLoop(older, newer, LoopParams(), pyramids);
+  EXPECT_EQ(pyramids.hits(), 2u);
+  EXPECT_TRUE(again.accepted);
+  EXPECT_TRUE(again.T_old_new.isApprox(c.T_old_new, 1e-12));
+  // A third keyframe evicts the least recently used one (capacity 2): the older keyframe is made again.
+  const Keyframe third = keyframeOf(seq, 202, drifted, 26.2, 2);
+  verifyLoop(older, third, LoopParams(), pyramids);
+  EXPECT_EQ(pyramids.misses(), 3u);
+  verifyLoop(newer, third, LoopParams(), pyramids);
+  EXPECT_EQ(pyramids.misses(), 4u);
 }
 
 // Keyframes beyond the RAM budget go to disk and come back bit for bit; the newest always stays in RAM.
@@ -427,7 +440,8 @@ TEST(LoopVerifier, LookAlikePlacesAreNotJoined) {
   ASSERT_NEAR(t1.translation().x() - t0.translation().x(), 3.0, 0.05);
   const Keyframe older = keyframeOf(seq, 20, t0, 0.0, 0);
   const Keyframe newer = keyframeOf(seq, j, t1, 3.0, 1);
-  const LoopCheck c = verifyLoop(older, newer, LoopParams());
+  PyramidCache pyramids(2);
+  const LoopCheck c = verifyLoop(older, newer, LoopParams(), pyramids);
   std::printf("look-alike: %d matches, %d inliers, reason '%s', correction %.3f m\n", c.matches, c.inliers,
               c.reason.c_str(), c.correction_m);
   EXPECT_FALSE(c.accepted);

@@ -135,4 +135,5 @@ TEST(LoopScenes, KeyframeQueueIsBounded) {
   EXPECT_LE(max_queued, 16u);
   EXPECT_GT(waits, 0u) << "the thread kept up: the bound was not exercised";
   EXPECT_EQ(closer.keyframes().size(), handed);
+  EXPECT_GT(closer.threadCpuSeconds(), 0.0);  // summary.json's thread_cpu_ms_per_frame
 }

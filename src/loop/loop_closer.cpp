@@ -32,6 +32,9 @@ struct LoopCloser::Impl {
   std::size_t indexed = 0;  // keyframes[0, indexed) have been considered for the index
   std::optional<Eigen::Isometry3d> last_indexed;  // pose of the newest keyframe in the index
   PoseGraph graph;
+  // ICP pyramids of the last keyframes verified (~2.7 MB each at 320x240): a revisit's consecutive
+  // keyframes meet the same older ones.
+  PyramidCache pyramids{4};
   std::vector<std::size_t> loop_edge_record;  // graph edge index -> loops[] index (loop edges only)
 
   // Shared with the frame loop, under `mu`.
@@ -48,6 +51,7 @@ struct LoopCloser::Impl {
   std::vector<KeyframePose> poses;
   std::map<std::string, std::size_t> rejections;
   StageTimes times;
+  double cpu_seconds = 0.0;  // the thread's CPU time in process()
   KeyframeStoreStats store;
   std::thread worker;
 
@@ -99,6 +103,7 @@ struct LoopCloser::Impl {
   // One keyframe: a node chained to the previous one, then place recognition among the keyframes
   // older than the recent ones, verification, and an optimisation when a loop was accepted.
   void process(Keyframe k) {
+    const double cpu_start = vofusion::threadCpuSeconds();
     StageTimes t;
     const std::size_t id = graph.addNode(k.tracked);
     if (id > 0) {
@@ -128,7 +133,7 @@ struct LoopCloser::Impl {
       ScopedStageTimer timer(t, "loop_verification");
       for (const PlaceCandidate& c : candidates) {
         const Keyframe old = keyframes.load(c.keyframe);
-        const LoopCheck check = verifyLoop(old, cur, params);
+        const LoopCheck check = verifyLoop(old, cur, params, pyramids);
         if (!check.accepted) {
           ++rejected[check.reason];
           continue;
@@ -150,7 +155,7 @@ struct LoopCloser::Impl {
       ScopedStageTimer timer(t, "pose_graph");
       if (!accepted.empty()) removed = graph.optimise(params.max_loop_chi2, params.max_chain_chi2);
     }
-    publish(accepted, removed, rejected, t);
+    publish(accepted, removed, rejected, t, vofusion::threadCpuSeconds() - cpu_start);
   }
 
   // At the end of the run, with the thread idle and some loop removed: one optimisation over every
@@ -184,7 +189,7 @@ struct LoopCloser::Impl {
   }
 
   void publish(const std::vector<LoopRecord>& accepted, const std::vector<std::size_t>& removed,
-               const std::map<std::string, std::size_t>& rejected, const StageTimes& t) {
+               const std::map<std::string, std::size_t>& rejected, const StageTimes& t, double cpu) {
     std::lock_guard<std::mutex> lock(mu);
     loops.insert(loops.end(), accepted.begin(), accepted.end());
     for (const std::size_t e : removed)
@@ -196,6 +201,7 @@ struct LoopCloser::Impl {
       poses[i] = {keyframes.at(i).frame_index, keyframes.at(i).timestamp, keyframes.at(i).tracked, graph.pose(i)};
     store = keyframes.stats();
     times.merge(t);
+    cpu_seconds += cpu;
   }
 };
 
@@ -298,10 +304,11 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
   for (const PlaceCandidate& c : m.index.query(features->descriptors))
     if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
   std::optional<Relocalisation> best;
+  PyramidCache pyramids(2);  // the view's, made once for all candidates
   for (const std::size_t id : candidates) {
     const Keyframe known = m.keyframes.load(id);
     if (!known.features) continue;
-    const LoopCheck check = verifyRelocalisation(known, view, m.params);
+    const LoopCheck check = verifyRelocalisation(known, view, m.params, pyramids);
     if (!check.accepted || (best && check.inliers <= best->inliers)) continue;
     best = Relocalisation{frame.index, known.id, known.frame_index, check.inliers, check.icp_rms, known.tracked * check.T_old_new};
   }
@@ -349,6 +356,11 @@ KeyframeStoreStats LoopCloser::storeStats() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   return impl_->store;
 }
+double LoopCloser::threadCpuSeconds() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return impl_->cpu_seconds;
+}
+
 StageTimes LoopCloser::times() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   return impl_->times;

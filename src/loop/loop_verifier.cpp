@@ -73,8 +73,9 @@ bool fitFeatures(const Keyframe& older, const Keyframe& newer, const LoopParams&
 // with its inlier matches in one Gauss-Newton, as the tracker does (mode joint): where the geometry is
 // weak (a corridor's axis) the features hold the pose.
 bool refineIcp(const Keyframe& older, const Keyframe& newer, const LoopParams& P, LoopCheck& c,
-               fusion::PointMatches& matches) {
-  const auto model = icpLevels(older), frame = icpLevels(newer);
+               fusion::PointMatches& matches, PyramidCache& pyramids) {
+  const std::vector<fusion::DepthLevel>& model = pyramids.of(older);
+  const std::vector<fusion::DepthLevel>& frame = pyramids.of(newer);
   std::vector<cv::Mat> mv, mn;
   for (const auto& l : model) mv.push_back(l.vertices), mn.push_back(l.normals);
   fusion::IcpParams ip;
@@ -108,21 +109,36 @@ bool refineIcp(const Keyframe& older, const Keyframe& newer, const LoopParams& P
 
 }  // namespace
 
-LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, const LoopParams& P) {
+const std::vector<fusion::DepthLevel>& PyramidCache::of(const Keyframe& k) {
+  for (auto it = newest_first_.begin(); it != newest_first_.end(); ++it)
+    if (it->first == k.id) {
+      ++hits_;
+      newest_first_.splice(newest_first_.begin(), newest_first_, it);
+      return newest_first_.front().second;
+    }
+  ++misses_;
+  // Both pyramids of one verification must stay valid together: never evict below two.
+  while (newest_first_.size() >= std::max<std::size_t>(capacity_, 2)) newest_first_.pop_back();
+  newest_first_.emplace_front(k.id, icpLevels(k));
+  return newest_first_.front().second;
+}
+
+LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, const LoopParams& P,
+                               PyramidCache& pyramids) {
   LoopCheck c;
   fusion::PointMatches inliers;
   // No overlap bound: the view is usually a step away from the keyframe (the camera moved on while
   // lost) and the tracker checks the pose against the whole map right after.
   LoopParams relaxed = P;
   relaxed.min_icp_overlap = 0.0;
-  c.accepted = fitFeatures(keyframe, view, relaxed, c, inliers) && refineIcp(keyframe, view, relaxed, c, inliers);
+  c.accepted = fitFeatures(keyframe, view, relaxed, c, inliers) && refineIcp(keyframe, view, relaxed, c, inliers, pyramids);
   return c;
 }
 
-LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& P) {
+LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& P, PyramidCache& pyramids) {
   LoopCheck c;
   fusion::PointMatches inliers;
-  if (!fitFeatures(older, newer, P, c, inliers) || !refineIcp(older, newer, P, c, inliers)) return c;
+  if (!fitFeatures(older, newer, P, c, inliers) || !refineIcp(older, newer, P, c, inliers, pyramids)) return c;
   // The drift the path between the two could have gathered bounds the correction.
   const double travelled = std::abs(newer.path_length - older.path_length);
   const auto [dt, dr] = poseDifference(older.tracked.inverse() * newer.tracked, c.T_old_new);

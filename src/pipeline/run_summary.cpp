@@ -77,6 +77,7 @@ json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std:
           {"map_reintegrated", rec.reintegrated()},
           {"frame_loop_ms_per_frame", frames ? front * 1e3 / frames : 0.0},
           {"thread_ms_per_frame", frames ? back * 1e3 / frames : 0.0},
+          {"thread_cpu_ms_per_frame", frames ? lc.threadCpuSeconds() * 1e3 / frames : 0.0},
           {"stages", timesJson(t, frames)}};
 }
 

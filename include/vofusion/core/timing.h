@@ -1,6 +1,7 @@
 #pragma once
-// Wall-clock time per pipeline stage, for the per-stage breakdowns apps print and summary.json holds.
+// Wall-clock time per pipeline stage (and a thread's CPU time), for the per-stage breakdowns apps print and summary.json holds.
 #include <chrono>
+#include <ctime>
 #include <map>
 #include <string>
 
@@ -16,6 +17,14 @@ struct StageTimes {
     for (const auto& [k, v] : o.calls) calls[k] += v;
   }
 };
+
+// CPU seconds the calling thread has used (POSIX CLOCK_THREAD_CPUTIME_ID): what a background thread
+// costs the cores, where its wall time also counts the time it waited for one.
+inline double threadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
 
 // Seconds of wall time since `start`.
 inline double secondsSince(std::chrono::steady_clock::time_point start) {

@@ -93,6 +93,7 @@ class LoopCloser {
   // (at most 16 wait: beyond, the frame loop blocks until the thread takes one).
   std::pair<std::size_t, std::size_t> queueStats() const;
   std::size_t strainedFrames() const;  // frames whose ICP residual stood out (ResidualMonitor); frame loop only
+  double threadCpuSeconds() const;  // the thread's CPU time on keyframes (its stages' wall time counts waits too)
   StageTimes times() const;  // the thread's: "place_recognition", "loop_verification", "pose_graph" (the frame
                              // loop's keyframing is the pipeline's stage "keyframes")
 

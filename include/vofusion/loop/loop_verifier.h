@@ -4,9 +4,15 @@
 // (the odometry's fit), then ICP of the two reduced depth images from that motion; and a
 // plausibility test: the loop may correct the tracked relative pose by no more than the drift the
 // path between the two keyframes could have gathered (a look-alike place farther away is refused).
+#include <cstddef>
+#include <list>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <Eigen/Geometry>
+
+#include "vofusion/registration/preprocess.h"
 
 #include "vofusion/loop/keyframe.h"
 #include "vofusion/loop/loop_params.h"
@@ -25,11 +31,28 @@ struct LoopCheck {
   double correction_m = 0.0, correction_deg = 0.0;  // measured vs tracked relative pose
 };
 
-LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& params);
+// The ICP pyramids (filtered depth, vertices, normals at two levels) of the keyframes verified last.
+// A revisit verifies consecutive keyframes against the same older ones, and one keyframe against up to
+// `candidates` places: each pyramid is made once while it is among the newest `capacity` used.
+class PyramidCache {
+ public:
+  explicit PyramidCache(std::size_t capacity) : capacity_(capacity) {}
+  // Keyed by keyframe id: a keyframe's depth never changes once made.
+  const std::vector<fusion::DepthLevel>& of(const Keyframe& k);
+  std::size_t hits() const { return hits_; }
+  std::size_t misses() const { return misses_; }
+
+ private:
+  std::size_t capacity_, hits_ = 0, misses_ = 0;
+  std::list<std::pair<std::size_t, std::vector<fusion::DepthLevel>>> newest_first_;
+};
+
+LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& params, PyramidCache& pyramids);
 // The same features and ICP for relocalisation, without the drift bound (the view's own pose is what
 // is sought) nor the overlap bound (the tracker verifies the pose against the map next). T_old_new:
 // the view in the keyframe's camera frame.
-LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, const LoopParams& params);
+LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, const LoopParams& params,
+                               PyramidCache& pyramids);
 
 // Translation (m) and rotation (degrees) of the pose difference a^-1 b.
 std::pair<double, double> poseDifference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b);
