@@ -65,7 +65,7 @@ PoseGraph graphOf(const Circle& c, const LoopParams& P) {
     e.from = i - 1;
     e.to = i;
     e.T_from_to = c.tracked[i - 1].inverse() * c.tracked[i];
-    e.information = odometryInformation(e.T_from_to, P.odometry_sigma_rate, P.odometry_sigma_floor);
+    e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, P.odometry_sigma_floor);
     g.addEdge(e);
   }
   return g;
@@ -300,8 +300,11 @@ TEST(LoopPoseGraph, AnEdgeUnsureAlongTheCameraTakesTheCorrectionAlongIt) {
   const double step = (g.pose(unsure).translation() - g.pose(unsure - 1).translation()).norm();
   EXPECT_NEAR(step, 1.0, 0.001) << "the unsure edge took the 10 cm";
   EXPECT_NEAR((g.pose(n - 1).translation() - g.pose(0).translation()).norm(), n - 1, 0.001);  // the loop's 3 mm against 5 cm
-  for (int i = 1; i < n; ++i)
-    if (i != unsure) EXPECT_NEAR((g.pose(i).translation() - g.pose(i - 1).translation()).norm(), 1.0, 0.001);
+  for (int i = 1; i < n; ++i) {
+    if (i != unsure) {
+      EXPECT_NEAR((g.pose(i).translation() - g.pose(i - 1).translation()).norm(), 1.0, 0.001);
+    }
+  }
 }
 
 TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
