@@ -117,27 +117,33 @@ std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all) const {
 // place is an indexed keyframe with its neighbours in the index, scored by their votes together, and
 // verified through its best-voted keyframe.
 std::vector<PlaceCandidate> PlaceIndex::placesByVotes(const std::vector<int>& votes) const {
+  struct Place {
+    std::size_t best;  // position in the index of the place's best-voted keyframe
+    int votes;         // the place's: the keyframe's and its two neighbours'
+  };
   const std::size_t n = votes.size();
-  std::vector<PlaceCandidate> places;
+  std::vector<Place> places;
   for (std::size_t i = 0; i < n; ++i) {
     if (votes[i] == 0) continue;
-    const std::size_t lo = i > 0 ? i - 1 : 0, hi = std::min(n - 1, i + 1);
-    int place = 0;
-    std::size_t best = i;
-    for (std::size_t j = lo; j <= hi; ++j) {
-      place += votes[j];
-      if (votes[j] > votes[best]) best = j;
+    Place p{i, 0};
+    for (std::size_t j = i > 0 ? i - 1 : 0; j <= std::min(n - 1, i + 1); ++j) {
+      p.votes += votes[j];
+      if (votes[j] > votes[p.best]) p.best = j;
     }
-    if (place >= params_.min_votes) places.push_back({best, place});
+    if (p.votes >= params_.min_votes) places.push_back(p);
   }
-  std::sort(places.begin(), places.end(), [&](const PlaceCandidate& a, const PlaceCandidate& b) {
-    return a.votes != b.votes ? a.votes > b.votes : votes[a.keyframe] != votes[b.keyframe] ? votes[a.keyframe] > votes[b.keyframe] : a.keyframe < b.keyframe;
+  // Most votes first; ties: the better best keyframe, then the older.
+  std::sort(places.begin(), places.end(), [&](const Place& a, const Place& b) {
+    if (a.votes != b.votes) return a.votes > b.votes;
+    if (votes[a.best] != votes[b.best]) return votes[a.best] > votes[b.best];
+    return a.best < b.best;
   });
   std::vector<PlaceCandidate> out;
-  for (const PlaceCandidate& p : places) {
+  for (const Place& p : places) {
     if (out.size() == std::size_t(params_.candidates)) break;
-    const bool seen = std::any_of(out.begin(), out.end(), [&](const PlaceCandidate& o) { return o.keyframe == keyframes_[p.keyframe]; });
-    if (!seen) out.push_back({keyframes_[p.keyframe], p.votes});
+    const std::size_t id = keyframes_[p.best];  // neighbouring places often share their best keyframe
+    if (std::none_of(out.begin(), out.end(), [&](const PlaceCandidate& o) { return o.keyframe == id; }))
+      out.push_back({id, p.votes});
   }
   return out;
 }

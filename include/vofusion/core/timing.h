@@ -1,5 +1,6 @@
 #pragma once
-// Wall-clock time per pipeline stage (and a thread's CPU time), for the per-stage breakdowns apps print and summary.json holds.
+// Wall-clock time per pipeline stage (and a thread's CPU time), for the per-stage breakdowns apps
+// print and summary.json holds.
 #include <chrono>
 #include <ctime>
 #include <map>

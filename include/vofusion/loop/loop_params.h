@@ -46,8 +46,8 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   double max_drift_rotation = 5.0;      // degrees, base
   double max_drift_rotation_rate = 3.0; // degrees per m travelled
   // Pose graph: keyframe-to-keyframe edges from the tracker, with kOdometrySigmaRate noise per metre /
-  // per radian moved (plus a floor); loops with the verification's covariance. After each optimisation a loop
-  // whose residual exceeds max_loop_chi2 (6 DoF) is removed and the graph optimised again.
+  // per radian moved (plus a floor); loops with the verification's covariance. After each optimisation
+  // a loop whose residual exceeds max_loop_chi2 (6 DoF) is removed and the graph optimised again.
   double odometry_sigma_floor = 0.002;    // m (and the same in rad)
   double poor_tracking_sigma_scale = 10.0;  // x the noise of an edge across frames not well tracked
   double strain_rms_ratio = 2.0;          // a frame whose ICP residual is over this x the recent median is
