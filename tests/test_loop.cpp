@@ -382,7 +382,8 @@ TEST(LoopVerifier, SamePlaceAfterALapIsAcceptedWithTheTruePose) {
   EXPECT_EQ(pyramids.hits(), 2u);
   EXPECT_TRUE(again.accepted);
   EXPECT_TRUE(again.T_old_new.isApprox(c.T_old_new, 1e-12));
-  // A third keyframe evicts the least recently used one (capacity 2): the older keyframe is made again.
+  // A third keyframe evicts the least recently used pyramid (capacity 2), `newer`'s, which is made again
+  // when it is next verified.
   const Keyframe third = keyframeOf(seq, 202, drifted, 26.2, 2);
   verifyLoop(older, third, LoopParams(), pyramids);
   EXPECT_EQ(pyramids.misses(), 3u);
