@@ -56,7 +56,7 @@ Circle circle(int n, double r, double bias_deg) {
   return c;
 }
 
-PoseGraph graphOf(const Circle& c, const LoopParams& P) {
+PoseGraph graphOf(const Circle& c) {
   PoseGraph g;
   for (std::size_t i = 0; i < c.tracked.size(); ++i) {
     g.addNode(c.tracked[i]);
@@ -65,7 +65,7 @@ PoseGraph graphOf(const Circle& c, const LoopParams& P) {
     e.from = i - 1;
     e.to = i;
     e.T_from_to = c.tracked[i - 1].inverse() * c.tracked[i];
-    e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, P.odometry_sigma_floor);
+    e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, kOdometrySigmaFloor);
     g.addEdge(e);
   }
   return g;
@@ -267,7 +267,7 @@ TEST(LoopPlaceIndex, FindsWhatFlannLshFinds) {
 TEST(LoopPoseGraph, TrueLoopSpreadsTheDrift) {
   const LoopParams P;
   const Circle c = circle(40, 3.0, 0.4);  // 16 deg of yaw drift around the loop
-  PoseGraph g = graphOf(c, P);
+  PoseGraph g = graphOf(c);
   const double before = maxError(g, c);
   g.addEdge(loopEdge(0, 39, c.truth[0].inverse() * c.truth[39]));
   EXPECT_TRUE(g.optimise(P.max_loop_chi2, P.max_chain_chi2).empty());
@@ -310,7 +310,7 @@ TEST(LoopPoseGraph, AnEdgeUnsureAlongTheCameraTakesTheCorrectionAlongIt) {
 TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
   const LoopParams P;
   const Circle c = circle(40, 3.0, 0.05);  // little drift
-  PoseGraph g = graphOf(c, P);
+  PoseGraph g = graphOf(c);
   const double before = maxError(g, c);
   g.addEdge(loopEdge(0, 39, c.truth[0].inverse() * c.truth[39]));          // true
   const std::size_t bad = g.addEdge(loopEdge(10, 30, pose(0.3, 0, 0, 0)));  // 10 and 30 are 6 m apart
@@ -324,7 +324,7 @@ TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
 TEST(LoopPoseGraph, NewNodesFollowTheirOptimisedPredecessor) {
   const LoopParams P;
   const Circle c = circle(20, 2.0, 0.5);
-  PoseGraph g = graphOf(c, P);
+  PoseGraph g = graphOf(c);
   g.addEdge(loopEdge(0, 19, c.truth[0].inverse() * c.truth[19]));
   g.optimise(P.max_loop_chi2, P.max_chain_chi2);
   const Eigen::Isometry3d step = pose(0.1, 0, 0, 0);

@@ -112,7 +112,7 @@ struct LoopCloser::Impl {
       e.from = id - 1;
       e.to = id;
       e.T_from_to = prev.tracked.inverse() * k.tracked;
-      e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, params.odometry_sigma_floor);
+      e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, kOdometrySigmaFloor);
       // Across frames the tracker lost, predicted or took from a fallback the chain may hold a jump:
       // a loop should move it there, not spread it over the whole path.
       if (k.after_poor_tracking) e.information /= params.poor_tracking_sigma_scale * params.poor_tracking_sigma_scale;

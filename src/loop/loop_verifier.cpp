@@ -154,7 +154,7 @@ LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopPar
   // own covariance (thousands of pixels, errors taken as independent) would claim far less.
   const double depth = meanDepth(newer);
   const double st = std::max(P.loop_sigma_translation, c.icp_rms);
-  const double sr = std::max(P.loop_sigma_rotation * M_PI / 180.0, depth > 0 ? c.icp_rms / depth : 0.0);
+  const double sr = std::max(kLoopSigmaRotation, depth > 0 ? c.icp_rms / depth : 0.0);
   c.covariance.setZero();
   for (int i = 0; i < 3; ++i) c.covariance(i, i) = st * st, c.covariance(i + 3, i + 3) = sr * sr;
   c.accepted = true;

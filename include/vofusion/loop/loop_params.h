@@ -7,10 +7,15 @@
 
 namespace vofusion::loop {
 
-// A keyframe edge's noise per metre moved and per radian turned. Fixed, not a key: 0.01 and 0.04 moved
-// no loop-scene run by 1 mm (`bench/run --loops`, seeds 1-5 at 300 and 900 frames, 2026-11-27; at most
-// 0.8 mm), and the shared sequences form no loop.
+// A keyframe edge's noise: kOdometrySigmaRate per metre moved and per radian turned, at least
+// kOdometrySigmaFloor (m, and rad). Fixed, not keys: half and twice either moved no loop-scene run by
+// 1 mm (`bench/run --loops`, seeds 1-5 at 300 and 900 frames, 2026-11-27; at most 0.8 mm), and the
+// shared sequences form no loop.
 inline constexpr double kOdometrySigmaRate = 0.02;
+inline constexpr double kOdometrySigmaFloor = 0.002;
+// Floor of a loop edge's rotation noise, rad (0.1 deg); above it, the ICP residual over the depth.
+// Fixed, not a key: 0.05 and 0.2 deg moved no loop-scene run by 1 mm (the same bench, at most 0.4 mm).
+inline constexpr double kLoopSigmaRotation = 0.1 * 3.14159265358979323846 / 180.0;
 
 struct LoopParams : public mrpt::config::CLoadableOptions {
   bool enabled = true;                 // loop closure on (--no-loop-closure switches it off)
@@ -46,16 +51,15 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   double max_drift_rotation = 5.0;      // degrees, base
   double max_drift_rotation_rate = 3.0; // degrees per m travelled
   // Pose graph: keyframe-to-keyframe edges from the tracker, with kOdometrySigmaRate noise per metre /
-  // per radian moved (plus a floor); loops with the verification's covariance. After each optimisation
-  // a loop whose residual exceeds max_loop_chi2 (6 DoF) is removed and the graph optimised again.
-  double odometry_sigma_floor = 0.002;    // m (and the same in rad)
+  // per radian moved (at least kOdometrySigmaFloor); loops with the verification's covariance. After
+  // each optimisation a loop whose residual exceeds max_loop_chi2 (6 DoF) is removed and the graph
+  // optimised again.
   double poor_tracking_sigma_scale = 10.0;  // x the noise of an edge across frames not well tracked
   double strain_rms_ratio = 2.0;          // a frame whose ICP residual is over this x the recent median is
                                           // not well tracked (ResidualMonitor); 0: off
   // A loop edge's noise: its ICP's residual RMS (m; as an angle over the keyframe's mean depth), at
-  // least these floors.
+  // least this floor (and kLoopSigmaRotation).
   double loop_sigma_translation = 0.003;  // m, floor of a loop edge's noise
-  double loop_sigma_rotation = 0.1;       // degrees, same
   double max_loop_chi2 = 1000.0;          // ~30 sigma: true loops carry some of the tracker's tension; false ones are metres off
   double max_chain_chi2 = 100.0;          // a tracker edge bent this far (6 DoF chi2) by the loops: the worst loop goes
   // Map: when the optimised poses move some frame by more than this, the frames are integrated
