@@ -265,12 +265,11 @@ TEST(LoopPlaceIndex, FindsWhatFlannLshFinds) {
 }
 
 TEST(LoopPoseGraph, TrueLoopSpreadsTheDrift) {
-  const LoopParams P;
   const Circle c = circle(40, 3.0, 0.4);  // 16 deg of yaw drift around the loop
   PoseGraph g = graphOf(c);
   const double before = maxError(g, c);
   g.addEdge(loopEdge(0, 39, c.truth[0].inverse() * c.truth[39]));
-  EXPECT_TRUE(g.optimise(P.max_loop_chi2, P.max_chain_chi2).empty());
+  EXPECT_TRUE(g.optimise(kMaxLoopChi2, kMaxChainChi2).empty());
   const double after = maxError(g, c);
   std::printf("circle of 40 keyframes: max error %.3f m tracked, %.3f m optimised\n", before, after);
   EXPECT_GT(before, 0.5);
@@ -308,13 +307,12 @@ TEST(LoopPoseGraph, AnEdgeUnsureAlongTheCameraTakesTheCorrectionAlongIt) {
 }
 
 TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
-  const LoopParams P;
   const Circle c = circle(40, 3.0, 0.05);  // little drift
   PoseGraph g = graphOf(c);
   const double before = maxError(g, c);
   g.addEdge(loopEdge(0, 39, c.truth[0].inverse() * c.truth[39]));          // true
   const std::size_t bad = g.addEdge(loopEdge(10, 30, pose(0.3, 0, 0, 0)));  // 10 and 30 are 6 m apart
-  const std::vector<std::size_t> removed = g.optimise(P.max_loop_chi2, P.max_chain_chi2);
+  const std::vector<std::size_t> removed = g.optimise(kMaxLoopChi2, kMaxChainChi2);
   ASSERT_EQ(removed.size(), 1u);
   EXPECT_EQ(removed[0], bad);
   EXPECT_FALSE(g.edges()[bad].active);
@@ -322,11 +320,10 @@ TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
 }
 
 TEST(LoopPoseGraph, NewNodesFollowTheirOptimisedPredecessor) {
-  const LoopParams P;
   const Circle c = circle(20, 2.0, 0.5);
   PoseGraph g = graphOf(c);
   g.addEdge(loopEdge(0, 19, c.truth[0].inverse() * c.truth[19]));
-  g.optimise(P.max_loop_chi2, P.max_chain_chi2);
+  g.optimise(kMaxLoopChi2, kMaxChainChi2);
   const Eigen::Isometry3d step = pose(0.1, 0, 0, 0);
   const std::size_t n = g.addNode(c.tracked[19] * step);
   GraphEdge e;

@@ -153,7 +153,7 @@ struct LoopCloser::Impl {
     std::vector<std::size_t> removed;
     {
       ScopedStageTimer timer(t, "pose_graph");
-      if (!accepted.empty()) removed = graph.optimise(params.max_loop_chi2, params.max_chain_chi2);
+      if (!accepted.empty()) removed = graph.optimise(kMaxLoopChi2, kMaxChainChi2);
     }
     publish(accepted, removed, rejected, t, vofusion::threadCpuSeconds() - cpu_start);
   }
@@ -161,7 +161,7 @@ struct LoopCloser::Impl {
   // At the end of the run, with the thread idle and some loop removed: one optimisation over every
   // loop found (loops removed when they came may fit the ones after them).
   void finalOptimisation() {
-    const std::vector<std::size_t> removed = graph.optimiseAll(params.max_loop_chi2, params.max_chain_chi2);
+    const std::vector<std::size_t> removed = graph.optimiseAll(kMaxLoopChi2, kMaxChainChi2);
     std::lock_guard<std::mutex> lock(mu);
     for (LoopRecord& l : loops) l.active = true;
     rejections.erase("did not fit the graph after optimisation");

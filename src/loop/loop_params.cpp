@@ -35,9 +35,6 @@ std::vector<ConfigKey> loopKeys(LoopParams& p) {
       {"max_drift_rotation_rate", &p.max_drift_rotation_rate, "degrees of correction per m travelled", 0.0, 180.0},
       {"poor_tracking_sigma_scale", &p.poor_tracking_sigma_scale, "x keyframe edge noise across frames not well tracked", 1.0, 1e4},
       {"strain_rms_ratio", &p.strain_rms_ratio, "a frame's ICP RMS over this x the recent median counts as not well tracked; 0 = off", 0.0, 1000.0},
-      {"loop_sigma_translation", &p.loop_sigma_translation, "m, floor of a loop edge's noise", 1e-5, 10.0},
-      {"max_loop_chi2", &p.max_loop_chi2, "a loop's residual after optimisation (6 DoF chi2)", 0.1, 1e6},
-      {"max_chain_chi2", &p.max_chain_chi2, "a tracker edge's residual after optimisation (6 DoF chi2)", 0.1, 1e6},
       {"reintegrate_min_correction", &p.reintegrate_min_correction, "m; larger corrections re-fuse the map", 0.0, 100.0},
   };
 }

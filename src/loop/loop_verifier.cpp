@@ -153,7 +153,7 @@ LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopPar
   // were off by 5 mm (median) and 11 mm (90 %) from the truth at ICP residuals of 6-10 mm. The fit's
   // own covariance (thousands of pixels, errors taken as independent) would claim far less.
   const double depth = meanDepth(newer);
-  const double st = std::max(P.loop_sigma_translation, c.icp_rms);
+  const double st = std::max(kLoopSigmaTranslation, c.icp_rms);
   const double sr = std::max(kLoopSigmaRotation, depth > 0 ? c.icp_rms / depth : 0.0);
   c.covariance.setZero();
   for (int i = 0; i < 3; ++i) c.covariance(i, i) = st * st, c.covariance(i + 3, i + 3) = sr * sr;
