@@ -206,7 +206,7 @@ TEST(KinFuParams, SaveWritesEveryKeyAndLoadReadsItBack) {
   KinFuParams a;
   a.tsdf.voxel_size = 0.004f;
   a.icp.iterations = {7, 3, 2};
-  a.min_condition = 2.5e-5;
+  a.min_inlier_ratio = 0.25f;
   a.integrate_on_fallback = false;
   mrpt::config::CConfigFileMemory cfg;
   a.saveToConfigFile(cfg, "kinfu");
@@ -215,7 +215,7 @@ TEST(KinFuParams, SaveWritesEveryKeyAndLoadReadsItBack) {
   EXPECT_FLOAT_EQ(b.tsdf.voxel_size, 0.004f);
   EXPECT_EQ(b.icp.iterations[0], 7);
   EXPECT_EQ(b.icp.iterations[2], 2);
-  EXPECT_DOUBLE_EQ(b.min_condition, 2.5e-5);
+  EXPECT_FLOAT_EQ(b.min_inlier_ratio, 0.25f);
   EXPECT_FALSE(b.integrate_on_fallback);
   std::vector<std::string> keys;
   cfg.getAllKeys("kinfu", keys);

@@ -13,7 +13,7 @@ using namespace fusion;
 
 IcpParams icpParams(const KinFuParams& P, bool joint, bool seeded, bool have_prior) {
   IcpParams ip = P.icp;
-  if (!seeded && !(joint && have_prior)) ip.degenerate_ratio = std::min(ip.degenerate_ratio, P.min_condition);
+  if (!seeded && !(joint && have_prior)) ip.degenerate_ratio = std::min(ip.degenerate_ratio, kMinCondition);
   if (joint) ip.point_to_plane_sigma = P.joint_icp_sigma;
   return ip;
 }
@@ -108,7 +108,7 @@ std::pair<Rejection, std::string> judge(const KinFuParams& P, const IcpResult& i
   if (icp.inliers < P.min_inlier_ratio * std::max(1, judged))
     return {Rejection::TooFewInliers, toString(Rejection::TooFewInliers) + " (" + std::to_string(icp.inliers) + " of " +
                                           std::to_string(judged) + ")"};
-  if (!joint && icp.condition < P.min_condition)
+  if (!joint && icp.condition < kMinCondition)
     return {Rejection::IllConditioned,
             toString(Rejection::IllConditioned) + " (eigenvalue ratio " + std::to_string(icp.condition) + ")"};
   if (prior_pose) {

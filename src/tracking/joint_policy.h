@@ -50,6 +50,13 @@ fusion::PhotometricTerms photometricTerms(const KinFuParams& P, const ModelPredi
                                           const std::vector<fusion::IntensityLevel>& current,
                                           const std::vector<fusion::DepthLevel>& levels);
 
+// Smallest / largest eigenvalue of the (depth-scaled) ICP system below which mode kinfu rejects the
+// whole ICP (weaker directions keep the prediction by icp_degenerate_ratio); in mode joint it only caps
+// that ratio when there is neither a seed nor a prior. Fixed, not a key: 5e-7 and 2e-6 left every run
+// of mode joint the same (16 inputs, 2026-11-28, docs/tracking.md), and every run of mode kinfu but a
+// loop scene it loses anyway (2.86 m off, 19 mm more at 2e-6).
+inline constexpr double kMinCondition = 1e-6;
+
 // Why an ICP result is not taken (None when it is), with the figures that decided it: divergence and
 // degeneracy tests, and a jump from the prior's pose when given. Mode joint judges the inliers among
 // the pixels that see the model: a view that is mostly new is no sign of divergence, and there the

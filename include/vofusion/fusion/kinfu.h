@@ -40,11 +40,9 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
                                       // resolution (integration always fuses the full-resolution depth)
   float shift_threshold = 0.3f;       // m, distance focus point <-> volume centre that triggers a shift
   float focus_distance = 1.2f;        // m, the volume follows the point this far along the optical axis
-  // Tracking failure (divergence, degeneracy) detection:
+  // Tracking failure (divergence, degeneracy) detection; the conditioning bound is fixed in code
+  // (tracking::kMinCondition).
   float min_inlier_ratio = 0.10f;     // inliers / valid pixels at full resolution
-  double min_condition = 1e-6;        // smallest/largest eigenvalue of the (depth-scaled) ICP system
-                                      // below which the whole ICP is rejected; weaker directions
-                                      // are handled by icp.degenerate_ratio (kept from the prediction)
   float max_jump_translation = 0.05f; // m, ICP pose vs the prior's prediction (modes joint, paper-handoff)
   float max_jump_rotation = 5.0f;     // degrees, same
   bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback

@@ -25,7 +25,7 @@ enum class Rejection {
   NoDepth,                 // the frame has no depth image
   NotSolvable,             // ICP's system could not be solved
   TooFewInliers,           // below min_inlier_ratio of the pixels judged
-  IllConditioned,          // the ICP system's eigenvalue ratio below min_condition
+  IllConditioned,          // the ICP system's eigenvalue ratio below kMinCondition
   JumpedFromPrior,         // ICP's pose beyond max_jump_* from the prior's
   NoPrior,                 // mode odometry: no motion prior for this frame
   PriorReferenceUnknown,   // mode odometry: the prior's reference frame has no pose here
