@@ -12,6 +12,10 @@ namespace vofusion {
 
 class CrossCheckedHammingMatcher {
  public:
+  // simd = false: the scalar build even where the CPU has AVX-512's popcount (tests).
+  explicit CrossCheckedHammingMatcher(bool simd = true);
+  // Whether this CPU takes the AVX-512 build (eight reference rows at a time).
+  static bool usesAvx512();
   // Matches the rows of `cur` not seen yet (cur grows between calls; the first rows must stay the
   // same) against `ref`, which must be the same at every call. CV_8U descriptors, any width.
   void add(const cv::Mat& cur, const cv::Mat& ref);
@@ -23,6 +27,7 @@ class CrossCheckedHammingMatcher {
   std::vector<cv::DMatch> forward_;   // per current row: nearest reference row
   std::vector<cv::DMatch> backward_;  // per reference row: nearest current row so far
   int rows_ = 0;
+  bool simd_;
 };
 
 }  // namespace vofusion
