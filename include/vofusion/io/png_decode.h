@@ -1,0 +1,22 @@
+#pragma once
+// PNG decoding for the two image types RGB-D recordings hold (TUM, 7-Scenes, the colour our rawlogs
+// copy): 16-bit grey depth and 8-bit RGB colour, not interlaced. libdeflate inflates the image data
+// in about half the time zlib takes under libpng (OpenCV's decoder); the row filters are PNG's five.
+//
+// The result is what cv::imread gives for such a file (IMREAD_ANYDEPTH | IMREAD_ANYCOLOR for depth:
+// CV_16UC1; IMREAD_COLOR for colour: CV_8UC3, BGR). Anything else gives an empty Mat, and the caller
+// decodes with cv::imread, which also names what is wrong: another pixel type, interlacing, a
+// palette or transparency, an unknown critical chunk, a bad CRC, a damaged or short image stream.
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+namespace vofusion {
+
+cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size);
+// The same for a file (empty also when it cannot be read).
+cv::Mat readPlainPng(const std::string& path);
+
+}  // namespace vofusion

@@ -1,0 +1,147 @@
+#include "vofusion/io/png_decode.h"
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+#include <libdeflate.h>
+
+namespace vofusion {
+
+namespace {
+
+std::uint32_t be32(const std::uint8_t* p) {
+  return (std::uint32_t(p[0]) << 24) | (std::uint32_t(p[1]) << 16) | (std::uint32_t(p[2]) << 8) | p[3];
+}
+
+bool isChunk(const std::uint8_t* tag, const char* name) { return std::memcmp(tag, name, 4) == 0; }
+
+// The chunks' header and the image stream (IDAT chunks joined); false for anything outside the two
+// supported types.
+struct PngImage {
+  std::uint32_t width = 0, height = 0;
+  int bytes_per_pixel = 0, type = -1;  // 2 / CV_16UC1 or 3 / CV_8UC3
+  std::vector<std::uint8_t>& stream;
+};
+
+// Per thread, kept from one image to the next: a fresh buffer of a frame's size is fresh pages for
+// the kernel to fault in and zero (that took more time than the inflating).
+struct Buffers {
+  std::vector<std::uint8_t> file, stream, raw;
+};
+Buffers& buffers() {
+  thread_local Buffers b;
+  return b;
+}
+
+bool readChunks(const std::uint8_t* p, std::size_t n, PngImage& img) {
+  static const std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (n < 8 || std::memcmp(p, kSignature, 8) != 0) return false;
+  bool header = false;
+  for (std::size_t at = 8; at + 12 <= n;) {
+    const std::uint32_t len = be32(p + at);
+    if (len > n - at - 12) return false;
+    const std::uint8_t* tag = p + at + 4;
+    const std::uint8_t* body = tag + 4;
+    if (libdeflate_crc32(0, tag, len + 4) != be32(body + len)) return false;
+    if (isChunk(tag, "IHDR")) {
+      // 13 bytes: width, height, bit depth, colour type, compression, filter method, interlace.
+      if (len != 13 || body[10] != 0 || body[11] != 0 || body[12] != 0) return false;
+      img.width = be32(body), img.height = be32(body + 4);
+      if (body[8] == 16 && body[9] == 0) img.bytes_per_pixel = 2, img.type = CV_16UC1;
+      else if (body[8] == 8 && body[9] == 2) img.bytes_per_pixel = 3, img.type = CV_8UC3;
+      else return false;
+      header = true;
+    } else if (isChunk(tag, "IDAT")) {
+      img.stream.insert(img.stream.end(), body, body + len);
+    } else if (isChunk(tag, "IEND")) {
+      return header && img.width > 0 && img.height > 0 && img.width <= (1u << 15) && img.height <= (1u << 15);
+    } else if (isChunk(tag, "tRNS") || !(tag[0] & 0x20)) {
+      return false;  // transparency, or a critical chunk (PLTE, ...) this decoder does not know
+    }
+    at += 12 + std::size_t(len);
+  }
+  return false;  // no IEND
+}
+
+int paeth(int a, int b, int c) {
+  const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
+  return pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+}
+
+// Undoes row y's filter in place (prior: the row above, unfiltered; zeros for the first row).
+bool unfilter(std::uint8_t filter, std::uint8_t* cur, const std::uint8_t* prior, std::size_t stride, int bpp) {
+  switch (filter) {
+    case 0:
+      return true;
+    case 1:
+      for (std::size_t i = bpp; i < stride; ++i) cur[i] = std::uint8_t(cur[i] + cur[i - bpp]);
+      return true;
+    case 2:
+      for (std::size_t i = 0; i < stride; ++i) cur[i] = std::uint8_t(cur[i] + prior[i]);
+      return true;
+    case 3:
+      for (std::size_t i = 0; i < stride; ++i) cur[i] = std::uint8_t(cur[i] + ((i >= std::size_t(bpp) ? cur[i - bpp] : 0) + prior[i]) / 2);
+      return true;
+    case 4:
+      for (std::size_t i = 0; i < std::size_t(bpp); ++i) cur[i] = std::uint8_t(cur[i] + prior[i]);
+      for (std::size_t i = bpp; i < stride; ++i) cur[i] = std::uint8_t(cur[i] + paeth(cur[i - bpp], prior[i], prior[i - bpp]));
+      return true;
+    default:
+      return false;
+  }
+}
+
+}  // namespace
+
+cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
+  Buffers& b = buffers();
+  b.stream.clear();
+  PngImage img{0, 0, 0, -1, b.stream};
+  if (!readChunks(data, size, img)) return {};
+  const int bpp = img.bytes_per_pixel;
+  const std::size_t stride = std::size_t(img.width) * bpp, row = stride + 1;
+  std::vector<std::uint8_t>& raw = b.raw;
+  raw.resize(row * img.height);
+  thread_local const std::unique_ptr<libdeflate_decompressor, decltype(&libdeflate_free_decompressor)> inflater(
+      libdeflate_alloc_decompressor(), &libdeflate_free_decompressor);
+  std::size_t got = 0;
+  if (!inflater ||
+      libdeflate_zlib_decompress(inflater.get(), img.stream.data(), img.stream.size(), raw.data(), raw.size(), &got) !=
+          LIBDEFLATE_SUCCESS ||
+      got != raw.size())
+    return {};
+  const std::vector<std::uint8_t> zeros(stride, 0);
+  cv::Mat out(int(img.height), int(img.width), img.type);
+  for (int y = 0; y < out.rows; ++y) {
+    std::uint8_t* cur = raw.data() + row * y + 1;
+    if (!unfilter(cur[-1], cur, y > 0 ? cur - row : zeros.data(), stride, bpp)) return {};
+    if (img.type == CV_16UC1) {
+      std::uint16_t* o = out.ptr<std::uint16_t>(y);
+      for (std::uint32_t x = 0; x < img.width; ++x) o[x] = std::uint16_t((cur[2 * x] << 8) | cur[2 * x + 1]);  // big-endian
+    } else {
+      std::uint8_t* o = out.ptr<std::uint8_t>(y);
+      for (std::uint32_t x = 0; x < img.width; ++x) o[3 * x] = cur[3 * x + 2], o[3 * x + 1] = cur[3 * x + 1], o[3 * x + 2] = cur[3 * x];
+    }
+  }
+  return out;
+}
+
+cv::Mat readPlainPng(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return {};
+  std::vector<std::uint8_t>& bytes = buffers().file;
+  const bool sized = std::fseek(f, 0, SEEK_END) == 0;
+  const long size = sized ? std::ftell(f) : -1;
+  bool read = size > 0 && std::fseek(f, 0, SEEK_SET) == 0;
+  if (read) {
+    bytes.resize(std::size_t(size));
+    read = std::fread(bytes.data(), 1, bytes.size(), f) == bytes.size();
+  }
+  std::fclose(f);
+  return read ? decodePlainPng(bytes.data(), bytes.size()) : cv::Mat();
+}
+
+}  // namespace vofusion

@@ -1,0 +1,163 @@
+// decodePlainPng gives cv::imdecode's pixels for 16-bit grey and 8-bit RGB PNGs, with each of PNG's
+// five row filters (PNGs made here row by row) and on the shared TUM sequence's real files; for
+// anything else it gives an empty Mat, so that the caller's cv::imread decides.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+#include <zlib.h>
+
+#include "support.h"
+#include "vofusion/io/png_decode.h"
+
+using namespace vofusion;
+namespace fs = std::filesystem;
+
+namespace {
+
+void put32(std::vector<std::uint8_t>& out, std::uint32_t v) {
+  for (int s = 24; s >= 0; s -= 8) out.push_back(std::uint8_t(v >> s));
+}
+
+void chunk(std::vector<std::uint8_t>& png, const char* tag, const std::vector<std::uint8_t>& body) {
+  put32(png, std::uint32_t(body.size()));
+  const std::size_t start = png.size();
+  png.insert(png.end(), tag, tag + 4);
+  png.insert(png.end(), body.begin(), body.end());
+  put32(png, std::uint32_t(crc32(0, png.data() + start, uInt(png.size() - start))));
+}
+
+struct PngSpec {
+  int bit_depth = 16, colour_type = 0, interlace = 0;
+  bool transparency = false;
+};
+
+// A PNG of `img` (CV_16UC1 or CV_8UC3 BGR) whose row y is filtered with filter y % 5, as an encoder
+// would: each byte minus its predictor from the raw (unfiltered) bytes.
+std::vector<std::uint8_t> makePng(const cv::Mat& img, const PngSpec& spec = {}) {
+  const int bpp = img.type() == CV_16UC1 ? 2 : 3;
+  const std::size_t stride = std::size_t(img.cols) * bpp;
+  std::vector<std::uint8_t> raw(img.rows * stride);
+  for (int y = 0; y < img.rows; ++y)
+    for (int x = 0; x < img.cols; ++x) {
+      std::uint8_t* r = &raw[y * stride + x * bpp];
+      if (bpp == 2) {
+        const std::uint16_t v = img.at<std::uint16_t>(y, x);
+        r[0] = std::uint8_t(v >> 8), r[1] = std::uint8_t(v);
+      } else {
+        const cv::Vec3b v = img.at<cv::Vec3b>(y, x);
+        r[0] = v[2], r[1] = v[1], r[2] = v[0];
+      }
+    }
+  std::vector<std::uint8_t> filtered;
+  for (int y = 0; y < img.rows; ++y) {
+    const int f = y % 5;
+    filtered.push_back(std::uint8_t(f));
+    for (std::size_t i = 0; i < stride; ++i) {
+      const int a = i >= std::size_t(bpp) ? raw[y * stride + i - bpp] : 0;
+      const int b = y > 0 ? raw[(y - 1) * stride + i] : 0;
+      const int c = y > 0 && i >= std::size_t(bpp) ? raw[(y - 1) * stride + i - bpp] : 0;
+      const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
+      const int predictor[5] = {0, a, b, (a + b) / 2, pa <= pb && pa <= pc ? a : pb <= pc ? b : c};
+      filtered.push_back(std::uint8_t(raw[y * stride + i] - predictor[f]));
+    }
+  }
+  std::vector<std::uint8_t> z(compressBound(uLong(filtered.size())));
+  uLongf zlen = z.size();
+  EXPECT_EQ(compress2(z.data(), &zlen, filtered.data(), uLong(filtered.size()), 6), Z_OK);
+  z.resize(zlen);
+  std::vector<std::uint8_t> png = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, ihdr;
+  put32(ihdr, std::uint32_t(img.cols));
+  put32(ihdr, std::uint32_t(img.rows));
+  ihdr.insert(ihdr.end(), {std::uint8_t(spec.bit_depth), std::uint8_t(spec.colour_type), 0, 0, std::uint8_t(spec.interlace)});
+  chunk(png, "IHDR", ihdr);
+  if (spec.transparency) chunk(png, "tRNS", {0, 0});
+  chunk(png, "tEXt", {'a', 0, 'b'});  // an ancillary chunk is skipped
+  // The stream in two IDAT chunks, as encoders split it.
+  const std::size_t half = z.size() / 2;
+  chunk(png, "IDAT", std::vector<std::uint8_t>(z.begin(), z.begin() + half));
+  chunk(png, "IDAT", std::vector<std::uint8_t>(z.begin() + half, z.end()));
+  chunk(png, "IEND", {});
+  return png;
+}
+
+cv::Mat depthImage(int w, int h) {
+  cv::Mat d(h, w, CV_16UC1);
+  cv::RNG rng(3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) d.at<std::uint16_t>(y, x) = rng.uniform(0, 8) == 0 ? 0 : std::uint16_t(5000 + 37 * x + 11 * y + rng.uniform(0, 400));
+  return d;
+}
+
+cv::Mat colourImage(int w, int h) {
+  cv::Mat c(h, w, CV_8UC3);
+  cv::RNG(5).fill(c, cv::RNG::UNIFORM, 0, 256);
+  return c;
+}
+
+void expectSameAs(const cv::Mat& got, const cv::Mat& want) {
+  ASSERT_FALSE(got.empty());
+  ASSERT_EQ(got.type(), want.type());
+  ASSERT_EQ(got.size(), want.size());
+  EXPECT_EQ(cv::norm(got, want, cv::NORM_INF), 0.0);
+}
+
+cv::Mat decode(const std::vector<std::uint8_t>& png) { return decodePlainPng(png.data(), png.size()); }
+
+}  // namespace
+
+TEST(PngDecode, EveryRowFilterAsOpenCvDecodesIt) {
+  for (const cv::Size size : {cv::Size(37, 23), cv::Size(640, 10)}) {
+    const cv::Mat depth = depthImage(size.width, size.height), colour = colourImage(size.width, size.height);
+    const std::vector<std::uint8_t> dpng = makePng(depth), cpng = makePng(colour, {8, 2});
+    const cv::Mat d_cv = cv::imdecode(dpng, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR), c_cv = cv::imdecode(cpng, cv::IMREAD_COLOR);
+    expectSameAs(d_cv, depth);  // the PNGs made here are right
+    expectSameAs(c_cv, colour);
+    expectSameAs(decode(dpng), d_cv);
+    expectSameAs(decode(cpng), c_cv);
+  }
+}
+
+TEST(PngDecode, OpenCvsOwnPngsAsOpenCvDecodesThem) {
+  const cv::Mat depth = depthImage(160, 120), colour = colourImage(160, 120);
+  for (const int level : {0, 1, 9}) {
+    std::vector<std::uint8_t> dpng, cpng;
+    ASSERT_TRUE(cv::imencode(".png", depth, dpng, {cv::IMWRITE_PNG_COMPRESSION, level}));
+    ASSERT_TRUE(cv::imencode(".png", colour, cpng, {cv::IMWRITE_PNG_COMPRESSION, level}));
+    expectSameAs(decode(dpng), depth);
+    expectSameAs(decode(cpng), colour);
+  }
+}
+
+TEST(PngDecode, AnythingElseIsLeftToOpenCv) {
+  const cv::Mat depth = depthImage(20, 10);
+  EXPECT_TRUE(decode(makePng(depth, {16, 0, 1})).empty()) << "interlaced";
+  EXPECT_TRUE(decode(makePng(depth, {16, 0, 0, true})).empty()) << "transparency";
+  std::vector<std::uint8_t> grey8;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(10, 20, CV_8UC1, cv::Scalar(7)), grey8));
+  EXPECT_TRUE(decode(grey8).empty()) << "8-bit grey";
+  std::vector<std::uint8_t> png = makePng(depth);
+  ASSERT_FALSE(decode(png).empty());
+  std::vector<std::uint8_t> bad_crc = png;
+  bad_crc[40] ^= 1;  // the text chunk's name: its CRC no longer matches
+  EXPECT_TRUE(decode(bad_crc).empty()) << "bad CRC";
+  EXPECT_TRUE(decode(std::vector<std::uint8_t>(png.begin(), png.end() - 12)).empty()) << "no IEND";
+  EXPECT_TRUE(decode(std::vector<std::uint8_t>(png.begin(), png.begin() + png.size() / 2)).empty()) << "truncated";
+  EXPECT_TRUE(decode(std::vector<std::uint8_t>(5, 0)).empty()) << "not a PNG";
+}
+
+TEST(PngDecode, TumFilesAsOpenCvDecodesThem) {
+  const std::string seq = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(seq);
+  int n = 0;
+  for (const char* sub : {"depth", "rgb"})
+    for (const auto& e : fs::directory_iterator(fs::path(seq) / sub)) {
+      if (n++ % 25 != 0) continue;  // 24 of the 600 files
+      const std::string path = e.path().string();
+      const bool depth = std::string(sub) == "depth";
+      expectSameAs(readPlainPng(path), cv::imread(path, depth ? cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR : cv::IMREAD_COLOR));
+    }
+  EXPECT_GT(n, 500);
+}
