@@ -131,7 +131,9 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
     std::ofstream(cut, std::ios::binary) << bytes.substr(0, std::size_t(bytes.size() * share));
     const std::string why = refusal(cut, "input room\n");
     EXPECT_NE(why, "") << "cut at " << share;
-    if (share > 0.1) EXPECT_NE(why.find("truncated or corrupt checkpoint"), std::string::npos) << why;
+    if (share > 0.1) {
+      EXPECT_NE(why.find("truncated or corrupt checkpoint"), std::string::npos) << why;
+    }
   }
   std::ofstream(dir + "/map", std::ios::binary) << "VOFUSION-MAP";
   EXPECT_FALSE(RunSession::isCheckpoint(dir + "/map"));

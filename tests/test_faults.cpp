@@ -119,7 +119,9 @@ void expectCleanFailure(const std::string& cmd, const std::string& file, const s
       << "error line does not say /" << problem << "/: " << e;
   if (!out.empty()) {
     EXPECT_EQ(listing(out), before) << "the output folder changed";
-    if (fs::exists(out + "/trajectory.txt")) EXPECT_EQ(readAll(out + "/trajectory.txt"), kEarlier);
+    if (fs::exists(out + "/trajectory.txt")) {
+      EXPECT_EQ(readAll(out + "/trajectory.txt"), kEarlier);
+    }
   }
 }
 

@@ -202,7 +202,9 @@ TEST(Odometry, OlderFramesJoinTheFit) {
     if (i == 10) continue;
     ASSERT_TRUE(ra.success && rb.success) << "frame " << i << ": " << ra.failure << rb.failure;
     EXPECT_EQ(rb.reference_index, i - 1);
-    if (i >= 13) EXPECT_GT(rb.matches, ra.matches + ra.matches / 2) << "frame " << i;  // three frames matched
+    if (i >= 13) {
+      EXPECT_GT(rb.matches, ra.matches + ra.matches / 2) << "frame " << i;  // three frames matched
+    }
     const mrpt::poses::CPose3D err = rb.motion - (seq.groundTruth(i) - seq.groundTruth(i - 1));
     EXPECT_LT(err.translation().norm(), 0.002) << "frame " << i;
     EXPECT_LT(rotDeg(err), 0.2) << "frame " << i;

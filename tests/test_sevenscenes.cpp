@@ -64,7 +64,9 @@ TEST(SevenScenes, ReadsFramesDepthPosesAndStamps) {
     EXPECT_EQ(f.depth.type(), CV_32FC1);
     EXPECT_FLOAT_EQ(f.depth.at<float>(10, 10), (1000 + n) * 1e-3f);
     EXPECT_EQ(f.depth.at<float>(0, 0), 0.0f);
-    if (n != 5) EXPECT_EQ(f.rgb.at<cv::Vec3b>(5, 5)[0], n * 10);  // JPEG is lossy: frame 5 not exact
+    if (n != 5) {
+      EXPECT_EQ(f.rgb.at<cv::Vec3b>(5, 5)[0], n * 10);  // JPEG is lossy: frame 5 not exact
+    }
     EXPECT_EQ(f.camera.width, 64);
     EXPECT_EQ(f.camera.height, 48);
     // The 640x480 defaults (fx 585, cx 320) scaled to the 64x48 images.

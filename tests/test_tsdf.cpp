@@ -261,7 +261,9 @@ TEST(MarchingCubes, RegionByRegionGivesTheWholeWorldMeshAndClosedSeams) {
   int regions = 0;
   std::size_t last_ordinal = 0, of = 0;
   marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, [&](RegionMesh& r) {
-    if (regions > 0) EXPECT_GT(r.ordinal, last_ordinal);  // in order, counting regions with bricks
+    if (regions > 0) {
+      EXPECT_GT(r.ordinal, last_ordinal);  // in order, counting regions with bricks
+    }
     EXPECT_LT(r.ordinal, r.regions);
     last_ordinal = r.ordinal, of = r.regions;
     ++regions;

@@ -60,7 +60,9 @@ TEST(TumFolder, FramesAreStampedAtTheirDepthCapture) {
   for (std::size_t i = 0; i < src.pairs().size(); ++i) {
     const auto& a = src.pairs()[i];
     EXPECT_LE(std::abs(a.rgb.timestamp - a.depth.timestamp), 0.02);
-    if (i > 0) EXPECT_GT(a.depth.timestamp, src.pairs()[i - 1].depth.timestamp);  // strictly increasing stamps
+    if (i > 0) {
+      EXPECT_GT(a.depth.timestamp, src.pairs()[i - 1].depth.timestamp);  // strictly increasing stamps
+    }
   }
   const Frame f = src.read(5);
   EXPECT_DOUBLE_EQ(f.timestamp, src.pairs()[5].depth.timestamp);

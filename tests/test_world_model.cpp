@@ -108,7 +108,9 @@ TEST(WorldModel, BrickIndexAnswersAsAnUnorderedMap) {
       const auto found = index.find(k);
       const auto it = reference.find(k);
       ASSERT_EQ(found.has_value(), it != reference.end());
-      if (found) EXPECT_EQ(std::uint64_t(found->offset), it->second);
+      if (found) {
+        EXPECT_EQ(std::uint64_t(found->offset), it->second);
+      }
     }
     ASSERT_EQ(index.size(), reference.size());
   }

@@ -81,7 +81,9 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
   const auto npoints = r.get<std::uint64_t>();
   if (npoints > bytes.size() / sizeof(Eigen::Vector3d)) throw std::runtime_error("corrupt points in the keyframes' spill file");
   f->points.resize(npoints);
-  std::memcpy(f->points.data(), r.take(npoints * sizeof(Eigen::Vector3d)), npoints * sizeof(Eigen::Vector3d));
+  // Three doubles each, no padding (Eigen::Vector3d is not vectorised): the bytes encode wrote.
+  static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double));
+  std::memcpy(static_cast<void*>(f->points.data()), r.take(npoints * sizeof(Eigen::Vector3d)), npoints * sizeof(Eigen::Vector3d));
   k.features = std::move(f);
 }
 
