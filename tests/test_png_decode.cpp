@@ -31,11 +31,13 @@ void chunk(std::vector<std::uint8_t>& png, const char* tag, const std::vector<st
 
 struct PngSpec {
   int bit_depth = 16, colour_type = 0, interlace = 0;
-  bool transparency = false;
+  int first_filter = 0;              // row y is filtered with (first_filter + y) % 5
+  const char* extra = nullptr;       // another chunk (empty body) after IHDR, e.g. "tRNS", "eXIf"
+  bool text_between_idats = false;   // an ancillary chunk splitting the IDATs (libpng refuses it)
 };
 
-// A PNG of `img` (CV_16UC1 or CV_8UC3 BGR) whose row y is filtered with filter y % 5, as an encoder
-// would: each byte minus its predictor from the raw (unfiltered) bytes.
+// A PNG of `img` (CV_16UC1 or CV_8UC3 BGR) whose row y is filtered with filter (first + y) % 5, as an
+// encoder would: each byte minus its predictor from the raw (unfiltered) bytes.
 std::vector<std::uint8_t> makePng(const cv::Mat& img, const PngSpec& spec = {}) {
   const int bpp = img.type() == CV_16UC1 ? 2 : 3;
   const std::size_t stride = std::size_t(img.cols) * bpp;
@@ -53,7 +55,7 @@ std::vector<std::uint8_t> makePng(const cv::Mat& img, const PngSpec& spec = {}) 
     }
   std::vector<std::uint8_t> filtered;
   for (int y = 0; y < img.rows; ++y) {
-    const int f = y % 5;
+    const int f = (spec.first_filter + y) % 5;
     filtered.push_back(std::uint8_t(f));
     for (std::size_t i = 0; i < stride; ++i) {
       const int a = i >= std::size_t(bpp) ? raw[y * stride + i - bpp] : 0;
@@ -73,11 +75,12 @@ std::vector<std::uint8_t> makePng(const cv::Mat& img, const PngSpec& spec = {}) 
   put32(ihdr, std::uint32_t(img.rows));
   ihdr.insert(ihdr.end(), {std::uint8_t(spec.bit_depth), std::uint8_t(spec.colour_type), 0, 0, std::uint8_t(spec.interlace)});
   chunk(png, "IHDR", ihdr);
-  if (spec.transparency) chunk(png, "tRNS", {0, 0});
+  if (spec.extra) chunk(png, spec.extra, {0, 0});
   chunk(png, "tEXt", {'a', 0, 'b'});  // an ancillary chunk is skipped
   // The stream in two IDAT chunks, as encoders split it.
   const std::size_t half = z.size() / 2;
   chunk(png, "IDAT", std::vector<std::uint8_t>(z.begin(), z.begin() + half));
+  if (spec.text_between_idats) chunk(png, "tEXt", {'c', 0, 'd'});
   chunk(png, "IDAT", std::vector<std::uint8_t>(z.begin() + half, z.end()));
   chunk(png, "IEND", {});
   return png;
@@ -109,9 +112,11 @@ cv::Mat decode(const std::vector<std::uint8_t>& png) { return decodePlainPng(png
 }  // namespace
 
 TEST(PngDecode, EveryRowFilterAsOpenCvDecodesIt) {
-  for (const cv::Size size : {cv::Size(37, 23), cv::Size(640, 10)}) {
+  // Each filter also on the first row (nothing above it).
+  for (const cv::Size size : {cv::Size(37, 23), cv::Size(640, 10)})
+  for (int first = 0; first < 5; ++first) {
     const cv::Mat depth = depthImage(size.width, size.height), colour = colourImage(size.width, size.height);
-    const std::vector<std::uint8_t> dpng = makePng(depth), cpng = makePng(colour, {8, 2});
+    const std::vector<std::uint8_t> dpng = makePng(depth, {16, 0, 0, first}), cpng = makePng(colour, {8, 2, 0, first});
     const cv::Mat d_cv = cv::imdecode(dpng, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR), c_cv = cv::imdecode(cpng, cv::IMREAD_COLOR);
     expectSameAs(d_cv, depth);  // the PNGs made here are right
     expectSameAs(c_cv, colour);
@@ -134,7 +139,12 @@ TEST(PngDecode, OpenCvsOwnPngsAsOpenCvDecodesThem) {
 TEST(PngDecode, AnythingElseIsLeftToOpenCv) {
   const cv::Mat depth = depthImage(20, 10);
   EXPECT_TRUE(decode(makePng(depth, {16, 0, 1})).empty()) << "interlaced";
-  EXPECT_TRUE(decode(makePng(depth, {16, 0, 0, true})).empty()) << "transparency";
+  EXPECT_TRUE(decode(makePng(depth, {16, 0, 0, 0, "tRNS"})).empty()) << "transparency";
+  EXPECT_TRUE(decode(makePng(depth, {16, 0, 0, 0, "eXIf"})).empty()) << "an orientation imread would apply";
+  EXPECT_TRUE(decode(makePng(depth, {16, 0, 0, 0, "IHDR"})).empty()) << "a second IHDR";
+  EXPECT_TRUE(decode(makePng(depth, {16, 0, 0, 0, "PLTE"})).empty()) << "a critical chunk it does not know";
+  EXPECT_TRUE(decode(makePng(depth, {16, 0, 0, 0, nullptr, true})).empty()) << "IDATs not one after the other";
+  EXPECT_FALSE(decode(makePng(depth, {16, 0, 0, 0, "sRGB"})).empty()) << "an ancillary chunk is skipped";
   std::vector<std::uint8_t> grey8;
   ASSERT_TRUE(cv::imencode(".png", cv::Mat(10, 20, CV_8UC1, cv::Scalar(7)), grey8));
   EXPECT_TRUE(decode(grey8).empty()) << "8-bit grey";

@@ -51,7 +51,7 @@ void distancesAvx512(const std::uint64_t* cur, int n_cur, const std::uint64_t* r
         const __m512i b = _mm512_loadu_si512(ref_t + std::size_t(k) * stride + j0);
         sum = _mm512_add_epi64(sum, _mm512_popcnt_epi64(_mm512_xor_si512(b, _mm512_set1_epi64(std::int64_t(a[k])))));
       }
-      const __m256i d = _mm512_cvtepi64_epi32(sum);
+      const __m256i d = _mm512_maskz_cvtepi64_epi32(0xff, sum);  // not the unmasked form: GCC 12 warns of its undefined operand
       const __m256i bd = _mm256_maskz_loadu_epi32(valid, bwd_d + j0);
       const __mmask8 nearer = _mm256_mask_cmplt_epi32_mask(valid, d, bd);
       _mm256_mask_storeu_epi32(bwd_d + j0, nearer, d);
@@ -72,8 +72,12 @@ void distancesAvx512(const std::uint64_t* cur, int n_cur, const std::uint64_t* r
   }
 }
 
-const bool kAvx512Popcount = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-                             __builtin_cpu_supports("avx512vpopcntdq");
+// Asked once, when first needed (also right for a matcher made during another file's static start-up).
+bool haveAvx512Popcount() {
+  static const bool have = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+                           __builtin_cpu_supports("avx512vpopcntdq");
+  return have;
+}
 
 // Rows as zero-padded 64-bit words (rows of a cv::Mat need not be 8-byte aligned).
 std::vector<std::uint64_t> asWords(const cv::Mat& m, int first_row, int words) {
@@ -93,9 +97,9 @@ std::vector<std::uint64_t> transposed(const std::vector<std::uint64_t>& rows, in
 
 }  // namespace
 
-CrossCheckedHammingMatcher::CrossCheckedHammingMatcher(bool simd) : simd_(simd && kAvx512Popcount) {}
+CrossCheckedHammingMatcher::CrossCheckedHammingMatcher(bool simd) : simd_(simd && haveAvx512Popcount()) {}
 
-bool CrossCheckedHammingMatcher::usesAvx512() { return kAvx512Popcount; }
+bool CrossCheckedHammingMatcher::usesAvx512() { return haveAvx512Popcount(); }
 
 void CrossCheckedHammingMatcher::add(const cv::Mat& cur, const cv::Mat& ref) {
   if (cur.rows <= rows_ || ref.empty()) return;

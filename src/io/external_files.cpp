@@ -73,8 +73,11 @@ void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& 
   std::FILE* f = std::fopen(path.c_str(), "wb");
   const bool ok = f && std::fwrite(gz.data(), 1, gz.size(), f) == gz.size();
   const int err = errno;
-  if (!f || std::fclose(f) != 0 || !ok)
-    throw InputError(path, std::string("cannot write range image: ") + std::strerror(f && ok ? errno : err));
+  if (!f || std::fclose(f) != 0 || !ok) {
+    const std::string why = std::strerror(f && ok ? errno : err);
+    std::remove(path.c_str());  // no half-written file that names itself a range image
+    throw InputError(path, "cannot write range image: " + why);
+  }
   obs.*ExternalNames::range_file = file_name;
   obs.*ExternalNames::range_stored = true;
   obs.rangeImage.setSize(0, 0);

@@ -39,13 +39,15 @@ Buffers& buffers() {
 bool readChunks(const std::uint8_t* p, std::size_t n, PngImage& img) {
   static const std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
   if (n < 8 || std::memcmp(p, kSignature, 8) != 0) return false;
-  bool header = false;
+  bool header = false, in_stream = false, stream_ended = false;
   for (std::size_t at = 8; at + 12 <= n;) {
     const std::uint32_t len = be32(p + at);
     if (len > n - at - 12) return false;
     const std::uint8_t* tag = p + at + 4;
     const std::uint8_t* body = tag + 4;
     if (libdeflate_crc32(0, tag, len + 4) != be32(body + len)) return false;
+    // The order libpng insists on: IHDR first and once, the IDATs one after the other.
+    if (header == isChunk(tag, "IHDR")) return false;
     if (isChunk(tag, "IHDR")) {
       // 13 bytes: width, height, bit depth, colour type, compression, filter method, interlace.
       if (len != 13 || body[10] != 0 || body[11] != 0 || body[12] != 0) return false;
@@ -55,11 +57,16 @@ bool readChunks(const std::uint8_t* p, std::size_t n, PngImage& img) {
       else return false;
       header = true;
     } else if (isChunk(tag, "IDAT")) {
+      if (stream_ended) return false;
+      in_stream = true;
       img.stream.insert(img.stream.end(), body, body + len);
-    } else if (isChunk(tag, "IEND")) {
-      return header && img.width > 0 && img.height > 0 && img.width <= (1u << 15) && img.height <= (1u << 15);
-    } else if (isChunk(tag, "tRNS") || !(tag[0] & 0x20)) {
-      return false;  // transparency, or a critical chunk (PLTE, ...) this decoder does not know
+    } else {
+      stream_ended = in_stream;
+      if (isChunk(tag, "IEND"))
+        return in_stream && img.width > 0 && img.height > 0 && img.width <= (1u << 15) && img.height <= (1u << 15);
+      // Transparency; an orientation OpenCV would apply (imread turns the image by eXIf); a critical
+      // chunk this decoder does not know (PLTE, ...).
+      if (isChunk(tag, "tRNS") || isChunk(tag, "eXIf") || !(tag[0] & 0x20)) return false;
     }
     at += 12 + std::size_t(len);
   }
@@ -98,11 +105,21 @@ bool unfilter(std::uint8_t filter, std::uint8_t* cur, const std::uint8_t* prior,
 
 cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
   Buffers& b = buffers();
+  struct Release {  // an unusually large image's buffers are not kept for the thread's next frames
+    Buffers& b;
+    ~Release() {
+      constexpr std::size_t kKeep = std::size_t(64) << 20;
+      for (auto* v : {&b.file, &b.stream, &b.raw})
+        if (v->capacity() > kKeep) std::vector<std::uint8_t>().swap(*v);
+    }
+  } release{b};
   b.stream.clear();
   PngImage img{0, 0, 0, -1, b.stream};
   if (!readChunks(data, size, img)) return {};
   const int bpp = img.bytes_per_pixel;
   const std::size_t stride = std::size_t(img.width) * bpp, row = stride + 1;
+  // Deflate expands at most ~1032:1: a header claiming more than the stream can hold is not this image's.
+  if (row * img.height > img.stream.size() * 1032 + 1024) return {};
   std::vector<std::uint8_t>& raw = b.raw;
   raw.resize(row * img.height);
   thread_local const std::unique_ptr<libdeflate_decompressor, decltype(&libdeflate_free_decompressor)> inflater(
