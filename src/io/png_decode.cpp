@@ -18,6 +18,8 @@ std::uint32_t be32(const std::uint8_t* p) {
 
 bool isChunk(const std::uint8_t* tag, const char* name) { return std::memcmp(tag, name, 4) == 0; }
 
+const std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+
 // The chunks' header and the image stream (IDAT chunks joined); false for anything outside the two
 // supported types.
 struct PngImage {
@@ -37,7 +39,6 @@ Buffers& buffers() {
 }
 
 bool readChunks(const std::uint8_t* p, std::size_t n, PngImage& img) {
-  static const std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
   if (n < 8 || std::memcmp(p, kSignature, 8) != 0) return false;
   bool header = false, in_stream = false, stream_ended = false;
   for (std::size_t at = 8; at + 12 <= n;) {
@@ -146,19 +147,29 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
   return out;
 }
 
-cv::Mat readPlainPng(const std::string& path) {
+bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return {};
-  std::vector<std::uint8_t>& bytes = buffers().file;
-  const bool sized = std::fseek(f, 0, SEEK_END) == 0;
-  const long size = sized ? std::ftell(f) : -1;
-  bool read = size > 0 && std::fseek(f, 0, SEEK_SET) == 0;
+  if (!f) return false;
+  const long size = std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
+  bool read = size >= 0 && std::fseek(f, 0, SEEK_SET) == 0;
   if (read) {
     bytes.resize(std::size_t(size));
     read = std::fread(bytes.data(), 1, bytes.size(), f) == bytes.size();
   }
   std::fclose(f);
-  return read ? decodePlainPng(bytes.data(), bytes.size()) : cv::Mat();
+  return read;
+}
+
+cv::Mat readPlainPng(const std::string& path) {
+  std::vector<std::uint8_t>& bytes = buffers().file;
+  return readWholeFile(path, bytes) ? decodePlainPng(bytes.data(), bytes.size()) : cv::Mat();
+}
+
+bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
+  // Signature, then IHDR first: length, name, width, height, bit depth 8, colour type 2.
+  const std::uint8_t* h = bytes.data();
+  return bytes.size() >= 29 && std::memcmp(h, kSignature, 8) == 0 && isChunk(h + 12, "IHDR") &&
+         be32(h + 16) == std::uint32_t(width) && be32(h + 20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
 }
 
 }  // namespace vofusion

@@ -1,6 +1,7 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/colour_registration.h"
 #include "vofusion/io/external_files.h"
+#include "vofusion/io/png_decode.h"
 #include "record_file.h"
 
 #include <cerrno>
@@ -32,25 +33,6 @@ using mrpt::obs::CObservation3DRangeScan;
 namespace vofusion {
 
 namespace {
-// The bytes of `path` when it is a PNG of 8-bit RGB pixels of that size (its IHDR says so): decoding
-// it gives exactly the frame's colour image, so its bytes can stand for it. False otherwise.
-bool readPlainRgbPng(const std::string& path, int width, int height, std::vector<uchar>& bytes) {
-  if (path.empty()) return false;
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return false;
-  bytes.clear();
-  unsigned char buf[1 << 16];
-  std::size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) bytes.insert(bytes.end(), buf, buf + n);
-  const bool read = !std::ferror(f);
-  std::fclose(f);
-  if (!read || bytes.size() < 29) return false;
-  const uchar* h = bytes.data();
-  const auto be32 = [&](int at) { return (std::uint32_t(h[at]) << 24) | (h[at + 1] << 16) | (h[at + 2] << 8) | h[at + 3]; };
-  return std::memcmp(h, "\x89PNG\r\n\x1a\n", 8) == 0 && std::memcmp(h + 12, "IHDR", 4) == 0 &&
-         be32(16) == std::uint32_t(width) && be32(20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
-}
-
 constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
 
 // What one rawlog entry may allocate while it is deserialised. MRPT sizes (and zero-fills) strings,
@@ -479,7 +461,9 @@ void RawlogWriter::write(const Frame& frame) {
     const std::string dir = impl_->images_dir;
     std::vector<uchar> bytes;
     // A TUM/7-Scenes colour PNG is copied as it is: encoding it again was ~25 ms of CPU per frame.
-    if (!readPlainRgbPng(frame.colour_file, frame.rgb.cols, frame.rgb.rows, bytes)) {
+    // A PNG of 8-bit RGB pixels of this size decodes to exactly the frame's colour image: its bytes
+    // stand for it.
+    if (frame.colour_file.empty() || !readWholeFile(frame.colour_file, bytes) || !isRgb8Png(bytes, frame.rgb.cols, frame.rgb.rows)) {
       // Encoded in memory and written here: on a full disk libpng would print its own error line.
       if (!cv::imencode(".png", frame.rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, opts_.png_compression}))
         throw InputError(imagesDirFor(path_) + "/" + png, "cannot encode image");
