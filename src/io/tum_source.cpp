@@ -91,9 +91,13 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
 
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note) {
   if (!fs::exists(path)) throw InputError(path, "depth image is missing");
-  if (isTruncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
-  cv::Mat raw = readPlainPng(path);  // a 16-bit grey PNG, in about half OpenCV's time
-  if (raw.empty()) raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  // A 16-bit grey PNG in about half OpenCV's time; only a whole file decodes (IEND, CRCs), so the
+  // truncation check is needed (and the file opened again) only for what OpenCV gets.
+  cv::Mat raw = readPlainPng(path);
+  if (raw.empty()) {
+    if (isTruncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
+    raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  }
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
   if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel" + unit_note);
   if (raw.cols != expect_w || raw.rows != expect_h)
@@ -110,9 +114,11 @@ cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double
 
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   if (!fs::exists(path)) throw InputError(path, "colour image is missing");
-  if (isTruncatedPng(path)) throw InputError(path, "cannot decode colour image (truncated PNG)");
-  cv::Mat img = readPlainPng(path);  // an 8-bit RGB PNG, in about half OpenCV's time
-  if (img.type() != CV_8UC3) img = cv::imread(path, cv::IMREAD_COLOR);
+  cv::Mat img = readPlainPng(path);  // an 8-bit RGB PNG, as loadRawDepthPng does
+  if (img.type() != CV_8UC3) {
+    if (isTruncatedPng(path)) throw InputError(path, "cannot decode colour image (truncated PNG)");
+    img = cv::imread(path, cv::IMREAD_COLOR);
+  }
   if (img.empty()) throw InputError(path, "cannot decode colour image (corrupt or truncated?)");
   if (img.cols != expect_w || img.rows != expect_h)
     throw InputError(path, "colour image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
