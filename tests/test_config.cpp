@@ -49,6 +49,28 @@ TEST(Config, UnknownKeyNamesFileSectionAndKey) {
   EXPECT_THROW(checkConfigKeys(loadConfig(dir + "/b.ini"), "b.ini", {{"kinfu", &p}}), InputError);
 }
 
+// An old config's retired key is refused, but says why and where the figures are.
+TEST(Config, RetiredKeySaysItsValueIsFixedInCode) {
+  const std::string dir = test::tempDir("config_retired");
+  std::ofstream(dir + "/a.ini") << "[loop]\nmax_loop_chi2 = 22.5\n";
+  DemoParams p;
+  try {
+    checkConfigKeys(loadConfig(dir + "/a.ini"), dir + "/a.ini", {{"loop", &p}});
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), dir + "/a.ini: 'max_loop_chi2' in section [loop] is no longer a key: its value is "
+                                           "fixed in code (docs/loop-closure.md gives the figures); remove the line");
+  }
+  // The same name in another section is an ordinary unknown key.
+  std::ofstream(dir + "/b.ini") << "[kinfu]\nmax_loop_chi2 = 22.5\n";
+  try {
+    checkConfigKeys(loadConfig(dir + "/b.ini"), "b.ini", {{"kinfu", &p}});
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "b.ini: unknown key 'max_loop_chi2' in section [kinfu]");
+  }
+}
+
 TEST(Config, MissingFileIsError) { EXPECT_THROW(loadConfig("/nonexistent/x.ini"), InputError); }
 
 TEST(Config, DumpHoldsEveryKey) {

@@ -35,6 +35,32 @@ static mrpt::config::CConfigFileMemory defaultsOf(const std::vector<ConfigSectio
   return mem;
 }
 
+// Keys earlier versions read whose values are now fixed in code, each with where the figures that
+// fixed it are. An old config naming one is still refused (the value would silently do nothing), but
+// not as a typo. From the history of share/*.ini.
+struct RetiredKey {
+  const char* section;
+  const char* key;
+  const char* figures;
+};
+constexpr RetiredKey kRetiredKeys[] = {
+    {"kinfu", "min_condition", "docs/tracking.md"},
+    {"loop", "loop_sigma_rotation", "docs/loop-closure.md"},
+    {"loop", "loop_sigma_translation", "docs/loop-closure.md"},
+    {"loop", "max_chain_chi2", "docs/loop-closure.md"},
+    {"loop", "max_loop_chi2", "docs/loop-closure.md"},
+    {"loop", "odometry_sigma_floor", "docs/loop-closure.md"},
+    {"loop", "odometry_sigma_rate", "docs/loop-closure.md"},
+};
+
+static std::string unknownKeyMessage(const std::string& section, const std::string& key) {
+  for (const RetiredKey& r : kRetiredKeys)
+    if (section == r.section && key == r.key)
+      return "'" + key + "' in section [" + section + "] is no longer a key: its value is fixed in code (" + r.figures +
+             " gives the figures); remove the line";
+  return "unknown key '" + key + "' in section [" + section + "]";
+}
+
 void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                      const std::vector<ConfigSection>& known) {
   const auto defaults = defaultsOf(known);
@@ -51,7 +77,7 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
     for (const auto& key : keys) {
       const std::string k = trimmed(key);
       if (std::find(valid.begin(), valid.end(), k) == valid.end())
-        throw InputError(origin, "unknown key '" + k + "' in section [" + s + "]");
+        throw InputError(origin, unknownKeyMessage(s, k));
     }
   }
 }

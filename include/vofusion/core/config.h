@@ -21,7 +21,8 @@ using ConfigSection = std::pair<std::string, const mrpt::config::CLoadableOption
 mrpt::config::CConfigFileMemory loadConfig(const std::string& path);
 
 // Throws InputError(origin, "unknown key 'x' in section [s]" / "unknown section [s]") for the first
-// key or section of `user` that none of `known` writes.
+// key or section of `user` that none of `known` writes. A key an earlier version read and whose value
+// is now fixed in code is refused as such ("'k' in section [s] is no longer a key: ..."), not as a typo.
 void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                      const std::vector<ConfigSection>& known);
 
