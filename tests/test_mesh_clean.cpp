@@ -5,12 +5,19 @@
 #include <fstream>
 #include <iterator>
 
+#include <random>
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
 #include "test_mesh_fixtures.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/mesh_io.h"
+#include "vofusion/mesh/nearest_triangle.h"
 #include "vofusion/mesh/quadric_simplify.h"
 
 using namespace vofusion;
@@ -323,6 +330,56 @@ TEST(MeshClean, MeshDistanceIsTheDistanceToTheNearestSurface) {
   // inner one's faces a few hundredths of a millimetre inside theirs.
   EXPECT_NEAR(d.mean, 0.1, 0.001);
   EXPECT_LT(d.max, 0.1 + 0.0002);
+  // The same samples every time: CGAL 5.5's soup sampler drew from its default generator, which the
+  // first call advanced, so a second call measured other points.
+  const MeshDistance again = meshDistance(outer, inner, 20000);
+  EXPECT_EQ(again.mean, d.mean);
+  EXPECT_EQ(again.max, d.max);
+}
+
+// The grid search against CGAL's AABB tree: a fine sphere (marching cubes' small triangles), one
+// large triangle across it, a degenerate segment and point; queries on, near, inside and far from it.
+TEST(MeshClean, NearestTriangleFindsWhatCgalsAabbTreeFinds) {
+  const TriangleMesh sphere = icosphere(4, 0.5f, Eigen::Vector3f(0.1f, -0.2f, 1.0f));
+  std::vector<Eigen::Vector3d> points;
+  for (const auto& v : sphere.vertices) points.push_back(v.cast<double>());
+  std::vector<std::array<std::size_t, 3>> tris;
+  for (const auto& f : sphere.faces) tris.push_back({f[0], f[1], f[2]});
+  const std::size_t n = points.size();
+  points.insert(points.end(), {{-2.0, 0.3, 0.4}, {2.5, 0.1, 1.9}, {0.2, 1.7, 0.8},    // large
+                               {0.9, 0.9, 0.9}, {1.0, 1.1, 0.7},                        // segment
+                               {-0.7, -0.9, 1.3}});                                     // point
+  tris.push_back({n, n + 1, n + 2});
+  tris.push_back({n + 3, n + 4, n + 4});
+  tris.push_back({n + 5, n + 5, n + 5});
+  const NearestTriangle grid(points, tris);
+
+  using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+  std::vector<K::Triangle_3> cgal;
+  const auto pt = [&](std::size_t i) { return K::Point_3(points[i].x(), points[i].y(), points[i].z()); };
+  for (const auto& t : tris) cgal.emplace_back(pt(t[0]), pt(t[1]), pt(t[2]));
+  using Primitive = CGAL::AABB_triangle_primitive<K, std::vector<K::Triangle_3>::const_iterator>;
+  CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>> tree(cgal.cbegin(), cgal.cend());
+
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::vector<Eigen::Vector3d> queries;
+  for (int i = 0; i < 3000; ++i) {
+    const Eigen::Vector3d on = points[std::size_t(rng() % n)];
+    queries.push_back(on + 0.002 * Eigen::Vector3d(unit(rng), unit(rng), unit(rng)));  // near the surface
+    queries.push_back(Eigen::Vector3d(0.1, -0.2, 1.0) + 3.0 * Eigen::Vector3d(unit(rng), unit(rng), unit(rng)));
+  }
+  queries.push_back({0.1, -0.2, 1.0});  // the centre, 0.5 m from the sphere
+  queries.push_back({40.0, -30.0, 25.0});
+  queries.push_back({0.95, 1.0, 0.8});
+  std::size_t far = 0;
+  for (const Eigen::Vector3d& q : queries) {
+    const double expected = std::sqrt(tree.squared_distance(K::Point_3(q.x(), q.y(), q.z())));
+    far += expected > 0.05;
+    ASSERT_NEAR(grid.distance(q), expected, 1e-12) << "at " << q.transpose();
+  }
+  EXPECT_GT(far, 1000u);  // most of the box's queries are many cells from any triangle
+  EXPECT_TRUE(NearestTriangle({}, {}).empty());
 }
 
 TEST(MeshClean, FaceBudgetStillStopsErrorBoundedSimplification) {

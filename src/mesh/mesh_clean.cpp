@@ -4,19 +4,18 @@
 #define CGAL_EIGEN3_ENABLED 1  // Eigen sparse solvers for hole fairing and shape smoothing
 #endif
 #include "vofusion/mesh/mesh_clean.h"
+#include "vofusion/mesh/nearest_triangle.h"
 #include "vofusion/mesh/quadric_simplify.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <random>
 #include <type_traits>
 #include <unordered_map>
 #include <unordered_set>
 
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/border.h>
 #include <CGAL/Polygon_mesh_processing/compute_normal.h>
@@ -190,37 +189,50 @@ Soup soupOf(const TriangleMesh& m) {
   return s;
 }
 
+// `samples` points uniformly by area on the soup's faces, the same for the same soup: CGAL 5.5's
+// sample_triangle_soup draws the point inside each face from the thread's default generator, not
+// the seeded one, so its samples, and the distances reported, varied from run to run with the
+// order TBB gave regions to threads (rpy_first100: max 6.6-7.3 mm).
+std::vector<Eigen::Vector3d> samplesByArea(const Soup& soup, std::size_t samples) {
+  std::vector<double> cumulative;
+  cumulative.reserve(soup.triangles.size());
+  double total = 0.0;
+  for (const auto& t : soup.triangles) {
+    const Point &a = soup.points[t[0]], &b = soup.points[t[1]], &c = soup.points[t[2]];
+    const double area = std::sqrt(CGAL::squared_area(a, b, c));
+    total += std::isfinite(area) ? area : 0.0;
+    cumulative.push_back(total);
+  }
+  std::vector<Eigen::Vector3d> out;
+  if (!(total > 0)) return out;
+  out.reserve(samples);
+  std::mt19937_64 rng(20240615u);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const auto at = [&](std::size_t i) { return Eigen::Vector3d(soup.points[i].x(), soup.points[i].y(), soup.points[i].z()); };
+  for (std::size_t n = 0; n < samples; ++n) {
+    const double pick = unit(rng) * total;
+    const std::size_t f = std::min<std::size_t>(
+        std::size_t(std::upper_bound(cumulative.begin(), cumulative.end(), pick) - cumulative.begin()), cumulative.size() - 1);
+    const double s = std::sqrt(unit(rng)), r = unit(rng);  // uniform on the triangle
+    const auto& t = soup.triangles[f];
+    out.push_back((1.0 - s) * at(t[0]) + s * (1.0 - r) * at(t[1]) + s * r * at(t[2]));
+  }
+  return out;
+}
+
 // Mean and max distance from points sampled uniformly by area on `from`'s faces to `to`'s surface.
 MeshDistance distanceBetween(const Soup& from, const Soup& to, std::size_t samples) {
   MeshDistance d;
   if (from.triangles.empty() || to.triangles.empty() || samples == 0) return d;
-  std::vector<Point> points;
-  PMP::sample_triangle_soup(from.points, from.triangles, std::back_inserter(points),
-                            CGAL::parameters::number_of_points_on_faces(samples)
-                                .do_sample_vertices(false)
-                                .do_sample_edges(false)
-                                .random_seed(20240615u));
-  std::vector<Kernel::Triangle_3> triangles;
-  triangles.reserve(to.triangles.size());
-  for (const auto& t : to.triangles) triangles.emplace_back(to.points[t[0]], to.points[t[1]], to.points[t[2]]);
-  using Primitive = CGAL::AABB_triangle_primitive<Kernel, std::vector<Kernel::Triangle_3>::const_iterator>;
-  CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>> tree(triangles.cbegin(), triangles.cend());
-  tree.build();
-  // Samples in space order (5 cm cells), each query starting from the last one's answer, a point on
-  // `to` nearby. CGAL's own start, a kd-tree over `to`'s points (accelerate_distance_queries), took
-  // a quarter of the regions' CPU to build (rpy_first100: measurement 3.2 -> 2.4 s; the same distances).
-  // Each sample's cell once, not at every comparison of the sort.
-  std::vector<std::pair<std::array<long, 3>, Point>> in_cells;
-  in_cells.reserve(points.size());
-  for (const Point& q : points)
-    in_cells.push_back({{long(std::floor(q.x() / 0.05)), long(std::floor(q.y() / 0.05)), long(std::floor(q.z() / 0.05))}, q});
-  std::stable_sort(in_cells.begin(), in_cells.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (std::size_t i = 0; i < points.size(); ++i) points[i] = in_cells[i].second;
-  auto nearest = tree.any_reference_point_and_id();
+  const std::vector<Eigen::Vector3d> points = samplesByArea(from, samples);
+  std::vector<Eigen::Vector3d> to_points;
+  to_points.reserve(to.points.size());
+  for (const Point& q : to.points) to_points.emplace_back(q.x(), q.y(), q.z());
+  const NearestTriangle surface(to_points, to.triangles);
+  if (surface.empty()) return d;
   double sum = 0.0;
-  for (const Point& p : points) {
-    nearest = tree.closest_point_and_primitive(p, nearest);
-    const double e = std::sqrt(CGAL::squared_distance(p, nearest.first));
+  for (const Eigen::Vector3d& q : points) {
+    const double e = surface.distance(q);
     sum += e;
     d.max = std::max(d.max, e);
   }
