@@ -271,6 +271,9 @@ void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, c
     regions[{r.x(), r.y(), r.z()}].push_back(c);
   }
   std::size_t ordinal = 0;
+  // Where bricks read from the world model go, kept from region to region: made per region, the
+  // zeroed bricks of every listed brick were a tenth of meshing's page faults (rpy_first100).
+  std::vector<Brick> scratch;
   for (auto& [region, own] : regions) {
     std::sort(own.begin(), own.end(), [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
       return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
@@ -285,7 +288,7 @@ void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, c
         const Eigen::Vector3i n = c + Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1);
         if (present.count(brickKey(n)) && listed.insert(brickKey(n)).second) list.push_back(n);
       }
-    std::vector<Brick> scratch(list.size());
+    if (scratch.size() < list.size()) scratch.resize(list.size());
     std::vector<BrickRef> refs(list.size());
     for (std::size_t i = 0; i < list.size(); ++i) refs[i] = {list[i], fetch(list[i], scratch[i])};
     RegionMesh r;
