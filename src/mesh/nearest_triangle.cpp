@@ -103,6 +103,7 @@ void NearestTriangle::searchCell(const Cell& c, const Eigen::Vector3d& p, Eigen:
 }
 
 Eigen::Vector3d NearestTriangle::closestPoint(const Eigen::Vector3d& p) const {
+  if (!p.allFinite()) return Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   const Cell c = cellOf(p);
   Eigen::Vector3d best = Eigen::Vector3d::Zero();
   double best_sq = std::numeric_limits<double>::infinity();

@@ -20,7 +20,7 @@ class NearestTriangle {
   NearestTriangle(const std::vector<Eigen::Vector3d>& points, const std::vector<std::array<std::size_t, 3>>& triangles);
 
   bool empty() const { return tris_.empty(); }
-  // The nearest point of the surface to p (undefined when empty()).
+  // The nearest point of the surface to p (undefined when empty(); NaN when p is not finite).
   Eigen::Vector3d closestPoint(const Eigen::Vector3d& p) const;
   double distance(const Eigen::Vector3d& p) const { return (closestPoint(p) - p).norm(); }
 
