@@ -9,6 +9,8 @@
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/tracking/tracker.h"
+#include "vofusion/pipeline/mesh_by_region.h"
+#include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/registration/rigid_motion.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
@@ -157,6 +159,54 @@ TEST(KinFu, TracksTheRoomInEveryMode) {
   // Odometry mode composes the (noisy) motions: it drifts like a random walk, ICP does not add to it.
   const RunSummary odo = runSequence(seq, TrackingMode::Odometry, p, 0.0);
   EXPECT_LT(odo.max_error, 0.005);
+}
+
+// Meshing while tracking: the regions the shifting volume leaves behind are simplified during the
+// run, and meshing at the end takes them and gives the mesh it makes alone, bit for bit.
+TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
+  sim::SimOptions o = simOpts("corridor", 90);
+  o.fps = 5;  // 18 s: ~7 m along the corridor
+  const sim::SyntheticSequence seq(o);
+  KinFuParams p = testParams();
+  p.tsdf.volume_voxels = 160;  // 3.2 m: shifts along the corridor
+  p.tsdf.voxel_size = 0.02f;
+  p.tsdf.truncation = 0.06f;
+  p.focus_distance = 1.0f;
+  p.tsdf.max_depth = 2.0f;
+  MeshCleanParams mp;  // defaults: fragments under 50 faces go, error-bounded simplification
+  mp.region_bricks = 8;  // 64 cells a side: a seam fragment is judged with the neighbours' pieces
+  RegionPremesher premesher(mp);
+  Tracker kf(p, TrackingMode::Odometry, seq.groundTruth(0));
+  kf.setShiftObserver([&](const fusion::TsdfVolume& v, const Eigen::Vector3i& old) { premesher.volumeShifted(v, old); });
+  std::mt19937 rng(7);
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    fusion::MotionPrior prior;
+    if (i > 0) prior = noisyPrior(seq, i, rng, 0.0, 0.1 * M_PI / 180, 0);
+    kf.process(seq.render(i), i > 0 ? &prior : nullptr);
+  }
+  premesher.stop();
+  EXPECT_GT(kf.stats().shifts, 3u);
+  const auto regions = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
+    kf.volume().extractMeshByRegion(mp.region_bricks, sink);
+  };
+  const RegionMeshResult alone = meshByRegion(regions, mp);
+  const RegionMeshResult with = meshByRegion(regions, mp, "", {}, {}, premesher.lookup());
+  std::printf("regions %zu, simplified while tracking %zu, taken at the end %zu\n", with.regions,
+              premesher.regionsMeshed(), with.regions_premeshed);
+  EXPECT_GE(with.regions_premeshed, 2u);
+  EXPECT_LT(with.regions_premeshed, with.regions);  // those the volume still reaches are made at the end
+  ASSERT_GT(alone.mesh.faces.size(), 2000u);
+  EXPECT_EQ(with.mesh.faces, alone.mesh.faces);
+  EXPECT_EQ(with.mesh.vertices, alone.mesh.vertices);
+  EXPECT_EQ(with.mesh.colors, alone.mesh.colors);
+  EXPECT_EQ(with.report.simplification.faces_after, alone.report.simplification.faces_after);
+  // A region is taken only for the input it was made from.
+  const PremeshedLookup lookup = premesher.lookup();
+  std::size_t found = 0;
+  kf.volume().extractMeshByRegion(mp.region_bricks, [&](fusion::RegionMesh& r) {
+    found += lookup(r.region, regionInputHash(r) ^ 1) != nullptr;
+  });
+  EXPECT_EQ(found, 0u);
 }
 
 TEST(KinFu, CorridorMeshWithShiftingCoversWhatABigVolumeCovers) {

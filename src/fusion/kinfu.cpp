@@ -29,11 +29,18 @@ struct KinFu::Impl {
   Eigen::Vector3f focusPoint(const Eigen::Isometry3d& T) const {
     return (T.translation() + T.linear().col(2) * params.focus_distance).cast<float>();
   }
+  ShiftObserver on_shift;
+  bool shiftIfNeeded(const Eigen::Isometry3d& pose) {
+    const Eigen::Vector3i before = volume->originBrick();
+    const bool shifted = volume->shiftIfNeeded(focusPoint(pose), params.shift_threshold);
+    if (shifted && on_shift) on_shift(*volume, before);
+    return shifted;
+  }
   // Moves the volume with the camera and fuses the depth at `pose`; true when the volume shifted.
   bool integrate(const cv::Mat& depth, const cv::Mat& rgb, const CameraIntrinsics& cam, const Eigen::Isometry3d& pose,
                  StageTimes& times) {
     auto t0 = std::chrono::steady_clock::now();
-    const bool shifted = volume->shiftIfNeeded(focusPoint(pose), params.shift_threshold);
+    const bool shifted = shiftIfNeeded(pose);
     times.add("shift", secondsSince(t0));
     t0 = std::chrono::steady_clock::now();
     volume->integrate(depth, rgb, cam, pose.cast<float>());
@@ -93,7 +100,7 @@ bool KinFu::hasModel() const { return impl_->have_model; }
 
 void KinFu::predictAgain(const Eigen::Isometry3d& pose) {
   if (!impl_->have_model) return;
-  impl_->volume->shiftIfNeeded(impl_->focusPoint(pose), impl_->params.shift_threshold);
+  impl_->shiftIfNeeded(pose);
   impl_->model_stale = true;
   impl_->model_depth.release();
   impl_->model.intensity.clear();
@@ -264,6 +271,7 @@ MapStats KinFu::stats() const {
 }
 
 const TsdfVolume& KinFu::volume() const { return *impl_->volume; }
+void KinFu::setShiftObserver(ShiftObserver observer) { impl_->on_shift = std::move(observer); }
 const KinFuParams& KinFu::params() const { return impl_->params; }
 
 }  // namespace vofusion

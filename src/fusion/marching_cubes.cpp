@@ -20,6 +20,11 @@
 
 namespace vofusion::fusion {
 
+Eigen::Vector3i regionOf(const Eigen::Vector3i& brick, int region_bricks) {
+  const auto d = [region_bricks](int v) { return v >= 0 ? v / region_bricks : -((-v + region_bricks - 1) / region_bricks); };
+  return {d(brick.x()), d(brick.y()), d(brick.z())};
+}
+
 namespace {
 
 std::uint64_t brickKey(const Eigen::Vector3i& c) {
@@ -72,11 +77,6 @@ inline bool usable(const Voxel* v, int min_weight) {
   return v && v->weight >= min_weight && std::abs(v->tsdf) < 32440;  // |tsdf| < 0.99
 }
 
-// The region (block of region_bricks^3 bricks) a brick belongs to.
-Eigen::Vector3i regionOf(const Eigen::Vector3i& brick, int region_bricks) {
-  const auto d = [region_bricks](int v) { return v >= 0 ? v / region_bricks : -((-v + region_bricks - 1) / region_bricks); };
-  return {d(brick.x()), d(brick.y()), d(brick.z())};
-}
 
 // Area-weighted vertex normals, oriented like the faces.
 void computeNormals(TriangleMesh& mesh) {
@@ -259,6 +259,31 @@ void marchingCubesByRegion(const std::vector<BrickRef>& bricks, float voxel_size
                                 voxel_size, min_weight, region_bricks, sink);
 }
 
+RegionMesh marchRegion(const Eigen::Vector3i& region, std::vector<Eigen::Vector3i> own,
+                       const std::function<bool(const Eigen::Vector3i&)>& present, const BrickFetch& fetch,
+                       float voxel_size, int min_weight, int region_bricks, std::vector<Brick>& scratch) {
+  std::sort(own.begin(), own.end(), [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+    return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+  });
+  // Only this region's bricks and their +1 neighbours (whose voxels and edges its cells reach) are
+  // fetched, and held, at a time.
+  std::vector<Eigen::Vector3i> list = own;
+  std::unordered_set<std::uint64_t> listed;
+  for (const auto& c : own) listed.insert(brickKey(c));
+  for (const auto& c : own)
+    for (int k = 1; k < 8; ++k) {
+      const Eigen::Vector3i n = c + Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+      if (present(n) && listed.insert(brickKey(n)).second) list.push_back(n);
+    }
+  if (scratch.size() < list.size()) scratch.resize(list.size());
+  std::vector<BrickRef> refs(list.size());
+  for (std::size_t i = 0; i < list.size(); ++i) refs[i] = {list[i], fetch(list[i], scratch[i])};
+  RegionMesh r;
+  r.region = region;
+  r.mesh = extract(refs, own.size(), voxel_size, min_weight, region_bricks, &r.on_seam);
+  return r;
+}
+
 void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch, float voxel_size,
                                    int min_weight, int region_bricks, const std::function<void(RegionMesh&)>& sink) {
   if (region_bricks <= 0) throw std::invalid_argument("region_bricks must be positive");
@@ -270,32 +295,16 @@ void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, c
     const Eigen::Vector3i r = regionOf(c, region_bricks);
     regions[{r.x(), r.y(), r.z()}].push_back(c);
   }
+  const auto isPresent = [&](const Eigen::Vector3i& c) { return present.count(brickKey(c)) != 0; };
   std::size_t ordinal = 0;
   // Where bricks read from the world model go, kept from region to region: made per region, the
   // zeroed bricks of every listed brick were a tenth of meshing's page faults (rpy_first100).
   std::vector<Brick> scratch;
   for (auto& [region, own] : regions) {
-    std::sort(own.begin(), own.end(), [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
-      return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
-    });
-    // Only this region's bricks and their +1 neighbours (whose voxels and edges its cells reach) are
-    // fetched, and held, at a time.
-    std::vector<Eigen::Vector3i> list = own;
-    std::unordered_set<std::uint64_t> listed;
-    for (const auto& c : own) listed.insert(brickKey(c));
-    for (const auto& c : own)
-      for (int k = 1; k < 8; ++k) {
-        const Eigen::Vector3i n = c + Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1);
-        if (present.count(brickKey(n)) && listed.insert(brickKey(n)).second) list.push_back(n);
-      }
-    if (scratch.size() < list.size()) scratch.resize(list.size());
-    std::vector<BrickRef> refs(list.size());
-    for (std::size_t i = 0; i < list.size(); ++i) refs[i] = {list[i], fetch(list[i], scratch[i])};
-    RegionMesh r;
-    r.region = Eigen::Vector3i(region[0], region[1], region[2]);
+    RegionMesh r = marchRegion(Eigen::Vector3i(region[0], region[1], region[2]), std::move(own), isPresent, fetch,
+                               voxel_size, min_weight, region_bricks, scratch);
     r.ordinal = ordinal++;
     r.regions = regions.size();
-    r.mesh = extract(refs, own.size(), voxel_size, min_weight, region_bricks, &r.on_seam);
     if (!r.mesh.empty()) sink(r);
   }
 }

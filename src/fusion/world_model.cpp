@@ -49,6 +49,7 @@ void WorldModel::erase(std::uint64_t k) {
 }
 
 void WorldModel::put(std::unique_ptr<Brick> brick) {
+  const std::lock_guard<std::mutex> lock(mutex_);
   const std::uint64_t k = key(brick->coord);
   erase(k);  // a brick already stored there is replaced
   lru_.push_front(k);
@@ -80,6 +81,7 @@ void WorldModel::readRecord(SpillFile::Record r, Brick& out) const {
 }
 
 std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
+  const std::lock_guard<std::mutex> lock(mutex_);
   const std::uint64_t k = key(c);
   if (auto it = ram_.find(k); it != ram_.end()) {
     std::unique_ptr<Brick> b = std::move(it->second.brick);
@@ -97,6 +99,7 @@ std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
 }
 
 bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
+  const std::lock_guard<std::mutex> lock(mutex_);
   const std::uint64_t k = key(c);
   if (const auto it = ram_.find(k); it != ram_.end()) std::memcpy(out.voxels, it->second.brick->voxels, kVoxelBytes);
   else if (const auto record = disk_.find(k)) readRecord(*record, out);
@@ -112,6 +115,7 @@ void WorldModel::forEachKey(F&& f) const {
 }
 
 std::vector<Eigen::Vector3i> WorldModel::coordsInBox(const Eigen::Vector3i& lo, int n) const {
+  const std::lock_guard<std::mutex> lock(mutex_);
   std::vector<Eigen::Vector3i> out;
   forEachKey([&](std::uint64_t k) {
     const Eigen::Vector3i c = decode(k);
@@ -120,16 +124,28 @@ std::vector<Eigen::Vector3i> WorldModel::coordsInBox(const Eigen::Vector3i& lo, 
   return out;
 }
 
+std::size_t WorldModel::size() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return ram_.size() + disk_.size();
+}
+
+bool WorldModel::contains(const Eigen::Vector3i& c) const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return ram_.count(key(c)) != 0 || disk_.find(key(c)).has_value();
+}
+
 std::vector<Eigen::Vector3i> WorldModel::coords() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
   std::vector<Eigen::Vector3i> out;
-  out.reserve(size());
+  out.reserve(ram_.size() + disk_.size());
   forEachKey([&](std::uint64_t k) { out.push_back(decode(k)); });
   return out;
 }
 
 WorldModelStats WorldModel::stats() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
   WorldModelStats s = stats_;
-  s.bricks = size();
+  s.bricks = ram_.size() + disk_.size();
   s.bricks_in_ram = lru_.size();
   // cache: map node + bucket ~64, list node ~24; a free place of the spill file: two tree nodes ~96
   s.index_bytes = disk_.bytes() + lru_.size() * 88 + spill_.freePlaces() * 96;

@@ -143,8 +143,7 @@ class RawComponents {
     std::vector<std::uint8_t> drop(l.faces.size());
     for (std::size_t c = 0; c < drop.size(); ++c)
       drop[c] = l.seam_slot[c] < 0 ? small(l.faces[c], l.area[c]) : small_[seams_.find(std::uint32_t(l.seam_slot[c]))];
-    auto& f = r.mesh.faces;
-    f.erase(std::remove_if(f.begin(), f.end(), [&](const auto& t) { return drop[l.of_vertex[t[0]]] != 0; }), f.end());
+    dropComponents(r, {l.of_vertex, {}, {}}, drop);
   }
 
  private:
@@ -155,31 +154,15 @@ class RawComponents {
     std::vector<std::int64_t> seam_slot;   // per component: one of its seam vertices' slot, -1 when none
   };
 
-  bool small(std::uint64_t faces, double area) const {
-    return (min_faces_ > 0 && faces < std::uint64_t(min_faces_)) || (min_area_ > 0 && area < min_area_);
-  }
+  bool small(std::uint64_t faces, double area) const { return smallFragment(faces, area, min_faces_, min_area_); }
 
   // The region's components; in pass 1 (`first`) its seam vertices get slots and each component's
   // seam vertices are joined, in pass 2 they are looked up.
   Local local(const fusion::RegionMesh& r, bool first) {
     const TriangleMesh& m = r.mesh;
-    UnionFind uf;
-    uf.reset(m.vertices.size());
-    for (const auto& f : m.faces) uf.unite(f[0], f[1]), uf.unite(f[1], f[2]);
-    Local l;
-    l.of_vertex.assign(m.vertices.size(), 0);
-    std::vector<std::int64_t> comp_of_root(m.vertices.size(), -1);
-    for (std::uint32_t v = 0; v < m.vertices.size(); ++v) {
-      std::int64_t& c = comp_of_root[uf.find(v)];
-      if (c < 0) c = std::int64_t(l.faces.size()), l.faces.push_back(0), l.area.push_back(0.0), l.seam_slot.push_back(-1);
-      l.of_vertex[v] = std::uint32_t(c);
-    }
-    for (const auto& f : m.faces) {
-      const Eigen::Vector3f& a = m.vertices[f[0]];
-      const std::uint32_t c = l.of_vertex[f[0]];
-      ++l.faces[c];
-      l.area[c] += 0.5 * double((m.vertices[f[1]] - a).cross(m.vertices[f[2]] - a).norm());
-    }
+    RegionComponents rc = componentsOf(m);
+    Local l{std::move(rc.of_vertex), std::move(rc.faces), std::move(rc.area), {}};
+    l.seam_slot.assign(l.faces.size(), -1);
     for (std::uint32_t v = 0; v < m.vertices.size(); ++v) {
       if (!r.on_seam[v]) continue;
       const std::array<float, 3> key = fusion::exactPosition(m.vertices[v]);
@@ -267,6 +250,65 @@ void cleanWelded(RegionMeshResult& out, const MeshCleanParams& params, const Raw
 
 }  // namespace
 
+RegionComponents componentsOf(const TriangleMesh& m) {
+  UnionFind uf;
+  uf.reset(m.vertices.size());
+  for (const auto& f : m.faces) uf.unite(f[0], f[1]), uf.unite(f[1], f[2]);
+  RegionComponents l;
+  l.of_vertex.assign(m.vertices.size(), 0);
+  std::vector<std::int64_t> comp_of_root(m.vertices.size(), -1);
+  for (std::uint32_t v = 0; v < m.vertices.size(); ++v) {
+    std::int64_t& c = comp_of_root[uf.find(v)];
+    if (c < 0) c = std::int64_t(l.faces.size()), l.faces.push_back(0), l.area.push_back(0.0);
+    l.of_vertex[v] = std::uint32_t(c);
+  }
+  for (const auto& f : m.faces) {
+    const Eigen::Vector3f& a = m.vertices[f[0]];
+    const std::uint32_t c = l.of_vertex[f[0]];
+    ++l.faces[c];
+    l.area[c] += 0.5 * double((m.vertices[f[1]] - a).cross(m.vertices[f[2]] - a).norm());
+  }
+  return l;
+}
+
+bool smallFragment(std::uint64_t faces, double area, int min_faces, double min_area) {
+  return (min_faces > 0 && faces < std::uint64_t(min_faces)) || (min_area > 0 && area < min_area);
+}
+
+void dropComponents(fusion::RegionMesh& r, const RegionComponents& components, const std::vector<std::uint8_t>& drop) {
+  auto& f = r.mesh.faces;
+  f.erase(std::remove_if(f.begin(), f.end(), [&](const auto& t) { return drop[components.of_vertex[t[0]]] != 0; }), f.end());
+}
+
+MeshCleanParams regionSimplifyParams(const MeshCleanParams& params) {
+  MeshCleanParams p = params;
+  if (params.min_component_faces > 0 || params.min_component_area > 0) {  // judged on the raw mesh before
+    p.min_component_faces = 0;
+    p.min_component_area = 0;
+  }
+  return p;
+}
+
+std::uint64_t regionInputHash(const fusion::RegionMesh& r) {
+  std::uint64_t h = 0xcbf29ce484222325ull;  // FNV-1a, 64 bits
+  const auto mix = [&h](const void* data, std::size_t n) {
+    const auto* b = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 0x100000001b3ull;
+  };
+  const auto mixSized = [&](const auto& v) {
+    const std::uint64_t n = v.size();
+    mix(&n, sizeof n);
+    if (n) mix(v.data(), n * sizeof(v[0]));
+  };
+  mix(r.region.data(), 3 * sizeof(int));
+  mixSized(r.mesh.vertices);
+  mixSized(r.mesh.normals);
+  mixSized(r.mesh.colors);
+  mixSized(r.mesh.faces);
+  mixSized(r.on_seam);
+  return h;
+}
+
 // Simplifies regions on every core as they come and hands them to `weld` in region order. Only
 // regions not simplified yet count against the limit (two per core), so a large region on one core
 // does not hold up the smaller ones behind it on the other: waiting for the oldest in order left a
@@ -306,6 +348,15 @@ class OrderedRegionSimplifier {
       weldReady();
     }
   }
+  // A region simplified already (during the run): welded in its turn like the others.
+  void addDone(fusion::RegionMesh r, const MeshCleanReport& report) {
+    queue_.push_back(std::make_unique<Item>());
+    Item& item = *queue_.back();
+    item.region = std::move(r);
+    item.report = report;
+    item.done.store(true, std::memory_order_release);
+    weldReady();
+  }
   // Waits for every region and welds the rest; rethrows what a region's simplification threw.
   void finish() {
     while (!queue_.empty()) {
@@ -343,7 +394,8 @@ class OrderedRegionSimplifier {
 };
 
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
-                              const MeshProgress& progress, const std::function<void()>& regions_done) {
+                              const MeshProgress& progress, const std::function<void()>& regions_done,
+                              const PremeshedLookup& premeshed) {
   const auto told = [&](int pass, const fusion::RegionMesh& r) {
     if (progress) progress(pass, r.ordinal + 1, r.regions);
   };
@@ -355,7 +407,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   MeshCleanStep step{"regions"};
   const auto t0 = std::chrono::steady_clock::now();
   // Pass 1 (marching cubes only): which fragments are too small, judged whole across seams.
-  MeshCleanParams region_params = params;
+  const MeshCleanParams region_params = regionSimplifyParams(params);
   std::unique_ptr<RawComponents> fragments;
   if (params.min_component_faces > 0 || params.min_component_area > 0) {
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
@@ -368,8 +420,6 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     out.report.components_removed = fragments->judge();
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
     if (progress && region_count) progress(2, 0, region_count);
-    region_params.min_component_faces = 0;
-    region_params.min_component_area = 0;
   }
   // Pass 2: the same regions again, each simplified on a task of its own as soon as it is made (CGAL
   // works on the region's own mesh) while the next regions are marched, and welded in region order,
@@ -385,6 +435,14 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     out.raw_faces += r.mesh.faces.size();
     step.faces_before += r.mesh.faces.size();
     if (fragments) fragments->filter(r);
+    if (premeshed)
+      if (const PremeshedRegion* done = premeshed(r.region, regionInputHash(r))) {
+        r.mesh = done->mesh;
+        r.on_seam = done->on_seam;
+        ++out.regions_premeshed;
+        simplifier.addDone(std::move(r), done->report);
+        return;
+      }
     simplifier.add(std::move(r));
   });
   simplifier.finish();

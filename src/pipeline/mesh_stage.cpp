@@ -12,8 +12,12 @@ using nlohmann::json;
 
 namespace vofusion {
 
+bool meshesByRegion(const OutputParams& p, const MeshCleanParams& mesh_params) {
+  return p.write_mesh && p.clean_mesh && mesh_params.region_bricks > 0 && !p.save_full_mesh;
+}
+
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshCleanParams& mesh_params, json& s,
-                         StagedOutputs& out) {
+                         StagedOutputs& out, const RegionPremesher* premeshed) {
   // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
   const auto release_map = [&] {
     if (rec.mapReleased()) return;
@@ -23,7 +27,7 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
   TriangleMesh mesh;
   std::string streamed_raw;  // logged after mesh.ply, whose line then carries the meshing time
   // Region by region unless the unsimplified whole (mesh_full.ply) is asked for.
-  const bool by_region = p.clean_mesh && mesh_params.region_bricks > 0 && !p.save_full_mesh;
+  const bool by_region = meshesByRegion(p, mesh_params);
   if (by_region) {
     const auto source = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
       rec.extractMeshByRegion(mesh_params.region_bricks, sink);
@@ -39,8 +43,10 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
       }
       shown->update(done);
     };
-    RegionMeshResult r =
-        meshByRegion(source, mesh_params, p.save_raw_mesh ? out.path("mesh_raw.ply") : "", progress, release_map);
+    RegionMeshResult r = meshByRegion(source, mesh_params, p.save_raw_mesh ? out.path("mesh_raw.ply") : "", progress,
+                                      release_map, premeshed ? premeshed->lookup() : PremeshedLookup());
+    if (premeshed)
+      s["mesh_while_tracking"] = {{"regions_meshed", premeshed->regionsMeshed()}, {"regions_reused", r.regions_premeshed}};
     if (shown) shown->finish();
     mesh = std::move(r.mesh);
     s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};

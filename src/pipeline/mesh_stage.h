@@ -5,14 +5,19 @@
 #include "vofusion/core/triangle_mesh.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/pipeline/run_outputs.h"
 #include "staged_outputs.h"
 
 namespace vofusion {
 
+// Whether writeMeshes meshes region by region (mesh.ply cleaned, regions on, no mesh_full.ply).
+bool meshesByRegion(const OutputParams& params, const MeshCleanParams& mesh_params);
+
 // Meshes the map (region by region unless mesh_full.ply is asked for), releases it, and writes
-// mesh_raw.ply / mesh_full.ply / mesh.ply as asked; fills the mesh entries of s.
+// mesh_raw.ply / mesh_full.ply / mesh.ply as asked; fills the mesh entries of s. Regions `premeshed`
+// made during the run are taken where they are still what the map gives.
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& params, const MeshCleanParams& mesh_params,
-                         nlohmann::json& s, StagedOutputs& out);
+                         nlohmann::json& s, StagedOutputs& out, const RegionPremesher* premeshed = nullptr);
 
 }  // namespace vofusion

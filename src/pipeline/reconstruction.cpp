@@ -204,6 +204,8 @@ void Reconstruction::finish() {
 
 const loop::LoopCloser* Reconstruction::loopCloser() const { return impl_->loops.get(); }
 
+void Reconstruction::setShiftObserver(KinFu::ShiftObserver observer) { impl_->map().setShiftObserver(std::move(observer)); }
+
 double Reconstruction::maxLoopCorrection() const { return impl_->max_correction; }
 
 bool Reconstruction::mapNeedsReintegration() const {

@@ -132,7 +132,7 @@ SceneOptions RunRecorder::Impl::sceneOptions(const Reconstruction& rec, json& s)
   return o;
 }
 
-json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log) {
+json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log, const RegionPremesher* premeshed) {
   Impl& m = *impl_;
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
   json s = runSummary(rec, info);
@@ -141,7 +141,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
 
   returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
   TriangleMesh mesh;
-  if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out);
+  if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed);
   else rec.releaseMap();
 
   const SceneOptions scene_opts = m.sceneOptions(rec, s);

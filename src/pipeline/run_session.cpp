@@ -14,6 +14,8 @@
 #include "vofusion/core/progress.h"
 #include "vofusion/core/state_archive.h"
 
+#include "mesh_stage.h"
+
 namespace vofusion {
 
 namespace {
@@ -62,7 +64,14 @@ FrameReport readReport(state::Archive& a) {
 
 RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode, const std::string& out_dir,
                        const OutputParams& out_params, const MeshCleanParams& mesh_params)
-    : rec_(cfg, mode), recorder_(out_dir, out_params, mesh_params), write_mesh_(out_params.write_mesh) {}
+    : rec_(cfg, mode), recorder_(out_dir, out_params, mesh_params), write_mesh_(out_params.write_mesh) {
+  if (meshesByRegion(out_params, mesh_params)) {
+    premesher_ = std::make_unique<RegionPremesher>(mesh_params);
+    rec_.setShiftObserver([p = premesher_.get()](const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin) {
+      p->volumeShifted(volume, old_origin);
+    });
+  }
+}
 
 RunSession::~RunSession() = default;
 
@@ -200,9 +209,10 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
 nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume) {
   if (replaying()) throw std::logic_error("RunSession::finish before the checkpoint's frames were replayed");
   rec_.finish();
+  if (premesher_) premesher_->stop();  // before the map is fused again or released
   if (write_mesh_ || save_volume) refuse(info, reopen);  // the map is not used otherwise
   if (save_volume) rec_.saveVolume(*save_volume);
-  return recorder_.finish(rec_, info);
+  return recorder_.finish(rec_, info, stderr, premesher_.get());
 }
 
 }  // namespace vofusion

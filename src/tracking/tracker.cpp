@@ -327,6 +327,7 @@ KinFuStats Tracker::stats() const {
 }
 
 const KinFu& Tracker::map() const { return impl_->map; }
+void Tracker::setShiftObserver(KinFu::ShiftObserver observer) { impl_->map.setShiftObserver(std::move(observer)); }
 TrackingMode Tracker::mode() const { return impl_->mode; }
 
 }  // namespace vofusion

@@ -9,6 +9,7 @@
 //   per frame: track against map.model(), then map.fuse(frame_to_fuse, times);
 //   TriangleMesh m = map.extractMesh();
 #include <iosfwd>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -146,6 +147,10 @@ class KinFu {
                      bool coloured = false) const;
   MapStats stats() const;
   const fusion::TsdfVolume& volume() const;
+  // Called on the fusion thread after each shift of the volume, with the volume (moved) and its first
+  // brick before the shift. One observer; an empty function removes it.
+  using ShiftObserver = std::function<void(const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin)>;
+  void setShiftObserver(ShiftObserver observer);
   const KinFuParams& params() const;
 
  private:

@@ -83,6 +83,14 @@ using BrickFetch = std::function<const Brick*(const Eigen::Vector3i& coord, Bric
 // on disk never has to be in RAM whole. Vertices on region borders are welded.
 TriangleMesh marchingCubesStreamed(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch,
                                    float voxel_size, int min_weight = 1, int region_bricks = 16);
+// Region `region`'s mesh (as marchingCubesByRegion makes it; ordinal and regions left 0): its own
+// bricks `own` and those of their +1 neighbours that `present` says exist, fetched into `scratch`
+// (grown as needed, kept by the caller from region to region) where fetch needs it.
+RegionMesh marchRegion(const Eigen::Vector3i& region, std::vector<Eigen::Vector3i> own,
+                       const std::function<bool(const Eigen::Vector3i&)>& present, const BrickFetch& fetch,
+                       float voxel_size, int min_weight, int region_bricks, std::vector<Brick>& scratch);
+// The region (block of region_bricks^3 bricks) holding a world brick coordinate.
+Eigen::Vector3i regionOf(const Eigen::Vector3i& brick, int region_bricks);
 // marchingCubesByRegion over bricks fetched one region at a time (what both of the above use).
 void marchingCubesStreamedByRegion(const std::vector<Eigen::Vector3i>& coords, const BrickFetch& fetch, float voxel_size,
                                    int min_weight, int region_bricks, const std::function<void(RegionMesh&)>& sink);

@@ -93,6 +93,9 @@ class TsdfVolume {
   const WorldModel& worldModel() const { return *world_; }
   std::size_t memoryBytes() const;
   const TsdfParams& params() const { return params_; }
+  // The volume's box of bricks: its first brick (world brick coordinates) and bricks per side.
+  const Eigen::Vector3i& originBrick() const { return origin_; }
+  int bricksPerSide() const { return n_; }
 
  private:
   const Brick* brickAt(int bx, int by, int bz) const {

@@ -5,11 +5,13 @@
 // them stay in RAM (least recently handed over first out); the rest are written zlib-compressed to a
 // SpillFile in `spill_dir`. A brick on disk costs RAM only for its index entry (~40 bytes), so a long
 // walk's memory grows by that alone; a brick taken back frees its place in the file for the next.
-// put/take run on one thread; read() may run on several, but not beside put/take (places are reused).
+// Every member locks the store: the frame loop hands bricks over (put/take) while the region mesher
+// (pipeline/region_premesher.h) reads the regions the volume has left.
 #include <cstdint>
 #include <functional>
 #include <list>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -54,8 +56,8 @@ class WorldModel {
   // Copies a stored brick without changing what is cached; false when there is none.
   bool read(const Eigen::Vector3i& c, Brick& out) const;
 
-  std::size_t size() const { return ram_.size() + disk_.size(); }
-  bool contains(const Eigen::Vector3i& c) const { return ram_.count(key(c)) != 0 || disk_.find(key(c)).has_value(); }
+  std::size_t size() const;
+  bool contains(const Eigen::Vector3i& c) const;
   WorldModelStats stats() const;
   static std::uint64_t key(const Eigen::Vector3i& c);
 
@@ -75,6 +77,7 @@ class WorldModel {
   BrickIndex disk_;                            // the rest, by key
   std::list<std::uint64_t> lru_;               // keys of the bricks in RAM, most recent first
   mutable WorldModelStats stats_;
+  mutable std::mutex mutex_;
 };
 
 }  // namespace vofusion::fusion

@@ -2,8 +2,10 @@
 // The default mesh without a whole-world peak (issue 15): marching cubes, repair and simplification
 // one region (block of bricks) at a time with the seams kept, then the remaining cleaning steps on
 // the welded, simplified mesh (about a tenth of the raw faces).
+#include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/mesh/mesh_clean.h"
@@ -18,8 +20,35 @@ struct RegionMeshResult {
   MeshCleanReport report;            // steps: "regions" (all regions' repair, components and
                                      // simplification), then cleanMesh's on the welded mesh
   std::size_t regions = 0;
+  std::size_t regions_premeshed = 0;  // of them, simplified during the run (PremeshedLookup)
   std::size_t raw_vertices = 0, raw_faces = 0;  // the marching-cubes mesh (seam vertices once)
 };
+
+// A region simplified during the run (pipeline/region_premesher.h) and what simplifyRegion reported.
+struct PremeshedRegion {
+  std::uint64_t input_hash = 0;  // regionInputHash of what it was simplified from
+  TriangleMesh mesh;
+  std::vector<std::uint8_t> on_seam;
+  MeshCleanReport report;
+};
+// The region `region` simplified during the run from an input hashing to `input_hash`, or null.
+using PremeshedLookup = std::function<const PremeshedRegion*(const Eigen::Vector3i& region, std::uint64_t input_hash)>;
+
+// How meshByRegion prepares a region for simplifyRegion, for whoever simplifies one beforehand. Its
+// connected components are judged as fragments (smallFragment: [mesh] min_component_faces / _area),
+// those touching a seam by their whole across regions; the small ones' faces go (dropComponents),
+// and the region is simplified with regionSimplifyParams.
+struct RegionComponents {
+  std::vector<std::uint32_t> of_vertex;  // per vertex, its component
+  std::vector<std::uint64_t> faces;      // per component
+  std::vector<double> area;              // per component, m^2
+};
+RegionComponents componentsOf(const TriangleMesh& m);
+bool smallFragment(std::uint64_t faces, double area, int min_faces, double min_area);
+void dropComponents(fusion::RegionMesh& r, const RegionComponents& components, const std::vector<std::uint8_t>& drop);
+MeshCleanParams regionSimplifyParams(const MeshCleanParams& params);
+// Every bit simplifyRegion reads of a region (positions, normals, colours, faces, seam flags, region).
+std::uint64_t regionInputHash(const fusion::RegionMesh& r);
 
 // Told after each region: pass 1 finds fragments (marching cubes only), pass 2 simplifies.
 using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t regions)>;
@@ -29,8 +58,10 @@ using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t 
 // one; a seam vertex's normal is its first region's). Throws on I/O errors; a region CGAL fails on
 // is kept unsimplified (counted in report.failure).
 // `regions_done` runs once the last region was read, before the welded mesh is cleaned: the caller
-// can free what the regions came from.
+// can free what the regions came from. `premeshed`: a region it has, made from the same input, is
+// taken instead of simplifying it again (the result is the same: simplifyRegion is deterministic).
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "",
-                              const MeshProgress& progress = {}, const std::function<void()>& regions_done = {});
+                              const MeshProgress& progress = {}, const std::function<void()>& regions_done = {},
+                              const PremeshedLookup& premeshed = {});
 
 }  // namespace vofusion

@@ -64,6 +64,8 @@ class Reconstruction {
   // loop closure ran, else (and before finish()) the tracked ones.
   const Trajectory& trajectory() const;
   const Trajectory& trackedTrajectory() const;  // the tracker's poses, before any loop
+  // KinFu::setShiftObserver on the tracking map (not on the volume reintegrate() fuses anew).
+  void setShiftObserver(KinFu::ShiftObserver observer);
   // End of the frames: waits for the fusion and the loop-closure thread, then corrects the trajectory
   // (every pose follows its keyframe). Idempotent; process() must not be called afterwards.
   void finish();

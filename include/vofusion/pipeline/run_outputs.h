@@ -19,6 +19,8 @@
 
 namespace vofusion {
 
+class RegionPremesher;
+
 // INI section [output].
 struct OutputParams : public mrpt::config::CLoadableOptions {
   bool write_rawlog = true;      // poses.rawlog (costs PNG encoding per frame, on a writer thread)
@@ -56,7 +58,9 @@ class RunRecorder {
   void add(const Frame& frame, const FrameReport& report);
   // Writes every output and returns the summary that went into summary.json. `log` gets one line
   // per file written (may be null). Frees rec's map once it is meshed (Reconstruction::releaseMap).
-  nlohmann::json finish(Reconstruction& rec, const RunInfo& info, std::FILE* log = stderr);
+  // `premeshed`: the regions meshed while tracking (stopped), taken where they are still the map's.
+  nlohmann::json finish(Reconstruction& rec, const RunInfo& info, std::FILE* log = stderr,
+                        const RegionPremesher* premeshed = nullptr);
 
  private:
   struct Impl;

@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "vofusion/io/frame_source.h"
+#include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
 
@@ -78,6 +79,9 @@ class RunSession {
   std::vector<FrameReport> reports_;
   std::size_t resumed_frames_ = 0, replayed_ = 0;
   std::string resumed_from_;
+  // Meshing while tracking, when the mesh is made region by region; last, so it stops before the
+  // map it reads goes.
+  std::unique_ptr<RegionPremesher> premesher_;
 };
 
 }  // namespace vofusion

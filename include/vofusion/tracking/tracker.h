@@ -100,6 +100,7 @@ class Tracker {
   KinFuStats stats() const;
   const KinFu& map() const;
   const fusion::TsdfVolume& volume() const { return map().volume(); }
+  void setShiftObserver(KinFu::ShiftObserver observer);  // KinFu::setShiftObserver
   const KinFuParams& params() const { return map().params(); }
   TrackingMode mode() const;
 

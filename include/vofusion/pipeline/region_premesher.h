@@ -1,0 +1,87 @@
+#pragma once
+// Meshing while tracking (issue 31): the regions the moving volume has left are marched and
+// simplified on a thread of their own at the lowest priority, so that meshing at the end finds them
+// done (meshByRegion's PremeshedLookup). A region is simplified once its 26 neighbours have left the
+// volume too, because its fragments that cross a seam are judged whole ([mesh] min_component_faces),
+// with the neighbours' pieces. Nothing is assumed final: the end takes a region made during the run
+// only when what it would simplify is the same, bit for bit (regionInputHash), so a region the camera
+// came back to or a map fused again after loop closure is simply simplified again there, and the mesh
+// is the one meshing at the end alone gives.
+//
+//   RegionPremesher pre(mesh_params);
+//   rec.setShiftObserver([&](const fusion::TsdfVolume& v, const Eigen::Vector3i& o) { pre.volumeShifted(v, o); });
+//   ... frames ...
+//   rec.finish(); pre.stop();          // before the map is fused again, released or replaced
+//   meshByRegion(..., pre.lookup());
+#include <array>
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <set>
+#include <thread>
+
+#include "vofusion/fusion/tsdf_volume.h"
+#include "vofusion/pipeline/mesh_by_region.h"
+
+namespace vofusion {
+
+class RegionPremesher {
+ public:
+  explicit RegionPremesher(const MeshCleanParams& params);  // params.region_bricks > 0
+  ~RegionPremesher();                                       // stop()
+  RegionPremesher(const RegionPremesher&) = delete;
+  RegionPremesher& operator=(const RegionPremesher&) = delete;
+
+  // On the fusion thread, after a shift: the regions whose bricks (and the +1 bricks their cells
+  // read) were inside the volume's box before and are all outside it now are queued; those it reaches
+  // again are forgotten. The volume's world model is read from this object's thread until stop(): the
+  // map must not be replaced before.
+  void volumeShifted(const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin);
+  // Finishes the region in hand and ends the thread; idempotent.
+  void stop();
+
+  // After stop(): the regions made, for meshByRegion.
+  PremeshedLookup lookup() const;
+  std::size_t regionsMeshed() const;  // simplified during the run (a region made again counts again)
+
+  using Key = std::array<int, 3>;
+  // A region's raw components that touch a seam: what its neighbours need to judge theirs.
+  struct SeamPieces {
+    std::vector<std::uint64_t> faces;
+    std::vector<double> area;
+    std::vector<std::pair<std::array<float, 3>, std::uint32_t>> seam_vertices;  // exact position, component
+  };
+
+ private:
+  void run();
+  void summarise(const Key& region);
+  void simplifyIfReady(const Key& region);
+  bool finalNow(const Key& region) const;  // under mutex_
+  bool reaches(const Key& region, const Eigen::Vector3i& origin) const;
+  fusion::RegionMesh march(const Key& region, bool& ok);
+  // Which of the region's components are fragments, those on seams judged with the neighbours'
+  // pieces; false when one cannot be judged here (then the end does it).
+  bool judge(const Key& region, const fusion::RegionMesh& r, const RegionComponents& c,
+             const std::vector<const SeamPieces*>& neighbours, std::vector<std::uint8_t>& drop) const;
+
+  const MeshCleanParams params_;
+  const MeshCleanParams region_params_;
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::deque<Key> queue_;                   // regions to summarise
+  bool stopping_ = false;
+  const fusion::WorldModel* world_ = nullptr;
+  float voxel_size_ = 0.f;
+  Eigen::Vector3i origin_ = Eigen::Vector3i::Zero();  // the volume's box now
+  int box_bricks_ = 0;
+  std::map<Key, std::uint64_t> generation_;  // bumped when the volume reaches a region again
+  std::map<Key, SeamPieces> pieces_;         // final regions summarised (with bricks)
+  std::set<Key> empty_;                      // final regions without bricks
+  std::map<Key, PremeshedRegion> done_;
+  std::size_t meshed_ = 0;
+  std::vector<fusion::Brick> scratch_;       // the thread's, kept from region to region
+  std::thread thread_;
+};
+
+}  // namespace vofusion
