@@ -172,7 +172,7 @@ void RegionPremesher::summarise(const Key& region) {
   std::uint64_t generation;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
-    if (!finalNow(region)) return;
+    if (stopping_ || !finalNow(region)) return;
     generation = generation_[region];
   }
   bool ok = false;
@@ -200,7 +200,7 @@ void RegionPremesher::simplifyIfReady(const Key& region) {
   std::vector<SeamPieces> neighbours;  // copies: the map may change while this one works
   {
     const std::lock_guard<std::mutex> lock(mutex_);
-    if (!pieces_.count(region) || done_.count(region)) return;
+    if (stopping_ || !pieces_.count(region) || done_.count(region)) return;
     for (const Key& n : neighboursOf(region)) {
       if (!finalNow(n)) return;
       if (const auto it = pieces_.find(n); it != pieces_.end()) neighbours.push_back(it->second);

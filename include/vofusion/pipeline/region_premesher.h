@@ -38,7 +38,7 @@ class RegionPremesher {
   // again are forgotten. The volume's world model is read from this object's thread until stop(): the
   // map must not be replaced before.
   void volumeShifted(const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin);
-  // Finishes the region in hand and ends the thread; idempotent.
+  // Ends the thread once the region in hand is done (no other is started); idempotent.
   void stop();
 
   // After stop(): the regions made, for meshByRegion.
