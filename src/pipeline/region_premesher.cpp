@@ -130,12 +130,17 @@ void RegionPremesher::run() {
       region = queue_.front();
       queue_.pop_front();
     }
-    alone.execute([&] {
-      summarise(region);
-      // The region, or a neighbour waiting for it, may be ready to simplify.
-      simplifyIfReady(region);
-      for (const Key& n : neighboursOf(region)) simplifyIfReady(n);
-    });
+    try {
+      alone.execute([&] {
+        summarise(region);
+        // The region, or a neighbour waiting for it, may be ready to simplify.
+        simplifyIfReady(region);
+        for (const Key& n : neighboursOf(region)) simplifyIfReady(n);
+      });
+    } catch (const std::exception&) {
+      // A spilled brick that does not read back (or no memory): the end meshes this region and
+      // reports what is wrong with it there.
+    }
   }
 }
 
