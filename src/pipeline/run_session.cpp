@@ -73,7 +73,9 @@ RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mo
   }
 }
 
-RunSession::~RunSession() = default;
+RunSession::~RunSession() {
+  if (premesher_) premesher_->stop();  // no more reads of the map rec_ is about to free
+}
 
 FrameReport RunSession::process(const Frame& frame) {
   if (replaying()) throw std::logic_error("RunSession::process before the checkpoint's frames were replayed");

@@ -71,6 +71,9 @@ class RunSession {
  private:
   void refuse(RunInfo& info, const Reopen& reopen);
 
+  // Meshing while tracking, when the mesh is made region by region. Declared before rec_, so it
+  // outlives the fusion thread that tells it of shifts; its own thread is stopped first (destructor).
+  std::unique_ptr<RegionPremesher> premesher_;
   Reconstruction rec_;
   RunRecorder recorder_;
   bool write_mesh_;  // the map is used at all after the frame loop
@@ -79,9 +82,6 @@ class RunSession {
   std::vector<FrameReport> reports_;
   std::size_t resumed_frames_ = 0, replayed_ = 0;
   std::string resumed_from_;
-  // Meshing while tracking, when the mesh is made region by region; last, so it stops before the
-  // map it reads goes.
-  std::unique_ptr<RegionPremesher> premesher_;
 };
 
 }  // namespace vofusion
