@@ -35,40 +35,33 @@ TEST(Config, KnownKeysPassAndLoad) {
   EXPECT_EQ(p.weight_cap, 64);
 }
 
-TEST(Config, UnknownKeyNamesFileSectionAndKey) {
-  const std::string dir = test::tempDir("config_bad");
-  std::ofstream(dir + "/a.ini") << "[kinfu]\nvoxl = 0.01\n";
+// The message checkConfigKeys refuses `ini` with (empty: accepted).
+std::string refusal(const std::string& path, const std::string& ini, const std::string& section) {
+  std::ofstream(path) << ini;
   DemoParams p;
   try {
-    checkConfigKeys(loadConfig(dir + "/a.ini"), dir + "/a.ini", {{"kinfu", &p}});
-    FAIL();
+    checkConfigKeys(loadConfig(path), path, {{section, &p}});
   } catch (const InputError& e) {
-    EXPECT_EQ(std::string(e.what()), dir + "/a.ini: unknown key 'voxl' in section [kinfu]");
+    return e.what();
   }
-  std::ofstream(dir + "/b.ini") << "[kinfoo]\nvoxel = 0.01\n";
-  EXPECT_THROW(checkConfigKeys(loadConfig(dir + "/b.ini"), "b.ini", {{"kinfu", &p}}), InputError);
+  return "";
+}
+
+TEST(Config, UnknownKeyNamesFileSectionAndKey) {
+  const std::string dir = test::tempDir("config_bad");
+  EXPECT_EQ(refusal(dir + "/a.ini", "[kinfu]\nvoxl = 0.01\n", "kinfu"), dir + "/a.ini: unknown key 'voxl' in section [kinfu]");
+  EXPECT_NE(refusal(dir + "/b.ini", "[kinfoo]\nvoxel = 0.01\n", "kinfu"), "");
 }
 
 // An old config's retired key is refused, but says why and where the figures are.
 TEST(Config, RetiredKeySaysItsValueIsFixedInCode) {
   const std::string dir = test::tempDir("config_retired");
-  std::ofstream(dir + "/a.ini") << "[loop]\nmax_loop_chi2 = 22.5\n";
-  DemoParams p;
-  try {
-    checkConfigKeys(loadConfig(dir + "/a.ini"), dir + "/a.ini", {{"loop", &p}});
-    FAIL();
-  } catch (const InputError& e) {
-    EXPECT_EQ(std::string(e.what()), dir + "/a.ini: 'max_loop_chi2' in section [loop] is no longer a key: its value is "
-                                           "fixed in code (docs/loop-closure.md gives the figures); remove the line");
-  }
+  EXPECT_EQ(refusal(dir + "/a.ini", "[loop]\nmax_loop_chi2 = 22.5\n", "loop"),
+            dir + "/a.ini: 'max_loop_chi2' in section [loop] is no longer a key: its value is fixed in code "
+                  "(docs/loop-closure.md gives the figures); remove the line");
   // The same name in another section is an ordinary unknown key.
-  std::ofstream(dir + "/b.ini") << "[kinfu]\nmax_loop_chi2 = 22.5\n";
-  try {
-    checkConfigKeys(loadConfig(dir + "/b.ini"), "b.ini", {{"kinfu", &p}});
-    FAIL();
-  } catch (const InputError& e) {
-    EXPECT_EQ(std::string(e.what()), "b.ini: unknown key 'max_loop_chi2' in section [kinfu]");
-  }
+  EXPECT_EQ(refusal(dir + "/b.ini", "[kinfu]\nmax_loop_chi2 = 22.5\n", "kinfu"),
+            dir + "/b.ini: unknown key 'max_loop_chi2' in section [kinfu]");
 }
 
 TEST(Config, MissingFileIsError) { EXPECT_THROW(loadConfig("/nonexistent/x.ini"), InputError); }

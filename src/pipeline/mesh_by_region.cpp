@@ -17,6 +17,8 @@
 
 #include "vofusion/core/errors.h"
 
+#include "union_find.h"
+
 namespace vofusion {
 
 namespace {
@@ -72,30 +74,6 @@ class PlyStream {
   std::size_t faces_ = 0;
 };
 
-// Union-find over 0..n-1 (the smaller index is the root).
-class UnionFind {
- public:
-  std::uint32_t add() {
-    parent_.push_back(std::uint32_t(parent_.size()));
-    return parent_.back();
-  }
-  void reset(std::size_t n) {
-    parent_.resize(n);
-    for (std::uint32_t i = 0; i < n; ++i) parent_[i] = i;
-  }
-  std::uint32_t find(std::uint32_t v) {
-    while (parent_[v] != v) v = parent_[v] = parent_[parent_[v]];
-    return v;
-  }
-  void unite(std::uint32_t a, std::uint32_t b) {
-    a = find(a), b = find(b);
-    if (a != b) parent_[std::max(a, b)] = std::min(a, b);
-  }
-  std::size_t size() const { return parent_.size(); }
-
- private:
-  std::vector<std::uint32_t> parent_;
-};
 
 // Connected components of the raw mesh across regions, with their faces and area: cleanMesh judges
 // fragments on the raw mesh, so must the regions. Inside a region components are found locally;

@@ -4,11 +4,12 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include <numeric>
 #include <unordered_map>
 #include <unordered_set>
 
 #include <tbb/task_arena.h>
+
+#include "union_find.h"
 
 namespace vofusion {
 
@@ -34,21 +35,6 @@ std::vector<Key> neighboursOf(const Key& k) {
 // A brick the volume took back while its region was read: the region is not final after all.
 struct BrickTakenBack {};
 
-class Joins {  // union-find with the smaller index as root
- public:
-  explicit Joins(std::size_t n) : parent_(n) { std::iota(parent_.begin(), parent_.end(), 0u); }
-  std::uint32_t find(std::uint32_t v) {
-    while (parent_[v] != v) v = parent_[v] = parent_[parent_[v]];
-    return v;
-  }
-  void unite(std::uint32_t a, std::uint32_t b) {
-    a = find(a), b = find(b);
-    if (a != b) parent_[std::max(a, b)] = std::min(a, b);
-  }
-
- private:
-  std::vector<std::uint32_t> parent_;
-};
 
 }  // namespace
 
@@ -251,7 +237,8 @@ bool RegionPremesher::judge(const Key&, const fusion::RegionMesh& r, const Regio
   std::vector<std::size_t> base{0};
   base.push_back(c.faces.size());
   for (const SeamPieces* n : neighbours) base.push_back(base.back() + n->faces.size());
-  Joins joins(base.back());
+  UnionFind joins;
+  joins.reset(base.back());
   std::unordered_map<std::array<float, 3>, std::uint32_t, fusion::ExactPositionHash> first_at;
   const auto meet = [&](const std::array<float, 3>& at, std::uint32_t piece) {
     const auto [it, fresh] = first_at.emplace(at, piece);
