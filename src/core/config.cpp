@@ -38,6 +38,7 @@ static mrpt::config::CConfigFileMemory defaultsOf(const std::vector<ConfigSectio
 // Keys earlier versions read whose values are now fixed in code, each with where the figures that
 // fixed it are. An old config naming one is still refused (the value would silently do nothing), but
 // not as a typo. From the history of share/*.ini.
+namespace {
 struct RetiredKey {
   const char* section;
   const char* key;
@@ -52,6 +53,7 @@ constexpr RetiredKey kRetiredKeys[] = {
     {"loop", "odometry_sigma_floor", "docs/loop-closure.md"},
     {"loop", "odometry_sigma_rate", "docs/loop-closure.md"},
 };
+}  // namespace
 
 static std::string unknownKeyMessage(const std::string& section, const std::string& key) {
   for (const RetiredKey& r : kRetiredKeys)

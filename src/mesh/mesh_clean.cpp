@@ -192,15 +192,16 @@ Soup soupOf(const TriangleMesh& m) {
 // `samples` points uniformly by area on the soup's faces, the same for the same soup: CGAL 5.5's
 // sample_triangle_soup draws the point inside each face from the thread's default generator, not
 // the seeded one, so its samples, and the distances reported, varied from run to run with the
-// order TBB gave regions to threads (rpy_first100: max 6.6-7.3 mm).
+// order TBB gave regions to threads (rpy_first100: max 6.2-7.3 mm).
 std::vector<Eigen::Vector3d> samplesByArea(const Soup& soup, std::size_t samples) {
   std::vector<double> cumulative;
   cumulative.reserve(soup.triangles.size());
   double total = 0.0;
+  std::size_t last_with_area = 0;  // where a pick rounded up to `total` lands
   for (const auto& t : soup.triangles) {
     const Point &a = soup.points[t[0]], &b = soup.points[t[1]], &c = soup.points[t[2]];
     const double area = std::sqrt(CGAL::squared_area(a, b, c));
-    total += std::isfinite(area) ? area : 0.0;
+    if (std::isfinite(area) && area > 0) total += area, last_with_area = cumulative.size();
     cumulative.push_back(total);
   }
   std::vector<Eigen::Vector3d> out;
@@ -211,8 +212,8 @@ std::vector<Eigen::Vector3d> samplesByArea(const Soup& soup, std::size_t samples
   const auto at = [&](std::size_t i) { return Eigen::Vector3d(soup.points[i].x(), soup.points[i].y(), soup.points[i].z()); };
   for (std::size_t n = 0; n < samples; ++n) {
     const double pick = unit(rng) * total;
-    const std::size_t f = std::min<std::size_t>(
-        std::size_t(std::upper_bound(cumulative.begin(), cumulative.end(), pick) - cumulative.begin()), cumulative.size() - 1);
+    const auto it = std::upper_bound(cumulative.begin(), cumulative.end(), pick);
+    const std::size_t f = it == cumulative.end() ? last_with_area : std::size_t(it - cumulative.begin());
     const double s = std::sqrt(unit(rng)), r = unit(rng);  // uniform on the triangle
     const auto& t = soup.triangles[f];
     out.push_back((1.0 - s) * at(t[0]) + s * (1.0 - r) * at(t[1]) + s * r * at(t[2]));
@@ -628,18 +629,18 @@ MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& se
       p.target_faces = 0;
     }
     Cleaner(p, report, nullptr, &work_seam, samples).run(work);
+    if (quadrics) {
+      MeshSimplification& s = report.simplification;
+      s.ran = true;
+      s.faces_before = mesh.faces.size();
+      s.faces_after = work.faces.size();
+      if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(work), soupOf(mesh), samples);
+      s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
     return report;
-  }
-  if (quadrics) {
-    MeshSimplification& s = report.simplification;
-    s.ran = true;
-    s.faces_before = mesh.faces.size();
-    s.faces_after = work.faces.size();
-    if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(work), soupOf(mesh), samples);
-    s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   mesh = std::move(work);
   seam = std::move(work_seam);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 namespace vofusion {
 
@@ -54,11 +55,16 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
   }
   if (tris_.empty()) return;
   // Twice the mean longest edge: a triangle spans one or two cells a side, and a query near the
-  // surface usually ends after its own cell and a few of its neighbours. A whole room's mesh would
-  // need too many such cells: then at most eight cells per triangle.
-  const Eigen::Vector3d extent = (hi - lo).cwiseMax(1e-9);
-  const double dense = std::cbrt(extent.prod() / (8.0 * double(tris_.size())));
-  cell_ = std::max({2.0 * edge_sum / double(tris_.size()), dense, extent.maxCoeff() * 1e-6});
+  // surface usually ends after its own cell and a few of its neighbours. A whole room's mesh, or a
+  // flat one, would need too many such cells: then larger ones, at most eight cells per triangle.
+  const Eigen::Vector3d extent = hi - lo;
+  const auto cellsOf = [&](double cell) {
+    double n = 1.0;
+    for (int i = 0; i < 3; ++i) n *= std::floor(extent[i] / cell) + 1.0;
+    return n;
+  };
+  cell_ = std::max({2.0 * edge_sum / double(tris_.size()), extent.maxCoeff() * 1e-6, 1e-12});
+  while (cellsOf(cell_) > 8.0 * double(tris_.size()) + 64.0) cell_ *= 1.25;
   origin_ = lo;
   for (int i = 0; i < 3; ++i) dims_[i] = std::int64_t(std::floor(extent[i] / cell_)) + 1;
   const auto index = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return std::size_t((z * dims_[1] + y) * dims_[0] + x); };
@@ -68,7 +74,17 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
       for (std::int64_t y = std::max<std::int64_t>(a[1], 0); y <= std::min(b[1], dims_[1] - 1); ++y)
         for (std::int64_t x = std::max<std::int64_t>(a[0], 0); x <= std::min(b[0], dims_[0] - 1); ++x) visit(index(x, y, z));
   };
-  // Counting sort into cells: counts, their running sum, then the ids.
+  // Counting sort into cells: counts, their running sum, then the ids. Long triangles among short
+  // ones are listed in many cells: more listings than 32-bit offsets hold is refused.
+  std::uint64_t listings = 0;
+  for (const auto& v : tris_) {
+    const Cell a = cellOf(v[0].cwiseMin(v[1]).cwiseMin(v[2])), b = cellOf(v[0].cwiseMax(v[1]).cwiseMax(v[2]));
+    std::uint64_t n = 1;
+    for (int i = 0; i < 3; ++i) n *= std::uint64_t(std::min(b[i], dims_[i] - 1) - std::max<std::int64_t>(a[i], 0) + 1);
+    listings += n;
+  }
+  if (listings > std::numeric_limits<std::uint32_t>::max())
+    throw std::length_error("NearestTriangle: " + std::to_string(listings) + " cell listings, more than 2^32");
   begin_.assign(std::size_t(dims_[0] * dims_[1] * dims_[2]) + 1, 0);
   for (const auto& v : tris_) forEachCell(v, [&](std::size_t c) { ++begin_[c + 1]; });
   for (std::size_t c = 1; c < begin_.size(); ++c) begin_[c] += begin_[c - 1];

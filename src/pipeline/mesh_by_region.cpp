@@ -121,7 +121,7 @@ class RawComponents {
     std::vector<std::uint8_t> drop(l.faces.size());
     for (std::size_t c = 0; c < drop.size(); ++c)
       drop[c] = l.seam_slot[c] < 0 ? small(l.faces[c], l.area[c]) : small_[seams_.find(std::uint32_t(l.seam_slot[c]))];
-    dropComponents(r, {l.of_vertex, {}, {}}, drop);
+    dropComponents(r, l.of_vertex, drop);
   }
 
  private:
@@ -232,30 +232,31 @@ RegionComponents componentsOf(const TriangleMesh& m) {
   UnionFind uf;
   uf.reset(m.vertices.size());
   for (const auto& f : m.faces) uf.unite(f[0], f[1]), uf.unite(f[1], f[2]);
-  RegionComponents l;
-  l.of_vertex.assign(m.vertices.size(), 0);
+  RegionComponents out;
+  out.of_vertex.assign(m.vertices.size(), 0);
   std::vector<std::int64_t> comp_of_root(m.vertices.size(), -1);
   for (std::uint32_t v = 0; v < m.vertices.size(); ++v) {
     std::int64_t& c = comp_of_root[uf.find(v)];
-    if (c < 0) c = std::int64_t(l.faces.size()), l.faces.push_back(0), l.area.push_back(0.0);
-    l.of_vertex[v] = std::uint32_t(c);
+    if (c < 0) c = std::int64_t(out.faces.size()), out.faces.push_back(0), out.area.push_back(0.0);
+    out.of_vertex[v] = std::uint32_t(c);
   }
   for (const auto& f : m.faces) {
     const Eigen::Vector3f& a = m.vertices[f[0]];
-    const std::uint32_t c = l.of_vertex[f[0]];
-    ++l.faces[c];
-    l.area[c] += 0.5 * double((m.vertices[f[1]] - a).cross(m.vertices[f[2]] - a).norm());
+    const std::uint32_t c = out.of_vertex[f[0]];
+    ++out.faces[c];
+    out.area[c] += 0.5 * double((m.vertices[f[1]] - a).cross(m.vertices[f[2]] - a).norm());
   }
-  return l;
+  return out;
 }
 
 bool smallFragment(std::uint64_t faces, double area, int min_faces, double min_area) {
   return (min_faces > 0 && faces < std::uint64_t(min_faces)) || (min_area > 0 && area < min_area);
 }
 
-void dropComponents(fusion::RegionMesh& r, const RegionComponents& components, const std::vector<std::uint8_t>& drop) {
+void dropComponents(fusion::RegionMesh& r, const std::vector<std::uint32_t>& component_of_vertex,
+                    const std::vector<std::uint8_t>& drop) {
   auto& f = r.mesh.faces;
-  f.erase(std::remove_if(f.begin(), f.end(), [&](const auto& t) { return drop[components.of_vertex[t[0]]] != 0; }), f.end());
+  f.erase(std::remove_if(f.begin(), f.end(), [&](const auto& t) { return drop[component_of_vertex[t[0]]] != 0; }), f.end());
 }
 
 MeshCleanParams regionSimplifyParams(const MeshCleanParams& params) {

@@ -7,6 +7,7 @@
 #include "vofusion/core/progress.h"
 #include "vofusion/mesh/mesh_io.h"
 #include "vofusion/pipeline/mesh_by_region.h"
+#include "vofusion/pipeline/region_premesher.h"
 
 using nlohmann::json;
 

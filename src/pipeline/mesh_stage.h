@@ -5,11 +5,12 @@
 #include "vofusion/core/triangle_mesh.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/pipeline/reconstruction.h"
-#include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/pipeline/run_outputs.h"
 #include "staged_outputs.h"
 
 namespace vofusion {
+
+class RegionPremesher;
 
 // Whether writeMeshes meshes region by region (mesh.ply cleaned, regions on, no mesh_full.ply).
 bool meshesByRegion(const OutputParams& params, const MeshCleanParams& mesh_params);

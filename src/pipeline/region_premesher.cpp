@@ -4,6 +4,8 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -15,16 +17,12 @@ namespace vofusion {
 
 namespace {
 
-using Key = RegionPremesher::Key;
-
-Key keyOf(const Eigen::Vector3i& r) { return {r.x(), r.y(), r.z()}; }
-Eigen::Vector3i vectorOf(const Key& k) { return {k[0], k[1], k[2]}; }
-
-int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+std::array<int, 3> keyOf(const Eigen::Vector3i& r) { return {r.x(), r.y(), r.z()}; }
+Eigen::Vector3i vectorOf(const std::array<int, 3>& k) { return {k[0], k[1], k[2]}; }
 
 // The 26 regions round a region.
-std::vector<Key> neighboursOf(const Key& k) {
-  std::vector<Key> out;
+std::vector<std::array<int, 3>> neighboursOf(const std::array<int, 3>& k) {
+  std::vector<std::array<int, 3>> out;
   for (int dx = -1; dx <= 1; ++dx)
     for (int dy = -1; dy <= 1; ++dy)
       for (int dz = -1; dz <= 1; ++dz)
@@ -66,8 +64,14 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const Eige
   box_bricks_ = volume.bricksPerSide();
   origin_ = volume.originBrick();
   // Regions the volume reaches now may change: what was made of them is stale.
+  // The regions whose range can meet a box of bricks [o, o + n): from the one holding brick o - 1 to
+  // the one holding o + n - 1.
+  const auto regionsNear = [&](const Eigen::Vector3i& o, Eigen::Vector3i& first, Eigen::Vector3i& last) {
+    first = fusion::regionOf(o - Eigen::Vector3i::Ones(), rb);
+    last = fusion::regionOf(o + Eigen::Vector3i::Constant(box_bricks_ - 1), rb);
+  };
   Eigen::Vector3i first, last;
-  for (int i = 0; i < 3; ++i) first[i] = floorDiv(origin_[i] - 1, rb), last[i] = floorDiv(origin_[i] + box_bricks_ - 1, rb);
+  regionsNear(origin_, first, last);
   for (int x = first.x(); x <= last.x(); ++x)
     for (int y = first.y(); y <= last.y(); ++y)
       for (int z = first.z(); z <= last.z(); ++z) {
@@ -77,9 +81,11 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const Eige
         pieces_.erase(k);
         empty_.erase(k);
         done_.erase(k);
+        // Its neighbours were judged with its pieces: judged again once it has left.
+        for (const Key& n : neighboursOf(k)) done_.erase(n);
       }
   // Regions it reached before and does not now are final until it comes back.
-  for (int i = 0; i < 3; ++i) first[i] = floorDiv(old_origin[i] - 1, rb), last[i] = floorDiv(old_origin[i] + box_bricks_ - 1, rb);
+  regionsNear(old_origin, first, last);
   bool queued = false;
   for (int x = first.x(); x <= last.x(); ++x)
     for (int y = first.y(); y <= last.y(); ++y)
@@ -100,6 +106,11 @@ void RegionPremesher::stop() {
   }
   wake_.notify_one();
   if (thread_.joinable()) thread_.join();
+  // What only the thread needed, before the end's meshing (the run's peak) begins.
+  pieces_.clear();
+  empty_.clear();
+  generation_.clear();
+  scratch_ = {};
 }
 
 void RegionPremesher::run() {
@@ -123,7 +134,7 @@ void RegionPremesher::run() {
         simplifyIfReady(region);
         for (const Key& n : neighboursOf(region)) simplifyIfReady(n);
       });
-    } catch (const std::exception&) {
+    } catch (...) {
       // A spilled brick that does not read back (or no memory): the end meshes this region and
       // reports what is wrong with it there.
     }
@@ -141,10 +152,13 @@ fusion::RegionMesh RegionPremesher::march(const Key& region, bool& ok) {
   const int rb = params_.region_bricks;
   const Eigen::Vector3i lo = vectorOf(region) * rb;
   ok = true;
-  const std::vector<Eigen::Vector3i> own = world->coordsInBox(lo, rb);
+  std::vector<Eigen::Vector3i> own;
+  std::unordered_set<std::uint64_t> reach;  // own and +1 bricks: one scan of the world model
+  for (const Eigen::Vector3i& c : world->coordsInBox(lo, rb + 1)) {
+    reach.insert(fusion::WorldModel::key(c));
+    if (((c - lo).array() < rb).all()) own.push_back(c);
+  }
   if (own.empty()) return {};
-  std::unordered_set<std::uint64_t> reach;
-  for (const Eigen::Vector3i& c : world->coordsInBox(lo, rb + 1)) reach.insert(fusion::WorldModel::key(c));
   const fusion::BrickFetch fetch = [&](const Eigen::Vector3i& c, fusion::Brick& scratch) -> const fusion::Brick* {
     if (!world->read(c, scratch)) throw BrickTakenBack{};
     return &scratch;
@@ -183,42 +197,54 @@ void RegionPremesher::summarise(const Key& region) {
   const std::lock_guard<std::mutex> lock(mutex_);
   if (generation_[region] != generation) return;  // the volume came back meanwhile
   if (r.mesh.faces.empty()) empty_.insert(region);
-  else pieces_[region] = std::move(p);
+  else pieces_[region] = std::make_shared<const SeamPieces>(std::move(p));
 }
 
+// The region is marched again here rather than kept from summarise(): regions wait for their
+// neighbours while others are marched, and holding their raw meshes (~4 MB a region of the long walk)
+// would cost more memory than marching again costs time.
 void RegionPremesher::simplifyIfReady(const Key& region) {
+  const int rb = params_.region_bricks;
   std::uint64_t generation;
-  std::vector<SeamPieces> neighbours;  // copies: the map may change while this one works
+  std::vector<std::shared_ptr<const SeamPieces>> neighbours;
+  std::vector<Key> unknown;  // final neighbours neither summarised nor known empty
+  const fusion::WorldModel* world;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
     if (stopping_ || !pieces_.count(region) || done_.count(region)) return;
     for (const Key& n : neighboursOf(region)) {
       if (!finalNow(n)) return;
       if (const auto it = pieces_.find(n); it != pieces_.end()) neighbours.push_back(it->second);
-      else if (empty_.count(n)) continue;
-      // Never reached by the volume (no bricks, and none can come while it is final), or summarised
-      // yet to be.
-      else if (world_->coordsInBox(vectorOf(n) * params_.region_bricks, params_.region_bricks).empty()) empty_.insert(n);
-      else return;
+      else if (!empty_.count(n)) unknown.push_back(n);
     }
     generation = generation_[region];
+    world = world_;
+  }
+  if (!unknown.empty()) {
+    // One scan of the world model for the block round the region, outside the lock the fusion thread
+    // takes at a shift. A final neighbour without bricks was never reached (none can come while it
+    // is final); one with bricks is to be summarised yet: wait for it.
+    std::set<Key> with_bricks;
+    for (const Eigen::Vector3i& b : world->coordsInBox((vectorOf(region) - Eigen::Vector3i::Ones()) * rb, 3 * rb))
+      with_bricks.insert(keyOf(fusion::regionOf(b, rb)));
+    const std::lock_guard<std::mutex> lock(mutex_);
+    for (const Key& n : unknown) {
+      if (with_bricks.count(n)) return;
+      if (finalNow(n)) empty_.insert(n);
+    }
   }
   bool ok = false;
   fusion::RegionMesh r = march(region, ok);
   if (!ok || r.mesh.faces.empty()) return;
   const RegionComponents c = componentsOf(r.mesh);
-  std::vector<const SeamPieces*> around;
-  for (const SeamPieces& n : neighbours) around.push_back(&n);
   std::vector<std::uint8_t> drop;
-  if (!judge(region, r, c, around, drop)) return;
-  dropComponents(r, c, drop);
+  if (!judge(r, c, neighbours, drop)) return;
+  dropComponents(r, c.of_vertex, drop);
   PremeshedRegion done;
   done.input_hash = regionInputHash(r);
-  try {
-    done.report = simplifyRegion(r.mesh, r.on_seam, region_params_);
-  } catch (const std::exception&) {
-    return;  // the end simplifies it, and reports what failed
-  }
+  done.report = simplifyRegion(r.mesh, r.on_seam, region_params_);
+  // A region that failed (no memory, say) is left to the end, which reports it if it fails there too.
+  if (!done.report.success) return;
   done.mesh = std::move(r.mesh);
   done.on_seam = std::move(r.on_seam);
   const std::lock_guard<std::mutex> lock(mutex_);
@@ -227,8 +253,9 @@ void RegionPremesher::simplifyIfReady(const Key& region) {
   ++meshed_;
 }
 
-bool RegionPremesher::judge(const Key&, const fusion::RegionMesh& r, const RegionComponents& c,
-                            const std::vector<const SeamPieces*>& neighbours, std::vector<std::uint8_t>& drop) const {
+bool RegionPremesher::judge(const fusion::RegionMesh& r, const RegionComponents& c,
+                            const std::vector<std::shared_ptr<const SeamPieces>>& neighbours,
+                            std::vector<std::uint8_t>& drop) const {
   const int min_faces = params_.min_component_faces;
   const double min_area = params_.min_component_area;
   drop.assign(c.faces.size(), 0);
@@ -236,7 +263,7 @@ bool RegionPremesher::judge(const Key&, const fusion::RegionMesh& r, const Regio
   // Pieces: this region's components, then each neighbour's; joined where they share a seam vertex.
   std::vector<std::size_t> base{0};
   base.push_back(c.faces.size());
-  for (const SeamPieces* n : neighbours) base.push_back(base.back() + n->faces.size());
+  for (const auto& n : neighbours) base.push_back(base.back() + n->faces.size());
   UnionFind joins;
   joins.reset(base.back());
   std::unordered_map<std::array<float, 3>, std::uint32_t, fusion::ExactPositionHash> first_at;
@@ -261,7 +288,7 @@ bool RegionPremesher::judge(const Key&, const fusion::RegionMesh& r, const Regio
   // them spans a whole region (region_bricks * 8 cells, one face at least in each), more faces than
   // min_component_faces. An area bound has no such guarantee: a component it would call small is left
   // to the end.
-  const std::uint64_t span = std::uint64_t(params_.region_bricks) * 8;
+  const std::uint64_t span = std::uint64_t(params_.region_bricks) * fusion::kBrickEdge;
   for (std::uint32_t comp = 0; comp < c.faces.size(); ++comp) {
     if (!on_seam[comp]) {
       drop[comp] = smallFragment(c.faces[comp], c.area[comp], min_faces, min_area);
@@ -276,6 +303,7 @@ bool RegionPremesher::judge(const Key&, const fusion::RegionMesh& r, const Regio
 }
 
 PremeshedLookup RegionPremesher::lookup() const {
+  if (thread_.joinable()) throw std::logic_error("RegionPremesher::lookup before stop()");
   return [this](const Eigen::Vector3i& region, std::uint64_t input_hash) -> const PremeshedRegion* {
     const std::lock_guard<std::mutex> lock(mutex_);
     const auto it = done_.find(keyOf(region));

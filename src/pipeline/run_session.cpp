@@ -8,6 +8,7 @@
 
 #include <mrpt/config/CConfigFileMemory.h>
 
+#include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/pose_eigen.h"

@@ -147,8 +147,9 @@ class KinFu {
                      bool coloured = false) const;
   MapStats stats() const;
   const fusion::TsdfVolume& volume() const;
-  // Called on the fusion thread after each shift of the volume, with the volume (moved) and its first
-  // brick before the shift. One observer; an empty function removes it.
+  // Called on the thread that moves the volume (fusion; relocalisation's predictAgain) after each
+  // shift, with the volume (moved) and its first brick before the shift. One observer, set before
+  // the first frame (setting it while frames are fused races with the call).
   using ShiftObserver = std::function<void(const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin)>;
   void setShiftObserver(ShiftObserver observer);
   const KinFuParams& params() const;

@@ -16,11 +16,13 @@ namespace vofusion {
 class NearestTriangle {
  public:
   // Triangles as indices into `points`; both are copied. Cells are twice the mean longest edge, or
-  // larger where the box would otherwise hold more than eight cells per triangle.
+  // larger where the box would otherwise hold more than eight cells per triangle. Throws
+  // std::length_error when the triangles would be listed in more than 2^32 cells in all.
   NearestTriangle(const std::vector<Eigen::Vector3d>& points, const std::vector<std::array<std::size_t, 3>>& triangles);
 
   bool empty() const { return tris_.empty(); }
-  // The nearest point of the surface to p (undefined when empty(); NaN when p is not finite).
+  // The nearest point of the surface to p (undefined when empty(); NaN when p is not finite). Exact
+  // for any p within 1e15 cells of the mesh.
   Eigen::Vector3d closestPoint(const Eigen::Vector3d& p) const;
   double distance(const Eigen::Vector3d& p) const { return (closestPoint(p) - p).norm(); }
 

@@ -45,7 +45,8 @@ struct RegionComponents {
 };
 RegionComponents componentsOf(const TriangleMesh& m);
 bool smallFragment(std::uint64_t faces, double area, int min_faces, double min_area);
-void dropComponents(fusion::RegionMesh& r, const RegionComponents& components, const std::vector<std::uint8_t>& drop);
+void dropComponents(fusion::RegionMesh& r, const std::vector<std::uint32_t>& component_of_vertex,
+                    const std::vector<std::uint8_t>& drop);
 MeshCleanParams regionSimplifyParams(const MeshCleanParams& params);
 // Every bit simplifyRegion reads of a region (positions, normals, colours, faces, seam flags, region).
 std::uint64_t regionInputHash(const fusion::RegionMesh& r);

@@ -17,6 +17,7 @@
 #include <condition_variable>
 #include <deque>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -41,10 +42,12 @@ class RegionPremesher {
   // Ends the thread once the region in hand is done (no other is started); idempotent.
   void stop();
 
-  // After stop(): the regions made, for meshByRegion.
+  // After stop() (throws std::logic_error before): the regions made, for a meshByRegion with the
+  // same MeshCleanParams as this.
   PremeshedLookup lookup() const;
   std::size_t regionsMeshed() const;  // simplified during the run (a region made again counts again)
 
+ private:
   using Key = std::array<int, 3>;
   // A region's raw components that touch a seam: what its neighbours need to judge theirs.
   struct SeamPieces {
@@ -53,7 +56,6 @@ class RegionPremesher {
     std::vector<std::pair<std::array<float, 3>, std::uint32_t>> seam_vertices;  // exact position, component
   };
 
- private:
   void run();
   void summarise(const Key& region);
   void simplifyIfReady(const Key& region);
@@ -62,8 +64,8 @@ class RegionPremesher {
   fusion::RegionMesh march(const Key& region, bool& ok);
   // Which of the region's components are fragments, those on seams judged with the neighbours'
   // pieces; false when one cannot be judged here (then the end does it).
-  bool judge(const Key& region, const fusion::RegionMesh& r, const RegionComponents& c,
-             const std::vector<const SeamPieces*>& neighbours, std::vector<std::uint8_t>& drop) const;
+  bool judge(const fusion::RegionMesh& r, const RegionComponents& c,
+             const std::vector<std::shared_ptr<const SeamPieces>>& neighbours, std::vector<std::uint8_t>& drop) const;
 
   const MeshCleanParams params_;
   const MeshCleanParams region_params_;
@@ -76,7 +78,7 @@ class RegionPremesher {
   Eigen::Vector3i origin_ = Eigen::Vector3i::Zero();  // the volume's box now
   int box_bricks_ = 0;
   std::map<Key, std::uint64_t> generation_;  // bumped when the volume reaches a region again
-  std::map<Key, SeamPieces> pieces_;         // final regions summarised (with bricks)
+  std::map<Key, std::shared_ptr<const SeamPieces>> pieces_;  // final regions summarised (with bricks)
   std::set<Key> empty_;                      // final regions without bricks
   std::map<Key, PremeshedRegion> done_;
   std::size_t meshed_ = 0;

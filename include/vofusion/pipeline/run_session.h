@@ -17,11 +17,12 @@
 #include <nlohmann/json.hpp>
 
 #include "vofusion/io/frame_source.h"
-#include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
 
 namespace vofusion {
+
+class RegionPremesher;
 
 class RunSession {
  public:
