@@ -229,8 +229,8 @@ void RegionPremesher::simplifyIfReady(const Key& region) {
       with_bricks.insert(keyOf(fusion::regionOf(b, rb)));
     const std::lock_guard<std::mutex> lock(mutex_);
     for (const Key& n : unknown) {
-      if (with_bricks.count(n)) return;
-      if (finalNow(n)) empty_.insert(n);
+      if (with_bricks.count(n) || !finalNow(n)) return;  // to be summarised, or reached again meanwhile
+      empty_.insert(n);
     }
   }
   bool ok = false;
