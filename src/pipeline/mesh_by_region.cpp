@@ -415,7 +415,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     step.faces_before += r.mesh.faces.size();
     if (fragments) fragments->filter(r);
     if (premeshed)
-      if (const PremeshedRegion* done = premeshed(r.region, regionInputHash(r))) {
+      if (const PremeshedRegion* done = premeshed(r)) {
         r.mesh = done->mesh;
         r.on_seam = done->on_seam;
         ++out.regions_premeshed;

@@ -63,38 +63,32 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const Eige
   voxel_size_ = volume.params().voxel_size;
   box_bricks_ = volume.bricksPerSide();
   origin_ = volume.originBrick();
-  // Regions the volume reaches now may change: what was made of them is stale.
-  // The regions whose range can meet a box of bricks [o, o + n): from the one holding brick o - 1 to
-  // the one holding o + n - 1.
-  const auto regionsNear = [&](const Eigen::Vector3i& o, Eigen::Vector3i& first, Eigen::Vector3i& last) {
-    first = fusion::regionOf(o - Eigen::Vector3i::Ones(), rb);
-    last = fusion::regionOf(o + Eigen::Vector3i::Constant(box_bricks_ - 1), rb);
+  // Calls f for each region the box of bricks [o, o + n) reaches (from the region holding brick o - 1
+  // to the one holding o + n - 1, those whose range meets the box).
+  const auto forRegionsReached = [&](const Eigen::Vector3i& o, const auto& f) {
+    const Eigen::Vector3i first = fusion::regionOf(o - Eigen::Vector3i::Ones(), rb);
+    const Eigen::Vector3i last = fusion::regionOf(o + Eigen::Vector3i::Constant(box_bricks_ - 1), rb);
+    for (int x = first.x(); x <= last.x(); ++x)
+      for (int y = first.y(); y <= last.y(); ++y)
+        for (int z = first.z(); z <= last.z(); ++z)
+          if (const Key k{x, y, z}; reaches(k, o)) f(k);
   };
-  Eigen::Vector3i first, last;
-  regionsNear(origin_, first, last);
-  for (int x = first.x(); x <= last.x(); ++x)
-    for (int y = first.y(); y <= last.y(); ++y)
-      for (int z = first.z(); z <= last.z(); ++z) {
-        const Key k{x, y, z};
-        if (!reaches(k, origin_)) continue;
-        ++generation_[k];
-        pieces_.erase(k);
-        empty_.erase(k);
-        done_.erase(k);
-        // Its neighbours were judged with its pieces: judged again once it has left.
-        for (const Key& n : neighboursOf(k)) done_.erase(n);
-      }
+  // Regions the volume reaches now may change: what was made of them is stale, and so are their
+  // neighbours' judgements made with their pieces.
+  forRegionsReached(origin_, [&](const Key& k) {
+    ++generation_[k];
+    pieces_.erase(k);
+    empty_.erase(k);
+    done_.erase(k);
+    for (const Key& n : neighboursOf(k)) done_.erase(n);
+  });
   // Regions it reached before and does not now are final until it comes back.
-  regionsNear(old_origin, first, last);
   bool queued = false;
-  for (int x = first.x(); x <= last.x(); ++x)
-    for (int y = first.y(); y <= last.y(); ++y)
-      for (int z = first.z(); z <= last.z(); ++z) {
-        const Key k{x, y, z};
-        if (!reaches(k, old_origin) || reaches(k, origin_)) continue;
-        queue_.push_back(k);
-        queued = true;
-      }
+  forRegionsReached(old_origin, [&](const Key& k) {
+    if (reaches(k, origin_)) return;
+    queue_.push_back(k);
+    queued = true;
+  });
   if (queued) wake_.notify_one();
 }
 
@@ -304,10 +298,11 @@ bool RegionPremesher::judge(const fusion::RegionMesh& r, const RegionComponents&
 
 PremeshedLookup RegionPremesher::lookup() const {
   if (thread_.joinable()) throw std::logic_error("RegionPremesher::lookup before stop()");
-  return [this](const Eigen::Vector3i& region, std::uint64_t input_hash) -> const PremeshedRegion* {
+  // Hashed only for a region made during the run: most regions of a short run have none.
+  return [this](const fusion::RegionMesh& r) -> const PremeshedRegion* {
     const std::lock_guard<std::mutex> lock(mutex_);
-    const auto it = done_.find(keyOf(region));
-    return it != done_.end() && it->second.input_hash == input_hash ? &it->second : nullptr;
+    const auto it = done_.find(keyOf(r.region));
+    return it != done_.end() && it->second.input_hash == regionInputHash(r) ? &it->second : nullptr;
   };
 }
 

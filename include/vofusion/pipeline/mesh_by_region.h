@@ -31,8 +31,8 @@ struct PremeshedRegion {
   std::vector<std::uint8_t> on_seam;
   MeshCleanReport report;
 };
-// The region `region` simplified during the run from an input hashing to `input_hash`, or null.
-using PremeshedLookup = std::function<const PremeshedRegion*(const Eigen::Vector3i& region, std::uint64_t input_hash)>;
+// The region simplified during the run from exactly what `r` holds (regionInputHash), or null.
+using PremeshedLookup = std::function<const PremeshedRegion*(const fusion::RegionMesh& r)>;
 
 // How meshByRegion prepares a region for simplifyRegion, for whoever simplifies one beforehand. Its
 // connected components are judged as fragments (smallFragment: [mesh] min_component_faces / _area),
