@@ -1,5 +1,7 @@
 // Depth preprocessing on analytic surfaces: bilateral filter, pyramid, vertex and normal maps.
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <random>
 
 #include "support.h"
@@ -79,6 +81,33 @@ TEST(Bilateral, PreservesDepthEdges) {
   for (int v = 0; v < 100; ++v) {
     EXPECT_NEAR(f.at<float>(v, 49), 1.0f, 1e-3);
     EXPECT_NEAR(f.at<float>(v, 50), 1.5f, 1e-3);
+  }
+}
+
+// The AVX2 loop must give the scalar loop's bytes: holes, depth edges, readings far apart (outside the
+// range table), NaN and infinity, widths that leave part-full runs of eight, and a view into a larger image.
+TEST(Bilateral, EightAtATimeGivesTheScalarLoopsBytes) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> depth(0.5f, 3.f), jitter(-0.05f, 0.05f), u01(0.f, 1.f);
+  for (const cv::Size size : {cv::Size(320, 240), cv::Size(37, 11), cv::Size(9, 9)}) {
+    cv::Mat big(size.height + 4, size.width + 6, CV_32F);
+    float base = depth(rng);
+    for (auto it = big.begin<float>(); it != big.end<float>(); ++it) {
+      const float p = u01(rng);
+      if (p < 0.02f) base = depth(rng);  // a depth edge
+      *it = p < 0.1f ? 0.f : p < 0.11f ? -1.f : base + jitter(rng);
+    }
+    big.at<float>(3, 5) = std::numeric_limits<float>::quiet_NaN();
+    big.at<float>(4, 9) = std::numeric_limits<float>::infinity();
+    const cv::Mat view = big(cv::Rect(3, 2, size.width, size.height));
+    for (const int kernel : {3, 5, 7}) {
+      const cv::Mat simd = bilateralFilterDepth(view, 0.04f, 2.f, kernel, true);
+      const cv::Mat scalar = bilateralFilterDepth(view, 0.04f, 2.f, kernel, false);
+      ASSERT_EQ(simd.size(), scalar.size());
+      for (int v = 0; v < simd.rows; ++v)
+        ASSERT_EQ(0, std::memcmp(simd.ptr(v), scalar.ptr(v), simd.cols * sizeof(float)))
+            << size << " kernel " << kernel << " row " << v;
+    }
   }
 }
 
