@@ -2,6 +2,7 @@
 // fallback on a bare wall, and volume shifting along a long corridor.
 #include <cstdio>
 #include <random>
+#include <sstream>
 
 #include <mrpt/config/CConfigFile.h>
 #include <mrpt/config/CConfigFileMemory.h>
@@ -161,54 +162,100 @@ TEST(KinFu, TracksTheRoomInEveryMode) {
   EXPECT_LT(odo.max_error, 0.005);
 }
 
+// The corridor walked with a volume that shifts along it (18 s: ~7 m), and meshing regions of 8^3
+// bricks (64 cells a side: a seam fragment is judged with the neighbours' pieces).
+struct PremeshingCorridor {
+  sim::SyntheticSequence seq{options()};
+  KinFuParams params = kinfuParams();
+  MeshCleanParams mesh;  // defaults: fragments under 50 faces go, error-bounded simplification
+
+  PremeshingCorridor() { mesh.region_bricks = 8; }
+  static sim::SimOptions options() {
+    sim::SimOptions o = simOpts("corridor", 90);
+    o.fps = 5;
+    return o;
+  }
+  static KinFuParams kinfuParams() {
+    KinFuParams p = testParams();
+    p.tsdf.volume_voxels = 160;  // 3.2 m: shifts along the corridor
+    p.tsdf.voxel_size = 0.02f;
+    p.tsdf.truncation = 0.06f;
+    p.focus_distance = 1.0f;
+    p.tsdf.max_depth = 2.0f;
+    return p;
+  }
+  // Frames [first, last) with a noisy odometry prior.
+  void track(Tracker& kf, std::size_t first, std::size_t last) const {
+    std::mt19937 rng(7);
+    for (std::size_t i = first; i < last; ++i) {
+      fusion::MotionPrior prior;
+      if (i > 0) prior = noisyPrior(seq, i, rng, 0.0, 0.1 * M_PI / 180, 0);
+      kf.process(seq.render(i), i > 0 ? &prior : nullptr);
+    }
+  }
+  static void observe(Tracker& kf, RegionPremesher& premesher) {
+    kf.setShiftObserver([&premesher](const fusion::TsdfVolume& v, const std::optional<Eigen::Vector3i>& old) {
+      premesher.volumeShifted(v, old);
+    });
+  }
+  // Meshing at the end of kf's map with the regions premesher made gives the mesh meshing alone gives.
+  std::size_t expectTheMeshOfMeshingAtTheEnd(const Tracker& kf, const RegionPremesher& premesher) const {
+    const auto regions = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
+      kf.volume().extractMeshByRegion(mesh.region_bricks, sink);
+    };
+    const RegionMeshResult alone = meshByRegion(regions, mesh);
+    const RegionMeshResult with = meshByRegion(regions, mesh, "", {}, {}, premesher.lookup());
+    std::printf("regions %zu, simplified while tracking %zu, taken at the end %zu\n", with.regions,
+                premesher.regionsMeshed(), with.regions_premeshed);
+    EXPECT_LT(with.regions_premeshed, with.regions);  // those the volume still reaches are made at the end
+    EXPECT_GT(alone.mesh.faces.size(), 2000u);
+    EXPECT_EQ(with.mesh.faces, alone.mesh.faces);
+    EXPECT_EQ(with.mesh.vertices, alone.mesh.vertices);
+    EXPECT_EQ(with.mesh.colors, alone.mesh.colors);
+    EXPECT_EQ(with.report.simplification.faces_after, alone.report.simplification.faces_after);
+    return with.regions_premeshed;
+  }
+};
+
 // Meshing while tracking: the regions the shifting volume leaves behind are simplified during the
 // run, and meshing at the end takes them and gives the mesh it makes alone, bit for bit.
 TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
-  sim::SimOptions o = simOpts("corridor", 90);
-  o.fps = 5;  // 18 s: ~7 m along the corridor
-  const sim::SyntheticSequence seq(o);
-  KinFuParams p = testParams();
-  p.tsdf.volume_voxels = 160;  // 3.2 m: shifts along the corridor
-  p.tsdf.voxel_size = 0.02f;
-  p.tsdf.truncation = 0.06f;
-  p.focus_distance = 1.0f;
-  p.tsdf.max_depth = 2.0f;
-  MeshCleanParams mp;  // defaults: fragments under 50 faces go, error-bounded simplification
-  mp.region_bricks = 8;  // 64 cells a side: a seam fragment is judged with the neighbours' pieces
-  RegionPremesher premesher(mp);
-  Tracker kf(p, TrackingMode::Odometry, seq.groundTruth(0));
-  kf.setShiftObserver([&](const fusion::TsdfVolume& v, const Eigen::Vector3i& old) { premesher.volumeShifted(v, old); });
-  std::mt19937 rng(7);
-  for (std::size_t i = 0; i < seq.size(); ++i) {
-    fusion::MotionPrior prior;
-    if (i > 0) prior = noisyPrior(seq, i, rng, 0.0, 0.1 * M_PI / 180, 0);
-    kf.process(seq.render(i), i > 0 ? &prior : nullptr);
-  }
+  const PremeshingCorridor c;
+  RegionPremesher premesher(c.mesh);
+  Tracker kf(c.params, TrackingMode::Odometry, c.seq.groundTruth(0));
+  PremeshingCorridor::observe(kf, premesher);
+  c.track(kf, 0, c.seq.size());
+  premesher.waitIdle();
   premesher.stop();
   EXPECT_GT(kf.stats().shifts, 3u);
-  const auto regions = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
-    kf.volume().extractMeshByRegion(mp.region_bricks, sink);
-  };
-  const RegionMeshResult alone = meshByRegion(regions, mp);
-  const RegionMeshResult with = meshByRegion(regions, mp, "", {}, {}, premesher.lookup());
-  std::printf("regions %zu, simplified while tracking %zu, taken at the end %zu\n", with.regions,
-              premesher.regionsMeshed(), with.regions_premeshed);
-  EXPECT_GE(with.regions_premeshed, 2u);
-  EXPECT_LT(with.regions_premeshed, with.regions);  // those the volume still reaches are made at the end
-  ASSERT_GT(alone.mesh.faces.size(), 2000u);
-  EXPECT_EQ(with.mesh.faces, alone.mesh.faces);
-  EXPECT_EQ(with.mesh.vertices, alone.mesh.vertices);
-  EXPECT_EQ(with.mesh.colors, alone.mesh.colors);
-  EXPECT_EQ(with.report.simplification.faces_after, alone.report.simplification.faces_after);
+  EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(kf, premesher), 2u);
   // A region is taken only for the input it was made from: with one colour bit changed in each
   // (a face less could fall in a fragment the end drops anyway), none is.
   const auto changed = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
-    kf.volume().extractMeshByRegion(mp.region_bricks, [&](fusion::RegionMesh& r) {
+    kf.volume().extractMeshByRegion(c.mesh.region_bricks, [&](fusion::RegionMesh& r) {
       r.mesh.colors.at(0)[0] ^= 1;
       sink(r);
     });
   };
-  EXPECT_EQ(meshByRegion(changed, mp, "", {}, {}, premesher.lookup()).regions_premeshed, 0u);
+  EXPECT_EQ(meshByRegion(changed, c.mesh, "", {}, {}, premesher.lookup()).regions_premeshed, 0u);
+}
+
+// A run resumed from a checkpoint: the regions the volume had left before it are queued when the map
+// is loaded (they were queued only as the volume left them, in the run that saved it).
+TEST(KinFu, RegionsLeftBeforeACheckpointAreMeshedAfterItIsLoaded) {
+  const PremeshingCorridor c;
+  Tracker saved(c.params, TrackingMode::Odometry, c.seq.groundTruth(0));
+  c.track(saved, 0, c.seq.size());
+  ASSERT_GT(saved.stats().shifts, 3u);
+  std::stringstream checkpoint;
+  saved.saveState(checkpoint);
+  RegionPremesher premesher(c.mesh);
+  Tracker resumed(c.params, TrackingMode::Odometry, c.seq.groundTruth(0));
+  PremeshingCorridor::observe(resumed, premesher);
+  resumed.loadState(checkpoint);
+  premesher.waitIdle();
+  premesher.stop();
+  EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(resumed, premesher), 2u);
 }
 
 TEST(KinFu, CorridorMeshWithShiftingCoversWhatABigVolumeCovers) {

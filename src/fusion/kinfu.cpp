@@ -187,6 +187,7 @@ Eigen::Isometry3d KinFu::resume(const std::string& path) {
   s.model_stale = true;
   s.model_depth.release();
   s.model.intensity.clear();
+  if (s.on_shift) s.on_shift(*s.volume, std::nullopt);
   Eigen::Isometry3d pose;
   pose.matrix() = T;
   return pose;
@@ -233,6 +234,7 @@ void KinFu::loadState(std::istream& is) {
     state::read(a, s.model_depth);
   }
   s.volume->load(is);
+  if (s.on_shift) s.on_shift(*s.volume, std::nullopt);
 }
 
 cv::Mat KinFu::renderView(const mrpt::poses::CPose3D& cam_to_world, const CameraIntrinsics& cam, bool coloured) const {

@@ -55,7 +55,7 @@ bool RegionPremesher::reaches(const Key& region, const Eigen::Vector3i& origin) 
 
 bool RegionPremesher::finalNow(const Key& region) const { return box_bricks_ > 0 && !reaches(region, origin_); }
 
-void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin) {
+void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin) {
   const int rb = params_.region_bricks;
   const std::lock_guard<std::mutex> lock(mutex_);
   if (stopping_) return;
@@ -82,14 +82,26 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const Eige
     done_.erase(k);
     for (const Key& n : neighboursOf(k)) done_.erase(n);
   });
-  // Regions it reached before and does not now are final until it comes back.
+  // Regions it reached before and does not now are final until it comes back; after a load, every
+  // region of the map it does not reach.
+  std::set<Key> final_now;
+  if (old_origin) {
+    forRegionsReached(*old_origin, [&](const Key& k) { final_now.insert(k); });
+  } else {
+    for (const Eigen::Vector3i& b : world_->coords()) final_now.insert(keyOf(fusion::regionOf(b, rb)));
+  }
   bool queued = false;
-  forRegionsReached(old_origin, [&](const Key& k) {
-    if (reaches(k, origin_)) return;
+  for (const Key& k : final_now) {
+    if (reaches(k, origin_)) continue;
     queue_.push_back(k);
     queued = true;
-  });
+  }
   if (queued) wake_.notify_one();
+}
+
+void RegionPremesher::waitIdle() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  idle_.wait(lock, [&] { return stopping_ || (queue_.empty() && !in_hand_); });
 }
 
 void RegionPremesher::stop() {
@@ -99,6 +111,7 @@ void RegionPremesher::stop() {
     queue_.clear();
   }
   wake_.notify_one();
+  idle_.notify_all();
   if (thread_.joinable()) thread_.join();
   // What only the thread needed, before the end's meshing (the run's peak) begins.
   pieces_.clear();
@@ -120,6 +133,7 @@ void RegionPremesher::run() {
       if (stopping_) return;
       region = queue_.front();
       queue_.pop_front();
+      in_hand_ = true;
     }
     try {
       alone.execute([&] {
@@ -132,6 +146,9 @@ void RegionPremesher::run() {
       // A spilled brick that does not read back (or no memory): the end meshes this region and
       // reports what is wrong with it there.
     }
+    const std::lock_guard<std::mutex> lock(mutex_);
+    in_hand_ = false;
+    if (queue_.empty()) idle_.notify_all();
   }
 }
 

@@ -68,7 +68,8 @@ RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mo
     : rec_(cfg, mode), recorder_(out_dir, out_params, mesh_params), write_mesh_(out_params.write_mesh) {
   if (meshesByRegion(out_params, mesh_params)) {
     premesher_ = std::make_unique<RegionPremesher>(mesh_params);
-    rec_.setShiftObserver([p = premesher_.get()](const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin) {
+    rec_.setShiftObserver([p = premesher_.get()](const fusion::TsdfVolume& volume,
+                                                 const std::optional<Eigen::Vector3i>& old_origin) {
       p->volumeShifted(volume, old_origin);
     });
   }

@@ -11,6 +11,7 @@
 #include <iosfwd>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -148,9 +149,12 @@ class KinFu {
   MapStats stats() const;
   const fusion::TsdfVolume& volume() const;
   // Called on the thread that moves the volume (fusion; relocalisation's predictAgain) after each
-  // shift, with the volume (moved) and its first brick before the shift. One observer, set before
-  // the first frame (setting it while frames are fused races with the call).
-  using ShiftObserver = std::function<void(const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin)>;
+  // shift, with the volume (moved) and its first brick before the shift; and once after a map was
+  // loaded (loadState, resume) with no old origin: every brick outside the box is then as final as
+  // one the volume left. One observer, set before the first frame and before a map is loaded
+  // (setting it while frames are fused races with the call).
+  using ShiftObserver =
+      std::function<void(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin)>;
   void setShiftObserver(ShiftObserver observer);
   const KinFuParams& params() const;
 

@@ -9,7 +9,7 @@
 // is the one meshing at the end alone gives.
 //
 //   RegionPremesher pre(mesh_params);
-//   rec.setShiftObserver([&](const fusion::TsdfVolume& v, const Eigen::Vector3i& o) { pre.volumeShifted(v, o); });
+//   rec.setShiftObserver([&](const fusion::TsdfVolume& v, const std::optional<Eigen::Vector3i>& o) { pre.volumeShifted(v, o); });
 //   ... frames ...
 //   rec.finish(); pre.stop();          // before the map is fused again, released or replaced
 //   meshByRegion(..., pre.lookup());
@@ -19,6 +19,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 
@@ -36,9 +37,13 @@ class RegionPremesher {
 
   // On the fusion thread, after a shift: the regions whose bricks (and the +1 bricks their cells
   // read) were inside the volume's box before and are all outside it now are queued; those it reaches
-  // again are forgotten. The volume's world model is read from this object's thread until stop(): the
-  // map must not be replaced before.
-  void volumeShifted(const fusion::TsdfVolume& volume, const Eigen::Vector3i& old_origin);
+  // again are forgotten. Without an old origin (a map just loaded: a checkpoint, a saved map) every
+  // region of the world model outside the box is queued. The volume's world model is read from this
+  // object's thread until stop(): the map must not be replaced before.
+  void volumeShifted(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin);
+  // Returns once every region queued so far has been summarised and, where ready, simplified (tests:
+  // the thread's share of CPU is whatever the frame loop leaves).
+  void waitIdle();
   // Ends the thread once the region in hand is done (no other is started); idempotent.
   void stop();
 
@@ -70,8 +75,9 @@ class RegionPremesher {
   const MeshCleanParams params_;
   const MeshCleanParams region_params_;
   mutable std::mutex mutex_;
-  std::condition_variable wake_;
+  std::condition_variable wake_, idle_;
   std::deque<Key> queue_;                   // regions to summarise
+  bool in_hand_ = false;                    // the thread is working on a region taken from queue_
   bool stopping_ = false;
   const fusion::WorldModel* world_ = nullptr;
   float voxel_size_ = 0.f;
