@@ -45,6 +45,10 @@ struct RetiredKey {
   const char* figures;
 };
 constexpr RetiredKey kRetiredKeys[] = {
+    {"kinfu", "guess_margin", "docs/tracking.md"},
+    {"kinfu", "joint_match_cauchy", "docs/tracking.md"},
+    {"kinfu", "joint_photometric_huber", "docs/tracking.md"},
+    {"kinfu", "joint_photometric_min_gradient", "docs/tracking.md"},
     {"kinfu", "min_condition", "docs/tracking.md"},
     {"loop", "loop_sigma_rotation", "docs/loop-closure.md"},
     {"loop", "loop_sigma_translation", "docs/loop-closure.md"},

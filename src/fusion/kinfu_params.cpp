@@ -43,15 +43,11 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"overlap_fusion", &p.overlap_fusion, "fuse frame k beside the odometry of frame k+1 (same results, faster)"},
       {"joint_icp_sigma", &p.joint_icp_sigma, "m, mode joint: noise of one point-to-plane residual (smaller: geometry outweighs the matches more)", 0.0001, 1.0},
       {"joint_rolling_shutter", &p.joint_rolling_shutter, "s, mode joint: depth readout time; ICP noise grows by it x turn rate x depth", 0.0, 0.1},
-      {"joint_match_cauchy", &p.joint_match_cauchy, "sigmas, mode joint: Cauchy kernel on the odometry matches' whitened residuals (0 = none)", 0.0, 100.0},
       {"motion_sigma_translation", &p.motion_sigma_translation, "m per 1/30 s, mode joint: camera centre vs the constant-velocity prediction (0 = no motion model)", 0.0, 10.0},
       {"motion_sigma_rotation", &p.motion_sigma_rotation, "degrees per 1/30 s, mode joint: rotation vs the constant-velocity prediction (0 = none)", 0.0, 180.0},
       {"joint_photometric_sigma", &p.joint_photometric_sigma, "grey levels, mode joint: noise of one photometric residual (last frame's intensity at the model point; 0 = no photometric term)", 0.0, 255.0},
-      {"joint_photometric_huber", &p.joint_photometric_huber, "sigmas, mode joint: Huber kernel on the photometric residuals", 0.1, 100.0},
-      {"joint_photometric_min_gradient", &p.joint_photometric_min_gradient, "grey levels per pixel, mode joint: weaker-gradient pixels carry no photometric residual", 0.0, 255.0},
       {"joint_photometric_rotation_only", &p.joint_photometric_rotation_only, "mode joint: the photometric term informs the rotation only (its translation part marginalised out)"},
       {"joint_photometric_colour_time", &p.joint_photometric_colour_time, "mode joint: the photometric term places each colour image at its capture time (constant velocity)"},
-      {"guess_margin", &p.guess_margin, "mode joint: another initial guess replaces the odometry's when its alignment cost is below this fraction", 0.01, 1.0},
   };
 }
 

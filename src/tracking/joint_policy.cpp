@@ -21,7 +21,7 @@ IcpParams icpParams(const KinFuParams& P, bool joint, bool seeded, bool have_pri
 PointMatches matchesOf(const KinFuParams& P, const MotionPrior& prior, const Eigen::Isometry3d& T_world_ref,
                        const Eigen::Isometry3d& guess) {
   PointMatches pm;
-  pm.cauchy = P.joint_match_cauchy;
+  pm.cauchy = kMatchCauchy;
   const std::size_t n = std::min(prior.current_points.size(), prior.reference_points.size());
   const Eigen::Matrix3d Rr = T_world_ref.linear(), Rc = guess.linear();
   for (std::size_t i = 0; i < n; ++i) {
@@ -81,8 +81,8 @@ InitialGuess chooseGuess(const KinFuParams& P, const ModelPrediction& model, con
                        [&] { if (last_is_candidate) last_cost = cost(last_pose); });
   InitialGuess best = have_prior ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
   double best_cost = have_prior ? prior_cost : velocity_cost;
-  if (have_prior && velocity_cost < P.guess_margin * best_cost) best = InitialGuess::ConstantVelocity, best_cost = velocity_cost;
-  if (last_is_candidate && last_cost < P.guess_margin * best_cost) best = InitialGuess::LastPose;
+  if (have_prior && velocity_cost < kGuessMargin * best_cost) best = InitialGuess::ConstantVelocity, best_cost = velocity_cost;
+  if (last_is_candidate && last_cost < kGuessMargin * best_cost) best = InitialGuess::LastPose;
   return best;
 }
 
@@ -90,8 +90,8 @@ PhotometricTerms photometricTerms(const KinFuParams& P, const ModelPrediction& m
                                   const std::vector<IntensityLevel>& current, const std::vector<DepthLevel>& levels) {
   PhotometricTerms t;
   t.params.sigma = P.joint_photometric_sigma;
-  t.params.huber = P.joint_photometric_huber;
-  t.params.min_gradient = P.joint_photometric_min_gradient;
+  t.params.huber = kPhotometricHuber;
+  t.params.min_gradient = kPhotometricMinGradient;
   const std::size_t n = std::min({current.size(), model.intensity.size(), levels.size(), model.vertices.size()});
   for (std::size_t l = 0; l < n; ++l) {
     if (model.intensity[l].grey.size() != model.vertices[l].size() || current[l].grey.size() != levels[l].depth.size())

@@ -57,6 +57,16 @@ fusion::PhotometricTerms photometricTerms(const KinFuParams& P, const ModelPredi
 // loop scene it loses anyway (2.86 m off, 19 mm more at 2e-6).
 inline constexpr double kMinCondition = 1e-6;
 
+// Mode joint's robust estimation, fixed, not keys: at half and twice each (the guess margin at 0.6 and
+// 0.95) no value was better on every one of 14 inputs (both shared sequences, their halves run on their
+// own, shake seeds 1-5 and room seeds 1-3 at the tests' size), and each moved some run by more than 1 mm
+// in each direction (2026-11-28, docs/tracking.md).
+inline constexpr double kMatchCauchy = 1.5;  // sigmas, Cauchy kernel on the odometry matches' whitened residuals
+inline constexpr double kPhotometricHuber = 0.3;  // sigmas, Huber kernel on the photometric residuals
+inline constexpr double kPhotometricMinGradient = 4.0;  // grey levels per pixel: weaker reference pixels carry no residual
+// Another initial guess replaces the odometry's when its coarse alignment cost is below this fraction of it.
+inline constexpr double kGuessMargin = 0.8;
+
 // Why an ICP result is not taken (None when it is), with the figures that decided it: divergence and
 // degeneracy tests, and a jump from the prior's pose when given. Mode joint judges the inliers among
 // the pixels that see the model: a view that is mostly new is no sign of divergence, and there the

@@ -52,23 +52,19 @@ struct KinFuParams : public mrpt::config::CLoadableOptions {
                                       // (with tracking_downsample 1 only)
   bool overlap_fusion = true;         // pipeline (Reconstruction): integrate + ray cast frame k on
                                       // another thread while the odometry of frame k+1 runs; same poses
-  // Mode joint: one Gauss-Newton over the ICP residuals and the prior's point matches.
+  // Mode joint: one Gauss-Newton over the ICP residuals and the prior's point matches (its robust
+  // kernels and the initial guess's margin are fixed in code: tracking/joint_policy.h).
   double joint_icp_sigma = 0.005;     // m, noise of one finest-level point-to-plane residual (smaller:
                                       // geometry outweighs the matches more)
   double joint_rolling_shutter = 0.05;  // s, mode joint: readout time of the depth camera; a residual's
                                       // noise grows by this x the turn rate x the scene depth (rows are
                                       // captured at different times, so fast turns bend the frame)
-  double joint_match_cauchy = 1.5;    // sigmas, Cauchy kernel on the matches' whitened residuals
   double motion_sigma_translation = 0.002;  // m per 1/30 s, mode joint: how far the camera centre may
                                       // depart from the constant-velocity prediction (0 = no motion model)
   double motion_sigma_rotation = 0.0;  // degrees per 1/30 s, same for the rotation (0 = none)
-  float guess_margin = 0.8f;          // another initial guess replaces the prior's only when its
-                                      // alignment cost is below this fraction of the prior's
   // Mode joint, the photometric term (registration/photometric.h): each textured pixel of the last frame keeps
   // its intensity in this one.
   double joint_photometric_sigma = 40.0;  // grey levels, noise of one finest-level residual (0 = no term)
-  double joint_photometric_huber = 0.3;  // sigmas, Huber kernel on the whitened residual
-  double joint_photometric_min_gradient = 4.0;  // grey levels per pixel, weaker reference pixels unused
   bool joint_photometric_rotation_only = true;  // the term informs the rotation only (its translation
                                       // part marginalised): on xyz_first300 it moved the path, not the turns
   bool joint_photometric_colour_time = true;  // each colour image placed at its capture (Frame::colour_offset)
