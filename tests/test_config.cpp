@@ -59,6 +59,9 @@ TEST(Config, RetiredKeySaysItsValueIsFixedInCode) {
   EXPECT_EQ(refusal(dir + "/a.ini", "[loop]\nmax_loop_chi2 = 22.5\n", "loop"),
             dir + "/a.ini: 'max_loop_chi2' in section [loop] is no longer a key: its value is fixed in code "
                   "(docs/loop-closure.md gives the figures); remove the line");
+  EXPECT_EQ(refusal(dir + "/c.ini", "[kinfu]\nguess_margin = 0.8\n", "kinfu"),
+            dir + "/c.ini: 'guess_margin' in section [kinfu] is no longer a key: its value is fixed in code "
+                  "(docs/tracking.md gives the figures); remove the line");
   // The same name in another section is an ordinary unknown key.
   EXPECT_EQ(refusal(dir + "/b.ini", "[kinfu]\nmax_loop_chi2 = 22.5\n", "kinfu"),
             dir + "/b.ini: unknown key 'max_loop_chi2' in section [kinfu]");

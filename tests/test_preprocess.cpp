@@ -5,6 +5,7 @@
 #include <random>
 
 #include "support.h"
+#include "vofusion/core/cpu_features.h"
 #include "vofusion/registration/preprocess.h"
 
 using namespace vofusion;
@@ -87,6 +88,7 @@ TEST(Bilateral, PreservesDepthEdges) {
 // The AVX2 loop must give the scalar loop's bytes: holes, depth edges, readings far apart (outside the
 // range table), NaN and infinity, widths that leave part-full runs of eight, and a view into a larger image.
 TEST(Bilateral, EightAtATimeGivesTheScalarLoopsBytes) {
+  if (!cpuHasAvx2()) GTEST_SKIP() << "no AVX2 on this CPU: only the scalar loop runs";
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> depth(0.5f, 3.f), jitter(-0.05f, 0.05f), u01(0.f, 1.f);
   for (const cv::Size size : {cv::Size(320, 240), cv::Size(37, 11), cv::Size(9, 9)}) {

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <immintrin.h>
 
+#include "vofusion/core/cpu_features.h"
+
 namespace vofusion::fusion {
 
 namespace {
@@ -42,7 +44,8 @@ void sampleScalar(const Setup& s, const float* first, const float* step, VoxelRo
 }
 
 // The same steps on 8 lanes. std::min(a, b) is (b < a ? b : a), i.e. _mm256_min_ps(b, a), and
-// std::max(a, b) is _mm256_max_ps(b, a): the same results, NaN included. No FMA: target avx2 only.
+// std::max(a, b) is _mm256_max_ps(b, a): the same results, NaN included. No FMA: target avx2 only, and the file is built with
+// -ffp-contract=off so that a -march=native build does not fuse the scalar loop either.
 __attribute__((target("avx2"))) void sampleAvx2(const Setup& s, const float* first, const float* step,
                                                 VoxelRowSamples& out) {
   const __m256 lane = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
@@ -100,19 +103,17 @@ __attribute__((target("avx2"))) void sampleAvx2(const Setup& s, const float* fir
                       _mm256_blendv_epi8(_mm256_set1_epi32(-1), pix, _mm256_castps_si256(ok)));
 }
 
-const bool kAvx2 = __builtin_cpu_supports("avx2");
-
 }  // namespace
 
 VoxelProjector::VoxelProjector(const cv::Mat& depth, const CameraIntrinsics& cam, float min_depth, float max_depth,
                                float agree, bool simd)
     : s_{depth.ptr<float>(), depth.cols, depth.rows, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy),
          min_depth, max_depth, agree},
-      avx2_(simd && kAvx2) {
+      avx2_(simd && cpuHasAvx2()) {
   CV_Assert(depth.type() == CV_32FC1 && depth.isContinuous());
 }
 
-bool VoxelProjector::usesAvx2() { return kAvx2; }
+bool VoxelProjector::usesAvx2() { return cpuHasAvx2(); }
 
 void VoxelProjector::sampleRow(const Eigen::Vector3f& first, const Eigen::Vector3f& step, VoxelRowSamples& out) const {
   if (avx2_) sampleAvx2(s_, first.data(), step.data(), out);

@@ -57,8 +57,14 @@ bool RegionPremesher::finalNow(const Key& region) const { return box_bricks_ > 0
 
 void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin) {
   const int rb = params_.region_bricks;
+  // After a load, the regions of the whole map: listed before the lock, which the fusion thread takes.
+  std::set<Key> loaded;
+  if (!old_origin)
+    for (const Eigen::Vector3i& b : volume.worldModel().coords()) loaded.insert(keyOf(fusion::regionOf(b, rb)));
   const std::lock_guard<std::mutex> lock(mutex_);
   if (stopping_) return;
+  // What was made of a map a load replaced would be stale, and work in flight would read freed bricks.
+  if (!old_origin && world_) throw std::logic_error("RegionPremesher: a map was loaded after the volume had moved");
   world_ = &volume.worldModel();
   voxel_size_ = volume.params().voxel_size;
   box_bricks_ = volume.bricksPerSide();
@@ -84,18 +90,14 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std:
   });
   // Regions it reached before and does not now are final until it comes back; after a load, every
   // region of the map it does not reach.
-  std::set<Key> final_now;
-  if (old_origin) {
-    forRegionsReached(*old_origin, [&](const Key& k) { final_now.insert(k); });
-  } else {
-    for (const Eigen::Vector3i& b : world_->coords()) final_now.insert(keyOf(fusion::regionOf(b, rb)));
-  }
   bool queued = false;
-  for (const Key& k : final_now) {
-    if (reaches(k, origin_)) continue;
+  const auto queueIfFinal = [&](const Key& k) {
+    if (reaches(k, origin_)) return;
     queue_.push_back(k);
     queued = true;
-  }
+  };
+  if (old_origin) forRegionsReached(*old_origin, queueIfFinal);
+  for (const Key& k : loaded) queueIfFinal(k);
   if (queued) wake_.notify_one();
 }
 

@@ -9,6 +9,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "vofusion/core/cpu_features.h"
 #include "vofusion/core/parallel.h"
 #include "vofusion/registration/projective_icp.h"
 
@@ -84,8 +85,9 @@ float bilateralPixel(const cv::Mat& depth, const BilateralWeights& W, int x, int
   return sum / wsum;  // the centre itself has weight 1
 }
 
-// Eight pixels of a row's inside at once, each lane the scalar pixel's steps in the same order (no
-// FMA: target avx2 only), so the result is the same bytes. `at` points at the first pixel, `step` is
+// Eight pixels of a row's inside at once, each lane the scalar pixel's steps in the same order, so the
+// result is the same bytes (no FMA here, and this file is built with -ffp-contract=off so that a
+// -march=native build does not fuse the scalar loop's products either). `at` points at the first pixel, `step` is
 // the row stride in floats.
 __attribute__((target("avx2"))) void bilateralEightAvx2(const float* at, std::ptrdiff_t step, const BilateralWeights& W,
                                                         float* out) {
@@ -114,8 +116,6 @@ __attribute__((target("avx2"))) void bilateralEightAvx2(const float* at, std::pt
   _mm256_storeu_ps(out, _mm256_and_ps(_mm256_div_ps(sum, wsum), centre_ok));
 }
 
-const bool kAvx2 = __builtin_cpu_supports("avx2");
-
 }  // namespace
 
 cv::Mat bilateralFilterDepth(const cv::Mat& depth, float sigma_depth, float sigma_spatial, int kernel, bool simd) {
@@ -125,7 +125,7 @@ cv::Mat bilateralFilterDepth(const cv::Mat& depth, float sigma_depth, float sigm
   // and in depth difference (table), invalid neighbours left out, invalid pixels stay 0.
   const BilateralWeights W(sigma_depth, sigma_spatial, kernel);
   const int w = depth.cols, h = depth.rows, r = W.r;
-  const bool avx2 = simd && kAvx2;
+  const bool avx2 = simd && cpuHasAvx2();
   const std::ptrdiff_t step = static_cast<std::ptrdiff_t>(depth.step1());
   cv::Mat out(depth.size(), CV_32FC1);
   parallelFor(0, h, [&](int y) {

@@ -65,7 +65,7 @@ inline constexpr double kMatchCauchy = 1.5;  // sigmas, Cauchy kernel on the odo
 inline constexpr double kPhotometricHuber = 0.3;  // sigmas, Huber kernel on the photometric residuals
 inline constexpr double kPhotometricMinGradient = 4.0;  // grey levels per pixel: weaker reference pixels carry no residual
 // Another initial guess replaces the odometry's when its coarse alignment cost is below this fraction of it.
-inline constexpr double kGuessMargin = 0.8;
+inline constexpr float kGuessMargin = 0.8f;  // float, as the key was: the same decisions
 
 // Why an ICP result is not taken (None when it is), with the figures that decided it: divergence and
 // degeneracy tests, and a jump from the prior's pose when given. Mode joint judges the inliers among
