@@ -1,6 +1,8 @@
 // KinFu end to end on synthetic sequences with exact ground truth: tracking modes, the odometry
 // fallback on a bare wall, and volume shifting along a long corridor.
 #include <cstdio>
+#include <functional>
+#include <memory>
 #include <random>
 #include <sstream>
 
@@ -193,10 +195,20 @@ struct PremeshingCorridor {
       kf.process(seq.render(i), i > 0 ? &prior : nullptr);
     }
   }
-  static void observe(Tracker& kf, RegionPremesher& premesher) {
-    kf.setShiftObserver([&premesher](const fusion::TsdfVolume& v, const std::optional<Eigen::Vector3i>& old) {
+  std::unique_ptr<Tracker> newTracker() const {
+    return std::make_unique<Tracker>(params, TrackingMode::Odometry, seq.groundTruth(0));
+  }
+  // A tracker whose volume's moves premesher follows while `feed` gives it frames or a map; the thread
+  // has finished every region queued when this returns.
+  std::unique_ptr<Tracker> meshedWhile(RegionPremesher& premesher, const std::function<void(Tracker&)>& feed) const {
+    std::unique_ptr<Tracker> kf = newTracker();
+    kf->setShiftObserver([&premesher](const fusion::TsdfVolume& v, const std::optional<Eigen::Vector3i>& old) {
       premesher.volumeShifted(v, old);
     });
+    feed(*kf);
+    premesher.waitIdle();
+    premesher.stop();
+    return kf;
   }
   // Meshing at the end of kf's map with the regions premesher made gives the mesh meshing alone gives.
   std::size_t expectTheMeshOfMeshingAtTheEnd(const Tracker& kf, const RegionPremesher& premesher) const {
@@ -222,11 +234,8 @@ struct PremeshingCorridor {
 TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
   const PremeshingCorridor c;
   RegionPremesher premesher(c.mesh);
-  Tracker kf(c.params, TrackingMode::Odometry, c.seq.groundTruth(0));
-  PremeshingCorridor::observe(kf, premesher);
-  c.track(kf);
-  premesher.waitIdle();
-  premesher.stop();
+  const std::unique_ptr<Tracker> tracked = c.meshedWhile(premesher, [&](Tracker& kf) { c.track(kf); });
+  const Tracker& kf = *tracked;
   EXPECT_GT(kf.stats().shifts, 3u);
   EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(kf, premesher), 2u);
   // A region is taken only for the input it was made from: with one colour bit changed in each
@@ -244,18 +253,14 @@ TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
 // is loaded (they were queued only as the volume left them, in the run that saved it).
 TEST(KinFu, RegionsLeftBeforeACheckpointAreMeshedAfterItIsLoaded) {
   const PremeshingCorridor c;
-  Tracker saved(c.params, TrackingMode::Odometry, c.seq.groundTruth(0));
-  c.track(saved);
-  ASSERT_GT(saved.stats().shifts, 3u);
+  const std::unique_ptr<Tracker> saved = c.newTracker();
+  c.track(*saved);
+  ASSERT_GT(saved->stats().shifts, 3u);
   std::stringstream checkpoint;
-  saved.saveState(checkpoint);
+  saved->saveState(checkpoint);
   RegionPremesher premesher(c.mesh);
-  Tracker resumed(c.params, TrackingMode::Odometry, c.seq.groundTruth(0));
-  PremeshingCorridor::observe(resumed, premesher);
-  resumed.loadState(checkpoint);
-  premesher.waitIdle();
-  premesher.stop();
-  EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(resumed, premesher), 2u);
+  const std::unique_ptr<Tracker> resumed = c.meshedWhile(premesher, [&](Tracker& kf) { kf.loadState(checkpoint); });
+  EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(*resumed, premesher), 2u);
 }
 
 TEST(KinFu, CorridorMeshWithShiftingCoversWhatABigVolumeCovers) {
