@@ -249,9 +249,9 @@ TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
   EXPECT_EQ(meshByRegion(changed, c.mesh, "", {}, {}, premesher.lookup()).regions_premeshed, 0u);
 }
 
-// A run resumed from a checkpoint: the regions the volume had left before it are queued when the map
-// is loaded (they were queued only as the volume left them, in the run that saved it).
-TEST(KinFu, RegionsLeftBeforeACheckpointAreMeshedAfterItIsLoaded) {
+// A run resumed from a checkpoint or a saved map: the regions the volume had left before it are queued
+// when the map is loaded (they were queued only as the volume left them, in the run that saved it).
+TEST(KinFu, RegionsLeftBeforeALoadedMapAreMeshedAfterIt) {
   const PremeshingCorridor c;
   const std::unique_ptr<Tracker> saved = c.newTracker();
   c.track(*saved);
@@ -261,6 +261,17 @@ TEST(KinFu, RegionsLeftBeforeACheckpointAreMeshedAfterItIsLoaded) {
   RegionPremesher premesher(c.mesh);
   const std::unique_ptr<Tracker> resumed = c.meshedWhile(premesher, [&](Tracker& kf) { kf.loadState(checkpoint); });
   EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(*resumed, premesher), 2u);
+  // The same from a map saved to a file (--save-volume, then --resume with it).
+  const std::string map = test::tempDir("premesh_saved_map") + "/map.bin";
+  saved->save(map);
+  RegionPremesher from_file(c.mesh);
+  const std::unique_ptr<Tracker> reloaded = c.meshedWhile(from_file, [&](Tracker& kf) { kf.resume(map); });
+  EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(*reloaded, from_file), 2u);
+  // A map loaded once the premesher has seen the volume (moved, or loaded) replaces the one it reads:
+  // refused.
+  RegionPremesher late(c.mesh);
+  late.volumeShifted(reloaded->volume(), std::nullopt);
+  EXPECT_THROW(late.volumeShifted(reloaded->volume(), std::nullopt), std::logic_error);
 }
 
 TEST(KinFu, CorridorMeshWithShiftingCoversWhatABigVolumeCovers) {

@@ -64,7 +64,8 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std:
   const std::lock_guard<std::mutex> lock(mutex_);
   if (stopping_) return;
   // What was made of a map a load replaced would be stale, and work in flight would read freed bricks.
-  if (!old_origin && world_) throw std::logic_error("RegionPremesher: a map was loaded after the volume had moved");
+  if (!old_origin && world_)
+    throw std::logic_error("RegionPremesher: a map was loaded after the volume had moved or another map was loaded");
   world_ = &volume.worldModel();
   voxel_size_ = volume.params().voxel_size;
   box_bricks_ = volume.bricksPerSide();

@@ -38,9 +38,9 @@ class RegionPremesher {
   // On the fusion thread, after a shift: the regions whose bricks (and the +1 bricks their cells
   // read) were inside the volume's box before and are all outside it now are queued; those it reaches
   // again are forgotten. Without an old origin (a map just loaded: a checkpoint, a saved map) every
-  // region of the world model outside the box is queued; a load after a shift throws std::logic_error
-  // (what was made and what is being read belong to the map it replaced). The volume's world model is
-  // read from this object's thread until stop(): the map must not be replaced before.
+  // region of the world model outside the box is queued; a load after a shift or another load throws
+  // std::logic_error (what was made and what is being read belong to the map it replaced). The volume's
+  // world model is read from this object's thread until stop(): the map must not be replaced before.
   void volumeShifted(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin);
   // Returns once every region queued so far has been summarised and, where ready, simplified (tests:
   // the thread's share of CPU is whatever the frame loop leaves).
