@@ -6,6 +6,8 @@
 
 #include <immintrin.h>
 
+#include "vofusion/core/cpu_features.h"
+
 namespace vofusion {
 
 namespace {
@@ -72,13 +74,6 @@ void distancesAvx512(const std::uint64_t* cur, int n_cur, const std::uint64_t* r
   }
 }
 
-// Asked once, when first needed (also right for a matcher made during another file's static start-up).
-bool haveAvx512Popcount() {
-  static const bool have = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-                           __builtin_cpu_supports("avx512vpopcntdq");
-  return have;
-}
-
 // Rows as zero-padded 64-bit words (rows of a cv::Mat need not be 8-byte aligned).
 std::vector<std::uint64_t> asWords(const cv::Mat& m, int first_row, int words) {
   std::vector<std::uint64_t> out(std::size_t(m.rows - first_row) * words, 0);
@@ -97,9 +92,9 @@ std::vector<std::uint64_t> transposed(const std::vector<std::uint64_t>& rows, in
 
 }  // namespace
 
-CrossCheckedHammingMatcher::CrossCheckedHammingMatcher(bool simd) : simd_(simd && haveAvx512Popcount()) {}
+CrossCheckedHammingMatcher::CrossCheckedHammingMatcher(bool simd) : simd_(simd && cpuHasAvx512Popcount()) {}
 
-bool CrossCheckedHammingMatcher::usesAvx512() { return haveAvx512Popcount(); }
+bool CrossCheckedHammingMatcher::usesAvx512() { return cpuHasAvx512Popcount(); }
 
 void CrossCheckedHammingMatcher::add(const cv::Mat& cur, const cv::Mat& ref) {
   if (cur.rows <= rows_ || ref.empty()) return;

@@ -20,13 +20,14 @@ namespace {
 std::array<int, 3> keyOf(const Eigen::Vector3i& r) { return {r.x(), r.y(), r.z()}; }
 Eigen::Vector3i vectorOf(const std::array<int, 3>& k) { return {k[0], k[1], k[2]}; }
 
-// The 26 regions round a region.
-std::vector<std::array<int, 3>> neighboursOf(const std::array<int, 3>& k) {
-  std::vector<std::array<int, 3>> out;
+// The 26 regions round a region (no allocation: called for every region a shift reaches).
+std::array<std::array<int, 3>, 26> neighboursOf(const std::array<int, 3>& k) {
+  std::array<std::array<int, 3>, 26> out;
+  std::size_t n = 0;
   for (int dx = -1; dx <= 1; ++dx)
     for (int dy = -1; dy <= 1; ++dy)
       for (int dz = -1; dz <= 1; ++dz)
-        if (dx || dy || dz) out.push_back({k[0] + dx, k[1] + dy, k[2] + dz});
+        if (dx || dy || dz) out[n++] = {k[0] + dx, k[1] + dy, k[2] + dz};
   return out;
 }
 
@@ -318,9 +319,9 @@ bool RegionPremesher::judge(const fusion::RegionMesh& r, const RegionComponents&
 
 PremeshedLookup RegionPremesher::lookup() const {
   if (thread_.joinable()) throw std::logic_error("RegionPremesher::lookup before stop()");
-  // Hashed only for a region made during the run: most regions of a short run have none.
+  // Hashed only for a region made during the run: most regions of a short run have none. No lock: the
+  // thread has ended, so done_ no longer changes.
   return [this](const fusion::RegionMesh& r) -> const PremeshedRegion* {
-    const std::lock_guard<std::mutex> lock(mutex_);
     const auto it = done_.find(keyOf(r.region));
     return it != done_.end() && it->second.input_hash == regionInputHash(r) ? &it->second : nullptr;
   };

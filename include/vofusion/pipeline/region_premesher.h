@@ -37,7 +37,7 @@ class RegionPremesher {
 
   // On the fusion thread, after a shift: the regions whose bricks (and the +1 bricks their cells
   // read) were inside the volume's box before and are all outside it now are queued; those it reaches
-  // again are forgotten. Without an old origin (a map just loaded: a checkpoint, a saved map) every
+  // again are forgotten, and so are their neighbours' simplified meshes (judged with their pieces). Without an old origin (a map just loaded: a checkpoint, a saved map) every
   // region of the world model outside the box is queued; a load after a shift or another load throws
   // std::logic_error (what was made and what is being read belong to the map it replaced). The volume's
   // world model is read from this object's thread until stop(): the map must not be replaced before.
