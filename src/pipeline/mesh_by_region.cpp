@@ -415,9 +415,9 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     step.faces_before += r.mesh.faces.size();
     if (fragments) fragments->filter(r);
     if (premeshed)
-      if (const PremeshedRegion* done = premeshed(r)) {
-        r.mesh = done->mesh;
-        r.on_seam = done->on_seam;
+      if (std::optional<PremeshedRegion> done = premeshed(r)) {
+        r.mesh = std::move(done->mesh);
+        r.on_seam = std::move(done->on_seam);
         ++out.regions_premeshed;
         simplifier.addDone(std::move(r), done->report);
         return;

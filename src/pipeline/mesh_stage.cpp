@@ -18,7 +18,7 @@ bool meshesByRegion(const OutputParams& p, const MeshCleanParams& mesh_params) {
 }
 
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshCleanParams& mesh_params, json& s,
-                         StagedOutputs& out, const RegionPremesher* premeshed) {
+                         StagedOutputs& out, RegionPremesher* premeshed) {
   // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
   const auto release_map = [&] {
     if (rec.mapReleased()) return;

@@ -19,6 +19,6 @@ bool meshesByRegion(const OutputParams& params, const MeshCleanParams& mesh_para
 // mesh_raw.ply / mesh_full.ply / mesh.ply as asked; fills the mesh entries of s. Regions `premeshed`
 // made during the run are taken where they are still what the map gives.
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& params, const MeshCleanParams& mesh_params,
-                         nlohmann::json& s, StagedOutputs& out, const RegionPremesher* premeshed = nullptr);
+                         nlohmann::json& s, StagedOutputs& out, RegionPremesher* premeshed = nullptr);
 
 }  // namespace vofusion

@@ -317,13 +317,16 @@ bool RegionPremesher::judge(const fusion::RegionMesh& r, const RegionComponents&
   return true;
 }
 
-PremeshedLookup RegionPremesher::lookup() const {
+PremeshedLookup RegionPremesher::lookup() {
   if (thread_.joinable()) throw std::logic_error("RegionPremesher::lookup before stop()");
   // Hashed only for a region made during the run: most regions of a short run have none. No lock: the
-  // thread has ended, so done_ no longer changes.
-  return [this](const fusion::RegionMesh& r) -> const PremeshedRegion* {
+  // thread has ended, so done_ changes only here, on the caller's thread.
+  return [this](const fusion::RegionMesh& r) -> std::optional<PremeshedRegion> {
     const auto it = done_.find(keyOf(r.region));
-    return it != done_.end() && it->second.input_hash == regionInputHash(r) ? &it->second : nullptr;
+    if (it == done_.end() || it->second.input_hash != regionInputHash(r)) return std::nullopt;
+    std::optional<PremeshedRegion> taken(std::move(it->second));
+    done_.erase(it);
+    return taken;
   };
 }
 

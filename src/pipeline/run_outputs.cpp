@@ -132,7 +132,7 @@ SceneOptions RunRecorder::Impl::sceneOptions(const Reconstruction& rec, json& s)
   return o;
 }
 
-json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log, const RegionPremesher* premeshed) {
+json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log, RegionPremesher* premeshed) {
   Impl& m = *impl_;
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
   json s = runSummary(rec, info);

@@ -4,6 +4,7 @@
 // the welded, simplified mesh (about a tenth of the raw faces).
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,8 +32,9 @@ struct PremeshedRegion {
   std::vector<std::uint8_t> on_seam;
   MeshCleanReport report;
 };
-// The region simplified during the run from exactly what `r` holds (regionInputHash), or null.
-using PremeshedLookup = std::function<const PremeshedRegion*(const fusion::RegionMesh& r)>;
+// The region simplified during the run from exactly what `r` holds (regionInputHash), handed over
+// (moved: the run's copy is gone, so the end never holds a region twice), or nullopt.
+using PremeshedLookup = std::function<std::optional<PremeshedRegion>(const fusion::RegionMesh& r)>;
 
 // How meshByRegion prepares a region for simplifyRegion, for whoever simplifies one beforehand. Its
 // connected components are judged as fragments (smallFragment: [mesh] min_component_faces / _area),

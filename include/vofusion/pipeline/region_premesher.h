@@ -49,8 +49,9 @@ class RegionPremesher {
   void stop();
 
   // After stop() (throws std::logic_error before): the regions made, for a meshByRegion with the
-  // same MeshCleanParams as this.
-  PremeshedLookup lookup() const;
+  // same MeshCleanParams as this. Each region is handed over once, when its input matches; one that
+  // does not match stays for a later meshing.
+  PremeshedLookup lookup();
   std::size_t regionsMeshed() const;  // simplified during the run (a region made again counts again)
 
  private:

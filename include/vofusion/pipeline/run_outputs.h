@@ -60,7 +60,7 @@ class RunRecorder {
   // per file written (may be null). Frees rec's map once it is meshed (Reconstruction::releaseMap).
   // `premeshed`: the regions meshed while tracking (stopped), taken where they are still the map's.
   nlohmann::json finish(Reconstruction& rec, const RunInfo& info, std::FILE* log = stderr,
-                        const RegionPremesher* premeshed = nullptr);
+                        RegionPremesher* premeshed = nullptr);
 
  private:
   struct Impl;
