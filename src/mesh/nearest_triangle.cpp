@@ -5,6 +5,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace vofusion {
 
@@ -68,20 +69,25 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
   origin_ = lo;
   for (int i = 0; i < 3; ++i) dims_[i] = std::int64_t(std::floor(extent[i] / cell_)) + 1;
   const auto index = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return std::size_t((z * dims_[1] + y) * dims_[0] + x); };
-  const auto forEachCell = [&](const std::array<Eigen::Vector3d, 3>& v, const auto& visit) {
+  // The cells a triangle's bounding box covers, clamped to the grid: first and last per axis.
+  const auto cellBox = [&](const std::array<Eigen::Vector3d, 3>& v) {
     const Cell a = cellOf(v[0].cwiseMin(v[1]).cwiseMin(v[2])), b = cellOf(v[0].cwiseMax(v[1]).cwiseMax(v[2]));
-    for (std::int64_t z = std::max<std::int64_t>(a[2], 0); z <= std::min(b[2], dims_[2] - 1); ++z)
-      for (std::int64_t y = std::max<std::int64_t>(a[1], 0); y <= std::min(b[1], dims_[1] - 1); ++y)
-        for (std::int64_t x = std::max<std::int64_t>(a[0], 0); x <= std::min(b[0], dims_[0] - 1); ++x) visit(index(x, y, z));
+    std::pair<Cell, Cell> box;
+    for (int i = 0; i < 3; ++i) box.first[i] = std::max<std::int64_t>(a[i], 0), box.second[i] = std::min(b[i], dims_[i] - 1);
+    return box;
+  };
+  const auto forEachCell = [&](const std::array<Eigen::Vector3d, 3>& v, const auto& visit) {
+    const auto [a, b] = cellBox(v);
+    for (std::int64_t z = a[2]; z <= b[2]; ++z)
+      for (std::int64_t y = a[1]; y <= b[1]; ++y)
+        for (std::int64_t x = a[0]; x <= b[0]; ++x) visit(index(x, y, z));
   };
   // Counting sort into cells: counts, their running sum, then the ids. Long triangles among short
   // ones are listed in many cells: more listings than 32-bit offsets hold is refused.
   std::uint64_t listings = 0;
   for (const auto& v : tris_) {
-    const Cell a = cellOf(v[0].cwiseMin(v[1]).cwiseMin(v[2])), b = cellOf(v[0].cwiseMax(v[1]).cwiseMax(v[2]));
-    std::uint64_t n = 1;
-    for (int i = 0; i < 3; ++i) n *= std::uint64_t(std::min(b[i], dims_[i] - 1) - std::max<std::int64_t>(a[i], 0) + 1);
-    listings += n;
+    const auto [a, b] = cellBox(v);
+    listings += std::uint64_t(b[0] - a[0] + 1) * std::uint64_t(b[1] - a[1] + 1) * std::uint64_t(b[2] - a[2] + 1);
   }
   if (listings > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error("NearestTriangle: " + std::to_string(listings) + " cell listings, more than 2^32");
