@@ -216,6 +216,7 @@ struct PremeshingCorridor {
       kf.volume().extractMeshByRegion(mesh.region_bricks, sink);
     };
     const RegionMeshResult alone = meshByRegion(regions, mesh);
+    const std::size_t held = premesher.regionsHeld();
     const RegionMeshResult with = meshByRegion(regions, mesh, "", {}, {}, premesher.lookup());
     std::printf("regions %zu, simplified while tracking %zu, taken at the end %zu\n", with.regions,
                 premesher.regionsMeshed(), with.regions_premeshed);
@@ -225,8 +226,8 @@ struct PremeshingCorridor {
     EXPECT_EQ(with.mesh.vertices, alone.mesh.vertices);
     EXPECT_EQ(with.mesh.colors, alone.mesh.colors);
     EXPECT_EQ(with.report.simplification.faces_after, alone.report.simplification.faces_after);
-    // Handed over, not copied: a second meshing finds none left.
-    EXPECT_EQ(meshByRegion(regions, mesh, "", {}, {}, premesher.lookup()).regions_premeshed, 0u);
+    // Handed over, not copied: the premesher no longer holds those it gave.
+    EXPECT_EQ(premesher.regionsHeld(), held - with.regions_premeshed);
     return with.regions_premeshed;
   }
 };
@@ -247,8 +248,12 @@ TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
       sink(r);
     });
   };
+  const std::size_t held = premesher.regionsHeld();
   EXPECT_EQ(meshByRegion(changed, c.mesh, "", {}, {}, premesher.lookup()).regions_premeshed, 0u);
+  EXPECT_EQ(premesher.regionsHeld(), held);
   EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(kf, premesher), 2u);
+  premesher.discard();
+  EXPECT_EQ(premesher.regionsHeld(), 0u);
 }
 
 // A run resumed from a checkpoint or a saved map: the regions the volume had left before it are queued

@@ -328,11 +328,11 @@ class OrderedRegionSimplifier {
     }
   }
   // A region simplified already (during the run): welded in its turn like the others.
-  void addDone(fusion::RegionMesh r, const MeshCleanReport& report) {
+  void addDone(fusion::RegionMesh r, MeshCleanReport report) {
     queue_.push_back(std::make_unique<Item>());
     Item& item = *queue_.back();
     item.region = std::move(r);
-    item.report = report;
+    item.report = std::move(report);
     item.done.store(true, std::memory_order_release);
     weldReady();
   }
@@ -419,7 +419,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
         r.mesh = std::move(done->mesh);
         r.on_seam = std::move(done->on_seam);
         ++out.regions_premeshed;
-        simplifier.addDone(std::move(r), done->report);
+        simplifier.addDone(std::move(r), std::move(done->report));
         return;
       }
     simplifier.add(std::move(r));

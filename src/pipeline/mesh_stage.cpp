@@ -21,6 +21,7 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
                          StagedOutputs& out, RegionPremesher* premeshed) {
   // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
   const auto release_map = [&] {
+    if (premeshed) premeshed->discard();  // the regions not taken: none is used after this
     if (rec.mapReleased()) return;
     rec.releaseMap();
     returnFreedHeap();

@@ -319,15 +319,25 @@ bool RegionPremesher::judge(const fusion::RegionMesh& r, const RegionComponents&
 
 PremeshedLookup RegionPremesher::lookup() {
   if (thread_.joinable()) throw std::logic_error("RegionPremesher::lookup before stop()");
-  // Hashed only for a region made during the run: most regions of a short run have none. No lock: the
-  // thread has ended, so done_ changes only here, on the caller's thread.
+  // Hashed only for a region made during the run: most regions of a short run have none. The thread
+  // has ended; the lock keeps two meshings from erasing at once.
   return [this](const fusion::RegionMesh& r) -> std::optional<PremeshedRegion> {
+    const std::lock_guard<std::mutex> lock(mutex_);
     const auto it = done_.find(keyOf(r.region));
     if (it == done_.end() || it->second.input_hash != regionInputHash(r)) return std::nullopt;
-    std::optional<PremeshedRegion> taken(std::move(it->second));
-    done_.erase(it);
-    return taken;
+    return std::move(done_.extract(it).mapped());
   };
+}
+
+void RegionPremesher::discard() {
+  if (thread_.joinable()) throw std::logic_error("RegionPremesher::discard before stop()");
+  const std::lock_guard<std::mutex> lock(mutex_);
+  done_.clear();
+}
+
+std::size_t RegionPremesher::regionsHeld() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return done_.size();
 }
 
 std::size_t RegionPremesher::regionsMeshed() const {

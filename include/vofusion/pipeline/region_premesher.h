@@ -49,10 +49,14 @@ class RegionPremesher {
   void stop();
 
   // After stop() (throws std::logic_error before): the regions made, for a meshByRegion with the
-  // same MeshCleanParams as this. Each region is handed over once, when its input matches; one that
-  // does not match stays for a later meshing.
+  // same MeshCleanParams as this. Each region is handed over (moved out) once, when its input matches;
+  // one that does not match stays until discard().
   PremeshedLookup lookup();
+  // After stop(): frees the regions not handed over (the end's meshing is done, or the map is about to
+  // be fused again, which no region made during the run matches).
+  void discard();
   std::size_t regionsMeshed() const;  // simplified during the run (a region made again counts again)
+  std::size_t regionsHeld() const;    // simplified and not yet handed over or discarded
 
  private:
   using Key = std::array<int, 3>;

@@ -58,7 +58,8 @@ class RunRecorder {
   void add(const Frame& frame, const FrameReport& report);
   // Writes every output and returns the summary that went into summary.json. `log` gets one line
   // per file written (may be null). Frees rec's map once it is meshed (Reconstruction::releaseMap).
-  // `premeshed`: the regions meshed while tracking (stopped), taken where they are still the map's.
+  // `premeshed`: the regions meshed while tracking (stopped), handed over where they are still the map's,
+  // the rest freed once the regions are done.
   nlohmann::json finish(Reconstruction& rec, const RunInfo& info, std::FILE* log = stderr,
                         RegionPremesher* premeshed = nullptr);
 
