@@ -164,6 +164,21 @@ TEST(MeshClean, RepairsSphereWithHoleFragmentDegeneratesAndDuplicates) {
   EXPECT_GT(patch_vertices, 0u);  // the patch was refined
 }
 
+// cleanMesh works on the mesh itself (no copy: the welded mesh's repair is a long run's peak), and a
+// failure leaves it as it came.
+TEST(MeshClean, AFailureLeavesTheMeshAsItCame) {
+  TriangleMesh m = icosphere(2);
+  m.faces.push_back({0, 1, std::uint32_t(m.vertices.size() + 7)});
+  const TriangleMesh in = m;
+  const MeshCleanReport r = cleanMesh(m, testParams());
+  EXPECT_FALSE(r.success);
+  EXPECT_NE(r.failure.find("references vertex"), std::string::npos) << r.failure;
+  EXPECT_EQ(m.vertices, in.vertices);
+  EXPECT_EQ(m.faces, in.faces);
+  EXPECT_EQ(m.colors, in.colors);
+  EXPECT_EQ(m.normals, in.normals);
+}
+
 TEST(MeshClean, LargeOpeningsStayOpenSmallHolesClose) {
   TriangleMesh m = test::boxRoom(4, 3, 2.5, 8);  // walls meet along shared positions, not indices
   const double ref_area = totalArea(m);

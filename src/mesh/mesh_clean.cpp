@@ -34,6 +34,7 @@
 #include <CGAL/Polygon_mesh_processing/stitch_borders.h>
 #include <CGAL/Polygon_mesh_processing/tangential_relaxation.h>
 #include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
+#include <boost/container/small_vector.hpp>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_placement.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Edge_length_cost.h>
@@ -71,7 +72,9 @@ struct PointHash {
 
 // Greedy welding of vertices closer than `dist`: each vertex maps to the first earlier
 // representative within reach (hash grid with cell size `dist`, 27 neighbouring cells searched).
-std::size_t weldSoup(std::vector<Point>& points, std::vector<std::vector<std::size_t>>& polys, double dist) {
+using Polygons = std::vector<boost::container::small_vector<std::size_t, 3>>;  // a soup's triangles, each in place
+
+std::size_t weldSoup(std::vector<Point>& points, Polygons& polys, double dist) {
   struct CellHash {
     std::size_t operator()(const std::array<long long, 3>& c) const {
       return std::size_t(c[0] * 73856093ll ^ c[1] * 19349663ll ^ c[2] * 83492791ll);
@@ -159,6 +162,40 @@ struct StopAtTarget {
     if (target_edges && current_edges <= target_edges) return true;
     return min_sq_length > 0 && CGAL::squared_distance(profile.p0(), profile.p1()) >= min_sq_length;
   }
+};
+
+// The colour of each position (the soup functions renumber points but keep their coordinates), as a
+// sorted array: a third of a hash map's memory on the welded mesh, whose repair is a long run's peak.
+// Positions are keyed by their bits, as PointHash keys them, and the first colour given for one wins,
+// as a map's emplace.
+class ColoursByPosition {
+ public:
+  ColoursByPosition(const std::vector<Point>& points, const std::vector<Rgb>& colours) {
+    at_.reserve(points.size());
+    for (std::size_t i = 0; i < points.size() && i < colours.size(); ++i) at_.push_back({bitsOf(points[i]), colours[i]});
+    std::stable_sort(at_.begin(), at_.end(), [](const Entry& a, const Entry& b) { return a.bits < b.bits; });
+  }
+  const Rgb* find(const Point& p) const {
+    const Bits b = bitsOf(p);
+    const auto it = std::lower_bound(at_.begin(), at_.end(), b, [](const Entry& e, const Bits& k) { return e.bits < k; });
+    return it != at_.end() && it->bits == b ? &it->colour : nullptr;
+  }
+
+ private:
+  using Bits = std::array<std::uint64_t, 3>;
+  struct Entry {
+    Bits bits;
+    Rgb colour;
+  };
+  static Bits bitsOf(const Point& p) {
+    Bits b;
+    for (int i = 0; i < 3; ++i) {
+      const double d = p[i];
+      std::memcpy(&b[std::size_t(i)], &d, 8);
+    }
+    return b;
+  }
+  std::vector<Entry> at_;
 };
 
 // A triangle soup: distances are measured on soups, so any mesh (non-manifold too) can be compared.
@@ -300,7 +337,7 @@ class Cleaner {
     r_.closed = r_.border_cycles_after == 0 && !m_.is_empty();
     r_.manifold = nonManifoldVertexCount(m_) == 0;
     r_.area = m_.is_empty() ? 0.0 : PMP::area(m_);
-    in = toTriangleMesh(m_);
+    in = toTriangleMesh(m_);  // last but the seam flags: until here `in` is the caller's input (cleanMesh)
     if (seam_) {
       seam_->clear();
       for (VD v : m_.vertices()) seam_->push_back(fixed_[v]);
@@ -334,13 +371,13 @@ class Cleaner {
     std::vector<Point> pts;
     pts.reserve(in.vertices.size());
     for (const auto& v : in.vertices) pts.emplace_back(v.x(), v.y(), v.z());
-    std::vector<std::vector<std::size_t>> polys;
+    // Triangles held in place (no allocation each): the welded mesh's soup is a long run's peak.
+    Polygons polys;
     polys.reserve(in.faces.size());
     for (const auto& f : in.faces) polys.push_back({f[0], f[1], f[2]});
     // Colours travel by position: the soup functions renumber points but keep their coordinates.
-    std::unordered_map<Point, Rgb, PointHash> colour_at;
-    if (has_colours_)
-      for (std::size_t i = 0; i < pts.size(); ++i) colour_at.emplace(pts[i], in.colors[i]);
+    static const std::vector<Rgb> kNoColours;
+    const ColoursByPosition colour_at(pts, has_colours_ ? in.colors : kNoColours);
     std::unordered_set<Point, PointHash> fixed_at;  // seam vertices, by position too
     if (seam_)
       for (std::size_t i = 0; i < pts.size() && i < seam_->size(); ++i)
@@ -368,8 +405,7 @@ class Cleaner {
     col_ = m_.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
     known_ = m_.add_property_map<VD, bool>("v:rgb_known", false).first;
     for (VD v : m_.vertices()) {
-      auto it = colour_at.find(m_.point(v));
-      if (it != colour_at.end()) col_[v] = it->second;
+      if (const Rgb* c = colour_at.find(m_.point(v))) col_[v] = *c;
       known_[v] = true;
     }
     if (seam_) {
@@ -594,15 +630,16 @@ class Cleaner {
 
 MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, TriangleMesh* unsimplified) {
   MeshCleanReport report;
-  TriangleMesh work = mesh, before;
+  TriangleMesh before;
   try {
-    Cleaner(params, report, unsimplified ? &before : nullptr).run(work);
+    // No copy of the input (the welded mesh's repair is a long run's peak): Cleaner only reads `mesh`
+    // and replaces it at its very end, so on failure it is as it came.
+    Cleaner(params, report, unsimplified ? &before : nullptr).run(mesh);
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
     return report;
   }
-  mesh = std::move(work);
   if (unsimplified) *unsimplified = std::move(before);
   report.success = true;
   return report;
