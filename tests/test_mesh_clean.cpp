@@ -165,18 +165,30 @@ TEST(MeshClean, RepairsSphereWithHoleFragmentDegeneratesAndDuplicates) {
 }
 
 // cleanMesh works on the mesh itself (no copy: the welded mesh's repair is a long run's peak), and a
-// failure leaves it as it came.
+// failure leaves it as it came: at the start (a bad face), and after the repair, fragments and holes
+// (simplification refuses an edge-length target beside a quadric error).
 TEST(MeshClean, AFailureLeavesTheMeshAsItCame) {
-  TriangleMesh m = icosphere(2);
-  m.faces.push_back({0, 1, std::uint32_t(m.vertices.size() + 7)});
+  TriangleMesh m = explode(icosphere(2));  // a soup: the repair has work to do
+  for (std::size_t i = 0; i < m.vertices.size(); ++i) m.colors.push_back({std::uint8_t(i), 7, 9});
+  m.normals.assign(m.vertices.size(), Eigen::Vector3f::UnitZ());
   const TriangleMesh in = m;
-  const MeshCleanReport r = cleanMesh(m, testParams());
+  MeshCleanParams late = testParams();
+  late.max_simplify_error = 0.001;
+  late.target_edge_length = 0.01;
+  const MeshCleanReport r = cleanMesh(m, late);
   EXPECT_FALSE(r.success);
-  EXPECT_NE(r.failure.find("references vertex"), std::string::npos) << r.failure;
+  EXPECT_NE(r.failure.find("target_edge_length"), std::string::npos) << r.failure;
   EXPECT_EQ(m.vertices, in.vertices);
   EXPECT_EQ(m.faces, in.faces);
   EXPECT_EQ(m.colors, in.colors);
   EXPECT_EQ(m.normals, in.normals);
+  m.faces.push_back({0, 1, std::uint32_t(m.vertices.size() + 7)});
+  const TriangleMesh bad = m;
+  const MeshCleanReport early = cleanMesh(m, testParams());
+  EXPECT_FALSE(early.success);
+  EXPECT_NE(early.failure.find("references vertex"), std::string::npos) << early.failure;
+  EXPECT_EQ(m.faces, bad.faces);
+  EXPECT_EQ(m.vertices, bad.vertices);
 }
 
 TEST(MeshClean, LargeOpeningsStayOpenSmallHolesClose) {

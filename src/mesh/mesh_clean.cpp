@@ -171,7 +171,7 @@ struct StopAtTarget {
 class ColoursByPosition {
  public:
   ColoursByPosition(const std::vector<Point>& points, const std::vector<Rgb>& colours) {
-    at_.reserve(points.size());
+    at_.reserve(std::min(points.size(), colours.size()));
     for (std::size_t i = 0; i < points.size() && i < colours.size(); ++i) at_.push_back({bitsOf(points[i]), colours[i]});
     std::stable_sort(at_.begin(), at_.end(), [](const Entry& a, const Entry& b) { return a.bits < b.bits; });
   }

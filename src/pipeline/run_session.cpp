@@ -201,7 +201,7 @@ std::string RunSession::checkpointOrigin(const std::string& input, TrackingMode 
 void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
   // No recording to read again (vofusion interrupted, vofusion-grab without one): the app says why.
   if (!rec_.mapNeedsReintegration() || !reopen) return;
-  if (premesher_) premesher_->discard();  // made from the map fused at the tracked poses: none would match
+  if (premesher_) premesher_->discard();  // made from the map fused at the tracked poses: none is expected to match
   auto again = reopen();
   Progress progress(info.app + " [re-fusing at the loop-closed poses]", rec_.framesProcessed());
   const std::size_t fused =
