@@ -228,6 +228,66 @@ TEST(MeshClean, NonManifoldVertexIsSplit) {
   EXPECT_TRUE(m.colors.empty());  // none given, none invented
 }
 
+// The faults a welded mesh can have where regions meet, each beside a sound surface.
+std::vector<std::pair<std::string, TriangleMesh>> seamFaults() {
+  std::vector<std::pair<std::string, TriangleMesh>> out;
+  TriangleMesh bowtie;  // two tetrahedra touching at one vertex
+  bowtie.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
+  for (const auto& v : bowtie.vertices) bowtie.colors.push_back(colourAt(v));
+  bowtie.faces = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}, {0, 5, 4}, {0, 4, 6}, {0, 6, 5}, {4, 5, 6}};
+  out.emplace_back("two tetrahedra on one vertex", bowtie);
+  TriangleMesh sphere = icosphere(3);
+  const std::array<std::uint32_t, 3> f = sphere.faces[40];
+  sphere.faces.push_back(f);                   // a repeat, as both regions made it
+  sphere.faces.push_back({f[0], f[2], f[1]});  // a repeat the other way round
+  sphere.faces.push_back({f[0], f[0], f[1]});  // a repeated corner
+  const auto fin = std::uint32_t(sphere.vertices.size());  // a third face on an edge
+  sphere.vertices.push_back(1.2f * sphere.vertices[f[0]]);
+  sphere.colors.push_back(colourAt(sphere.vertices.back()));
+  sphere.faces.push_back({f[0], f[1], fin});
+  out.emplace_back("sphere with repeats, a fin and a repeated corner", sphere);
+  TriangleMesh open = icosphere(3);  // a hole and a cone touching the border at one vertex
+  open.faces.erase(open.faces.begin() + 7);
+  const std::array<std::uint32_t, 3> g = icosphere(3).faces[7];
+  const auto tip = std::uint32_t(open.vertices.size());
+  open.vertices.push_back(1.5f * open.vertices[g[0]]);
+  open.vertices.push_back(1.5f * open.vertices[g[0]] + Eigen::Vector3f(0.1f, 0, 0));
+  for (std::size_t i = tip; i < open.vertices.size(); ++i) open.colors.push_back(colourAt(open.vertices[i]));
+  open.faces.push_back({g[0], tip, tip + 1});
+  out.emplace_back("sphere with a hole and a flap on its border", open);
+  return out;
+}
+
+// Regions welded at their seams are repaired face by face (no polygon soup, a fraction of the
+// memory): on each fault where regions meet it must give what CGAL's soup repair gives.
+TEST(MeshClean, WeldedRegionsRepairAsTheSoupRepairDoes) {
+  for (const auto& [name, in] : seamFaults()) {
+    SCOPED_TRACE(name);
+    for (int min_faces : {0, 30}) {
+      MeshCleanParams p = testParams();
+      p.min_component_faces = min_faces;
+      TriangleMesh soup = in, welded = in;
+      const MeshCleanReport a = cleanMesh(soup, p), b = cleanWeldedRegions(welded, p);
+      ASSERT_TRUE(a.success) << a.failure;
+      ASSERT_TRUE(b.success) << b.failure;
+      EXPECT_EQ(b.closed, a.closed);
+      EXPECT_TRUE(b.manifold);
+      EXPECT_EQ(b.components_kept, a.components_kept);
+      EXPECT_EQ(b.border_cycles_after, a.border_cycles_after);
+      EXPECT_EQ(b.holes_filled, a.holes_filled);
+      EXPECT_EQ(b.duplicate_faces_removed, a.duplicate_faces_removed);
+      EXPECT_EQ(welded.faces.size(), soup.faces.size());
+      EXPECT_EQ(welded.vertices.size(), soup.vertices.size());
+      EXPECT_NEAR(totalArea(welded), totalArea(soup), 1e-6 * totalArea(soup));
+      EXPECT_NEAR(signedVolume(welded), signedVolume(soup), 1e-6 * std::abs(signedVolume(soup)) + 1e-9);
+      ASSERT_EQ(welded.colors.size(), welded.vertices.size());
+      for (std::size_t i = 0; i < welded.vertices.size(); ++i)
+        if (welded.vertices[i].norm() > 0.99f && welded.vertices[i].norm() < 1.01f)  // not a hole's patch
+          EXPECT_EQ(welded.colors[i], colourAt(welded.vertices[i]));
+    }
+  }
+}
+
 TEST(MeshClean, SimplifiesToFaceBudgetKeepingShapeAndColours) {
   TriangleMesh m = icosphere(4);  // 5120 faces
   const double ref_vol = signedVolume(m);

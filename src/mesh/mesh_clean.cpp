@@ -304,9 +304,14 @@ struct BlendColoursOnCollapse : SMS::Edge_collapse_visitor_base<Mesh> {
 
 class Cleaner {
  public:
+  // What the input is: any soup, or regions repaired each on its own and welded at their seams.
+  enum class Input { Soup, WeldedRegions };
+  static constexpr std::size_t kDistanceSamples = 100000;
+
   Cleaner(const MeshCleanParams& p, MeshCleanReport& r, TriangleMesh* unsimplified,
-          std::vector<std::uint8_t>* seam = nullptr, std::size_t distance_samples = kDistanceSamples)
-      : p_(p), r_(r), unsimplified_(unsimplified), seam_(seam), distance_samples_(distance_samples) {}
+          std::vector<std::uint8_t>* seam = nullptr, std::size_t distance_samples = kDistanceSamples,
+          Input input = Input::Soup)
+      : p_(p), r_(r), unsimplified_(unsimplified), seam_(seam), distance_samples_(distance_samples), input_(input) {}
 
   void run(TriangleMesh& in) {
     has_colours_ = !in.colors.empty() && in.colors.size() == in.vertices.size();
@@ -368,6 +373,93 @@ class Cleaner {
   void buildRepaired(const TriangleMesh& in) {
     input_vertices_ = in.vertices.size();
     input_faces_ = in.faces.size();
+    // Welding by distance needs the soup; so does a region (its seam flags travel by position).
+    if (input_ == Input::WeldedRegions && p_.repair && p_.weld_distance <= 0 && !seam_) buildFaceByFace(in);
+    else buildFromSoup(in);
+    if (!p_.repair) return;
+    r_.border_edges_stitched += PMP::stitch_borders(m_);
+    const std::size_t faces_before = m_.number_of_faces();
+    PMP::remove_degenerate_faces(m_);  // zero-area triangles (collinear or coincident corners)
+    m_.collect_garbage();
+    r_.degenerate_faces_removed += faces_before - m_.number_of_faces();
+    r_.non_manifold_vertices_split += splitNonManifoldVertices();
+    PMP::remove_isolated_vertices(m_);
+    m_.collect_garbage();
+  }
+
+  // Regions repaired each on their own and welded at their seams (meshByRegion) form a mesh but where
+  // regions meet, so their faces go in one by one without a polygon soup: CGAL's soup orienter was
+  // the welded repair's peak (loop scene at 640x480: 313 of 592 MB of heap, docs/mesh.md). A face the
+  // mesh refuses repeats a corner or another face (dropped), or would make an edge or a vertex
+  // non-manifold: one corner of its own lets it in, as orient_polygon_soup splits such points, and
+  // stitch_borders joins it back where the mesh stays manifold.
+  void buildFaceByFace(const TriangleMesh& in) {
+    m_.reserve(Mesh::size_type(in.vertices.size()), Mesh::size_type(in.faces.size() * 3 / 2 + 3),
+               Mesh::size_type(in.faces.size()));
+    col_ = m_.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
+    known_ = m_.add_property_map<VD, bool>("v:rgb_known", true).first;
+    for (std::size_t i = 0; i < in.vertices.size(); ++i) {
+      const Eigen::Vector3f& v = in.vertices[i];
+      const VD d = m_.add_vertex(Point(v.x(), v.y(), v.z()));  // d.idx() == i
+      if (has_colours_) col_[d] = in.colors[i];
+    }
+    for (const auto& f : in.faces) {
+      const std::array<VD, 3> corners{VD(f[0]), VD(f[1]), VD(f[2])};
+      if (corners[0] == corners[1] || corners[1] == corners[2] || corners[0] == corners[2]) {
+        ++r_.degenerate_faces_removed;
+        continue;
+      }
+      if (m_.add_face(corners[0], corners[1], corners[2]) != Mesh::null_face()) continue;
+      if (hasFace(corners)) ++r_.duplicate_faces_removed;
+      else r_.non_manifold_vertices_split += addWithOwnCorners(corners);
+    }
+    PMP::remove_isolated_vertices(m_);  // corners no face kept
+    m_.collect_garbage();
+    // Stitching and the degeneracy repair need a valid polygon mesh: one fan of faces per vertex.
+    r_.non_manifold_vertices_split += splitNonManifoldVertices();
+  }
+
+  // CGAL's split of vertices with more than one fan of faces, each copy in its vertex's colour.
+  std::size_t splitNonManifoldVertices() {
+    std::vector<std::vector<VD>> groups;  // a vertex, then its copies
+    const std::size_t n =
+        PMP::duplicate_non_manifold_vertices(m_, CGAL::parameters::output_iterator(std::back_inserter(groups)));
+    for (const auto& g : groups)
+      for (VD v : g) col_[v] = col_[g.front()];
+    return n;
+  }
+
+  // A face on these corners already, in either orientation.
+  bool hasFace(const std::array<VD, 3>& c) const {
+    const HD h = m_.halfedge(c[0], c[1]);
+    if (h == Mesh::null_halfedge()) return false;
+    for (HD e : {h, m_.opposite(h)})
+      if (!m_.is_border(e) && m_.target(m_.next(e)) == c[2]) return true;
+    return false;
+  }
+
+  // Adds the face with one corner copied, the first copy the mesh accepts, else with all three;
+  // returns the copies made.
+  std::size_t addWithOwnCorners(std::array<VD, 3> c) {
+    const auto copyOf = [&](VD from) {
+      const Point at = m_.point(from);  // a copy: add_vertex may move the points
+      const Rgb colour = col_[from];
+      const VD v = m_.add_vertex(at);
+      col_[v] = colour;
+      return v;
+    };
+    for (int k = 0; k < 3; ++k) {
+      std::array<VD, 3> tried = c;
+      tried[k] = copyOf(c[k]);
+      if (m_.add_face(tried[0], tried[1], tried[2]) != Mesh::null_face()) return 1;
+      m_.remove_vertex(tried[k]);
+    }
+    for (VD& v : c) v = copyOf(v);
+    m_.add_face(c[0], c[1], c[2]);
+    return 3;
+  }
+
+  void buildFromSoup(const TriangleMesh& in) {
     std::vector<Point> pts;
     pts.reserve(in.vertices.size());
     for (const auto& v : in.vertices) pts.emplace_back(v.x(), v.y(), v.z());
@@ -412,15 +504,6 @@ class Cleaner {
       fixed_ = m_.add_property_map<VD, bool>("v:fixed_seam", false).first;
       for (VD v : m_.vertices()) fixed_[v] = fixed_at.count(m_.point(v)) > 0;
     }
-    if (!p_.repair) return;
-    r_.border_edges_stitched += PMP::stitch_borders(m_);
-    const std::size_t faces_before = m_.number_of_faces();
-    PMP::remove_degenerate_faces(m_);  // zero-area triangles (collinear or coincident corners)
-    m_.collect_garbage();
-    r_.degenerate_faces_removed += faces_before - m_.number_of_faces();
-    r_.non_manifold_vertices_split += PMP::duplicate_non_manifold_vertices(m_);
-    PMP::remove_isolated_vertices(m_);
-    m_.collect_garbage();
   }
 
   void removeSmallComponents() {
@@ -611,13 +694,12 @@ class Cleaner {
     return out;
   }
 
-  static constexpr std::size_t kDistanceSamples = 100000;
-
   const MeshCleanParams& p_;
   MeshCleanReport& r_;
   TriangleMesh* unsimplified_;
   std::vector<std::uint8_t>* seam_;  // region mode: per vertex, fixed (shared with another region)
   std::size_t distance_samples_;
+  Input input_;
   Mesh::Property_map<VD, bool> fixed_;
   Mesh m_;
   Mesh::Property_map<VD, Rgb> col_;
@@ -628,13 +710,15 @@ class Cleaner {
 
 }  // namespace
 
-MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, TriangleMesh* unsimplified) {
+namespace {
+
+MeshCleanReport clean(TriangleMesh& mesh, const MeshCleanParams& params, TriangleMesh* unsimplified, Cleaner::Input input) {
   MeshCleanReport report;
   TriangleMesh before;
   try {
     // No copy of the input (the welded mesh's repair is a long run's peak): Cleaner only reads `mesh`
     // and replaces it at its very end, so on failure it is as it came.
-    Cleaner(params, report, unsimplified ? &before : nullptr).run(mesh);
+    Cleaner(params, report, unsimplified ? &before : nullptr, nullptr, Cleaner::kDistanceSamples, input).run(mesh);
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
@@ -643,6 +727,16 @@ MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, Tri
   if (unsimplified) *unsimplified = std::move(before);
   report.success = true;
   return report;
+}
+
+}  // namespace
+
+MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, TriangleMesh* unsimplified) {
+  return clean(mesh, params, unsimplified, Cleaner::Input::Soup);
+}
+
+MeshCleanReport cleanWeldedRegions(TriangleMesh& mesh, const MeshCleanParams& params) {
+  return clean(mesh, params, nullptr, Cleaner::Input::WeldedRegions);
 }
 
 MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& seam, const MeshCleanParams& params) {

@@ -219,7 +219,7 @@ void cleanWelded(RegionMeshResult& out, const MeshCleanParams& params, double me
     rest.min_component_area = std::max(rest.min_component_area, 0.5 * params.min_component_faces * mean_raw_face_area);
   const MeshSimplification regional = out.report.simplification;
   const std::size_t removed = out.report.components_removed;
-  if (!out.mesh.empty()) out.report = cleanMesh(out.mesh, rest);
+  if (!out.mesh.empty()) out.report = cleanWeldedRegions(out.mesh, rest);
   else out.report.success = true;
   out.report.simplification = regional;
   out.report.components_removed += removed;
@@ -442,8 +442,8 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   }
   step.vertices_before = out.raw_vertices;
   if (regions_done) regions_done();
-  // The welded mesh's repair is the run's peak (CGAL's soup and mesh beside it: loop scene at 640x480,
-  // ~450 MiB more): the seam indexes of both passes go first, and the merged mesh's spare capacity.
+  // The welded mesh's repair can be the run's peak (CGAL's mesh beside the merged one): the seam
+  // indexes of both passes go first, and the merged mesh's spare capacity.
   const double mean_raw_face_area = fragments ? fragments->meanFaceArea() : 0.0;
   fragments.reset();
   raw_count = fusion::SeamWelder();

@@ -91,6 +91,14 @@ struct MeshCleanReport {
 // simplification (repaired, fragments removed, holes filled; not smoothed).
 MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, TriangleMesh* unsimplified = nullptr);
 
+// cleanMesh for regions that simplifyRegion repaired each on its own, welded at their seams and
+// oriented alike (marching cubes orients every region by the TSDF's sign): the mesh is valid but
+// where regions meet, so the repair adds its faces one by one instead of through a polygon soup
+// (loop scene: 1.6 M faces repaired in a third of the time, the run's peak ~200 MiB lower). A repeated
+// face is dropped; one that would make an edge or vertex non-manifold gets a corner of its own,
+// joined back by stitching where the mesh stays manifold. With weld_distance > 0 this is cleanMesh.
+MeshCleanReport cleanWeldedRegions(TriangleMesh& mesh, const MeshCleanParams& params);
+
 // The first half of cleanMesh for one region of a mesh built region by region: repair, removal of
 // small components that touch no seam (those continuing into a neighbour are judged whole, after
 // welding), then simplification. Vertices flagged in `seam` (shared with a neighbouring region) are
