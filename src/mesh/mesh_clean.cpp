@@ -391,8 +391,9 @@ class Cleaner {
   // regions meet, so their faces go in one by one without a polygon soup: CGAL's soup orienter was
   // the welded repair's peak (loop scene at 640x480: 313 of 592 MB of heap, docs/mesh.md). A face the
   // mesh refuses repeats a corner or another face (dropped), or would make an edge or a vertex
-  // non-manifold: one corner of its own lets it in, as orient_polygon_soup splits such points, and
-  // stitch_borders joins it back where the mesh stays manifold.
+  // non-manifold: it goes in on corners of its own, cut off as orient_polygon_soup cuts it off, and
+  // stitch_borders joins it back where the mesh stays manifold (the loop scene's welded mesh: face
+  // counts, fragments and holes nearer the soup repair's than with one corner of its own).
   void buildFaceByFace(const TriangleMesh& in) {
     m_.reserve(Mesh::size_type(in.vertices.size()), Mesh::size_type(in.faces.size() * 3 / 2 + 3),
                Mesh::size_type(in.faces.size()));
@@ -411,7 +412,7 @@ class Cleaner {
       }
       if (m_.add_face(corners[0], corners[1], corners[2]) != Mesh::null_face()) continue;
       if (hasFace(corners)) ++r_.duplicate_faces_removed;
-      else r_.non_manifold_vertices_split += addWithOwnCorners(corners);
+      else r_.non_manifold_vertices_split += addOnOwnCorners(corners);
     }
     PMP::remove_isolated_vertices(m_);  // corners no face kept
     m_.collect_garbage();
@@ -438,23 +439,14 @@ class Cleaner {
     return false;
   }
 
-  // Adds the face with one corner copied, the first copy the mesh accepts, else with all three;
-  // returns the copies made.
-  std::size_t addWithOwnCorners(std::array<VD, 3> c) {
-    const auto copyOf = [&](VD from) {
-      const Point at = m_.point(from);  // a copy: add_vertex may move the points
-      const Rgb colour = col_[from];
-      const VD v = m_.add_vertex(at);
+  // Adds the face on corners of its own, cut off as the soup repair cuts it off; returns the copies.
+  std::size_t addOnOwnCorners(std::array<VD, 3> c) {
+    for (VD& v : c) {
+      const Point at = m_.point(v);  // a copy: add_vertex may move the points
+      const Rgb colour = col_[v];
+      v = m_.add_vertex(at);
       col_[v] = colour;
-      return v;
-    };
-    for (int k = 0; k < 3; ++k) {
-      std::array<VD, 3> tried = c;
-      tried[k] = copyOf(c[k]);
-      if (m_.add_face(tried[0], tried[1], tried[2]) != Mesh::null_face()) return 1;
-      m_.remove_vertex(tried[k]);
     }
-    for (VD& v : c) v = copyOf(v);
     m_.add_face(c[0], c[1], c[2]);
     return 3;
   }

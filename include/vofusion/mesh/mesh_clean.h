@@ -95,7 +95,7 @@ MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, Tri
 // oriented alike (marching cubes orients every region by the TSDF's sign): the mesh is valid but
 // where regions meet, so the repair adds its faces one by one instead of through a polygon soup
 // (loop scene: 1.6 M faces repaired in a third of the time, the run's peak ~200 MiB lower). A repeated
-// face is dropped; one that would make an edge or vertex non-manifold gets a corner of its own,
+// face is dropped; one that would make an edge or vertex non-manifold gets corners of its own,
 // joined back by stitching where the mesh stays manifold. With weld_distance > 0 this is cleanMesh.
 MeshCleanReport cleanWeldedRegions(TriangleMesh& mesh, const MeshCleanParams& params);
 
