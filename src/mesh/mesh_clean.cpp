@@ -392,8 +392,8 @@ class Cleaner {
   // the welded repair's peak (loop scene at 640x480: 313 of 592 MB of heap, docs/mesh.md). A face the
   // mesh refuses repeats a corner or another face (dropped), or would make an edge or a vertex
   // non-manifold: it goes in on corners of its own, cut off as orient_polygon_soup cuts it off, and
-  // stitch_borders joins it back where the mesh stays manifold (the loop scene's welded mesh: face
-  // counts, fragments and holes nearer the soup repair's than with one corner of its own).
+  // stitch_borders joins it back where the mesh stays manifold (three corners rather than one: faces
+  // and area nearer the soup repair's on the loop scene, docs/mesh.md).
   void buildFaceByFace(const TriangleMesh& in) {
     m_.reserve(Mesh::size_type(in.vertices.size()), Mesh::size_type(in.faces.size() * 3 / 2 + 3),
                Mesh::size_type(in.faces.size()));
