@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <set>
 #include <type_traits>
 #include <unordered_map>
 #include <unordered_set>
@@ -395,23 +396,32 @@ class Cleaner {
   // stitch_borders joins it back where the mesh stays manifold (three corners rather than one: faces
   // and area nearer the soup repair's on the loop scene, docs/mesh.md).
   void buildFaceByFace(const TriangleMesh& in) {
+    col_ = m_.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
+    known_ = m_.add_property_map<VD, bool>("v:rgb_known", false).first;  // vertices made later take colours from these
     m_.reserve(Mesh::size_type(in.vertices.size()), Mesh::size_type(in.faces.size() * 3 / 2 + 3),
                Mesh::size_type(in.faces.size()));
-    col_ = m_.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
-    known_ = m_.add_property_map<VD, bool>("v:rgb_known", true).first;
     for (std::size_t i = 0; i < in.vertices.size(); ++i) {
       const Eigen::Vector3f& v = in.vertices[i];
       const VD d = m_.add_vertex(Point(v.x(), v.y(), v.z()));  // d.idx() == i
       if (has_colours_) col_[d] = in.colors[i];
+      known_[d] = true;
     }
+    std::set<std::array<std::uint32_t, 3>> cut_off;  // refused faces' corners, sorted: their repeats too are repeats
     for (const auto& f : in.faces) {
       const std::array<VD, 3> corners{VD(f[0]), VD(f[1]), VD(f[2])};
       if (corners[0] == corners[1] || corners[1] == corners[2] || corners[0] == corners[2]) {
         ++r_.degenerate_faces_removed;
         continue;
       }
+      // Looked for first: a repeat the other way round would go in, closing a two-face pillow.
+      if (hasFace(corners)) {
+        ++r_.duplicate_faces_removed;
+        continue;
+      }
       if (m_.add_face(corners[0], corners[1], corners[2]) != Mesh::null_face()) continue;
-      if (hasFace(corners)) ++r_.duplicate_faces_removed;
+      std::array<std::uint32_t, 3> sorted = f;
+      std::sort(sorted.begin(), sorted.end());
+      if (!cut_off.insert(sorted).second) ++r_.duplicate_faces_removed;
       else r_.non_manifold_vertices_split += addOnOwnCorners(corners);
     }
     PMP::remove_isolated_vertices(m_);  // corners no face kept
@@ -420,13 +430,18 @@ class Cleaner {
     r_.non_manifold_vertices_split += splitNonManifoldVertices();
   }
 
-  // CGAL's split of vertices with more than one fan of faces, each copy in its vertex's colour.
+  // CGAL's split of vertices with more than one fan of faces, each copy in its vertex's colour and,
+  // in a region, on the seam when its vertex is (so the welder joins it to the neighbour's).
   std::size_t splitNonManifoldVertices() {
     std::vector<std::vector<VD>> groups;  // a vertex, then its copies
     const std::size_t n =
         PMP::duplicate_non_manifold_vertices(m_, CGAL::parameters::output_iterator(std::back_inserter(groups)));
     for (const auto& g : groups)
-      for (VD v : g) col_[v] = col_[g.front()];
+      for (VD v : g) {
+        col_[v] = col_[g.front()];
+        known_[v] = known_[g.front()];
+        if (seam_) fixed_[v] = fixed_[g.front()];
+      }
     return n;
   }
 
@@ -446,6 +461,7 @@ class Cleaner {
       const Rgb colour = col_[v];
       v = m_.add_vertex(at);
       col_[v] = colour;
+      known_[v] = true;
     }
     m_.add_face(c[0], c[1], c[2]);
     return 3;
