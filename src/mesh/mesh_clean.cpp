@@ -484,10 +484,8 @@ class Cleaner {
         if ((*seam_)[i]) fixed_at.insert(pts[i]);
 
     if (p_.repair) {
-      const std::size_t n_points = pts.size();
       if (p_.weld_distance > 0) r_.duplicate_vertices_merged += weldSoup(pts, polys, p_.weld_distance);
       r_.duplicate_vertices_merged += PMP::merge_duplicate_points_in_polygon_soup(pts, polys);
-      (void)n_points;
       // Faces that repeat a vertex (e.g. after welding) are degenerate.
       const std::size_t n_polys = polys.size();
       polys.erase(std::remove_if(polys.begin(), polys.end(),

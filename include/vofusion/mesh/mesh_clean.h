@@ -96,7 +96,8 @@ MeshCleanReport cleanMesh(TriangleMesh& mesh, const MeshCleanParams& params, Tri
 // where regions meet, so the repair adds its faces one by one instead of through a polygon soup
 // (loop scene: 1.6 M faces repaired in a third of the time, the run's peak ~200 MiB lower). A repeated
 // face is dropped; one that would make an edge or vertex non-manifold gets corners of its own,
-// joined back by stitching where the mesh stays manifold. With weld_distance > 0 this is cleanMesh.
+// joined back by stitching where the mesh stays manifold. With repair off or weld_distance > 0 this
+// is cleanMesh.
 MeshCleanReport cleanWeldedRegions(TriangleMesh& mesh, const MeshCleanParams& params);
 
 // The first half of cleanMesh for one region of a mesh built region by region: repair, removal of
