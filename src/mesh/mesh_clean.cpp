@@ -374,8 +374,8 @@ class Cleaner {
   void buildRepaired(const TriangleMesh& in) {
     input_vertices_ = in.vertices.size();
     input_faces_ = in.faces.size();
-    // Welding by distance needs the soup; so does a region (its seam flags travel by position).
-    if (input_ == Input::WeldedRegions && p_.repair && p_.weld_distance <= 0 && !seam_) buildFaceByFace(in);
+    // Welding by distance needs the soup.
+    if (input_ == Input::WeldedRegions && p_.repair && p_.weld_distance <= 0) buildFaceByFace(in);
     else buildFromSoup(in);
     if (!p_.repair) return;
     r_.border_edges_stitched += PMP::stitch_borders(m_);
