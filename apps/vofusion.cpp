@@ -12,6 +12,7 @@
 #include <optional>
 
 #include "vofusion/core/cli.h"
+#include "vofusion/core/heap.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
@@ -269,4 +270,7 @@ int body(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) { return runApp("vofusion", body, argc, argv); }
+int main(int argc, char** argv) {
+  restartWithHugePageHeap(argv);
+  return runApp("vofusion", body, argc, argv);
+}

@@ -7,6 +7,8 @@
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/heap.h"
+#include "support.h"
 
 using namespace vofusion;
 
@@ -109,4 +111,66 @@ TEST(RunApp, ExitCodesAndOneLine) {
   EXPECT_EQ(runApp(nullptr, throwsInput, 0, nullptr), 2);
   EXPECT_EQ(testing::internal::GetCapturedStderr(), "f.txt: bad\n");
   EXPECT_EQ(runApp("app", returns7, 0, nullptr), 7);
+}
+
+TEST(Heap, HugePagesAddedToTheTunablesUnlessTheyAlreadySayHowThePagesGo) {
+  EXPECT_EQ(tunablesWithHugePageHeap(nullptr), "glibc.malloc.hugetlb=1");
+  EXPECT_EQ(tunablesWithHugePageHeap(""), "glibc.malloc.hugetlb=1");
+  EXPECT_EQ(tunablesWithHugePageHeap("glibc.malloc.arena_max=2"), "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1");
+  EXPECT_EQ(tunablesWithHugePageHeap("glibc.malloc.hugetlb=0"), std::nullopt);
+  EXPECT_EQ(tunablesWithHugePageHeap("glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1"), std::nullopt);
+}
+
+namespace {
+// The probe's output lines, run with `env` first (e.g. "-u GLIBC_TUNABLES").
+std::vector<std::string> probeLines(const std::string& env) {
+  std::string out;
+  EXPECT_EQ(test::run("env " + env + " " + test::app("heap_restart_probe") + " a 'b c'", &out), 0) << out;
+  std::vector<std::string> lines;
+  for (std::size_t at = 0, end; (end = out.find('\n', at)) != std::string::npos; at = end + 1)
+    lines.push_back(out.substr(at, end - at));
+  return lines;
+}
+// "start <pid>" -> "<pid>"
+std::string pidOf(const std::string& start_line) { return start_line.substr(std::string("start ").size()); }
+}  // namespace
+
+TEST(Heap, AnAppRestartsOnceInPlaceWithHugePagesAndTheSameArguments) {
+  const std::vector<std::string> lines = probeLines("-u GLIBC_TUNABLES");
+  ASSERT_EQ(lines.size(), 3u);  // started, restarted, ran
+  const std::string pid = pidOf(lines[0]);
+  EXPECT_EQ(lines[0], "start " + pid);
+  EXPECT_EQ(lines[1], "start " + pid);  // the same process, started again
+  EXPECT_EQ(lines[2], "running " + pid + " glibc.malloc.hugetlb=1 a b c");
+}
+
+TEST(Heap, TheUsersTunablesKeptAndTheirHugePageChoiceStands) {
+  std::vector<std::string> lines = probeLines("GLIBC_TUNABLES=glibc.malloc.arena_max=4");
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_EQ(lines[2], "running " + pidOf(lines[0]) + " glibc.malloc.arena_max=4:glibc.malloc.hugetlb=1 a b c");
+  lines = probeLines("GLIBC_TUNABLES=glibc.malloc.hugetlb=0");
+  ASSERT_EQ(lines.size(), 2u);  // no restart
+  EXPECT_EQ(lines[1], "running " + pidOf(lines[0]) + " glibc.malloc.hugetlb=0 a b c");
+}
+
+TEST(Heap, NoRestartUnderAPreloadedTool) {
+  // heaptrack and valgrind preload their library: a restarted process would escape them.
+  const std::vector<std::string> lines = probeLines("-u GLIBC_TUNABLES LD_PRELOAD=libm.so.6");
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_EQ(lines[1], "running " + pidOf(lines[0]) + " (unset) a b c");
+}
+
+TEST(Heap, NoRestartUnderHeaptrack) {
+  // heaptrack takes its library out of LD_PRELOAD once it is loaded.
+  if (test::run("command -v heaptrack") != 0) GTEST_SKIP() << "heaptrack is not installed";
+  std::string out;
+  ASSERT_EQ(test::run("cd " + test::tempDir("heaptrack") + " && env -u GLIBC_TUNABLES heaptrack -o probe " +
+                          test::app("heap_restart_probe") + " a",
+                      &out),
+            0)
+      << out;
+  const std::size_t first = out.find("start ");
+  ASSERT_NE(first, std::string::npos) << out;
+  EXPECT_EQ(out.find("start ", first + 1), std::string::npos) << "restarted under heaptrack:\n" << out;
+  EXPECT_NE(out.find("(unset) a"), std::string::npos) << out;
 }

@@ -4,6 +4,9 @@
 // mapped fresh and faulted in page by page (1.2 M page faults, 2 s of kernel time in a 300-frame
 // run). Once the frames are done, meshing and CGAL allocate hundreds of MiB one region at a time:
 // kept in the heap, what one region freed stays counted in the process's RSS through the rest.
+// Where a block is mapped fresh, transparent huge pages fault it in 2 MiB at a time, not 4 KiB.
+#include <optional>
+#include <string>
 
 namespace vofusion {
 
@@ -12,5 +15,16 @@ void keepFreedHeapForFrames();
 // After the frame loop: glibc's defaults again (large blocks mapped and unmapped, the heap's top
 // trimmed) and the free memory held so far returned to the kernel now.
 void returnFreedHeap();
+
+// GLIBC_TUNABLES with glibc.malloc.hugetlb=1 added to `current` (null: unset); nullopt when
+// `current` already sets glibc.malloc.hugetlb (the user's choice stands).
+std::optional<std::string> tunablesWithHugePageHeap(const char* current);
+// glibc reads its tunables only when a program starts, so an app's main() calls this first: it
+// restarts the program in place (same pid, same arguments; execv of /proc/self/exe) once, with
+// GLIBC_TUNABLES from tunablesWithHugePageHeap. Returns without restarting when the variable
+// already sets glibc.malloc.hugetlb (GLIBC_TUNABLES=glibc.malloc.hugetlb=0 turns this off), when
+// a tool is preloaded (LD_PRELOAD set, or heaptrack's or valgrind's library loaded: they would not
+// follow), or when the restart fails.
+void restartWithHugePageHeap(char** argv);
 
 }  // namespace vofusion
