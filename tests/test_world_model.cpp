@@ -10,6 +10,8 @@
 #include <unordered_map>
 #include <sstream>
 
+#include <zlib.h>
+
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/spill_file.h"
@@ -213,6 +215,34 @@ TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit
   EXPECT_EQ(wm.stats().ram_bytes, 0u);
   EXPECT_FALSE(wm.take(Eigen::Vector3i(0, 0, 0)));
   EXPECT_EQ(wm.coordsInBox(Eigen::Vector3i(-10, -10, -10), 20).size(), 0u);
+}
+
+// Bricks and keyframe depths are written by libdeflate as zlib streams: zlib reads what we write
+// and we read what zlib wrote (maps saved by earlier builds), and a damaged stream is refused.
+TEST(WorldModel, SpillStreamsAreZlibsBothWays) {
+  std::mt19937 rng(3);
+  const auto brick = randomBrick(Eigen::Vector3i(1, 2, 3), rng);
+  const std::size_t n = sizeof(brick->voxels);
+  const std::vector<std::uint8_t> ours = zlibCompress(brick->voxels, n);
+  ASSERT_FALSE(ours.empty());
+  std::vector<std::uint8_t> back(n);
+  uLongf len = uLongf(n);
+  ASSERT_EQ(uncompress(back.data(), &len, ours.data(), uLong(ours.size())), Z_OK);
+  EXPECT_EQ(len, n);
+  EXPECT_EQ(std::memcmp(back.data(), brick->voxels, n), 0);
+
+  std::vector<std::uint8_t> theirs(compressBound(uLong(n)));
+  uLongf theirs_len = uLongf(theirs.size());
+  ASSERT_EQ(compress2(theirs.data(), &theirs_len, reinterpret_cast<const Bytef*>(brick->voxels), uLong(n), 1), Z_OK);
+  Brick read;
+  ASSERT_TRUE(zlibUncompress(theirs.data(), theirs_len, read.voxels, n));
+  EXPECT_TRUE(sameVoxels(read, *brick));
+
+  EXPECT_FALSE(zlibUncompress(theirs.data(), theirs_len / 2, read.voxels, n));  // truncated
+  EXPECT_FALSE(zlibUncompress(theirs.data(), theirs_len, read.voxels, n - 6));  // not the length expected
+  std::vector<std::uint8_t> flipped = ours;
+  flipped[flipped.size() - 1] ^= 0x5a;  // the Adler-32 check
+  EXPECT_FALSE(zlibUncompress(flipped.data(), flipped.size(), read.voxels, n));
 }
 
 // A released place is written again: best fit, the rest stays free, neighbours merge.
