@@ -309,10 +309,17 @@ class Cleaner {
   enum class Input { Soup, WeldedRegions };
   static constexpr std::size_t kDistanceSamples = 100000;
 
-  Cleaner(const MeshCleanParams& p, MeshCleanReport& r, TriangleMesh* unsimplified,
-          std::vector<std::uint8_t>* seam = nullptr, std::size_t distance_samples = kDistanceSamples,
-          Input input = Input::Soup)
-      : p_(p), r_(r), unsimplified_(unsimplified), seam_(seam), distance_samples_(distance_samples), input_(input) {}
+  // What a run is asked for beside the parameters.
+  struct Job {
+    Input input = Input::Soup;
+    TriangleMesh* unsimplified = nullptr;       // gets the mesh as simplification found it
+    std::vector<std::uint8_t>* seam = nullptr;  // a region's seam flags: those vertices stay, no hole is filled
+    std::size_t distance_samples = kDistanceSamples;  // of the simplification's distance
+  };
+
+  Cleaner(const MeshCleanParams& p, MeshCleanReport& r, const Job& job)
+      : p_(p), r_(r), unsimplified_(job.unsimplified), seam_(job.seam), distance_samples_(job.distance_samples),
+        input_(job.input) {}
 
   void run(TriangleMesh& in) {
     has_colours_ = !in.colors.empty() && in.colors.size() == in.vertices.size();
@@ -724,7 +731,10 @@ MeshCleanReport clean(TriangleMesh& mesh, const MeshCleanParams& params, Triangl
   try {
     // No copy of the input (the welded mesh's repair is a long run's peak): Cleaner only reads `mesh`
     // and replaces it at its very end, so on failure it is as it came.
-    Cleaner(params, report, unsimplified ? &before : nullptr, nullptr, Cleaner::kDistanceSamples, input).run(mesh);
+    Cleaner::Job job;
+    job.input = input;
+    job.unsimplified = unsimplified ? &before : nullptr;
+    Cleaner(params, report, job).run(mesh);
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
@@ -765,7 +775,10 @@ MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& se
       p.max_simplify_error = 0;
       p.target_faces = 0;
     }
-    Cleaner(p, report, nullptr, &work_seam, samples).run(work);
+    Cleaner::Job job;
+    job.seam = &work_seam;
+    job.distance_samples = samples;
+    Cleaner(p, report, job).run(work);
     if (quadrics) {
       MeshSimplification& s = report.simplification;
       s.ran = true;
