@@ -47,7 +47,7 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   const std::string dir = test::tempDir("vofusion_app_synth");
   const std::string out = dir + "/out";
   std::string log;
-  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 12 --raw-mesh --config " +
+  ASSERT_EQ(test::run("env -u GLIBC_TUNABLES -u LD_PRELOAD " + test::app("vofusion") + " synthetic:room --max-frames 12 --raw-mesh --config " +
                           validConfig(dir) + " --out " + out,
                       &log),
             0)
@@ -61,6 +61,7 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   const auto summary = readJson(out + "/summary.json");
   EXPECT_EQ(summary["frames"].get<int>(), 12);
   EXPECT_EQ(summary["mode"].get<std::string>(), "joint");
+  EXPECT_TRUE(summary["heap_huge_pages"].get<bool>()) << "the app did not restart with huge pages";
   ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.05);
   // Over 50 ms: about one pair per frame, their 95th percentile between the median and the largest.
