@@ -239,10 +239,16 @@ TEST(WorldModel, SpillStreamsAreZlibsBothWays) {
   EXPECT_TRUE(sameVoxels(read, *brick));
 
   EXPECT_FALSE(zlibUncompress(theirs.data(), theirs_len / 2, read.voxels, n));  // truncated
+  std::vector<std::uint8_t> shorter(compressBound(uLong(n)));
+  uLongf shorter_len = uLongf(shorter.size());
+  ASSERT_EQ(compress2(shorter.data(), &shorter_len, reinterpret_cast<const Bytef*>(brick->voxels), uLong(n - 6), 1), Z_OK);
+  EXPECT_FALSE(zlibUncompress(shorter.data(), shorter_len, read.voxels, n));  // whole, but a voxel short
   EXPECT_FALSE(zlibUncompress(theirs.data(), theirs_len, read.voxels, n - 6));  // not the length expected
   std::vector<std::uint8_t> flipped = ours;
   flipped[flipped.size() - 1] ^= 0x5a;  // the Adler-32 check
   EXPECT_FALSE(zlibUncompress(flipped.data(), flipped.size(), read.voxels, n));
+  EXPECT_TRUE(zlibCompress(brick->voxels, 0).empty());
+  EXPECT_TRUE(zlibUncompress(nullptr, 0, read.voxels, 0));
 }
 
 // A released place is written again: best fit, the rest stays free, neighbours merge.

@@ -21,8 +21,9 @@ namespace vofusion {
 // way), in less time: one compressor and decompressor per thread.
 std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size) {
   if (size == 0) return {};
-  thread_local const std::unique_ptr<libdeflate_compressor, decltype(&libdeflate_free_compressor)> compressor(
-      libdeflate_alloc_compressor(1), &libdeflate_free_compressor);
+  thread_local std::unique_ptr<libdeflate_compressor, decltype(&libdeflate_free_compressor)> compressor(
+      nullptr, &libdeflate_free_compressor);
+  if (!compressor) compressor.reset(libdeflate_alloc_compressor(1));
   if (!compressor) throw std::bad_alloc();
   std::vector<std::uint8_t> out(libdeflate_zlib_compress_bound(compressor.get(), size));
   out.resize(libdeflate_zlib_compress(compressor.get(), data, size, out.data(), out.size()));
@@ -32,8 +33,9 @@ std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size) {
 
 bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
   if (size == 0) return data_size == 0;
-  thread_local const std::unique_ptr<libdeflate_decompressor, decltype(&libdeflate_free_decompressor)> inflater(
-      libdeflate_alloc_decompressor(), &libdeflate_free_decompressor);
+  thread_local std::unique_ptr<libdeflate_decompressor, decltype(&libdeflate_free_decompressor)> inflater(
+      nullptr, &libdeflate_free_decompressor);
+  if (!inflater) inflater.reset(libdeflate_alloc_decompressor());
   if (!inflater) throw std::bad_alloc();
   std::size_t got = 0;
   return libdeflate_zlib_decompress(inflater.get(), data, data_size, out, size, &got) == LIBDEFLATE_SUCCESS && got == size;
