@@ -9,6 +9,7 @@
 #include <array>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 
 namespace vofusion {
 
@@ -26,7 +27,8 @@ void returnFreedHeap() {
 
 namespace {
 constexpr const char* kHugePageKey = "glibc.malloc.hugetlb";
-// Set for the restarted process only (it takes it out again): there is never a second restart.
+// Set for the restarted process only (it takes it out again): there is never a second restart, even
+// where glibc would take the tunable out of the environment.
 constexpr const char* kRestartedMarker = "VOFUSION_HEAP_RESTARTED";
 
 // The value of `key` in a GLIBC_TUNABLES string (key=value pairs separated by ':').
@@ -43,21 +45,26 @@ std::optional<std::string> tunable(const char* tunables, const std::string& key)
 }
 
 // A tool preloaded into this process has set itself up here and would not follow a restart (under
-// heaptrack a restarted run showed 5 MB and its first seconds). heaptrack takes its library out of
-// LD_PRELOAD once loaded, so its library (and valgrind's) is looked for among those loaded too.
+// heaptrack a restarted run showed 5 MB and its first seconds). valgrind's library stays in
+// LD_PRELOAD; heaptrack takes its own out once loaded, so it is looked for among those loaded too.
 bool toolPreloaded() {
   if (const char* preload = std::getenv("LD_PRELOAD"); preload != nullptr && *preload != '\0') return true;
   bool found = false;
   dl_iterate_phdr(
       [](dl_phdr_info* info, std::size_t, void* data) {
-        const char* name = info->dlpi_name;
-        if (name == nullptr || (std::strstr(name, "heaptrack") == nullptr && std::strstr(name, "vgpreload") == nullptr))
-          return 0;
+        if (info->dlpi_name == nullptr || std::strstr(info->dlpi_name, "heaptrack") == nullptr) return 0;
         *static_cast<bool*>(data) = true;
         return 1;
       },
       &found);
   return found;
+}
+
+// The kernel gives no transparent huge pages at all: a restart would cost 0.3 s for nothing.
+bool hugePagesNever() {
+  std::string mode;
+  std::getline(std::ifstream("/sys/kernel/mm/transparent_hugepage/enabled"), mode);
+  return mode.find("[never]") != std::string::npos;
 }
 
 // The program's own file, resolved, so that the restarted process keeps its name ("vofusion", not
@@ -97,15 +104,15 @@ void restartWithHugePageHeap(char** argv) {
     unsetenv(kRestartedMarker);  // our own children start afresh
     return;
   }
-  if (argv == nullptr || argv[0] == nullptr || getauxval(AT_SECURE) != 0 || toolPreloaded()) return;
+  if (argv == nullptr || argv[0] == nullptr || getauxval(AT_SECURE) != 0 || toolPreloaded() || hugePagesNever()) return;
   const char* before = std::getenv("GLIBC_TUNABLES");
   const std::optional<std::string> tunables = tunablesWithHugePageHeap(before);
   const std::optional<std::string> file = ownFile();
   if (!tunables || !file) return;
   const std::optional<std::string> restore = before ? std::optional<std::string>(before) : std::nullopt;
-  if (setenv("GLIBC_TUNABLES", tunables->c_str(), 1) != 0 || setenv(kRestartedMarker, "1", 1) != 0) return;
-  execv(file->c_str(), argv);
-  // The restart failed: run on with 4 KiB pages, the environment as it came.
+  if (setenv("GLIBC_TUNABLES", tunables->c_str(), 1) == 0 && setenv(kRestartedMarker, "1", 1) == 0)
+    execv(file->c_str(), argv);
+  // No restart: run on with 4 KiB pages, the environment as it came.
   unsetenv(kRestartedMarker);
   if (restore) setenv("GLIBC_TUNABLES", restore->c_str(), 1);
   else unsetenv("GLIBC_TUNABLES");

@@ -3,43 +3,16 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include <libdeflate.h>
 
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <iterator>
-#include <memory>
-#include <new>
 #include <stdexcept>
 
 #include "vofusion/core/errors.h"
 
 namespace vofusion {
-
-// libdeflate writes and reads the same zlib streams as zlib (saved maps and checkpoints read either
-// way), in less time: one compressor and decompressor per thread.
-std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size) {
-  if (size == 0) return {};
-  thread_local std::unique_ptr<libdeflate_compressor, decltype(&libdeflate_free_compressor)> compressor(
-      nullptr, &libdeflate_free_compressor);
-  if (!compressor) compressor.reset(libdeflate_alloc_compressor(1));
-  if (!compressor) throw std::bad_alloc();
-  std::vector<std::uint8_t> out(libdeflate_zlib_compress_bound(compressor.get(), size));
-  out.resize(libdeflate_zlib_compress(compressor.get(), data, size, out.data(), out.size()));
-  if (out.empty()) throw std::runtime_error("libdeflate: cannot compress");
-  return out;
-}
-
-bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
-  if (size == 0) return data_size == 0;
-  thread_local std::unique_ptr<libdeflate_decompressor, decltype(&libdeflate_free_decompressor)> inflater(
-      nullptr, &libdeflate_free_decompressor);
-  if (!inflater) inflater.reset(libdeflate_alloc_decompressor());
-  if (!inflater) throw std::bad_alloc();
-  std::size_t got = 0;
-  return libdeflate_zlib_decompress(inflater.get(), data, data_size, out, size, &got) == LIBDEFLATE_SUCCESS && got == size;
-}
 
 SpillFile::SpillFile(std::string dir, std::string what) : dir_(std::move(dir)), what_(std::move(what)) {}
 

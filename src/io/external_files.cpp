@@ -8,8 +8,7 @@
 #include <memory>
 #include <vector>
 
-#include <libdeflate.h>
-
+#include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
 
 namespace fs = std::filesystem;
@@ -64,12 +63,7 @@ void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& 
   static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are written as they are in memory");
   std::memcpy(raw.data(), dims, sizeof dims);
   if (ri.size() != 0) std::memcpy(raw.data() + sizeof dims, ri.data(), std::size_t(ri.size()) * 2);
-  thread_local const std::unique_ptr<libdeflate_compressor, decltype(&libdeflate_free_compressor)> compressor(
-      libdeflate_alloc_compressor(1), &libdeflate_free_compressor);
-  if (!compressor) throw std::bad_alloc();
-  std::vector<unsigned char> gz(libdeflate_gzip_compress_bound(compressor.get(), raw.size()));
-  gz.resize(libdeflate_gzip_compress(compressor.get(), raw.data(), raw.size(), gz.data(), gz.size()));
-  if (gz.empty()) throw std::logic_error(path + ": libdeflate could not compress the range image");
+  const std::vector<std::uint8_t> gz = gzipCompress(raw.data(), raw.size());
   std::FILE* f = std::fopen(path.c_str(), "wb");
   const bool ok = f && std::fwrite(gz.data(), 1, gz.size(), f) == gz.size();
   const int err = errno;

@@ -6,7 +6,9 @@
 #include <memory>
 #include <vector>
 
-#include <libdeflate.h>
+#include <libdeflate.h>  // its CRC-32
+
+#include "vofusion/core/deflate.h"
 
 namespace vofusion {
 
@@ -123,14 +125,7 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
   if (row * img.height > img.stream.size() * 1032 + 1024) return {};
   std::vector<std::uint8_t>& raw = b.raw;
   raw.resize(row * img.height);
-  thread_local const std::unique_ptr<libdeflate_decompressor, decltype(&libdeflate_free_decompressor)> inflater(
-      libdeflate_alloc_decompressor(), &libdeflate_free_decompressor);
-  std::size_t got = 0;
-  if (!inflater ||
-      libdeflate_zlib_decompress(inflater.get(), img.stream.data(), img.stream.size(), raw.data(), raw.size(), &got) !=
-          LIBDEFLATE_SUCCESS ||
-      got != raw.size())
-    return {};
+  if (!zlibUncompress(img.stream.data(), img.stream.size(), raw.data(), raw.size())) return {};
   const std::vector<std::uint8_t> zeros(stride, 0);
   cv::Mat out(int(img.height), int(img.width), img.type);
   for (int y = 0; y < out.rows; ++y) {

@@ -27,7 +27,8 @@ bool heapAsksForHugePages();
 // with GLIBC_TUNABLES from tunablesWithHugePageHeap. It does not restart, and returns, when:
 // - the variable already sets glibc.malloc.hugetlb (GLIBC_TUNABLES=glibc.malloc.hugetlb=0 turns this
 //   off, e.g. to debug in gdb, where main() would be reached twice);
-// - a tool is preloaded (LD_PRELOAD set, or heaptrack's or valgrind's library loaded): it would not follow;
+// - a tool is preloaded (LD_PRELOAD set, as valgrind's is, or heaptrack's library loaded): it would not follow;
+// - the kernel's transparent huge pages are off ("[never]"): nothing to gain;
 // - the program runs set-user-ID or with file capabilities (glibc may drop the variable), or was
 //   started through the dynamic loader, or /proc is missing, or the restart fails (the environment is
 //   then put back as it came);

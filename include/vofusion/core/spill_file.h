@@ -12,14 +12,11 @@
 #include <string>
 #include <vector>
 
+#include "vofusion/core/deflate.h"
+
 namespace vofusion {
 
-// What goes into a spill file is compressed first (zlib streams at level 1, written and read by
-// libdeflate: fast, ~3x on TSDF bricks and depth).
-std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size);
-// Fills exactly `size` bytes at `out`; false when `data` is not a zlib stream of that length. Both
-// throw std::bad_alloc when libdeflate cannot allocate its state.
-bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size);
+// What goes into a spill file is compressed first: zlibCompress / zlibUncompress (deflate.h).
 
 class SpillFile {
  public:

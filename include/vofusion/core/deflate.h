@@ -1,0 +1,19 @@
+#pragma once
+// Deflate streams through libdeflate, one compressor and decompressor per thread: the zlib streams of
+// spilled and saved TSDF bricks, keyframe depths and PNG image data, and the gzip files of the range
+// images we write. The same bytes zlib reads and writes, in less time.
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace vofusion {
+
+// A zlib stream of `size` bytes at `data`, at level 1 (fast, ~3x on TSDF bricks and depth); empty for size 0.
+std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size);
+// Fills exactly `size` bytes at `out`; false when `data` is not a zlib stream of that length.
+bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size);
+// A gzip file's bytes (one member) of `size` bytes at `data`, at level 1.
+std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size);
+// All three throw std::bad_alloc when libdeflate cannot allocate its state.
+
+}  // namespace vofusion

@@ -1,0 +1,54 @@
+#include "vofusion/core/deflate.h"
+
+#include <libdeflate.h>
+
+#include <memory>
+#include <new>
+#include <stdexcept>
+
+namespace vofusion {
+
+namespace {
+// This thread's compressor (level 1) and decompressor, made when first needed.
+libdeflate_compressor& compressor() {
+  thread_local std::unique_ptr<libdeflate_compressor, decltype(&libdeflate_free_compressor)> c(
+      nullptr, &libdeflate_free_compressor);
+  if (!c) c.reset(libdeflate_alloc_compressor(1));
+  if (!c) throw std::bad_alloc();
+  return *c;
+}
+
+libdeflate_decompressor& decompressor() {
+  thread_local std::unique_ptr<libdeflate_decompressor, decltype(&libdeflate_free_decompressor)> d(
+      nullptr, &libdeflate_free_decompressor);
+  if (!d) d.reset(libdeflate_alloc_decompressor());
+  if (!d) throw std::bad_alloc();
+  return *d;
+}
+}  // namespace
+
+std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size) {
+  if (size == 0) return {};
+  libdeflate_compressor& c = compressor();
+  std::vector<std::uint8_t> out(libdeflate_zlib_compress_bound(&c, size));
+  out.resize(libdeflate_zlib_compress(&c, data, size, out.data(), out.size()));
+  if (out.empty()) throw std::runtime_error("libdeflate: cannot compress");
+  return out;
+}
+
+bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
+  if (size == 0) return data_size == 0;
+  std::size_t got = 0;
+  return libdeflate_zlib_decompress(&decompressor(), data, data_size, out, size, &got) == LIBDEFLATE_SUCCESS &&
+         got == size;
+}
+
+std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size) {
+  libdeflate_compressor& c = compressor();
+  std::vector<std::uint8_t> out(libdeflate_gzip_compress_bound(&c, size));
+  out.resize(libdeflate_gzip_compress(&c, data, size, out.data(), out.size()));
+  if (out.empty()) throw std::runtime_error("libdeflate: cannot compress");
+  return out;
+}
+
+}  // namespace vofusion
