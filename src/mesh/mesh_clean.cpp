@@ -318,8 +318,7 @@ class Cleaner {
   };
 
   Cleaner(const MeshCleanParams& p, MeshCleanReport& r, const Job& job)
-      : p_(p), r_(r), unsimplified_(job.unsimplified), seam_(job.seam), distance_samples_(job.distance_samples),
-        input_(job.input) {}
+      : p_(p), r_(r), job_(job) {}
 
   void run(TriangleMesh& in) {
     has_colours_ = !in.colors.empty() && in.colors.size() == in.vertices.size();
@@ -330,16 +329,16 @@ class Cleaner {
     step("repair", [&] { buildRepaired(in); });
     if (p_.min_component_faces > 0 || p_.min_component_area > 0) step("components", [&] { removeSmallComponents(); });
     // A region's holes may run into its neighbours: they are filled once the regions are welded.
-    if (!seam_ && p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) step("holes", [&] { fillHoles(); });
+    if (!job_.seam && p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) step("holes", [&] { fillHoles(); });
     const bool simplifying = p_.max_simplify_error > 0 || p_.target_faces > 0 || p_.target_edge_length > 0;
     Mesh before;  // the mesh as simplification found it: measured against, and `unsimplified`
-    if (simplifying || unsimplified_) before = m_;
+    if (simplifying || job_.unsimplified) before = m_;
     if (simplifying) step("simplify", [&] { simplifyAndMeasure(before); });
-    if (!seam_ && (p_.smooth_iterations > 0 || p_.relax_iterations > 0)) step("smooth", [&] { smooth(); });
+    if (!job_.seam && (p_.smooth_iterations > 0 || p_.relax_iterations > 0)) step("smooth", [&] { smooth(); });
     finish(m_);
-    if (unsimplified_) {
+    if (job_.unsimplified) {
       finish(before);
-      *unsimplified_ = toTriangleMesh(before);
+      *job_.unsimplified = toTriangleMesh(before);
     }
     r_.border_cycles_after = borderCycleCount(m_);
     {
@@ -351,9 +350,9 @@ class Cleaner {
     r_.manifold = nonManifoldVertexCount(m_) == 0;
     r_.area = m_.is_empty() ? 0.0 : PMP::area(m_);
     in = toTriangleMesh(m_);  // last but the seam flags: until here `in` is the caller's input (cleanMesh)
-    if (seam_) {
-      seam_->clear();
-      for (VD v : m_.vertices()) seam_->push_back(fixed_[v]);
+    if (job_.seam) {
+      job_.seam->clear();
+      for (VD v : m_.vertices()) job_.seam->push_back(fixed_[v]);
     }
   }
 
@@ -382,7 +381,7 @@ class Cleaner {
     input_vertices_ = in.vertices.size();
     input_faces_ = in.faces.size();
     // Welding by distance needs the soup.
-    if (input_ == Input::WeldedRegions && p_.repair && p_.weld_distance <= 0) buildFaceByFace(in);
+    if (job_.input == Input::WeldedRegions && p_.repair && p_.weld_distance <= 0) buildFaceByFace(in);
     else buildFromSoup(in);
     if (!p_.repair) return;
     r_.border_edges_stitched += PMP::stitch_borders(m_);
@@ -447,7 +446,7 @@ class Cleaner {
       for (VD v : g) {
         col_[v] = col_[g.front()];
         known_[v] = known_[g.front()];
-        if (seam_) fixed_[v] = fixed_[g.front()];
+        if (job_.seam) fixed_[v] = fixed_[g.front()];
       }
     return n;
   }
@@ -486,9 +485,9 @@ class Cleaner {
     static const std::vector<Rgb> kNoColours;
     const ColoursByPosition colour_at(pts, has_colours_ ? in.colors : kNoColours);
     std::unordered_set<Point, PointHash> fixed_at;  // seam vertices, by position too
-    if (seam_)
-      for (std::size_t i = 0; i < pts.size() && i < seam_->size(); ++i)
-        if ((*seam_)[i]) fixed_at.insert(pts[i]);
+    if (job_.seam)
+      for (std::size_t i = 0; i < pts.size() && i < job_.seam->size(); ++i)
+        if ((*job_.seam)[i]) fixed_at.insert(pts[i]);
 
     if (p_.repair) {
       if (p_.weld_distance > 0) r_.duplicate_vertices_merged += weldSoup(pts, polys, p_.weld_distance);
@@ -513,7 +512,7 @@ class Cleaner {
       if (const Rgb* c = colour_at.find(m_.point(v))) col_[v] = *c;
       known_[v] = true;
     }
-    if (seam_) {
+    if (job_.seam) {
       fixed_ = m_.add_property_map<VD, bool>("v:fixed_seam", false).first;
       for (VD v : m_.vertices()) fixed_[v] = fixed_at.count(m_.point(v)) > 0;
     }
@@ -528,7 +527,7 @@ class Cleaner {
     for (FD f : m_.faces()) {
       ++faces[fcc[f]];
       area[fcc[f]] += PMP::face_area(f, m_);
-      if (seam_)
+      if (job_.seam)
         for (VD v : CGAL::vertices_around_face(m_.halfedge(f), m_)) on_seam[fcc[f]] = on_seam[fcc[f]] || fixed_[v];
     }
     std::vector<std::size_t> drop;
@@ -594,7 +593,7 @@ class Cleaner {
     simplify();
     s.faces_after = m_.number_of_faces();
     // Cheap enough to run every time (a fixed number of samples): the bound is measured, not assumed.
-    if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(m_), soupOf(before), distance_samples_);
+    if (s.faces_after < s.faces_before) s.distance = distanceBetween(soupOf(m_), soupOf(before), job_.distance_samples);
     s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
 
@@ -676,7 +675,7 @@ class Cleaner {
 
   void finish(Mesh& m) const {
     m.collect_garbage();  // indices are now 0..n-1
-    if (seam_) return;    // a region is neither closed nor final
+    if (job_.seam) return;    // a region is neither closed nor final
     if (p_.orient_closed_outward && !m.is_empty() && CGAL::is_closed(m)) PMP::orient(m);
   }
 
@@ -709,10 +708,7 @@ class Cleaner {
 
   const MeshCleanParams& p_;
   MeshCleanReport& r_;
-  TriangleMesh* unsimplified_;
-  std::vector<std::uint8_t>* seam_;  // region mode: per vertex, fixed (shared with another region)
-  std::size_t distance_samples_;
-  Input input_;
+  const Job job_;
   Mesh::Property_map<VD, bool> fixed_;
   Mesh m_;
   Mesh::Property_map<VD, Rgb> col_;
