@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 
 #include <array>
+#include <sstream>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -43,6 +44,13 @@ std::string tempDir(const std::string& name) {
 }
 
 std::string app(const std::string& name) { return (fs::path(VOFUSION_BIN_DIR) / name).string(); }
+
+std::vector<std::string> lines(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string l; std::getline(in, l);) out.push_back(l);
+  return out;
+}
 
 int run(const std::string& cmd, std::string* output) {
   std::FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");

@@ -2,6 +2,7 @@
 // Shared helpers for the test suite.
 #include <cstddef>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <mrpt/config/CConfigFileMemory.h>
@@ -34,6 +35,8 @@ std::string tempDir(const std::string& name);
 std::string app(const std::string& name);
 // Runs a shell command; returns its exit code and fills output (stdout+stderr).
 int run(const std::string& cmd, std::string* output = nullptr);
+// The lines of a text, without their newlines.
+std::vector<std::string> lines(const std::string& text);
 
 // A tmpfs of `size` (mount's option, e.g. "300k") on dir while the object lives: a disk that fills up.
 // mounted() is false where this machine does not allow it (not root): the test then skips.

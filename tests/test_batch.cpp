@@ -36,13 +36,6 @@ std::string slurp(const std::string& path) {
   return s.str();
 }
 
-std::vector<std::string> lines(const std::string& text) {
-  std::vector<std::string> out;
-  std::istringstream in(text);
-  for (std::string l; std::getline(in, l);) out.push_back(l);
-  return out;
-}
-
 std::vector<std::string> split(const std::string& line, char sep) {
   std::vector<std::string> out;
   std::istringstream in(line);
@@ -53,7 +46,7 @@ std::vector<std::string> split(const std::string& line, char sep) {
 // The Markdown table's data rows (after the header and its |---| line).
 std::vector<std::vector<std::string>> tableRows(const std::string& md) {
   std::vector<std::vector<std::string>> rows;
-  for (const auto& l : lines(md))
+  for (const auto& l : test::lines(md))
     if (l.rfind("| ", 0) == 0 && l.find("| recording |") != 0) {
       std::vector<std::string> cells;
       for (auto& c : split(l.substr(2, l.size() - 4), '|')) {
@@ -74,7 +67,7 @@ struct Job {
 // parallel --joblog: a header, then Seq Host Starttime JobRuntime Send Receive Exitval Signal Command.
 std::vector<Job> joblog(const std::string& path) {
   std::vector<Job> jobs;
-  const auto ls = lines(slurp(path));
+  const auto ls = test::lines(slurp(path));
   for (std::size_t i = 1; i < ls.size(); ++i) {
     const auto f = split(ls[i], '\t');
     if (f.size() < 9) continue;
@@ -133,7 +126,7 @@ TEST(Batch, FourRecordingsTwoAtATimeGiveOneTable) {
       EXPECT_TRUE(fs::exists(f + "/" + file)) << f << "/" << file << "\n" << log;
     EXPECT_EQ(slurp(f + "/exit_code"), "0\n") << n;
     // batch-job's first log line: which CPUs it was pinned to ("taskset -c <list>").
-    const std::string first = lines(slurp(f + "/vofusion.log")).at(0);
+    const std::string first = test::lines(slurp(f + "/vofusion.log")).at(0);
     const auto at = first.find("taskset -c ");
     if (std::thread::hardware_concurrency() >= 2) {
       ASSERT_NE(at, std::string::npos) << first;
@@ -191,7 +184,7 @@ TEST(Batch, FourRecordingsTwoAtATimeGiveOneTable) {
     EXPECT_EQ(r["frames"], 40);
   }
   ASSERT_EQ(test::run("python3 " + test::sourceDir() + "/bench/collect.py " + out + " --csv 2>/dev/null", &csv), 0);
-  const auto csv_lines = lines(csv);
+  const auto csv_lines = test::lines(csv);
   ASSERT_EQ(csv_lines.size(), 5u) << csv;
   EXPECT_EQ(csv_lines[0].rfind("recording,mode,frames,fps,ate_rmse_m,", 0), 0u) << csv;
 }

@@ -13,6 +13,7 @@
 #include <zlib.h>
 
 #include "support.h"
+#include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/spill_file.h"
 #include "vofusion/fusion/brick_arena.h"

@@ -25,15 +25,21 @@ libdeflate_decompressor& decompressor() {
   if (!d) throw std::bad_alloc();
   return *d;
 }
+
+// One deflate container (zlib or gzip) through this thread's compressor.
+template <class Bound, class Compress>
+std::vector<std::uint8_t> compressWith(const void* data, std::size_t size, Bound bound, Compress compress) {
+  libdeflate_compressor& c = compressor();
+  std::vector<std::uint8_t> out(bound(&c, size));
+  out.resize(compress(&c, data, size, out.data(), out.size()));
+  if (out.empty()) throw std::runtime_error("libdeflate: cannot compress");
+  return out;
+}
 }  // namespace
 
 std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size) {
   if (size == 0) return {};
-  libdeflate_compressor& c = compressor();
-  std::vector<std::uint8_t> out(libdeflate_zlib_compress_bound(&c, size));
-  out.resize(libdeflate_zlib_compress(&c, data, size, out.data(), out.size()));
-  if (out.empty()) throw std::runtime_error("libdeflate: cannot compress");
-  return out;
+  return compressWith(data, size, libdeflate_zlib_compress_bound, libdeflate_zlib_compress);
 }
 
 bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
@@ -44,11 +50,7 @@ bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, 
 }
 
 std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size) {
-  libdeflate_compressor& c = compressor();
-  std::vector<std::uint8_t> out(libdeflate_gzip_compress_bound(&c, size));
-  out.resize(libdeflate_gzip_compress(&c, data, size, out.data(), out.size()));
-  if (out.empty()) throw std::runtime_error("libdeflate: cannot compress");
-  return out;
+  return compressWith(data, size, libdeflate_gzip_compress_bound, libdeflate_gzip_compress);
 }
 
 }  // namespace vofusion

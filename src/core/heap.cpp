@@ -60,12 +60,7 @@ bool toolPreloaded() {
   return found;
 }
 
-// The kernel gives no transparent huge pages at all: a restart would cost 0.3 s for nothing.
-bool hugePagesNever() {
-  std::string mode;
-  std::getline(std::ifstream("/sys/kernel/mm/transparent_hugepage/enabled"), mode);
-  return mode.find("[never]") != std::string::npos;
-}
+
 
 // The program's own file, resolved, so that the restarted process keeps its name ("vofusion", not
 // "exe", in ps, top and pkill); nullopt without /proc or when the program was started through the
@@ -89,6 +84,12 @@ std::optional<std::string> tunablesWithHugePageHeap(const char* current) {
   return std::string(current) + ":" + huge_pages;
 }
 
+bool kernelHugePagesOff() {
+  std::string mode;
+  std::getline(std::ifstream("/sys/kernel/mm/transparent_hugepage/enabled"), mode);
+  return mode.find("[never]") != std::string::npos;
+}
+
 bool heapAsksForHugePages() {
   const std::optional<std::string> v = tunable(std::getenv("GLIBC_TUNABLES"), kHugePageKey);
   return v && !v->empty() && *v != "0";
@@ -104,7 +105,9 @@ void restartWithHugePageHeap(char** argv) {
     unsetenv(kRestartedMarker);  // our own children start afresh
     return;
   }
-  if (argv == nullptr || argv[0] == nullptr || getauxval(AT_SECURE) != 0 || toolPreloaded() || hugePagesNever()) return;
+  if (argv == nullptr || argv[0] == nullptr || getauxval(AT_SECURE) != 0 || toolPreloaded() ||
+      kernelHugePagesOff())  // a restart would cost 0.3 s for nothing
+    return;
   const char* before = std::getenv("GLIBC_TUNABLES");
   const std::optional<std::string> tunables = tunablesWithHugePageHeap(before);
   const std::optional<std::string> file = ownFile();

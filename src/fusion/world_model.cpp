@@ -4,6 +4,8 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "vofusion/core/deflate.h"
+
 namespace vofusion::fusion {
 
 namespace {

@@ -1,3 +1,4 @@
+#include "vofusion/core/deflate.h"
 #include "vofusion/loop/keyframe_store.h"
 
 #include <cstring>

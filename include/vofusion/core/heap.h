@@ -20,6 +20,8 @@ void returnFreedHeap();
 // GLIBC_TUNABLES with glibc.malloc.hugetlb=1 added to `current` (null: unset); nullopt when
 // `current` already sets glibc.malloc.hugetlb (the user's choice stands).
 std::optional<std::string> tunablesWithHugePageHeap(const char* current);
+// The kernel gives no transparent huge pages at all ("[never]" in /sys/kernel/mm/transparent_hugepage/enabled).
+bool kernelHugePagesOff();
 // Whether this process's GLIBC_TUNABLES asks for huge pages (glibc.malloc.hugetlb set, not 0).
 bool heapAsksForHugePages();
 // glibc reads its tunables only when a program starts, so an app's main() calls this first: it

@@ -12,11 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "vofusion/core/deflate.h"
-
 namespace vofusion {
 
-// What goes into a spill file is compressed first: zlibCompress / zlibUncompress (deflate.h).
 
 class SpillFile {
  public:
