@@ -38,12 +38,29 @@ const int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0, 1, 0}
 const int kEdgeCorners[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 
 struct BrickVertices {
-  std::vector<std::uint16_t> edges;  // owned edge ids (voxel index * 3 + axis), ascending
-  std::vector<Eigen::Vector3f> points;
+  // Owned edges with a crossing, one bit per edge id (voxel index * 3 + axis), and per word of bits the
+  // crossings before it: an edge's vertex is found by a popcount, not a search.
+  static constexpr int kWords = kBrickVoxels * 3 / 64;
+  std::array<std::uint64_t, kWords> edge_bits{};
+  std::array<std::uint16_t, kWords> before{};
+  std::vector<Eigen::Vector3f> points;  // in edge id order
   std::vector<std::array<std::uint8_t, 3>> colours;
   std::vector<std::uint8_t> seam;    // 1: also used by another region's cells (region meshing only)
   std::uint32_t base = 0;            // global index of the first vertex
+
+  void addEdge(int id) { edge_bits[id >> 6] |= std::uint64_t(1) << (id & 63); }
+  void countBefore() {
+    std::uint16_t n = 0;
+    for (int w = 0; w < kWords; ++w) before[w] = n, n += std::uint16_t(__builtin_popcountll(edge_bits[w]));
+  }
+  // The global index of the vertex on edge `id`, -1 when it has none.
+  std::int64_t vertexOn(int id) const {
+    const std::uint64_t bit = std::uint64_t(1) << (id & 63), word = edge_bits[id >> 6];
+    if (!(word & bit)) return -1;
+    return base + before[id >> 6] + std::uint32_t(__builtin_popcountll(word & (bit - 1)));
+  }
 };
+static_assert(kBrickVoxels * 3 % 64 == 0, "edge bits fill whole words");
 
 class Grid {
  public:
@@ -110,23 +127,44 @@ struct SeamTest {
   }
 };
 
+// Per voxel of a brick and its +1 neighbours (9 per axis, x fastest): 0 when unusable, else 1 on the
+// positive side and 2 on the negative. Read once per voxel instead of once per cell corner (8 times):
+// the cells without a crossing, most of a brick, are then skipped from this table alone.
+constexpr int kSpan = kBrickEdge + 1;
+using CornerStates = std::array<std::uint8_t, kSpan * kSpan * kSpan>;
+
+void cornerStates(const Grid& grid, const int* nb, int min_weight, CornerStates& state) {
+  std::size_t k = 0;
+  for (int z = 0; z < kSpan; ++z)
+    for (int y = 0; y < kSpan; ++y)
+      for (int x = 0; x < kSpan; ++x, ++k) {
+        const Voxel* v = grid.voxel(nb, x, y, z);
+        state[k] = !usable(v, min_weight) ? 0 : (v->tsdf < 0 ? 2 : 1);
+      }
+}
+
 // Pass 1, one brick: the vertices on the edges it owns (from each voxel along +x, +y, +z).
 void edgeVertices(const Grid& grid, const int* nb, std::size_t i, const Eigen::Vector3i& coord, float voxel_size,
                   int min_weight, const SeamTest* seam, BrickVertices& bv) {
   const Eigen::Vector3i o = coord * kBrickEdge;
+  CornerStates state;
+  cornerStates(grid, nb, min_weight, state);
+  constexpr int kStep[3] = {1, kSpan, kSpan * kSpan};
   for (int z = 0; z < kBrickEdge; ++z)
     for (int y = 0; y < kBrickEdge; ++y)
       for (int x = 0; x < kBrickEdge; ++x) {
+        const std::uint8_t* at = &state[x + kSpan * (y + kSpan * z)];
+        if (!at[0]) continue;
         const Voxel* a = grid.voxel(nb, x, y, z);
-        if (!usable(a, min_weight)) continue;
         for (int axis = 0; axis < 3; ++axis) {
+          // A crossing: both ends usable, on opposite sides.
+          if (!at[kStep[axis]] || at[kStep[axis]] == at[0]) continue;
           const Voxel* b = grid.voxel(nb, x + (axis == 0), y + (axis == 1), z + (axis == 2));
-          if (!usable(b, min_weight) || ((a->tsdf < 0) == (b->tsdf < 0))) continue;
           const float fa = a->tsdf, fb = b->tsdf;
           const float t = fa / (fa - fb);
           Eigen::Vector3f p((o.x() + x) * voxel_size, (o.y() + y) * voxel_size, (o.z() + z) * voxel_size);
           p[axis] += t * voxel_size;
-          bv.edges.push_back(static_cast<std::uint16_t>(Brick::index(x, y, z) * 3 + axis));
+          bv.addEdge(Brick::index(x, y, z) * 3 + axis);
           if (seam) bv.seam.push_back((*seam)(i, x, y, z, axis));
           bv.points.push_back(p);
           const auto mix = [t](std::uint8_t u, std::uint8_t v) {
@@ -135,6 +173,7 @@ void edgeVertices(const Grid& grid, const int* nb, std::size_t i, const Eigen::V
           bv.colours.push_back({mix(a->r, b->r), mix(a->g, b->g), mix(a->b, b->b)});
         }
       }
+  bv.countBefore();
 }
 
 // The bricks' vertices one after another into the mesh (each brick's base index set).
@@ -157,22 +196,23 @@ void cellFaces(const Grid& grid, const int* nb, const std::vector<BrickVertices>
     const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
     const int bi = nb[which];
     if (bi < 0) return -1;
-    const auto& e = verts[bi].edges;
-    const auto id = static_cast<std::uint16_t>(Brick::index(cx & 7, cy & 7, cz & 7) * 3 + axis);
-    const auto it = std::lower_bound(e.begin(), e.end(), id);
-    if (it == e.end() || *it != id) return -1;
-    return verts[bi].base + static_cast<std::uint32_t>(it - e.begin());
+    return verts[bi].vertexOn(Brick::index(cx & 7, cy & 7, cz & 7) * 3 + axis);
   };
+  CornerStates state;
+  cornerStates(grid, nb, min_weight, state);
+  // Each corner's offset in the table, in PCL's corner order.
+  int corner_offset[8];
+  for (int k = 0; k < 8; ++k) corner_offset[k] = kCorner[k][0] + kSpan * (kCorner[k][1] + kSpan * kCorner[k][2]);
   for (int z = 0; z < kBrickEdge; ++z)
     for (int y = 0; y < kBrickEdge; ++y)
       for (int x = 0; x < kBrickEdge; ++x) {
-        const Voxel* c[8];
+        const std::uint8_t* at = &state[x + kSpan * (y + kSpan * z)];
         int cube = 0;
         bool ok = true;
         for (int k = 0; k < 8 && ok; ++k) {
-          c[k] = grid.voxel(nb, x + kCorner[k][0], y + kCorner[k][1], z + kCorner[k][2]);
-          ok = usable(c[k], min_weight);
-          if (ok && c[k]->tsdf < 0) cube |= 1 << k;
+          const std::uint8_t c = at[corner_offset[k]];
+          ok = c != 0;
+          if (c == 2) cube |= 1 << k;
         }
         if (!ok || pcl::edgeTable[cube] == 0) continue;
         std::int64_t ev[12];
