@@ -5,6 +5,7 @@
 //            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -16,6 +17,7 @@
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/timing.h"
 #include "vofusion/sim/default_recording.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/prefetching_source.h"
@@ -236,6 +238,9 @@ int body(int argc, char** argv) {
   if (plan.resume && RunSession::isCheckpoint(*plan.resume)) loop = resumeCheckpoint(plan, *source, run);
   else if (plan.resume) run.reconstruction().resumeVolume(*plan.resume);
   const std::size_t resumed_at = loop.done;
+  // Start-up (libraries, the heap's restart, the input opened, a checkpoint read again): not part of
+  // the frame loop, nor of the time after its last frame.
+  const double before_frames = secondsSinceProcessStart();
   reconstructFrames(plan, *source, run, loop);
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");
   if (loop.frames_with_depth == 0 && !loop.interrupted)
@@ -245,6 +250,7 @@ int body(int argc, char** argv) {
   info.config = plan.config_path;
   info.interrupted = loop.interrupted;
   info.seconds = loop.seconds;
+  if (std::isfinite(before_frames)) info.extra["seconds_before_frames"] = before_frames;
   if (plan.checkpoint_every > 0 || resumed_at)
     info.extra["checkpoints"] = {{"every_seconds", plan.checkpoint_every}, {"written", loop.checkpoints},
                                  {"seconds_writing", loop.checkpoint_seconds}, {"resumed_at_frame", resumed_at}};

@@ -6,8 +6,8 @@
 For each shared sequence, the earlier build and this one run one after the other (this machine's speed
 drifts by ~25 %: only runs side by side in time compare):
   - `vofusion <seq> --out o` (default config): frame-loop fps (summary.json), end-to-end fps (frames /
-    wall time of the process, to the last output written), the time from the last frame to the last
-    output against the frame loop's, ATE RMSE, peak RSS;
+    wall time of the process, to the last output written), the start-up before the first frame, the
+    time from the last frame to the last output against the frame loop's, ATE RMSE, peak RSS;
   - `vofusion-grab --replay <seq> --out o --live --no-gui` (recording included, at the recorded rate):
     frames processed of those played.
 The earlier build (default 618a78c, the build issue 31 was filed on) is checked out with `git worktree`
@@ -61,8 +61,13 @@ def offline(bin_dir, seq, out):
     with open(os.path.join(out, "summary.json")) as f:
         s = json.load(f)
     frames, loop_s = s["frames"], s["seconds"]
-    return {"loop_fps": s["fps"], "e2e_fps": frames / wall, "loop_s": loop_s, "tail_s": wall - loop_s,
-            "ate": s.get("ate", {}).get("rmse"), "rss": rss, "frames": frames}
+    # Start-up is neither the frame loop nor the time after its last frame. Builds before summary.json
+    # had seconds_before_frames: the wall time of `vofusion --help` (libraries loaded, the heap's restart).
+    startup = s.get("seconds_before_frames")
+    if startup is None:
+        startup = sorted(run_timed([os.path.join(bin_dir, "vofusion"), "--help"], out + ".help.log")[1] for _ in range(3))[1]
+    return {"loop_fps": s["fps"], "e2e_fps": frames / wall, "loop_s": loop_s, "startup_s": startup,
+            "tail_s": wall - startup - loop_s, "ate": s.get("ate", {}).get("rmse"), "rss": rss, "frames": frames}
 
 
 def live(bin_dir, seq, out):
@@ -90,7 +95,9 @@ def main():
     lines = ["# Real time, back to back: %s against this build (%s)" % (rev, head), "",
              "Command: `bench/run --realtime` (bench/realtime.py); default config, 2 cores. Each sequence is run by "
              "both builds one after the other. End to end: frames / wall time of the process to its last output; "
-             "tail: from the last frame to the last output. Live: `vofusion-grab --replay <seq> --live --no-gui`, "
+             "start-up: from the process's start to the first frame (summary.json `seconds_before_frames`; for a "
+             "build without it, the wall time of `vofusion --help`); tail: from the last frame to the last output "
+             "(wall time minus start-up and frame loop). Live: `vofusion-grab --replay <seq> --live --no-gui`, "
              "recording included, frames processed of those played.", ""]
     for seq in seqs:
         name = os.path.basename(os.path.normpath(seq))
@@ -108,6 +115,7 @@ def main():
                   "| | %s | this build | this / %s | target |" % (rev, rev), "|---|---:|---:|---:|---|",
                   "| frame loop, fps | %.1f | %.1f | %s | >= 30 and >= 1.3x |" % (b["loop_fps"], t["loop_fps"], ratio("loop_fps")),
                   "| end to end, fps | %.1f | %.1f | %s | |" % (b["e2e_fps"], t["e2e_fps"], ratio("e2e_fps")),
+                  "| start-up before the first frame, s | %.2f | %.2f | | |" % (b["startup_s"], t["startup_s"]),
                   "| tail after the last frame, s (share of the frame loop) | %.1f (%.0f %%) | %.1f (%.0f %%) | | <= 25 %% |" % (
                       b["tail_s"], 100 * b["tail_s"] / b["loop_s"], t["tail_s"], 100 * t["tail_s"] / t["loop_s"]),
                   "| live: processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (

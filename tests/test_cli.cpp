@@ -1,13 +1,17 @@
 // vofusion::CommandLine and runApp: what the thin apps rely on for parsing and error reporting.
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cmath>
 #include <stdexcept>
+#include <thread>
 #include <string>
 #include <vector>
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/heap.h"
+#include "vofusion/core/timing.h"
 #include "support.h"
 
 using namespace vofusion;
@@ -186,4 +190,19 @@ TEST(Heap, NoRestartUnderHeaptrack) {
   ASSERT_NE(first, std::string::npos) << out;
   EXPECT_EQ(out.find("start ", first + 1), std::string::npos) << "restarted under heaptrack:\n" << out;
   EXPECT_NE(out.find("no-marker (unset) a"), std::string::npos) << out;
+}
+
+TEST(Timing, TheProcessClockCountsFromThisProcessesStart) {
+  const auto test_started = std::chrono::steady_clock::now();
+  const double a = secondsSinceProcessStart();
+  ASSERT_TRUE(std::isfinite(a));
+  EXPECT_GE(a, 0.0);
+  // Not the machine's uptime: no more than this test binary has run (its tests take minutes at most).
+  EXPECT_LT(a, 900.0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(80));
+  const double b = secondsSinceProcessStart();
+  const double slept = std::chrono::duration<double>(std::chrono::steady_clock::now() - test_started).count();
+  // /proc counts in 10 ms steps: within two of the sleep, and of all the time since the first reading.
+  EXPECT_GE(b - a, 0.08 - 0.02);
+  EXPECT_LE(b - a, slept + 0.02);
 }

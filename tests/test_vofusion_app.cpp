@@ -1,6 +1,7 @@
 // The vofusion app end to end: every output written and loadable, Ctrl-C keeps what was built,
 // a failing run leaves earlier results alone.
 #include <Eigen/Dense>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 
@@ -48,11 +49,13 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   const std::string dir = test::tempDir("vofusion_app_synth");
   const std::string out = dir + "/out";
   std::string log;
+  const auto started = std::chrono::steady_clock::now();
   ASSERT_EQ(test::run("env -u GLIBC_TUNABLES -u LD_PRELOAD " + test::app("vofusion") + " synthetic:room --max-frames 12 --raw-mesh --config " +
                           validConfig(dir) + " --out " + out,
                       &log),
             0)
       << log;
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   for (const char* f : {"trajectory.txt", "poses.rawlog", "mesh.ply", "mesh_raw.ply", "mesh_full.ply", "scene.3Dscene", "summary.json",
                         "trajectory.png", "mesh.png"})
     EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f << "\n" << log;
@@ -64,6 +67,10 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   EXPECT_EQ(summary["mode"].get<std::string>(), "joint");
   // The app restarted with huge pages, unless this kernel has none.
   EXPECT_EQ(summary["heap_huge_pages"].get<bool>(), !kernelHugePagesOff());
+  // Start-up and frame loop, one after the other, within the run's wall time (/proc's 10 ms steps).
+  const double before_frames = summary["seconds_before_frames"].get<double>();
+  EXPECT_GT(before_frames, 0.0);
+  EXPECT_LE(before_frames + summary["seconds"].get<double>(), wall + 0.02);
   ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.05);
   // Over 50 ms: about one pair per frame, their 95th percentile between the median and the largest.
