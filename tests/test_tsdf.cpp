@@ -252,7 +252,9 @@ std::array<Key, 3> faceKey(const TriangleMesh& m, const std::array<std::uint32_t
 
 // Every cell on its own, straight from PCL's tables (Bourke's edgeTable/triTable) and the bricks' voxels,
 // with none of marchingCubes' shared-vertex bookkeeping: its faces must be these, on the same vertices.
-// Some voxels unobserved and some bricks missing, so cells next to holes and lent bricks are covered.
+// Some voxels unobserved and some bricks missing, so cells next to unobserved voxels and to absent
+// neighbour bricks are covered. The usable limit (32440) and the corner and edge order are PCL's
+// convention copied on purpose: the check is the tables and the voxels, not the code under test.
 TEST(MarchingCubes, EveryCellAsPclsTablesMakeIt) {
   const float voxel = 0.01f;
   SphereBricks sphere(Eigen::Vector3f(0.03f, -0.02f, 0.05f), 0.2f, voxel, 0.04f);

@@ -34,7 +34,7 @@ std::uint64_t brickKey(const Eigen::Vector3i& c) {
 
 // Cube corners in PCL's order (its tables are written for it) and, per cube edge, the corner that
 // owns it and the axis it runs along.
-const int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}};
+constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}};
 const int kEdgeCorners[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 
 struct BrickVertices {
@@ -51,7 +51,10 @@ struct BrickVertices {
   void addEdge(int id) { edge_bits[id >> 6] |= std::uint64_t(1) << (id & 63); }
   void countBefore() {
     std::uint16_t n = 0;
-    for (int w = 0; w < kWords; ++w) before[w] = n, n += std::uint16_t(__builtin_popcountll(edge_bits[w]));
+    for (int w = 0; w < kWords; ++w) {
+      before[w] = n;
+      n += std::uint16_t(__builtin_popcountll(edge_bits[w]));
+    }
   }
   // The global index of the vertex on edge `id`, -1 when it has none.
   std::int64_t vertexOn(int id) const {
@@ -132,6 +135,13 @@ struct SeamTest {
 // the cells without a crossing, most of a brick, are then skipped from this table alone.
 constexpr int kSpan = kBrickEdge + 1;
 using CornerStates = std::array<std::uint8_t, kSpan * kSpan * kSpan>;
+// Each cube corner's offset in that table, in PCL's corner order (kCorner).
+constexpr std::array<int, 8> cornerOffsets() {
+  std::array<int, 8> o{};
+  for (int k = 0; k < 8; ++k) o[k] = kCorner[k][0] + kSpan * (kCorner[k][1] + kSpan * kCorner[k][2]);
+  return o;
+}
+constexpr std::array<int, 8> kCornerOffset = cornerOffsets();
 
 void cornerStates(const Grid& grid, const int* nb, int min_weight, CornerStates& state) {
   std::size_t k = 0;
@@ -144,11 +154,9 @@ void cornerStates(const Grid& grid, const int* nb, int min_weight, CornerStates&
 }
 
 // Pass 1, one brick: the vertices on the edges it owns (from each voxel along +x, +y, +z).
-void edgeVertices(const Grid& grid, const int* nb, std::size_t i, const Eigen::Vector3i& coord, float voxel_size,
-                  int min_weight, const SeamTest* seam, BrickVertices& bv) {
+void edgeVertices(const Grid& grid, const int* nb, const CornerStates& state, std::size_t i, const Eigen::Vector3i& coord,
+                  float voxel_size, const SeamTest* seam, BrickVertices& bv) {
   const Eigen::Vector3i o = coord * kBrickEdge;
-  CornerStates state;
-  cornerStates(grid, nb, min_weight, state);
   constexpr int kStep[3] = {1, kSpan, kSpan * kSpan};
   for (int z = 0; z < kBrickEdge; ++z)
     for (int y = 0; y < kBrickEdge; ++y)
@@ -190,7 +198,7 @@ void gatherVertices(std::vector<BrickVertices>& verts, TriangleMesh& mesh, std::
 }
 
 // Pass 2, one brick: the triangles of every cell whose 8 corners are usable.
-void cellFaces(const Grid& grid, const int* nb, const std::vector<BrickVertices>& verts, int min_weight,
+void cellFaces(const int* nb, const CornerStates& state, const std::vector<BrickVertices>& verts,
                std::vector<std::array<std::uint32_t, 3>>& faces) {
   auto vertexOf = [&](int cx, int cy, int cz, int axis) -> std::int64_t {
     const int which = (cx >> 3) | ((cy >> 3) << 1) | ((cz >> 3) << 2);
@@ -198,11 +206,6 @@ void cellFaces(const Grid& grid, const int* nb, const std::vector<BrickVertices>
     if (bi < 0) return -1;
     return verts[bi].vertexOn(Brick::index(cx & 7, cy & 7, cz & 7) * 3 + axis);
   };
-  CornerStates state;
-  cornerStates(grid, nb, min_weight, state);
-  // Each corner's offset in the table, in PCL's corner order.
-  int corner_offset[8];
-  for (int k = 0; k < 8; ++k) corner_offset[k] = kCorner[k][0] + kSpan * (kCorner[k][1] + kSpan * kCorner[k][2]);
   for (int z = 0; z < kBrickEdge; ++z)
     for (int y = 0; y < kBrickEdge; ++y)
       for (int x = 0; x < kBrickEdge; ++x) {
@@ -210,7 +213,7 @@ void cellFaces(const Grid& grid, const int* nb, const std::vector<BrickVertices>
         int cube = 0;
         bool ok = true;
         for (int k = 0; k < 8 && ok; ++k) {
-          const std::uint8_t c = at[corner_offset[k]];
+          const std::uint8_t c = at[kCornerOffset[k]];
           ok = c != 0;
           if (c == 2) cube |= 1 << k;
         }
@@ -266,14 +269,18 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
   const Grid grid(bricks);
   std::vector<BrickVertices> verts(bricks.size());
   std::vector<std::array<int, 8>> nbs(bricks.size());
+  std::vector<CornerStates> states(owned);  // the owned bricks', read again by pass 2
   const SeamTest seam_test{bricks, owned, region_bricks};
   parallelFor(0, static_cast<int>(bricks.size()), [&](int i) {
     grid.neighbours(i, nbs[i].data());
-    edgeVertices(grid, nbs[i].data(), i, bricks[i].coord, voxel_size, min_weight, seam ? &seam_test : nullptr, verts[i]);
+    CornerStates lent;
+    CornerStates& state = std::size_t(i) < owned ? states[i] : lent;
+    cornerStates(grid, nbs[i].data(), min_weight, state);
+    edgeVertices(grid, nbs[i].data(), state, i, bricks[i].coord, voxel_size, seam ? &seam_test : nullptr, verts[i]);
   }, 8);
   gatherVertices(verts, mesh, seam);
   std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(owned);
-  parallelFor(0, static_cast<int>(owned), [&](int i) { cellFaces(grid, nbs[i].data(), verts, min_weight, faces[i]); }, 8);
+  parallelFor(0, static_cast<int>(owned), [&](int i) { cellFaces(nbs[i].data(), states[i], verts, faces[i]); }, 8);
   std::size_t nf = 0;
   for (const auto& f : faces) nf += f.size();
   mesh.faces.reserve(nf);
