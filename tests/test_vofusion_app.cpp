@@ -68,6 +68,7 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   // The app restarted with huge pages, unless this kernel has none.
   EXPECT_EQ(summary["heap_huge_pages"].get<bool>(), !kernelHugePagesOff());
   // Start-up and frame loop, one after the other, within the run's wall time (/proc's 10 ms steps).
+  ASSERT_TRUE(summary.contains("seconds_before_frames")) << summary.dump(2);
   const double before_frames = summary["seconds_before_frames"].get<double>();
   EXPECT_GT(before_frames, 0.0);
   EXPECT_LE(before_frames + summary["seconds"].get<double>(), wall + 0.02);
