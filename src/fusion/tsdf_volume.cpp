@@ -320,14 +320,9 @@ void TsdfVolume::save(std::ostream& os) const {
     os.write(reinterpret_cast<const char*>(z.data()), static_cast<std::streamsize>(z.size()));
   };
   // Compression is most of a save's time (a checkpoint stops the frame loop): the volume's bricks are
-  // compressed on every core, then written in order; the world model's are read one by one. Each is
-  // kept at its compressed size (about a third of the bound it was compressed into) until written.
+  // compressed on every core, then written in order; the world model's are read one by one.
   std::vector<std::vector<std::uint8_t>> packed(vol.size());
-  parallelFor(0, int(vol.size()), [&](int i) {
-    std::vector<std::uint8_t>& z = packed[std::size_t(i)];
-    z = compressBrick(*vol[std::size_t(i)].brick);
-    z.shrink_to_fit();
-  }, 16);
+  parallelFor(0, int(vol.size()), [&](int i) { packed[std::size_t(i)] = compressBrick(*vol[std::size_t(i)].brick); }, 16);
   for (std::size_t i = 0; i < vol.size(); ++i) write(vol[i].brick->coord, packed[i]);
   packed.clear();
   Brick scratch;
