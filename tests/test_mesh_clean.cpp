@@ -234,7 +234,6 @@ TEST(MeshClean, NonManifoldVertexIsSplit) {
   EXPECT_TRUE(m.colors.empty());  // none given, none invented
 }
 
-// The faults a welded mesh can have where regions meet, each beside a sound surface.
 // A fault where regions meet; `fills_a_hole`: the repair patches a hole with vertices of its own.
 struct SeamFault {
   std::string name;
@@ -242,6 +241,7 @@ struct SeamFault {
   bool fills_a_hole = false;
 };
 
+// The faults a welded mesh can have where regions meet, each beside a sound surface.
 std::vector<SeamFault> seamFaults() {
   std::vector<SeamFault> out;
   TriangleMesh bowtie;  // two tetrahedra touching at one vertex
@@ -302,7 +302,9 @@ TEST(MeshClean, WeldedRegionsRepairAsTheSoupRepairDoes) {
       EXPECT_NEAR(totalArea(welded), totalArea(soup), 1e-6 * totalArea(soup));
       EXPECT_NEAR(signedVolume(welded), signedVolume(soup), 1e-6 * std::abs(signedVolume(soup)) + 1e-9);
       const std::size_t patch_vertices = expectColoursKeptAndBlended(welded);
-      if (fault.fills_a_hole) EXPECT_GT(patch_vertices, 0u);
+      if (fault.fills_a_hole) {
+        EXPECT_GT(patch_vertices, 0u);
+      }
     }
   }
 }

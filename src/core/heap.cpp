@@ -60,8 +60,6 @@ bool toolPreloaded() {
   return found;
 }
 
-
-
 // The program's own file, resolved, so that the restarted process keeps its name ("vofusion", not
 // "exe", in ps, top and pkill); nullopt without /proc or when the program was started through the
 // dynamic loader (ld-linux-x86-64.so.2 ./vofusion: the file is the loader, which would take the
@@ -99,7 +97,7 @@ void restartWithHugePageHeap(char** argv) {
   // hugetlb=1: glibc advises the kernel to back the blocks of 2 MiB and more it maps, and the heap as
   // it grows, with transparent huge pages. Meshing maps and unmaps region-sized blocks
   // (returnFreedHeap), and on a virtual machine each 4 KiB fault is dear: the loop scene's system
-  // time 13.0 -> 8.2 s and its time after the last frame 48 -> 37 s, peak RSS +7 MiB
+  // time 13.0 -> 8.2 s and its time after the last frame 48 -> 37 s, peak RSS +3-21 MiB
   // (bench/results/2026-11-28-huge-pages.md).
   if (std::getenv(kRestartedMarker) != nullptr) {
     unsetenv(kRestartedMarker);  // our own children start afresh

@@ -1,8 +1,9 @@
-#include "vofusion/core/deflate.h"
 #include "vofusion/loop/keyframe_store.h"
 
 #include <cstring>
 #include <stdexcept>
+
+#include "vofusion/core/deflate.h"
 
 namespace vofusion::loop {
 
