@@ -4,10 +4,10 @@
 #include <sys/wait.h>
 
 #include <array>
-#include <sstream>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
 
 #include <gtest/gtest.h>
 

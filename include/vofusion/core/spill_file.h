@@ -14,7 +14,6 @@
 
 namespace vofusion {
 
-
 class SpillFile {
  public:
   // A record's place, 8 bytes (an index of millions of them stays small): up to 1 TiB of file,
