@@ -2,7 +2,9 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <limits>
 #include <map>
+#include <random>
 #include <set>
 
 #include <Eigen/Geometry>
@@ -10,6 +12,7 @@
 #include <tbb/task_arena.h>
 
 #include "support.h"
+#include "vofusion/core/floor_int.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/tsdf_volume.h"
 #include "vofusion/mesh/mesh_io.h"
@@ -461,4 +464,21 @@ TEST(MarchingCubes, MeshByRegionJudgesFragmentsWholeAcrossSeams) {
   EXPECT_EQ(r.report.components_kept, 1u);
   EXPECT_EQ(r.mesh.faces.size(), marchingCubes(big.refs, 0.01f).faces.size());
   for (const auto& v : r.mesh.vertices) ASSERT_LT(std::fabs((v - centre).norm() - 0.3f), 0.02f);
+}
+
+// The ray cast's floor: the integer std::floor gives, for voxel coordinates on both sides of zero, whole
+// numbers and their neighbours, and floats too large to have a fraction.
+TEST(FloorToInt, IsStdFloor) {
+  std::vector<float> xs = {0.f, -0.f, 0.5f, -0.5f, 1.f, -1.f, 7.9999995f, -7.9999995f, 1e-30f, -1e-30f,
+                           8388607.5f, -8388607.5f, 16777216.f, -16777216.f, 2e9f, -2e9f};
+  for (int i = -300; i <= 300; ++i) {
+    const float x = static_cast<float>(i);
+    xs.push_back(x);
+    xs.push_back(std::nextafter(x, -1e9f));
+    xs.push_back(std::nextafter(x, 1e9f));
+  }
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> any(-5000.f, 5000.f);
+  for (int i = 0; i < 100000; ++i) xs.push_back(any(rng));
+  for (const float x : xs) ASSERT_EQ(floorToInt(x), static_cast<int>(std::floor(x))) << "x = " << x;
 }

@@ -3,6 +3,9 @@
 // of the trilinearly interpolated field, refine it by regula falsi and take the normal from the TSDF
 // gradient. Every sample is trilinear: nearest-voxel samples put the crossing up to half a voxel off,
 // in rings that follow the marching phase (a systematic bias ICP then tracks as drift).
+// A ray's samples form one chain (where the next one goes depends on the last one's value), so a ray
+// marched alone leaves the core waiting; kRaysSideBySide rays are marched a sample each in turn and
+// their chains overlap.
 #include <cmath>
 #include <limits>
 
@@ -42,83 +45,136 @@ float TsdfVolume::pastUnallocated(const Ray& ray, int ix, int iy, int iz, float 
 // Hit: zs is the first +/- crossing in [z, zend]. Miss: none (or a back face / the ray starts inside
 // unobserved space). Untrusted: need_free_start and the first sample is not observed free space, so a
 // hint-based start cannot be relied on.
-TsdfVolume::March TsdfVolume::marchRay(const Ray& ray, float z, float zend, bool need_free_start, float& zs) const {
-  const float trunc = params_.truncation;
+struct TsdfVolume::Marcher {
+  const Ray* ray;
+  float z, zend;
+  bool need_free_start;
   float prev_f = 0.f, prev_z = 0.f;
   bool prev_ok = false, first = true;
-  while (z < zend) {
-    const Eigen::Vector3f q = ray.oq + ray.dq * z;
-    const int ix = static_cast<int>(std::floor(q.x())), iy = static_cast<int>(std::floor(q.y())),
-              iz = static_cast<int>(std::floor(q.z()));
-    if (!brickAt(ix >> 3, iy >> 3, iz >> 3)) {
-      if (first && need_free_start) return March::Untrusted;
-      z = pastUnallocated(ray, ix, iy, iz, z);
-      prev_ok = false;
-      first = false;
-      continue;
-    }
-    float f;
-    if (!trilinear(q, f)) {  // next to unobserved voxels: creep, do not jump over the band
-      if (first && need_free_start) return March::Untrusted;
-      prev_ok = false;
-      first = false;
-      // A whole voxel: the observed band before any surface is several voxels deep, so the
-      // first sample back in it still lands on its positive side.
-      z += 2.f * ray.min_step;
-      continue;
-    }
-    if (f < 0.f) {
-      if (!prev_ok) return first && need_free_start ? March::Untrusted : March::Miss;  // back face
-      // Regula falsi on the bracket [prev_z (f > 0), z (f < 0)]. One step: over a bracket this
-      // short the field is nearly linear (3 steps cost 6 % more CPU in mode kinfu, same ATE on fr1_xyz).
-      float za = prev_z, fa = prev_f, zb = z, fb = f;
-      constexpr int kRefineSteps = 1;
-      for (int k = 0; k < kRefineSteps && zb - za > 0.05f * ray.min_step; ++k) {
-        const float zm = za + (zb - za) * fa / (fa - fb);
-        float fm;
-        if (!trilinear(ray.oq + ray.dq * zm, fm)) break;
-        if (fm > 0.f) za = zm, fa = fm;
-        else zb = zm, fb = fm;
-      }
-      zs = za + (zb - za) * fa / (fa - fb);
-      return March::Hit;
-    }
-    prev_f = f;
-    prev_z = z;
-    prev_ok = true;
-    first = false;
-    // f * trunc is a projective (depth) distance to the surface; 0.8 of it rarely crosses it.
-    z += std::max(ray.min_step, 0.8f * f * trunc);
+  March result = March::Miss;
+  float zs = 0.f;
+};
+
+namespace {
+template <typename Marcher, typename March>
+bool ended(Marcher& m, March result) {
+  m.result = result;
+  return false;
+}
+}  // namespace
+
+// One sample of a march; false once it has its result.
+bool TsdfVolume::marchStep(Marcher& m) const {
+  const Ray& ray = *m.ray;
+  if (!(m.z < m.zend)) return ended(m, March::Miss);
+  const float trunc = params_.truncation;
+  const Eigen::Vector3f q = ray.oq + ray.dq * m.z;
+  const int ix = floorToInt(q.x()), iy = floorToInt(q.y()), iz = floorToInt(q.z());
+  if (!brickAt(ix >> 3, iy >> 3, iz >> 3)) {
+    if (m.first && m.need_free_start) return ended(m, March::Untrusted);
+    m.z = pastUnallocated(ray, ix, iy, iz, m.z);
+    m.prev_ok = false;
+    m.first = false;
+    return true;
   }
-  return March::Miss;
+  float f;
+  if (!trilinear(q, f)) {  // next to unobserved voxels: creep, do not jump over the band
+    if (m.first && m.need_free_start) return ended(m, March::Untrusted);
+    m.prev_ok = false;
+    m.first = false;
+    // A whole voxel: the observed band before any surface is several voxels deep, so the
+    // first sample back in it still lands on its positive side.
+    m.z += 2.f * ray.min_step;
+    return true;
+  }
+  if (f < 0.f) {
+    if (!m.prev_ok) return ended(m, m.first && m.need_free_start ? March::Untrusted : March::Miss);  // back face
+    // Regula falsi on the bracket [prev_z (f > 0), z (f < 0)]. One step: over a bracket this
+    // short the field is nearly linear (3 steps cost 6 % more CPU in mode kinfu, same ATE on fr1_xyz).
+    float za = m.prev_z, fa = m.prev_f, zb = m.z, fb = f;
+    constexpr int kRefineSteps = 1;
+    for (int k = 0; k < kRefineSteps && zb - za > 0.05f * ray.min_step; ++k) {
+      const float zm = za + (zb - za) * fa / (fa - fb);
+      float fm;
+      if (!trilinear(ray.oq + ray.dq * zm, fm)) break;
+      if (fm > 0.f) za = zm, fa = fm;
+      else zb = zm, fb = fm;
+    }
+    m.zs = za + (zb - za) * fa / (fa - fb);
+    return ended(m, March::Hit);
+  }
+  m.prev_f = f;
+  m.prev_z = m.z;
+  m.prev_ok = true;
+  m.first = false;
+  // f * trunc is a projective (depth) distance to the surface; 0.8 of it rarely crosses it.
+  m.z += std::max(ray.min_step, 0.8f * f * trunc);
+  return true;
 }
 
-// The ray's surface in [z0, z1] (hint: the depth where it is expected, 0 = none): zs and the field's
-// gradient g there. False when there is none with a normal.
-bool TsdfVolume::castRay(const Ray& ray, float z0, float z1, float hint, bool hinted_only, float& zs,
-                         Eigen::Vector3f& g) const {
+TsdfVolume::March TsdfVolume::marchRay(const Ray& ray, float z, float zend, bool need_free_start, float& zs) const {
+  Marcher m{&ray, z, zend, need_free_start};
+  while (marchStep(m)) {
+  }
+  zs = m.zs;
+  return m.result;
+}
+
+// A ray about to be cast: its band, its hint (the depth where the surface is expected, 0 = none), and
+// once cast, its surface zs and the field's gradient g there.
+struct TsdfVolume::PendingRay {
+  int x;
+  Ray ray;
+  float z0, z1, hint;
+  bool found;
+  float zs;
+  Eigen::Vector3f g;
+};
+
+// Each ray's surface in [z0, z1]: the hinted band first, marched for all the rays side by side, then
+// what it could not settle one ray at a time.
+void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only) const {
   const float trunc = params_.truncation;
-  const auto normalAt = [&](const Eigen::Vector3f& q) { return cellGradient(q, g) && g.squaredNorm() > 0.f; };
-  bool found = false, settled = false;
-  if (hint > 0.f) {
-    const March hinted = marchRay(ray, std::max(z0, hint - 0.5f * trunc), std::min(z1, hint + 2.f * trunc), true, zs);
-    found = hinted == March::Hit && normalAt(ray.oq + ray.dq * zs);
-    // For tracking, a band that starts in observed free space and holds no surface settles the
-    // ray: the model has nothing there for this reading to pair with. Searching such rays again
-    // from min_depth (8 % of the rays, 1 in 17 finding a surface far in front of the reading)
-    // took a third of the ray cast's samples. Without it, back to back: ray cast 20.4 -> 11.9 ms
-    // per frame (synthetic room), frame loop +2/+5 % on xyz_first300, +11/+13 % on rpy_first100,
-    // +12 % room, +2 % shake; ATE xyz 0.01194 -> 0.01193 m, rpy 0.01664 -> 0.01645, room
-    // 0.0101 -> 0.0102, shake 0.0182 -> 0.0189, corridor and bare wall unchanged.
-    settled = hinted_only && hinted == March::Miss;
+  Marcher hinted[kRaysSideBySide];
+  bool marching[kRaysSideBySide];
+  for (int i = 0; i < n; ++i) {
+    const PendingRay& r = rays[i];
+    marching[i] = r.hint > 0.f;
+    hinted[i] = Marcher{&r.ray, std::max(r.z0, r.hint - 0.5f * trunc), std::min(r.z1, r.hint + 2.f * trunc), true};
   }
-  // Whatever the hinted search could not settle, the full search decides; for tracking only up to
-  // the hint's band (a surface farther behind the reading is hidden by it and would not pair).
-  if (!found && !settled) {
-    const float zend = hinted_only ? std::min(z1, hint + 2.f * trunc) : z1;
-    found = marchRay(ray, z0, zend, false, zs) == March::Hit && normalAt(ray.oq + ray.dq * zs);
+  for (bool any = true; any;) {
+    any = false;
+    for (int i = 0; i < n; ++i)
+      if (marching[i]) any |= marching[i] = marchStep(hinted[i]);
   }
-  return found;
+  for (int i = 0; i < n; ++i) {
+    PendingRay& r = rays[i];
+    const auto normalAt = [&](float zs) { return cellGradient(r.ray.oq + r.ray.dq * zs, r.g) && r.g.squaredNorm() > 0.f; };
+    r.found = false;
+    r.zs = 0.f;
+    bool settled = false;
+    if (r.hint > 0.f) {
+      const March h = hinted[i].result;
+      r.zs = hinted[i].zs;
+      r.found = h == March::Hit && normalAt(r.zs);
+      // For tracking, a band that starts in observed free space and holds no surface settles the
+      // ray: the model has nothing there for this reading to pair with. Searching such rays again
+      // from min_depth (8 % of the rays, 1 in 17 finding a surface far in front of the reading)
+      // took a third of the ray cast's samples. Without it, back to back: ray cast 20.4 -> 11.9 ms
+      // per frame (synthetic room), frame loop +2/+5 % on xyz_first300, +11/+13 % on rpy_first100,
+      // +12 % room, +2 % shake; ATE xyz 0.01194 -> 0.01193 m, rpy 0.01664 -> 0.01645, room
+      // 0.0101 -> 0.0102, shake 0.0182 -> 0.0189, corridor and bare wall unchanged.
+      settled = hinted_only && h == March::Miss;
+    }
+    // Whatever the hinted search could not settle, the full search decides; for tracking only up to
+    // the hint's band (a surface farther behind the reading is hidden by it and would not pair).
+    if (!r.found && !settled) {
+      const float zend = hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1;
+      float zs = r.zs;
+      r.found = marchRay(r.ray, r.z0, zend, false, zs) == March::Hit && normalAt(zs);
+      r.zs = zs;
+    }
+  }
 }
 
 cv::Vec3b TsdfVolume::colourAt(const Eigen::Vector3f& q) const {
@@ -173,31 +229,42 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
     cv::Vec3f* nrow = maps.normals.ptr<cv::Vec3f>(y);
     const float* hrow = use_hint ? depth_hint->ptr<float>(y) : nullptr;
     float* zrow = maps.depth.ptr<float>(y);
+    PendingRay batch[kRaysSideBySide];
+    int pending = 0;
+    const auto castBatch = [&] {
+      castRays(batch, pending, hinted_only);
+      for (int i = 0; i < pending; ++i) {
+        PendingRay& r = batch[i];
+        if (!r.found) continue;
+        const Eigen::Vector3f q = oq + r.ray.dq * r.zs;
+        r.g.normalize();
+        const Eigen::Vector3f p = q * vs;
+        vrow[r.x] = cv::Vec3f(p.x(), p.y(), p.z());
+        zrow[r.x] = r.zs;
+        nrow[r.x] = cv::Vec3f(r.g.x(), r.g.y(), r.g.z());
+        if (with_colour) maps.colours.ptr<cv::Vec3b>(y)[r.x] = colourAt(q);
+      }
+      pending = 0;
+    };
     for (int x = 0; x < w; ++x) {
       vrow[x] = nrow[x] = cv::Vec3f(nan, nan, nan);
       zrow[x] = 0.f;
       if (hinted_only && !(use_hint && hrow[x] > 0.f)) continue;
       const Eigen::Vector3f ray_cam((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.f);
       const float len = ray_cam.norm();  // metres of ray per metre of depth
-      Ray ray;
-      ray.oq = oq;
-      ray.dq = R * ray_cam * inv_vs;  // voxel units per metre of depth
-      ray.min_step = 0.5f * vs / len;
-      ray.inv_dq_norm = 1.f / ray.dq.norm();
-      ray.inv_dq = ray.dq.cwiseInverse();
-      float z0 = z_near, z1 = z_far, zs = 0.f;
-      Eigen::Vector3f g;
-      if (!clipToBox(oq, ray.dq, lo, hi, z0, z1)) continue;
-      if (!castRay(ray, z0, z1, use_hint ? hrow[x] : 0.f, hinted_only, zs, g)) continue;
-
-      const Eigen::Vector3f q = oq + ray.dq * zs;
-      g.normalize();
-      const Eigen::Vector3f p = q * vs;
-      vrow[x] = cv::Vec3f(p.x(), p.y(), p.z());
-      zrow[x] = zs;
-      nrow[x] = cv::Vec3f(g.x(), g.y(), g.z());
-      if (with_colour) maps.colours.ptr<cv::Vec3b>(y)[x] = colourAt(q);
+      PendingRay& r = batch[pending];
+      r.x = x;
+      r.ray.oq = oq;
+      r.ray.dq = R * ray_cam * inv_vs;  // voxel units per metre of depth
+      r.ray.min_step = 0.5f * vs / len;
+      r.ray.inv_dq_norm = 1.f / r.ray.dq.norm();
+      r.ray.inv_dq = r.ray.dq.cwiseInverse();
+      r.z0 = z_near, r.z1 = z_far;
+      r.hint = use_hint ? hrow[x] : 0.f;
+      if (!clipToBox(oq, r.ray.dq, lo, hi, r.z0, r.z1)) continue;
+      if (++pending == kRaysSideBySide) castBatch();
     }
+    castBatch();
   }, 4);
   return maps;
 }

@@ -7,6 +7,7 @@
 
 #include <cmath>
 
+#include "vofusion/core/floor_int.h"
 #include "vofusion/fusion/tsdf_volume.h"
 
 namespace vofusion::fusion {
@@ -14,9 +15,8 @@ namespace vofusion::fusion {
 // The 8 voxels of the cell holding q (voxel units) and q's position in it; false when one of them is
 // outside the volume, in an unallocated brick or never observed.
 inline bool TsdfVolume::cell(const Eigen::Vector3f& q, const Voxel* (&v)[8], float& a, float& b, float& c) const {
-  const float fx0 = std::floor(q.x()), fy0 = std::floor(q.y()), fz0 = std::floor(q.z());
-  const int x0 = static_cast<int>(fx0), y0 = static_cast<int>(fy0), z0 = static_cast<int>(fz0);
-  a = q.x() - fx0, b = q.y() - fy0, c = q.z() - fz0;
+  const int x0 = floorToInt(q.x()), y0 = floorToInt(q.y()), z0 = floorToInt(q.z());
+  a = q.x() - static_cast<float>(x0), b = q.y() - static_cast<float>(y0), c = q.z() - static_cast<float>(z0);
   if ((x0 & 7) != 7 && (y0 & 7) != 7 && (z0 & 7) != 7) {
     const Brick* br = brickAt(x0 >> 3, y0 >> 3, z0 >> 3);
     if (!br) return false;

@@ -136,9 +136,17 @@ class TsdfVolume {
   // Ray casting (raycast.cpp): one pixel's ray in voxel units, marched through the field.
   struct Ray;
   enum class March { Hit, Miss, Untrusted };
+  struct Marcher;
+  bool marchStep(Marcher& m) const;
   March marchRay(const Ray& ray, float z, float zend, bool need_free_start, float& zs) const;
   float pastUnallocated(const Ray& ray, int ix, int iy, int iz, float z) const;
-  bool castRay(const Ray& ray, float z0, float z1, float hint, bool hinted_only, float& zs, Eigen::Vector3f& g) const;
+  // Rays marched side by side, a sample each in turn. 4 against one at a time (with floorToInt): ray cast
+  // 20.7 -> 17.8 ms a frame on rpy_first100 (mode joint, four pairs), 20.0 -> 15.8 on xyz_first300 (two
+  // pairs), the same bytes out; 2, 4 and 8 within noise of each other (mode kinfu, rpy: 9.9, 9.9, 9.7 ms
+  // against 10.9).
+  static constexpr int kRaysSideBySide = 4;
+  struct PendingRay;
+  void castRays(PendingRay* rays, int n, bool hinted_only) const;
   cv::Vec3b colourAt(const Eigen::Vector3f& q) const;  // the nearest voxel's colour (BGR), black when none
 
   TsdfParams params_;
