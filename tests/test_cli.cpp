@@ -1,11 +1,12 @@
-// vofusion::CommandLine and runApp: what the thin apps rely on for parsing and error reporting.
+// vofusion::CommandLine and runApp: what the thin apps rely on for parsing and error reporting; the
+// heap's restart with huge pages and the process clock they start with.
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
-#include <thread>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "vofusion/core/cli.h"

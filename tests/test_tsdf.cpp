@@ -2,10 +2,11 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
-#include <limits>
+#include <cstring>
 #include <map>
 #include <random>
 #include <set>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <pcl/surface/marching_cubes.h>
@@ -160,6 +161,49 @@ TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
       ASSERT_LT(cv::norm(ph - pv), 2 * p.voxel_size);  // both within a voxel of the truth (above)
     }
   EXPECT_GT(hits, 0.8 * c.width * c.height / 4);
+}
+
+// The ray cast marches several rays side by side: each pixel must come out as it does cast alone. A
+// partly observed sphere, a hint with holes (0 and NaN) and with readings off the surface, both
+// ray-cast modes; each column is cast again by a one-pixel-wide camera over the same rays.
+TEST(Tsdf, RaysCastSideBySideGiveWhatEachGivesAlone) {
+  const TsdfParams p = smallParams();
+  const Eigen::Vector3f centre(0.03f, -0.02f, 1.0f);
+  const float r = 0.3f;
+  TsdfVolume vol(p, centre);
+  const CameraIntrinsics c = smallCam();
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(0.5f * k), std::sin(0.5f * k), 0.2f), centre);
+    vol.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
+  }
+  const Eigen::Isometry3f view = lookAt(centre + Eigen::Vector3f(0.9f, 0.5f, 0.1f), centre);
+  cv::Mat hint = renderDepth(c, view, &centre, r, nullptr);
+  for (int v = 0; v < hint.rows; ++v)
+    for (int u = 0; u < hint.cols; ++u) {
+      float& h = hint.at<float>(v, u);
+      if ((u + 3 * v) % 7 == 0) h = 0.f;
+      else if ((u + 5 * v) % 11 == 0) h = std::numeric_limits<float>::quiet_NaN();
+      else if ((2 * u + v) % 13 == 0 && h > 0.f) h += 0.1f;  // a reading behind the surface
+    }
+  for (const bool hinted_only : {false, true}) {
+    const RaycastMaps all = vol.raycast(view, c, &hint, false, hinted_only);
+    int hits = 0;
+    for (int u = 0; u < c.width; ++u) {
+      CameraIntrinsics one = c;
+      one.width = 1;
+      one.cx = c.cx - u;  // the same rays: (0 - (cx - u)) is (u - cx) exactly
+      const cv::Mat column = hint.col(u).clone();
+      const RaycastMaps alone = vol.raycast(view, one, &column, false, hinted_only);
+      for (int v = 0; v < c.height; ++v) {
+        ASSERT_EQ(std::memcmp(&alone.vertices.at<cv::Vec3f>(v, 0), &all.vertices.at<cv::Vec3f>(v, u), sizeof(cv::Vec3f)), 0)
+            << "pixel " << u << ", " << v << (hinted_only ? " (hinted only)" : "");
+        ASSERT_EQ(std::memcmp(&alone.normals.at<cv::Vec3f>(v, 0), &all.normals.at<cv::Vec3f>(v, u), sizeof(cv::Vec3f)), 0);
+        ASSERT_EQ(std::memcmp(&alone.depth.at<float>(v, 0), &all.depth.at<float>(v, u), sizeof(float)), 0);
+        hits += !std::isnan(all.vertices.at<cv::Vec3f>(v, u)[0]);
+      }
+    }
+    EXPECT_GT(hits, 5000) << "the sphere is in view: the comparison is not vacuous";
+  }
 }
 
 TEST(Tsdf, ShiftMovesBricksToWorldModelAndBackWithoutLoss) {

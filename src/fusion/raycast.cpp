@@ -6,11 +6,13 @@
 // A ray's samples form one chain (where the next one goes depends on the last one's value), so a ray
 // marched alone leaves the core waiting; kRaysSideBySide rays are marched a sample each in turn and
 // their chains overlap.
+#include <cassert>
 #include <cmath>
 #include <limits>
 
 #include "vofusion/fusion/tsdf_volume.h"
 
+#include "vofusion/core/floor_int.h"
 #include "vofusion/core/parallel.h"
 
 #include "tsdf_sampling.h"
@@ -42,36 +44,34 @@ float TsdfVolume::pastUnallocated(const Ray& ray, int ix, int iy, int iz, float 
   return std::max(z + ray.min_step, exit + 0.01f * ray.inv_dq_norm);
 }
 
-// Hit: zs is the first +/- crossing in [z, zend]. Miss: none (or a back face / the ray starts inside
-// unobserved space). Untrusted: need_free_start and the first sample is not observed free space, so a
-// hint-based start cannot be relied on.
+// One ray's march from z to zend, a sample at a time.
 struct TsdfVolume::Marcher {
   const Ray* ray;
   float z, zend;
   bool need_free_start;
   float prev_f = 0.f, prev_z = 0.f;
   bool prev_ok = false, first = true;
+  // Hit: zs is the first +/- crossing in [z, zend]. Miss: none (or a back face / the ray starts inside
+  // unobserved space). Untrusted: need_free_start and the first sample is not observed free space, so
+  // a hint-based start cannot be relied on.
   March result = March::Miss;
   float zs = 0.f;
-};
 
-namespace {
-template <typename Marcher, typename March>
-bool ended(Marcher& m, March result) {
-  m.result = result;
-  return false;
-}
-}  // namespace
+  bool end(March r) {
+    result = r;
+    return false;
+  }
+};
 
 // One sample of a march; false once it has its result.
 bool TsdfVolume::marchStep(Marcher& m) const {
   const Ray& ray = *m.ray;
-  if (!(m.z < m.zend)) return ended(m, March::Miss);
+  if (!(m.z < m.zend)) return m.end(March::Miss);
   const float trunc = params_.truncation;
   const Eigen::Vector3f q = ray.oq + ray.dq * m.z;
   const int ix = floorToInt(q.x()), iy = floorToInt(q.y()), iz = floorToInt(q.z());
   if (!brickAt(ix >> 3, iy >> 3, iz >> 3)) {
-    if (m.first && m.need_free_start) return ended(m, March::Untrusted);
+    if (m.first && m.need_free_start) return m.end(March::Untrusted);
     m.z = pastUnallocated(ray, ix, iy, iz, m.z);
     m.prev_ok = false;
     m.first = false;
@@ -79,7 +79,7 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   }
   float f;
   if (!trilinear(q, f)) {  // next to unobserved voxels: creep, do not jump over the band
-    if (m.first && m.need_free_start) return ended(m, March::Untrusted);
+    if (m.first && m.need_free_start) return m.end(March::Untrusted);
     m.prev_ok = false;
     m.first = false;
     // A whole voxel: the observed band before any surface is several voxels deep, so the
@@ -88,7 +88,7 @@ bool TsdfVolume::marchStep(Marcher& m) const {
     return true;
   }
   if (f < 0.f) {
-    if (!m.prev_ok) return ended(m, m.first && m.need_free_start ? March::Untrusted : March::Miss);  // back face
+    if (!m.prev_ok) return m.end(m.first && m.need_free_start ? March::Untrusted : March::Miss);  // back face
     // Regula falsi on the bracket [prev_z (f > 0), z (f < 0)]. One step: over a bracket this
     // short the field is nearly linear (3 steps cost 6 % more CPU in mode kinfu, same ATE on fr1_xyz).
     float za = m.prev_z, fa = m.prev_f, zb = m.z, fb = f;
@@ -101,7 +101,7 @@ bool TsdfVolume::marchStep(Marcher& m) const {
       else zb = zm, fb = fm;
     }
     m.zs = za + (zb - za) * fa / (fa - fb);
-    return ended(m, March::Hit);
+    return m.end(March::Hit);
   }
   m.prev_f = f;
   m.prev_z = m.z;
@@ -112,16 +112,17 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   return true;
 }
 
-TsdfVolume::March TsdfVolume::marchRay(const Ray& ray, float z, float zend, bool need_free_start, float& zs) const {
-  Marcher m{&ray, z, zend, need_free_start};
-  while (marchStep(m)) {
+// The marches whose `going` is set, a sample of each in turn, until each has its result.
+void TsdfVolume::marchSideBySide(Marcher* marches, bool* going, int n) const {
+  for (bool any = true; any;) {
+    any = false;
+    for (int i = 0; i < n; ++i)
+      if (going[i]) any |= going[i] = marchStep(marches[i]);
   }
-  zs = m.zs;
-  return m.result;
 }
 
-// A ray about to be cast: its band, its hint (the depth where the surface is expected, 0 = none), and
-// once cast, its surface zs and the field's gradient g there.
+// A ray about to be cast: its pixel's column, its band, its hint (the depth where the surface is
+// expected, 0 = none), and once cast, its surface zs and the field's gradient g there.
 struct TsdfVolume::PendingRay {
   int x;
   Ray ray;
@@ -131,32 +132,31 @@ struct TsdfVolume::PendingRay {
   Eigen::Vector3f g;
 };
 
-// Each ray's surface in [z0, z1]: the hinted band first, marched for all the rays side by side, then
-// what it could not settle one ray at a time.
+// Whether the ray's surface at zs has a normal (into r.g).
+bool TsdfVolume::normalAt(PendingRay& r, float zs) const {
+  return cellGradient(r.ray.oq + r.ray.dq * zs, r.g) && r.g.squaredNorm() > 0.f;
+}
+
+// Each ray's surface in [z0, z1]: first the hinted bands, then the full search for what they did not
+// settle, each stage's rays marched side by side.
 void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only) const {
+  assert(n <= kRaysSideBySide);
   const float trunc = params_.truncation;
-  Marcher hinted[kRaysSideBySide];
-  bool marching[kRaysSideBySide];
+  Marcher march[kRaysSideBySide];
+  bool going[kRaysSideBySide], searching[kRaysSideBySide];
   for (int i = 0; i < n; ++i) {
     const PendingRay& r = rays[i];
-    marching[i] = r.hint > 0.f;
-    hinted[i] = Marcher{&r.ray, std::max(r.z0, r.hint - 0.5f * trunc), std::min(r.z1, r.hint + 2.f * trunc), true};
+    going[i] = r.hint > 0.f;
+    if (going[i]) march[i] = Marcher{&r.ray, std::max(r.z0, r.hint - 0.5f * trunc), std::min(r.z1, r.hint + 2.f * trunc), true};
   }
-  for (bool any = true; any;) {
-    any = false;
-    for (int i = 0; i < n; ++i)
-      if (marching[i]) any |= marching[i] = marchStep(hinted[i]);
-  }
+  marchSideBySide(march, going, n);
   for (int i = 0; i < n; ++i) {
     PendingRay& r = rays[i];
-    const auto normalAt = [&](float zs) { return cellGradient(r.ray.oq + r.ray.dq * zs, r.g) && r.g.squaredNorm() > 0.f; };
     r.found = false;
-    r.zs = 0.f;
     bool settled = false;
     if (r.hint > 0.f) {
-      const March h = hinted[i].result;
-      r.zs = hinted[i].zs;
-      r.found = h == March::Hit && normalAt(r.zs);
+      r.zs = march[i].zs;
+      r.found = march[i].result == March::Hit && normalAt(r, r.zs);
       // For tracking, a band that starts in observed free space and holds no surface settles the
       // ray: the model has nothing there for this reading to pair with. Searching such rays again
       // from min_depth (8 % of the rays, 1 in 17 finding a surface far in front of the reading)
@@ -164,16 +164,19 @@ void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only) const {
       // per frame (synthetic room), frame loop +2/+5 % on xyz_first300, +11/+13 % on rpy_first100,
       // +12 % room, +2 % shake; ATE xyz 0.01194 -> 0.01193 m, rpy 0.01664 -> 0.01645, room
       // 0.0101 -> 0.0102, shake 0.0182 -> 0.0189, corridor and bare wall unchanged.
-      settled = hinted_only && h == March::Miss;
+      settled = hinted_only && march[i].result == March::Miss;
     }
     // Whatever the hinted search could not settle, the full search decides; for tracking only up to
     // the hint's band (a surface farther behind the reading is hidden by it and would not pair).
-    if (!r.found && !settled) {
-      const float zend = hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1;
-      float zs = r.zs;
-      r.found = marchRay(r.ray, r.z0, zend, false, zs) == March::Hit && normalAt(zs);
-      r.zs = zs;
-    }
+    searching[i] = going[i] = !r.found && !settled;
+    if (going[i]) march[i] = Marcher{&r.ray, r.z0, hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1, false};
+  }
+  marchSideBySide(march, going, n);
+  for (int i = 0; i < n; ++i) {
+    if (!searching[i]) continue;
+    PendingRay& r = rays[i];
+    if (march[i].result == March::Hit) r.zs = march[i].zs;
+    r.found = march[i].result == March::Hit && normalAt(r, r.zs);
   }
 }
 
@@ -205,6 +208,22 @@ bool clipToBox(const Eigen::Vector3f& oq, const Eigen::Vector3f& dq, const Eigen
 }
 }  // namespace
 
+// Row y's pixels of the rays that found a surface: its position, depth, normal (and colour).
+void TsdfVolume::storeHits(PendingRay* rays, int n, RaycastMaps& maps, int y) const {
+  const float vs = params_.voxel_size;
+  for (int i = 0; i < n; ++i) {
+    PendingRay& r = rays[i];
+    if (!r.found) continue;
+    const Eigen::Vector3f q = r.ray.oq + r.ray.dq * r.zs;
+    r.g.normalize();
+    const Eigen::Vector3f p = q * vs;
+    maps.vertices.ptr<cv::Vec3f>(y)[r.x] = cv::Vec3f(p.x(), p.y(), p.z());
+    maps.depth.ptr<float>(y)[r.x] = r.zs;
+    maps.normals.ptr<cv::Vec3f>(y)[r.x] = cv::Vec3f(r.g.x(), r.g.y(), r.g.z());
+    if (!maps.colours.empty()) maps.colours.ptr<cv::Vec3b>(y)[r.x] = colourAt(q);
+  }
+}
+
 RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const CameraIntrinsics& cam,
                                 const cv::Mat* depth_hint, bool with_colour, bool hinted_only) const {
   const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -231,21 +250,6 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
     float* zrow = maps.depth.ptr<float>(y);
     PendingRay batch[kRaysSideBySide];
     int pending = 0;
-    const auto castBatch = [&] {
-      castRays(batch, pending, hinted_only);
-      for (int i = 0; i < pending; ++i) {
-        PendingRay& r = batch[i];
-        if (!r.found) continue;
-        const Eigen::Vector3f q = oq + r.ray.dq * r.zs;
-        r.g.normalize();
-        const Eigen::Vector3f p = q * vs;
-        vrow[r.x] = cv::Vec3f(p.x(), p.y(), p.z());
-        zrow[r.x] = r.zs;
-        nrow[r.x] = cv::Vec3f(r.g.x(), r.g.y(), r.g.z());
-        if (with_colour) maps.colours.ptr<cv::Vec3b>(y)[r.x] = colourAt(q);
-      }
-      pending = 0;
-    };
     for (int x = 0; x < w; ++x) {
       vrow[x] = nrow[x] = cv::Vec3f(nan, nan, nan);
       zrow[x] = 0.f;
@@ -262,9 +266,13 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
       r.z0 = z_near, r.z1 = z_far;
       r.hint = use_hint ? hrow[x] : 0.f;
       if (!clipToBox(oq, r.ray.dq, lo, hi, r.z0, r.z1)) continue;
-      if (++pending == kRaysSideBySide) castBatch();
+      if (++pending < kRaysSideBySide) continue;
+      castRays(batch, pending, hinted_only);
+      storeHits(batch, pending, maps, y);
+      pending = 0;
     }
-    castBatch();
+    castRays(batch, pending, hinted_only);
+    storeHits(batch, pending, maps, y);
   }, 4);
   return maps;
 }

@@ -138,15 +138,17 @@ class TsdfVolume {
   enum class March { Hit, Miss, Untrusted };
   struct Marcher;
   bool marchStep(Marcher& m) const;
-  March marchRay(const Ray& ray, float z, float zend, bool need_free_start, float& zs) const;
+  void marchSideBySide(Marcher* marches, bool* going, int n) const;
   float pastUnallocated(const Ray& ray, int ix, int iy, int iz, float z) const;
-  // Rays marched side by side, a sample each in turn. 4 against one at a time (with floorToInt): ray cast
-  // 20.7 -> 17.8 ms a frame on rpy_first100 (mode joint, four pairs), 20.0 -> 15.8 on xyz_first300 (two
-  // pairs), the same bytes out; 2, 4 and 8 within noise of each other (mode kinfu, rpy: 9.9, 9.9, 9.7 ms
-  // against 10.9).
+  // Rays marched side by side, a sample each in turn. 4 with floorToInt against one at a time with
+  // std::floor: ray cast 8-21 % cheaper (mode joint, rpy_first100 and xyz_first300, two rounds each), the
+  // same bytes out; 2, 4 and 8 within noise of each other (mode kinfu, before floorToInt).
+  // bench/results/2026-11-28-raycast-side-by-side.md
   static constexpr int kRaysSideBySide = 4;
   struct PendingRay;
-  void castRays(PendingRay* rays, int n, bool hinted_only) const;
+  void castRays(PendingRay* rays, int n, bool hinted_only) const;  // n <= kRaysSideBySide
+  bool normalAt(PendingRay& r, float zs) const;
+  void storeHits(PendingRay* rays, int n, RaycastMaps& maps, int y) const;
   cv::Vec3b colourAt(const Eigen::Vector3f& q) const;  // the nearest voxel's colour (BGR), black when none
 
   TsdfParams params_;
