@@ -68,6 +68,10 @@ cv::Mat renderDepth(const CameraIntrinsics& c, const Eigen::Isometry3f& T, const
   return z;
 }
 
+// The tests' sphere, in a small volume centred on it.
+const Eigen::Vector3f kSphereCentre(0.03f, -0.02f, 1.0f);
+constexpr float kSphereRadius = 0.3f;
+
 TsdfParams smallParams() {
   TsdfParams p;
   p.volume_voxels = 256;
@@ -81,8 +85,8 @@ TsdfParams smallParams() {
 
 TEST(Tsdf, SphereMeshWithinOneVoxelClosedAndOutwardOriented) {
   const TsdfParams p = smallParams();
-  const Eigen::Vector3f centre(0.03f, -0.02f, 1.0f);
-  const float r = 0.3f;
+  const Eigen::Vector3f& centre = kSphereCentre;
+  const float r = kSphereRadius;
   TsdfVolume vol(p, centre);
   const CameraIntrinsics c = smallCam();
   for (int k = 0; k < 12; ++k) {  // orbit around the sphere, above and below the equator
@@ -167,17 +171,15 @@ TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
 // partly observed sphere, a hint with holes (0 and NaN) and with readings off the surface, both
 // ray-cast modes; each column is cast again by a one-pixel-wide camera over the same rays.
 TEST(Tsdf, RaysCastSideBySideGiveWhatEachGivesAlone) {
-  const TsdfParams p = smallParams();
-  const Eigen::Vector3f centre(0.03f, -0.02f, 1.0f);
-  const float r = 0.3f;
-  TsdfVolume vol(p, centre);
+  const Eigen::Vector3f& centre = kSphereCentre;
+  TsdfVolume vol(smallParams(), centre);
   const CameraIntrinsics c = smallCam();
-  for (int k = 0; k < 3; ++k) {
+  for (int k = 0; k < 3; ++k) {  // three views from one side
     const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(0.5f * k), std::sin(0.5f * k), 0.2f), centre);
-    vol.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
+    vol.integrate(renderDepth(c, T, &centre, kSphereRadius, nullptr), cv::Mat(), c, T);
   }
   const Eigen::Isometry3f view = lookAt(centre + Eigen::Vector3f(0.9f, 0.5f, 0.1f), centre);
-  cv::Mat hint = renderDepth(c, view, &centre, r, nullptr);
+  cv::Mat hint = renderDepth(c, view, &centre, kSphereRadius, nullptr);
   for (int v = 0; v < hint.rows; ++v)
     for (int u = 0; u < hint.cols; ++u) {
       float& h = hint.at<float>(v, u);
