@@ -35,7 +35,7 @@ std::uint64_t brickKey(const Eigen::Vector3i& c) {
 // Cube corners in PCL's order (its tables are written for it) and, per cube edge, the corner that
 // owns it and the axis it runs along.
 constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}};
-const int kEdgeCorners[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+constexpr int kEdgeCorners[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 
 struct BrickVertices {
   // Owned edges with a crossing, one bit per edge id (voxel index * 3 + axis), and per word of bits the
@@ -143,6 +143,22 @@ constexpr std::array<int, 8> cornerOffsets() {
 }
 constexpr std::array<int, 8> kCornerOffset = cornerOffsets();
 
+// Each cube edge as the voxel it starts from (its lower corner, relative to the cell's first) and the
+// axis it runs along: where its crossing's vertex is kept.
+struct EdgeStart {
+  int dx, dy, dz, axis;
+};
+constexpr std::array<EdgeStart, 12> edgeStarts() {
+  std::array<EdgeStart, 12> s{};
+  for (int e = 0; e < 12; ++e) {
+    const int* a = kCorner[kEdgeCorners[e][0]];
+    const int* b = kCorner[kEdgeCorners[e][1]];
+    s[e] = {std::min(a[0], b[0]), std::min(a[1], b[1]), std::min(a[2], b[2]), a[0] != b[0] ? 0 : (a[1] != b[1] ? 1 : 2)};
+  }
+  return s;
+}
+constexpr std::array<EdgeStart, 12> kEdgeStart = edgeStarts();
+
 void cornerStates(const Grid& grid, const int* nb, int min_weight, CornerStates& state) {
   std::size_t k = 0;
   for (int z = 0; z < kSpan; ++z)
@@ -222,11 +238,8 @@ void cellFaces(const int* nb, const CornerStates& state, const std::vector<Brick
         for (int e = 0; e < 12; ++e) {
           ev[e] = -1;
           if (!(pcl::edgeTable[cube] & (1 << e))) continue;
-          const int* a = kCorner[kEdgeCorners[e][0]];
-          const int* b = kCorner[kEdgeCorners[e][1]];
-          const int lx = std::min(a[0], b[0]), ly = std::min(a[1], b[1]), lz = std::min(a[2], b[2]);
-          const int axis = a[0] != b[0] ? 0 : (a[1] != b[1] ? 1 : 2);
-          ev[e] = vertexOf(x + lx, y + ly, z + lz, axis);
+          const EdgeStart& start = kEdgeStart[e];
+          ev[e] = vertexOf(x + start.dx, y + start.dy, z + start.dz, start.axis);
         }
         for (int k = 0; pcl::triTable[cube][k] != -1; k += 3) {
           const std::int64_t i0 = ev[pcl::triTable[cube][k]], i1 = ev[pcl::triTable[cube][k + 1]],
