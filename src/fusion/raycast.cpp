@@ -132,14 +132,14 @@ struct TsdfVolume::PendingRay {
   Eigen::Vector3f g;
 };
 
-// Whether the ray's surface at zs has a normal (into r.g).
-bool TsdfVolume::normalAt(PendingRay& r, float zs) const {
-  return cellGradient(r.ray.oq + r.ray.dq * zs, r.g) && r.g.squaredNorm() > 0.f;
+// Whether the ray's surface at r.zs has a normal (into r.g).
+bool TsdfVolume::normalAt(PendingRay& r) const {
+  return cellGradient(r.ray.oq + r.ray.dq * r.zs, r.g) && r.g.squaredNorm() > 0.f;
 }
 
 // Each ray's surface in [z0, z1]: first the hinted bands, then the full search for what they did not
-// settle, each stage's rays marched side by side.
-void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only) const {
+// settle, each stage's rays marched side by side; the hits go into row y of the maps.
+void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only, RaycastMaps& maps, int y) const {
   assert(n <= kRaysSideBySide);
   const float trunc = params_.truncation;
   Marcher march[kRaysSideBySide];
@@ -156,7 +156,7 @@ void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only) const {
     bool settled = false;
     if (r.hint > 0.f) {
       r.zs = march[i].zs;
-      r.found = march[i].result == March::Hit && normalAt(r, r.zs);
+      r.found = march[i].result == March::Hit && normalAt(r);
       // For tracking, a band that starts in observed free space and holds no surface settles the
       // ray: the model has nothing there for this reading to pair with. Searching such rays again
       // from min_depth (8 % of the rays, 1 in 17 finding a surface far in front of the reading)
@@ -175,9 +175,11 @@ void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only) const {
   for (int i = 0; i < n; ++i) {
     if (!searching[i]) continue;
     PendingRay& r = rays[i];
-    if (march[i].result == March::Hit) r.zs = march[i].zs;
-    r.found = march[i].result == March::Hit && normalAt(r, r.zs);
+    if (march[i].result != March::Hit) continue;
+    r.zs = march[i].zs;
+    r.found = normalAt(r);
   }
+  storeHits(rays, n, maps, y);
 }
 
 cv::Vec3b TsdfVolume::colourAt(const Eigen::Vector3f& q) const {
@@ -267,12 +269,10 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
       r.hint = use_hint ? hrow[x] : 0.f;
       if (!clipToBox(oq, r.ray.dq, lo, hi, r.z0, r.z1)) continue;
       if (++pending < kRaysSideBySide) continue;
-      castRays(batch, pending, hinted_only);
-      storeHits(batch, pending, maps, y);
+      castRays(batch, pending, hinted_only, maps, y);
       pending = 0;
     }
-    castRays(batch, pending, hinted_only);
-    storeHits(batch, pending, maps, y);
+    castRays(batch, pending, hinted_only, maps, y);
   }, 4);
   return maps;
 }

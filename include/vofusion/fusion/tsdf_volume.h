@@ -146,8 +146,8 @@ class TsdfVolume {
   // bench/results/2026-11-28-raycast-side-by-side.md
   static constexpr int kRaysSideBySide = 4;
   struct PendingRay;
-  void castRays(PendingRay* rays, int n, bool hinted_only) const;  // n <= kRaysSideBySide
-  bool normalAt(PendingRay& r, float zs) const;
+  void castRays(PendingRay* rays, int n, bool hinted_only, RaycastMaps& maps, int y) const;  // n <= kRaysSideBySide
+  bool normalAt(PendingRay& r) const;
   void storeHits(PendingRay* rays, int n, RaycastMaps& maps, int y) const;
   cv::Vec3b colourAt(const Eigen::Vector3f& q) const;  // the nearest voxel's colour (BGR), black when none
 
