@@ -128,10 +128,16 @@ TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   VOFUSION_REQUIRE_DATA(tum);
   const std::string out = test::tempDir("grab_app_sigint");
   std::string log;
-  // The whole 300-frame sequence would take 10 s; SIGINT after 3 s stops it.
-  const int rc = test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out +
-                               " & pid=$!; sleep 3; kill -INT $pid; wait $pid'",
+  // The whole 300-frame sequence takes 10 s; SIGINT 1 s after the app says it records stops it.
+  // Start-up is waited for, not guessed: on a loaded machine it (the restart for huge pages included)
+  // took over 3 s, and sh starts a background job with SIGINT ignored, so a SIGINT sent before the
+  // app's handler is in place is lost.
+  const std::string err = out + ".log";
+  const int rc = test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out + " 2> " + err +
+                               " & pid=$!; i=0; until grep -q \"Ctrl-C to stop\" " + err +
+                               " || [ $i -ge 600 ]; do sleep 0.05; i=$((i+1)); done; sleep 1; kill -INT $pid; wait $pid'",
                            &log);
+  log += std::string(std::istreambuf_iterator<char>(std::ifstream(err).rdbuf()), {});
   ASSERT_EQ(rc, 0) << log;
   auto kv = readSummary(out + "/grab-summary.txt");
   ASSERT_FALSE(kv.empty()) << log;
