@@ -132,10 +132,11 @@ TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   // Start-up is waited for, not guessed: on a loaded machine it (the restart for huge pages included)
   // took over 3 s, and sh starts a background job with SIGINT ignored, so a SIGINT sent before the
   // app's handler is in place is lost.
-  const std::string err = out + ".log";
+  const std::string err = test::tempDir("grab_app_sigint_err") + "/stderr.txt";
   const int rc = test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out + " 2> " + err +
                                " & pid=$!; i=0; until grep -q \"Ctrl-C to stop\" " + err +
-                               " || [ $i -ge 600 ]; do sleep 0.05; i=$((i+1)); done; sleep 1; kill -INT $pid; wait $pid'",
+                               " 2>/dev/null || ! kill -0 $pid 2>/dev/null || [ $i -ge 1200 ]; do sleep 0.05; i=$((i+1)); done; "
+                               "[ $i -lt 1200 ] || echo \"no start-up line in 60 s\" >&2; sleep 1; kill -INT $pid; wait $pid'",
                            &log);
   log += std::string(std::istreambuf_iterator<char>(std::ifstream(err).rdbuf()), {});
   ASSERT_EQ(rc, 0) << log;
