@@ -1,19 +1,19 @@
 // TSDF integration, ray casting, volume shifting and marching cubes on analytic scenes.
 #include <algorithm>
 #include <cmath>
-#include <memory>
 #include <cstring>
 #include <map>
+#include <memory>
 #include <random>
 #include <set>
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <opencv2/core/fast_math.hpp>  // cvFloor
 #include <pcl/surface/marching_cubes.h>
 #include <tbb/task_arena.h>
 
 #include "support.h"
-#include "vofusion/core/floor_int.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/tsdf_volume.h"
 #include "vofusion/mesh/mesh_io.h"
@@ -168,43 +168,71 @@ TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
 }
 
 // The ray cast marches several rays side by side: each pixel must come out as it does cast alone. A
-// partly observed sphere, a hint with holes (0 and NaN) and with readings off the surface, both
-// ray-cast modes; each column is cast again by a one-pixel-wide camera over the same rays.
+// partly observed, coloured sphere, a hint with holes (0 and NaN) and with readings off the surface,
+// both ray-cast modes, a view from inside the volume and one from outside it whose rays partly miss the
+// volume; each column is cast again by a one-pixel-wide camera over the same rays.
 TEST(Tsdf, RaysCastSideBySideGiveWhatEachGivesAlone) {
   const Eigen::Vector3f& centre = kSphereCentre;
-  TsdfVolume vol(smallParams(), centre);
+  const TsdfParams params = smallParams();
+  TsdfVolume vol(params, centre);
   const CameraIntrinsics c = smallCam();
+  cv::Mat bgr(c.height, c.width, CV_8UC3);
+  cv::RNG rng(5);
+  rng.fill(bgr, cv::RNG::UNIFORM, 0, 256);
   for (int k = 0; k < 3; ++k) {  // three views from one side
     const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(0.5f * k), std::sin(0.5f * k), 0.2f), centre);
-    vol.integrate(renderDepth(c, T, &centre, kSphereRadius, nullptr), cv::Mat(), c, T);
+    vol.integrate(renderDepth(c, T, &centre, kSphereRadius, nullptr), bgr, c, T);
   }
-  const Eigen::Isometry3f view = lookAt(centre + Eigen::Vector3f(0.9f, 0.5f, 0.1f), centre);
-  cv::Mat hint = renderDepth(c, view, &centre, kSphereRadius, nullptr);
-  for (int v = 0; v < hint.rows; ++v)
-    for (int u = 0; u < hint.cols; ++u) {
-      float& h = hint.at<float>(v, u);
-      if ((u + 3 * v) % 7 == 0) h = 0.f;
-      else if ((u + 5 * v) % 11 == 0) h = std::numeric_limits<float>::quiet_NaN();
-      else if ((2 * u + v) % 13 == 0 && h > 0.f) h += 0.1f;  // a reading behind the surface
-    }
-  for (const bool hinted_only : {false, true}) {
-    const RaycastMaps all = vol.raycast(view, c, &hint, false, hinted_only);
-    int hits = 0;
-    for (int u = 0; u < c.width; ++u) {
-      CameraIntrinsics one = c;
-      one.width = 1;
-      one.cx = c.cx - u;  // the same rays: (0 - (cx - u)) is (u - cx) exactly
-      const cv::Mat column = hint.col(u).clone();
-      const RaycastMaps alone = vol.raycast(view, one, &column, false, hinted_only);
-      for (int v = 0; v < c.height; ++v) {
-        ASSERT_EQ(std::memcmp(&alone.vertices.at<cv::Vec3f>(v, 0), &all.vertices.at<cv::Vec3f>(v, u), sizeof(cv::Vec3f)), 0)
-            << "pixel " << u << ", " << v << (hinted_only ? " (hinted only)" : "");
-        ASSERT_EQ(std::memcmp(&alone.normals.at<cv::Vec3f>(v, 0), &all.normals.at<cv::Vec3f>(v, u), sizeof(cv::Vec3f)), 0);
-        ASSERT_EQ(std::memcmp(&alone.depth.at<float>(v, 0), &all.depth.at<float>(v, u), sizeof(float)), 0);
-        hits += !std::isnan(all.vertices.at<cv::Vec3f>(v, u)[0]);
+  // Rays that miss the volume's box (slabs) from the view, so that the outside view's test is not vacuous.
+  const auto missesOfBox = [&](const Eigen::Isometry3f& view) {
+    const Eigen::Vector3f lo = vol.minCorner(), hi = lo + Eigen::Vector3f::Constant(params.volume_voxels * params.voxel_size);
+    int misses = 0;
+    for (int v = 0; v < c.height; ++v)
+      for (int u = 0; u < c.width; ++u) {
+        const Eigen::Vector3f d = view.linear() * Eigen::Vector3f((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.f);
+        float t0 = 0.f, t1 = 1e9f;
+        for (int a = 0; a < 3; ++a) {
+          const float ta = (lo[a] - view.translation()[a]) / d[a], tb = (hi[a] - view.translation()[a]) / d[a];
+          t0 = std::max(t0, std::min(ta, tb)), t1 = std::min(t1, std::max(ta, tb));
+        }
+        misses += t0 > t1;
       }
+    return misses;
+  };
+  const Eigen::Isometry3f inside = lookAt(centre + Eigen::Vector3f(0.9f, 0.5f, 0.1f), centre);
+  const Eigen::Isometry3f outside = lookAt(centre + Eigen::Vector3f(2.2f, -0.3f, 0.1f), centre + Eigen::Vector3f(0.f, 0.9f, 0.f));
+  ASSERT_EQ(missesOfBox(inside), 0);
+  ASSERT_GT(missesOfBox(outside), 1000);
+  for (const Eigen::Isometry3f& view : {inside, outside}) {
+    cv::Mat hint = renderDepth(c, view, &centre, kSphereRadius, nullptr);
+    for (int v = 0; v < hint.rows; ++v)
+      for (int u = 0; u < hint.cols; ++u) {
+        float& h = hint.at<float>(v, u);
+        if ((u + 3 * v) % 7 == 0) h = 0.f;
+        else if ((u + 5 * v) % 11 == 0) h = std::numeric_limits<float>::quiet_NaN();
+        else if ((2 * u + v) % 13 == 0 && h > 0.f) h += 0.1f;  // a reading behind the surface
+      }
+    for (const bool hinted_only : {false, true}) {
+      const RaycastMaps all = vol.raycast(view, c, &hint, true, hinted_only);
+      ASSERT_EQ(all.colours.size(), all.vertices.size());
+      int hits = 0;
+      for (int u = 0; u < c.width; ++u) {
+        CameraIntrinsics one = c;
+        one.width = 1;
+        one.cx = c.cx - u;  // the same rays: (0 - (cx - u)) is (u - cx) exactly
+        const cv::Mat column = hint.col(u).clone();
+        const RaycastMaps alone = vol.raycast(view, one, &column, true, hinted_only);
+        for (int v = 0; v < c.height; ++v) {
+          ASSERT_EQ(std::memcmp(&alone.vertices.at<cv::Vec3f>(v, 0), &all.vertices.at<cv::Vec3f>(v, u), sizeof(cv::Vec3f)), 0)
+              << "pixel " << u << ", " << v << (hinted_only ? " (hinted only)" : "");
+          ASSERT_EQ(std::memcmp(&alone.normals.at<cv::Vec3f>(v, 0), &all.normals.at<cv::Vec3f>(v, u), sizeof(cv::Vec3f)), 0);
+          ASSERT_EQ(std::memcmp(&alone.depth.at<float>(v, 0), &all.depth.at<float>(v, u), sizeof(float)), 0);
+          ASSERT_EQ(alone.colours.at<cv::Vec3b>(v, 0), all.colours.at<cv::Vec3b>(v, u));
+          hits += !std::isnan(all.vertices.at<cv::Vec3f>(v, u)[0]);
+        }
+      }
+      EXPECT_GT(hits, 1000) << "the sphere is in view: the comparison is not vacuous";
     }
-    EXPECT_GT(hits, 5000) << "the sphere is in view: the comparison is not vacuous";
   }
 }
 
@@ -512,9 +540,10 @@ TEST(MarchingCubes, MeshByRegionJudgesFragmentsWholeAcrossSeams) {
   for (const auto& v : r.mesh.vertices) ASSERT_LT(std::fabs((v - centre).norm() - 0.3f), 0.02f);
 }
 
-// The ray cast's floor: the integer std::floor gives, for voxel coordinates on both sides of zero, whole
-// numbers and their neighbours, and floats too large to have a fraction.
-TEST(FloorToInt, IsStdFloor) {
+// The ray cast's floor (OpenCV's cvFloor) must be the integer std::floor gives, or the ray cast's bytes
+// change: voxel coordinates on both sides of zero, whole numbers and their neighbours, and floats too
+// large to have a fraction.
+TEST(Tsdf, CvFloorIsStdFloor) {
   std::vector<float> xs = {0.f, -0.f, 0.5f, -0.5f, 1.f, -1.f, 7.9999995f, -7.9999995f, 1e-30f, -1e-30f,
                            8388607.5f, -8388607.5f, 16777216.f, -16777216.f, 2e9f, -2e9f};
   for (int i = -300; i <= 300; ++i) {
@@ -526,5 +555,5 @@ TEST(FloorToInt, IsStdFloor) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> any(-5000.f, 5000.f);
   for (int i = 0; i < 100000; ++i) xs.push_back(any(rng));
-  for (const float x : xs) ASSERT_EQ(floorToInt(x), static_cast<int>(std::floor(x))) << "x = " << x;
+  for (const float x : xs) ASSERT_EQ(cvFloor(x), static_cast<int>(std::floor(x))) << "x = " << x;
 }

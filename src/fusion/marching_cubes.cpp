@@ -32,8 +32,8 @@ std::uint64_t brickKey(const Eigen::Vector3i& c) {
   return u(c.x()) | (u(c.y()) << 21) | (u(c.z()) << 42);
 }
 
-// Cube corners in PCL's order (its tables are written for it) and, per cube edge, the corner that
-// owns it and the axis it runs along.
+// Cube corners in PCL's order (its tables are written for it) and each cube edge's two corners, in
+// PCL's edge numbering.
 constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}};
 constexpr int kEdgeCorners[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 

@@ -12,7 +12,6 @@
 
 #include "vofusion/fusion/tsdf_volume.h"
 
-#include "vofusion/core/floor_int.h"
 #include "vofusion/core/parallel.h"
 
 #include "tsdf_sampling.h"
@@ -69,7 +68,7 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   if (!(m.z < m.zend)) return m.end(March::Miss);
   const float trunc = params_.truncation;
   const Eigen::Vector3f q = ray.oq + ray.dq * m.z;
-  const int ix = floorToInt(q.x()), iy = floorToInt(q.y()), iz = floorToInt(q.z());
+  const int ix = cvFloor(q.x()), iy = cvFloor(q.y()), iz = cvFloor(q.z());
   if (!brickAt(ix >> 3, iy >> 3, iz >> 3)) {
     if (m.first && m.need_free_start) return m.end(March::Untrusted);
     m.z = pastUnallocated(ray, ix, iy, iz, m.z);

@@ -140,9 +140,9 @@ class TsdfVolume {
   bool marchStep(Marcher& m) const;
   void marchSideBySide(Marcher* marches, bool* going, int n) const;
   float pastUnallocated(const Ray& ray, int ix, int iy, int iz, float z) const;
-  // Rays marched side by side, a sample each in turn. 4 with floorToInt against one at a time with
+  // Rays marched side by side, a sample each in turn. 4 with cvFloor against one at a time with
   // std::floor: ray cast 8-21 % cheaper (mode joint, rpy_first100 and xyz_first300, two rounds each), the
-  // same bytes out; 2, 4 and 8 within noise of each other (mode kinfu, before floorToInt).
+  // same bytes out; 2, 4 and 8 within noise of each other (mode kinfu, before cvFloor).
   // bench/results/2026-11-28-raycast-side-by-side.md
   static constexpr int kRaysSideBySide = 4;
   struct PendingRay;
