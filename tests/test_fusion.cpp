@@ -11,7 +11,7 @@
 
 #include "support.h"
 #include "vofusion/core/errors.h"
-#include "vofusion/tracking/tracker.h"
+#include "vofusion/fusion/tracked_map.h"
 #include "vofusion/pipeline/mesh_by_region.h"
 #include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/registration/rigid_motion.h"
@@ -77,9 +77,9 @@ struct RunSummary {
 };
 
 RunSummary runSequence(const sim::SyntheticSequence& seq, TrackingMode mode, const KinFuParams& p,
-                       double odo_sigma_t = 0.0015, Tracker** keep = nullptr, int matches = 0) {
+                       double odo_sigma_t = 0.0015, TrackedMap** keep = nullptr, int matches = 0) {
   std::mt19937 rng(7);
-  auto* kf = new Tracker(p, mode, seq.groundTruth(0));
+  auto* kf = new TrackedMap(p, mode, seq.groundTruth(0));
   RunSummary s;
   for (std::size_t i = 0; i < seq.size(); ++i) {
     const Frame f = seq.render(i);
@@ -127,7 +127,7 @@ TEST(KinFu, JointModeWithoutPriorTracksLikeKinFu) {
   sim::SimOptions exact = simOpts("room", 30);
   exact.noise = false;
   const sim::SyntheticSequence seq(exact);
-  Tracker kf(testParams(), TrackingMode::Joint, seq.groundTruth(0));
+  TrackedMap kf(testParams(), TrackingMode::Joint, seq.groundTruth(0));
   double max_error = 0;
   for (std::size_t i = 0; i < seq.size(); ++i) {
     const FusionResult r = kf.process(seq.render(i), nullptr);
@@ -187,7 +187,7 @@ struct PremeshingCorridor {
     return p;
   }
   // Every frame, with a noisy odometry prior.
-  void track(Tracker& kf) const {
+  void track(TrackedMap& kf) const {
     std::mt19937 rng(7);
     for (std::size_t i = 0; i < seq.size(); ++i) {
       fusion::MotionPrior prior;
@@ -195,13 +195,13 @@ struct PremeshingCorridor {
       kf.process(seq.render(i), i > 0 ? &prior : nullptr);
     }
   }
-  std::unique_ptr<Tracker> newTracker() const {
-    return std::make_unique<Tracker>(params, TrackingMode::Odometry, seq.groundTruth(0));
+  std::unique_ptr<TrackedMap> newTrackedMap() const {
+    return std::make_unique<TrackedMap>(params, TrackingMode::Odometry, seq.groundTruth(0));
   }
-  // A tracker whose volume's moves premesher follows while `feed` gives it frames or a map; the thread
+  // A tracked map whose volume's moves premesher follows while `feed` gives it frames or a map; the thread
   // has finished every region queued when this returns.
-  std::unique_ptr<Tracker> meshedWhile(RegionPremesher& premesher, const std::function<void(Tracker&)>& feed) const {
-    std::unique_ptr<Tracker> kf = newTracker();
+  std::unique_ptr<TrackedMap> meshedWhile(RegionPremesher& premesher, const std::function<void(TrackedMap&)>& feed) const {
+    std::unique_ptr<TrackedMap> kf = newTrackedMap();
     kf->setShiftObserver([&premesher](const fusion::TsdfVolume& v, const std::optional<Eigen::Vector3i>& old) {
       premesher.volumeShifted(v, old);
     });
@@ -211,7 +211,7 @@ struct PremeshingCorridor {
     return kf;
   }
   // Meshing at the end of kf's map with the regions premesher made gives the mesh meshing alone gives.
-  std::size_t expectTheMeshOfMeshingAtTheEnd(const Tracker& kf, RegionPremesher& premesher) const {
+  std::size_t expectTheMeshOfMeshingAtTheEnd(const TrackedMap& kf, RegionPremesher& premesher) const {
     const auto regions = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
       kf.volume().extractMeshByRegion(mesh.region_bricks, sink);
     };
@@ -237,8 +237,8 @@ struct PremeshingCorridor {
 TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
   const PremeshingCorridor c;
   RegionPremesher premesher(c.mesh);
-  const std::unique_ptr<Tracker> tracked = c.meshedWhile(premesher, [&](Tracker& kf) { c.track(kf); });
-  const Tracker& kf = *tracked;
+  const std::unique_ptr<TrackedMap> tracked = c.meshedWhile(premesher, [&](TrackedMap& kf) { c.track(kf); });
+  const TrackedMap& kf = *tracked;
   EXPECT_GT(kf.stats().shifts, 3u);
   // A region is taken only for the input it was made from: with one colour bit changed in each
   // (a face less could fall in a fragment the end drops anyway), none is, and all stay.
@@ -258,19 +258,19 @@ TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
 // when the map is loaded (they were queued only as the volume left them, in the run that saved it).
 TEST(KinFu, RegionsLeftBeforeALoadedMapAreMeshedAfterIt) {
   const PremeshingCorridor c;
-  const std::unique_ptr<Tracker> saved = c.newTracker();
+  const std::unique_ptr<TrackedMap> saved = c.newTrackedMap();
   c.track(*saved);
   ASSERT_GT(saved->stats().shifts, 3u);
   std::stringstream checkpoint;
   saved->saveState(checkpoint);
   RegionPremesher premesher(c.mesh);
-  const std::unique_ptr<Tracker> resumed = c.meshedWhile(premesher, [&](Tracker& kf) { kf.loadState(checkpoint); });
+  const std::unique_ptr<TrackedMap> resumed = c.meshedWhile(premesher, [&](TrackedMap& kf) { kf.loadState(checkpoint); });
   EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(*resumed, premesher), 2u);
   // The same from a map saved to a file (--save-volume, then --resume with it).
   const std::string map = test::tempDir("premesh_saved_map") + "/map.bin";
   saved->save(map);
   RegionPremesher from_file(c.mesh);
-  const std::unique_ptr<Tracker> reloaded = c.meshedWhile(from_file, [&](Tracker& kf) { kf.resume(map); });
+  const std::unique_ptr<TrackedMap> reloaded = c.meshedWhile(from_file, [&](TrackedMap& kf) { kf.resume(map); });
   EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(*reloaded, from_file), 2u);
   // A map loaded once the premesher has seen the volume (moved, or loaded) replaces the one it reads:
   // refused.
@@ -301,10 +301,10 @@ TEST(KinFu, CorridorMeshWithShiftingCoversWhatABigVolumeCovers) {
   KinFuParams big = small;
   big.tsdf.volume_voxels = 1024;  // 20 m: the whole corridor, never shifts
   big.shift_threshold = 100.f;
-  Tracker *ks = nullptr, *kb = nullptr;
+  TrackedMap *ks = nullptr, *kb = nullptr;
   const RunSummary rs = runSequence(seq, TrackingMode::Odometry, small, 0.0, &ks);
   const RunSummary rb = runSequence(seq, TrackingMode::Odometry, big, 0.0, &kb);
-  std::unique_ptr<Tracker> hold_s(ks), hold_b(kb);
+  std::unique_ptr<TrackedMap> hold_s(ks), hold_b(kb);
   EXPECT_GT(rs.stats.shifts, 3u);
   EXPECT_EQ(rb.stats.shifts, 0u);
   EXPECT_GT(rs.stats.bricks_in_world_model, 0u);

@@ -18,7 +18,7 @@
 #include "vofusion/core/spill_file.h"
 #include "vofusion/fusion/brick_arena.h"
 #include "vofusion/fusion/brick_index.h"
-#include "vofusion/tracking/tracker.h"
+#include "vofusion/fusion/tracked_map.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/tsdf_volume.h"
 #include "vofusion/fusion/world_model.h"
@@ -352,7 +352,7 @@ TEST(WorldModel, VolumeWithEverythingOnDiskKeepsItsMapAndSavesIt) {
   // The corridor fused at its true poses with no RAM cache at all: every brick that leaves is on disk.
   const sim::SyntheticSequence seq(corridor(60));
   KinFuParams ram = smallKinFu(1024), disk = smallKinFu(0);
-  Tracker a(ram, TrackingMode::Odometry, *seq.render(0).groundTruth), b(disk, TrackingMode::Odometry, *seq.render(0).groundTruth);
+  TrackedMap a(ram, TrackingMode::Odometry, *seq.render(0).groundTruth), b(disk, TrackingMode::Odometry, *seq.render(0).groundTruth);
   for (std::size_t i = 0; i < seq.size(); ++i) {
     const Frame f = seq.render(i);
     a.integrateAt(f, *f.groundTruth);
@@ -390,21 +390,21 @@ TEST(WorldModel, SaveThenResumeGivesTheMeshOfOneRun) {
   const sim::SyntheticSequence seq(corridor(60));
   const KinFuParams p = smallKinFu(0);
   const auto start = *seq.render(0).groundTruth;
-  Tracker one(p, TrackingMode::Odometry, start);
+  TrackedMap one(p, TrackingMode::Odometry, start);
   for (std::size_t i = 0; i < seq.size(); ++i) {
     const Frame f = seq.render(i);
     one.integrateAt(f, *f.groundTruth);
   }
   const std::string file = test::tempDir("world_model_resume") + "/map.vfmap";
   {
-    Tracker first(p, TrackingMode::Odometry, start);
+    TrackedMap first(p, TrackingMode::Odometry, start);
     for (std::size_t i = 0; i < 30; ++i) {
       const Frame f = seq.render(i);
       first.integrateAt(f, *f.groundTruth);
     }
     first.save(file);
   }
-  Tracker second(p, TrackingMode::Odometry);  // anchored elsewhere: resume() brings map and pose back
+  TrackedMap second(p, TrackingMode::Odometry);  // anchored elsewhere: resume() brings map and pose back
   second.resume(file);
   EXPECT_LT(second.pose().distanceTo(*seq.render(29).groundTruth), 1e-9);
   for (std::size_t i = 30; i < seq.size(); ++i) {
@@ -430,7 +430,7 @@ TEST(WorldModel, CorruptOrTruncatedSaveFileIsAOneLineError) {
   std::size_t lines = 0;
   for (char c : out) lines += c == '\n';
   EXPECT_LE(lines, 2u) << out;  // the app's start line may precede it
-  Tracker kf(KinFuParams(), TrackingMode::Odometry);
+  TrackedMap kf(KinFuParams(), TrackingMode::Odometry);
   EXPECT_THROW(kf.resume(bad), InputError);
   EXPECT_THROW(kf.resume(dir + "/missing.vfmap"), InputError);
 }

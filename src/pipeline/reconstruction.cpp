@@ -38,7 +38,7 @@ struct Reconstruction::Impl {
   OdometryParams odo_params;
   KinFuParams kinfu_params;
   std::unique_ptr<RgbdOdometry> odometry;  // null in mode kinfu: ICP alone, as KinFu LS
-  std::unique_ptr<Tracker> kinfu;
+  std::unique_ptr<TrackedMap> kinfu;
   Trajectory trajectory;  // tracked
   loop::LoopParams loop_params;
   std::unique_ptr<loop::LoopCloser> loops;  // null: loop closure off
@@ -65,7 +65,7 @@ struct Reconstruction::Impl {
   FusionResult fusing_result;
   Frame fusing_frame;
 
-  Tracker& map() const {
+  TrackedMap& map() const {
     if (!kinfu) throw std::logic_error("Reconstruction: the map was released (releaseMap)");
     return *kinfu;
   }
@@ -112,7 +112,7 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
     impl_->loops = std::make_unique<loop::LoopCloser>(impl_->loop_params, impl_->kinfu_params.tsdf.work_dir);
   // The map is anchored at the first camera (world = first camera frame). Ground truth never changes
   // what the tracker or the map does; evaluation and pictures align to it afterwards.
-  impl_->kinfu = std::make_unique<Tracker>(impl_->kinfu_params, mode);
+  impl_->kinfu = std::make_unique<TrackedMap>(impl_->kinfu_params, mode);
 }
 
 Reconstruction::~Reconstruction() = default;
@@ -224,8 +224,8 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   // once were the run's peak (loop scene: 820 MiB while re-fusing, 369 MiB while tracking).
   // If reading fails midway, the partly re-fused map is the one left (never none).
   m.kinfu.reset();
-  m.kinfu = std::make_unique<Tracker>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
-  Tracker& map = *m.kinfu;
+  m.kinfu = std::make_unique<TrackedMap>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
+  TrackedMap& map = *m.kinfu;
   std::size_t read = 0, fused = 0;
   Frame frame;
   while (read < poses.size() && next(frame)) {

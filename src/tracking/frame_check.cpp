@@ -45,7 +45,7 @@ void read(state::Archive& a, std::optional<ReferenceFrame>& ref) {
   });
 }
 
-bool worthChecking(const KinFuParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& prior_pose) {
+bool worthChecking(const TrackerParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& prior_pose) {
   return distance(joint, prior_pose) > P.joint_icp_sigma;
 }
 
@@ -67,7 +67,7 @@ IcpResult trackAgainstFrame(const ReferenceFrame& ref, const std::vector<DepthLe
   return r;
 }
 
-bool modelPulledAway(const KinFuParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& frame_to_frame,
+bool modelPulledAway(const TrackerParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& frame_to_frame,
                      const Eigen::Isometry3d& prior_pose) {
   const double pull = distance(joint, frame_to_frame);
   return pull > P.joint_icp_sigma && pull > kModelPullRatio * distance(frame_to_frame, prior_pose);

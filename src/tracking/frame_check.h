@@ -9,7 +9,7 @@
 #include <Eigen/Geometry>
 
 #include "vofusion/core/state_archive.h"
-#include "vofusion/fusion/kinfu.h"
+#include "vofusion/tracking/tracker_params.h"
 #include "vofusion/registration/preprocess.h"
 #include "vofusion/registration/projective_icp.h"
 
@@ -29,7 +29,7 @@ void read(state::Archive& a, std::optional<ReferenceFrame>& ref);
 
 // Whether the joint estimate left the odometry's pose by more than one residual's noise
 // (joint_icp_sigma): only then is a second estimate worth its ICP.
-bool worthChecking(const KinFuParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& prior_pose);
+bool worthChecking(const TrackerParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& prior_pose);
 
 // The frame's depth against the reference's instead of the model's, from the odometry's pose and held
 // by it only where the geometry is weak.
@@ -39,7 +39,7 @@ fusion::IcpResult trackAgainstFrame(const ReferenceFrame& ref, const std::vector
 // Whether the model pulled the frame away from two estimates that do not see it: the frame-to-frame
 // ICP and the odometry agree, and the joint estimate is farther from them than both one residual's
 // noise and several times their own disagreement.
-bool modelPulledAway(const KinFuParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& frame_to_frame,
+bool modelPulledAway(const TrackerParams& P, const Eigen::Isometry3d& joint, const Eigen::Isometry3d& frame_to_frame,
                      const Eigen::Isometry3d& prior_pose);
 
 }  // namespace vofusion::tracking

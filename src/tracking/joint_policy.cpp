@@ -11,14 +11,14 @@ namespace vofusion::tracking {
 
 using namespace fusion;
 
-IcpParams icpParams(const KinFuParams& P, bool joint, bool seeded, bool have_prior) {
+IcpParams icpParams(const TrackerParams& P, bool joint, bool seeded, bool have_prior) {
   IcpParams ip = P.icp;
   if (!seeded && !(joint && have_prior)) ip.degenerate_ratio = std::min(ip.degenerate_ratio, kMinCondition);
   if (joint) ip.point_to_plane_sigma = P.joint_icp_sigma;
   return ip;
 }
 
-PointMatches matchesOf(const KinFuParams& P, const MotionPrior& prior, const Eigen::Isometry3d& T_world_ref,
+PointMatches matchesOf(const TrackerParams& P, const MotionPrior& prior, const Eigen::Isometry3d& T_world_ref,
                        const Eigen::Isometry3d& guess) {
   PointMatches pm;
   pm.cauchy = kMatchCauchy;
@@ -35,7 +35,7 @@ PointMatches matchesOf(const KinFuParams& P, const MotionPrior& prior, const Eig
   return pm;
 }
 
-double rollingShutterSigma(const KinFuParams& P, const MotionHistory& history, const std::vector<DepthLevel>& levels,
+double rollingShutterSigma(const TrackerParams& P, const MotionHistory& history, const std::vector<DepthLevel>& levels,
                            const Eigen::Isometry3d& initial, double timestamp) {
   if (!(P.joint_rolling_shutter > 0) || !history.hasLast() || !(timestamp > history.lastTimestamp())) return 0.0;
   const double turn =
@@ -44,7 +44,7 @@ double rollingShutterSigma(const KinFuParams& P, const MotionHistory& history, c
   return P.joint_rolling_shutter * turn * cv::mean(d, d > 0)[0];
 }
 
-PosePrior motionModel(const KinFuParams& P, const MotionHistory& history, const Eigen::Isometry3d& velocity_pose,
+PosePrior motionModel(const TrackerParams& P, const MotionHistory& history, const Eigen::Isometry3d& velocity_pose,
                       double timestamp) {
   PosePrior m;
   m.pose = velocity_pose;
@@ -54,7 +54,7 @@ PosePrior motionModel(const KinFuParams& P, const MotionHistory& history, const 
   return m;
 }
 
-InitialGuess chooseGuess(const KinFuParams& P, const ModelPrediction& model, const Eigen::Isometry3d& last_pose,
+InitialGuess chooseGuess(const TrackerParams& P, const ModelPrediction& model, const Eigen::Isometry3d& last_pose,
                          const std::vector<DepthLevel>& levels, const IcpParams& ip, bool have_prior,
                          const Eigen::Isometry3d& prior_pose, const Eigen::Isometry3d& velocity_pose) {
   const std::size_t L = std::min(levels.size(), model.vertices.size()) - 1;
@@ -86,7 +86,7 @@ InitialGuess chooseGuess(const KinFuParams& P, const ModelPrediction& model, con
   return best;
 }
 
-PhotometricTerms photometricTerms(const KinFuParams& P, const ModelPrediction& model,
+PhotometricTerms photometricTerms(const TrackerParams& P, const ModelPrediction& model,
                                   const std::vector<IntensityLevel>& current, const std::vector<DepthLevel>& levels) {
   PhotometricTerms t;
   t.params.sigma = P.joint_photometric_sigma;
@@ -101,7 +101,7 @@ PhotometricTerms photometricTerms(const KinFuParams& P, const ModelPrediction& m
   return t;
 }
 
-std::pair<Rejection, std::string> judge(const KinFuParams& P, const IcpResult& icp, bool joint,
+std::pair<Rejection, std::string> judge(const TrackerParams& P, const IcpResult& icp, bool joint,
                                         const Eigen::Isometry3d* prior_pose) {
   const int judged = joint ? icp.in_view : icp.valid_pixels;
   if (!icp.solved) return {Rejection::NotSolvable, toString(Rejection::NotSolvable)};

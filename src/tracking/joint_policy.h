@@ -8,11 +8,12 @@
 
 #include <Eigen/Geometry>
 
-#include "vofusion/fusion/kinfu.h"
 #include "vofusion/registration/motion_prior.h"
 #include "vofusion/registration/photometric.h"
 #include "vofusion/registration/projective_icp.h"
+#include "vofusion/tracking/model_prediction.h"
 #include "vofusion/tracking/motion_history.h"
+#include "vofusion/tracking/tracker_params.h"
 #include "vofusion/tracking/tracking_mode.h"
 
 namespace vofusion::tracking {
@@ -20,33 +21,33 @@ namespace vofusion::tracking {
 // ICP's settings per mode. Weak directions keep the initial guess only when it is worth keeping (the
 // prior: mode paper-handoff), or follow the prior's pose (mode joint, see projectiveIcp); from the
 // last pose alone every direction that is not numerically singular is solved.
-fusion::IcpParams icpParams(const KinFuParams& P, bool joint, bool seeded, bool have_prior);
+fusion::IcpParams icpParams(const TrackerParams& P, bool joint, bool seeded, bool have_prior);
 
 // The prior's matches in world coordinates, each weighed by both points' Kinect noise.
-fusion::PointMatches matchesOf(const KinFuParams& P, const fusion::MotionPrior& prior, const Eigen::Isometry3d& T_world_ref,
+fusion::PointMatches matchesOf(const TrackerParams& P, const fusion::MotionPrior& prior, const Eigen::Isometry3d& T_world_ref,
                                const Eigen::Isometry3d& guess);
 
 // Mode joint: what a turning camera adds to a residual's noise (the depth camera reads its rows over
 // joint_rolling_shutter seconds): that time x the turn rate of the initial guess x the scene depth.
-double rollingShutterSigma(const KinFuParams& P, const MotionHistory& history, const std::vector<fusion::DepthLevel>& levels,
+double rollingShutterSigma(const TrackerParams& P, const MotionHistory& history, const std::vector<fusion::DepthLevel>& levels,
                            const Eigen::Isometry3d& initial, double timestamp);
 
 // Mode joint: the constant-velocity prediction as a motion model, its spread growing with the time
 // since the last tracked frame.
-fusion::PosePrior motionModel(const KinFuParams& P, const MotionHistory& history, const Eigen::Isometry3d& velocity_pose,
+fusion::PosePrior motionModel(const TrackerParams& P, const MotionHistory& history, const Eigen::Isometry3d& velocity_pose,
                               double timestamp);
 
 // Mode joint: the candidate that explains the frame clearly best after a few ICP steps at the
 // coarsest level (so errors ICP corrects anyway do not count); the prior wins ties (where geometry
 // cannot tell, e.g. sliding along a wall). The last pose competes only without a prior: the model
 // was cast from it, which biases its cost low.
-InitialGuess chooseGuess(const KinFuParams& P, const ModelPrediction& model, const Eigen::Isometry3d& last_pose,
+InitialGuess chooseGuess(const TrackerParams& P, const ModelPrediction& model, const Eigen::Isometry3d& last_pose,
                          const std::vector<fusion::DepthLevel>& levels, const fusion::IcpParams& ip, bool have_prior,
                          const Eigen::Isometry3d& prior_pose, const Eigen::Isometry3d& velocity_pose);
 
 // Mode joint: the photometric term's levels when this frame and the model's reference both have an
 // intensity pyramid on the tracking levels' grids (empty otherwise: no term).
-fusion::PhotometricTerms photometricTerms(const KinFuParams& P, const ModelPrediction& model,
+fusion::PhotometricTerms photometricTerms(const TrackerParams& P, const ModelPrediction& model,
                                           const std::vector<fusion::IntensityLevel>& current,
                                           const std::vector<fusion::DepthLevel>& levels);
 
@@ -72,7 +73,7 @@ inline constexpr float kGuessMargin = 0.8f;  // float, as the key was: the same 
 // the pixels that see the model: a view that is mostly new is no sign of divergence, and there the
 // matches outweigh the few ICP residuals anyway; its weak directions are held by the prior, so no
 // condition test.
-std::pair<Rejection, std::string> judge(const KinFuParams& P, const fusion::IcpResult& icp, bool joint,
+std::pair<Rejection, std::string> judge(const TrackerParams& P, const fusion::IcpResult& icp, bool joint,
                                         const Eigen::Isometry3d* prior_pose);
 
 }  // namespace vofusion::tracking

@@ -17,20 +17,18 @@ namespace vofusion {
 using namespace fusion;
 
 struct Tracker::Impl {
-  KinFuParams params;
+  TrackerParams params;
   TrackingMode mode;
-  KinFu map;
   MotionHistory history;
-  KinFuStats stats;  // the tracking counts and stage times (the map's own figures are added by stats())
-  // What track() leaves for fuse(): the frame as the map takes it.
+  TrackerStats stats;
+  // What track() leaves for the map (frameToFuse) until it was fused: the frame as the map takes it.
   std::optional<FrameToFuse> pending;
   // relocalise(): where the next frame is, as its prior (ICP starts there and may not jump from it).
   std::optional<Eigen::Isometry3d> placed;
   // Mode joint: the last tracked frame, which checks the model's pull (frame_check.h).
   std::optional<tracking::ReferenceFrame> reference;
 
-  Impl(const KinFuParams& p, TrackingMode m, const Eigen::Isometry3d& initial)
-      : params(p), mode(m), map(p, initial, {m != TrackingMode::Odometry, m == TrackingMode::Joint}), history(initial) {}
+  Impl(const TrackerParams& p, TrackingMode m, const Eigen::Isometry3d& initial) : params(p), mode(m), history(initial) {}
 
   // Where the colour camera was relative to the depth camera (mode joint's photometric term).
   Eigen::Isometry3d colourMotion(double offset) const {
@@ -42,7 +40,7 @@ struct Tracker::Impl {
   Eigen::Isometry3d trackOdometry(const Frame& frame, const MotionPrior* prior, FusionResult& res) const;
   // Modes with ICP: the frame's pose from ICP against the map's model, or the fallback the mode allows.
   Eigen::Isometry3d trackIcp(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels,
-                             const std::vector<IntensityLevel>& intensity, FusionResult& res);
+                             const std::vector<IntensityLevel>& intensity, const ModelPrediction& model, FusionResult& res);
   void count(const FusionResult& res, bool had_model);
   void keepForFusion(const Frame& frame, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
                      const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity, const FusionResult& res);
@@ -52,7 +50,7 @@ struct Tracker::Impl {
 // level is then 320x240, which KinFu-style coarse-to-fine tracking hardly misses.
 std::vector<DepthLevel> Tracker::Impl::trackingLevels(const Frame& frame, const FrameGeometry* geometry,
                                                       const CameraIntrinsics& cam, CameraIntrinsics& track_cam) const {
-  const KinFuParams& P = params;
+  const TrackerParams& P = params;
   track_cam = cam;
   if (geometry && geometry->points.size() == frame.depth.size() && geometry->normals.size() == frame.depth.size()) {
     // The frame's shared maps, averaged down: one back-projection and normal map serve BRAND and ICP.
@@ -83,8 +81,9 @@ Eigen::Isometry3d Tracker::Impl::trackOdometry(const Frame& frame, const MotionP
 }
 
 Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels,
-                                          const std::vector<IntensityLevel>& intensity, FusionResult& res) {
-  const KinFuParams& P = params;
+                                          const std::vector<IntensityLevel>& intensity, const ModelPrediction& model,
+                                          FusionResult& res) {
+  const TrackerParams& P = params;
   // The prior counts only when its reference frame has a pose here.
   const Eigen::Isometry3d* ref_pose = prior ? history.poseOf(prior->reference_index) : nullptr;
   const bool have_prior = ref_pose != nullptr || placed;
@@ -95,7 +94,7 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
   IcpParams ip = tracking::icpParams(P, joint, seeded, have_prior);
   PointMatches matches;
   if (joint) {
-    res.guess = tracking::chooseGuess(P, map.model(), history.pose(), levels, ip, have_prior, prior_pose, velocity_pose);
+    res.guess = tracking::chooseGuess(P, model, history.pose(), levels, ip, have_prior, prior_pose, velocity_pose);
     if (ref_pose) matches = tracking::matchesOf(P, *prior, *ref_pose, prior_pose);
   } else {
     res.guess = seeded ? InitialGuess::Prior : InitialGuess::LastPose;
@@ -113,11 +112,10 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
     if (history.hasMotion() && (motion.sigma_translation > 0 || motion.sigma_rotation > 0)) terms.motion = &motion;
     if (have_prior) terms.weak_anchor = &prior_pose;
   }
-  PhotometricTerms photometric = tracking::photometricTerms(P, map.model(), intensity, levels);
+  PhotometricTerms photometric = tracking::photometricTerms(P, model, intensity, levels);
   photometric.colour_motion = colourMotion(frame.colour_offset);
   photometric.rotation_only = P.joint_photometric_rotation_only;
   if (!photometric.levels.empty()) terms.photometric = &photometric;
-  const ModelPrediction& model = map.model();
   const IcpResult icp = projectiveIcp(levels, model.vertices, model.normals, model.pose, initial, ip, terms);
   res.times.add("icp", secondsSince(t0));
   res.icp_inliers = icp.inliers;
@@ -183,18 +181,12 @@ void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLev
   pending = std::move(f);
 }
 
-Tracker::Tracker(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose)
+Tracker::Tracker(const TrackerParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose)
     : impl_(std::make_unique<Impl>(params, mode, toEigen(initial_pose))) {}
 
 Tracker::~Tracker() = default;
 
-FusionResult Tracker::process(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry) {
-  FusionResult res = track(frame, prior, geometry);
-  fuse(res);
-  return res;
-}
-
-FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry) {
+FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry, ModelSource& map) {
   Impl& s = *impl_;
   s.pending.reset();
   FusionResult res;
@@ -213,7 +205,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<DepthLevel> levels = s.trackingLevels(frame, geometry, cam, track_cam);
   res.times.add("preprocess", secondsSince(t0));
-  s.map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
+  map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
   // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
   std::vector<IntensityLevel> intensity;
   if (s.mode == TrackingMode::Joint && s.params.joint_photometric_sigma > 0) {
@@ -221,14 +213,14 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
     intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
     res.times.add("intensity", secondsSince(t0));
   }
-  const bool had_model = s.map.hasModel();
+  const bool had_model = map.hasModel();
   Eigen::Isometry3d new_pose = s.history.pose();
   if (!had_model) {
     res.tracked = true;  // the first frame defines the map
   } else if (s.mode == TrackingMode::Odometry) {
     new_pose = s.trackOdometry(frame, prior, res);
   } else {
-    new_pose = s.trackIcp(frame, prior, levels, intensity, res);
+    new_pose = s.trackIcp(frame, prior, levels, intensity, map.model(), res);
   }
   if (res.tracked) s.history.remember(frame.index, frame.timestamp, new_pose);
   if (s.mode == TrackingMode::Joint) s.reference = res.tracked ? std::optional(tracking::ReferenceFrame{levels, new_pose}) : std::nullopt;
@@ -239,95 +231,65 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   return res;
 }
 
-void Tracker::fuse(FusionResult& res) {
-  Impl& s = *impl_;
-  if (!s.pending) return;
-  StageTimes times;
-  res.shifted = s.map.fuse(*s.pending, times);
-  res.integrated = s.pending->integrate;
-  s.pending.reset();
-  if (res.shifted) ++s.stats.shifts;
-  res.times.merge(times);
-  s.stats.times.merge(times);
+const FrameToFuse* Tracker::frameToFuse() const { return impl_->pending ? &*impl_->pending : nullptr; }
+
+void Tracker::fused(bool shifted, const StageTimes& times) {
+  impl_->pending.reset();
+  if (shifted) ++impl_->stats.shifts;
+  impl_->stats.times.merge(times);
 }
 
-void Tracker::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world) {
+bool Tracker::placeAt(const Frame& frame, const Eigen::Isometry3d& cam_to_world) {
   Impl& s = *impl_;
   ++s.stats.frames;
-  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) return;
-  s.history.setPose(toEigen(cam_to_world));
-  StageTimes times;
-  if (s.map.integrateAt(frame, s.history.pose(), times)) ++s.stats.shifts;
+  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) return false;
+  s.history.setPose(cam_to_world);
   ++s.stats.tracked;
-  s.stats.times.merge(times);
+  return true;
 }
 
 mrpt::poses::CPose3D Tracker::pose() const { return toMrpt(impl_->history.pose()); }
+Eigen::Isometry3d Tracker::camToWorld() const { return impl_->history.pose(); }
 
-void Tracker::relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior) {
-  impl_->history.restart(toEigen(cam_to_world));
-  impl_->map.predictAgain(impl_->history.pose());
+void Tracker::relocalise(const Eigen::Isometry3d& cam_to_world, bool as_prior) {
+  impl_->history.restart(cam_to_world);
   impl_->placed.reset();
   impl_->reference.reset();
   if (as_prior) impl_->placed = impl_->history.pose();
 }
 
-void Tracker::save(const std::string& path) const { impl_->map.save(path, impl_->history.pose()); }
-
-void Tracker::resume(const std::string& path) {
-  impl_->history.restart(impl_->map.resume(path));
-  impl_->reference.reset();
-}
-
 void Tracker::saveState(std::ostream& os) const {
   const Impl& s = *impl_;
   if (s.pending) throw std::logic_error("Tracker::saveState: a tracked frame was not fused yet");
-  {
-    auto a = state::archiveOf(os);
-    state::tag(a, "tracker");
-    s.history.saveState(a);
-    const KinFuStats& st = s.stats;
-    for (std::size_t n : {st.frames, st.tracked, st.fell_back, st.predicted, st.lost, st.shifts, st.guess_prior,
-                          st.guess_velocity, st.guess_last, st.degenerate, st.model_overruled})
-      a << uint64_t(n);
-    state::write(a, st.times);
-    tracking::write(a, s.reference);
-  }
-  s.map.saveState(os);
+  auto a = state::archiveOf(os);
+  state::tag(a, "tracker");
+  s.history.saveState(a);
+  const TrackerStats& st = s.stats;
+  for (std::size_t n : {st.frames, st.tracked, st.fell_back, st.predicted, st.lost, st.shifts, st.guess_prior,
+                        st.guess_velocity, st.guess_last, st.degenerate, st.model_overruled})
+    a << uint64_t(n);
+  state::write(a, st.times);
+  tracking::write(a, s.reference);
 }
 
 void Tracker::loadState(std::istream& is) {
   Impl& s = *impl_;
-  {
-    auto a = state::archiveOf(is);
-    state::expectTag(a, "tracker");
-    s.history.loadState(a);
-    KinFuStats& st = s.stats;
-    for (std::size_t* n : {&st.frames, &st.tracked, &st.fell_back, &st.predicted, &st.lost, &st.shifts, &st.guess_prior,
-                           &st.guess_velocity, &st.guess_last, &st.degenerate, &st.model_overruled}) {
-      uint64_t v = 0;
-      a >> v;
-      *n = v;
-    }
-    state::read(a, st.times);
-    tracking::read(a, s.reference);
+  auto a = state::archiveOf(is);
+  state::expectTag(a, "tracker");
+  s.history.loadState(a);
+  TrackerStats& st = s.stats;
+  for (std::size_t* n : {&st.frames, &st.tracked, &st.fell_back, &st.predicted, &st.lost, &st.shifts, &st.guess_prior,
+                         &st.guess_velocity, &st.guess_last, &st.degenerate, &st.model_overruled}) {
+    uint64_t v = 0;
+    a >> v;
+    *n = v;
   }
-  s.map.loadState(is);
+  state::read(a, st.times);
+  tracking::read(a, s.reference);
   s.pending.reset();
 }
 
-KinFuStats Tracker::stats() const {
-  KinFuStats st = impl_->stats;
-  const MapStats map = impl_->map.stats();
-  st.bricks_in_volume = map.bricks_in_volume;
-  st.bricks_in_world_model = map.bricks_in_world_model;
-  st.memory_bytes = map.memory_bytes;
-  st.world = map.world;
-  return st;
-}
-
-const KinFu& Tracker::map() const { return impl_->map; }
-void Tracker::setShiftObserver(KinFu::ShiftObserver observer) { impl_->map.setShiftObserver(std::move(observer)); }
+TrackerStats Tracker::stats() const { return impl_->stats; }
 TrackingMode Tracker::mode() const { return impl_->mode; }
 
 }  // namespace vofusion

@@ -20,7 +20,7 @@
 #include "vofusion/core/frame.h"
 #include "vofusion/core/timing.h"
 #include "vofusion/core/trajectory.h"
-#include "vofusion/tracking/tracker.h"
+#include "vofusion/fusion/tracked_map.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/loop/loop_closer.h"
 #include "vofusion/core/triangle_mesh.h"
@@ -82,9 +82,9 @@ class Reconstruction {
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
                           const std::function<void(std::size_t)>& progress = nullptr);
   bool reintegrated() const;
-  // The map and the current pose to a file (Tracker::save), after the fusion in flight finished.
+  // The map and the current pose to a file (TrackedMap::save), after the fusion in flight finished.
   void saveVolume(const std::string& path) const;
-  // Before the first frame: continue from a saved map and pose (Tracker::resume).
+  // Before the first frame: continue from a saved map and pose (TrackedMap::resume).
   void resumeVolume(const std::string& path);
   // Checkpoints, between frames: every stage's state (odometry, tracker and map, loop closer) and the
   // run's poses and counts so far. A reconstruction made with the same configuration and mode that

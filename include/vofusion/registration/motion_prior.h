@@ -2,8 +2,8 @@
 // What KinectFusion's tracker is told about a frame's motion by another estimator (the 6D RGB-D
 // odometry, an IMU, a wheel odometry): the motion from an earlier frame, its covariance, and, when
 // the estimator had them, the 3D point correspondences it rests on. The tracker weighs the
-// correspondences in its own estimate (fusion/joint_tracker.h); the pose alone is enough for the
-// paper's hand-off. fusion/ knows nothing of who produced it.
+// correspondences in its own estimate (tracking/joint_policy.h, registration/projective_icp.h); the pose
+// alone is enough for the paper's hand-off. tracking/ knows nothing of who produced it.
 #include <cstddef>
 #include <vector>
 

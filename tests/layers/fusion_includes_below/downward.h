@@ -3,3 +3,4 @@
 #include "vofusion/core/frame.h"
 #include "vofusion/fusion/kinfu.h"
 #include "vofusion/registration/projective_icp.h"
+#include "vofusion/tracking/tracker.h"

@@ -1,0 +1,70 @@
+#include "vofusion/fusion/tracked_map.h"
+
+#include "vofusion/core/pose_eigen.h"
+
+namespace vofusion {
+
+TrackedMap::TrackedMap(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose)
+    : map_(params, toEigen(initial_pose), {mode != TrackingMode::Odometry, mode == TrackingMode::Joint}),
+      tracker_(params, mode, initial_pose) {}
+
+FusionResult TrackedMap::process(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry) {
+  FusionResult res = track(frame, prior, geometry);
+  fuse(res);
+  return res;
+}
+
+FusionResult TrackedMap::track(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry) {
+  return tracker_.track(frame, prior, geometry, map_);
+}
+
+void TrackedMap::fuse(FusionResult& res) {
+  const FrameToFuse* frame = tracker_.frameToFuse();
+  if (!frame) return;
+  StageTimes times;
+  res.shifted = map_.fuse(*frame, times);
+  res.integrated = frame->integrate;
+  tracker_.fused(res.shifted, times);
+  res.times.merge(times);
+}
+
+void TrackedMap::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world) {
+  const Eigen::Isometry3d pose = toEigen(cam_to_world);
+  if (!tracker_.placeAt(frame, pose)) return;
+  StageTimes times;
+  tracker_.fused(map_.integrateAt(frame, pose, times), times);
+}
+
+void TrackedMap::relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior) {
+  const Eigen::Isometry3d pose = toEigen(cam_to_world);
+  tracker_.relocalise(pose, as_prior);
+  map_.predictAgain(pose);
+}
+
+void TrackedMap::save(const std::string& path) const { map_.save(path, tracker_.camToWorld()); }
+
+// Before the first frame: the tracker starts afresh at the saved pose (as relocalised there).
+void TrackedMap::resume(const std::string& path) { tracker_.relocalise(map_.resume(path)); }
+
+void TrackedMap::saveState(std::ostream& os) const {
+  tracker_.saveState(os);
+  map_.saveState(os);
+}
+
+void TrackedMap::loadState(std::istream& is) {
+  tracker_.loadState(is);
+  map_.loadState(is);
+}
+
+KinFuStats TrackedMap::stats() const {
+  KinFuStats st;
+  static_cast<TrackerStats&>(st) = tracker_.stats();
+  const MapStats map = map_.stats();
+  st.bricks_in_volume = map.bricks_in_volume;
+  st.bricks_in_world_model = map.bricks_in_world_model;
+  st.memory_bytes = map.memory_bytes;
+  st.world = map.world;
+  return st;
+}
+
+}  // namespace vofusion
