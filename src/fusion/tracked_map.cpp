@@ -6,7 +6,7 @@ namespace vofusion {
 
 TrackedMap::TrackedMap(const KinFuParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose)
     : map_(params, toEigen(initial_pose), {mode != TrackingMode::Odometry, mode == TrackingMode::Joint}),
-      tracker_(params, mode, initial_pose) {}
+      tracker_(params, mode, toEigen(initial_pose)) {}
 
 FusionResult TrackedMap::process(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry) {
   FusionResult res = track(frame, prior, geometry);
@@ -35,13 +35,15 @@ void TrackedMap::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam
   tracker_.fused(map_.integrateAt(frame, pose, times), times);
 }
 
+mrpt::poses::CPose3D TrackedMap::pose() const { return toMrpt(tracker_.pose()); }
+
 void TrackedMap::relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior) {
   const Eigen::Isometry3d pose = toEigen(cam_to_world);
   tracker_.relocalise(pose, as_prior);
   map_.predictAgain(pose);
 }
 
-void TrackedMap::save(const std::string& path) const { map_.save(path, tracker_.camToWorld()); }
+void TrackedMap::save(const std::string& path) const { map_.save(path, tracker_.pose()); }
 
 // Before the first frame: the tracker starts afresh at the saved pose (as relocalised there).
 void TrackedMap::resume(const std::string& path) { tracker_.relocalise(map_.resume(path)); }
@@ -59,11 +61,7 @@ void TrackedMap::loadState(std::istream& is) {
 KinFuStats TrackedMap::stats() const {
   KinFuStats st;
   static_cast<TrackerStats&>(st) = tracker_.stats();
-  const MapStats map = map_.stats();
-  st.bricks_in_volume = map.bricks_in_volume;
-  st.bricks_in_world_model = map.bricks_in_world_model;
-  st.memory_bytes = map.memory_bytes;
-  st.world = map.world;
+  static_cast<MapStats&>(st) = map_.stats();
   return st;
 }
 

@@ -181,8 +181,8 @@ void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLev
   pending = std::move(f);
 }
 
-Tracker::Tracker(const TrackerParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose)
-    : impl_(std::make_unique<Impl>(params, mode, toEigen(initial_pose))) {}
+Tracker::Tracker(const TrackerParams& params, TrackingMode mode, const Eigen::Isometry3d& initial_pose)
+    : impl_(std::make_unique<Impl>(params, mode, initial_pose)) {}
 
 Tracker::~Tracker() = default;
 
@@ -248,8 +248,7 @@ bool Tracker::placeAt(const Frame& frame, const Eigen::Isometry3d& cam_to_world)
   return true;
 }
 
-mrpt::poses::CPose3D Tracker::pose() const { return toMrpt(impl_->history.pose()); }
-Eigen::Isometry3d Tracker::camToWorld() const { return impl_->history.pose(); }
+Eigen::Isometry3d Tracker::pose() const { return impl_->history.pose(); }
 
 void Tracker::relocalise(const Eigen::Isometry3d& cam_to_world, bool as_prior) {
   impl_->history.restart(cam_to_world);
@@ -290,6 +289,5 @@ void Tracker::loadState(std::istream& is) {
 }
 
 TrackerStats Tracker::stats() const { return impl_->stats; }
-TrackingMode Tracker::mode() const { return impl_->mode; }
 
 }  // namespace vofusion

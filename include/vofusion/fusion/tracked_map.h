@@ -23,11 +23,7 @@
 namespace vofusion {
 
 // The tracker's counts with the map's figures at the time they were read.
-struct KinFuStats : TrackerStats {
-  std::size_t bricks_in_volume = 0, bricks_in_world_model = 0;
-  std::size_t memory_bytes = 0;  // TSDF storage in RAM (volume + the world model's cache)
-  fusion::WorldModelStats world;  // the world model: cache, spill file, time spent spilling
-};
+struct KinFuStats : TrackerStats, MapStats {};
 
 class TrackedMap {
  public:
@@ -48,7 +44,7 @@ class TrackedMap {
   // follows the camera as in tracking; no ICP, no ray cast.
   void integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
 
-  mrpt::poses::CPose3D pose() const { return tracker_.pose(); }
+  mrpt::poses::CPose3D pose() const;
   // Tracking found again elsewhere (relocalisation): Tracker::relocalise, and the model predicted from
   // there before the next frame is tracked.
   void relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior = false);
@@ -66,11 +62,8 @@ class TrackedMap {
     return map_.renderView(cam_to_world, cam, coloured);
   }
   KinFuStats stats() const;
-  const KinFu& map() const { return map_; }
   const fusion::TsdfVolume& volume() const { return map_.volume(); }
   void setShiftObserver(KinFu::ShiftObserver observer) { map_.setShiftObserver(std::move(observer)); }
-  const KinFuParams& params() const { return map_.params(); }
-  TrackingMode mode() const { return tracker_.mode(); }
 
  private:
   KinFu map_;

@@ -10,8 +10,8 @@
 #include <memory>
 #include <string>
 
+#include <Eigen/Geometry>
 #include <mrpt/poses/CPose3D.h>
-#include <opencv2/core.hpp>
 
 #include "vofusion/core/frame.h"
 #include "vofusion/core/point_maps.h"
@@ -28,8 +28,7 @@ struct FusionResult {
   bool fell_back = false;     // ICP rejected, pose taken from the prior
   bool predicted = false;     // neither ICP nor a prior: pose from the constant-velocity prediction
   InitialGuess guess = InitialGuess::LastPose;
-  // Filled by the map's owner (fusion's TrackedMap) once the map took the frame:
-  bool integrated = false;    // the frame was fused into the TSDF
+  bool integrated = false;    // the frame was fused into the TSDF (filled by the map's owner, TrackedMap)
   Rejection rejection = Rejection::None;  // why ICP was rejected / tracking lost
   std::string reason;         // the same with its figures ("" when ICP was accepted)
   mrpt::poses::CPose3D pose;  // camera-to-world after this frame (unchanged when lost)
@@ -41,8 +40,8 @@ struct FusionResult {
   double icp_sigma = 0.0;     // m, mode joint: the noise the ICP residuals were weighed with
   bool model_overruled = false;  // mode joint: the pose is the frame-to-frame estimate's, the model had
                                  // pulled the frame away from it and the odometry (an earlier pass's surface)
-  bool shifted = false;       // the volume moved this frame
-  StageTimes times;           // preprocess, icp, integrate, raycast, shift
+  bool shifted = false;       // the volume moved this frame (filled by the map's owner)
+  StageTimes times;           // preprocess, icp; integrate, raycast, shift added by the map's owner
 };
 
 // The tracker's counts over all frames, and the stage times of the frames it posed. The map's shifts and
@@ -57,8 +56,8 @@ struct TrackerStats {
 
 class Tracker {
  public:
-  // initial_pose: camera-to-world of the first frame (world = first camera frame by default).
-  Tracker(const TrackerParams& params, TrackingMode mode, const mrpt::poses::CPose3D& initial_pose = mrpt::poses::CPose3D());
+  // initial_pose: camera-to-world of the first frame.
+  Tracker(const TrackerParams& params, TrackingMode mode, const Eigen::Isometry3d& initial_pose);
   ~Tracker();
 
   // The frame's pose against the model `map` predicts (without a model yet, the frame defines the map).
@@ -77,20 +76,18 @@ class Tracker {
   // the pose kept) when the frame has no depth image to fuse. The map's integration is counted by fused().
   bool placeAt(const Frame& frame, const Eigen::Isometry3d& cam_to_world);
 
-  mrpt::poses::CPose3D pose() const;
-  Eigen::Isometry3d camToWorld() const;  // the same pose, as kept
+  Eigen::Isometry3d pose() const;  // camera-to-world after the last frame
   // Tracking found again elsewhere (relocalisation), or a saved map resumed: the camera is at
   // `cam_to_world` (the map's frame), with no recent motion. as_prior: that pose is the next frame's
   // prior (ICP starts there and may not jump from it; when it does, the frame takes that pose as a
   // fallback), as the odometry's motion is otherwise. The map is to predict its model from there
   // before the next frame (TrackedMap::relocalise, TrackedMap::resume).
   void relocalise(const Eigen::Isometry3d& cam_to_world, bool as_prior = false);
-  // Checkpoints: the camera's recent motion and the counts. Call between frames (after the frame was
-  // taken for fusion); the map's own state follows in the same stream.
+  // Checkpoints: the camera's recent motion and the counts. Call between frames, once the map fused
+  // the last one (fused(); it throws before); the map's own state follows in the same stream.
   void saveState(std::ostream& os) const;
   void loadState(std::istream& is);
   TrackerStats stats() const;
-  TrackingMode mode() const;
 
  private:
   struct Impl;
