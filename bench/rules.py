@@ -1,0 +1,181 @@
+#!/usr/bin/env python3
+"""Does a change carry over? The rule a default must pass, as one command (the developers' guide, "how to
+choose a default"): it wins by more than 1 mm on each half of both shared sequences, each half run on its
+own, and on the synthetic set over several seeds, never on one.
+
+    bench/run --rules --baseline OTHER_BUILD [--build DIR] [--config INI] [--seeds 1,2,3,4,5]
+
+Runs `vofusion` of both builds (this one, --build, against --baseline) on:
+- both shared sequences whole, and each half on its own (xyz 0-149 / 150-299, rpy 0-49 / 50-99; a half
+  is a TUM folder of list files whose images link to the shared ones, never copies);
+- the shake at the tests' size (`rgbd-simulate --scene room --trajectory shake --size 320x240 --frames 90`)
+  on every seed;
+- the loop scene (300 frames) on every seed, ATE without loop closure (the run's tracked path) and with it.
+Each run uses the config given (default: [output] mesh = false, write_rawlog = false: only the path).
+Prints a markdown table (ATE RMSE per input and build, the difference in mm, rpy's 50 ms RPE p95) and the
+verdict, and writes it to <work>/rules.md. Runs are deterministic: one run per input and build.
+"""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED = os.path.join(os.path.dirname(ROOT), "shared", "data", "tum")
+HALVES = {"rgbd_dataset_freiburg1_xyz_first300": [(0, 150), (150, 300)],
+          "rgbd_dataset_freiburg1_rpy_first100": [(0, 50), (50, 100)]}
+DEFAULT_CONFIG = "[output]\nmesh = false\nwrite_rawlog = false\n"
+
+
+def log(msg):
+    print("[bench rules] " + msg, file=sys.stderr, flush=True)
+
+
+def list_lines(path):
+    with open(path) as f:
+        lines = f.read().splitlines()
+    return [l for l in lines if l.startswith("#") or not l.strip()], [l for l in lines if l.strip() and not l.startswith("#")]
+
+
+def make_half(seq_dir, first, end, out):
+    """A TUM folder holding colour frames [first, end) of seq_dir's rgb.txt and the depth images taken
+    within their time span (+-20 ms: the lists need not be the same length), everything else linked."""
+    os.makedirs(out)
+    head, rgb = list_lines(os.path.join(seq_dir, "rgb.txt"))
+    rgb = rgb[first:end]
+    t0, t1 = float(rgb[0].split()[0]) - 0.02, float(rgb[-1].split()[0]) + 0.02
+    dhead, depth = list_lines(os.path.join(seq_dir, "depth.txt"))
+    depth = [l for l in depth if t0 <= float(l.split()[0]) <= t1]
+    for name, h, rows in (("rgb.txt", head, rgb), ("depth.txt", dhead, depth)):
+        with open(os.path.join(out, name), "w") as f:
+            f.write("\n".join(h + rows) + "\n")
+    for name in os.listdir(seq_dir):
+        if name not in ("rgb.txt", "depth.txt"):
+            os.symlink(os.path.join(seq_dir, name), os.path.join(out, name))
+    return out
+
+
+def simulate(build, out, args):
+    subprocess.run([os.path.join(build, "bin", "rgbd-simulate"), "--out", out] + args, check=True,
+                   stdout=subprocess.DEVNULL)
+    return out
+
+
+def inputs(build, work, seeds):
+    """[(name, kind, path, summary key)] in the order of the table; kind: whole, half, shake, loop, loop_lc."""
+    runs = []
+    for seq, halves in HALVES.items():
+        path = os.path.join(SHARED, seq)
+        if not os.path.isdir(path):
+            sys.exit("bench rules: shared sequence missing: " + path)
+        short = seq.split("_")[3]  # xyz, rpy
+        runs.append((short, "whole", path, "ate"))
+        for first, end in halves:
+            # The folder keeps the sequence's name: vofusion takes TUM's camera (fr1) from it.
+            half = make_half(path, first, end, os.path.join(work, "inputs", "%s_%d-%d" % (seq, first, end - 1)))
+            runs.append(("%s %d-%d" % (short, first, end - 1), "half", half, "ate"))
+    for s in seeds:
+        runs.append(("shake seed %d" % s, "shake", simulate(build, os.path.join(work, "inputs", "shake_s%d" % s),
+                     ["--scene", "room", "--trajectory", "shake", "--size", "320x240", "--frames", "90", "--seed", str(s)]),
+                     "ate"))
+    for s in seeds:
+        rawlog = simulate(build, os.path.join(work, "inputs", "loop_s%d.rawlog" % s), ["--scene", "loop", "--seed", str(s)])
+        runs.append(("loop seed %d" % s, "loop", rawlog, "ate_tracked"))
+        runs.append(("loop seed %d, loop closure" % s, "loop_lc", rawlog, "ate"))
+    return runs
+
+
+def run(vofusion, path, out, config):
+    """summary.json of one run (kept in `out` for a second key of the same run: the loop scene's)."""
+    summary = os.path.join(out, "summary.json")
+    if not os.path.exists(summary):
+        cmd = [vofusion, path, "--out", out, "--config", config]
+        done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        if done.returncode != 0:
+            sys.exit("bench rules: %s failed: %s" % (" ".join(cmd), done.stderr.strip().splitlines()[-1:]))
+    with open(summary) as f:
+        return json.load(f)
+
+
+def mm(a, b):
+    return (b - a) * 1000.0
+
+
+def verdict(rows):
+    """The guide's rule, from the table: wins (> 1 mm) on every half and on the synthetic seeds."""
+    halves = [r for r in rows if r["kind"] == "half"]
+    half_wins = all(mm(r["base"], r["this"]) < -1.0 for r in halves)
+    lines = ["- every half of both shared sequences better by > 1 mm: %s (%s)" % (
+        "yes" if half_wins else "no", ", ".join("%s %+.2f" % (r["name"], mm(r["base"], r["this"])) for r in halves))]
+    for kind, label in (("shake", "shake"), ("loop", "loop scene without loop closure"), ("loop_lc", "loop scene with loop closure")):
+        sel = [r for r in rows if r["kind"] == kind]
+        if sel:
+            diff = sum(mm(r["base"], r["this"]) for r in sel) / len(sel)
+            worse = sum(1 for r in sel if mm(r["base"], r["this"]) > 1.0)
+            lines.append("- %s, mean over %d seeds: %+.2f mm (%d seeds worse by > 1 mm)" % (label, len(sel), diff, worse))
+    return lines
+
+
+def markdown(rows, rpe, this_name, base_name, command):
+    out = ["# Does it carry over? %s against %s" % (this_name, base_name), "",
+           "`%s`, %s. ATE RMSE [m]; difference in mm (negative: this build better)." % (command, time.strftime("%Y-%m-%d %H:%M")), "",
+           "| input | baseline | this build | difference, mm |", "|---|---:|---:|---:|"]
+    for r in rows:
+        out.append("| %s | %.5f | %.5f | %+.2f |" % (r["name"], r["base"], r["this"], mm(r["base"], r["this"])))
+    if rpe:
+        out += ["", "rpy_first100's 50 ms translation RPE, 95th percentile [m]: baseline %.4f, this build %.4f." % rpe]
+    out += ["", "Verdict (a default changes only if it wins by > 1 mm on each half and on the synthetic seeds):", ""]
+    out += verdict(rows)
+    return "\n".join(out) + "\n"
+
+
+def main(argv):
+    ap = argparse.ArgumentParser(prog="bench/run --rules")
+    ap.add_argument("--rules", action="store_true")
+    ap.add_argument("--baseline", required=True, help="the other build's directory (holding bin/vofusion)")
+    ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(ROOT, "build")))
+    ap.add_argument("--config", default=None, help="INI given to every run of both builds")
+    ap.add_argument("--seeds", default="1,2,3,4,5")
+    ap.add_argument("--work", default=None, help="inputs and run outputs (default <build>/bench-rules)")
+    a = ap.parse_args(argv)
+    seeds = [int(s) for s in a.seeds.split(",")]
+    work = a.work or os.path.join(a.build, "bench-rules")
+    shutil.rmtree(work, ignore_errors=True)  # inputs and runs of this invocation only: builds change
+    os.makedirs(work)
+    config = a.config
+    if not config:
+        config = os.path.join(work, "paths_only.ini")
+        with open(config, "w") as f:
+            f.write(DEFAULT_CONFIG)
+    builds = {"this": os.path.join(a.build, "bin", "vofusion"), "base": os.path.join(a.baseline, "bin", "vofusion")}
+    for b in builds.values():
+        if not os.access(b, os.X_OK):
+            sys.exit("bench rules: no vofusion at " + b)
+    runs = inputs(a.build, work, seeds)
+    rows, rpe = [], None
+    start = time.time()
+    for i, (name, kind, path, key) in enumerate(runs):
+        row = {"name": name, "kind": kind}
+        for tag, exe in builds.items():
+            out = os.path.join(work, tag, name.split(",")[0].replace(" ", "_"))
+            s = run(exe, path, out, config)
+            row[tag] = s[key]["rmse"]
+            if name == "rpy":
+                row["rpe_" + tag] = s["rpe_50ms"]["trans_m"]["p95"]
+        if name == "rpy":
+            rpe = (row["rpe_base"], row["rpe_this"])
+        rows.append(row)
+        elapsed = time.time() - start
+        log("%d/%d %s: %.5f -> %.5f  (%.0f s, ETA %.0f s)" % (i + 1, len(runs), name, row["base"], row["this"], elapsed,
+                                                            elapsed / (i + 1) * (len(runs) - i - 1)))
+    text = markdown(rows, rpe, a.build, a.baseline, "bench/run " + " ".join(argv))
+    with open(os.path.join(work, "rules.md"), "w") as f:
+        f.write(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
