@@ -59,9 +59,16 @@ def make_half(seq_dir, first, end, out):
 
 
 def simulate(build, out, args):
-    subprocess.run([os.path.join(build, "bin", "rgbd-simulate"), "--out", out] + args, check=True,
-                   stdout=subprocess.DEVNULL)
+    cmd = [os.path.join(build, "bin", "rgbd-simulate"), "--out", out] + args
+    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if done.returncode != 0:
+        sys.exit("bench rules: %s failed: %s" % (" ".join(cmd), last_line(done.stderr)))
     return out
+
+
+def last_line(text):
+    lines = text.strip().splitlines()
+    return lines[-1] if lines else "(no message)"
 
 
 def inputs(build, work, seeds):
@@ -95,7 +102,7 @@ def run(vofusion, path, out, config):
         cmd = [vofusion, path, "--out", out, "--config", config]
         done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         if done.returncode != 0:
-            sys.exit("bench rules: %s failed: %s" % (" ".join(cmd), done.stderr.strip().splitlines()[-1:]))
+            sys.exit("bench rules: %s failed: %s" % (" ".join(cmd), last_line(done.stderr)))
     with open(summary) as f:
         return json.load(f)
 
@@ -104,31 +111,38 @@ def mm(a, b):
     return (b - a) * 1000.0
 
 
-def verdict(rows):
-    """The guide's rule, from the table: wins (> 1 mm) on every half and on the synthetic seeds."""
+def verdict(rows, seeds):
+    """The guide's rule, from the table: it carries over when every half and the mean of every synthetic
+    row are better by more than 1 mm; fewer than five seeds are no verdict."""
     halves = [r for r in rows if r["kind"] == "half"]
     half_wins = all(mm(r["base"], r["this"]) < -1.0 for r in halves)
     lines = ["- every half of both shared sequences better by > 1 mm: %s (%s)" % (
         "yes" if half_wins else "no", ", ".join("%s %+.2f" % (r["name"], mm(r["base"], r["this"])) for r in halves))]
+    synthetic_wins = True
     for kind, label in (("shake", "shake"), ("loop", "loop scene without loop closure"), ("loop_lc", "loop scene with loop closure")):
         sel = [r for r in rows if r["kind"] == kind]
-        if sel:
-            diff = sum(mm(r["base"], r["this"]) for r in sel) / len(sel)
-            worse = sum(1 for r in sel if mm(r["base"], r["this"]) > 1.0)
-            lines.append("- %s, mean over %d seeds: %+.2f mm (%d seeds worse by > 1 mm)" % (label, len(sel), diff, worse))
+        diff = sum(mm(r["base"], r["this"]) for r in sel) / len(sel)
+        worse = sum(1 for r in sel if mm(r["base"], r["this"]) > 1.0)
+        synthetic_wins = synthetic_wins and diff < -1.0
+        lines.append("- %s, mean over %d seeds: %+.2f mm, better by > 1 mm: %s (%d seeds worse by > 1 mm)" % (
+            label, len(sel), diff, "yes" if diff < -1.0 else "no", worse))
+    if len(seeds) < 5:
+        lines.append("- **no verdict**: %d seeds; the rule counts seeds 1-5, never fewer" % len(seeds))
+    else:
+        lines.append("- **%s**" % ("carries over: the default may change" if half_wins and synthetic_wins
+                                   else "does not carry over: the default stays"))
     return lines
 
 
-def markdown(rows, rpe, this_name, base_name, command):
+def markdown(rows, rpe, seeds, this_name, base_name, command):
     out = ["# Does it carry over? %s against %s" % (this_name, base_name), "",
            "`%s`, %s. ATE RMSE [m]; difference in mm (negative: this build better)." % (command, time.strftime("%Y-%m-%d %H:%M")), "",
            "| input | baseline | this build | difference, mm |", "|---|---:|---:|---:|"]
     for r in rows:
         out.append("| %s | %.5f | %.5f | %+.2f |" % (r["name"], r["base"], r["this"], mm(r["base"], r["this"])))
-    if rpe:
-        out += ["", "rpy_first100's 50 ms translation RPE, 95th percentile [m]: baseline %.4f, this build %.4f." % rpe]
+    out += ["", "rpy_first100's 50 ms translation RPE, 95th percentile [m]: baseline %.4f, this build %.4f." % rpe]
     out += ["", "Verdict (a default changes only if it wins by > 1 mm on each half and on the synthetic seeds):", ""]
-    out += verdict(rows)
+    out += verdict(rows, seeds)
     return "\n".join(out) + "\n"
 
 
@@ -143,17 +157,22 @@ def main(argv):
     a = ap.parse_args(argv)
     seeds = [int(s) for s in a.seeds.split(",")]
     work = a.work or os.path.join(a.build, "bench-rules")
-    shutil.rmtree(work, ignore_errors=True)  # inputs and runs of this invocation only: builds change
+    # Inputs and runs of this invocation only (builds change): emptied first, if this command made it.
+    marker = os.path.join(work, ".bench-rules")
+    if os.path.exists(work) and os.listdir(work) and not os.path.exists(marker):
+        sys.exit("bench rules: %s is not empty and not a bench rules folder: give --work another folder" % work)
+    shutil.rmtree(work, ignore_errors=True)
     os.makedirs(work)
+    open(marker, "w").close()
     config = a.config
     if not config:
         config = os.path.join(work, "paths_only.ini")
         with open(config, "w") as f:
             f.write(DEFAULT_CONFIG)
     builds = {"this": os.path.join(a.build, "bin", "vofusion"), "base": os.path.join(a.baseline, "bin", "vofusion")}
-    for b in builds.values():
+    for b in list(builds.values()) + [os.path.join(a.build, "bin", "rgbd-simulate")]:
         if not os.access(b, os.X_OK):
-            sys.exit("bench rules: no vofusion at " + b)
+            sys.exit("bench rules: no executable " + b)
     runs = inputs(a.build, work, seeds)
     rows, rpe = [], None
     start = time.time()
@@ -162,16 +181,20 @@ def main(argv):
         for tag, exe in builds.items():
             out = os.path.join(work, tag, name.split(",")[0].replace(" ", "_"))
             s = run(exe, path, out, config)
-            row[tag] = s[key]["rmse"]
-            if name == "rpy":
-                row["rpe_" + tag] = s["rpe_50ms"]["trans_m"]["p95"]
+            try:
+                row[tag] = s[key]["rmse"]
+                if name == "rpy":
+                    row["rpe_" + tag] = s["rpe_50ms"]["trans_m"]["p95"]
+            except KeyError as e:
+                sys.exit("bench rules: %s/summary.json has no %s (ground truth missing, or loop closure off in the config?)"
+                         % (out, e))
         if name == "rpy":
             rpe = (row["rpe_base"], row["rpe_this"])
         rows.append(row)
         elapsed = time.time() - start
         log("%d/%d %s: %.5f -> %.5f  (%.0f s, ETA %.0f s)" % (i + 1, len(runs), name, row["base"], row["this"], elapsed,
                                                             elapsed / (i + 1) * (len(runs) - i - 1)))
-    text = markdown(rows, rpe, a.build, a.baseline, "bench/run " + " ".join(argv))
+    text = markdown(rows, rpe, seeds, a.build, a.baseline, "bench/run " + " ".join(argv))
     with open(os.path.join(work, "rules.md"), "w") as f:
         f.write(text)
     print(text)
