@@ -137,6 +137,8 @@ def verdict(rows, seeds):
 def markdown(rows, rpe, seeds, this_name, base_name, command):
     out = ["# Does it carry over? %s against %s" % (this_name, base_name), "",
            "`%s`, %s. ATE RMSE [m]; difference in mm (negative: this build better)." % (command, time.strftime("%Y-%m-%d %H:%M")), "",
+           "Compare figures only within one run: the same build gives other synthetic figures on another machine "
+           "(bench/results/2026-11-29-first-frame.md).", "",
            "| input | baseline | this build | difference, mm |", "|---|---:|---:|---:|"]
     for r in rows:
         out.append("| %s | %.5f | %.5f | %+.2f |" % (r["name"], r["base"], r["this"], mm(r["base"], r["this"])))
