@@ -3,7 +3,8 @@
 choose a default"): it wins by more than 1 mm on each half of both shared sequences, each half run on its
 own, and on the synthetic set over several seeds, never on one.
 
-    bench/run --rules --baseline OTHER_BUILD [--build DIR] [--config INI] [--seeds 1,2,3,4,5]
+    bench/run --rules --baseline OTHER_BUILD [--build DIR] [--config INI] [--candidate INI] [--seeds 1,2,3,4,5]
+    bench/run --rules --baseline build --candidate new_value.ini     # one key's new value, same build
 
 Runs `vofusion` of both builds (this one, --build, against --baseline) on:
 - both shared sequences whole, and each half on its own (xyz 0-149 / 150-299, rpy 0-49 / 50-99; a half
@@ -154,6 +155,8 @@ def main(argv):
     ap.add_argument("--baseline", required=True, help="the other build's directory (holding bin/vofusion)")
     ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(ROOT, "build")))
     ap.add_argument("--config", default=None, help="INI given to every run of both builds")
+    ap.add_argument("--candidate", default=None,
+                    help="INI added to this build's runs only: a key's new value (with --baseline the same build)")
     ap.add_argument("--seeds", default="1,2,3,4,5")
     ap.add_argument("--work", default=None, help="inputs and run outputs (default <build>/bench-rules)")
     a = ap.parse_args(argv)
@@ -171,6 +174,14 @@ def main(argv):
         config = os.path.join(work, "paths_only.ini")
         with open(config, "w") as f:
             f.write(DEFAULT_CONFIG)
+    configs = {"this": config, "base": config}
+    if a.candidate:
+        # This build's runs read the common config, then the candidate's sections (a later value wins).
+        configs["this"] = os.path.join(work, "candidate.ini")
+        with open(configs["this"], "w") as f:
+            for part in (config, a.candidate):
+                with open(part) as src:
+                    f.write(src.read() + "\n")
     builds = {"this": os.path.join(a.build, "bin", "vofusion"), "base": os.path.join(a.baseline, "bin", "vofusion")}
     for b in list(builds.values()) + [os.path.join(a.build, "bin", "rgbd-simulate")]:
         if not os.access(b, os.X_OK):
@@ -182,7 +193,7 @@ def main(argv):
         row = {"name": name, "kind": kind}
         for tag, exe in builds.items():
             out = os.path.join(work, tag, name.split(",")[0].replace(" ", "_"))
-            s = run(exe, path, out, config)
+            s = run(exe, path, out, configs[tag])
             try:
                 row[tag] = s[key]["rmse"]
                 if name == "rpy":
