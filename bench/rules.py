@@ -12,7 +12,8 @@ Runs `vofusion` of both builds (this one, --build, against --baseline) on:
 - the shake at the tests' size (`rgbd-simulate --scene room --trajectory shake --size 320x240 --frames 90`)
   on every seed;
 - the loop scene (300 frames) on every seed, ATE without loop closure (the run's tracked path) and with it.
-Each run uses the config given (default: [output] mesh = false, write_rawlog = false: only the path).
+Each run uses the config given (default: [output] mesh = false, write_rawlog = false: only the path);
+with --candidate, this build's runs read the candidate's sections after it (a later value of a key wins).
 Prints a markdown table (ATE RMSE per input and build, the difference in mm, rpy's 50 ms RPE p95) and the
 verdict, and writes it to <work>/rules.md. Runs are deterministic: one run per input and build.
 """
@@ -108,6 +109,14 @@ def run(vofusion, path, out, config):
         return json.load(f)
 
 
+def read_ini(path, what):
+    try:
+        with open(path) as f:
+            return f.read()
+    except OSError as e:
+        sys.exit("bench rules: %s: cannot read the %s INI (%s)" % (path, what, e.strerror))
+
+
 def mm(a, b):
     return (b - a) * 1000.0
 
@@ -156,12 +165,23 @@ def main(argv):
     ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(ROOT, "build")))
     ap.add_argument("--config", default=None, help="INI given to every run of both builds")
     ap.add_argument("--candidate", default=None,
-                    help="INI added to this build's runs only: a key's new value (with --baseline the same build)")
+                    help="INI added after the config to this build's runs only, starting with a [section]: "
+                         "a key's new value (with --baseline the same build)")
     ap.add_argument("--seeds", default="1,2,3,4,5")
     ap.add_argument("--work", default=None, help="inputs and run outputs (default <build>/bench-rules)")
     a = ap.parse_args(argv)
     seeds = [int(s) for s in a.seeds.split(",")]
     work = a.work or os.path.join(a.build, "bench-rules")
+    for path in (a.config, a.candidate):
+        if path and os.path.realpath(path).startswith(os.path.realpath(work) + os.sep):
+            sys.exit("bench rules: %s lies in the work folder %s, which is emptied first: keep it elsewhere" % (path, work))
+    config_text = read_ini(a.config, "config") if a.config else DEFAULT_CONFIG
+    candidate_text = read_ini(a.candidate, "candidate") if a.candidate else None
+    first_line = next((l.strip() for l in (candidate_text or "").splitlines()
+                       if l.strip() and not l.strip().startswith(("#", ";"))), "[")
+    if not first_line.startswith("["):
+        sys.exit("bench rules: %s: the candidate must start with a [section] (its keys would join the config's last one)"
+                 % a.candidate)
     # Inputs and runs of this invocation only (builds change): emptied first, if this command made it.
     marker = os.path.join(work, ".bench-rules")
     if os.path.exists(work) and os.listdir(work) and not os.path.exists(marker):
@@ -169,19 +189,15 @@ def main(argv):
     shutil.rmtree(work, ignore_errors=True)
     os.makedirs(work)
     open(marker, "w").close()
-    config = a.config
-    if not config:
-        config = os.path.join(work, "paths_only.ini")
-        with open(config, "w") as f:
-            f.write(DEFAULT_CONFIG)
-    configs = {"this": config, "base": config}
-    if a.candidate:
+    configs = {"base": os.path.join(work, "config.ini")}
+    with open(configs["base"], "w") as f:
+        f.write(config_text)
+    configs["this"] = configs["base"]
+    if candidate_text is not None:
         # This build's runs read the common config, then the candidate's sections (a later value wins).
         configs["this"] = os.path.join(work, "candidate.ini")
         with open(configs["this"], "w") as f:
-            for part in (config, a.candidate):
-                with open(part) as src:
-                    f.write(src.read() + "\n")
+            f.write(config_text + "\n" + candidate_text + "\n")
     builds = {"this": os.path.join(a.build, "bin", "vofusion"), "base": os.path.join(a.baseline, "bin", "vofusion")}
     for b in list(builds.values()) + [os.path.join(a.build, "bin", "rgbd-simulate")]:
         if not os.access(b, os.X_OK):
@@ -207,7 +223,11 @@ def main(argv):
         elapsed = time.time() - start
         log("%d/%d %s: %.5f -> %.5f  (%.0f s, ETA %.0f s)" % (i + 1, len(runs), name, row["base"], row["this"], elapsed,
                                                             elapsed / (i + 1) * (len(runs) - i - 1)))
-    text = markdown(rows, rpe, seeds, a.build, a.baseline, "bench/run " + " ".join(argv))
+    this_name = a.build if candidate_text is None else "%s with the candidate %s" % (a.build, a.candidate)
+    text = markdown(rows, rpe, seeds, this_name, a.baseline, "bench/run " + " ".join(argv))
+    if candidate_text is not None:
+        text += "\nThe candidate (`%s`), read after the config by this build's runs only:\n\n```ini\n%s\n```\n" % (
+            a.candidate, candidate_text.strip())
     with open(os.path.join(work, "rules.md"), "w") as f:
         f.write(text)
     print(text)
