@@ -17,7 +17,7 @@ std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
       {"narf_concurrent", &p.narf_concurrent, "NARF beside STAR, normals and smoothing"},
       {"union_radius", &p.union_radius, "pixels, duplicate radius", 0.0, 50.0},
       {"keyframe_min_inliers", &p.keyframe_min_inliers, "keep the keyframe while this many inliers, 0 = off", 0.0, 100000.0},
-      {"undistort", &p.undistort, "undistort keypoints before 3D/homography; false: rpy 0.0212 m against 0.0165 (2026-11-29-first-frame.md)"},
+      {"undistort", &p.undistort, "undistort keypoints before 3D/homography"},
       {"depth_window", &p.depth_window, "pixels, half-size of the keypoint depth window", 0.0, 10.0},
       ConfigKey::oneOf("depth_mode", &p.depth_mode, "of that window's valid readings", kDepthModes),
       {"references", &p.references, "frames matched: the previous one and references-1 before it", 1.0, 8.0},
