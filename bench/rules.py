@@ -14,8 +14,9 @@ Runs `vofusion` of both builds (this one, --build, against --baseline) on:
 - the loop scene (300 frames) on every seed, ATE without loop closure (the run's tracked path) and with it.
 Each run uses the config given (default: [output] mesh = false, write_rawlog = false: only the path);
 with --candidate, this build's runs read the candidate's sections after it (a later value of a key wins).
-Prints a markdown table (ATE RMSE per input and build, the difference in mm, rpy's 50 ms RPE p95) and the
-verdict, and writes it to <work>/rules.md. Runs are deterministic: one run per input and build.
+Prints a markdown table (ATE RMSE per input and build, the difference in mm, rpy's 50 ms RPE p95), the
+verdict and whether every input is within +2 % (issue 31's rule for a cheaper stage), and writes it to
+<work>/rules.md. Runs are deterministic: one run per input and build.
 """
 import argparse
 import json
@@ -136,8 +137,11 @@ def verdict(rows, seeds):
         synthetic_wins = synthetic_wins and diff < -1.0
         lines.append("- %s, mean over %d seeds: %+.2f mm, better by > 1 mm: %s (%d seeds worse by > 1 mm)" % (
             label, len(sel), diff, "yes" if diff < -1.0 else "no", worse))
-    if len(seeds) < 5:
-        lines.append("- **no verdict**: %d seeds; the rule counts seeds 1-5, never fewer" % len(seeds))
+    # Issue 31's rule for a stage made cheaper: accuracy within +2 % on every input (not a mean).
+    over = ["%s %+.1f %%" % (r["name"], 100.0 * (r["this"] / r["base"] - 1.0)) for r in rows if r["this"] > 1.02 * r["base"]]
+    lines.append("- a cheaper stage's rule, every input within +2 %%: %s" % ("yes" if not over else "no (" + ", ".join(over) + ")"))
+    if not set(range(1, 6)) <= set(seeds):
+        lines.append("- **no verdict**: seeds %s; the rule counts seeds 1-5, never fewer" % ",".join(map(str, seeds)))
     else:
         lines.append("- **%s**" % ("carries over: the default may change" if half_wins and synthetic_wins
                                    else "does not carry over: the default stays"))
@@ -170,7 +174,10 @@ def main(argv):
     ap.add_argument("--seeds", default="1,2,3,4,5")
     ap.add_argument("--work", default=None, help="inputs and run outputs (default <build>/bench-rules)")
     a = ap.parse_args(argv)
-    seeds = [int(s) for s in a.seeds.split(",")]
+    try:
+        seeds = sorted({int(s) for s in a.seeds.split(",")})
+    except ValueError:
+        sys.exit("bench rules: --seeds %s: give seed numbers separated by commas (1,2,3,4,5)" % a.seeds)
     work = a.work or os.path.join(a.build, "bench-rules")
     for path in (a.config, a.candidate):
         if path and os.path.realpath(path).startswith(os.path.realpath(work) + os.sep):
