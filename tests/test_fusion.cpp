@@ -2,6 +2,7 @@
 // fallback on a bare wall, and volume shifting along a long corridor.
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <random>
 #include <sstream>
@@ -136,6 +137,39 @@ TEST(KinFu, JointModeWithoutPriorTracksLikeKinFu) {
   }
   EXPECT_LT(max_error, 0.006);
   EXPECT_GT(kf.stats().guess_velocity + kf.stats().guess_last, seq.size() - 3);
+}
+
+// A damaged odometry result (NaN in its motion, its covariance or a match) costs that frame's prior,
+// not the run: the frame is tracked exactly as if the estimator had given nothing, and NaN reaches
+// neither a pose nor the map.
+TEST(KinFu, ANonFinitePriorIsTrackedAsNoPrior) {
+  const sim::SyntheticSequence seq(simOpts("room", 10));
+  const std::size_t bad = 5;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (const TrackingMode mode : {TrackingMode::Joint, TrackingMode::PaperHandoff, TrackingMode::Odometry}) {
+    std::vector<CPose3D> without;  // frame `bad` given no prior
+    for (int damage = -1; damage < 3; ++damage) {
+      std::mt19937 rng(7);
+      TrackedMap kf(testParams(), mode, seq.groundTruth(0));
+      std::vector<CPose3D> path;
+      for (std::size_t i = 0; i < seq.size(); ++i) {
+        fusion::MotionPrior prior;
+        if (i > 0) prior = noisyPrior(seq, i, rng, 0.0015, 0.1 * M_PI / 180, 40);
+        if (i == bad && damage == 0) prior.T_ref_cur.translation().x() = nan;
+        if (i == bad && damage == 1) prior.covariance(0, 0) = std::numeric_limits<double>::infinity();
+        if (i == bad && damage == 2) prior.current_points[3].z() = nan;
+        const bool given = i > 0 && !(i == bad && damage < 0);
+        path.push_back(kf.process(seq.render(i), given ? &prior : nullptr).pose);
+      }
+      if (damage < 0) {
+        without = path;
+        continue;
+      }
+      for (std::size_t i = 0; i < path.size(); ++i)
+        ASSERT_EQ(path[i].asVectorVal(), without[i].asVectorVal()) << toString(mode) << " damage " << damage << " frame " << i;
+    }
+    for (const CPose3D& p : without) EXPECT_TRUE(p.asVectorVal().asEigen().allFinite()) << toString(mode);
+  }
 }
 
 // A checkpoint holds the tracker and the map together: between track() and fuse() the tracker has posed

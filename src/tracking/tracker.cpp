@@ -190,6 +190,9 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   Impl& s = *impl_;
   s.pending.reset();
   FusionResult res;
+  // A damaged prior would carry NaN into the pose, the map and every later frame: the frame is tracked
+  // as if the estimator had given nothing.
+  if (prior && !fusion::isFinite(*prior)) prior = nullptr;
   // No reading at all (a covered lens, a sensor glitch): nothing to track, the frame is lost.
   if (frame.depth.empty() || frame.depth.type() != CV_32FC1 || cv::countNonZero(frame.depth) == 0) {
     res.rejection = Rejection::NoDepth;

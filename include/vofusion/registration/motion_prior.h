@@ -21,4 +21,14 @@ struct MotionPrior {
   std::vector<Eigen::Vector3d> current_points, reference_points;
 };
 
+// False when any of the motion, its covariance or the points is NaN or infinite: a damaged estimate,
+// which the tracker ignores as a whole.
+inline bool isFinite(const MotionPrior& p) {
+  if (!p.T_ref_cur.matrix().allFinite() || !p.covariance.allFinite()) return false;
+  for (const auto* points : {&p.current_points, &p.reference_points})
+    for (const Eigen::Vector3d& v : *points)
+      if (!v.allFinite()) return false;
+  return true;
+}
+
 }  // namespace vofusion::fusion
