@@ -98,6 +98,27 @@ TEST(RigidMotion, TooFewCorrespondencesFail) {
   EXPECT_FALSE(fitPaper(s, d, {}).ok);
 }
 
+// Correspondences far enough out that their squares overflow a double (a damaged reading) give no fit,
+// never a NaN or infinite motion with ok set: the odometry and the loop verifier pass a fit's motion
+// on without checking it. (Measured: up to 1e150 m the fits succeed, from 1e155 m on they fail.)
+TEST(RigidMotion, OverflowingPointsGiveNoFitRatherThanANonFiniteOne) {
+  Points3 s, d;
+  makeCorrespondences(40, 0.0, 0.0, s, d, 3);
+  for (const double scale : {1e150, 1e160, 1e300}) {
+    Points3 ss = s, ds = d;
+    for (Points3* points : {&ss, &ds})
+      for (Eigen::Vector3d& p : *points) p *= scale;
+    for (const RigidFit& f : {fitRobust(ss, ds, RobustFitOptions{}), fitPaper(ss, ds, PaperFitOptions{})}) {
+      if (f.ok) {
+        EXPECT_TRUE(f.T.matrix().allFinite()) << scale;
+        EXPECT_TRUE(f.covariance.allFinite()) << scale;
+      } else {
+        EXPECT_FALSE(f.failure.empty()) << scale;
+      }
+    }
+  }
+}
+
 // Kinect-like noise (large along the viewing ray, small across it, growing with depth): whitening the
 // residuals by that model (ray_noise) recovers the motion better than isotropic weights, on average
 // (measured: 1.40 vs 1.55 mm mean point displacement over 30 draws).

@@ -646,12 +646,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   // A frame with almost nothing to match (textureless, no depth) cannot be anyone's reference:
   // keep the last good one so the next frame can bridge the gap.
   if (int(cur.keypoints.size()) < P.min_matches) return failed(r, "too few keypoints (textureless or no depth)");
-  Impl::Motion mo = m.estimateMotion(cur, older, split, r);
-  // A numerical failure must not become the next frames' reference motion (nor anyone's prior).
-  if (mo.ok && !(mo.T_last_cur.matrix().allFinite() && mo.T_last_fitref.matrix().allFinite() && mo.fit.covariance.allFinite())) {
-    mo.ok = false;
-    r.failure = "non-finite motion";
-  }
+  const Impl::Motion mo = m.estimateMotion(cur, older, split, r);
   if (!mo.ok) {
     // The last good frame stays the reference (its pose is known): the next frame bridges the gap.
     m.failed = std::move(cur);
