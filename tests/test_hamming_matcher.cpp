@@ -1,6 +1,6 @@
 // The cross-checked Hamming matcher gives exactly cv::BFMatcher(NORM_HAMMING, crossCheck = true)'s
 // matches, also when the current descriptors arrive in parts and when many distances tie, in the
-// scalar build and (where the CPU has it) the AVX-512 one.
+// scalar build and (where the CPU has them) the AVX2 and AVX-512 ones.
 #include <gtest/gtest.h>
 
 #include <opencv2/features2d.hpp>
@@ -30,7 +30,7 @@ void expectSame(const std::vector<cv::DMatch>& got, const std::vector<cv::DMatch
 
 namespace {
 // Both builds see the same descriptors (the RNG starts again for each).
-void expectSameAsBFMatcher(bool simd) {
+void expectSameAsBFMatcher(CrossCheckedHammingMatcher::Build build) {
   cv::RNG rng(7);
   for (const int cols : {32, 61}) {
     // 248 and 251 reference rows: a last block of eight rows full and part-full.
@@ -39,11 +39,11 @@ void expectSameAsBFMatcher(bool simd) {
       std::vector<cv::DMatch> want;
       cv::BFMatcher(cv::NORM_HAMMING, true).match(cur, ref, want);
       ASSERT_GT(want.size(), 20u);
-      CrossCheckedHammingMatcher whole(simd);
+      CrossCheckedHammingMatcher whole(build);
       whole.add(cur, ref);
       expectSame(whole.crossChecked(), want);
       // In parts, as the odometry feeds it (STAR rows first, NARF rows once they are described).
-      CrossCheckedHammingMatcher parts(simd);
+      CrossCheckedHammingMatcher parts(build);
       parts.add(cur.rowRange(0, 120), ref);
       parts.add(cur.rowRange(0, 121), ref);
       parts.add(cur, ref);
@@ -57,18 +57,41 @@ void expectSameAsBFMatcher(bool simd) {
     const cv::Mat cur = randomDescriptors(40, 32, rng, 4), ref = randomDescriptors(n, 32, rng, 4);
     std::vector<cv::DMatch> want;
     cv::BFMatcher(cv::NORM_HAMMING, true).match(cur, ref, want);
-    CrossCheckedHammingMatcher m(simd);
+    CrossCheckedHammingMatcher m(build);
     m.add(cur, ref);
     expectSame(m.crossChecked(), want);
   }
 }
 }  // namespace
 
-TEST(HammingMatcher, SameAsBFMatcherCrossCheck) { expectSameAsBFMatcher(false); }
+using Build = CrossCheckedHammingMatcher::Build;
+
+TEST(HammingMatcher, SameAsBFMatcherCrossCheck) { expectSameAsBFMatcher(Build::Scalar); }
+
+TEST(HammingMatcher, Avx2SameAsBFMatcherCrossCheck) {
+  if (!CrossCheckedHammingMatcher::runs(Build::Avx2)) GTEST_SKIP() << "no AVX2 on this CPU";
+  expectSameAsBFMatcher(Build::Avx2);
+}
 
 TEST(HammingMatcher, Avx512SameAsBFMatcherCrossCheck) {
-  if (!CrossCheckedHammingMatcher::usesAvx512()) GTEST_SKIP() << "no AVX-512 popcount on this CPU: only the scalar build runs";
-  expectSameAsBFMatcher(true);
+  if (!CrossCheckedHammingMatcher::runs(Build::Avx512)) GTEST_SKIP() << "no AVX-512 popcount on this CPU";
+  expectSameAsBFMatcher(Build::Avx512);
+}
+
+// 256-byte descriptors (32 64-bit words), some reference rows the complement of a current row: each
+// byte of that pair counts 8 bits in every word, 256 in all, which a byte would hold as 0. The AVX2
+// build sums its byte counts before then, so those pairs stay the farthest, as BFMatcher has them.
+TEST(HammingMatcher, Avx2LongDescriptorsSameAsBFMatcher) {
+  if (!CrossCheckedHammingMatcher::runs(Build::Avx2)) GTEST_SKIP() << "no AVX2 on this CPU";
+  cv::RNG rng(3);
+  const cv::Mat cur = randomDescriptors(40, 256, rng, 256);
+  cv::Mat ref;
+  cv::vconcat(randomDescriptors(30, 256, rng, 256), ~cur.rowRange(0, 10), ref);
+  std::vector<cv::DMatch> want;
+  cv::BFMatcher(cv::NORM_HAMMING, true).match(cur, ref, want);
+  CrossCheckedHammingMatcher m(Build::Avx2);
+  m.add(cur, ref);
+  expectSame(m.crossChecked(), want);
 }
 
 TEST(HammingMatcher, EmptyReferenceGivesNoMatches) {

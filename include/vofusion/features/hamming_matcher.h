@@ -12,10 +12,12 @@ namespace vofusion {
 
 class CrossCheckedHammingMatcher {
  public:
-  // simd = false: the scalar build even where the CPU has AVX-512's popcount (tests).
-  explicit CrossCheckedHammingMatcher(bool simd = true);
-  // Whether this CPU takes the AVX-512 build (eight reference rows at a time).
-  static bool usesAvx512();
+  // The distance loop's builds, all giving the same matches: AVX-512's popcount, AVX2's table
+  // lookup (both eight reference rows at a time) or the scalar popcount. Fastest: the first this CPU
+  // runs; the others are for tests, and throw std::invalid_argument where the CPU lacks them.
+  enum class Build { Fastest, Avx512, Avx2, Scalar };
+  explicit CrossCheckedHammingMatcher(Build build = Build::Fastest);
+  static bool runs(Build build);
   // Matches the rows of `cur` not seen yet (cur grows between calls; the first rows must stay the
   // same) against `ref`, which must be the same at every call. CV_8U descriptors, any width.
   void add(const cv::Mat& cur, const cv::Mat& ref);
@@ -27,7 +29,7 @@ class CrossCheckedHammingMatcher {
   std::vector<cv::DMatch> forward_;   // per current row: nearest reference row
   std::vector<cv::DMatch> backward_;  // per reference row: nearest current row so far
   int rows_ = 0;
-  bool simd_;
+  Build build_;
 };
 
 }  // namespace vofusion
