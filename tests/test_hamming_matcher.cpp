@@ -29,7 +29,7 @@ void expectSame(const std::vector<cv::DMatch>& got, const std::vector<cv::DMatch
 }  // namespace
 
 namespace {
-// Both builds see the same descriptors (the RNG starts again for each).
+// Every build sees the same descriptors (the RNG starts again for each).
 void expectSameAsBFMatcher(CrossCheckedHammingMatcher::Build build) {
   cv::RNG rng(7);
   for (const int cols : {32, 61}) {
@@ -69,29 +69,35 @@ using Build = CrossCheckedHammingMatcher::Build;
 TEST(HammingMatcher, SameAsBFMatcherCrossCheck) { expectSameAsBFMatcher(Build::Scalar); }
 
 TEST(HammingMatcher, Avx2SameAsBFMatcherCrossCheck) {
-  if (!CrossCheckedHammingMatcher::runs(Build::Avx2)) GTEST_SKIP() << "no AVX2 on this CPU";
+  if (!CrossCheckedHammingMatcher::available(Build::Avx2)) GTEST_SKIP() << "no AVX2 on this CPU";
   expectSameAsBFMatcher(Build::Avx2);
 }
 
 TEST(HammingMatcher, Avx512SameAsBFMatcherCrossCheck) {
-  if (!CrossCheckedHammingMatcher::runs(Build::Avx512)) GTEST_SKIP() << "no AVX-512 popcount on this CPU";
+  if (!CrossCheckedHammingMatcher::available(Build::Avx512)) GTEST_SKIP() << "no AVX-512 popcount on this CPU";
   expectSameAsBFMatcher(Build::Avx512);
 }
 
+TEST(HammingMatcher, FastestSameAsBFMatcherCrossCheck) { expectSameAsBFMatcher(Build::Fastest); }
+
 // 256-byte descriptors (32 64-bit words), some reference rows the complement of a current row: each
 // byte of that pair counts 8 bits in every word, 256 in all, which a byte would hold as 0. The AVX2
-// build sums its byte counts before then, so those pairs stay the farthest, as BFMatcher has them.
-TEST(HammingMatcher, Avx2LongDescriptorsSameAsBFMatcher) {
-  if (!CrossCheckedHammingMatcher::runs(Build::Avx2)) GTEST_SKIP() << "no AVX2 on this CPU";
+// build sums its byte counts every 31 words, so those pairs stay the farthest, as BFMatcher has them.
+// Every build the CPU runs.
+TEST(HammingMatcher, LongDescriptorsSameAsBFMatcher) {
   cv::RNG rng(3);
   const cv::Mat cur = randomDescriptors(40, 256, rng, 256);
   cv::Mat ref;
   cv::vconcat(randomDescriptors(30, 256, rng, 256), ~cur.rowRange(0, 10), ref);
   std::vector<cv::DMatch> want;
   cv::BFMatcher(cv::NORM_HAMMING, true).match(cur, ref, want);
-  CrossCheckedHammingMatcher m(Build::Avx2);
-  m.add(cur, ref);
-  expectSame(m.crossChecked(), want);
+  for (const Build build : {Build::Scalar, Build::Avx2, Build::Avx512}) {
+    if (!CrossCheckedHammingMatcher::available(build)) continue;
+    SCOPED_TRACE(int(build));
+    CrossCheckedHammingMatcher m(build);
+    m.add(cur, ref);
+    expectSame(m.crossChecked(), want);
+  }
 }
 
 TEST(HammingMatcher, EmptyReferenceGivesNoMatches) {

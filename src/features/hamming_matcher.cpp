@@ -92,8 +92,9 @@ __attribute__((target("avx2"), always_inline)) inline __m256i bitsPerByte(__m256
 
 // The same with AVX2, which has no popcount instruction for vectors: bytes counted by table lookup
 // (vpshufb on each nibble), summed over the words in bytes and then per 64-bit lane (vpsadbw). Eight
-// reference rows at a time, two vectors of four; `ref_t` as for distancesAvx512. 2.4x the scalar
-// build's speed on 1000 x 1000 random 256-bit descriptors (an AMD EPYC without AVX-512).
+// reference rows at a time, two vectors of four; `ref_t` as for distancesAvx512. On an AMD EPYC
+// without AVX-512, 1.8x fewer perf samples than the scalar build in whole runs (loop scene, xyz).
+// Details in bench/results/2026-11-29-hamming-avx2.md.
 __attribute__((target("avx2")))
 void distancesAvx2(const std::uint64_t* cur, int n_cur, const std::uint64_t* ref_t, int n_ref, int stride, int words,
                    int* fwd_idx, int* fwd_d, int* bwd_idx, int* bwd_d) {
@@ -103,7 +104,8 @@ void distancesAvx2(const std::uint64_t* cur, int n_cur, const std::uint64_t* ref
   const __m256i lane_index = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   // The two vectors' four 64-bit sums interleaved as 32-bit lanes, put back in row order.
   const __m256i row_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
-  // A byte holds at most 8 bits per word: 31 words fit before the bytes are summed into 64-bit lanes.
+  // A byte's count grows by at most 8 a word: after 31 words it is at most 248, so the bytes are
+  // summed into the 64-bit lanes every 31 words.
   constexpr int kWordsPerByteSum = 31;
   for (int i = 0; i < n_cur; ++i) {
     const std::uint64_t* a = cur + std::size_t(i) * words;
@@ -160,10 +162,10 @@ std::vector<std::uint64_t> transposed(const std::vector<std::uint64_t>& rows, in
 
 CrossCheckedHammingMatcher::CrossCheckedHammingMatcher(Build build) : build_(build) {
   if (build_ == Build::Fastest) build_ = cpuHasAvx512Popcount() ? Build::Avx512 : cpuHasAvx2() ? Build::Avx2 : Build::Scalar;
-  if (!runs(build_)) throw std::invalid_argument("CrossCheckedHammingMatcher: this CPU cannot run the build asked for");
+  if (!available(build_)) throw std::invalid_argument("CrossCheckedHammingMatcher: this CPU cannot run the build asked for");
 }
 
-bool CrossCheckedHammingMatcher::runs(Build build) {
+bool CrossCheckedHammingMatcher::available(Build build) {
   switch (build) {
     case Build::Avx512: return cpuHasAvx512Popcount();
     case Build::Avx2: return cpuHasAvx2();

@@ -63,10 +63,11 @@ struct LoopCloser::Impl {
   }
 
   void run() {
-    // The thread's parallel loops (ICP sums, depth filters) stay on it, in a one-slot arena, instead of
-    // taking the pool's workers from the frame loop: the loop closer's CPU is then all its own thread's,
-    // and its CPU time (summary.json) is the whole of it. The same results: parallelReduce's split is
-    // fixed, whatever the thread count.
+    // Our own parallel loops (parallelFor / parallelReduce: ICP sums, depth filters) stay on this
+    // thread, in a one-slot arena, instead of taking the pool's workers from the frame loop. Its CPU
+    // time (summary.json) then counts that work whole. The cost: a keyframe takes longer in wall time,
+    // and relocalise() and finish() wait longer for the thread to be idle. The same results:
+    // parallelReduce's split is fixed, whatever the thread count.
     tbb::task_arena alone(1);
     for (;;) {
       Keyframe k;

@@ -13,11 +13,12 @@ namespace vofusion {
 class CrossCheckedHammingMatcher {
  public:
   // The distance loop's builds, all giving the same matches: AVX-512's popcount, AVX2's table
-  // lookup (both eight reference rows at a time) or the scalar popcount. Fastest: the first this CPU
-  // runs; the others are for tests, and throw std::invalid_argument where the CPU lacks them.
+  // lookup (both eight reference rows at a time) or the scalar popcount. Fastest: the first of these
+  // this CPU has. The others are for tests; Avx512 and Avx2 throw std::invalid_argument where the CPU
+  // lacks them (available() says).
   enum class Build { Fastest, Avx512, Avx2, Scalar };
   explicit CrossCheckedHammingMatcher(Build build = Build::Fastest);
-  static bool runs(Build build);
+  static bool available(Build build);
   // Matches the rows of `cur` not seen yet (cur grows between calls; the first rows must stay the
   // same) against `ref`, which must be the same at every call. CV_8U descriptors, any width.
   void add(const cv::Mat& cur, const cv::Mat& ref);
