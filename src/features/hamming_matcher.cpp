@@ -177,15 +177,22 @@ void CrossCheckedHammingMatcher::add(const cv::Mat& cur, const cv::Mat& ref) {
   if (cur.rows <= rows_ || ref.empty()) return;
   CV_Assert(cur.type() == CV_8UC1 && ref.type() == CV_8UC1 && cur.cols == ref.cols);
   const int words = (cur.cols + 7) / 8, n = cur.rows - rows_;
-  const auto a = asWords(cur, rows_, words), b = asWords(ref, 0, words);
+  const bool eight_rows = build_ == Build::Avx512 || build_ == Build::Avx2;
+  const int stride = (ref.rows + 7) / 8 * 8;
+  // The reference is the same at every call: put in the build's layout once.
+  if (ref_words_.empty()) {
+    ref_words_ = asWords(ref, 0, words);
+    if (eight_rows) ref_words_ = transposed(ref_words_, ref.rows, words, stride);
+  }
+  const auto a = asWords(cur, rows_, words);
   std::vector<int> fwd_idx(n), fwd_d(n), bwd_idx(ref.rows, -1), bwd_d(ref.rows, std::numeric_limits<int>::max());
-  if (build_ == Build::Avx512 || build_ == Build::Avx2) {
-    const int stride = (ref.rows + 7) / 8 * 8;
+  if (eight_rows) {
     const auto distances = build_ == Build::Avx512 ? distancesAvx512 : distancesAvx2;
-    distances(a.data(), n, transposed(b, ref.rows, words, stride).data(), ref.rows, stride, words, fwd_idx.data(),
-              fwd_d.data(), bwd_idx.data(), bwd_d.data());
+    distances(a.data(), n, ref_words_.data(), ref.rows, stride, words, fwd_idx.data(), fwd_d.data(), bwd_idx.data(),
+              bwd_d.data());
   } else {
-    distancesScalar(a.data(), n, b.data(), ref.rows, words, fwd_idx.data(), fwd_d.data(), bwd_idx.data(), bwd_d.data());
+    distancesScalar(a.data(), n, ref_words_.data(), ref.rows, words, fwd_idx.data(), fwd_d.data(), bwd_idx.data(),
+                    bwd_d.data());
   }
   for (int i = 0; i < n; ++i) forward_.emplace_back(rows_ + i, fwd_idx[i], float(fwd_d[i]));
   backward_.resize(ref.rows, cv::DMatch(-1, -1, std::numeric_limits<float>::max()));

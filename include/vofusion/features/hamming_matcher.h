@@ -4,6 +4,7 @@
 // descriptor pair's distance is computed once for both directions (BFMatcher walks the distance
 // matrix twice) and the current frame's descriptors can arrive in parts: the STAR ones are matched
 // while NARF still runs.
+#include <cstdint>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -29,6 +30,7 @@ class CrossCheckedHammingMatcher {
  private:
   std::vector<cv::DMatch> forward_;   // per current row: nearest reference row
   std::vector<cv::DMatch> backward_;  // per reference row: nearest current row so far
+  std::vector<std::uint64_t> ref_words_;  // the reference as 64-bit words, in the layout build_ reads
   int rows_ = 0;
   Build build_;
 };
