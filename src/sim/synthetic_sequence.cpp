@@ -257,7 +257,7 @@ struct SyntheticSequence::Impl {
   }
 
   // Scene set-up, one per --scene value: geometry and the hand-held path (waves) through it.
-  void buildScene(const std::string& scene, std::uint32_t s, double duration);
+  void buildWorld(const std::string& scene, std::uint32_t s, double duration);
   void buildRoom(std::uint32_t s);
   void buildCorridor(std::uint32_t s, double duration);
   void buildBareWall(std::uint32_t s);
@@ -281,7 +281,7 @@ static Wave wave(double c0, double rate, double a0, double f0, double a1, double
   return w;
 }
 
-void SyntheticSequence::Impl::buildScene(const std::string& scene, std::uint32_t s, double duration) {
+void SyntheticSequence::Impl::buildWorld(const std::string& scene, std::uint32_t s, double duration) {
   // Velocity bounds (sum of amp*freq per axis) keep speed <= ~0.45 m/s and turn rate <= ~30 deg/s.
   if (scene == "room") buildRoom(s);
   else if (scene == "corridor") buildCorridor(s, duration);
@@ -420,7 +420,7 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   if (!(o.max_range > kKinectMinRange)) throw InputError("--max-range", "must exceed 0.4 m");
   const std::uint32_t s = o.seed;
   const double duration = std::max(1.0, double(o.frames) / o.fps);
-  impl->buildScene(o.scene, s, duration);
+  impl->buildWorld(o.scene, s, duration);
   impl->buildTrajectory(o.trajectory, s);
   if (!(o.exposure >= 0 && o.exposure <= 0.1)) throw InputError("--exposure", "must be in [0, 0.1] s");
   if (!(o.colour_offset_max >= 0 && o.colour_offset_max <= 0.05)) throw InputError("--colour-offset", "must be in [0, 0.05] s");
