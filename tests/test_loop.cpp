@@ -106,6 +106,25 @@ TEST(LoopKeyframes, MadeByMotionAndAfterRecovery) {
   EXPECT_NEAR(s.pathLength(), 0.14, 1e-9);
 }
 
+// Strained frames (tracked, residual standing out) become keyframes by motion as any other, so a loop can
+// observe the drift where it comes out; the edge that spans them is the weak kind.
+TEST(LoopKeyframes, StrainedFramesAreKeyframesWithAWeakEdge) {
+  LoopParams P;
+  P.keyframe_translation = 0.1;
+  P.keyframe_rotation = 10.0;
+  KeyframeSelector s(P);
+  EXPECT_TRUE(s.next(pose(0, 0, 0, 0), true, true));  // the first keyframe has no edge to weaken
+  EXPECT_FALSE(s.lastAfterPoorTracking());
+  EXPECT_FALSE(s.next(pose(0.05, 0, 0, 0), true, true));  // strained, but moved too little
+  EXPECT_TRUE(s.next(pose(0.12, 0, 0, 0), true));          // moved enough; its edge spans a strained frame
+  EXPECT_TRUE(s.lastAfterPoorTracking());
+  EXPECT_TRUE(s.next(pose(0.24, 0, 0, 0), true, true));    // a strained frame that moved enough
+  EXPECT_TRUE(s.lastAfterPoorTracking());
+  EXPECT_FALSE(s.next(pose(0.26, 0, 0, 0), true));         // no keyframe forced after strained frames
+  EXPECT_TRUE(s.next(pose(0.36, 0, 0, 0), true));
+  EXPECT_FALSE(s.lastAfterPoorTracking());
+}
+
 // A burst of frames whose ICP residual stands out from the recent ones is strained; a residual that
 // rises slowly (farther walls, more noise) is not, and frames without ICP never are.
 TEST(LoopKeyframes, ResidualBurstIsStrainedSlowRiseIsNot) {

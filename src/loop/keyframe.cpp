@@ -43,7 +43,7 @@ cv::Mat Keyframe::depthMetres() const {
   return m;
 }
 
-bool KeyframeSelector::next(const Eigen::Isometry3d& pose, bool well_tracked) {
+bool KeyframeSelector::next(const Eigen::Isometry3d& pose, bool well_tracked, bool strained) {
   if (have_pose_) path_ += (pose.translation() - last_pose_.translation()).norm();
   last_pose_ = pose;
   have_pose_ = true;
@@ -51,28 +51,29 @@ bool KeyframeSelector::next(const Eigen::Isometry3d& pose, bool well_tracked) {
     recovering_ = have_keyframe_;
     return false;
   }
+  strained_since_keyframe_ |= strained && have_keyframe_;
   const Eigen::Isometry3d d = last_keyframe_.inverse() * pose;
   const double turned = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
   if (have_keyframe_ && !recovering_ && d.translation().norm() < params_.keyframe_translation &&
       turned < params_.keyframe_rotation)
     return false;
   last_keyframe_ = pose;
-  last_after_poor_ = recovering_;
+  last_after_poor_ = recovering_ || strained_since_keyframe_;
   have_keyframe_ = true;
-  recovering_ = false;
+  recovering_ = strained_since_keyframe_ = false;
   return true;
 }
 
 void KeyframeSelector::saveState(state::Archive& a) const {
   state::write(a, last_keyframe_);
   state::write(a, last_pose_);
-  a << have_keyframe_ << have_pose_ << recovering_ << last_after_poor_ << path_;
+  a << have_keyframe_ << have_pose_ << recovering_ << last_after_poor_ << strained_since_keyframe_ << path_;
 }
 
 void KeyframeSelector::loadState(state::Archive& a) {
   state::read(a, last_keyframe_);
   state::read(a, last_pose_);
-  a >> have_keyframe_ >> have_pose_ >> recovering_ >> last_after_poor_ >> path_;
+  a >> have_keyframe_ >> have_pose_ >> recovering_ >> last_after_poor_ >> strained_since_keyframe_ >> path_;
 }
 
 }  // namespace vofusion::loop

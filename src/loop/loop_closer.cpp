@@ -231,7 +231,7 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
   Impl& m = *impl_;
   const bool strained = m.residuals.strained(icp_rms);
   m.strained_frames += strained;
-  const bool key = m.selector.next(tracked, well_tracked && !strained && !frame.depth.empty());
+  const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty(), strained);
   if (key) {
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);

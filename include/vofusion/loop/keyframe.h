@@ -24,7 +24,8 @@ struct Keyframe {
   double timestamp = 0.0;       // s
   Eigen::Isometry3d tracked = Eigen::Isometry3d::Identity();  // camera-to-world, as tracked
   double path_length = 0.0;     // m the camera travelled from the first frame to this one
-  bool after_poor_tracking = false;  // frames since the previous keyframe were lost, predicted, fell back or strained
+  bool after_poor_tracking = false;  // frames since the previous keyframe (this one included) were lost,
+                                     // predicted, fell back or strained
   std::shared_ptr<const DescribedKeypoints> features;
   cv::Mat depth;                // CV_16U, kDepthUnitsPerMetre, 1/keyframe_downsample resolution (nearest reading)
   CameraIntrinsics camera;      // of `depth`
@@ -43,7 +44,10 @@ class KeyframeSelector {
   explicit KeyframeSelector(const LoopParams& params) : params_(params) {}
   // Every frame in order; true when this one should become a keyframe. Frames not well tracked
   // (lost, predicted, fallback) never do; the first well-tracked frame after them always does.
-  bool next(const Eigen::Isometry3d& pose, bool well_tracked);
+  // Strained frames (tracked, but with an ICP residual that stands out) do by motion as any other: they
+  // are where a revisit's drift comes out, and a loop from one of them observes it there. Their edge
+  // to the previous keyframe is weak, as one across frames not well tracked.
+  bool next(const Eigen::Isometry3d& pose, bool well_tracked, bool strained = false);
   double pathLength() const { return path_; }
   // The keyframe just made follows frames that were not well tracked (its edge to the previous one is weak).
   bool lastAfterPoorTracking() const { return last_after_poor_; }
@@ -55,6 +59,7 @@ class KeyframeSelector {
   LoopParams params_;
   Eigen::Isometry3d last_keyframe_ = Eigen::Isometry3d::Identity(), last_pose_ = Eigen::Isometry3d::Identity();
   bool have_keyframe_ = false, have_pose_ = false, recovering_ = false, last_after_poor_ = false;
+  bool strained_since_keyframe_ = false;
   double path_ = 0.0;
 };
 

@@ -63,9 +63,11 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   double max_drift_rotation_rate = 3.0; // degrees per m travelled
   // Pose graph: keyframe-to-keyframe edges from the tracker, with kOdometrySigmaRate noise per metre /
   // per radian moved (at least kOdometrySigmaFloor); loops with the verification's covariance.
-  double poor_tracking_sigma_scale = 10.0;  // x the noise of an edge across frames not well tracked
+  double poor_tracking_sigma_scale = 10.0;  // x the noise of an edge across frames lost, predicted, fallen
+                                            // back or strained
   double strain_rms_ratio = 2.0;          // a frame whose ICP residual is over this x the recent median is
-                                          // not well tracked (ResidualMonitor); 0: off
+                                          // strained (ResidualMonitor): still a keyframe by motion, but its
+                                          // edge is weak; 0: off
   // Map: when the optimised poses move some frame by more than this, the frames are integrated
   // again into a fresh volume after the run (one wall where the drift drew two).
   double reintegrate_min_correction = 0.005;  // m
