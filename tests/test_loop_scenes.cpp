@@ -3,6 +3,7 @@
 // corridor whose places repeat every 3 m gets no false loop. Full resolution: at 320x240 the
 // detector finds too few keypoints to recognise a place.
 #include <cstdio>
+#include <sstream>
 
 #include <mrpt/config/CConfigFileMemory.h>
 
@@ -136,4 +137,42 @@ TEST(LoopScenes, KeyframeQueueIsBounded) {
   EXPECT_GT(waits, 0u) << "the thread kept up: the bound was not exercised";
   EXPECT_EQ(closer.keyframes().size(), handed);
   EXPECT_GT(closer.threadCpuSeconds(), 0.0);  // summary.json's thread_cpu_ms_per_frame
+}
+
+// A strained frame (its ICP residual over strain_rms_ratio x the recent median) becomes a keyframe by
+// motion as any other, also right after lost frames; a checkpoint taken inside the strained stretch
+// resumes to the same keyframes.
+TEST(LoopScenes, StrainedFramesBecomeKeyframes) {
+  const sim::SyntheticSequence seq(test::quickSim("corridor", 4));
+  RgbdOdometry odometry;
+  Frame frame = seq.render(0);
+  const auto features = odometry.process(frame).features;
+  loop::LoopParams params;
+  const auto step = [&](loop::LoopCloser& closer, std::size_t k, bool well_tracked, double rms) {
+    frame.index = k;
+    frame.timestamp = k / 30.0;
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation().x() = 0.2 * k;  // each frame far enough on to be a keyframe
+    return closer.addFrame(frame, pose, well_tracked, rms, features);
+  };
+  loop::LoopCloser closer(params);
+  for (std::size_t k = 0; k < 20; ++k) EXPECT_TRUE(step(closer, k, true, 0.003)) << k;  // the residuals' median
+  EXPECT_FALSE(step(closer, 20, false, 0.0));  // lost: never a keyframe
+  EXPECT_TRUE(step(closer, 21, true, 0.012));  // strained (4x the median), right after a lost frame
+  EXPECT_TRUE(step(closer, 22, true, 0.012));
+  std::stringstream saved;
+  closer.saveState(saved);
+  loop::LoopCloser resumed(params);
+  resumed.loadState(saved);
+  for (std::size_t k = 23; k < 26; ++k) {
+    EXPECT_TRUE(step(closer, k, true, 0.012)) << k;
+    EXPECT_TRUE(step(resumed, k, true, 0.012)) << k;
+  }
+  EXPECT_EQ(closer.strainedFrames(), 5u);
+  EXPECT_EQ(resumed.strainedFrames(), 5u);
+  EXPECT_EQ(closer.keyframesMade(), 25u);
+  EXPECT_EQ(resumed.keyframesMade(), 25u);
+  closer.finish();
+  resumed.finish();
+  EXPECT_EQ(closer.keyframes().size(), resumed.keyframes().size());
 }

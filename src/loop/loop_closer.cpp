@@ -248,7 +248,9 @@ void LoopCloser::saveState(std::ostream& os) const {
   Impl& m = *impl_;
   m.waitIdle();  // the thread's store is the caller's to read until the next addFrame
   auto a = state::archiveOf(os);
-  state::tag(a, "loop");
+  // "v2": the keyframe selector keeps whether strained frames came since the last keyframe (b9be6fb);
+  // a checkpoint of an earlier build is refused by name instead of read out of step.
+  state::tag(a, "loop v2");
   m.selector.saveState(a);
   m.residuals.saveState(a);
   a << uint64_t(m.strained_frames) << uint64_t(m.keyframes_made);
@@ -267,7 +269,7 @@ void LoopCloser::saveState(std::ostream& os) const {
 void LoopCloser::loadState(std::istream& is) {
   Impl& m = *impl_;
   auto a = state::archiveOf(is);
-  state::expectTag(a, "loop");
+  state::expectTag(a, "loop v2");
   m.selector.loadState(a);
   m.residuals.loadState(a);
   uint64_t strained = 0, made = 0, count = 0;

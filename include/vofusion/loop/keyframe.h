@@ -49,7 +49,8 @@ class KeyframeSelector {
   // to the previous keyframe is weak, as one across frames not well tracked.
   bool next(const Eigen::Isometry3d& pose, bool well_tracked, bool strained = false);
   double pathLength() const { return path_; }
-  // The keyframe just made follows frames that were not well tracked (its edge to the previous one is weak).
+  // The keyframe just made follows frames that were not well tracked, or strained ones (this one
+  // included): its edge to the previous one is weak.
   bool lastAfterPoorTracking() const { return last_after_poor_; }
   // Checkpoints: where the last keyframe and the last pose were, and the path so far.
   void saveState(state::Archive& a) const;
