@@ -7,6 +7,7 @@
 
 #include "vofusion/core/parallel.h"
 #include "vofusion/registration/normal_equations.h"
+#include "vofusion/registration/photometric_association.h"
 
 namespace vofusion::fusion {
 
@@ -97,56 +98,24 @@ IntensityLevel resampleAtModel(const IntensityLevel& image, const cv::Mat& model
 PhotometricSums accumulatePhotometric(const PhotometricLevel& level, const Eigen::Isometry3d& T,
                                       const PhotometricParams& params, double weight, const Eigen::Isometry3d& colour_motion) {
   PhotometricSums out;
-  const IntensityLevel& ref = *level.reference;
-  const IntensityLevel& cur = *level.current;
   const cv::Mat& mv = *level.model_vertices;
-  if (mv.size() != ref.grey.size() || !(params.sigma > 0)) return out;
-  // Current colour camera: p = M^-1 R^T (v - c); its derivatives go back to the world by R M_R.
-  const Eigen::Isometry3f M_inv = colour_motion.inverse().cast<float>();
-  const Eigen::Matrix3f R = T.linear().cast<float>() * colour_motion.linear().cast<float>(), Rt = T.linear().cast<float>().transpose();
-  const Eigen::Vector3f c = T.translation().cast<float>();
-  const float fx = level.camera.fx, fy = level.camera.fy, cx = level.camera.cx, cy = level.camera.cy;
-  const float max_x = cur.grey.cols - 1.001f, max_y = cur.grey.rows - 1.001f;
-  const float g2 = static_cast<float>(params.min_gradient * params.min_gradient);
-  const double inv_sigma = 1.0 / params.sigma, huber = params.huber;
+  if (mv.size() != level.reference->grey.size() || !(params.sigma > 0)) return out;
+  const PhotometricAssociator associator(level, T, params, colour_motion);
   // Large levels: every other pixel of every other row, each standing for the four (neighbouring
   // residuals are nearly the same measurement; a quarter of the cost).
   const int stride = mv.total() >= kStridedMinPixels ? 2 : 1;
-  const double pixel_weight = weight * stride * stride;
   const Sums s = parallelReduce(
       0, (mv.rows + stride - 1) / stride, Sums{},
       [&](int row, Sums& acc) {
-        const int y = row * stride;
-        const cv::Vec3f* vrow = mv.ptr<cv::Vec3f>(y);
-        const float* irow = ref.grey.ptr<float>(y);
-        const float* dxr = ref.dx.ptr<float>(y);
-        const float* dyr = ref.dy.ptr<float>(y);
-        for (int x = (row & 1) * (stride - 1); x < mv.cols; x += stride) {
-          if (dxr[x] * dxr[x] + dyr[x] * dyr[x] < g2 || std::isnan(irow[x])) continue;
-          const cv::Vec3f& m = vrow[x];
-          if (std::isnan(m[0])) continue;
-          const Eigen::Vector3f a = Eigen::Vector3f(m[0], m[1], m[2]) - c;  // model point about the camera centre
-          const Eigen::Vector3f p = M_inv * (Rt * a);  // in the current colour camera
-          if (!(p.z() > 0.f)) continue;
-          const float iz = 1.f / p.z();
-          const float u = fx * p.x() * iz + cx, v = fy * p.y() * iz + cy;
-          if (!(u >= 0.f && v >= 0.f && u < max_x && v < max_y)) continue;
-          const float r = sample(cur.grey, u, v) - irow[x];
-          const float gx = sample(cur.dx, u, v), gy = sample(cur.dy, u, v);
-          // d r / d p (current camera) = grad^T d pi / d p, then to the world frame.
-          const Eigen::Vector3f dp(gx * fx * iz, gy * fy * iz, -(gx * fx * p.x() + gy * fy * p.y()) * iz * iz);
-          const Eigen::Vector3f w = R * dp;
-          const Eigen::Vector3f jw = w.cross(a);
-          const double J[6] = {jw.x(), jw.y(), jw.z(), -w.x(), -w.y(), -w.z()};
-          const double e = std::abs(r) * inv_sigma;
-          const double wt = pixel_weight * (e > huber ? huber / e : 1.0);
-          acc.eq.add(J, r, wt);
-          acc.r2 += double(r) * r;
-          ++acc.n;
-        }
+        const PhotometricRowSums r = associator.sumRow(row * stride, (row & 1) * (stride - 1), stride);
+        for (int k = 0; k < 21; ++k) acc.eq.A[k] += r.A[k];
+        for (int k = 0; k < 6; ++k) acc.eq.b[k] += r.b[k];
+        acc.r2 += r.r2;
+        acc.n += r.n;
       },
       addSums, 16, mv.total() >= kParallelMinPixels);
-  s.eq.unpack(inv_sigma * inv_sigma, out.A, out.b);
+  const double inv_sigma = 1.0 / params.sigma;
+  s.eq.unpack(inv_sigma * inv_sigma * weight * stride * stride, out.A, out.b);
   out.residuals = s.n;
   out.r2 = s.r2;
   return out;

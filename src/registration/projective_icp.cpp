@@ -10,6 +10,7 @@
 #include <tbb/parallel_invoke.h>
 
 #include "vofusion/core/parallel.h"
+#include "vofusion/registration/icp_association.h"
 #include "vofusion/registration/normal_equations.h"
 
 namespace vofusion::fusion {
@@ -43,51 +44,20 @@ void addAccum(Accum& total, const Accum& a) {
 // about the camera centre (truncation > 0 also sums the truncated squared residuals).
 Accum accumulate(const DepthLevel& lv, const cv::Mat& mv, const cv::Mat& mn, const Eigen::Isometry3f& model_inv,
                  const Eigen::Isometry3f& T, const IcpParams& params, float truncation) {
-  const float max_d2 = params.max_distance * params.max_distance;
-  const float min_cos = static_cast<float>(std::cos(params.max_angle * M_PI / 180.0));
-  const float trunc2 = truncation * truncation;
-  const Eigen::Matrix3f Rm = model_inv.linear();
-  const Eigen::Vector3f tm = model_inv.translation();
-  const float fx = lv.camera.fx, fy = lv.camera.fy, cx = lv.camera.cx, cy = lv.camera.cy;
-  const int mw = mv.cols, mh = mv.rows;
-  const Eigen::Matrix3f R = T.linear();
-  const Eigen::Vector3f t = T.translation();
+  const IcpAssociator associator(mv, mn, lv.camera, model_inv, T, params.max_distance, params.max_angle, truncation);
   // Rows in fixed chunks, summed in a fixed order: the same frame gives the same pose on every run.
   return parallelReduce(
       0, lv.vertices.rows, Accum{},
       [&](int y, Accum& acc) {
-        const cv::Vec3f* vrow = lv.vertices.ptr<cv::Vec3f>(y);
-        const cv::Vec3f* nrow = lv.normals.ptr<cv::Vec3f>(y);
-        for (int x = 0; x < lv.vertices.cols; ++x) {
-          const cv::Vec3f& vc = vrow[x];
-          const cv::Vec3f& nc = nrow[x];
-          if (std::isnan(vc[0]) || std::isnan(nc[0])) continue;
-          ++acc.valid;
-          const Eigen::Vector3f vg = R * Eigen::Vector3f(vc[0], vc[1], vc[2]) + t;
-          const Eigen::Vector3f pm = Rm * vg + tm;  // in the model camera
-          if (pm.z() <= 0.f) continue;
-          const float uf = fx * pm.x() / pm.z() + cx, vf = fy * pm.y() / pm.z() + cy;
-          if (!(uf > -0.5f && vf > -0.5f && uf < mw - 0.5f && vf < mh - 0.5f)) continue;
-          const int u = static_cast<int>(uf + 0.5f), v = static_cast<int>(vf + 0.5f);
-          const cv::Vec3f& m = mv.ptr<cv::Vec3f>(v)[u];
-          const cv::Vec3f& n = mn.ptr<cv::Vec3f>(v)[u];
-          if (std::isnan(m[0]) || std::isnan(n[0])) continue;
-          ++acc.in_view;
-          const Eigen::Vector3f vm(m[0], m[1], m[2]), nm(n[0], n[1], n[2]);
-          const Eigen::Vector3f d = vg - vm;
-          if (d.squaredNorm() > max_d2) continue;
-          const Eigen::Vector3f ng = R * Eigen::Vector3f(nc[0], nc[1], nc[2]);
-          if (ng.dot(nm) < min_cos) continue;
-          const float r = nm.dot(d);
-          const Eigen::Vector3f pc = vg - t;
-          const Eigen::Vector3f rot = pc.cross(nm);
-          const double J[6] = {rot.x(), rot.y(), rot.z(), nm.x(), nm.y(), nm.z()};
-          acc.eq.add(J, r);
-          acc.r2 += static_cast<double>(r) * r;
-          acc.r2_truncated += std::min(r * r, trunc2);
-          acc.d2 += pc.squaredNorm();
-          ++acc.n;
-        }
+        const IcpRowSums row = associator.sumRow(lv.vertices.ptr<cv::Vec3f>(y), lv.normals.ptr<cv::Vec3f>(y), lv.vertices.cols);
+        for (int k = 0; k < 21; ++k) acc.eq.A[k] += row.A[k];
+        for (int k = 0; k < 6; ++k) acc.eq.b[k] += row.b[k];
+        acc.r2 += row.r2;
+        acc.r2_truncated += row.r2_truncated;
+        acc.d2 += row.d2;
+        acc.n += row.n;
+        acc.valid += row.valid;
+        acc.in_view += row.in_view;
       },
       addAccum, 16, lv.vertices.total() >= kParallelMinPixels);
 }

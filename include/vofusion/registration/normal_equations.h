@@ -1,7 +1,7 @@
 #pragma once
-// Gauss-Newton sums of a 6-parameter least-squares problem, accumulated per residual (J^T W J in its
-// upper triangle, -J^T W r): the per-pixel accumulator of ICP and of the photometric term, summed per
-// row chunk and joined in a fixed order (see parallelReduce).
+// Gauss-Newton sums of a 6-parameter least-squares problem (J^T W J in its upper triangle, -J^T W r):
+// ICP's and the photometric term's, summed per row (icp_association.h, photometric_association.h) and
+// joined in a fixed order (see parallelReduce).
 #include <Eigen/Core>
 
 namespace vofusion::fusion {
@@ -10,20 +10,6 @@ struct NormalSums6 {
   double A[21] = {};  // upper triangle of J^T W J, row by row
   double b[6] = {};   // -J^T W r
 
-  void add(const double J[6], double r) {
-    int k = 0;
-    for (int i = 0; i < 6; ++i) {
-      for (int j = i; j < 6; ++j) A[k++] += J[i] * J[j];
-      b[i] -= J[i] * r;
-    }
-  }
-  void add(const double J[6], double r, double w) {
-    int k = 0;
-    for (int i = 0; i < 6; ++i) {
-      for (int j = i; j < 6; ++j) A[k++] += w * J[i] * J[j];
-      b[i] -= w * J[i] * r;
-    }
-  }
   void join(const NormalSums6& o) {
     for (int i = 0; i < 21; ++i) A[i] += o.A[i];
     for (int i = 0; i < 6; ++i) b[i] += o.b[i];
