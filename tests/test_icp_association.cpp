@@ -59,11 +59,7 @@ Eigen::Isometry3f smallMotion(cv::RNG& rng, double rot, double trans) {
 IcpRowSums sumAll(const IcpAssociator& a, const cv::Mat& v, const cv::Mat& n) {
   IcpRowSums total;
   for (int y = 0; y < v.rows; ++y) {
-    const IcpRowSums r = a.sumRow(v.ptr<cv::Vec3f>(y), n.ptr<cv::Vec3f>(y), v.cols);
-    for (int k = 0; k < 21; ++k) total.A[k] += r.A[k];
-    for (int k = 0; k < 6; ++k) total.b[k] += r.b[k];
-    total.r2 += r.r2, total.r2_truncated += r.r2_truncated, total.d2 += r.d2;
-    total.n += r.n, total.valid += r.valid, total.in_view += r.in_view;
+    total += a.sumRow(v.ptr<cv::Vec3f>(y), n.ptr<cv::Vec3f>(y), v.cols);
   }
   return total;
 }
@@ -93,8 +89,8 @@ TEST(IcpAssociation, Avx2AndScalarAgreeBitForBit) {
         ASSERT_EQ(a.n, b.n) << width << " " << trial << " " << y;
         ASSERT_EQ(a.valid, b.valid);
         ASSERT_EQ(a.in_view, b.in_view);
-        ASSERT_EQ(std::memcmp(a.A, b.A, sizeof a.A), 0) << width << " " << trial << " " << y;
-        ASSERT_EQ(std::memcmp(a.b, b.b, sizeof a.b), 0);
+        ASSERT_EQ(std::memcmp(a.eq.A, b.eq.A, sizeof a.eq.A), 0) << width << " " << trial << " " << y;
+        ASSERT_EQ(std::memcmp(a.eq.b, b.eq.b, sizeof a.eq.b), 0);
         ASSERT_EQ(std::memcmp(&a.r2, &b.r2, sizeof a.r2), 0);
         ASSERT_EQ(std::memcmp(&a.r2_truncated, &b.r2_truncated, sizeof a.r2), 0);
         ASSERT_EQ(std::memcmp(&a.d2, &b.d2, sizeof a.d2), 0);
@@ -152,8 +148,8 @@ TEST(IcpAssociation, SumsAreThePointToPlaneNormalEquations) {
     EXPECT_NEAR(s.n, n, 2);  // a pixel at a threshold may fall either side in float
     int k = 0;
     for (int i = 0; i < 6; ++i) {
-      for (int j = i; j < 6; ++j, ++k) EXPECT_NEAR(s.A[k], A(i, j), 2e-3 * A.diagonal().maxCoeff()) << i << " " << j;
-      EXPECT_NEAR(s.b[i], b[i], 2e-3 * b.cwiseAbs().maxCoeff()) << i;
+      for (int j = i; j < 6; ++j, ++k) EXPECT_NEAR(s.eq.A[k], A(i, j), 2e-3 * A.diagonal().maxCoeff()) << i << " " << j;
+      EXPECT_NEAR(s.eq.b[i], b[i], 2e-3 * b.cwiseAbs().maxCoeff()) << i;
     }
     EXPECT_NEAR(s.r2, r2, 2e-3 * r2);
     EXPECT_NEAR(s.r2_truncated, r2t, 2e-3 * r2t);

@@ -149,8 +149,8 @@ TEST(Photometric, Avx2AndScalarSumsAgreeBitForBit) {
         const int first = stride == 2 ? y & 1 : 0;
         const PhotometricRowSums a = simd.sumRow(y, first, stride), b = scalar.sumRow(y, first, stride);
         ASSERT_EQ(a.n, b.n) << trial << " " << stride << " " << y;
-        ASSERT_EQ(std::memcmp(a.A, b.A, sizeof a.A), 0) << trial << " " << stride << " " << y;
-        ASSERT_EQ(std::memcmp(a.b, b.b, sizeof a.b), 0);
+        ASSERT_EQ(std::memcmp(a.eq.A, b.eq.A, sizeof a.eq.A), 0) << trial << " " << stride << " " << y;
+        ASSERT_EQ(std::memcmp(a.eq.b, b.eq.b, sizeof a.eq.b), 0);
         ASSERT_EQ(std::memcmp(&a.r2, &b.r2, sizeof a.r2), 0);
         residuals += a.n;
       }

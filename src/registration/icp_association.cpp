@@ -63,8 +63,8 @@ void pixelScalar(const Setup& s, const float* vc, const float* nc, int lane, Lan
 }
 
 void fold(const LaneSums& L, IcpRowSums& out) {
-  for (int e = 0; e < kB; ++e) out.A[e] = L.folded(e);
-  for (int i = 0; i < 6; ++i) out.b[i] = L.folded(kB + i);
+  for (int e = 0; e < kB; ++e) out.eq.A[e] = L.folded(e);
+  for (int i = 0; i < 6; ++i) out.eq.b[i] = L.folded(kB + i);
   out.r2 = L.folded(kR2);
   out.r2_truncated = L.folded(kR2Truncated);
   out.d2 = L.folded(kD2);

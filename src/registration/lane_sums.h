@@ -1,7 +1,7 @@
 // What ICP's and the photometric term's associations (icp_association.cpp, photometric_association.cpp)
-// share: per-lane sums of a row (float, or double sums of exact float products), the 3-term dot product
-// both builds compute in the same order,
-// and its AVX2 twin. Both files are built with -ffp-contract=off, so neither build fuses a multiply-add.
+// share: per-lane sums of a row (float, or double sums of exact float products), and the 3-term dot
+// product both builds compute in the same order, with its AVX2 twin. Both files are built with
+// -ffp-contract=off, so neither build fuses a multiply-add.
 // Included only by the registration stage's own sources.
 #pragma once
 

@@ -35,17 +35,10 @@ inline float sample(const cv::Mat& m, float x, float y) {
   return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
 }
 
-struct Sums {
-  NormalSums6 eq;
-  double r2 = 0.0;
-  int n = 0;
-};
+// A level's sums: its rows' (photometric_association.h).
+using Sums = PhotometricRowSums;
 
-void addSums(Sums& t, const Sums& s) {
-  t.eq.join(s.eq);
-  t.r2 += s.r2;
-  t.n += s.n;
-}
+void addSums(Sums& t, const Sums& s) { t += s; }
 
 }  // namespace
 
@@ -107,11 +100,7 @@ PhotometricSums accumulatePhotometric(const PhotometricLevel& level, const Eigen
   const Sums s = parallelReduce(
       0, (mv.rows + stride - 1) / stride, Sums{},
       [&](int row, Sums& acc) {
-        const PhotometricRowSums r = associator.sumRow(row * stride, (row & 1) * (stride - 1), stride);
-        for (int k = 0; k < 21; ++k) acc.eq.A[k] += r.A[k];
-        for (int k = 0; k < 6; ++k) acc.eq.b[k] += r.b[k];
-        acc.r2 += r.r2;
-        acc.n += r.n;
+        acc += associator.sumRow(row * stride, (row & 1) * (stride - 1), stride);
       },
       addSums, 16, mv.total() >= kParallelMinPixels);
   const double inv_sigma = 1.0 / params.sigma;

@@ -192,8 +192,8 @@ PhotometricRowSums PhotometricAssociator::sumRow(int y, int first, int stride) c
     for (; x + 7 * stride < cols; x += 8 * stride, k += 8) pixelsAvx2(s_, row, x, stride, L);
   for (; x < cols; x += stride, ++k) pixelScalar(s_, row, x, k % 8, L);
   PhotometricRowSums out;
-  for (int e = 0; e < kB; ++e) out.A[e] = L.folded(e);
-  for (int i = 0; i < 6; ++i) out.b[i] = L.folded(kB + i);
+  for (int e = 0; e < kB; ++e) out.eq.A[e] = L.folded(e);
+  for (int i = 0; i < 6; ++i) out.eq.b[i] = L.folded(kB + i);
   out.r2 = L.folded(kR2);
   out.n = L.n;
   return out;

@@ -20,25 +20,10 @@ namespace {
 // Coarse levels run on one thread: their iterations take less than handing rows out to the pool.
 constexpr std::size_t kParallelMinPixels = 30000;
 
-struct Accum {
-  NormalSums6 eq;  // point-to-plane normal equations
-  double r2 = 0.0;
-  double d2 = 0.0;  // squared distances of the inliers from the camera centre
-  double r2_truncated = 0.0;  // sum of min(r^2, truncation^2) over the inliers (alignment scores)
-  int n = 0;
-  int valid = 0;  // pixels with a vertex and a normal
-  int in_view = 0;  // valid pixels that land on a model pixel with a vertex and a normal
-};
+// A level's sums: its rows' (icp_association.h).
+using Accum = IcpRowSums;
 
-void addAccum(Accum& total, const Accum& a) {
-  total.eq.join(a.eq);
-  total.r2 += a.r2;
-  total.d2 += a.d2;
-  total.r2_truncated += a.r2_truncated;
-  total.n += a.n;
-  total.valid += a.valid;
-  total.in_view += a.in_view;
-}
+void addAccum(Accum& total, const Accum& a) { total += a; }
 
 // Projective association of one level's pixels with the model and the point-to-plane normal equations
 // about the camera centre (truncation > 0 also sums the truncated squared residuals).
@@ -49,15 +34,7 @@ Accum accumulate(const DepthLevel& lv, const cv::Mat& mv, const cv::Mat& mn, con
   return parallelReduce(
       0, lv.vertices.rows, Accum{},
       [&](int y, Accum& acc) {
-        const IcpRowSums row = associator.sumRow(lv.vertices.ptr<cv::Vec3f>(y), lv.normals.ptr<cv::Vec3f>(y), lv.vertices.cols);
-        for (int k = 0; k < 21; ++k) acc.eq.A[k] += row.A[k];
-        for (int k = 0; k < 6; ++k) acc.eq.b[k] += row.b[k];
-        acc.r2 += row.r2;
-        acc.r2_truncated += row.r2_truncated;
-        acc.d2 += row.d2;
-        acc.n += row.n;
-        acc.valid += row.valid;
-        acc.in_view += row.in_view;
+        acc += associator.sumRow(lv.vertices.ptr<cv::Vec3f>(y), lv.normals.ptr<cv::Vec3f>(y), lv.vertices.cols);
       },
       addAccum, 16, lv.vertices.total() >= kParallelMinPixels);
 }

@@ -10,20 +10,28 @@
 #include <opencv2/core.hpp>
 
 #include "vofusion/core/camera.h"
+#include "vofusion/registration/normal_equations.h"
 
 namespace vofusion::fusion {
 
 // One row's sums. Pixel x goes to lane x % 8, each lane a double sum of exact float products (as the
 // scalar loop before it summed every pixel in double), and the 8 lanes are added in lane order.
 struct IcpRowSums {
-  double A[21] = {};  // upper triangle of J^T J, row by row; J = (rotation about the camera centre, translation)
-  double b[6] = {};   // -J^T r
+  NormalSums6 eq;  // J^T J and -J^T r; J = (rotation about the camera centre, translation)
   double r2 = 0.0;            // squared point-to-plane residuals of the inliers
   double r2_truncated = 0.0;  // min(r^2, truncation^2) over the inliers
   double d2 = 0.0;            // squared distances of the inliers from the camera centre
   int n = 0;        // inliers
   int valid = 0;    // pixels with a vertex and a normal
   int in_view = 0;  // valid pixels landing on a model pixel with a vertex and a normal
+
+  // Rows add up to a level (in a fixed order: see parallelReduce).
+  IcpRowSums& operator+=(const IcpRowSums& o) {
+    eq.join(o.eq);
+    r2 += o.r2, r2_truncated += o.r2_truncated, d2 += o.d2;
+    n += o.n, valid += o.valid, in_view += o.in_view;
+    return *this;
+  }
 };
 
 class IcpAssociator {

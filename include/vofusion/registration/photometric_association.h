@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
+#include "vofusion/registration/normal_equations.h"
 #include "vofusion/registration/photometric.h"
 
 namespace vofusion::fusion {
@@ -15,10 +16,16 @@ namespace vofusion::fusion {
 // One row's sums, unwhitened and unscaled (1/sigma^2 and the level's weight apply to the total). The
 // k-th pixel of the row is summed in float into lane k % 8, the 8 lanes added in double in lane order.
 struct PhotometricRowSums {
-  double A[21] = {};  // upper triangle of J^T W J, row by row (W: the Huber weight)
-  double b[6] = {};   // -J^T W r
-  double r2 = 0.0;    // squared residuals, grey levels^2
-  int n = 0;          // residuals
+  NormalSums6 eq;    // J^T W J and -J^T W r (W: the Huber weight)
+  double r2 = 0.0;   // squared residuals, grey levels^2
+  int n = 0;         // residuals
+
+  // Rows add up to a level (in a fixed order: see parallelReduce).
+  PhotometricRowSums& operator+=(const PhotometricRowSums& o) {
+    eq.join(o.eq);
+    r2 += o.r2, n += o.n;
+    return *this;
+  }
 };
 
 class PhotometricAssociator {
