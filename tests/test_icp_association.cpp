@@ -40,10 +40,21 @@ void surfaceMaps(const CameraIntrinsics& cam, const Eigen::Isometry3f& pose, boo
         p = pose * p;
         n = pose.linear() * n;
       }
-      const bool hole = rng.uniform(0.0, 1.0) < 0.06;
-      const bool no_normal = rng.uniform(0.0, 1.0) < 0.03;
-      vertices.at<cv::Vec3f>(v, u) = hole ? cv::Vec3f(kNan, kNan, kNan) : cv::Vec3f(p.x(), p.y(), p.z());
-      normals.at<cv::Vec3f>(v, u) = no_normal ? cv::Vec3f(kNan, kNan, kNan) : cv::Vec3f(n.x(), n.y(), n.z());
+      cv::Vec3f& vertex = vertices.at<cv::Vec3f>(v, u);
+      cv::Vec3f& normal = normals.at<cv::Vec3f>(v, u);
+      vertex = cv::Vec3f(p.x(), p.y(), p.z());
+      normal = cv::Vec3f(n.x(), n.y(), n.z());
+      // Holes; in the frame's maps also the cases only one comparison's NaN rule decides: NaN in y or z
+      // alone (the x test lets it through), a point behind the camera. (A ray cast's model has whole
+      // holes only: a model vertex NaN in z alone would put NaN into both builds' sums.)
+      const double r = rng.uniform(0.0, 1.0);
+      if (r < 0.05) vertex = cv::Vec3f(kNan, kNan, kNan);
+      else if (r < 0.07) normal = cv::Vec3f(kNan, kNan, kNan);
+      else if (world) continue;
+      else if (r < 0.09) vertex[1] = kNan;
+      else if (r < 0.11) vertex[2] = kNan;
+      else if (r < 0.13) normal[2] = kNan;
+      else if (r < 0.15) vertex *= -1.f;
     }
 }
 
@@ -116,19 +127,21 @@ TEST(IcpAssociation, SumsAreThePointToPlaneNormalEquations) {
   // The system written out per pixel, in double (decisions in float, as the association makes them).
   Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
   Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
-  double r2 = 0, r2t = 0;
-  int n = 0;
+  double r2 = 0, r2t = 0, d2 = 0;
+  int n = 0, valid = 0, in_view = 0;
   const Eigen::Isometry3f model_inv = model_pose.inverse();
   for (int y = 0; y < fv.rows; ++y)
     for (int x = 0; x < fv.cols; ++x) {
       const cv::Vec3f v = fv.at<cv::Vec3f>(y, x), nc = fn.at<cv::Vec3f>(y, x);
       if (std::isnan(v[0]) || std::isnan(nc[0])) continue;
+      ++valid;
       const Eigen::Vector3f vg = pose * Eigen::Vector3f(v[0], v[1], v[2]);
       const Eigen::Vector3f pm = model_inv * vg;
       const float uf = cam.fx * pm.x() / pm.z() + cam.cx, vf = cam.fy * pm.y() / pm.z() + cam.cy;
       if (!(pm.z() > 0 && uf > -0.5f && vf > -0.5f && uf < cam.width - 0.5f && vf < cam.height - 0.5f)) continue;
       const cv::Vec3f m = mv.at<cv::Vec3f>(int(vf + 0.5f), int(uf + 0.5f)), mnv = mn.at<cv::Vec3f>(int(vf + 0.5f), int(uf + 0.5f));
       if (std::isnan(m[0]) || std::isnan(mnv[0])) continue;
+      ++in_view;
       const Eigen::Vector3d d = (vg - Eigen::Vector3f(m[0], m[1], m[2])).cast<double>();
       const Eigen::Vector3d nm(mnv[0], mnv[1], mnv[2]);
       const Eigen::Vector3d ng = (pose.linear() * Eigen::Vector3f(nc[0], nc[1], nc[2])).cast<double>();
@@ -140,12 +153,15 @@ TEST(IcpAssociation, SumsAreThePointToPlaneNormalEquations) {
       b -= J * r;
       r2 += r * r;
       r2t += std::min(r * r, double(truncation) * truncation);
+      d2 += (vg - pose.translation()).cast<double>().squaredNorm();
       ++n;
     }
   ASSERT_GT(n, 2000);
   for (const bool simd : {true, false}) {
     const IcpRowSums s = sumAll(IcpAssociator(mv, mn, cam, model_inv, pose, max_distance, max_angle, truncation, simd), fv, fn);
     EXPECT_NEAR(s.n, n, 2);  // a pixel at a threshold may fall either side in float
+    EXPECT_EQ(s.valid, valid);
+    EXPECT_NEAR(s.in_view, in_view, 2);
     int k = 0;
     for (int i = 0; i < 6; ++i) {
       for (int j = i; j < 6; ++j, ++k) EXPECT_NEAR(s.eq.A[k], A(i, j), 2e-3 * A.diagonal().maxCoeff()) << i << " " << j;
@@ -153,5 +169,6 @@ TEST(IcpAssociation, SumsAreThePointToPlaneNormalEquations) {
     }
     EXPECT_NEAR(s.r2, r2, 2e-3 * r2);
     EXPECT_NEAR(s.r2_truncated, r2t, 2e-3 * r2t);
+    EXPECT_NEAR(s.d2, d2, 2e-3 * d2);
   }
 }

@@ -14,7 +14,7 @@ namespace {
 
 using Setup = IcpAssociator::Setup;
 
-// Per-lane float sums of one row: the 21 entries of J^T J, the 6 of -J^T r, then r^2, min(r^2, trunc^2)
+// Per-lane double sums of one row: the 21 entries of J^T J, the 6 of -J^T r, then r^2, min(r^2, trunc^2)
 // and the squared distance from the camera centre.
 constexpr int kEntries = 30;
 constexpr int kB = 21, kR2 = 27, kR2Truncated = 28, kD2 = 29;
@@ -73,9 +73,6 @@ void fold(const LaneSums& L, IcpRowSums& out) {
   out.in_view = L.in_view;
 }
 
-// The same steps on 8 pixels, a rejected pixel adding +0 to its lane. Comparisons are the scalar
-// ones' negations with NaN taken as the scalar code takes it (e.g. `d2 > max` rejects, so a NaN
-// distance is kept: _CMP_NGT_UQ).
 struct V3 {
   __m256 x, y, z;
 };
@@ -98,6 +95,9 @@ __attribute__((target("avx2"))) inline V3 gather3(const float* base, __m256i idx
 
 __attribute__((target("avx2"))) inline __m256 keep(__m256 mask, __m256 x) { return _mm256_and_ps(x, mask); }
 
+// The same steps on 8 pixels, a rejected pixel adding +0 to its lane. Comparisons are the scalar
+// ones' negations with NaN taken as the scalar code takes it (e.g. `d2 > max` rejects, so a NaN
+// distance is kept: _CMP_NGT_UQ).
 __attribute__((target("avx2"))) void pixelsAvx2(const Setup& s, const float* vc, const float* nc, LaneSums& L) {
   const __m256i three = _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21);
   const V3 v{_mm256_i32gather_ps(vc, three, 4), _mm256_i32gather_ps(vc + 1, three, 4), _mm256_i32gather_ps(vc + 2, three, 4)};
@@ -161,8 +161,10 @@ IcpAssociator::IcpAssociator(const cv::Mat& model_vertices, const cv::Mat& model
                              const Eigen::Isometry3f& model_inv, const Eigen::Isometry3f& pose, float max_distance,
                              float max_angle_deg, float truncation, bool simd)
     : avx2_(simd && usesAvx2()) {
-  CV_Assert(model_vertices.type() == CV_32FC3 && model_normals.type() == CV_32FC3 && model_vertices.isContinuous() &&
-            model_normals.isContinuous() && model_vertices.size() == model_normals.size());
+  // An empty model (nothing ray cast yet) has no pixel to land on: every pixel is out of view.
+  CV_Assert(model_vertices.empty() ||
+            (model_vertices.type() == CV_32FC3 && model_normals.type() == CV_32FC3 && model_vertices.isContinuous() &&
+             model_normals.isContinuous() && model_vertices.size() == model_normals.size()));
   storeRowMajor(pose, s_.R, s_.t);
   storeRowMajor(model_inv, s_.Rm, s_.tm);
   s_.fx = camera.fx, s_.fy = camera.fy, s_.cx = camera.cx, s_.cy = camera.cy;

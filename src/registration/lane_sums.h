@@ -8,6 +8,9 @@
 #include <immintrin.h>
 
 namespace vofusion::fusion::lanes {
+// Internal linkage: each including file (all built with -ffp-contract=off) keeps its own copies, so a
+// file built otherwise could never lend the linker a fused one.
+namespace {
 
 // `Entries` sums of one row, 8 lanes each (the row's k-th pixel goes to lane k % 8), starting at +0: a
 // rejected pixel's lane in the AVX2 build adds +0, which leaves the sum as the scalar build's skip does.
@@ -58,4 +61,5 @@ __attribute__((target("avx2"))) inline void addValues(double* sum, __m256 v) {
 }
 __attribute__((target("avx2"))) inline int count(__m256 mask) { return __builtin_popcount(_mm256_movemask_ps(mask)); }
 
+}  // namespace
 }  // namespace vofusion::fusion::lanes

@@ -68,7 +68,6 @@ void pixelScalar(const Setup& s, const RefRow& ref, int x, int lane, LaneSums& L
   ++L.n;
 }
 
-// The same steps on 8 pixels (x, x + stride, ...), a rejected pixel adding +0 to its lane.
 __attribute__((target("avx2"))) inline __m256 gatherMasked(const float* base, __m256i idx, __m256 mask) {
   return _mm256_mask_i32gather_ps(_mm256_setzero_ps(), base, idx, mask, 4);
 }
@@ -85,6 +84,8 @@ __attribute__((target("avx2"))) inline __m256 sampleV(const float* image, int co
   return _mm256_add_ps(_mm256_mul_ps(by, top), _mm256_mul_ps(ay, bottom));
 }
 
+// The same steps on 8 pixels (x, x + stride, ...), a rejected pixel adding +0 to its lane; comparisons
+// as the scalar ones take NaN.
 __attribute__((target("avx2"))) void pixelsAvx2(const Setup& s, const RefRow& ref, int x, int stride, LaneSums& L) {
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i at = _mm256_mullo_epi32(lane, _mm256_set1_epi32(stride));  // the pixels, from x
@@ -147,8 +148,18 @@ void storeRowMajor(const Eigen::Matrix3d& M, float* out) {
     for (int j = 0; j < 3; ++j) out[3 * i + j] = static_cast<float>(M(i, j));
 }
 
+PhotometricRowSums fold(const LaneSums& L) {
+  PhotometricRowSums out;
+  for (int e = 0; e < kB; ++e) out.eq.A[e] = L.folded(e);
+  for (int i = 0; i < 6; ++i) out.eq.b[i] = L.folded(kB + i);
+  out.r2 = L.folded(kR2);
+  out.n = L.n;
+  return out;
+}
+
+// An empty image (no colour) gives max_x < 0: every pixel falls outside it.
 const float* continuousFloats(const cv::Mat& m) {
-  CV_Assert(m.type() == CV_32F && m.isContinuous());
+  CV_Assert(m.empty() || (m.type() == CV_32F && m.isContinuous()));
   return m.ptr<float>();
 }
 
@@ -191,12 +202,7 @@ PhotometricRowSums PhotometricAssociator::sumRow(int y, int first, int stride) c
   if (avx2_)
     for (; x + 7 * stride < cols; x += 8 * stride, k += 8) pixelsAvx2(s_, row, x, stride, L);
   for (; x < cols; x += stride, ++k) pixelScalar(s_, row, x, k % 8, L);
-  PhotometricRowSums out;
-  for (int e = 0; e < kB; ++e) out.eq.A[e] = L.folded(e);
-  for (int i = 0; i < 6; ++i) out.eq.b[i] = L.folded(kB + i);
-  out.r2 = L.folded(kR2);
-  out.n = L.n;
-  return out;
+  return fold(L);
 }
 
 }  // namespace vofusion::fusion
