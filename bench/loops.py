@@ -17,6 +17,9 @@ import subprocess
 import sys
 import time
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import machine  # noqa: E402
+
 
 def log(msg):
     print("[bench loops] " + msg, file=sys.stderr, flush=True)
@@ -109,6 +112,7 @@ def fmt(v, digits=4):
 
 def markdown(rows, command):
     out = ["# Loop closure on the loop scene", "", "`%s`, %s" % (command, time.strftime("%Y-%m-%d %H:%M")), "",
+           "Machine: " + machine.describe() + ".", "",
            "Without = the run's tracked trajectory (loop closure never feeds back into tracking). Lap end: where "
            "the path comes back to its start, the later pose's position relative to the earlier, against the truth. "
            "Loop thread: wall time of its stages (it shares two cores with the frame loop's two threads, so it also "

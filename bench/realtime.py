@@ -20,6 +20,9 @@ import subprocess
 import sys
 import time
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import machine  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 
@@ -111,7 +114,7 @@ def main():
              "start-up: from the process's start to the first frame (summary.json `seconds_before_frames`; for a "
              "build without it, the wall time of `vofusion --help`); tail: from the last frame to the last output "
              "(wall time minus start-up and frame loop). Live: `vofusion-grab --replay <seq> --live --no-gui`, "
-             "recording included, frames processed of those played.", ""]
+             "recording included, frames processed of those played.", "", "Machine: " + machine.describe() + ".", ""]
     for seq in seqs:
         name = os.path.basename(os.path.normpath(seq))
         res = {}
