@@ -148,13 +148,6 @@ __attribute__((target("avx2"))) void pixelsAvx2(const Setup& s, const float* vc,
   lanes::addValues(L.s[kD2], keep(ok, dotv(pc, pc)));
 }
 
-void storeRowMajor(const Eigen::Isometry3f& T, float* R, float* t) {
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) R[3 * i + j] = T.linear()(i, j);
-    t[i] = T.translation()[i];
-  }
-}
-
 }  // namespace
 
 IcpAssociator::IcpAssociator(const cv::Mat& model_vertices, const cv::Mat& model_normals, const CameraIntrinsics& camera,
@@ -165,8 +158,10 @@ IcpAssociator::IcpAssociator(const cv::Mat& model_vertices, const cv::Mat& model
   CV_Assert(model_vertices.empty() ||
             (model_vertices.type() == CV_32FC3 && model_normals.type() == CV_32FC3 && model_vertices.isContinuous() &&
              model_normals.isContinuous() && model_vertices.size() == model_normals.size()));
-  storeRowMajor(pose, s_.R, s_.t);
-  storeRowMajor(model_inv, s_.Rm, s_.tm);
+  lanes::storeRowMajor(pose.linear(), s_.R);
+  lanes::storeRowMajor(pose.translation(), s_.t);
+  lanes::storeRowMajor(model_inv.linear(), s_.Rm);
+  lanes::storeRowMajor(model_inv.translation(), s_.tm);
   s_.fx = camera.fx, s_.fy = camera.fy, s_.cx = camera.cx, s_.cy = camera.cy;
   s_.max_d2 = max_distance * max_distance;
   s_.min_cos = static_cast<float>(std::cos(max_angle_deg * M_PI / 180.0));

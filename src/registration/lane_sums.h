@@ -7,6 +7,8 @@
 
 #include <immintrin.h>
 
+#include <Eigen/Core>
+
 namespace vofusion::fusion::lanes {
 // Internal linkage: each including file (all built with -ffp-contract=off) keeps its own copies, so a
 // file built otherwise could never lend the linker a fused one.
@@ -25,6 +27,23 @@ struct alignas(32) LaneSums {
     return sum;
   }
 };
+
+// The matrix's entries, row by row, as floats (the builds' inputs).
+template <class Derived>
+void storeRowMajor(const Eigen::MatrixBase<Derived>& m, float* out) {
+  for (int i = 0; i < m.rows(); ++i)
+    for (int j = 0; j < m.cols(); ++j) out[m.cols() * i + j] = static_cast<float>(m(i, j));
+}
+
+// Bilinear sample of a row-major float image at (u, v), which the caller keeps inside
+// [0, cols-1) x [0, rows-1).
+inline float sample(const float* image, int cols, float u, float v) {
+  const int x0 = static_cast<int>(u), y0 = static_cast<int>(v);
+  const float ax = u - static_cast<float>(x0), ay = v - static_cast<float>(y0);
+  const float* r0 = image + y0 * cols + x0;
+  const float* r1 = r0 + cols;
+  return (1.f - ay) * ((1.f - ax) * r0[0] + ax * r0[1]) + ay * ((1.f - ax) * r1[0] + ax * r1[1]);
+}
 
 // ((m0 x + m1 y) + m2 z), in this order in both builds.
 inline float dot3(const float* m, float x, float y, float z) { return (m[0] * x + m[1] * y) + m[2] * z; }

@@ -9,6 +9,8 @@
 #include "vofusion/registration/normal_equations.h"
 #include "vofusion/registration/photometric_association.h"
 
+#include "lane_sums.h"
+
 namespace vofusion::fusion {
 
 namespace {
@@ -26,14 +28,11 @@ IntensityLevel withGradients(cv::Mat grey) {
   return l;
 }
 
-// Bilinear sample at (x, y), which the caller keeps inside [0, cols-1) x [0, rows-1).
-inline float sample(const cv::Mat& m, float x, float y) {
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const float ax = x - x0, ay = y - y0;
-  const float* r0 = m.ptr<float>(y0) + x0;
-  const float* r1 = m.ptr<float>(y0 + 1) + x0;
-  return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
-}
+// Bilinear sample of a continuous float image (lane_sums.h's, which the association uses too).
+inline float sample(const cv::Mat& m, float x, float y) { return lanes::sample(m.ptr<float>(), m.cols, x, y); }
+
+// An empty image (no colour) gives max_x < 0: every pixel falls outside it.
+bool continuousFloats(const cv::Mat& m) { return m.empty() || (m.type() == CV_32F && m.isContinuous()); }
 
 // A level's sums: its rows' (photometric_association.h).
 using Sums = PhotometricRowSums;
@@ -60,6 +59,7 @@ std::vector<IntensityLevel> intensityPyramid(const cv::Mat& bgr, cv::Size size, 
 
 IntensityLevel resampleAtModel(const IntensityLevel& image, const cv::Mat& model_vertices, const Eigen::Isometry3d& colour_pose,
                                const CameraIntrinsics& camera) {
+  CV_Assert(continuousFloats(image.grey) && continuousFloats(image.dx) && continuousFloats(image.dy));
   IntensityLevel out;
   out.grey.create(model_vertices.size(), CV_32F);
   out.dx.create(model_vertices.size(), CV_32F);

@@ -27,15 +27,8 @@ struct RefRow {
 };
 
 using lanes::dot3;
-
-// Bilinear sample at (u, v), which the caller keeps inside [0, cols-1) x [0, rows-1).
-inline float sample(const float* image, int cols, float u, float v) {
-  const int x0 = static_cast<int>(u), y0 = static_cast<int>(v);
-  const float ax = u - static_cast<float>(x0), ay = v - static_cast<float>(y0);
-  const float* r0 = image + y0 * cols + x0;
-  const float* r1 = r0 + cols;
-  return (1.f - ay) * ((1.f - ax) * r0[0] + ax * r0[1]) + ay * ((1.f - ax) * r1[0] + ax * r1[1]);
-}
+using lanes::sample;
+using lanes::storeRowMajor;
 
 void pixelScalar(const Setup& s, const RefRow& ref, int x, int lane, LaneSums& L) {
   const float gxr = ref.dx[x], gyr = ref.dy[x];
@@ -141,11 +134,6 @@ __attribute__((target("avx2"))) void pixelsAvx2(const Setup& s, const RefRow& re
     lanes::subtract(L.s[kB + i], _mm256_mul_ps(wj, r), ok);
   }
   lanes::add(L.s[kR2], _mm256_mul_ps(r, r), ok);
-}
-
-void storeRowMajor(const Eigen::Matrix3d& M, float* out) {
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) out[3 * i + j] = static_cast<float>(M(i, j));
 }
 
 PhotometricRowSums fold(const LaneSums& L) {
