@@ -1,8 +1,13 @@
 // Loop closure's parts on their own: keyframe selection, the LSH place index, the MRPT pose graph
 // (drift spread over a loop, a false loop removed instead of bending the map), and the loop
 // verification on rendered frames of the synthetic loop and look-alike scenes.
+#include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <random>
+#include <thread>
 
 #include <mrpt/config/CConfigFile.h>
 #include <opencv2/features2d.hpp>
@@ -10,7 +15,9 @@
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
+#include "vofusion/core/thread_name.h"
 #include "vofusion/loop/keyframe.h"
+#include "vofusion/loop/loop_closer.h"
 #include "vofusion/loop/keyframe_store.h"
 #include "vofusion/loop/loop_verifier.h"
 #include "vofusion/tracking/residual_monitor.h"
@@ -465,6 +472,43 @@ TEST(LoopVerifier, LookAlikePlacesAreNotJoined) {
   std::printf("look-alike: %d matches, %d inliers, reason '%s', correction %.3f m\n", c.matches, c.inliers,
               c.reason.c_str(), c.correction_m);
   EXPECT_FALSE(c.accepted);
+}
+
+// The names of this process's threads, from /proc (what top -H and perf show).
+std::vector<std::string> threadNames() {
+  std::vector<std::string> names;
+  for (const auto& task : std::filesystem::directory_iterator("/proc/self/task")) {
+    std::ifstream comm(task.path() / "comm");
+    std::string name;
+    if (std::getline(comm, name)) names.push_back(name);
+  }
+  return names;
+}
+
+TEST(LoopCloser, ItsThreadIsNamedForTopAndPerf) {
+  const auto named = [](const std::string& n) {
+    const std::vector<std::string> all = threadNames();
+    return std::count(all.begin(), all.end(), n);
+  };
+  const auto before = named("vof-loop");
+  {
+    loop::LoopCloser closer(loop::LoopParams{});
+    // The thread names itself when it starts.
+    for (int i = 0; i < 200 && named("vof-loop") == before; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    EXPECT_EQ(named("vof-loop"), before + 1);
+  }
+  EXPECT_EQ(named("vof-loop"), before);
+}
+
+TEST(ThreadName, CutAtLinuxsFifteenCharacters) {
+  std::string got;
+  std::thread([&] {
+    nameThisThread("vof-a-name-longer-than-fifteen");
+    char buf[32] = {};
+    pthread_getname_np(pthread_self(), buf, sizeof buf);
+    got = buf;
+  }).join();
+  EXPECT_EQ(got, "vof-a-name-long");
 }
 
 TEST(LoopParams, ShippedDefaultsFileMatchesTheCode) {

@@ -1,5 +1,7 @@
 #include "vofusion/io/prefetching_source.h"
 
+#include "vofusion/core/thread_name.h"
+
 namespace vofusion {
 
 PrefetchingSource::PrefetchingSource(std::unique_ptr<FrameSource> inner) : inner_(std::move(inner)) {}
@@ -10,6 +12,7 @@ PrefetchingSource::~PrefetchingSource() {
 
 void PrefetchingSource::start() {
   ahead_ = std::async(std::launch::async, [this] {
+    nameThisThread("vof-read");
     Read r;
     r.ok = inner_->next(r.frame);
     return r;

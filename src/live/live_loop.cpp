@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/thread_name.h"
 
 namespace vofusion {
 
@@ -53,6 +54,7 @@ struct Shared {
 bool externalStop(const LiveHooks& h) { return h.stop && h.stop->load(); }
 
 void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks, Shared& sh) {
+  nameThisThread("vof-grab");
   StopReason reason = StopReason::EndOfStream;
   std::string error;
   try {

@@ -16,6 +16,7 @@
 #include "vofusion/loop/loop_verifier.h"
 #include "vofusion/loop/place_index.h"
 #include "vofusion/loop/pose_graph.h"
+#include "vofusion/core/thread_name.h"
 
 namespace vofusion::loop {
 
@@ -68,6 +69,7 @@ struct LoopCloser::Impl {
     // time (summary.json) then counts that work whole. The cost: a keyframe takes longer in wall time,
     // and relocalise() and finish() wait longer for the thread to be idle. The same results:
     // parallelReduce's split is fixed, whatever the thread count.
+    nameThisThread("vof-loop");
     tbb::task_arena alone(1);
     for (;;) {
       Keyframe k;

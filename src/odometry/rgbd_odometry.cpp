@@ -18,6 +18,7 @@
 #include "vofusion/features/keypoint_union.h"
 #include "vofusion/odometry/colour_time_evidence.h"
 #include "vofusion/core/state_archive.h"
+#include "vofusion/core/thread_name.h"
 
 namespace vofusion {
 
@@ -241,6 +242,7 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
       prepared = prepareNarf(frame.depth, frame.camera, params.narf);
     }
     ex.narf_job = std::async(std::launch::async, [prepared = std::move(prepared)] {
+      nameThisThread("vof-narf");
       const auto t0 = std::chrono::steady_clock::now();
       auto k = detectNarf(prepared);
       return std::make_pair(std::move(k), secondsSince(t0));

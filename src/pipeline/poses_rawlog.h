@@ -12,6 +12,7 @@
 #include <mrpt/obs/CObservationRobotPose.h>
 
 #include "vofusion/core/frame.h"
+#include "vofusion/core/thread_name.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/pipeline/reconstruction.h"
@@ -54,6 +55,7 @@ class PosesRawlog {
     return o;
   }
   void loop() {
+    nameThisThread("vof-rawlog");
     for (;;) {
       std::pair<Frame, FrameReport> item;
       {

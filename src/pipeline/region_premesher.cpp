@@ -11,6 +11,8 @@
 
 #include <tbb/task_arena.h>
 
+#include "vofusion/core/thread_name.h"
+
 #include "union_find.h"
 
 namespace vofusion {
@@ -127,6 +129,7 @@ void RegionPremesher::stop() {
 void RegionPremesher::run() {
   // Only what the frame loop leaves of the two cores: the lowest priority, and marching cubes'
   // parallel loops kept on this thread (a one-slot arena) instead of the pool the frame loop uses.
+  nameThisThread("vof-premesh");
   setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
   tbb::task_arena alone(1);
   for (;;) {
