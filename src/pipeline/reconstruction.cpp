@@ -1,6 +1,7 @@
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/state_archive.h"
+#include "vofusion/tracking/path_smoother.h"
 
 #include <chrono>
 #include <map>
@@ -42,8 +43,10 @@ struct Reconstruction::Impl {
   Trajectory trajectory;  // tracked
   loop::LoopParams loop_params;
   std::unique_ptr<loop::LoopCloser> loops;  // null: loop closure off
+  Trajectory smoothed;                      // after finish(): the tracked centres smoothed (path_smoother.h)
+  PathNoise path_noise;                     // what smoothed them
   Trajectory optimised;                     // after finish(), when loop closure ran
-  double max_correction = 0.0;              // m, largest tracked -> optimised pose change (finish())
+  double max_correction = 0.0;              // m, largest smoothed -> optimised pose change (finish())
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
   KinFuStats released_stats;                // fusionStats() when releaseMap() freed the map
@@ -185,19 +188,26 @@ FrameReport Reconstruction::process(const Frame& frame) {
 
 TrackingMode Reconstruction::mode() const { return impl_->mode; }
 const Trajectory& Reconstruction::trajectory() const {
-  return impl_->finished && impl_->loops ? impl_->optimised : impl_->trajectory;
+  if (!impl_->finished) return impl_->trajectory;
+  return impl_->loops ? impl_->optimised : impl_->smoothed;
 }
-const Trajectory& Reconstruction::trackedTrajectory() const { return impl_->trajectory; }
+const Trajectory& Reconstruction::trackedTrajectory() const {
+  return impl_->finished ? impl_->smoothed : impl_->trajectory;
+}
+const Trajectory& Reconstruction::fusedPoses() const { return impl_->trajectory; }
+const PathNoise& Reconstruction::pathNoise() const { return impl_->path_noise; }
 
 void Reconstruction::finish() {
   Impl& m = *impl_;
   if (m.finished) return;
   m.waitFusion();
+  // The frames fused into the map are the measurements; lost, predicted and unfused frames end a run.
+  m.smoothed = smoothPath(m.trajectory, m.fused, &m.path_noise);
   if (m.loops) {
     m.loops->finish();
-    m.optimised = m.loops->correct(m.trajectory);
-    for (std::size_t i = 0; i < m.trajectory.size(); ++i)
-      m.max_correction = std::max(m.max_correction, m.trajectory[i].pose.distanceTo(m.optimised[i].pose));
+    m.optimised = m.loops->correct(m.smoothed);
+    for (std::size_t i = 0; i < m.smoothed.size(); ++i)
+      m.max_correction = std::max(m.max_correction, m.smoothed[i].pose.distanceTo(m.optimised[i].pose));
   }
   m.finished = true;
 }

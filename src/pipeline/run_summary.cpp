@@ -50,6 +50,20 @@ json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth) {
   return a;
 }
 
+// How far the written path's centres are from those the frames were fused at, and the noise levels
+// that smoothed them (tracking/path_smoother.h).
+json pathSmoothingJson(const Reconstruction& rec) {
+  const Trajectory &fused = rec.fusedPoses(), &smoothed = rec.trackedTrajectory();
+  double sum = 0.0, largest = 0.0;
+  for (std::size_t i = 0; i < fused.size() && i < smoothed.size(); ++i) {
+    const double d = fused[i].pose.distanceTo(smoothed[i].pose);
+    sum += d, largest = std::max(largest, d);
+  }
+  const PathNoise& n = rec.pathNoise();
+  return {{"measurement_sigma_m", n.measurement}, {"acceleration_sigma_m", n.acceleration}, {"frame_interval_s", n.interval},
+          {"pairs", n.pairs}, {"mean_shift_m", fused.empty() ? 0.0 : sum / double(fused.size())}, {"max_shift_m", largest}};
+}
+
 json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std::size_t frames) {
   std::size_t active = 0, removed = 0;
   for (const loop::LoopRecord& l : lc.loops()) (l.active ? active : removed)++;
@@ -114,6 +128,7 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
   s["seconds"] = info.seconds;
   s["fps"] = info.seconds > 0 ? frames / info.seconds : 0.0;
   s["stages"] = timesJson(rec.totalTimes(), frames);
+  s["path_smoothing"] = pathSmoothingJson(rec);
   const KinFuStats ks = rec.fusionStats();
   s["fusion"] = {{"volume_shifts", ks.shifts}, {"icp_degenerate_frames", ks.degenerate},
                  {"model_overruled_frames", ks.model_overruled},

@@ -19,6 +19,7 @@ nlohmann::json meshJson(const TriangleMesh& m);
 // summary.json "loops": one entry per accepted loop; with ground truth, how far the loop's measured
 // relative pose is from the truth's (what a loop is worth, whatever the tracker did).
 nlohmann::json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth);
+nlohmann::json pathSmoothingJson(const Reconstruction& rec);
 nlohmann::json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std::size_t frames);
 // Faces against the marching-cubes mesh; distances against the mesh just before simplification.
 nlohmann::json simplificationJson(const MeshSimplification& s, std::size_t raw_faces);

@@ -25,6 +25,7 @@
 #include "vofusion/loop/loop_closer.h"
 #include "vofusion/core/triangle_mesh.h"
 #include "vofusion/odometry/rgbd_odometry.h"
+#include "vofusion/tracking/path_smoother.h"
 
 namespace vofusion {
 
@@ -61,9 +62,13 @@ class Reconstruction {
 
   TrackingMode mode() const;
   // One pose per processed frame (held pose when lost): after finish(), the loop-closed poses when
-  // loop closure ran, else (and before finish()) the tracked ones.
+  // loop closure ran, else the tracked ones smoothed; before finish(), the tracked ones.
   const Trajectory& trajectory() const;
-  const Trajectory& trackedTrajectory() const;  // the tracker's poses, before any loop
+  // The tracker's poses, before any loop; after finish(), their camera centres smoothed over each run of
+  // fused frames (tracking/path_smoother.h), orientations as tracked.
+  const Trajectory& trackedTrajectory() const;
+  const Trajectory& fusedPoses() const;  // the tracker's poses as they came: where each frame was fused
+  const PathNoise& pathNoise() const;    // after finish(): the noise levels the smoothing found
   // KinFu::setShiftObserver on the tracking map (not on the volume reintegrate() fuses anew).
   void setShiftObserver(KinFu::ShiftObserver observer);
   // End of the frames: waits for the fusion and the loop-closure thread, then corrects the trajectory
@@ -74,7 +79,7 @@ class Reconstruction {
   // After finish(): loops moved some pose by more than [loop] reintegrate_min_correction, so the map
   // (fused at the tracked poses) should be fused again at the corrected ones.
   bool mapNeedsReintegration() const;
-  double maxLoopCorrection() const;  // after finish(): largest distance a loop moved a pose, m
+  double maxLoopCorrection() const;  // after finish(): largest distance a loop moved a (smoothed) pose, m
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
   // fresh volume at the corrected poses; frames not fused the first time are skipped again, and so are
   // frames the run never processed (earlier than the next processed frame's timestamp). progress
