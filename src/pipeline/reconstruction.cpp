@@ -1,7 +1,6 @@
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/state_archive.h"
-#include "vofusion/tracking/path_smoother.h"
 
 #include <chrono>
 #include <map>
@@ -44,8 +43,9 @@ struct Reconstruction::Impl {
   loop::LoopParams loop_params;
   std::unique_ptr<loop::LoopCloser> loops;  // null: loop closure off
   Trajectory smoothed;                      // after finish(): the tracked centres smoothed (path_smoother.h)
-  PathNoise path_noise;                     // what smoothed them
-  Trajectory optimised;                     // after finish(), when loop closure ran
+  PathSmoothing smoothing;                  // what smoothed them, and how far
+  Trajectory optimised;                     // after finish(), when loop closure ran: `smoothed` loop-closed
+  Trajectory optimised_as_tracked;          // the same corrections on the poses as tracked: reintegrate() fuses there
   double max_correction = 0.0;              // m, largest smoothed -> optimised pose change (finish())
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
@@ -194,18 +194,26 @@ const Trajectory& Reconstruction::trajectory() const {
 const Trajectory& Reconstruction::trackedTrajectory() const {
   return impl_->finished ? impl_->smoothed : impl_->trajectory;
 }
-const Trajectory& Reconstruction::fusedPoses() const { return impl_->trajectory; }
-const PathNoise& Reconstruction::pathNoise() const { return impl_->path_noise; }
+const Trajectory& Reconstruction::fusedTrajectory() const {
+  return impl_->reintegrated && impl_->loops ? impl_->optimised_as_tracked : impl_->trajectory;
+}
+const PathSmoothing& Reconstruction::pathSmoothing() const { return impl_->smoothing; }
 
 void Reconstruction::finish() {
   Impl& m = *impl_;
   if (m.finished) return;
   m.waitFusion();
   // The frames fused into the map are the measurements; lost, predicted and unfused frames end a run.
-  m.smoothed = smoothPath(m.trajectory, m.fused, &m.path_noise);
+  m.smoothed = smoothPath(m.trajectory, m.fused, &m.smoothing.noise);
+  for (std::size_t i = 0; i < m.smoothed.size(); ++i) {
+    const double d = m.trajectory[i].pose.distanceTo(m.smoothed[i].pose);
+    m.smoothing.mean_shift += d / double(m.smoothed.size());
+    m.smoothing.max_shift = std::max(m.smoothing.max_shift, d);
+  }
   if (m.loops) {
     m.loops->finish();
     m.optimised = m.loops->correct(m.smoothed);
+    m.optimised_as_tracked = m.loops->correct(m.trajectory);
     for (std::size_t i = 0; i < m.smoothed.size(); ++i)
       m.max_correction = std::max(m.max_correction, m.smoothed[i].pose.distanceTo(m.optimised[i].pose));
   }
@@ -227,7 +235,8 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
                                         const std::function<void(std::size_t)>& progress) {
   Impl& m = *impl_;
   finish();
-  const Trajectory& poses = trajectory();
+  // The map follows the loops, not the smoothing: each frame fused again where it was fused, corrected.
+  const Trajectory& poses = m.loops ? m.optimised_as_tracked : m.trajectory;
   // The tracking run's statistics stay (guesses, shifts); the map and its memory are the new volume's.
   const KinFuStats tracking = m.kinfu->stats();
   // The tracking run's map goes before the new one is made: two volumes with their world models at

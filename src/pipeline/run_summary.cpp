@@ -50,18 +50,13 @@ json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth) {
   return a;
 }
 
-// How far the written path's centres are from those the frames were fused at, and the noise levels
-// that smoothed them (tracking/path_smoother.h).
+// The noise levels that smoothed the tracked path and how far its centres moved from where the frames
+// were tracked (and fused) (tracking/path_smoother.h).
 json pathSmoothingJson(const Reconstruction& rec) {
-  const Trajectory &fused = rec.fusedPoses(), &smoothed = rec.trackedTrajectory();
-  double sum = 0.0, largest = 0.0;
-  for (std::size_t i = 0; i < fused.size() && i < smoothed.size(); ++i) {
-    const double d = fused[i].pose.distanceTo(smoothed[i].pose);
-    sum += d, largest = std::max(largest, d);
-  }
-  const PathNoise& n = rec.pathNoise();
-  return {{"measurement_sigma_m", n.measurement}, {"acceleration_sigma_m", n.acceleration}, {"frame_interval_s", n.interval},
-          {"pairs", n.pairs}, {"mean_shift_m", fused.empty() ? 0.0 : sum / double(fused.size())}, {"max_shift_m", largest}};
+  const PathSmoothing& s = rec.pathSmoothing();
+  return {{"measurement_sigma_m", s.noise.measurement}, {"acceleration_sigma_m", s.noise.acceleration},
+          {"frame_interval_s", s.noise.interval}, {"pairs", s.noise.pairs}, {"mean_shift_m", s.mean_shift},
+          {"max_shift_m", s.max_shift}};
 }
 
 json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std::size_t frames) {

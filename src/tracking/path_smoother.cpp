@@ -60,10 +60,15 @@ PathNoise estimatePathNoise(const Trajectory& path, const std::vector<bool>& mea
   const auto runs = measuredRuns(path, measured);
   noise.interval = medianInterval(path, runs);
   if (!(noise.interval > 0.0)) return noise;
-  double sum_sq = 0.0, sum_pairs = 0.0;
+  // Per axis, the scaled prediction errors u_i = e_i / scale_i: white measurement noise gives u_i the
+  // variance d_i sigma_m^2 (its coefficients' squares / scale_i^2) and neighbours the covariance
+  // c_i sigma_m^2 (their overlapping coefficients' products); the acceleration adds sigma_a^2 to the
+  // variance only. Moments matched over the whole path.
+  double sum_sq = 0.0, sum_d = 0.0, sum_pairs = 0.0, sum_c = 0.0;
   std::size_t errors = 0;
   for (const auto& [first, last] : runs) {
     bool have_last = false;
+    double last_coef[3] = {0.0, 0.0, 0.0}, last_scale = 1.0;
     Eigen::Vector3d last_error = Eigen::Vector3d::Zero();
     for (std::size_t i = first + 1; i + 1 < last; ++i) {
       double coef[3], scale;
@@ -71,27 +76,35 @@ PathNoise estimatePathNoise(const Trajectory& path, const std::vector<bool>& mea
         have_last = false;
         continue;
       }
-      const Eigen::Vector3d e = (coef[0] * centre(path[i - 1]) + coef[1] * centre(path[i]) + coef[2] * centre(path[i + 1])) / scale;
-      sum_sq += e.squaredNorm();
+      const Eigen::Vector3d u = (coef[0] * centre(path[i - 1]) + coef[1] * centre(path[i]) + coef[2] * centre(path[i + 1])) / scale;
+      sum_sq += u.squaredNorm();
+      sum_d += (coef[0] * coef[0] + coef[1] * coef[1] + coef[2] * coef[2]) / (scale * scale);
       ++errors;
-      if (have_last) sum_pairs += e.dot(last_error), ++noise.pairs;
-      last_error = e, have_last = true;
+      if (have_last) {  // u_{i-1} reads frames i-2, i-1, i; u_i reads i-1, i, i+1
+        sum_pairs += u.dot(last_error);
+        sum_c += (last_coef[1] * coef[0] + last_coef[2] * coef[1]) / (last_scale * scale);
+        ++noise.pairs;
+      }
+      std::copy(coef, coef + 3, last_coef), last_scale = scale, last_error = u, have_last = true;
     }
   }
   if (noise.pairs == 0) return noise;
-  const double variance = sum_sq / double(3 * errors), covariance = sum_pairs / double(3 * noise.pairs);
-  if (!(variance > 0.0)) return noise;
-  // Neighbouring errors correlate by rho = -4 sigma_m^2 / (sigma_a^2 + 6 sigma_m^2), which is -2/3 when
-  // the path is white noise about a constant velocity. Trusted one standard error (1/sqrt(pairs)) short
-  // of what the pairs show: no more smoothing than they prove.
-  const double rho = std::max(covariance / variance, -2.0 / 3.0 + 1.0 / std::sqrt(double(noise.pairs)));
+  const double variance = sum_sq / double(3 * errors), d = sum_d / double(errors);
+  const double covariance = sum_pairs / double(3 * noise.pairs), c = sum_c / double(noise.pairs);
+  if (!(variance > 0.0) || !(c < 0.0)) return noise;
+  // rho = covariance / variance lies between 0 (no white noise) and c / d (white noise about a constant
+  // velocity, sigma_a = 0; -4/6 at equal intervals). The measured rho is taken as it is, but kept one
+  // standard error (1/sqrt(pairs), as a fraction of -2/3) inside that limit, so that sigma_a never
+  // vanishes (a run would become a straight line); with 2 pairs or fewer nothing is smoothed.
+  const double limit = c / d;
+  const double rho = std::max(covariance / variance, limit * (1.0 - 1.5 / std::sqrt(double(noise.pairs))));
   if (!(rho < 0.0)) return noise;
-  noise.measurement = std::sqrt(-rho * variance / 4.0);
-  noise.acceleration = std::sqrt(variance * (1.0 + 1.5 * rho));
+  noise.measurement = std::sqrt(rho * variance / c);
+  noise.acceleration = std::sqrt(variance * (1.0 - rho / limit));
   return noise;
 }
 
-Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, const PathNoise& noise) {
+Trajectory smoothPathWith(const Trajectory& path, const std::vector<bool>& measured, const PathNoise& noise) {
   Trajectory out = path;
   if (!noise.smoothed() || !(noise.interval > 0.0)) return out;
   const double w_measurement = 1.0 / (noise.measurement * noise.measurement);
@@ -128,7 +141,7 @@ Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured,
 Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, PathNoise* noise_out) {
   const PathNoise noise = estimatePathNoise(path, measured);
   if (noise_out) *noise_out = noise;
-  return smoothPath(path, measured, noise);
+  return smoothPathWith(path, measured, noise);
 }
 
 }  // namespace vofusion

@@ -67,12 +67,14 @@ class Reconstruction {
   // The tracker's poses, before any loop; after finish(), their camera centres smoothed over each run of
   // fused frames (tracking/path_smoother.h), orientations as tracked.
   const Trajectory& trackedTrajectory() const;
-  const Trajectory& fusedPoses() const;  // the tracker's poses as they came: where each frame was fused
-  const PathNoise& pathNoise() const;    // after finish(): the noise levels the smoothing found
+  // Where each frame was fused into the map: as tracked, loop-corrected once reintegrate() ran.
+  const Trajectory& fusedTrajectory() const;
+  const PathSmoothing& pathSmoothing() const;  // after finish(): what smoothed the tracked path, how far
   // KinFu::setShiftObserver on the tracking map (not on the volume reintegrate() fuses anew).
   void setShiftObserver(KinFu::ShiftObserver observer);
-  // End of the frames: waits for the fusion and the loop-closure thread, then corrects the trajectory
-  // (every pose follows its keyframe). Idempotent; process() must not be called afterwards.
+  // End of the frames: waits for the fusion and the loop-closure thread, smooths the tracked path's
+  // centres, then corrects it (every pose follows its keyframe). Idempotent; process() must not be
+  // called afterwards.
   void finish();
   // Loop closure ([loop] enabled, and a mode with the odometry's features); null when off.
   const loop::LoopCloser* loopCloser() const;
@@ -81,7 +83,7 @@ class Reconstruction {
   bool mapNeedsReintegration() const;
   double maxLoopCorrection() const;  // after finish(): largest distance a loop moved a (smoothed) pose, m
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
-  // fresh volume at the corrected poses; frames not fused the first time are skipped again, and so are
+  // fresh volume at the corrected poses (the loops' corrections on the poses as tracked, unsmoothed); frames not fused the first time are skipped again, and so are
   // frames the run never processed (earlier than the next processed frame's timestamp). progress
   // gets the number of frames read. Returns the number of frames fused.
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,

@@ -8,8 +8,11 @@
 //
 // The two noise levels come from the path itself, not from a table: of the constant-velocity
 // prediction errors e_i (second differences), white measurement noise sigma_m adds 6 sigma_m^2 to
-// their variance and -4 sigma_m^2 to the covariance of neighbours, acceleration noise adds to the
-// variance only (Mehra's innovation correlation). bench/results/2026-12-02-path-smoothing.md.
+// their variance and -4 sigma_m^2 to the covariance of neighbours (at equal frame intervals; the
+// estimate uses each pair's own coefficients), acceleration noise adds to the variance only (Mehra's
+// innovation correlation). One noise level per recording: squared sums, so a few large errors raise
+// it for the whole path.
+// bench/results/2026-12-02-path-smoothing.md.
 //
 //   PathNoise noise;
 //   Trajectory smoothed = smoothPath(tracked, measured, &noise);
@@ -28,6 +31,12 @@ struct PathNoise {
   bool smoothed() const { return measurement > 0.0 && acceleration > 0.0; }
 };
 
+// A path's smoothing as a run reports it: the noise levels, and how far the centres moved.
+struct PathSmoothing {
+  PathNoise noise;
+  double mean_shift = 0.0, max_shift = 0.0;  // m
+};
+
 // The noise levels of the measured frames' centres. Too few pairs, or no negative correlation (no
 // white noise to remove): measurement = 0, and smoothPath leaves the path as it is.
 PathNoise estimatePathNoise(const Trajectory& path, const std::vector<bool>& measured);
@@ -40,6 +49,6 @@ PathNoise estimatePathNoise(const Trajectory& path, const std::vector<bool>& mea
 Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, PathNoise* noise_out = nullptr);
 
 // The same with given noise levels (tests; noise.interval > 0).
-Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, const PathNoise& noise);
+Trajectory smoothPathWith(const Trajectory& path, const std::vector<bool>& measured, const PathNoise& noise);
 
 }  // namespace vofusion
