@@ -39,6 +39,11 @@ void walk(std::size_t frames, double sigma_a, double sigma_m, std::uint32_t seed
   }
 }
 
+// The whole path as one run of measured frames.
+Trajectory smoothWhole(const Trajectory& path, PathNoise& noise) {
+  return smoothPath(path, std::vector<bool>(path.size(), true), &noise);
+}
+
 double rmsError(const Trajectory& a, const Trajectory& b) {
   double sum = 0.0;
   for (std::size_t i = 0; i < a.size(); ++i) sum += std::pow(a[i].pose.distanceTo(b[i].pose), 2);
@@ -67,7 +72,7 @@ TEST(PathSmoother, WhiteNoiseAboutAConstantVelocityKeepsSomeAcceleration) {
   Trajectory truth, measured;
   walk(300, 0.0, 0.003, 6, truth, measured);
   PathNoise n;
-  const Trajectory smoothed = smoothPath(measured, std::vector<bool>(measured.size(), true), &n);
+  const Trajectory smoothed = smoothWhole(measured, n);
   ASSERT_TRUE(n.smoothed());
   EXPECT_GT(n.acceleration, 0.0);
   EXPECT_NEAR(n.measurement, 0.003, 0.0006);
@@ -79,7 +84,7 @@ TEST(PathSmoother, CentresComeCloserToTheTruthOrientationsStay) {
     Trajectory truth, measured;
     walk(300, 0.001, 0.003, seed, truth, measured);
     PathNoise n;
-    const Trajectory smoothed = smoothPath(measured, std::vector<bool>(measured.size(), true), &n);
+    const Trajectory smoothed = smoothWhole(measured, n);
     ASSERT_TRUE(n.smoothed()) << seed;
     EXPECT_LT(rmsError(smoothed, truth), 0.6 * rmsError(measured, truth)) << seed;
     for (std::size_t i = 0; i < smoothed.size(); ++i) {
@@ -96,7 +101,7 @@ TEST(PathSmoother, ANoiselessPathIsAlmostUntouched) {
     Trajectory truth, measured;
     walk(3000, 0.001, 0.0, seed, truth, measured);
     PathNoise n;
-    const Trajectory smoothed = smoothPath(truth, std::vector<bool>(truth.size(), true), &n);
+    const Trajectory smoothed = smoothWhole(truth, n);
     EXPECT_LT(n.measurement, 0.15 * 0.001) << seed;
     EXPECT_LT(rmsError(smoothed, truth), 1e-4) << seed;
   }
