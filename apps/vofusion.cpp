@@ -45,7 +45,7 @@ const char* kUsage =
     "  --depth-scale  TUM-layout folders: depth PNG units per metre (default: the folder's intrinsics.txt /\n"
     "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n"
     "  --no-loop-closure  keyframes, place recognition and the pose graph off ([loop] enabled = false);\n"
-    "                 trajectory.txt is then the tracked trajectory\n"
+    "                 trajectory.txt is then the tracked trajectory, its centres smoothed\n"
     "  --work-dir     folder of the spill file of bricks that left the volume beyond [kinfu] world_cache_mib\n"
     "                 (default <out>/.tmp; the file is deleted as soon as it is created, so it never stays)\n"
     "  --save-volume  at the end, the map (volume + world model) and the camera pose to file f\n"

@@ -85,9 +85,18 @@ BlackoutRun runBlackout(std::uint32_t seed) {
   std::vector<FrameReport> reports;
   for (std::size_t i = 0; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
   rec.finish();
+  // The map stays where the frames were fused (as tracked), and follows the loops, not the smoothing.
+  Trajectory as_reported;
+  for (const FrameReport& fr : reports) as_reported.push_back({fr.timestamp, fr.pose});
+  const auto expectSamePoses = [](const Trajectory& a, const Trajectory& b, const char* what) {
+    ASSERT_EQ(a.size(), b.size()) << what;
+    for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i].pose.asVectorVal(), b[i].pose.asVectorVal()) << what << " " << i;
+  };
+  expectSamePoses(rec.fusedTrajectory(), as_reported, "fused while tracking");
   if (rec.mapNeedsReintegration()) {
     std::size_t next = 0;
     rec.reintegrate([&](Frame& f) { return next < seq.size() ? (f = seq.render(next++), true) : false; }, [](std::size_t) {});
+    expectSamePoses(rec.fusedTrajectory(), rec.loopCloser()->correct(as_reported), "fused again");
   }
   BlackoutRun r;
   r.view_back = start + second;

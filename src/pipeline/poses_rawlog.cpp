@@ -11,8 +11,9 @@ void PosesRawlog::finish(const Reconstruction& rec, const Trajectory& ground_tru
   const std::string err = stop();
   if (!err.empty()) throw InputError(writer_.path(), err);
   if (!ground_truth.empty()) writer_.writeGroundTruth(ground_truth);
-  // Loop closure: the corrected poses follow the frames as "VOFUSION_POSE_OPTIMISED" (the tracked
-  // ones went in with each frame as "VOFUSION_POSE"), one per frame in one last sensory frame.
+  // Loop closure: the written path (smoothed, loop-closed: trajectory.txt) follows the frames as
+  // "VOFUSION_POSE_OPTIMISED" (the tracked ones went in with each frame as "VOFUSION_POSE"), one per
+  // frame in one last sensory frame.
   if (rec.loopCloser())
     for (const StampedPose& sp : rec.trajectory()) {
       mrpt::obs::CObservationRobotPose pose;

@@ -46,7 +46,7 @@ struct Reconstruction::Impl {
   PathSmoothing smoothing;                  // what smoothed them, and how far
   Trajectory optimised;                     // after finish(), when loop closure ran: `smoothed` loop-closed
   Trajectory optimised_as_tracked;          // the same corrections on the poses as tracked: reintegrate() fuses there
-  double max_correction = 0.0;              // m, largest smoothed -> optimised pose change (finish())
+  double max_correction = 0.0;              // m, largest move of a fused pose by the loops (finish())
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
   KinFuStats released_stats;                // fusionStats() when releaseMap() freed the map
@@ -214,8 +214,8 @@ void Reconstruction::finish() {
     m.loops->finish();
     m.optimised = m.loops->correct(m.smoothed);
     m.optimised_as_tracked = m.loops->correct(m.trajectory);
-    for (std::size_t i = 0; i < m.smoothed.size(); ++i)
-      m.max_correction = std::max(m.max_correction, m.smoothed[i].pose.distanceTo(m.optimised[i].pose));
+    for (std::size_t i = 0; i < m.trajectory.size(); ++i)
+      m.max_correction = std::max(m.max_correction, m.trajectory[i].pose.distanceTo(m.optimised_as_tracked[i].pose));
   }
   m.finished = true;
 }

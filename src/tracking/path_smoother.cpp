@@ -93,9 +93,10 @@ PathNoise estimatePathNoise(const Trajectory& path, const std::vector<bool>& mea
   const double covariance = sum_pairs / double(3 * noise.pairs), c = sum_c / double(noise.pairs);
   if (!(variance > 0.0) || !(c < 0.0)) return noise;
   // rho = covariance / variance lies between 0 (no white noise) and c / d (white noise about a constant
-  // velocity, sigma_a = 0; -4/6 at equal intervals). The measured rho is taken as it is, but kept one
-  // standard error (1/sqrt(pairs), as a fraction of -2/3) inside that limit, so that sigma_a never
-  // vanishes (a run would become a straight line); with 2 pairs or fewer nothing is smoothed.
+  // velocity, sigma_a = 0; -4/6 at equal intervals). The measured rho is taken as it is, but kept
+  // 1.5/sqrt(pairs) of that limit inside it (about three of its standard errors: a short path seldom
+  // reaches the limit by chance), so that sigma_a never vanishes (a run would become a straight line);
+  // with 2 pairs or fewer nothing is smoothed.
   const double limit = c / d;
   const double rho = std::max(covariance / variance, limit * (1.0 - 1.5 / std::sqrt(double(noise.pairs))));
   if (!(rho < 0.0)) return noise;

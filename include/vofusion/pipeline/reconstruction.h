@@ -81,9 +81,9 @@ class Reconstruction {
   // After finish(): loops moved some pose by more than [loop] reintegrate_min_correction, so the map
   // (fused at the tracked poses) should be fused again at the corrected ones.
   bool mapNeedsReintegration() const;
-  double maxLoopCorrection() const;  // after finish(): largest distance a loop moved a (smoothed) pose, m
+  double maxLoopCorrection() const;  // after finish(): largest distance the loops moved a fused pose, m
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
-  // fresh volume at the corrected poses (the loops' corrections on the poses as tracked, unsmoothed); frames not fused the first time are skipped again, and so are
+  // fresh volume at the corrected poses (the loops' corrections of the poses as tracked); frames not fused the first time are skipped again, and so are
   // frames the run never processed (earlier than the next processed frame's timestamp). progress
   // gets the number of frames read. Returns the number of frames fused.
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
