@@ -41,7 +41,10 @@ void walk(std::size_t frames, double sigma_a, double sigma_m, std::uint32_t seed
 
 // The whole path as one run of measured frames.
 Trajectory smoothWhole(const Trajectory& path, PathNoise& noise) {
-  return smoothPath(path, std::vector<bool>(path.size(), true), &noise);
+  PathSmoothing how;
+  const Trajectory smoothed = smoothPath(path, std::vector<bool>(path.size(), true), &how);
+  noise = how.noise;
+  return smoothed;
 }
 
 double rmsError(const Trajectory& a, const Trajectory& b) {
@@ -117,9 +120,14 @@ TEST(PathSmoother, RunsEndAtUnmeasuredFrames) {
     measured[i].pose = measured[99].pose;
   }
   for (std::size_t i = 110; i < measured.size(); ++i) measured[i].pose.x(measured[i].pose.x() + 0.5);
-  PathNoise noise;
-  const Trajectory smoothed = smoothPath(measured, fused, &noise);
-  ASSERT_TRUE(noise.smoothed());
+  PathSmoothing how;
+  const Trajectory smoothed = smoothPath(measured, fused, &how);
+  ASSERT_TRUE(how.noise.smoothed());
+  // How far the centres moved, as reported.
+  double largest = 0.0;
+  for (std::size_t i = 0; i < smoothed.size(); ++i) largest = std::max(largest, smoothed[i].pose.distanceTo(measured[i].pose));
+  EXPECT_EQ(how.max_shift, largest);
+  EXPECT_GT(how.mean_shift, 0.0);
   for (std::size_t i = 100; i < 110; ++i) EXPECT_EQ(smoothed[i].pose.asVectorVal(), measured[i].pose.asVectorVal()) << i;
   EXPECT_LT(smoothed[99].pose.distanceTo(measured[99].pose), 0.01);
   EXPECT_LT(smoothed[110].pose.distanceTo(measured[110].pose), 0.01);

@@ -204,12 +204,7 @@ void Reconstruction::finish() {
   if (m.finished) return;
   m.waitFusion();
   // The frames fused into the map are the measurements; lost, predicted and unfused frames end a run.
-  m.smoothed = smoothPath(m.trajectory, m.fused, &m.smoothing.noise);
-  for (std::size_t i = 0; i < m.smoothed.size(); ++i) {
-    const double d = m.trajectory[i].pose.distanceTo(m.smoothed[i].pose);
-    m.smoothing.mean_shift += d / double(m.smoothed.size());
-    m.smoothing.max_shift = std::max(m.smoothing.max_shift, d);
-  }
+  m.smoothed = smoothPath(m.trajectory, m.fused, &m.smoothing);
   if (m.loops) {
     m.loops->finish();
     m.optimised = m.loops->correct(m.smoothed);

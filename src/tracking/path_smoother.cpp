@@ -139,10 +139,18 @@ Trajectory smoothPathWith(const Trajectory& path, const std::vector<bool>& measu
   return out;
 }
 
-Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, PathNoise* noise_out) {
+Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, PathSmoothing* out) {
   const PathNoise noise = estimatePathNoise(path, measured);
-  if (noise_out) *noise_out = noise;
-  return smoothPathWith(path, measured, noise);
+  Trajectory smoothed = smoothPathWith(path, measured, noise);
+  if (out) {
+    *out = PathSmoothing{noise, 0.0, 0.0};
+    for (std::size_t i = 0; i < path.size(); ++i) {
+      const double d = path[i].pose.distanceTo(smoothed[i].pose);
+      out->mean_shift += d / double(path.size());
+      out->max_shift = std::max(out->max_shift, d);
+    }
+  }
+  return smoothed;
 }
 
 }  // namespace vofusion

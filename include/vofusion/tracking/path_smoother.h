@@ -14,8 +14,8 @@
 // it for the whole path.
 // bench/results/2026-12-02-path-smoothing.md.
 //
-//   PathNoise noise;
-//   Trajectory smoothed = smoothPath(tracked, measured, &noise);
+//   PathSmoothing how;
+//   Trajectory smoothed = smoothPath(tracked, measured, &how);
 #include <cstddef>
 #include <vector>
 
@@ -45,8 +45,8 @@ PathNoise estimatePathNoise(const Trajectory& path, const std::vector<bool>& mea
 // sum |c_i - z_i|^2 / sigma_m^2 + sum |e_i|^2 / sigma_i^2, where e_i is centre i+1's error against
 // the constant-velocity prediction from i-1 and i, and sigma_i scales sigma_a by the frame intervals
 // (a constant acceleration over them). Unmeasured frames (lost, predicted, not fused) keep their pose
-// and end a run. noise_out: what was used.
-Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, PathNoise* noise_out = nullptr);
+// and end a run. out: the noise levels used and how far the centres moved.
+Trajectory smoothPath(const Trajectory& path, const std::vector<bool>& measured, PathSmoothing* out = nullptr);
 
 // The same with given noise levels (tests; noise.interval > 0).
 Trajectory smoothPathWith(const Trajectory& path, const std::vector<bool>& measured, const PathNoise& noise);
