@@ -16,7 +16,7 @@ std::vector<ConfigKey> loopKeys(LoopParams& p) {
       {"recent_keyframes", &p.recent_keyframes, "newest keyframes never loop candidates", 1.0, 10000.0},
       {"min_travel", &p.min_travel, "m of camera path between a loop's keyframes, at least", 0.0, 10000.0},
       {"place_descriptors", &p.place_descriptors, "descriptors per keyframe indexed and queried", 10.0, 100000.0},
-      {"index_spacing", &p.index_spacing, "m (or keyframe_rotation) from the last indexed keyframe to index another; 0 = every one", 0.0, 100.0},
+      {"index_spacing", &p.index_spacing, "m (or keyframe_rotation) from the last indexed keyframe to index another, and from the last queried one to query again; 0 = every one", 0.0, 100.0},
       {"candidates", &p.candidates, "best-voted places verified per keyframe", 1.0, 100.0},
       {"min_votes", &p.min_votes, "descriptor votes a place (an indexed keyframe and its two neighbours) needs", 1.0, 100000.0},
       {"max_hamming", &p.max_hamming, "bits of 256, a vote's distance at most", 1.0, 256.0},
