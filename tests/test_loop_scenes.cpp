@@ -150,7 +150,7 @@ TEST(LoopScenes, KeyframeQueueIsBounded) {
   EXPECT_GT(closer.threadCpuSeconds(), 0.0);  // summary.json's thread_cpu_ms_per_frame
 }
 
-// A strained frame (its ICP residual over strain_rms_ratio x the recent median) becomes a keyframe by
+// A strained frame (its ICP residual over kStrainRmsRatio x the recent median) becomes a keyframe by
 // motion as any other, also right after lost frames; a checkpoint taken inside the strained stretch
 // resumes to the same keyframes.
 TEST(LoopScenes, StrainedFramesBecomeKeyframes) {

@@ -60,7 +60,7 @@ struct LoopCloser::Impl {
   std::thread worker;
 
   Impl(const LoopParams& p, const std::string& spill_dir)
-      : params(p), selector(p), residuals(p.strain_rms_ratio), keyframes(std::size_t(p.keyframe_cache_mib) << 20, spill_dir), index(p) {
+      : params(p), selector(p), residuals(kStrainRmsRatio), keyframes(std::size_t(p.keyframe_cache_mib) << 20, spill_dir), index(p) {
     worker = std::thread([this] { run(); });
   }
 
