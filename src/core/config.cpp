@@ -56,6 +56,7 @@ constexpr RetiredKey kRetiredKeys[] = {
     {"loop", "max_loop_chi2", "docs/loop-closure.md"},
     {"loop", "odometry_sigma_floor", "docs/loop-closure.md"},
     {"loop", "odometry_sigma_rate", "docs/loop-closure.md"},
+    {"loop", "poor_tracking_sigma_scale", "docs/loop-closure.md"},
     {"loop", "strain_rms_ratio", "docs/loop-closure.md"},
 };
 }  // namespace

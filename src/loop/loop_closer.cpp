@@ -135,7 +135,7 @@ struct LoopCloser::Impl {
       e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, kOdometrySigmaFloor);
       // Across frames the tracker lost, predicted or took from a fallback the chain may hold a jump:
       // a loop should move it there, not spread it over the whole path.
-      if (k.after_poor_tracking) e.information /= params.poor_tracking_sigma_scale * params.poor_tracking_sigma_scale;
+      if (k.after_poor_tracking) e.information /= kPoorTrackingSigmaScale * kPoorTrackingSigmaScale;
       graph.addEdge(e);
       graph.chainNewNode(id);
     }

@@ -33,7 +33,6 @@ std::vector<ConfigKey> loopKeys(LoopParams& p) {
       {"max_drift_rate", &p.max_drift_rate, "m of correction per m travelled", 0.0, 10.0},
       {"max_drift_rotation", &p.max_drift_rotation, "degrees, correction allowed without travel", 0.0, 180.0},
       {"max_drift_rotation_rate", &p.max_drift_rotation_rate, "degrees of correction per m travelled", 0.0, 180.0},
-      {"poor_tracking_sigma_scale", &p.poor_tracking_sigma_scale, "x keyframe edge noise across frames lost, predicted, fallen back or strained", 1.0, 1e4},
       {"reintegrate_min_correction", &p.reintegrate_min_correction, "m; larger corrections re-fuse the map", 0.0, 100.0},
   };
 }

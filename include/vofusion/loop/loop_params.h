@@ -20,12 +20,19 @@ inline constexpr double kOdometrySigmaFloor = 0.002;
 inline constexpr double kLoopSigmaTranslation = 0.003;  // m
 inline constexpr double kLoopSigmaRotation = 0.1 * 3.14159265358979323846 / 180.0;
 // A frame whose ICP residual is over this x the median of the recent ones is strained
-// (ResidualMonitor): still a keyframe by motion, but its edge is weak (poor_tracking_sigma_scale).
+// (ResidualMonitor): still a keyframe by motion, but its edge is weak (kPoorTrackingSigmaScale).
 // Measured against off (0) on the loop scene, seeds 1-5 (bench/results/2026-12-02-loop-queries.md):
 // off is worse on six of the ten runs (by 1.2-9.0 mm on five; mean at 900 frames 0.0091 -> 0.0124 m),
 // better on three by at most 0.6 mm. Off does not win by the rule for defaults, so 2 is fixed here
 // instead of a key.
 inline constexpr double kStrainRmsRatio = 2.0;
+// x the noise of a keyframe edge across frames lost, predicted, fallen back or strained: such a stretch
+// may hold a jump, and a loop should put its correction there instead of spreading it over the path.
+// Measured against 1 (no special case) on the loop scene, seeds 1-5 at 300 and 900 frames
+// (bench/results/2026-12-02-loop-queries.md): 1 is worse on six of the ten runs (by 1.6-9.0 mm on five;
+// mean at 900 frames 0.0091 -> 0.0124 m), better on three by at most 0.8 mm. 1 does not win by the rule
+// for defaults, so 10 is fixed here instead of a key.
+inline constexpr double kPoorTrackingSigmaScale = 10.0;
 // After each optimisation the worst loop goes while its residual (6 DoF chi2) exceeds kMaxLoopChi2 or
 // some tracker edge's exceeds kMaxChainChi2, and the graph is optimised again. A true loop carries some
 // of the tracker's tension (at 22.5, chi2's 99.9 %, 23 of 36 true loops went) and a false one is metres
@@ -68,10 +75,9 @@ struct LoopParams : public mrpt::config::CLoadableOptions {
   double max_drift_rate = 0.10;         // m per m travelled
   double max_drift_rotation = 5.0;      // degrees, base
   double max_drift_rotation_rate = 3.0; // degrees per m travelled
-  // Pose graph: keyframe-to-keyframe edges from the tracker, with kOdometrySigmaRate noise per metre /
-  // per radian moved (at least kOdometrySigmaFloor); loops with the verification's covariance.
-  double poor_tracking_sigma_scale = 10.0;  // x the noise of an edge across frames lost, predicted, fallen
-                                            // back or strained
+  // Pose graph (no keys): keyframe-to-keyframe edges from the tracker, with kOdometrySigmaRate noise per
+  // metre / per radian moved (at least kOdometrySigmaFloor, kPoorTrackingSigmaScale x across poorly
+  // tracked frames); loops with the verification's covariance.
   // Map: when the optimised poses move some frame by more than this, the frames are integrated
   // again into a fresh volume after the run (one wall where the drift drew two).
   double reintegrate_min_correction = 0.005;  // m
