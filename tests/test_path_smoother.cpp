@@ -14,14 +14,18 @@ namespace {
 
 constexpr double kInterval = 1.0 / 30.0;
 
+struct Walk {
+  Trajectory truth, measured;
+};
+
 // A camera walking with random acceleration (sigma_a per frame) and turning, sampled at 30 Hz with
 // jittered stamps; `measured` gets the centres with white noise (sigma_m) added, `truth` without.
-void walk(std::size_t frames, double sigma_a, double sigma_m, std::uint32_t seed, Trajectory& truth, Trajectory& measured) {
+Walk walk(std::size_t frames, double sigma_a, double sigma_m, std::uint32_t seed) {
   std::mt19937 rng(seed);
   std::normal_distribution<double> unit(0.0, 1.0);
   std::uniform_real_distribution<double> jitter(-0.002, 0.002);
   Eigen::Vector3d c(0.0, 0.0, 0.0), v(0.02, 0.0, 0.01);  // m, m per frame interval
-  truth.clear(), measured.clear();
+  Walk w;
   double last_t = 0.0;
   for (std::size_t i = 0; i < frames; ++i) {
     const double t = double(i) * kInterval + jitter(rng);
@@ -33,10 +37,11 @@ void walk(std::size_t frames, double sigma_a, double sigma_m, std::uint32_t seed
     Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
     T.linear() = Eigen::AngleAxisd(0.01 * double(i), Eigen::Vector3d(0.2, 1.0, 0.1).normalized()).toRotationMatrix();
     T.translation() = c;
-    truth.push_back({t, toMrpt(T)});
+    w.truth.push_back({t, toMrpt(T)});
     T.translation() += sigma_m * Eigen::Vector3d(unit(rng), unit(rng), unit(rng));
-    measured.push_back({t, toMrpt(T)});
+    w.measured.push_back({t, toMrpt(T)});
   }
+  return w;
 }
 
 // The whole path as one run of measured frames.
@@ -59,8 +64,7 @@ double rmsError(const Trajectory& a, const Trajectory& b) {
 // correlation's standard error is ~0.02: sigma_m to ~2 %, sigma_a to ~10 %.
 TEST(PathSmoother, NoiseLevelsAreReadOffThePath) {
   for (std::uint32_t seed = 1; seed <= 5; ++seed) {
-    Trajectory truth, measured;
-    walk(3000, 0.002, 0.002, seed, truth, measured);
+    const auto [truth, measured] = walk(3000, 0.002, 0.002, seed);
     const PathNoise n = estimatePathNoise(measured, std::vector<bool>(measured.size(), true));
     EXPECT_NEAR(n.interval, kInterval, 0.002) << seed;
     EXPECT_GT(n.pairs, 2900u) << seed;
@@ -72,8 +76,7 @@ TEST(PathSmoother, NoiseLevelsAreReadOffThePath) {
 // White noise about a constant velocity (sigma_a = 0) correlates neighbours by -2/3: the estimate keeps
 // some acceleration there, so a run is smoothed, not laid on a straight line.
 TEST(PathSmoother, WhiteNoiseAboutAConstantVelocityKeepsSomeAcceleration) {
-  Trajectory truth, measured;
-  walk(300, 0.0, 0.003, 6, truth, measured);
+  const auto [truth, measured] = walk(300, 0.0, 0.003, 6);
   PathNoise n;
   const Trajectory smoothed = smoothWhole(measured, n);
   ASSERT_TRUE(n.smoothed());
@@ -84,8 +87,7 @@ TEST(PathSmoother, WhiteNoiseAboutAConstantVelocityKeepsSomeAcceleration) {
 
 TEST(PathSmoother, CentresComeCloserToTheTruthOrientationsStay) {
   for (std::uint32_t seed = 1; seed <= 5; ++seed) {
-    Trajectory truth, measured;
-    walk(300, 0.001, 0.003, seed, truth, measured);
+    const auto [truth, measured] = walk(300, 0.001, 0.003, seed);
     PathNoise n;
     const Trajectory smoothed = smoothWhole(measured, n);
     ASSERT_TRUE(n.smoothed()) << seed;
@@ -101,8 +103,7 @@ TEST(PathSmoother, CentresComeCloserToTheTruthOrientationsStay) {
 // so the measurement noise found is a small fraction of the acceleration's and the path barely moves.
 TEST(PathSmoother, ANoiselessPathIsAlmostUntouched) {
   for (std::uint32_t seed = 1; seed <= 5; ++seed) {
-    Trajectory truth, measured;
-    walk(3000, 0.001, 0.0, seed, truth, measured);
+    const auto [truth, measured] = walk(3000, 0.001, 0.0, seed);
     PathNoise n;
     const Trajectory smoothed = smoothWhole(truth, n);
     EXPECT_LT(n.measurement, 0.15 * 0.001) << seed;
@@ -111,8 +112,7 @@ TEST(PathSmoother, ANoiselessPathIsAlmostUntouched) {
 }
 
 TEST(PathSmoother, RunsEndAtUnmeasuredFrames) {
-  Trajectory truth, measured;
-  walk(200, 0.001, 0.003, 2, truth, measured);
+  auto [truth, measured] = walk(200, 0.001, 0.003, 2);  // lost frames are written into it
   // Frames 100-109 lost (pose held), then found again 0.5 m away: nothing is smoothed across them.
   std::vector<bool> fused(measured.size(), true);
   for (std::size_t i = 100; i < 110; ++i) {
@@ -136,8 +136,7 @@ TEST(PathSmoother, RunsEndAtUnmeasuredFrames) {
 // The smoothed centres minimise the cost path_smoother.h states, written out here on its own: no
 // coordinate moved by +-0.1 mm lowers it.
 TEST(PathSmoother, TheCentresAreTheLeastSquaresMinimum) {
-  Trajectory truth, measured;
-  walk(12, 0.002, 0.004, 4, truth, measured);
+  const Trajectory measured = walk(12, 0.002, 0.004, 4).measured;  // the cost lambda reads it
   PathNoise noise;
   noise.measurement = 0.004, noise.acceleration = 0.002, noise.interval = kInterval;
   const std::vector<bool> all(measured.size(), true);
