@@ -1,6 +1,7 @@
 #include "vofusion/pipeline/run_outputs.h"
 
 #include <filesystem>
+#include <future>
 
 #include "mesh_stage.h"
 #include "poses_rawlog.h"
@@ -153,11 +154,18 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
 
   const SceneOptions scene_opts = m.sceneOptions(rec, s);
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
+  // The picture rendered on one core while the scene is compressed on the other (each took ~0.35 s
+  // of rpy_first100's time after its last frame, one after the other); the future waits in any case.
+  std::future<void> png;
+  if (!mesh.empty())
+    png = std::async(std::launch::async, [&] {
+      renderMeshPng(out.path("mesh.png"), mesh, &rec.trajectory(), m.params.image_width, m.params.image_height,
+                    scene_opts.up_vector);
+    });
   exportScene(out.path("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam, scene_opts);
   out.wrote("scene.3Dscene", "open with SceneViewer3D");
-  if (!mesh.empty()) {
-    renderMeshPng(out.path("mesh.png"), mesh, &rec.trajectory(), m.params.image_width, m.params.image_height,
-                  scene_opts.up_vector);
+  if (png.valid()) {
+    png.get();  // rethrows what the render threw
     out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height));
   }
 
