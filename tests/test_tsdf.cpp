@@ -511,35 +511,6 @@ TEST(MarchingCubes, MeshByRegionOnEveryCoreGivesTheSingleCoreMesh) {
   EXPECT_EQ(parallel.report.simplification.faces_after, single.report.simplification.faces_after);
 }
 
-// The first pass's regions, kept for the second, give the mesh marching every region twice gives; the
-// source is read once when they fit the budget and twice when they do not.
-TEST(MarchingCubes, MeshByRegionKeepsTheFirstPassRegionsWhenTheyFit) {
-  const SphereBricks sphere(Eigen::Vector3f(-0.05f, 0.13f, 0.02f), 0.3f, 0.01f, 0.04f);
-  MeshCleanParams params;
-  params.max_simplify_error = 0.003;
-  ASSERT_GT(params.min_component_faces, 0);  // two passes
-  const auto mesh = [&](std::size_t keep_bytes, int& reads) {
-    return meshByRegion(
-        [&](const std::function<void(RegionMesh&)>& sink) {
-          ++reads;
-          marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink);
-        },
-        params, "", nullptr, nullptr, {}, keep_bytes);
-  };
-  int reads_kept = 0, reads_again = 0;
-  const RegionMeshResult kept = mesh(kKeepRawRegionBytes, reads_kept);
-  const RegionMeshResult again = mesh(1000, reads_again);  // less than the first region
-  EXPECT_EQ(reads_kept, 1);
-  EXPECT_EQ(reads_again, 2);
-  ASSERT_GT(kept.regions, 20u);
-  EXPECT_EQ(kept.regions, again.regions);
-  EXPECT_EQ(kept.raw_faces, again.raw_faces);
-  EXPECT_EQ(kept.raw_vertices, again.raw_vertices);
-  EXPECT_TRUE(kept.mesh.faces == again.mesh.faces);
-  EXPECT_TRUE(kept.mesh.vertices == again.mesh.vertices);
-  EXPECT_EQ(kept.report.components_removed, again.report.components_removed);
-}
-
 // Fragments are judged whole across regions: a sphere that is only a few hundred faces in each region
 // it crosses stays, while two small spheres go, one inside a region and one across a seam (as the
 // whole-world cleanMesh would judge them).

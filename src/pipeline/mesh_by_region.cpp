@@ -171,45 +171,6 @@ class RawComponents {
   double total_area_ = 0.0;
 };
 
-// Pass 1's regions kept for pass 2 while all of them fit in a budget: pass 2 then marches nothing
-// again. Past the budget none is kept and pass 2 marches every region again, as a whole-world raw
-// mesh does not fit in memory beside the map (the loop scene: 6 M raw vertices, ~280 MiB).
-class KeptRegions {
- public:
-  explicit KeptRegions(std::size_t budget_bytes) : budget_(budget_bytes) {}
-  // Takes r (moved out) while everything offered fits.
-  void offer(fusion::RegionMesh& r) {
-    if (!keeping_) return;
-    bytes_ += bytesOf(r);
-    if (bytes_ > budget_) {
-      keeping_ = false;
-      regions_ = {};
-      return;
-    }
-    regions_.push_back(std::move(r));
-  }
-  bool all() const { return keeping_; }
-  // Hands each kept region to `sink` in pass 1's order, once (moved out).
-  void drain(const std::function<void(fusion::RegionMesh&)>& sink) {
-    for (fusion::RegionMesh& r : regions_) {
-      sink(r);
-      r.mesh = {};  // the sink usually moved it out already
-      r.on_seam = {};
-    }
-    regions_ = {};
-  }
-
- private:
-  static std::size_t bytesOf(const fusion::RegionMesh& r) {
-    const TriangleMesh& m = r.mesh;
-    return m.vertices.size() * sizeof(m.vertices[0]) + m.normals.size() * sizeof(m.normals[0]) +
-           m.colors.size() * sizeof(m.colors[0]) + m.faces.size() * sizeof(m.faces[0]) + r.on_seam.size();
-  }
-  std::size_t budget_, bytes_ = 0;
-  bool keeping_ = true;
-  std::vector<fusion::RegionMesh> regions_;
-};
-
 // Pass 2's running sums: each region, once simplified, welded into the merged mesh in region order.
 struct RegionMerge {
   RegionMerge(TriangleMesh& m, MeshSimplification& s) : merged(m), simp(s) {}
@@ -414,7 +375,7 @@ class OrderedRegionSimplifier {
 
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
                               const MeshProgress& progress, const std::function<void()>& regions_done,
-                              const PremeshedLookup& premeshed, std::size_t keep_raw_bytes) {
+                              const PremeshedLookup& premeshed) {
   const auto told = [&](int pass, const fusion::RegionMesh& r) {
     if (progress) progress(pass, r.ordinal + 1, r.regions);
   };
@@ -428,8 +389,6 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   // Pass 1 (marching cubes only): which fragments are too small, judged whole across seams.
   const MeshCleanParams region_params = regionSimplifyParams(params);
   std::unique_ptr<RawComponents> fragments;
-  KeptRegions kept(keep_raw_bytes);
-  RegionSource pass2 = regions;
   if (params.min_component_faces > 0 || params.min_component_area > 0) {
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
     std::size_t region_count = 0;
@@ -437,9 +396,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
       fragments->add(r);
       told(1, r);
       region_count = r.regions;
-      kept.offer(r);
     });
-    if (kept.all()) pass2 = [&kept](const std::function<void(fusion::RegionMesh&)>& sink) { kept.drain(sink); };
     out.report.components_removed = fragments->judge();
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
     if (progress && region_count) progress(2, 0, region_count);
@@ -451,7 +408,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     merge.add(r, report);
     told(2, r);
   });
-  pass2([&](fusion::RegionMesh& r) {
+  regions([&](fusion::RegionMesh& r) {
     ++out.regions;
     if (raw) raw->add(r);
     else raw_count.add(r.mesh, r.on_seam, [](std::size_t) {});

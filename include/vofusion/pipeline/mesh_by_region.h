@@ -53,11 +53,6 @@ MeshCleanParams regionSimplifyParams(const MeshCleanParams& params);
 // Every bit simplifyRegion reads of a region (positions, normals, colours, faces, seam flags, region).
 std::uint64_t regionInputHash(const fusion::RegionMesh& r);
 
-// Marching cubes' regions kept between meshByRegion's two passes: 64 MiB holds the whole raw mesh of
-// a room-sized map (rpy_first100: 1.3 M faces, ~36 MiB; marching it again cost ~0.15 s of the ~3.5 s
-// after its last frame); larger maps (their raw mesh in the hundreds of MiB) are marched twice instead.
-inline constexpr std::size_t kKeepRawRegionBytes = std::size_t(64) << 20;
-
 // Told after each region: pass 1 finds fragments (marching cubes only), pass 2 simplifies.
 using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t regions)>;
 
@@ -68,10 +63,8 @@ using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t 
 // `regions_done` runs once the last region was read, before the welded mesh is cleaned: the caller
 // can free what the regions came from. `premeshed`: a region it has, made from the same input, is
 // taken instead of simplifying it again (the result is the same: simplifyRegion is deterministic).
-// When fragments are judged (a first pass), the first pass's regions are kept for the second while
-// they all fit in `keep_raw_bytes`, and `regions` is called once instead of twice; the mesh is the same.
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "",
                               const MeshProgress& progress = {}, const std::function<void()>& regions_done = {},
-                              const PremeshedLookup& premeshed = {}, std::size_t keep_raw_bytes = kKeepRawRegionBytes);
+                              const PremeshedLookup& premeshed = {});
 
 }  // namespace vofusion
