@@ -22,6 +22,15 @@ namespace {
 
 constexpr double kFrameRpeDelta = 0.05;  // s
 
+// The picture is rendered beside the scene's writing only for meshes whose two MRPT scenes at once
+// cost at most 32 MiB more than one after the other: side by side saves ~0.3 s after a short
+// recording's last frame (rpy_first100, 176 k faces: +16 MiB peak RSS), while the long walk's 996 k
+// faces lifted its peak 556 -> 679 MiB (~130 B a face; bench/results/2026-12-02-tail.md).
+bool pictureBesideScene(const TriangleMesh& mesh) {
+  constexpr double kExtraBytesPerFace = 130.0, kMaxExtraBytes = 32.0 * (1 << 20);
+  return kExtraBytesPerFace * double(mesh.faces.size()) <= kMaxExtraBytes;
+}
+
 // A recording as titles name it: its folder or file name ("rgbd_dataset_freiburg1_xyz", "loop7.rawlog",
 // "synthetic:room"), never the absolute path.
 std::string recordingName(const std::string& input) {
@@ -155,10 +164,11 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   const SceneOptions scene_opts = m.sceneOptions(rec, s);
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
   // The picture rendered on one core while the scene is compressed on the other (each took ~0.35 s
-  // of rpy_first100's time after its last frame, one after the other); the future waits in any case.
+  // of rpy_first100's time after its last frame, one after the other), where memory allows; else after
+  // the scene (deferred: run by get()). The future waits in any case.
   std::future<void> png;
   if (!mesh.empty())
-    png = std::async(std::launch::async, [&] {
+    png = std::async(pictureBesideScene(mesh) ? std::launch::async : std::launch::deferred, [&] {
       renderMeshPng(out.path("mesh.png"), mesh, &rec.trajectory(), m.params.image_width, m.params.image_height,
                     scene_opts.up_vector);
     });
