@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """Real time on two cores, back to back against an earlier build (issue 31's figures):
 
-    bench/run --realtime [--baseline REV] [--build DIR] [--sequences DIR,DIR]
+    bench/run --realtime [--baseline REV] [--build DIR] [--sequences DIR,DIR] [--rounds N]
 
-For each shared sequence, the earlier build and this one run one after the other (this machine's speed
-drifts by ~25 %: only runs side by side in time compare):
+For each shared sequence, the earlier build and this one run one after the other, N rounds (default 3)
+in alternating order, and each figure is the median of its rounds (this machine's speed drifts by
+~25 %: only runs side by side in time compare, and one pair of 100-frame runs can come out either way):
   - `vofusion <seq> --out o` (default config): frame-loop fps (summary.json), end-to-end fps (frames /
     wall time of the process, to the last output written), the start-up before the first frame, the
     time from the last frame to the last output against the frame loop's, ATE RMSE, peak RSS;
@@ -96,11 +97,27 @@ def live(bin_dir, seq, out):
     return {"played": int(kv["frames_played"]), "processed": int(kv["frames_processed"])}
 
 
+def medians(runs):
+    """Each figure's median over the rounds (the upper one of an even count), peak RSS the largest."""
+    out = {}
+    for key, value in runs[0].items():
+        if key == "rss":
+            out[key] = max(r[key] for r in runs)
+        elif isinstance(value, bool) or value is None:
+            out[key] = value
+        else:
+            out[key] = sorted(r[key] for r in runs)[len(runs) // 2]
+    return out
+
+
 def main():
     args = sys.argv[1:]
     opt = lambda name, default: args[args.index(name) + 1] if name in args else default
     build = os.path.abspath(opt("--build", os.path.join(ROOT, "build")))
     rev = opt("--baseline", "618a78c")
+    rounds = int(opt("--rounds", "3"))
+    if rounds < 1:
+        sys.exit("--rounds: at least 1")
     tum = os.path.join(ROOT, "..", "shared", "data", "tum")
     seqs = opt("--sequences", ",".join(os.path.join(tum, d) for d in
                                         ("rgbd_dataset_freiburg1_xyz_first300", "rgbd_dataset_freiburg1_rpy_first100"))).split(",")
@@ -110,21 +127,25 @@ def main():
     head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     lines = ["# Real time, back to back: %s against this build (%s)" % (rev, head), "",
              "Command: `bench/run --realtime` (bench/realtime.py); default config, 2 cores. Each sequence is run by "
-             "both builds one after the other. End to end: frames / wall time of the process to its last output; "
+             "both builds one after the other, %d rounds in alternating order; each figure is the median of the "
+             "rounds (peak RSS: the largest). End to end: frames / wall time of the process to its last output; "
              "start-up: from the process's start to the first frame (summary.json `seconds_before_frames`; for a "
              "build without it, the wall time of `vofusion --help`); tail: from the last frame to the last output "
              "(wall time minus start-up and frame loop). Live: `vofusion-grab --replay <seq> --live --no-gui`, "
-             "recording included, frames processed of those played.", "", "Machine: " + machine.describe() + ".", ""]
+             "recording included, frames processed of those played." % rounds, "", "Machine: " + machine.describe() + ".", ""]
     for seq in seqs:
         name = os.path.basename(os.path.normpath(seq))
-        res = {}
-        for label, bins in builds:
-            tag = "base" if label == rev else "this"
-            log("%s: %s offline" % (name, label))
-            r = offline(bins, seq, os.path.join(work, "%s_%s" % (name, tag)))
-            log("%s: %s live" % (name, label))
-            r.update(live(bins, seq, os.path.join(work, "%s_%s_live" % (name, tag))))
-            res[label] = r
+        runs = {label: [] for label, _ in builds}
+        for k in range(rounds):
+            for label, bins in (builds if k % 2 == 0 else builds[::-1]):
+                tag = "base" if label == rev else "this"
+                log("%s: %s offline, round %d of %d" % (name, label, k + 1, rounds))
+                r = offline(bins, seq, os.path.join(work, "%s_%s" % (name, tag)))
+                log("%s: %s live, round %d of %d" % (name, label, k + 1, rounds))
+                r.update(live(bins, seq, os.path.join(work, "%s_%s_live" % (name, tag))))
+                r["tail_share"] = r["tail_s"] / r["loop_s"]
+                runs[label].append(r)
+        res = {label: medians(rs) for label, rs in runs.items()}
         b, t = res[rev], res["this build"]
         ratio = lambda k: "%.2fx" % (t[k] / b[k]) if b[k] else "-"
         startup = lambda r: "%.2f%s" % (r["startup_s"], " (`--help`)" if r["startup_by_help"] else "")
@@ -134,10 +155,13 @@ def main():
                   "| end to end, fps | %.1f | %.1f | %s | |" % (b["e2e_fps"], t["e2e_fps"], ratio("e2e_fps")),
                   "| start-up before the first frame, s | %s | %s | | |" % (startup(b), startup(t)),
                   "| tail after the last frame, s (share of the frame loop) | %.1f (%.0f %%) | %.1f (%.0f %%) | | <= 25 %% |" % (
-                      b["tail_s"], 100 * b["tail_s"] / b["loop_s"], t["tail_s"], 100 * t["tail_s"] / t["loop_s"]),
+                      b["tail_s"], 100 * b["tail_share"], t["tail_s"], 100 * t["tail_share"]),
                   "| live: processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
                       b["processed"], b["played"], 100.0 * b["processed"] / b["played"],
                       t["processed"], t["played"], 100.0 * t["processed"] / t["played"]),
+                  "| frame loop fps of the rounds | %s | %s | | |" % (
+                      " ".join("%.1f" % r["loop_fps"] for r in runs[rev]),
+                      " ".join("%.1f" % r["loop_fps"] for r in runs["this build"])),
                   "| ATE RMSE, m | %.4f | %.4f | %s | within +2 %% |" % (b["ate"], t["ate"], ratio("ate")),
                   "| peak RSS, MiB | %.0f | %.0f | | <= 700 |" % (b["rss"], t["rss"]), ""]
     os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
