@@ -23,9 +23,9 @@ namespace {
 constexpr double kFrameRpeDelta = 0.05;  // s
 
 // The picture is rendered beside the scene's writing only for meshes whose two MRPT scenes at once
-// cost at most 32 MiB more than one after the other: side by side saves ~0.3 s after a short
-// recording's last frame (rpy_first100, 176 k faces: +16 MiB peak RSS), while the long walk's 996 k
-// faces lifted its peak 556 -> 679 MiB (~130 B a face; bench/results/2026-12-02-tail.md).
+// cost at most 32 MiB more than one after the other: on rpy_first100 (176 k faces) side by side
+// costs +15 MiB of peak RSS, while the long walk's 996 k faces lifted its peak 556 -> 679 MiB
+// (~130 B a face; bench/results/2026-12-02-tail.md).
 bool pictureBesideScene(const TriangleMesh& mesh) {
   constexpr double kExtraBytesPerFace = 130.0, kMaxExtraBytes = 32.0 * (1 << 20);
   return kExtraBytesPerFace * double(mesh.faces.size()) <= kMaxExtraBytes;
@@ -164,19 +164,24 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   const SceneOptions scene_opts = m.sceneOptions(rec, s);
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
   // The picture rendered on one core while the scene is compressed on the other (each took ~0.35 s
-  // of rpy_first100's time after its last frame, one after the other), where memory allows; else after
-  // the scene (deferred: run by get()). The future waits in any case.
+  // of rpy_first100's time after its last frame, one after the other) where memory allows, else
+  // deferred: rendered by get(), after the scene. The render takes its own copy of the path (reading a
+  // CPose3D's angles fills its cache) and its file name. `png` is declared after all it reads: if the
+  // scene throws, its destructor waits for a render in flight first.
+  const bool beside = !mesh.empty() && pictureBesideScene(mesh);
   std::future<void> png;
   if (!mesh.empty())
-    png = std::async(pictureBesideScene(mesh) ? std::launch::async : std::launch::deferred, [&] {
-      renderMeshPng(out.path("mesh.png"), mesh, &rec.trajectory(), m.params.image_width, m.params.image_height,
-                    scene_opts.up_vector);
-    });
+    png = std::async(beside ? std::launch::async | std::launch::deferred : std::launch::deferred,
+                     [&mesh, &m, &scene_opts, path = rec.trajectory(), file = out.path("mesh.png")] {
+                       renderMeshPng(file, mesh, &path, m.params.image_width, m.params.image_height,
+                                     scene_opts.up_vector);
+                     });
   exportScene(out.path("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam, scene_opts);
   out.wrote("scene.3Dscene", "open with SceneViewer3D");
   if (png.valid()) {
     png.get();  // rethrows what the render threw
-    out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height));
+    out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height) +
+                              (beside ? ", rendered beside the scene" : ""));
   }
 
   s["peak_memory_mib"] = peakMemoryMiB();
