@@ -17,6 +17,7 @@ and built (apps only) under <build>/bench-baseline/, once. Writes bench/results/
 import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import time
@@ -99,8 +100,8 @@ def live(bin_dir, seq, out):
 
 def median(values):
     """The median (the upper one of an even count) of the values that are not None, or None."""
-    values = sorted(v for v in values if v is not None)
-    return values[len(values) // 2] if values else None
+    values = [v for v in values if v is not None]
+    return statistics.median_high(values) if values else None
 
 
 def round_ratio(pairs, key):
