@@ -171,7 +171,7 @@ def main():
                       " ".join("%.1f" % r["loop_fps"] for r in runs["this build"])),
                   "| end to end, fps | %.1f | %.1f | %s | |" % (b["e2e_fps"], t["e2e_fps"], ratio("e2e_fps")),
                   "| start-up before the first frame, s | %s | %s | | |" % (startup(b), startup(t)),
-                  "| tail after the last frame, s (share of the frame loop) | %.1f (%.0f %%) | %.1f (%.0f %%) | | <= 25 %% |" % (
+                  "| tail after the last frame, s (share of the frame loop: the median of the rounds' own shares) | %.1f (%.0f %%) | %.1f (%.0f %%) | | <= 25 %% |" % (
                       b["tail_s"], 100 * b["tail_share"], t["tail_s"], 100 * t["tail_share"]),
                   "| live: processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
                       b["processed"], b["played"], 100.0 * b["processed"] / b["played"],
