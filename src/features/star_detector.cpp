@@ -1,6 +1,7 @@
 #include "vofusion/features/star_detector.h"
 
 #include <algorithm>
+#include <memory>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -53,7 +54,7 @@ constexpr int kMaxFilters = sizeof(kSizes) / sizeof(kSizes[0]);
 // horizontally by `pad` columns and vertically by 2 rows so the recurrences need no special cases.
 struct TiltedIntegrals {
   int pad = 0, stride = 0;
-  std::vector<int32_t> t, f;
+  std::unique_ptr<int32_t[]> t, f;  // not zeroed on allocation: computeTilted writes every entry
   const int32_t* T(int x, int y) const { return &t[(y + 2) * stride + x + pad]; }
   const int32_t* F(int x, int y) const { return &f[(y + 2) * stride + x + pad]; }
 };
@@ -62,8 +63,14 @@ void computeTilted(const cv::Mat& img, TiltedIntegrals& ti) {
   const int rows = img.rows, cols = img.cols;
   ti.pad = rows + 2;
   ti.stride = cols + 2 * ti.pad;
-  ti.t.assign(std::size_t(rows + 2) * ti.stride, 0);
-  ti.f.assign(std::size_t(rows + 2) * ti.stride, 0);
+  // Each image row is written whole below (the cones' reach, then copies out to the padding); only
+  // the two zero rows above the image are read first. Zeroing all of it was ~1 % of the frame loop's
+  // CPU (6 MB a 640x480 frame).
+  const std::size_t size = std::size_t(rows + 2) * ti.stride;
+  ti.t.reset(new int32_t[size]);
+  ti.f.reset(new int32_t[size]);
+  std::fill_n(ti.t.get(), 2 * ti.stride, 0);
+  std::fill_n(ti.f.get(), 2 * ti.stride, 0);
   const int s = ti.stride;
   for (int y = 0; y < rows; ++y) {
     const uint8_t* I = img.ptr<uint8_t>(y);
