@@ -1,9 +1,9 @@
 #include "vofusion/features/star_detector.h"
 
 #include <algorithm>
-#include <memory>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include <mrpt/config/CConfigFileBase.h>
@@ -64,8 +64,8 @@ void computeTilted(const cv::Mat& img, TiltedIntegrals& ti) {
   ti.pad = rows + 2;
   ti.stride = cols + 2 * ti.pad;
   // Each image row is written whole below (the cones' reach, then copies out to the padding); only
-  // the two zero rows above the image are read first. Zeroing all of it was ~1 % of the frame loop's
-  // CPU (6 MB a 640x480 frame).
+  // the two zero rows above the image are read first. Zeroing all of it (6 MB a 640x480 frame) cost
+  // ~0.7 % of the CPU of a run (xyz_first300: user CPU 24.30 -> 24.13 s without it, same output).
   const std::size_t size = std::size_t(rows + 2) * ti.stride;
   ti.t.reset(new int32_t[size]);
   ti.f.reset(new int32_t[size]);
