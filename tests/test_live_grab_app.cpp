@@ -156,6 +156,8 @@ TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
 
 // A recording is valid at every moment: kill -9 at random moments of a replayed live session leaves a
 // grab.rawlog under its final name that vofusion reconstructs and rawlog-edit reads, every frame whole.
+// A kill that lands inside the write(2) of a record can leave the file ending inside it (Linux cuts
+// the write short between pages): the frames before it are read, and the reader says where it ends.
 TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);
@@ -179,10 +181,14 @@ TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
     auto back = openFrameSource(out + "/grab.rawlog");
     std::size_t frames = 0;
     Frame f;
-    while (back->next(f)) {
-      EXPECT_TRUE(f.valid());
-      EXPECT_GT(cv::countNonZero(f.depth > 0), 1000);
-      ++frames;
+    try {
+      while (back->next(f)) {
+        EXPECT_TRUE(f.valid());
+        EXPECT_GT(cv::countNonZero(f.depth > 0), 1000);
+        ++frames;
+      }
+    } catch (const RecordingCutShort& e) {
+      EXPECT_EQ(e.problem().rfind("truncated rawlog (ends inside entry ", 0), 0u) << e.what();
     }
     EXPECT_GT(frames, 0u);
     std::string info;

@@ -226,6 +226,48 @@ TEST(Rawlog, UncommittedWriterLeavesNothingAndKeepsOldOutput) {
   EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator{}), 2);  // .rawlog + _Images
 }
 
+// A recorder killed while it appends a record can leave the file ending inside that record: Linux cuts
+// a write(2) short between two pages when a fatal signal arrives. Wherever in its last record an
+// in-place recording ends, the frames before that record are read, then RecordingCutShort says where
+// the file ends (a crash's end, not damage).
+TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {
+  const auto frames = simFrames(3);
+  const std::string dir = test::tempDir("rawlog_torn");
+  RawlogWriterOptions o;
+  o.in_place = true;
+  std::uintmax_t two_frames = 0;
+  {
+    RawlogWriter w(dir + "/rec.rawlog", o);
+    w.write(frames[0]);
+    w.write(frames[1]);
+    two_frames = fs::file_size(dir + "/rec.rawlog");
+    w.write(frames[2]);
+    w.commit();
+  }
+  const std::string bytes = fileBytes(dir + "/rec.rawlog");
+  ASSERT_GT(bytes.size(), two_frames + 100);
+  fs::create_directory_symlink(dir + "/rec_Images", dir + "/cut_Images");
+  const std::string cut = dir + "/cut.rawlog";
+  for (std::size_t at = two_frames + 1; at < bytes.size(); ++at) {
+    SCOPED_TRACE("ends at byte " + std::to_string(at) + " of " + std::to_string(bytes.size()));
+    std::ofstream(cut, std::ios::binary | std::ios::trunc) << bytes.substr(0, at);
+    RawlogSource src(cut, {});
+    Frame f;
+    std::size_t n = 0;
+    bool cut_short = false;
+    try {
+      while (src.next(f)) ++n;
+    } catch (const RecordingCutShort& e) {
+      cut_short = true;
+      EXPECT_EQ(e.problem().rfind("truncated rawlog (ends inside entry ", 0), 0u) << e.what();
+    }
+    // The last record is the third frame's entry and its ground truth's: ending between the two reads
+    // three frames to a clean end, anywhere else two or three frames and where the file ends.
+    EXPECT_GE(n, 2u);
+    EXPECT_TRUE(cut_short || n == 3u) << n << " frames read to a clean end";
+  }
+}
+
 TEST(Rawlog, ObservationsFormatRejectsActions) {
   const std::string dir = test::tempDir("rawlog_noact");
   RawlogWriter w(dir + "/x.rawlog");

@@ -47,6 +47,7 @@ constexpr std::size_t kMaxEntryBuffer = std::size_t(64) << 20;
 constexpr std::size_t kMaxEntryTotal = std::size_t(256) << 20;
 
 std::string mebibytes(std::size_t n) { return std::to_string((n + (1u << 20) - 1) >> 20) + " MiB"; }
+std::string truncatedAt(std::size_t entry) { return "truncated rawlog (ends inside entry " + std::to_string(entry) + ")"; }
 
 // Counts delivered bytes, so a clean end of file (EOF before an object starts) can be told apart
 // from a truncated one (EOF inside an object).
@@ -62,6 +63,11 @@ class CountingStream : public mrpt::io::CStream {
   uint64_t Seek(int64_t, TSeekOrigin) override { throw std::logic_error("stream cannot seek"); }
   uint64_t getTotalBytesCount() const override { return in_.getTotalBytesCount(); }
   uint64_t getPosition() const override { return count_; }
+  // Whether nothing is left to read (consumes a byte otherwise: only for after a failed read).
+  bool atEnd() {
+    char byte;
+    return in_.Read(&byte, 1) == 0;
+  }
 
  private:
   mrpt::io::CStream& in_;
@@ -218,8 +224,12 @@ struct RawlogSource::Reader {
         *arch >> obj;
       } catch (const mrpt::serialization::CExceptionEOF&) {
         if (counter->getPosition() == before) return nullptr;
-        throw InputError(path, "truncated rawlog (ends inside entry " + std::to_string(objects + 1) + ")");
+        throw InputError(path, truncatedAt(objects + 1));
       } catch (const std::exception&) {
+        // MRPT wraps an end of file met inside an object's fields in its own exceptions: a file that
+        // ends there (a recorder killed mid-write) is cut short, not corrupt.
+        if (!limit.refusedRequest() && !limit.totalExceeded() && objects > 0 && counter->atEnd())
+          throw InputError(path, truncatedAt(objects + 1));
         // Refused requests surface as bad_alloc or as MRPT's wrapper around it.
         const std::string why =
             limit.refusedRequest() ? " (asks for a buffer of " + mebibytes(limit.refusedRequest()) +
