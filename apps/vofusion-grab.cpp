@@ -156,6 +156,7 @@ std::string summaryText(const LiveStats& s, const std::string& source, std::size
     << "frames_played: " << s.played << "\n"
     << "frames_processed: " << s.processed << "\n"
     << "frames_dropped: " << s.dropped << "\n"
+    << "frames_processed_behind: " << s.behind << "\n"
     << "frames_recorded: " << recorded << "\n"
     << "queue_capacity: " << queue << "\n"
     << "max_queue: " << s.max_queue << "\n"
@@ -238,10 +239,11 @@ struct LiveConsumer {
   LiveCheckpoints& checkpoints;
   std::size_t loops_shown = 0;
 
-  void operator()(const Frame& frame) {
+  void operator()(const Frame& frame, std::size_t waiting) {
     if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
     if (!run) return;
-    const FrameReport r = run->process(frame);
+    // Frames waiting behind this one: the odometry skips NARF rather than the queue dropping frames.
+    const FrameReport r = run->process(frame, waiting > 0 ? FrameLoad::Behind : FrameLoad::OnTime);
     checkpoints.maybeWrite(*run);
     if (!viewer) return;
     const Reconstruction& rec = run->reconstruction();
@@ -268,6 +270,7 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
   info.seconds = stats.seconds;
   info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
+                          {"processed_behind", stats.behind},
                           {"queue_capacity", plan.opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
   if (checkpoints.every > 0)
     info.extra["checkpoints"] = {{"every_seconds", checkpoints.every}, {"written", checkpoints.written},

@@ -1,5 +1,6 @@
 // The live loop (bounded queue, drops, stops) on synthetic sources, and on the replay of the TUM
 // sequence through the very same code path, including recording into a rawlog read back after.
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
@@ -56,7 +57,7 @@ LiveOptions queueOf(std::size_t capacity) {
 TEST(LiveLoop, FastConsumerProcessesEveryFrameInOrder) {
   FakeSource src(50, 1);
   std::vector<std::size_t> seen;
-  const LiveStats s = runLive(src, [&](const Frame& f) { seen.push_back(f.index); }, queueOf(2));
+  const LiveStats s = runLive(src, [&](const Frame& f, std::size_t) { seen.push_back(f.index); }, queueOf(2));
   EXPECT_TRUE(s.ok()) << s.error;
   EXPECT_EQ(s.stop, StopReason::EndOfStream);
   EXPECT_EQ(s.played, 50u);
@@ -67,10 +68,11 @@ TEST(LiveLoop, FastConsumerProcessesEveryFrameInOrder) {
 
 TEST(LiveLoop, SlowConsumerDropsOldestAndNeverQueuesMoreThanCapacity) {
   FakeSource src(60, 2);  // ~500 fps producer
-  std::vector<std::size_t> seen;
+  std::vector<std::size_t> seen, waiting;
   const LiveStats s = runLive(src,
-                              [&](const Frame& f) {
+                              [&](const Frame& f, std::size_t behind_it) {
                                 seen.push_back(f.index);
+                                waiting.push_back(behind_it);
                                 std::this_thread::sleep_for(std::chrono::milliseconds(20));
                               },
                               queueOf(3));
@@ -79,6 +81,13 @@ TEST(LiveLoop, SlowConsumerDropsOldestAndNeverQueuesMoreThanCapacity) {
   EXPECT_GT(s.dropped, 0u);
   EXPECT_EQ(s.processed + s.dropped, s.played);
   EXPECT_LE(s.max_queue, 3u);
+  // The consumer is told how many frames wait behind each one: at most the rest of a full queue, none
+  // behind the last; the stats count the frames taken with any behind them.
+  ASSERT_EQ(waiting.size(), s.processed);
+  EXPECT_LE(*std::max_element(waiting.begin(), waiting.end()), 2u);
+  EXPECT_EQ(waiting.back(), 0u);
+  EXPECT_EQ(s.behind, std::size_t(std::count_if(waiting.begin(), waiting.end(), [](std::size_t w) { return w > 0; })));
+  EXPECT_GT(s.behind, 0u);
   // Drop-oldest keeps the freshest frames: the last frame played is always processed (drained).
   ASSERT_FALSE(seen.empty());
   EXPECT_EQ(seen.back(), 59u);
@@ -92,7 +101,7 @@ TEST(LiveLoop, MaxFramesStopsThePlay) {
   std::size_t recorded = 0;
   LiveHooks h;
   h.on_grabbed = [&](const Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++recorded; };
-  const LiveStats s = runLive(src, [](const Frame&) {}, o, h);
+  const LiveStats s = runLive(src, [](const Frame&, std::size_t) {}, o, h);
   EXPECT_EQ(s.stop, StopReason::MaxFrames);
   EXPECT_EQ(s.played, 17u);
   EXPECT_EQ(recorded, 17u);  // the tap sees every played frame, drops or not
@@ -104,7 +113,7 @@ TEST(LiveLoop, SensorErrorMidRunIsACleanStop) {
   std::size_t recorded = 0;
   LiveHooks h;
   h.on_grabbed = [&](const Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++recorded; };
-  const LiveStats s = runLive(src, [](const Frame&) {}, queueOf(2), h);
+  const LiveStats s = runLive(src, [](const Frame&, std::size_t) {}, queueOf(2), h);
   EXPECT_EQ(s.stop, StopReason::SourceError);
   EXPECT_NE(s.error.find("unplugged"), std::string::npos) << s.error;
   EXPECT_EQ(s.played, 30u);
@@ -115,7 +124,7 @@ TEST(LiveLoop, SensorErrorMidRunIsACleanStop) {
 TEST(LiveLoop, ConsumerExceptionStopsWithoutLosingCount) {
   FakeSource src(100, 1);
   const LiveStats s = runLive(src,
-                              [](const Frame& f) {
+                              [](const Frame& f, std::size_t) {
                                 if (f.index == 10) throw std::runtime_error("boom");
                               },
                               queueOf(2));
@@ -134,7 +143,7 @@ TEST(LiveLoop, ExternalStopFlagInterrupts) {
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
     stop = true;
   });
-  const LiveStats s = runLive(src, [](const Frame&) { std::this_thread::sleep_for(std::chrono::milliseconds(5)); },
+  const LiveStats s = runLive(src, [](const Frame&, std::size_t) { std::this_thread::sleep_for(std::chrono::milliseconds(5)); },
                               queueOf(2), h);
   stopper.join();
   EXPECT_EQ(s.stop, StopReason::Interrupted);
@@ -177,7 +186,7 @@ TEST(LiveReplay, PlaysAtTheRecordedRate) {
   }();
   fs_src->rewind();
   ReplaySource src(std::move(fs_src), 2.0);  // twice as fast as recorded
-  const LiveStats s = runLive(src, [](const Frame&) {}, queueOf(2));
+  const LiveStats s = runLive(src, [](const Frame&, std::size_t) {}, queueOf(2));
   EXPECT_EQ(s.played, 31u);
   // Never earlier than the timestamps allow (sleeping cannot be early); lateness is load-dependent
   // and not asserted.
@@ -203,7 +212,7 @@ TEST(LiveReplay, TumThroughTheLivePathWithSlowConsumerAndRecording) {
   };
   std::vector<double> processed_stamps;
   const LiveStats s = runLive(src,
-                              [&](const Frame& f) {
+                              [&](const Frame& f, std::size_t) {
                                 processed_stamps.push_back(f.timestamp);
                                 const std::size_t until = std::min<std::size_t>(f.index + 5, 45);
                                 const auto t0 = std::chrono::steady_clock::now();

@@ -68,6 +68,10 @@ TEST(GrabApp, ReplayWithSlowProcessingDropsAndRecordsEverything) {
   EXPECT_EQ(played, 40);
   EXPECT_GT(dropped, 0);
   EXPECT_EQ(processed + dropped, played);
+  // Every frame but the last ones drained at the end had frames queued behind it.
+  const long behind = std::stol(kv["frames_processed_behind"]);
+  EXPECT_GT(behind, 0);
+  EXPECT_LT(behind, processed);
   EXPECT_EQ(kv["frames_recorded"], "40");
   EXPECT_EQ(kv["stop"], "max frames reached");
   // The rawlog is a valid input for vofusion's own reader.
@@ -276,6 +280,10 @@ TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {
   EXPECT_EQ(played, 20);
   EXPECT_GE(processed, 1);
   EXPECT_EQ(processed + dropped, played);
+  // Frames processed with others queued behind them (their odometry without NARF): both summaries.
+  const auto summary = nlohmann::json::parse(std::ifstream(out + "/summary.json"));
+  EXPECT_EQ(summary["live"]["processed_behind"].get<long>(), std::stol(kv.at("frames_processed_behind")));
+  EXPECT_LE(summary["live"]["processed_behind"].get<long>(), processed);
   // One trajectory pose per processed frame.
   std::ifstream traj(out + "/trajectory.txt");
   std::string line;

@@ -132,6 +132,7 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
 
   for (;;) {
     Frame frame;
+    std::size_t waiting = 0;
     {
       std::unique_lock<std::mutex> lk(sh.m);
       if (externalStop(hooks)) sh.stop = true;
@@ -153,9 +154,10 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
       }
       frame = std::move(sh.queue.front());
       sh.queue.pop_front();
+      waiting = sh.queue.size();
     }
     try {
-      consumer(frame);
+      consumer(frame, waiting);
     } catch (const std::exception& e) {
       std::lock_guard<std::mutex> lk(sh.m);
       ++sh.stats.dropped;  // not finished: counted as dropped so processed stays honest
@@ -167,6 +169,7 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
     {
       std::lock_guard<std::mutex> lk(sh.m);
       ++sh.stats.processed;
+      if (waiting > 0) ++sh.stats.behind;
     }
     tick(true);
   }
