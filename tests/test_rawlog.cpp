@@ -1,8 +1,10 @@
 #include <Eigen/Dense>
 // MRPT rawlog reading and writing: a real OpenNI2 capture, round trips in both formats, bad input.
 #include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <tuple>
 
 #include <mrpt/core/Clock.h>
 #include <mrpt/io/CFileGZOutputStream.h>
@@ -265,6 +267,46 @@ TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {
     // three frames to a clean end, anywhere else two or three frames and where the file ends.
     EXPECT_GE(n, 2u);
     EXPECT_TRUE(cut_short || n == 3u) << n << " frames read to a clean end";
+  }
+}
+
+// Damage is not a cut: a bad end flag on the last entry, or a length field that reads on past the end
+// of the file from an entry in the middle, is "corrupt", with the frames before it read.
+TEST(Rawlog, InPlaceRecordingDamagedInsideIsCorruptNotTruncated) {
+  const auto frames = simFrames(5);
+  const std::string dir = test::tempDir("rawlog_damaged");
+  RawlogWriterOptions o;
+  o.in_place = true;
+  writeRawlog(dir + "/rec.rawlog", frames, o);
+  const std::string bytes = fileBytes(dir + "/rec.rawlog");
+  fs::create_directory_symlink(dir + "/rec_Images", dir + "/bad_Images");
+  // The third frame's colour image name, stored as a 32-bit length and its characters.
+  const std::size_t name = bytes.find("KINECT_000002_");
+  ASSERT_NE(name, std::string::npos);
+  std::uint32_t length = 0;
+  std::memcpy(&length, bytes.data() + name - 4, 4);
+  ASSERT_GT(length, 14u);
+  ASSERT_LT(length, 200u);
+  std::string long_name = bytes;
+  const std::uint32_t past_the_end = std::uint32_t(bytes.size());
+  std::memcpy(long_name.data() + name - 4, &past_the_end, 4);
+  std::string bad_flag = bytes;
+  bad_flag.back() = char(bad_flag.back() ^ 0x5a);
+  for (const auto& [what, damaged, frames_before] :
+       {std::tuple{"a length past the end", long_name, 2u}, std::tuple{"the last end flag", bad_flag, 5u}}) {
+    SCOPED_TRACE(what);
+    const std::string bad = dir + "/bad.rawlog";
+    std::ofstream(bad, std::ios::binary | std::ios::trunc) << damaged;
+    RawlogSource src(bad, {});
+    Frame f;
+    std::size_t n = 0;
+    try {
+      while (src.next(f)) ++n;
+      FAIL() << "read to a clean end";
+    } catch (const RecordingCutShort& e) {
+      EXPECT_EQ(e.problem().rfind("corrupt or truncated rawlog at entry ", 0), 0u) << e.what();
+    }
+    EXPECT_EQ(n, frames_before);
   }
 }
 

@@ -4,6 +4,7 @@
 #include "vofusion/io/png_decode.h"
 #include "record_file.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cmath>
@@ -57,21 +58,19 @@ class CountingStream : public mrpt::io::CStream {
   size_t Read(void* buf, size_t n) override {
     const size_t got = in_.Read(buf, n);
     count_ += got;
+    if (got < n) ended_ = true;
     return got;
   }
+  bool ended() const { return ended_; }  // a read came up short: the file has ended
   size_t Write(const void*, size_t) override { throw std::logic_error("read-only stream"); }
   uint64_t Seek(int64_t, TSeekOrigin) override { throw std::logic_error("stream cannot seek"); }
   uint64_t getTotalBytesCount() const override { return in_.getTotalBytesCount(); }
   uint64_t getPosition() const override { return count_; }
-  // Whether nothing is left to read (consumes a byte otherwise: only for after a failed read).
-  bool atEnd() {
-    char byte;
-    return in_.Read(&byte, 1) == 0;
-  }
 
  private:
   mrpt::io::CStream& in_;
   uint64_t count_ = 0;
+  bool ended_ = false;
 };
 
 // "<scale> metres per unit" made exact for the usual decimal units (1e-3, 2e-4 = 1/5000): the float
@@ -205,6 +204,7 @@ struct RawlogSource::Reader {
   std::unique_ptr<mrpt::serialization::CArchive> arch;
   std::deque<mrpt::obs::CObservation::Ptr> pending;  // observations of the current sensory frame
   std::size_t objects = 0;
+  uint64_t largest_entry = 0;  // bytes
   std::string path;
 
   explicit Reader(const std::string& p) : path(p) {
@@ -226,10 +226,11 @@ struct RawlogSource::Reader {
         if (counter->getPosition() == before) return nullptr;
         throw InputError(path, truncatedAt(objects + 1));
       } catch (const std::exception&) {
-        // MRPT wraps an end of file met inside an object's fields in its own exceptions: a file that
-        // ends there (a recorder killed mid-write) is cut short, not corrupt.
-        if (!limit.refusedRequest() && !limit.totalExceeded() && objects > 0 && counter->atEnd())
-          throw InputError(path, truncatedAt(objects + 1));
+        // MRPT wraps an end of file met inside an object's fields in its own exceptions. An entry that
+        // ran into the end no longer than the largest whole one before it was cut short (a recorder
+        // killed mid-write); a longer one read on past a damaged length field.
+        const bool cut_short = counter->ended() && objects > 0 && counter->getPosition() - before <= largest_entry;
+        if (!limit.refusedRequest() && !limit.totalExceeded() && cut_short) throw InputError(path, truncatedAt(objects + 1));
         // Refused requests surface as bad_alloc or as MRPT's wrapper around it.
         const std::string why =
             limit.refusedRequest() ? " (asks for a buffer of " + mebibytes(limit.refusedRequest()) +
@@ -240,6 +241,7 @@ struct RawlogSource::Reader {
         throw InputError(path, "corrupt or truncated rawlog at entry " + std::to_string(objects + 1) + why);
       }
       ++objects;
+      largest_entry = std::max(largest_entry, counter->getPosition() - before);
       if (!obj) continue;
       if (auto o = std::dynamic_pointer_cast<mrpt::obs::CObservation>(obj)) return o;
       if (auto sf = std::dynamic_pointer_cast<mrpt::obs::CSensoryFrame>(obj))

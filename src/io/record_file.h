@@ -1,12 +1,13 @@
 #pragma once
 // The stream of a rawlog recorded in place (RawlogWriterOptions::in_place): every record MRPT
-// serialises is gathered in memory and appended with one write(2) by endRecord(), so a recorder that
-// stops, fails or crashes between records leaves the file ending between two whole records. A kill
-// during that write(2) can still tear its record: Linux ends a write cut short by a fatal signal
-// between two pages, with the first pages in the file. The reader then reads to the last whole frame
-// and reports the file as truncated inside the next entry (RecordingCutShort). The kernel has the bytes as soon as write(2) returns; they go to the disk at most once a
-// second (fdatasync), so a power cut costs at most the last second. Plain, not gzip: a gzip stream
-// is only readable up to its last flush, and a record without its images is small.
+// serialises is gathered in memory and appended by endRecord() in one write(2) (repeated only if the
+// kernel takes part of it), so a recorder that stops, fails or crashes between records leaves the file
+// ending between two whole records. A kill during that write(2) can still tear its record: Linux ends
+// a write cut short by a fatal signal between two pages, with the first pages in the file. The reader
+// then reads to the last whole frame and reports the file as truncated inside the next entry
+// (RecordingCutShort). The kernel has the bytes as soon as write(2) returns; they go to the disk at
+// most once a second (fdatasync), so a power cut costs at most the last second. Plain, not gzip: a
+// gzip stream is only readable up to its last flush, and a record without its images is small.
 #include <chrono>
 #include <string>
 

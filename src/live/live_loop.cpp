@@ -115,6 +115,7 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   std::thread producer([&] { produce(source, opt, hooks, sh); });
 
+  std::size_t dropped_at_take = 0;  // sh.stats.dropped when the last frame was taken out
   auto last_tick = std::chrono::steady_clock::now();
   auto tick = [&](bool force) {
     if (!hooks.on_tick) return;
@@ -132,7 +133,7 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
 
   for (;;) {
     Frame frame;
-    std::size_t waiting = 0;
+    std::size_t behind = 0;
     {
       std::unique_lock<std::mutex> lk(sh.m);
       if (externalStop(hooks)) sh.stop = true;
@@ -154,10 +155,12 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
       }
       frame = std::move(sh.queue.front());
       sh.queue.pop_front();
-      waiting = sh.queue.size();
+      // Dropped frames count too: with a queue of one, the frames behind are never in it.
+      behind = sh.queue.size() + (sh.stats.dropped - dropped_at_take);
+      dropped_at_take = sh.stats.dropped;
     }
     try {
-      consumer(frame, waiting);
+      consumer(frame, behind);
     } catch (const std::exception& e) {
       std::lock_guard<std::mutex> lk(sh.m);
       ++sh.stats.dropped;  // not finished: counted as dropped so processed stays honest
@@ -169,7 +172,7 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
     {
       std::lock_guard<std::mutex> lk(sh.m);
       ++sh.stats.processed;
-      if (waiting > 0) ++sh.stats.behind;
+      if (behind > 0) ++sh.stats.behind;
     }
     tick(true);
   }
