@@ -156,7 +156,6 @@ std::string summaryText(const LiveStats& s, const std::string& source, std::size
     << "frames_played: " << s.played << "\n"
     << "frames_processed: " << s.processed << "\n"
     << "frames_dropped: " << s.dropped << "\n"
-    << "frames_processed_behind: " << s.behind << "\n"
     << "frames_recorded: " << recorded << "\n"
     << "queue_capacity: " << queue << "\n"
     << "max_queue: " << s.max_queue << "\n"
@@ -238,14 +237,11 @@ struct LiveConsumer {
   const LiveStats& latest;
   LiveCheckpoints& checkpoints;
   std::size_t loops_shown = 0;
-  std::size_t without_narf = 0;  // frames whose odometry ran on STAR keypoints alone
 
-  void operator()(const Frame& frame, std::size_t behind) {
+  void operator()(const Frame& frame) {
     if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
     if (!run) return;
-    // Frames came in behind this one: it skips NARF, so that fewer of them are dropped.
-    const FrameReport r = run->process(frame, behind > 0 ? FrameLoad::Behind : FrameLoad::OnTime);
-    if (r.odometry.star_keypoints > 0 && r.odometry.narf_keypoints == 0) ++without_narf;
+    const FrameReport r = run->process(frame);
     checkpoints.maybeWrite(*run);
     if (!viewer) return;
     const Reconstruction& rec = run->reconstruction();
@@ -263,8 +259,7 @@ struct LiveConsumer {
 // The reconstruction's end: the same outputs as vofusion, the map fused again from grab.rawlog when
 // loops moved the poses and the run recorded.
 void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, const std::string& source_name,
-                const std::string& out, std::size_t recorded, const LiveCheckpoints& checkpoints,
-                std::size_t without_narf) {
+                const std::string& out, std::size_t recorded, const LiveCheckpoints& checkpoints) {
   if (run.reconstruction().framesProcessed() == 0) return;
   RunInfo info;
   info.app = "vofusion-grab";
@@ -273,7 +268,6 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
   info.seconds = stats.seconds;
   info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
-                          {"processed_behind", stats.behind}, {"odometry_without_narf", without_narf},
                           {"queue_capacity", plan.opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
   if (checkpoints.every > 0)
     info.extra["checkpoints"] = {{"every_seconds", checkpoints.every}, {"written", checkpoints.written},
@@ -291,11 +285,11 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
 // Everything recorded so far is written, whatever stopped the run; then the reconstruction's outputs
 // and grab-summary.txt.
 int finishGrab(const LiveStats& stats, const GrabPlan& plan, const LiveSource& source, RawlogWriter* writer,
-               RunSession* session, const Args& args, const LiveCheckpoints& checkpoints, std::size_t without_narf) {
+               RunSession* session, const Args& args, const LiveCheckpoints& checkpoints) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   try {
     if (writer) writer->commit();
-    if (session) finishLive(*session, stats, plan, source.name(), args.out, recorded, checkpoints, without_narf);
+    if (session) finishLive(*session, stats, plan, source.name(), args.out, recorded, checkpoints);
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
                         summaryText(stats, source.name(), recorded, plan.opts.queue_capacity));
   } catch (const InputError&) {
@@ -364,7 +358,7 @@ int run(const Args& args) {
   const LiveStats stats = runLive(*source, std::ref(consumer), plan.opts, hooks);
   progress.finish("processed " + std::to_string(stats.processed) + "  dropped " + std::to_string(stats.dropped) +
                   "  (" + stopReasonName(stats.stop) + ")");
-  return finishGrab(stats, plan, *source, writer.get(), session.get(), args, checkpoints, consumer.without_narf);
+  return finishGrab(stats, plan, *source, writer.get(), session.get(), args, checkpoints);
 }
 
 }  // namespace

@@ -59,31 +59,6 @@ TEST(Odometry, RecoversSyntheticMotionWithin2mmAnd02deg) {
   }
 }
 
-// Behind (frames queued behind this one, live), a union odometry skips NARF for that frame and still
-// matches it, against union frames before and after it; "narf" alone is kept as set.
-TEST(Odometry, BehindFramesSkipNarfAndStillTrack) {
-  const auto seq = room(false);
-  OdometryParams p;
-  p.narf.downsample = 2;
-  RgbdOdometry odo(p);
-  odo.process(seq.render(10));
-  const OdometryResult behind = odo.process(seq.render(11), FrameLoad::Behind);
-  const OdometryResult on_time = odo.process(seq.render(12));
-  for (const OdometryResult* r : {&behind, &on_time}) ASSERT_TRUE(r->success) << r->failure;
-  EXPECT_EQ(behind.narf_keypoints, 0);
-  EXPECT_GT(behind.star_keypoints, 0);
-  EXPECT_GT(on_time.narf_keypoints, 0);
-  for (const auto& [r, i] : {std::pair{&behind, 11u}, std::pair{&on_time, 12u}}) {
-    const mrpt::poses::CPose3D err = r->motion - (seq.groundTruth(i) - seq.groundTruth(i - 1));
-    EXPECT_LT(err.translation().norm(), 0.002) << "frame " << i;
-    EXPECT_LT(rotDeg(err), 0.2) << "frame " << i;
-  }
-  p.keypoints = "narf";
-  RgbdOdometry narf_only(p);
-  narf_only.process(seq.render(10));
-  EXPECT_GT(narf_only.process(seq.render(11), FrameLoad::Behind).narf_keypoints, 0);
-}
-
 TEST(Odometry, NoisyDepthStillCloseAndCovarianceSensible) {
   const auto seq = room(true);
   RgbdOdometry odo;

@@ -115,7 +115,6 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   std::thread producer([&] { produce(source, opt, hooks, sh); });
 
-  std::size_t dropped_at_take = 0;  // sh.stats.dropped when the last frame was taken out
   auto last_tick = std::chrono::steady_clock::now();
   auto tick = [&](bool force) {
     if (!hooks.on_tick) return;
@@ -133,7 +132,6 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
 
   for (;;) {
     Frame frame;
-    std::size_t behind = 0;
     {
       std::unique_lock<std::mutex> lk(sh.m);
       if (externalStop(hooks)) sh.stop = true;
@@ -155,12 +153,9 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
       }
       frame = std::move(sh.queue.front());
       sh.queue.pop_front();
-      // Dropped frames count too: with a queue of one, the frames behind are never in it.
-      behind = sh.queue.size() + (sh.stats.dropped - dropped_at_take);
-      dropped_at_take = sh.stats.dropped;
     }
     try {
-      consumer(frame, behind);
+      consumer(frame);
     } catch (const std::exception& e) {
       std::lock_guard<std::mutex> lk(sh.m);
       ++sh.stats.dropped;  // not finished: counted as dropped so processed stays honest
@@ -172,7 +167,6 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
     {
       std::lock_guard<std::mutex> lk(sh.m);
       ++sh.stats.processed;
-      if (behind > 0) ++sh.stats.behind;
     }
     tick(true);
   }

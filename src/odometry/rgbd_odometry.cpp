@@ -148,11 +148,8 @@ struct RgbdOdometry::Impl {
     std::vector<cv::KeyPoint> star;
     cv::Mat points, normals, smoothed;
   };
-  FrameFeatures begin(const Frame& frame, KeypointSet set, Extraction& ex, StageTimes& times) const;
-  void finish(const Frame& frame, KeypointSet set, Extraction& ex, FrameFeatures& f, StageTimes& times) const;
-  KeypointSet keypointsUnder(FrameLoad load) const {
-    return load == FrameLoad::Behind && keypoints == KeypointSet::Union ? KeypointSet::Star : keypoints;
-  }
+  FrameFeatures begin(const Frame& frame, Extraction& ex, StageTimes& times) const;
+  void finish(const Frame& frame, Extraction& ex, FrameFeatures& f, StageTimes& times) const;
   // Describes kps and appends those with a descriptor and a depth reading to f.
   void describe(const Frame& frame, const Extraction& ex, std::vector<cv::KeyPoint> kps, FrameFeatures& f) const;
   // Depth reading for keypoint k at (distorted) pixel `at`: NARF keypoints take the nearest reading of
@@ -206,7 +203,7 @@ struct RgbdOdometry::Impl {
 
   // process()'s steps. The frame's features, its STAR part matched against the references while NARF
   // runs (split[0]: the reference, split[1 + i]: older[i]); the result's keypoint counts and shared maps.
-  FrameFeatures extract(const Frame& frame, FrameLoad load, const std::vector<OlderFrame>& older,
+  FrameFeatures extract(const Frame& frame, const std::vector<OlderFrame>& older,
                         std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r) const;
   // The motion of the current frame relative to the last frame with a pose, as far as it got.
   struct Motion {
@@ -229,7 +226,7 @@ struct RgbdOdometry::Impl {
   void advance(FrameFeatures cur, const Motion& mo);
 };
 
-FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, KeypointSet set, Extraction& ex, StageTimes& times) const {
+FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, StageTimes& times) const {
   FrameFeatures f;
   f.index = frame.index;
   f.timestamp = frame.timestamp;
@@ -238,7 +235,7 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, KeypointSet set, Ext
   f.camera = frame.camera;
   // NARF is the longest chain: its border extraction first, on every core, then its interest search
   // (serial) on its own thread beside everything else.
-  if (set != KeypointSet::Star && params.narf_concurrent) {
+  if (keypoints != KeypointSet::Star && params.narf_concurrent) {
     NarfPrepared prepared;
     {
       ScopedStageTimer t(times, "narf_prepare");
@@ -258,7 +255,7 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, KeypointSet set, Ext
     if (frame.rgb.channels() == 3) cv::cvtColor(frame.rgb, gray, cv::COLOR_BGR2GRAY);
     else gray = frame.rgb;
   }
-  if (set != KeypointSet::Narf) {
+  if (keypoints != KeypointSet::Narf) {
     ScopedStageTimer t(times, "star");
     ex.star = detectStar(gray, params.star);
   }
@@ -279,9 +276,8 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, KeypointSet set, Ext
   return f;
 }
 
-void RgbdOdometry::Impl::finish(const Frame& frame, KeypointSet set, Extraction& ex, FrameFeatures& f,
-                                StageTimes& times) const {
-  if (set == KeypointSet::Star) return;
+void RgbdOdometry::Impl::finish(const Frame& frame, Extraction& ex, FrameFeatures& f, StageTimes& times) const {
+  if (keypoints == KeypointSet::Star) return;
   std::vector<cv::KeyPoint> narf;
   if (ex.narf_job.valid()) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -532,18 +528,17 @@ OdometryResult failed(OdometryResult& r, const std::string& why) {
 }
 }  // namespace
 
-FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, FrameLoad load, const std::vector<OlderFrame>& older,
+FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, const std::vector<OlderFrame>& older,
                                           std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r) const {
   Extraction ex;
-  const KeypointSet set = keypointsUnder(load);
-  FrameFeatures cur = begin(frame, set, ex, r.times);
+  FrameFeatures cur = begin(frame, ex, r.times);
   split = std::vector<CrossCheckedHammingMatcher>(1 + older.size());
   if (reference && ex.narf_job.valid()) {
     ScopedStageTimer t(r.times, "matching");
     split[0].add(cur.descriptors, reference->descriptors);
     for (std::size_t i = 0; i < older.size(); ++i) split[1 + i].add(cur.descriptors, older[i].features->descriptors);
   }
-  finish(frame, set, ex, cur, r.times);
+  finish(frame, ex, cur, r.times);
   if (params.brand.use_geometry) r.geometry = std::make_shared<const FrameGeometry>(FrameGeometry{ex.points, ex.normals});
   r.features = std::make_shared<const DescribedKeypoints>(DescribedKeypoints{cur.descriptors, cur.points});
   r.keypoints = int(cur.keypoints.size());
@@ -625,7 +620,7 @@ void RgbdOdometry::Impl::advance(FrameFeatures cur, const Motion& mo) {
   T_kf_last.setIdentity();
 }
 
-OdometryResult RgbdOdometry::process(const Frame& frame, FrameLoad load) {
+OdometryResult RgbdOdometry::process(const Frame& frame) {
   OdometryResult r;
   r.covariance.setIdentity();
   const OdometryParams& P = impl_->params;
@@ -636,7 +631,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame, FrameLoad load) {
   if (P.keyframe_min_inliers <= 0)
     for (const auto& [f, T] : m.older) older.push_back({&f, T});
   std::vector<CrossCheckedHammingMatcher> split;
-  FrameFeatures cur = m.extract(frame, load, older, split, r);
+  FrameFeatures cur = m.extract(frame, older, split, r);
   if (!m.reference) {
     m.older.clear();
     m.reference = std::move(cur);

@@ -120,7 +120,7 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
 
 Reconstruction::~Reconstruction() = default;
 
-FrameReport Reconstruction::process(const Frame& frame, FrameLoad load) {
+FrameReport Reconstruction::process(const Frame& frame) {
   Impl& m = *impl_;
   const auto start = std::chrono::steady_clock::now();
   FrameReport r;
@@ -128,7 +128,7 @@ FrameReport Reconstruction::process(const Frame& frame, FrameLoad load) {
   r.timestamp = frame.timestamp;
   if (m.odometry) {
     ScopedStageTimer t(r.times, "odometry");
-    r.odometry = m.odometry->process(frame, load);
+    r.odometry = m.odometry->process(frame);
     // The very first frame has no motion to estimate: not a failure.
     if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
     if (r.odometry.success)

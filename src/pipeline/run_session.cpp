@@ -79,9 +79,9 @@ RunSession::~RunSession() {
   if (premesher_) premesher_->stop();  // no more reads of the map rec_ is about to free
 }
 
-FrameReport RunSession::process(const Frame& frame, FrameLoad load) {
+FrameReport RunSession::process(const Frame& frame) {
   if (replaying()) throw std::logic_error("RunSession::process before the checkpoint's frames were replayed");
-  const FrameReport report = rec_.process(frame, load);
+  const FrameReport report = rec_.process(frame);
   recorder_.add(frame, report);
   reports_.push_back(outputsPart(report));
   return report;

@@ -35,7 +35,6 @@ struct LiveStats {
   std::size_t played = 0;     // frames the source delivered (and the recorder got)
   std::size_t processed = 0;  // frames the consumer finished
   std::size_t dropped = 0;    // frames discarded because the consumer was busy (or left at a stop)
-  std::size_t behind = 0;     // of the processed, those taken with frames behind them (FrameConsumer)
   std::size_t max_queue = 0;  // highest queue occupancy seen
   double seconds = 0.0;       // wall time of the run
   StopReason stop = StopReason::EndOfStream;
@@ -46,9 +45,8 @@ struct LiveStats {
   double processedFps() const { return seconds > 0 ? processed / seconds : 0.0; }
 };
 
-// Runs on the calling thread (GUI, reconstruction), may be slow. `behind`: the frames that came after
-// this one by the time it was taken out, still queued or already dropped (0: the consumer keeps up).
-using FrameConsumer = std::function<void(const Frame&, std::size_t behind)>;
+// Runs on the calling thread (GUI, reconstruction), may be slow.
+using FrameConsumer = std::function<void(const Frame&)>;
 // Runs on the producer thread for EVERY played frame, before queueing (the rawlog recorder: a
 // recording never has drops). `raw` is the sensor's own observation, or null for a replay.
 using FrameTap = std::function<void(const Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr& raw)>;

@@ -109,11 +109,6 @@ struct OdometryResult {
   int colour_time_votes = 0, colour_time_capture_votes = 0;
 };
 
-// Whether frames wait behind this one (a live sensor outrunning the machine). Behind, the union's NARF
-// keypoints are skipped for the frame and STAR's kept: NARF is ~18 % of the frame loop's CPU, and a
-// frame dropped instead doubles the motion the next one has to track. "star" and "narf" are kept as set.
-enum class FrameLoad { OnTime, Behind };
-
 class RgbdOdometry {
  public:
   explicit RgbdOdometry(const OdometryParams& params = {});
@@ -121,7 +116,7 @@ class RgbdOdometry {
   // Motion since the reference frame (OdometryResult::reference_index): the previous frame, or after
   // a failure the last frame whose motion was estimated (then, if that fails too, the failed frame);
   // the first frame (or the first after reset()) returns success=false with failure "first frame".
-  OdometryResult process(const Frame& frame, FrameLoad load = FrameLoad::OnTime);
+  OdometryResult process(const Frame& frame);
   void reset();
   // Checkpoints: what the next frame is matched against (the reference, the older frames, the last
   // failed frame, their velocities) and the colour-time votes. An odometry with the same parameters

@@ -58,8 +58,7 @@ class Reconstruction {
   // Reads every stage's section of cfg (the caller checks for unknown keys first).
   Reconstruction(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode);
   ~Reconstruction();
-  // load: whether frames wait behind this one (live); see FrameLoad.
-  FrameReport process(const Frame& frame, FrameLoad load = FrameLoad::OnTime);
+  FrameReport process(const Frame& frame);
 
   TrackingMode mode() const;
   // One pose per processed frame (held pose when lost): after finish(), the loop-closed poses when

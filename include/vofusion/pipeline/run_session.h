@@ -36,7 +36,7 @@ class RunSession {
 
   Reconstruction& reconstruction() { return rec_; }
   // The frame through the reconstruction, then queued for poses.rawlog.
-  FrameReport process(const Frame& frame, FrameLoad load = FrameLoad::OnTime);
+  FrameReport process(const Frame& frame);
   // The end of the run, once: loop closure finished, the map fused again at the corrected poses when
   // loops moved them (from reopen(); without one the mesh keeps the tracked poses),
   // saved to save_volume when given, and every output written. Returns summary.json's content.
