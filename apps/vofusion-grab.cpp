@@ -344,7 +344,7 @@ int run(const Args& args) {
   LiveConsumer consumer{args, session.get(), viewer.get(), latest, checkpoints};
   LiveHooks hooks;
   hooks.stop = &g_stop;
-  if (writer) hooks.on_grabbed = [&](const Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { writer->write(f); };
+  if (writer) hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { f.recorded = writer->write(f); };
   std::size_t total = source->size();
   if (plan.opts.max_frames > 0 && (total == 0 || total > plan.opts.max_frames)) total = plan.opts.max_frames;
   Progress progress(args.live ? "live" : "recording", total);

@@ -91,7 +91,7 @@ TEST(LiveLoop, MaxFramesStopsThePlay) {
   o.max_frames = 17;
   std::size_t recorded = 0;
   LiveHooks h;
-  h.on_grabbed = [&](const Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++recorded; };
+  h.on_grabbed = [&](Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++recorded; };
   const LiveStats s = runLive(src, [](const Frame&) {}, o, h);
   EXPECT_EQ(s.stop, StopReason::MaxFrames);
   EXPECT_EQ(s.played, 17u);
@@ -103,7 +103,7 @@ TEST(LiveLoop, SensorErrorMidRunIsACleanStop) {
   FakeSource src(100, 1, 30);
   std::size_t recorded = 0;
   LiveHooks h;
-  h.on_grabbed = [&](const Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++recorded; };
+  h.on_grabbed = [&](Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++recorded; };
   const LiveStats s = runLive(src, [](const Frame&) {}, queueOf(2), h);
   EXPECT_EQ(s.stop, StopReason::SourceError);
   EXPECT_NE(s.error.find("unplugged"), std::string::npos) << s.error;
@@ -197,7 +197,7 @@ TEST(LiveReplay, TumThroughTheLivePathWithSlowConsumerAndRecording) {
   // the sensor has played k + 4 (or everything), so with a queue of 2 frames must be dropped.
   std::atomic<std::size_t> played{0};
   LiveHooks h;
-  h.on_grabbed = [&](const Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) {
+  h.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) {
     writer.write(f);
     ++played;
   };

@@ -276,6 +276,18 @@ TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {
   EXPECT_EQ(played, 20);
   EXPECT_GE(processed, 1);
   EXPECT_EQ(processed + dropped, played);
+  // poses.rawlog's images are the recording's, linked: each file of poses_Images is one of grab_Images.
+  std::size_t poses_images = 0, linked = 0;
+  for (const auto& p : fs::directory_iterator(out + "/poses_Images")) {
+    ++poses_images;
+    for (const auto& g : fs::directory_iterator(out + "/grab_Images"))
+      if (fs::equivalent(p.path(), g.path())) {
+        ++linked;
+        break;
+      }
+  }
+  EXPECT_EQ(poses_images, std::size_t(2 * processed));
+  EXPECT_EQ(linked, poses_images);
   // One trajectory pose per processed frame.
   std::ifstream traj(out + "/trajectory.txt");
   std::string line;

@@ -310,6 +310,39 @@ TEST(Rawlog, InPlaceRecordingDamagedInsideIsCorruptNotTruncated) {
   }
 }
 
+// A frame already recorded (vofusion-grab's recording, then poses.rawlog) gets hard links to the
+// recording's images rather than the same images written again; a range image at other units is
+// written anew. Either rawlog reads back the frames.
+TEST(Rawlog, RecordedFramesLinkTheRecordingsImages) {
+  auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_linked");
+  RawlogWriterOptions in_place;
+  in_place.in_place = true;
+  RawlogWriter recording(dir + "/grab.rawlog", in_place);
+  for (Frame& f : frames) f.recorded = recording.write(f);
+  recording.commit();
+  for (const double units : {2e-4, 1e-3}) {
+    SCOPED_TRACE(units);
+    RawlogWriterOptions o;
+    o.range_units = units;
+    const std::string path = dir + "/poses" + std::to_string(int(units * 1e4)) + ".rawlog";
+    writeRawlog(path, frames, o);
+    const std::string images = RawlogWriter::imagesDirFor(path);
+    std::size_t linked_colour = 0, linked_depth = 0;
+    for (const Frame& f : frames) {
+      ASSERT_TRUE(f.recorded);
+      for (const auto& e : fs::directory_iterator(images)) {
+        const bool colour = e.path().string().find("_INTENSITY.png") != std::string::npos;
+        if (fs::equivalent(e.path(), colour ? f.recorded->colour : f.recorded->depth)) ++(colour ? linked_colour : linked_depth);
+      }
+    }
+    EXPECT_EQ(linked_colour, 2u);
+    EXPECT_EQ(linked_depth, units == 2e-4 ? 2u : 0u);
+    RawlogSource src(path, {});
+    expectSameFrames(frames, src, units / 2 + 1e-6);
+  }
+}
+
 TEST(Rawlog, ObservationsFormatRejectsActions) {
   const std::string dir = test::tempDir("rawlog_noact");
   RawlogWriter w(dir + "/x.rawlog");

@@ -71,6 +71,10 @@ void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& 
     std::remove(path.c_str());  // no half-written file that names itself a range image
     throw InputError(path, "cannot write range image: " + why);
   }
+  useExternalRangeImage(obs, file_name);
+}
+
+void useExternalRangeImage(CObservation3DRangeScan& obs, const std::string& file_name) {
   obs.*ExternalNames::range_file = file_name;
   obs.*ExternalNames::range_stored = true;
   obs.rangeImage.setSize(0, 0);

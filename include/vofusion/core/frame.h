@@ -12,6 +12,13 @@
 
 namespace vofusion {
 
+// Where a recording (vofusion-grab's RawlogWriter) wrote a frame's images: absolute paths of its colour
+// PNG and its range-image file, which holds the depth in range_units metres per unit.
+struct RecordedImages {
+  std::string colour, depth;
+  double range_units = 0.0;
+};
+
 struct Frame {
   std::size_t index = 0;      // 0-based position in its source
   double timestamp = 0.0;     // seconds (UNIX time for real data); when the depth image was taken
@@ -24,6 +31,9 @@ struct Frame {
   std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
   std::optional<Eigen::Vector3d> up;  // unit "up" (against gravity) in the camera frame, from the
                                       // recording's accelerometer when it has one (TUM accelerometer.txt)
+  // Set once the frame is recorded: a later writer of the frame links those files rather than
+  // encoding, compressing and writing the same images again (RawlogWriter::write).
+  std::optional<RecordedImages> recorded;
 
   bool valid() const { return !rgb.empty() && !depth.empty(); }
 };

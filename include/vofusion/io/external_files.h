@@ -26,5 +26,8 @@ void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::st
 // global. Throws InputError(dir/file_name, ...) when the file cannot be written.
 void writeRangeImageExternally(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name,
                                const std::string& dir);
+// Marks obs's range image externally stored under the relative file_name, a file that already holds
+// it (a link to a recording's), releasing the matrix.
+void useExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name);
 
 }  // namespace vofusion

@@ -15,6 +15,7 @@
 // cameraParams == cameraParamsIntensity and relativePoseIntensityWRTDepth is MRPT's "cameras
 // coincide" pose (0,0,0,-90deg,0,-90deg). Everything goes to temporary names and appears on commit().
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -101,8 +102,11 @@ class RawlogWriter {
   RawlogWriter& operator=(const RawlogWriter&) = delete;
 
   // One CObservation3DRangeScan (+ ground-truth observation). Action/SF format: written as the
-  // pending actions followed by a sensory frame holding the observation(s).
-  void write(const Frame& frame);
+  // pending actions followed by a sensory frame holding the observation(s). External images: a frame
+  // already recorded (Frame::recorded) gets hard links to the recording's files (its range image only
+  // at the same range_units), else they are written. Returns where the images are (absolute; a
+  // writer not in place moves them on commit()), or nothing when they are embedded.
+  std::optional<RecordedImages> write(const Frame& frame);
   // Action/SF format only (std::logic_error otherwise): goes into the action collection preceding the
   // next frame's sensory frame.
   void writeAction(const mrpt::obs::CAction& action);
@@ -120,6 +124,8 @@ class RawlogWriter {
   static std::string groundTruthPathFor(const std::string& rawlog_path);
 
  private:
+  void writeColourPng(const Frame& frame, const std::string& path) const;
+
   struct Impl;
   std::string path_;
   RawlogWriterOptions opts_;

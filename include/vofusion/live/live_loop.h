@@ -48,8 +48,9 @@ struct LiveStats {
 // Runs on the calling thread (GUI, reconstruction), may be slow.
 using FrameConsumer = std::function<void(const Frame&)>;
 // Runs on the producer thread for EVERY played frame, before queueing (the rawlog recorder: a
-// recording never has drops). `raw` is the sensor's own observation, or null for a replay.
-using FrameTap = std::function<void(const Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr& raw)>;
+// recording never has drops; it notes in Frame::recorded where it wrote the frame). `raw` is the
+// sensor's own observation, or null for a replay.
+using FrameTap = std::function<void(Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr& raw)>;
 // Called on the calling thread about every 0.1 s and after each processed frame (progress, GUI).
 using LiveTick = std::function<void(const LiveStats&)>;
 
