@@ -341,6 +341,26 @@ TEST(Rawlog, RecordedFramesLinkTheRecordingsImages) {
     RawlogSource src(path, {});
     expectSameFrames(frames, src, units / 2 + 1e-6);
   }
+  // The links hold the bytes the writer writes for the frames it does not know recorded.
+  auto unrecorded = frames;
+  for (Frame& f : unrecorded) f.recorded.reset();
+  const std::string plain = RawlogWriter::imagesDirFor(writeRawlog(dir + "/plain.rawlog", unrecorded, {}));
+  std::size_t compared = 0;
+  for (const auto& e : fs::directory_iterator(plain)) {
+    EXPECT_EQ(fileBytes(e.path()), fileBytes(dir + "/poses2_Images/" + e.path().filename().string())) << e.path();
+    ++compared;
+  }
+  EXPECT_EQ(compared, 4u);
+  // A recording's file gone: the image is written instead.
+  fs::remove(frames[0].recorded->colour);
+  const std::string after = writeRawlog(dir + "/after.rawlog", frames, {});
+  for (const auto& e : fs::directory_iterator(RawlogWriter::imagesDirFor(after))) {
+    const bool written = e.path().filename().string().find("000000_") != std::string::npos &&
+                         e.path().extension() == ".png";
+    EXPECT_EQ(fs::hard_link_count(e.path()) == 1, written) << e.path();
+  }
+  RawlogSource src(after, {});
+  expectSameFrames(frames, src, 1e-4 + 1e-6);
 }
 
 TEST(Rawlog, ObservationsFormatRejectsActions) {

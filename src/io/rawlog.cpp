@@ -48,12 +48,35 @@ constexpr std::size_t kMaxEntryBuffer = std::size_t(64) << 20;
 constexpr std::size_t kMaxEntryTotal = std::size_t(256) << 20;
 
 std::string mebibytes(std::size_t n) { return std::to_string((n + (1u << 20) - 1) >> 20) + " MiB"; }
-// A hard link at `to` to the file `from`; false, with nothing made, where the file system refuses
-// (another device, no hard links) or `from` is gone.
+// A hard link at `to` to the recording's file `from`; false where the file system refuses (another
+// device, no hard links) or `from` is gone. Whatever was at `to` is removed first, so that a file
+// written there instead never writes through a link into the recording.
 bool linkFile(const std::string& from, const std::string& to) {
   std::error_code ec;
+  fs::remove(to, ec);
   fs::create_hard_link(from, to, ec);
   return !ec;
+}
+
+// The frame's colour image as a PNG at `path` (`shown` names it in errors: its final name).
+void writeColourPng(const Frame& frame, const std::string& path, int png_compression, const std::string& shown) {
+  std::vector<uchar> bytes;
+  // A TUM/7-Scenes colour PNG is copied as it is: encoding it again was ~25 ms of CPU per frame.
+  // A PNG of 8-bit RGB pixels of this size decodes to exactly the frame's colour image: its bytes
+  // stand for it.
+  if (frame.colour_file.empty() || !readWholeFile(frame.colour_file, bytes) || !isRgb8Png(bytes, frame.rgb.cols, frame.rgb.rows)) {
+    // Encoded in memory and written here: on a full disk libpng would print its own error line.
+    if (!cv::imencode(".png", frame.rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, png_compression}))
+      throw InputError(shown, "cannot encode image");
+  }
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  const bool ok = f && std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+  const int err = errno;
+  if (!f || std::fclose(f) != 0 || !ok) {
+    const std::string why = std::strerror(f && ok ? errno : err);
+    std::remove(path.c_str());  // no half-written image
+    throw InputError(shown, "cannot write image: " + why);
+  }
 }
 
 std::string truncatedAt(std::size_t entry) { return "truncated rawlog (ends inside entry " + std::to_string(entry) + ")"; }
@@ -236,7 +259,9 @@ struct RawlogSource::Reader {
       } catch (const std::exception&) {
         // MRPT wraps an end of file met inside an object's fields in its own exceptions. An entry that
         // ran into the end no longer than the largest whole one before it was cut short (a recorder
-        // killed mid-write); a longer one read on past a damaged length field.
+        // killed mid-write); a longer one read on past a damaged length field. A guess from sizes:
+        // a cut entry larger than all before it reads as corrupt, a damaged length that stays within
+        // that size as cut short. Either way the frames before it are read.
         const bool cut_short = counter->ended() && objects > 0 && counter->getPosition() - before <= largest_entry;
         if (!limit.refusedRequest() && !limit.totalExceeded() && cut_short) throw InputError(path, truncatedAt(objects + 1));
         // Refused requests surface as bad_alloc or as MRPT's wrapper around it.
@@ -483,14 +508,17 @@ std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
     // The same frame's files from its recording (poses.rawlog beside grab.rawlog): linked, not written
     // twice (the range image's compression was 2.6 ms a frame, a colour image's encoding ~25 ms).
     const std::optional<RecordedImages>& rec = frame.recorded;
-    if (!rec || !linkFile(rec->colour, dir + "/" + png)) writeColourPng(frame, dir + "/" + png);
+    if (!rec || !linkFile(rec->colour, dir + "/" + png))
+      writeColourPng(frame, dir + "/" + png, opts_.png_compression, imagesDirFor(path_) + "/" + png);
     obs->intensityImage.setExternalStorage(png);
     if (rec && rec->range_units == opts_.range_units && linkFile(rec->depth, dir + "/" + bin))
       useExternalRangeImage(*obs, bin);
     else
       writeRangeImageExternally(*obs, bin, dir);
     impl_->images_used = true;
-    images = RecordedImages{fs::absolute(dir + "/" + png).string(), fs::absolute(dir + "/" + bin).string(), opts_.range_units};
+    // Only a recording's files keep their names: a result's folder is renamed by commit().
+    if (opts_.in_place)
+      images = RecordedImages{fs::absolute(dir + "/" + png).string(), fs::absolute(dir + "/" + bin).string(), opts_.range_units};
   }
   std::vector<mrpt::obs::CObservation::Ptr> obs_list{obs};
   if (frame.groundTruth && opts_.ground_truth_observations) {
@@ -520,24 +548,6 @@ std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
   }
   ++frames_;
   return images;
-}
-
-void RawlogWriter::writeColourPng(const Frame& frame, const std::string& path) const {
-  std::vector<uchar> bytes;
-  // A TUM/7-Scenes colour PNG is copied as it is: encoding it again was ~25 ms of CPU per frame.
-  // A PNG of 8-bit RGB pixels of this size decodes to exactly the frame's colour image: its bytes
-  // stand for it.
-  if (frame.colour_file.empty() || !readWholeFile(frame.colour_file, bytes) || !isRgb8Png(bytes, frame.rgb.cols, frame.rgb.rows)) {
-    // Encoded in memory and written here: on a full disk libpng would print its own error line.
-    if (!cv::imencode(".png", frame.rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, opts_.png_compression}))
-      throw InputError(imagesDirFor(path_) + "/" + fs::path(path).filename().string(), "cannot encode image");
-  }
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  const bool ok = f && std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
-  const int err = errno;
-  if (!f || std::fclose(f) != 0 || !ok)
-    throw InputError(imagesDirFor(path_) + "/" + fs::path(path).filename().string(),
-                     std::string("cannot write image: ") + std::strerror(f && ok ? errno : err));
 }
 
 void RawlogWriter::commit() {

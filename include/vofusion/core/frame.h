@@ -32,7 +32,8 @@ struct Frame {
   std::optional<Eigen::Vector3d> up;  // unit "up" (against gravity) in the camera frame, from the
                                       // recording's accelerometer when it has one (TUM accelerometer.txt)
   // Set once the frame is recorded: a later writer of the frame links those files rather than
-  // encoding, compressing and writing the same images again (RawlogWriter::write).
+  // encoding, compressing and writing the same images again (RawlogWriter::write). Reset it when rgb
+  // or depth change.
   std::optional<RecordedImages> recorded;
 
   bool valid() const { return !rgb.empty() && !depth.empty(); }

@@ -104,8 +104,8 @@ class RawlogWriter {
   // One CObservation3DRangeScan (+ ground-truth observation). Action/SF format: written as the
   // pending actions followed by a sensory frame holding the observation(s). External images: a frame
   // already recorded (Frame::recorded) gets hard links to the recording's files (its range image only
-  // at the same range_units), else they are written. Returns where the images are (absolute; a
-  // writer not in place moves them on commit()), or nothing when they are embedded.
+  // at the same range_units), else they are written. A writer in place (a recording) returns where it
+  // wrote the images (absolute paths); others return nothing.
   std::optional<RecordedImages> write(const Frame& frame);
   // Action/SF format only (std::logic_error otherwise): goes into the action collection preceding the
   // next frame's sensory frame.
@@ -124,8 +124,6 @@ class RawlogWriter {
   static std::string groundTruthPathFor(const std::string& rawlog_path);
 
  private:
-  void writeColourPng(const Frame& frame, const std::string& path) const;
-
   struct Impl;
   std::string path_;
   RawlogWriterOptions opts_;
