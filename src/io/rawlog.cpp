@@ -48,6 +48,7 @@ constexpr std::size_t kMaxEntryBuffer = std::size_t(64) << 20;
 constexpr std::size_t kMaxEntryTotal = std::size_t(256) << 20;
 
 std::string mebibytes(std::size_t n) { return std::to_string((n + (1u << 20) - 1) >> 20) + " MiB"; }
+
 // A hard link at `to` to the recording's file `from`; false where the file system refuses (another
 // device, no hard links) or `from` is gone. Whatever was at `to` is removed first, so that a file
 // written there instead never writes through a link into the recording.
