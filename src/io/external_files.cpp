@@ -62,16 +62,20 @@ void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& 
   static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are written as they are in memory");
   std::memcpy(raw.data(), dims, sizeof dims);
   if (ri.size() != 0) std::memcpy(raw.data() + sizeof dims, ri.data(), std::size_t(ri.size()) * 2);
-  const std::vector<std::uint8_t> gz = gzipCompress(raw.data(), raw.size());
+  writeExternalFile(path, gzipCompress(raw.data(), raw.size()), path, "range image");
+  useExternalRangeImage(obs, file_name);
+}
+
+void writeExternalFile(const std::string& path, const std::vector<std::uint8_t>& bytes, const std::string& shown,
+                       const std::string& what) {
   std::FILE* f = std::fopen(path.c_str(), "wb");
-  const bool ok = f && std::fwrite(gz.data(), 1, gz.size(), f) == gz.size();
+  const bool ok = f && std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
   const int err = errno;
   if (!f || std::fclose(f) != 0 || !ok) {
     const std::string why = std::strerror(f && ok ? errno : err);
-    std::remove(path.c_str());  // no half-written file that names itself a range image
-    throw InputError(path, "cannot write range image: " + why);
+    std::remove(path.c_str());  // no half-written file that names itself an image
+    throw InputError(shown, "cannot write " + what + ": " + why);
   }
-  useExternalRangeImage(obs, file_name);
 }
 
 void useExternalRangeImage(CObservation3DRangeScan& obs, const std::string& file_name) {

@@ -70,14 +70,7 @@ void writeColourPng(const Frame& frame, const std::string& path, int png_compres
     if (!cv::imencode(".png", frame.rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, png_compression}))
       throw InputError(shown, "cannot encode image");
   }
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  const bool ok = f && std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
-  const int err = errno;
-  if (!f || std::fclose(f) != 0 || !ok) {
-    const std::string why = std::strerror(f && ok ? errno : err);
-    std::remove(path.c_str());  // no half-written image
-    throw InputError(shown, "cannot write image: " + why);
-  }
+  writeExternalFile(path, bytes, shown, "image");
 }
 
 std::string truncatedAt(std::size_t entry) { return "truncated rawlog (ends inside entry " + std::to_string(entry) + ")"; }
@@ -374,8 +367,10 @@ bool RawlogSource::next(Frame& frame) {
 // ------------------------------------------------------------------------------------------------
 // Writing
 
-CObservation3DRangeScan::Ptr observationFromFrame(const Frame& f, double range_units,
-                                                  const std::string& sensor_label) {
+namespace {
+// observationFromFrame without the pixels: a writer that stores the images externally never needs
+// the colour copy, nor the range image when it links a recording's.
+CObservation3DRangeScan::Ptr observationWithoutPixels(const Frame& f, double range_units, const std::string& sensor_label) {
   if (!f.valid()) throw std::invalid_argument("observationFromFrame: frame without colour or depth");
   if (!(range_units > 0)) throw std::invalid_argument("observationFromFrame: range_units must be positive");
   auto obs = std::make_shared<CObservation3DRangeScan>();
@@ -385,27 +380,37 @@ CObservation3DRangeScan::Ptr observationFromFrame(const Frame& f, double range_u
   obs->range_is_depth = true;
   obs->rangeUnits = float(range_units);
   const double scale = 1.0 / exactUnits(float(range_units));
-  obs->rangeImage_setSize(f.depth.rows, f.depth.cols);
-  double max_z = 0;
-  for (int r = 0; r < f.depth.rows; ++r) {
-    const float* in = f.depth.ptr<float>(r);
-    for (int c = 0; c < f.depth.cols; ++c) {
-      const double z = in[c];
-      const double v = (std::isfinite(z) && z > 0) ? std::round(z * scale) : 0.0;
-      obs->rangeImage(r, c) = static_cast<uint16_t>(std::min(v, 65535.0));
-      max_z = std::max(max_z, z);
-    }
-  }
   obs->maxRange = float(65535.0 / scale);
   obs->hasIntensityImage = true;
   obs->intensityImageChannel = CObservation3DRangeScan::CH_VISIBLE;
-  obs->intensityImage = mrpt::img::CImage(f.rgb, mrpt::img::DEEP_COPY);
   CameraIntrinsics cam = f.camera;
   cam.width = f.depth.cols;
   cam.height = f.depth.rows;
   obs->cameraParams = cam.toMrpt();
   obs->cameraParamsIntensity = obs->cameraParams;  // registered: one camera
   obs->relativePoseIntensityWRTDepth = mrpt::poses::CPose3D(0, 0, 0, -M_PI / 2, 0, -M_PI / 2);  // coincide
+  return obs;
+}
+
+// The depth (metres) as the observation's range image, in its rangeUnits.
+void setRangeImage(CObservation3DRangeScan& obs, const cv::Mat& depth) {
+  const double scale = 1.0 / exactUnits(obs.rangeUnits);
+  obs.rangeImage_setSize(depth.rows, depth.cols);
+  for (int r = 0; r < depth.rows; ++r) {
+    const float* in = depth.ptr<float>(r);
+    for (int c = 0; c < depth.cols; ++c) {
+      const double z = in[c];
+      const double v = (std::isfinite(z) && z > 0) ? std::round(z * scale) : 0.0;
+      obs.rangeImage(r, c) = static_cast<uint16_t>(std::min(v, 65535.0));
+    }
+  }
+}
+}  // namespace
+
+CObservation3DRangeScan::Ptr observationFromFrame(const Frame& f, double range_units, const std::string& sensor_label) {
+  auto obs = observationWithoutPixels(f, range_units, sensor_label);
+  setRangeImage(*obs, f.depth);
+  obs->intensityImage = mrpt::img::CImage(f.rgb, mrpt::img::DEEP_COPY);
   return obs;
 }
 
@@ -499,7 +504,8 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
 void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
 
 std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
-  auto obs = observationFromFrame(frame, opts_.range_units, opts_.sensor_label);
+  auto obs = opts_.external_images ? observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label)
+                                   : observationFromFrame(frame, opts_.range_units, opts_.sensor_label);
   std::optional<RecordedImages> images;
   if (opts_.external_images) {
     char stem[128];
@@ -512,10 +518,12 @@ std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
     if (!rec || !linkFile(rec->colour, dir + "/" + png))
       writeColourPng(frame, dir + "/" + png, opts_.png_compression, imagesDirFor(path_) + "/" + png);
     obs->intensityImage.setExternalStorage(png);
-    if (rec && rec->range_units == opts_.range_units && linkFile(rec->depth, dir + "/" + bin))
+    if (rec && rec->range_units == opts_.range_units && linkFile(rec->depth, dir + "/" + bin)) {
       useExternalRangeImage(*obs, bin);
-    else
+    } else {
+      setRangeImage(*obs, frame.depth);
       writeRangeImageExternally(*obs, bin, dir);
+    }
     impl_->images_used = true;
     // Only a recording's files keep their names: a result's folder is renamed by commit().
     if (opts_.in_place)

@@ -9,7 +9,9 @@
 // - a record read gets absolute file names (resolveExternalFiles), so loading it reads no global;
 // - a record written keeps MRPT's relative names (the rawlog stays relocatable) but its range image is
 //   written here, into an explicit folder (writeRangeImageExternally).
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include <mrpt/obs/CObservation3DRangeScan.h>
 
@@ -26,6 +28,10 @@ void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::st
 // global. Throws InputError(dir/file_name, ...) when the file cannot be written.
 void writeRangeImageExternally(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name,
                                const std::string& dir);
+// Writes `bytes` to `path`, or removes what it wrote and throws InputError(shown, "cannot write <what>:
+// <why>"): no half-written image is left. `shown` names the file as the user will find it.
+void writeExternalFile(const std::string& path, const std::vector<std::uint8_t>& bytes, const std::string& shown,
+                       const std::string& what);
 // Marks obs's range image externally stored under the relative file_name, a file that already holds
 // it (a link to a recording's), releasing the matrix.
 void useExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name);
