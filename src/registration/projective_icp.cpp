@@ -165,18 +165,44 @@ struct StrongDirections {
   int degenerate = 0;
 };
 
-StrongDirections strongDirections(const Eigen::SelfAdjointEigenSolver<Mat6>& es, double emax, double ratio) {
-  StrongDirections sd;
-  for (int i = 0; i < 6; ++i) {
-    const double e = es.eigenvalues()[i];
-    if (e < ratio * emax) {
-      ++sd.degenerate;
-      continue;
-    }
-    const auto v = es.eigenvectors().col(i);
-    sd.As += e * v * v.transpose();
-    sd.Ps += v * v.transpose();
+// Mode joint: ICP's weak directions, decided once per frame, at its first iteration (the coarsest
+// level, the initial guess), and kept for every later one. Decided at each iterate, the cut fed
+// itself: a direction left to the odometry's pose looks weaker from there (a room frame pair: its
+// eigenvalue 0.0025 of the largest where solved, 0.00066 where left), so the pose jumped as one
+// frame's ratio crossed degenerate_ratio, and rpy_first100's frames 50-99 ended at 0.009 or 0.011 m
+// by one frame (bench/results/2026-12-02-icp-sandwich-covariance.md). A direction within a factor of 2
+// of the ratio is partly weak: the step is solved both ways and mixed on a log scale of its
+// eigenvalue (weak at half the ratio, half and half at it, strong at twice it).
+struct WeakDirections {
+  bool decided = false;
+  std::vector<std::pair<Vec6, double>> directions;  // unit, scaled coordinates; the share solved as strong
+  int belowRatio() const {  // weak more than strong: under degenerate_ratio
+    int n = 0;
+    for (const auto& dir : directions) n += dir.second < 0.5;
+    return n;
   }
+};
+
+void decideWeakDirections(const Eigen::SelfAdjointEigenSolver<Mat6>& es, double emax, double ratio, WeakDirections& weak) {
+  weak.decided = true;
+  for (int i = 0; i < 6 && ratio > 0; ++i) {
+    const double q = es.eigenvalues()[i] / (ratio * emax);
+    if (q >= 2.0) continue;
+    weak.directions.emplace_back(es.eigenvectors().col(i), q < 0.5 ? 0.0 : 0.5 * (std::log2(q) + 1.0));
+  }
+}
+
+// ICP's system M (scaled) on the complement of the weak directions whose strong share is at most
+// `share`: those with more count as strong.
+StrongDirections strongBeside(const Mat6& M, const WeakDirections& weak, double share) {
+  StrongDirections sd;
+  sd.Ps = Mat6::Identity();
+  for (const auto& [v, w] : weak.directions)
+    if (w <= share) {
+      sd.Ps -= v * v.transpose();
+      ++sd.degenerate;
+    }
+  sd.As = sd.Ps * M * sd.Ps;
   return sd;
 }
 
@@ -190,6 +216,7 @@ struct IcpLevel {
   int level;
   double icp_weight;
   bool have_points, have_photo;
+  WeakDirections* weak;  // mode joint, shared by all levels of the frame
 };
 
 // With the other terms (matches, motion model, photometric term, weak anchor): the scaled step xs.
@@ -228,6 +255,23 @@ bool jointStep(const IcpLevel& L, const PhotometricSums& ps, const StrongDirecti
     const Vec6 delta_s = delta.cwiseQuotient(D);
     xs += (Mat6::Identity() - sd.Ps) * delta_s;
   }
+  return true;
+}
+
+// jointStep with ICP's weak directions as decided for the frame (WeakDirections); a partly weak
+// direction's two steps mixed by its share.
+bool jointStepBesideWeak(const IcpLevel& L, const PhotometricSums& ps, const Mat6& M, const Vec6& D, const Vec6& b_icp,
+                         IcpResult& res, Vec6& xs) {
+  double strong_share = 1.0;
+  for (const auto& dir : L.weak->directions)
+    if (dir.second > 0) strong_share *= dir.second;
+  const StrongDirections with_partly = strongBeside(M, *L.weak, 0.0);
+  if (strong_share == 1.0) return jointStep(L, ps, with_partly, D, b_icp, res, xs);
+  const StrongDirections without_partly = strongBeside(M, *L.weak, 1.0);
+  Vec6 xs_strong = Vec6::Zero(), xs_weak = Vec6::Zero();
+  if (!jointStep(L, ps, with_partly, D, b_icp, res, xs_strong) || !jointStep(L, ps, without_partly, D, b_icp, res, xs_weak))
+    return false;
+  xs += xs_weak + strong_share * (xs_strong - xs_weak);
   return true;
 }
 
@@ -286,28 +330,32 @@ bool icpIteration(const IcpLevel& L, IcpResult& res) {
   const double scale = std::sqrt(std::max(1e-6, total.n ? total.d2 / total.n : 1.0));
   Vec6 D;
   D << 1.0 / scale, 1.0 / scale, 1.0 / scale, 1.0, 1.0, 1.0;
-  const Eigen::SelfAdjointEigenSolver<Mat6> es(D.asDiagonal() * A * D.asDiagonal());
+  const Mat6 M = D.asDiagonal() * A * D.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Mat6> es(M);
   const double emax = es.eigenvalues()[5];
   const bool other_terms = L.have_points || L.joint.motion || L.joint.weak_anchor || L.have_photo;
   if (!(emax > 0.0) || !es.eigenvectors().allFinite()) {
     res.solved = false;
     return false;
   }
-  const StrongDirections sd = strongDirections(es, emax, L.params.degenerate_ratio);
-  if (L.level == 0) {
-    res.condition = std::max(0.0, es.eigenvalues()[0]) / emax;
-    res.degenerate_dims = sd.degenerate;
-  }
+  if (L.level == 0) res.condition = std::max(0.0, es.eigenvalues()[0]) / emax;
   const Vec6 b_icp = D.asDiagonal() * b;
   Vec6 xs = Vec6::Zero();
   if (!other_terms) {
+    int degenerate = 0;
     for (int i = 0; i < 6; ++i) {
       const double e = es.eigenvalues()[i];
       if (e >= L.params.degenerate_ratio * emax) xs += es.eigenvectors().col(i) * (es.eigenvectors().col(i).dot(b_icp) / e);
+      else ++degenerate;
     }
-  } else if (!jointStep(L, ps, sd, D, b_icp, res, xs)) {
-    res.solved = false;
-    return false;
+    if (L.level == 0) res.degenerate_dims = degenerate;
+  } else {
+    if (!L.weak->decided) decideWeakDirections(es, emax, L.params.degenerate_ratio, *L.weak);
+    if (L.level == 0) res.degenerate_dims = L.weak->belowRatio();
+    if (!jointStepBesideWeak(L, ps, M, D, b_icp, res, xs)) {
+      res.solved = false;
+      return false;
+    }
   }
   const Vec6 xi = D.asDiagonal() * xs;
   if (!xi.allFinite()) {
@@ -330,13 +378,14 @@ IcpResult projectiveIcp(const std::vector<DepthLevel>& frame, const std::vector<
   const int levels = static_cast<int>(std::min({frame.size(), model_vertices.size(), model_normals.size()}));
   const Eigen::Isometry3f model_inv = model_pose.inverse().cast<float>();
   const bool have_points = joint.matches && !joint.matches->camera_points.empty();
+  WeakDirections weak;
   for (int l = levels - 1; l >= 0; --l) {
     const int iters = l < static_cast<int>(params.iterations.size()) ? params.iterations[l] : params.iterations.back();
     // A pixel of level l averages 4^l finest-level readings.
     const double icp_weight =
         params.point_to_plane_sigma > 0 ? double(1 << (2 * l)) / (params.point_to_plane_sigma * params.point_to_plane_sigma) : 1.0;
     const bool have_photo = joint.photometric && l < static_cast<int>(joint.photometric->levels.size());
-    const IcpLevel L{frame[l], model_vertices[l], model_normals[l], model_inv, params, joint, l, icp_weight, have_points, have_photo};
+    const IcpLevel L{frame[l], model_vertices[l], model_normals[l], model_inv, params, joint, l, icp_weight, have_points, have_photo, &weak};
     for (int it = 0; it < iters; ++it)
       if (!icpIteration(L, res)) break;
   }

@@ -19,7 +19,8 @@ struct IcpParams {
   float max_angle = 30.0f;       // degrees between normals
   // Directions of the 6x6 system (rotation scaled by the scene depth, so both are in metres) whose
   // eigenvalue is below this fraction of the largest are not solved: the pose keeps the initial
-  // guess along them (the odometry prediction in mode paper, the last pose in mode kinfu).
+  // guess along them (the odometry prediction in mode paper, the last pose in mode kinfu). With
+  // JointTerms they are decided once per frame and the cut is gradual (see JointTerms).
   double degenerate_ratio = 1e-2;
   // m; > 0 weighs every point-to-plane residual as a measurement of this noise at the finest level
   // (a coarser level's averaged pixel: 4x the weight per level), so the ICP term can be summed with
@@ -43,6 +44,7 @@ struct IcpResult {
   double rms = 0.0;            // m, point-to-plane residual over the inliers
   double condition = 0.0;      // smallest / largest eigenvalue of the depth-scaled 6x6 normal matrix
   int degenerate_dims = 0;     // directions left at the initial guess at the last level-0 iteration
+                               // (with JointTerms: those decided for the frame under degenerate_ratio)
   bool solved = false;         // false when a linear system could not be solved
   int point_inliers = 0;       // PointMatches within 3 sigmas at the solution
 };
@@ -79,7 +81,11 @@ struct PhotometricTerms {
 // What joint tracking adds to ICP. The geometry's well-constrained directions are solved from ICP,
 // the matches, the motion model and the photometric term together (ICP residuals then need their
 // weight, params.point_to_plane_sigma > 0); its weak directions (see degenerate_ratio) move to weak_anchor
-// (the prior's pose) when given, else they keep the initial guess.
+// (the prior's pose) when given, else they keep the initial guess. The weak directions are decided
+// once, at the frame's first iteration (coarsest level, initial guess), and kept: decided at each
+// iterate, a direction left to the anchor looked weaker from there and stayed left, so the pose
+// jumped when a frame's ratio crossed the cut. A direction between half and twice the ratio takes
+// both steps mixed, on a log scale of its eigenvalue (half and half at the ratio).
 struct JointTerms {
   const PointMatches* matches = nullptr;
   const PhotometricTerms* photometric = nullptr;
