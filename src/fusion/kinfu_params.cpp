@@ -35,7 +35,7 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"shift_threshold", &p.shift_threshold, "m, focus point to volume centre distance that shifts the volume", 0.0, 100.0},
       {"focus_distance", &p.focus_distance, "m, the volume follows the point this far along the optical axis", 0.0, 10.0},
       {"min_inlier_ratio", &p.min_inlier_ratio, "ICP inliers / valid pixels below which ICP is rejected", 0.0, 1.0},
-      {"icp_degenerate_ratio", &p.icp.degenerate_ratio, "eigenvalue / largest (rotation scaled by depth) below which an ICP direction keeps the prediction (mode joint: decided once per frame, gradual from half to twice it)", 0.0, 1.0},
+      {"icp_degenerate_ratio", &p.icp.degenerate_ratio, "eigenvalue / largest (rotation scaled by depth) below which an ICP direction keeps the prediction (with the tracker's or loop verifier's other terms: decided once per ICP, gradual from half to twice it)", 0.0, 1.0},
       {"max_jump_translation", &p.max_jump_translation, "m, ICP vs odometry prediction beyond which ICP is rejected", 0.0, 100.0},
       {"max_jump_rotation", &p.max_jump_rotation, "degrees, same for rotation", 0.0, 180.0},
       {"integrate_on_fallback", &p.integrate_on_fallback, "fuse frames posed by the odometry fallback"},

@@ -258,8 +258,9 @@ bool jointStep(const IcpLevel& L, const PhotometricSums& ps, const StrongDirecti
   return true;
 }
 
-// jointStep with ICP's weak directions as decided for the frame (WeakDirections); a partly weak
-// direction's two steps mixed by its share.
+// jointStep with ICP's weak directions as decided for the frame (WeakDirections): the step with the
+// partly weak directions solved and the one with them left to the anchor, mixed by the product of
+// their shares (one such direction: continuous; two at once can still jump as one leaves the band).
 bool jointStepBesideWeak(const IcpLevel& L, const PhotometricSums& ps, const Mat6& M, const Vec6& D, const Vec6& b_icp,
                          IcpResult& res, Vec6& xs) {
   double strong_share = 1.0;
