@@ -165,20 +165,20 @@ struct StrongDirections {
   int degenerate = 0;
 };
 
-// Mode joint: ICP's weak directions, decided once per frame, at its first iteration (the coarsest
-// level, the initial guess), and kept for every later one. Decided at each iterate, the cut fed
-// itself: a direction left to the odometry's pose looks weaker from there (a room frame pair: its
-// eigenvalue 0.0025 of the largest where solved, 0.00066 where left), so the pose jumped as one
-// frame's ratio crossed degenerate_ratio, and rpy_first100's frames 50-99 ended at 0.009 or 0.011 m
-// by one frame (bench/results/2026-12-02-icp-sandwich-covariance.md). A direction within a factor of 2
-// of the ratio is partly weak: the step is solved both ways and mixed on a log scale of its
-// eigenvalue (weak at half the ratio, half and half at it, strong at twice it).
+// Mode joint's weak directions of ICP, decided once per call at its first iteration and kept (why:
+// JointTerms in the header). Each is a unit vector in that iteration's scaled coordinates with the
+// share of its step solved as strong: 0 under half of degenerate_ratio, 1 from twice it (not kept),
+// log-linear between (half and half at the ratio).
+struct WeakDirection {
+  Vec6 v;
+  double strong_share;
+};
 struct WeakDirections {
   bool decided = false;
-  std::vector<std::pair<Vec6, double>> directions;  // unit, scaled coordinates; the share solved as strong
+  std::vector<WeakDirection> directions;
   int belowRatio() const {  // weak more than strong: under degenerate_ratio
     int n = 0;
-    for (const auto& dir : directions) n += dir.second < 0.5;
+    for (const WeakDirection& d : directions) n += d.strong_share < 0.5;
     return n;
   }
 };
@@ -188,18 +188,18 @@ void decideWeakDirections(const Eigen::SelfAdjointEigenSolver<Mat6>& es, double 
   for (int i = 0; i < 6 && ratio > 0; ++i) {
     const double q = es.eigenvalues()[i] / (ratio * emax);
     if (q >= 2.0) continue;
-    weak.directions.emplace_back(es.eigenvectors().col(i), q < 0.5 ? 0.0 : 0.5 * (std::log2(q) + 1.0));
+    weak.directions.push_back({es.eigenvectors().col(i), q < 0.5 ? 0.0 : 0.5 * (std::log2(q) + 1.0)});
   }
 }
 
-// ICP's system M (scaled) on the complement of the weak directions whose strong share is at most
-// `share`: those with more count as strong.
-StrongDirections strongBeside(const Mat6& M, const WeakDirections& weak, double share) {
+// ICP's system M (scaled) without the weak directions whose strong share is at most `max_share`
+// (0: the wholly weak ones left out; 1: the partly weak ones too).
+StrongDirections strongBeside(const Mat6& M, const WeakDirections& weak, double max_share) {
   StrongDirections sd;
   sd.Ps = Mat6::Identity();
-  for (const auto& [v, w] : weak.directions)
-    if (w <= share) {
-      sd.Ps -= v * v.transpose();
+  for (const WeakDirection& d : weak.directions)
+    if (d.strong_share <= max_share) {
+      sd.Ps -= d.v * d.v.transpose();
       ++sd.degenerate;
     }
   sd.As = sd.Ps * M * sd.Ps;
@@ -264,8 +264,8 @@ bool jointStep(const IcpLevel& L, const PhotometricSums& ps, const StrongDirecti
 bool jointStepBesideWeak(const IcpLevel& L, const PhotometricSums& ps, const Mat6& M, const Vec6& D, const Vec6& b_icp,
                          IcpResult& res, Vec6& xs) {
   double strong_share = 1.0;
-  for (const auto& dir : L.weak->directions)
-    if (dir.second > 0) strong_share *= dir.second;
+  for (const WeakDirection& d : L.weak->directions)
+    if (d.strong_share > 0) strong_share *= d.strong_share;
   const StrongDirections with_partly = strongBeside(M, *L.weak, 0.0);
   if (strong_share == 1.0) return jointStep(L, ps, with_partly, D, b_icp, res, xs);
   const StrongDirections without_partly = strongBeside(M, *L.weak, 1.0);

@@ -19,8 +19,8 @@ struct IcpParams {
   float max_angle = 30.0f;       // degrees between normals
   // Directions of the 6x6 system (rotation scaled by the scene depth, so both are in metres) whose
   // eigenvalue is below this fraction of the largest are not solved: the pose keeps the initial
-  // guess along them (the odometry prediction in mode paper, the last pose in mode kinfu). With
-  // JointTerms they are decided once per frame and the cut is gradual (see JointTerms).
+  // guess along them (the odometry prediction in mode paper, the last pose in mode kinfu); with
+  // JointTerms, see there.
   double degenerate_ratio = 1e-2;
   // m; > 0 weighs every point-to-plane residual as a measurement of this noise at the finest level
   // (a coarser level's averaged pixel: 4x the weight per level), so the ICP term can be summed with
