@@ -11,6 +11,7 @@
 #include "vofusion/core/parallel.h"
 #include "vofusion/fusion/marching_cubes.h"
 #include "vofusion/fusion/voxel_projection.h"
+#include "vofusion/fusion/voxel_update.h"
 
 #include "tsdf_sampling.h"
 
@@ -174,16 +175,12 @@ std::size_t TsdfVolume::updateVoxels(const std::vector<std::int32_t>& touched, c
   const Eigen::Matrix3f Rt = R.transpose();
   const Eigen::Vector3f tc = -Rt * t;
   const Eigen::Vector3f dx = Rt.col(0) * vs, dy = Rt.col(1) * vs, dz = Rt.col(2) * vs;
-  const int max_w = params_.max_weight;
-  const float inv_trunc = 1.f / trunc;
-  float inv_count[256];  // 1 / (weight + 1)
-  for (int i = 0; i < 256; ++i) inv_count[i] = 1.f / (i + 1);
   std::atomic<std::size_t> updated{0};
   const cv::Mat depth_c = depth.isContinuous() ? depth : depth.clone();
   const cv::Mat bgr_c = colour && !bgr.isContinuous() ? bgr.clone() : bgr;
-  const cv::Vec3b* colours = colour ? bgr_c.ptr<cv::Vec3b>() : nullptr;
   // Bilinear depth only where the 4 neighbours spread less than half the truncation (voxel_projection.h).
   const VoxelProjector projector(depth_c, cam, zmin, zmax, 0.5f * trunc);
+  const VoxelUpdater updater(trunc, params_.max_weight, colour ? bgr_c.ptr<cv::Vec3b>() : nullptr);
   parallelFor(0, static_cast<int>(touched.size()), [&](int i) {
     Brick& b = bricks_[touched[i]];
     std::size_t brick_updates = 0;
@@ -192,29 +189,7 @@ std::size_t TsdfVolume::updateVoxels(const std::vector<std::int32_t>& touched, c
     for (int z = 0; z < kBrickEdge; ++z) {
       for (int y = 0; y < kBrickEdge; ++y) {
         projector.sampleRow(p0 + dy * static_cast<float>(y) + dz * static_cast<float>(z), dx, row);
-        Voxel* vox = &b.voxels[Brick::index(0, y, z)];
-        for (int x = 0; x < kBrickEdge; ++x) {
-          if (row.pixel[x] < 0) continue;
-          const float sdf = row.depth[x] - row.z[x];
-          if (sdf < -trunc) continue;
-          const float f = std::min(1.f, sdf * inv_trunc);
-          Voxel& vx = vox[x];
-          const int wold = vx.weight;
-          // Running average in tsdf units (no division, no libm rounding call): tsdf in [-1, 1]
-          // times 32767, rounded half away from zero as lround did.
-          const float fnew = (vx.tsdf * static_cast<float>(wold) + f * kTsdfScale) * inv_count[wold];
-          vx.tsdf = static_cast<std::int16_t>(fnew + (fnew >= 0.f ? 0.5f : -0.5f));
-          vx.weight = static_cast<std::uint8_t>(std::min(wold + 1, max_w));
-          if (colour && sdf < trunc) {
-            // Same running average, rounded; a multiply instead of three integer divisions per voxel.
-            const cv::Vec3b& c = colours[row.pixel[x]];
-            const float k = inv_count[wold], fw = static_cast<float>(wold);
-            vx.r = static_cast<std::uint8_t>((vx.r * fw + c[2]) * k + 0.5f);
-            vx.g = static_cast<std::uint8_t>((vx.g * fw + c[1]) * k + 0.5f);
-            vx.b = static_cast<std::uint8_t>((vx.b * fw + c[0]) * k + 0.5f);
-          }
-          ++brick_updates;
-        }
+        brick_updates += updater.updateRow(row, &b.voxels[Brick::index(0, y, z)]);
       }
     }
     updated.fetch_add(brick_updates, std::memory_order_relaxed);
