@@ -1,10 +1,15 @@
 // NARF keypoints on a synthetic range image (a box on a wall) and the depth reduction they run on;
 // our implementation against PCL's on real depth.
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/features/narf_detector.h"
+#include "vofusion/features/narf_fast.h"
 #include "vofusion/io/tum_source.h"
 
 using namespace vofusion;
@@ -145,4 +150,39 @@ TEST(Narf, DeterministicOnRealDepth) {
       }
     }
   }
+}
+
+// The interest search's direction cells by comparisons are PCL's acos cells, float for float: at every
+// 4099th float of [-1, 1], and at every float between two such where the cell changes (the whole range
+// was checked once by hand: 2.1e9 floats, 17 steps, no difference).
+namespace {
+// The float n floats above x, through the bits as an ordered key (-0 just below +0).
+float floatsAfter(float x, std::uint32_t n) {
+  std::uint32_t b;
+  std::memcpy(&b, &x, sizeof b);
+  std::uint32_t key = (b & 0x80000000u) ? ~b : (b | 0x80000000u);
+  key += n;
+  b = (key & 0x80000000u) ? (key & 0x7fffffffu) : ~key;
+  float y;
+  std::memcpy(&y, &b, sizeof y);
+  return y;
+}
+}  // namespace
+
+TEST(Narf, DirectionCellsAreAcosCells) {
+  const narf::DirectionCells cells;
+  int steps = 0;
+  float prev = -1.f;
+  for (float x = -1.f;;) {
+    ASSERT_EQ(cells.cellOf(x), narf::cellOfX(x)) << "x = " << x;
+    if (narf::cellOfX(x) != narf::cellOfX(prev)) {  // a step in (prev, x]
+      ++steps;
+      for (float y = prev; y <= x; y = std::nextafter(y, 2.f)) ASSERT_EQ(cells.cellOf(y), narf::cellOfX(y)) << "y = " << y;
+    }
+    if (x == 1.f) break;
+    prev = x;
+    x = std::min(1.f, floatsAfter(x, 4099));
+  }
+  for (const float x : {-0.f, 0.f}) EXPECT_EQ(cells.cellOf(x), narf::cellOfX(x));
+  EXPECT_EQ(steps, 17);  // 8 down to 0 below zero, 17 down to 9 above it
 }

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
+#include <limits>
 
 #ifdef __SSE2__
 #include <emmintrin.h>
@@ -17,7 +19,7 @@
 namespace vofusion::narf {
 
 namespace {
-constexpr int kBins = 18;                    // angle_histogram_size: directions over 180 degrees
+constexpr int kBins = kDirectionCells;       // angle_histogram_size: directions over 180 degrees
 constexpr float kOptimalDistance = 0.25f;    // optimal_distance_to_high_surface_change, factor on the radius
 constexpr float kMinPointDistance = 0.25f;   // min_distance_between_interest_points, factor on support size
 constexpr float kUnset = 2.0f;               // PCL's marker of a pixel whose interest is still to compute
@@ -26,18 +28,26 @@ constexpr float kUnset = 2.0f;               // PCL's marker of a pixel whose in
 // ours must too for the same floats.
 inline float eigenSquaredNorm(float dx, float dy, float dz) { return dx * dx + (dy * dy + dz * dz); }
 
-// nkdGetDirectionAngle and the histogram cell of that angle, in the seed's viewer frame.
-inline int directionCell(const Eigen::Vector3f& direction, const Eigen::Affine3f& rotation) {
+// The seed's histogram cell of a direction (nkdGetDirectionAngle's angle): its x in the seed's viewer
+// frame, normalised in the plane, through DirectionCells.
+inline int directionCell(const Eigen::Vector3f& direction, const Eigen::Affine3f& rotation, const DirectionCells& cells) {
   const Eigen::Vector3f rotated = rotation * direction;
   Eigen::Vector2f v(rotated[0], rotated[1]);
   v.normalize();
-  // pcl::normAngle(a) for a = 2 acos in [0, 2 pi]: fmod(a + pi, 2 pi) - pi, where the fmod is one
-  // exact subtraction (Sterbenz), so this is the same float without the libm call.
-  static const float pi = float(M_PI), two_pi = 2.0f * pi, deg90 = pcl::deg2rad(90.0f), deg180 = pcl::deg2rad(180.0f);
-  float t = 2.0f * std::acos(v[0]) + pi;
-  if (t >= two_pi) t -= two_pi;
-  const float angle = 0.5f * (t - pi);
-  return std::min(kBins - 1, int(std::lrint(double(std::floor((angle + deg90) / deg180 * kBins)))));
+  return cells.cellOf(v[0]);
+}
+
+// Floats as unsigned keys in their order (-0 just below +0), for bisection.
+std::uint32_t orderKey(float f) {
+  std::uint32_t b;
+  std::memcpy(&b, &f, sizeof b);
+  return (b & 0x80000000u) ? ~b : (b | 0x80000000u);
+}
+float fromOrderKey(std::uint32_t k) {
+  const std::uint32_t b = (k & 0x80000000u) ? (k & 0x7fffffffu) : ~k;
+  float f;
+  std::memcpy(&f, &b, sizeof f);
+  return f;
 }
 
 // The strongest change between two direction cells, weighted by their angle apart (PCL's loop over
@@ -86,6 +96,7 @@ struct Workspace {
   std::array<std::vector<std::pair<int, float>>, kBins> relevant;  // (pixel, change) per direction cell
   Changes changes;                      // the same, thinned
   std::vector<std::uint8_t> still_valid;
+  DirectionCells cells;
 };
 
 // Thins the sorted changes [first, first + n): drops those within `limit` of a stronger one, where
@@ -208,7 +219,7 @@ void seedInterest(const RangeImage& im, const Borders& b, float support_size, fl
         if (!t[dx]) touch(i2 + (dy - 1) * w + dx - 1, x2 + dx - 1, y2 + dy - 1);
     const float change = b.change_score[i2];
     if (change < kMinSurfaceChange) continue;
-    const int cell = directionCell(b.change_dir[i2], rotation);
+    const int cell = directionCell(b.change_dir[i2], rotation, ws.cells);
     hist[cell] = std::max(hist[cell], change);
     ws.relevant[cell].emplace_back(i2, change);
   }
@@ -239,6 +250,36 @@ void seedInterest(const RangeImage& im, const Borders& b, float support_size, fl
   }
 }
 }  // namespace
+
+int cellOfX(float x) {
+  // pcl::normAngle(a) for a = 2 acos in [0, 2 pi]: fmod(a + pi, 2 pi) - pi, where the fmod is one
+  // exact subtraction (Sterbenz), so this is the same float without the libm call.
+  const float pi = float(M_PI), two_pi = 2.0f * pi, deg90 = pcl::deg2rad(90.0f), deg180 = pcl::deg2rad(180.0f);
+  float t = 2.0f * std::acos(x) + pi;
+  if (t >= two_pi) t -= two_pi;
+  const float angle = 0.5f * (t - pi);
+  return std::min(kBins - 1, int(std::lrint(double(std::floor((angle + deg90) / deg180 * kBins)))));
+}
+
+DirectionCells::DirectionCells() {
+  std::uint32_t at = orderKey(-1.0f);
+  const std::uint32_t end = orderKey(1.0f);
+  int steps = 0;
+  cell_[0] = cellOfX(-1.0f);
+  // Each step: the first float after `at` whose cell differs (each cell holds one run of floats).
+  while (steps < kDirectionCells - 1 && cellOfX(1.0f) != cell_[steps]) {
+    std::uint32_t lo = at, hi = end;  // cellOfX(lo) == cell_[steps] != cellOfX(hi)
+    while (hi - lo > 1) {
+      const std::uint32_t mid = lo + (hi - lo) / 2;
+      (cellOfX(fromOrderKey(mid)) == cell_[steps] ? lo : hi) = mid;
+    }
+    step_[steps] = fromOrderKey(hi);
+    cell_[steps + 1] = cellOfX(step_[steps]);
+    at = hi;
+    ++steps;
+  }
+  for (int i = steps; i < kDirectionCells - 1; ++i) step_[i] = std::numeric_limits<float>::infinity(), cell_[i + 1] = cell_[i];
+}
 
 std::vector<int> interestPoints(const RangeImage& im, const Borders& b, const KeypointParams& p,
                                 std::vector<float>& interest) {

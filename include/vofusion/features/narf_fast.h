@@ -57,6 +57,28 @@ struct KeypointParams {
   int max_points = -1;              // strongest kept, <= 0: all
 };
 
+// The interest search's direction histogram cell of a surface change, in the seed's viewer frame: PCL
+// takes the angle of its direction (x, y) as 2 acos(x) folded to [-90, 90) degrees, so the cell depends
+// on the normalised x alone. cellOfX is that computation; DirectionCells gives the same cell for every
+// float by comparisons: the cell is a step function of x that falls over [-1, ~0) and again over
+// [~0, 1] (acosf is monotone), and its 17 steps are found once by bisection over the floats with
+// cellOfX itself (test Narf.DirectionCellsAreAcosCells).
+constexpr int kDirectionCells = 18;
+int cellOfX(float x);
+class DirectionCells {
+ public:
+  DirectionCells();
+  int cellOf(float x) const {
+    int steps_passed = 0;
+    for (int i = 0; i < kDirectionCells - 1; ++i) steps_passed += x >= step_[i];
+    return cell_[steps_passed];
+  }
+
+ private:
+  float step_[kDirectionCells - 1];  // ascending: where the cell changes
+  int cell_[kDirectionCells];        // below the first step, then after each
+};
+
 // pcl::NarfKeypoint: the pixel indices of the interest points in raster order (as NarfKeypoint::compute
 // lists them); `interest` receives the interest image (0 where no value).
 std::vector<int> interestPoints(const RangeImage& image, const Borders& borders, const KeypointParams& params,
