@@ -138,8 +138,7 @@ void TsdfVolume::markTouchedBricks(const cv::Mat& depth, const CameraIntrinsics&
       const Eigen::Vector3f ray((x - cx) / fx, (y - cy) / fy, 1.f);
       for (int k = -2; k <= 2; ++k) {
         const Eigen::Vector3f p = (R * (ray * (z + 0.5f * k * trunc)) + t) * inv_brick;
-        const int s = slotOf(static_cast<int>(std::floor(p.x())), static_cast<int>(std::floor(p.y())),
-                             static_cast<int>(std::floor(p.z())));
+        const int s = slotOf(cvFloor(p.x()), cvFloor(p.y()), cvFloor(p.z()));  // = std::floor (tsdf_sampling.h)
         // Many rows mark the same brick: a relaxed atomic store (all write the same 1).
         if (s >= 0) __atomic_store_n(&marks_[s], std::uint8_t{1}, __ATOMIC_RELAXED);
       }
