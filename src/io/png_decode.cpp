@@ -103,6 +103,30 @@ bool unfilter(std::uint8_t filter, std::uint8_t* cur, const std::uint8_t* prior,
   }
 }
 
+// A row with filter 1 (Sub, which OpenCV's writer gives every row: all TUM files), unfiltered and
+// converted in one pass, each channel its own running sum; the unfiltered bytes are kept in `cur`
+// for the next row's filter. The same bytes as unfilter() and the loops below (PngDecode tests).
+void subRowToMat(std::uint8_t* cur, cv::Mat& out, int y) {
+  if (out.type() == CV_16UC1) {
+    std::uint16_t* o = out.ptr<std::uint16_t>(y);
+    std::uint8_t hi = 0, lo = 0;
+    for (int x = 0; x < out.cols; ++x) {
+      hi = cur[2 * x] = std::uint8_t(cur[2 * x] + hi);
+      lo = cur[2 * x + 1] = std::uint8_t(cur[2 * x + 1] + lo);
+      o[x] = std::uint16_t((hi << 8) | lo);  // big-endian
+    }
+    return;
+  }
+  std::uint8_t* o = out.ptr<std::uint8_t>(y);
+  std::uint8_t r = 0, g = 0, b = 0;
+  for (int x = 0; x < out.cols; ++x) {
+    r = cur[3 * x] = std::uint8_t(cur[3 * x] + r);
+    g = cur[3 * x + 1] = std::uint8_t(cur[3 * x + 1] + g);
+    b = cur[3 * x + 2] = std::uint8_t(cur[3 * x + 2] + b);
+    o[3 * x] = b, o[3 * x + 1] = g, o[3 * x + 2] = r;  // RGB -> BGR
+  }
+}
+
 }  // namespace
 
 cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
@@ -129,6 +153,10 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
   cv::Mat out(int(img.height), int(img.width), img.type);
   for (int y = 0; y < out.rows; ++y) {
     std::uint8_t* cur = raw.data() + row * y + 1;
+    if (cur[-1] == 1) {
+      subRowToMat(cur, out, y);
+      continue;
+    }
     if (!unfilter(cur[-1], cur, y > 0 ? cur - row : zeros.data(), stride, bpp)) return {};
     if (img.type == CV_16UC1) {
       std::uint16_t* o = out.ptr<std::uint16_t>(y);
