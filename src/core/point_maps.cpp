@@ -1,10 +1,10 @@
 #include "vofusion/core/point_maps.h"
 
 #include <cmath>
+#include <algorithm>
 #include <cstdint>
 #include <limits>
 
-#include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/parallel.h"
 
@@ -26,31 +26,48 @@ cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& c) {
   return pts;
 }
 
+void validPointIntegrals(const cv::Mat& points, cv::Mat& sum, cv::Mat& count) {
+  CV_Assert(points.type() == CV_32FC3);
+  const int rows = points.rows, cols = points.cols;
+  sum.create(rows + 1, cols + 1, CV_64FC3);
+  count.create(rows + 1, cols + 1, CV_32S);
+  std::fill_n(sum.ptr<double>(0), 3 * (cols + 1), 0.0);
+  std::fill_n(count.ptr<int>(0), cols + 1, 0);
+  for (int y = 0; y < rows; ++y) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
+    const double* above = sum.ptr<double>(y);
+    double* row = sum.ptr<double>(y + 1);
+    const int* count_above = count.ptr<int>(y);
+    int* count_row = count.ptr<int>(y + 1);
+    row[0] = row[1] = row[2] = 0.0;
+    count_row[0] = 0;
+    // cv::integral's order: each row's running sum, added to the integral of the row above.
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+    int n = 0;
+    for (int x = 0; x < cols; ++x) {
+      const bool ok = std::isfinite(p[x][2]);
+      const cv::Vec3f q = ok ? p[x] : cv::Vec3f(0, 0, 0);
+      s0 += q[0], s1 += q[1], s2 += q[2];
+      n += ok;
+      const int i = 3 * (x + 1);
+      row[i] = above[i] + s0, row[i + 1] = above[i + 1] + s1, row[i + 2] = above[i + 2] + s2;
+      count_row[x + 1] = count_above[x + 1] + n;
+    }
+  }
+}
+
 cv::Mat computeNormalMap(const cv::Mat& points, int w, float max_depth_step) {
   CV_Assert(points.type() == CV_32FC3 && w >= 1);
   const int rows = points.rows, cols = points.cols;
-  // Integral images of the valid points and of their count, in buffers the calling thread keeps:
-  // 14 MB a frame at 640x480, otherwise taken fresh from the system (page faults) every frame.
+  // The integral images in buffers the calling thread keeps (14 MB a frame at 640x480, otherwise new
+  // pages every frame).
   struct Buffers {
-    cv::Mat clean, valid, sum, cnt;
+    cv::Mat sum, cnt;
   };
   thread_local Buffers buffers;
   // Named here: the rows below run on other threads, where `buffers` would be their own.
-  cv::Mat &clean = buffers.clean, &valid = buffers.valid, &sum = buffers.sum, &cnt = buffers.cnt;
-  clean.create(points.size(), CV_32FC3);
-  valid.create(points.size(), CV_8U);
-  for (int y = 0; y < rows; ++y) {
-    const cv::Vec3f* p = points.ptr<cv::Vec3f>(y);
-    cv::Vec3f* q = clean.ptr<cv::Vec3f>(y);
-    uint8_t* v = valid.ptr<uint8_t>(y);
-    for (int x = 0; x < cols; ++x) {
-      const bool ok = std::isfinite(p[x][2]);
-      q[x] = ok ? p[x] : cv::Vec3f(0, 0, 0);
-      v[x] = ok;
-    }
-  }
-  cv::integral(clean, sum, CV_64F);
-  cv::integral(valid, cnt, CV_32S);
+  cv::Mat &sum = buffers.sum, &cnt = buffers.cnt;
+  validPointIntegrals(points, sum, cnt);
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const cv::Vec3f none(nan, nan, nan);
   // Every pixel is written once below (a normal, or none), so no fill beforehand.
