@@ -1,6 +1,7 @@
 // NARF keypoints on a synthetic range image (a box on a wall) and the depth reduction they run on;
 // our implementation against PCL's on real depth.
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 

@@ -14,20 +14,31 @@ using namespace vofusion;
 using namespace vofusion::fusion;
 
 namespace {
-constexpr float kTrunc = 0.03f;
+// A power of two, and depths on a 2^-12 m grid: depth - z is exact, so a voxel can sit exactly on the
+// cut of the update (sdf = -truncation) and of the colour (sdf = +truncation).
+constexpr float kTrunc = 0.03125f;
 constexpr int kPixels = 64 * 48;
 
 // A row whose voxels see every case: no reading, far behind the surface (skipped), inside the band,
-// in front of it beyond the truncation (no colour), on pixel 0 and on the image's last pixel.
+// in front of it beyond the truncation (no colour), exactly on either cut, a NaN or infinite reading,
+// on pixel 0 (the gather's exception) and on the image's last pixel.
 VoxelRowSamples randomRow(cv::RNG& rng) {
   VoxelRowSamples row;
   for (int x = 0; x < 8; ++x) {
-    row.z[x] = float(rng.uniform(0.3, 3.0));
+    row.z[x] = std::round(float(rng.uniform(0.3, 3.0)) * 4096.f) / 4096.f;
     const double kind = rng.uniform(0.0, 1.0);
     row.pixel[x] = kind < 0.15 ? -1 : kind < 0.17 ? 0 : kind < 0.19 ? kPixels - 1 : rng.uniform(0, kPixels);
     row.depth[x] = row.pixel[x] < 0 ? std::numeric_limits<float>::quiet_NaN()
-                                    : row.z[x] + float(rng.uniform(-2.5, 2.5)) * kTrunc;
-    if (rng.uniform(0.0, 1.0) < 0.05) row.depth[x] = row.z[x] - kTrunc;  // exactly on the cut
+                                    : row.z[x] + std::round(float(rng.uniform(-2.5, 2.5)) * 32.f) / 32.f * kTrunc;
+    const double special = rng.uniform(0.0, 1.0);
+    if (special < 0.05) row.depth[x] = row.z[x] - kTrunc;
+    else if (special < 0.10) row.depth[x] = row.z[x] + kTrunc;
+    else if (special < 0.11) row.depth[x] = std::numeric_limits<float>::quiet_NaN();
+    else if (special < 0.12) row.depth[x] = std::numeric_limits<float>::infinity();
+    else if (special < 0.13) row.depth[x] = -std::numeric_limits<float>::infinity();
+    if (special < 0.10) {
+      EXPECT_EQ(std::abs(row.depth[x] - row.z[x]), kTrunc);  // exactly on a cut
+    }
   }
   return row;
 }
@@ -62,7 +73,7 @@ TEST(VoxelUpdate, Avx2AndScalarGiveTheSameBytes) {
         updated += na;
       }
     }
-  EXPECT_GT(updated, 4 * 20000 * 3);  // most voxels are updated: the comparison is not vacuous
+  EXPECT_GT(updated, 4 * 20000 * 3);  // over a third of the voxels are updated: the comparison is not vacuous
 }
 
 TEST(VoxelUpdate, ScalarIsTheWeightedRunningAverage) {
@@ -77,7 +88,7 @@ TEST(VoxelUpdate, ScalarIsTheWeightedRunningAverage) {
   for (auto& x : v) x.tsdf = 0, x.weight = 3, x.r = x.g = x.b = 100;
   v[0].weight = 64;  // at the cap
   EXPECT_EQ(updater.updateRow(row, v), 6);
-  // tsdf (0 * 3 + 0.5 * 32767) / 4 = 4095.9 -> 4096; each colour (100 * 3 + c) / 4, rounded:
+  // tsdf (0 * 3 + 0.5 * 32767) / 4 = 4095.875 -> 4096; each colour (100 * 3 + c) / 4, rounded:
   // red (300 + 200) / 4 = 125, green (300 + 20) / 4 = 80, blue (300 + 10) / 4 = 77.5 -> 78.
   EXPECT_EQ(v[1].tsdf, 4096);
   EXPECT_EQ(v[1].weight, 4);

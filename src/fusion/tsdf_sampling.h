@@ -1,9 +1,9 @@
 // TsdfVolume's trilinear sampling, defined here (not in tsdf_volume.cpp) so that the ray caster,
 // which samples the field ~7 times per ray, inlines it: as calls into another file they cost ~6 %
 // of the ray cast (xyz_first300, back to back: 23.4-25.0 -> 22.0-22.8 ms per frame; same trajectory
-// byte for byte). Forced: GCC 12 left trilinear a call from marchStep; inlined there, the ray cast
-// runs 22 % fewer instructions (callgrind, 12 frames of xyz_first300) and rpy_first100 takes 1-2 %
-// less CPU (three pairs back to back), the same bytes.
+// byte for byte). cell and trilinear are forced inline: GCC 12 left trilinear a call from marchStep;
+// inlined there, the ray cast runs 22 % fewer instructions (callgrind, 12 frames of xyz_first300) and
+// rpy_first100 takes 1-2 % less CPU (three pairs back to back), the same bytes.
 // Included only by the fusion stage's own sources.
 #pragma once
 

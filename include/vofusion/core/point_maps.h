@@ -14,8 +14,8 @@ cv::Mat depthToPointMap(const cv::Mat& depth, const CameraIntrinsics& camera);
 // vectors facing the camera; NaN where undefined (no depth, or a depth jump > max_depth_step).
 cv::Mat computeNormalMap(const cv::Mat& points, int window, float max_depth_step);
 // computeNormalMap's integral images, (rows + 1) x (cols + 1): of the valid points (CV_64FC3, a NaN
-// point counted as 0) and of their count (CV_32S), in one pass: cv::integral's doubles (test
-// PointMaps.IntegralsAreCvIntegrals), which took two passes beside the zeroing.
+// point counted as 0) and of their count (CV_32S), in one pass: the doubles cv::integral gives (test
+// PointMaps.IntegralsAreCvIntegrals).
 void validPointIntegrals(const cv::Mat& points, cv::Mat& sum, cv::Mat& count);
 
 struct FrameGeometry {

@@ -13,10 +13,12 @@ namespace vofusion::fusion {
 
 class VoxelUpdater {
  public:
-  // colours: the frame's BGR pixels, indexed as VoxelRowSamples::pixel, or null (depth only).
+  // truncation > 0 (m); max_weight in [1, 255] (a voxel's weight is a byte); colours: the frame's BGR
+  // pixels, covering every index a row's VoxelRowSamples::pixel holds, or null (depth only).
   // simd = false: the scalar build even on an AVX2 CPU (tests).
   VoxelUpdater(float truncation, int max_weight, const cv::Vec3b* colours, bool simd = true);
-  // Updates the row's 8 voxels (x fastest in the brick) from their samples; returns how many changed.
+  // Updates the row's 8 consecutive voxels (x fastest in the brick) from their samples; returns how
+  // many were updated.
   int updateRow(const VoxelRowSamples& row, Voxel* voxels) const;
 
   struct Setup {  // what both builds read
