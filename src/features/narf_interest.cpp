@@ -37,6 +37,12 @@ inline int directionCell(const Eigen::Vector3f& direction, const Eigen::Affine3f
   return cells.cellOf(v[0]);
 }
 
+// The cells' steps, found once per process (about 550 acos).
+const DirectionCells& directionCells() {
+  static const DirectionCells cells;
+  return cells;
+}
+
 // Floats as unsigned keys in their order (-0 just below +0), for bisection.
 std::uint32_t orderKey(float f) {
   std::uint32_t b;
@@ -96,7 +102,6 @@ struct Workspace {
   std::array<std::vector<std::pair<int, float>>, kBins> relevant;  // (pixel, change) per direction cell
   Changes changes;                      // the same, thinned
   std::vector<std::uint8_t> still_valid;
-  DirectionCells cells;
 };
 
 // Thins the sorted changes [first, first + n): drops those within `limit` of a stronger one, where
@@ -184,6 +189,7 @@ float cellScore(const Changes& c, int k0, int k1, const Eigen::Vector3f& p, floa
 // the pixels within the overhead radius from a thinned list of the changes.
 void seedInterest(const RangeImage& im, const Borders& b, float support_size, float min_interest, int index,
                   Workspace& ws, std::vector<float>& interest) {
+  const DirectionCells& cells = directionCells();
   const int w = im.width;
   const float radius = 0.5f * support_size, radius_inv = 1.0f / radius, increased = 1.5f * radius,
               increased2 = increased * increased, overhead = increased - radius, overhead2 = overhead * overhead;
@@ -219,7 +225,7 @@ void seedInterest(const RangeImage& im, const Borders& b, float support_size, fl
         if (!t[dx]) touch(i2 + (dy - 1) * w + dx - 1, x2 + dx - 1, y2 + dy - 1);
     const float change = b.change_score[i2];
     if (change < kMinSurfaceChange) continue;
-    const int cell = directionCell(b.change_dir[i2], rotation, ws.cells);
+    const int cell = directionCell(b.change_dir[i2], rotation, cells);
     hist[cell] = std::max(hist[cell], change);
     ws.relevant[cell].emplace_back(i2, change);
   }

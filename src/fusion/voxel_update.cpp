@@ -53,8 +53,9 @@ int updateScalar(const Setup& s, const VoxelRowSamples& row, Voxel* vox) {
 
 // The 8 voxels of a row are 48 bytes, 6 per voxel: tsdf (2), weight, r, g, b. A field's 8 values
 // (bytes `width` each) come out of the row's three 16-byte chunks by one byte shuffle per chunk, and go
-// back in by the inverse shuffles. kPick[field][chunk]: for each byte of the field's vector, its byte
-// in that chunk, or 0x80 (zero) when it is in another chunk.
+// back in by the inverse shuffles. pick[field][chunk]: for each byte of the field's vector, its byte
+// in that chunk, or 0x80 (zero) when it is in another chunk; place[field][chunk] the other way round.
+static_assert(kBrickEdge == 8 && sizeof(Voxel) == 6, "the AVX2 build updates a brick row of 8 six-byte voxels");
 constexpr int kFieldOffset[5] = {0, 2, 3, 4, 5}, kFieldWidth[5] = {2, 1, 1, 1, 1};
 
 struct ShuffleTables {

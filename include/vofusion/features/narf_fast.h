@@ -59,10 +59,10 @@ struct KeypointParams {
 
 // The interest search's direction histogram cell of a surface change, in the seed's viewer frame: PCL
 // takes the angle of its direction (x, y) as 2 acos(x) folded to [-90, 90) degrees, so the cell depends
-// on the normalised x alone. cellOfX is that computation; DirectionCells gives the same cell for every
-// float of [-1, 1] (a normalised x) by comparisons: the cell is a step function of x that falls over [-1, ~0) and again over
-// [~0, 1] (acosf is monotone), and its 17 steps are found once by bisection over the floats with
-// cellOfX itself (test Narf.DirectionCellsAreAcosCells).
+// on the normalised x alone. cellOfX is that computation. DirectionCells gives the same cell for every
+// float of [-1, 1] (a normalised x) by comparisons: the cell is a step function of x that falls over
+// [-1, ~0) and again over [~0, 1] (acosf is monotone), and its 17 steps are found by bisection over the
+// floats with cellOfX itself, once per process (test Narf.DirectionCellsAreAcosCells).
 constexpr int kDirectionCells = 18;
 int cellOfX(float x);
 class DirectionCells {
