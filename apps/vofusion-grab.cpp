@@ -364,7 +364,6 @@ int run(const Args& args) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  restartWithHugePageHeap(argv);
   // As vofusion (runApp): freed frame buffers stay in the heap. Without it the live loop page-faulted
   // its frame-sized buffers in again every frame (362k minor faults, 3.2 s of system time on xyz_first300).
   keepFreedHeapForFrames();

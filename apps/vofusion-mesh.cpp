@@ -8,7 +8,6 @@
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/cli.h"
-#include "vofusion/core/heap.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
@@ -91,6 +90,5 @@ int body(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  restartWithHugePageHeap(argv);
   return runApp("vofusion-mesh", body, argc, argv);
 }

@@ -13,7 +13,6 @@
 #include <optional>
 
 #include "vofusion/core/cli.h"
-#include "vofusion/core/heap.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
@@ -238,7 +237,7 @@ int body(int argc, char** argv) {
   if (plan.resume && RunSession::isCheckpoint(*plan.resume)) loop = resumeCheckpoint(plan, *source, run);
   else if (plan.resume) run.reconstruction().resumeVolume(*plan.resume);
   const std::size_t resumed_at = loop.done;
-  // Start-up (libraries, the heap's restart, the input opened, a checkpoint read again): not part of
+  // Start-up (libraries, the input opened, a checkpoint read again): not part of
   // the frame loop, nor of the time after its last frame.
   const double before_frames = secondsSinceProcessStart();
   reconstructFrames(plan, *source, run, loop);
@@ -277,6 +276,5 @@ int body(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  restartWithHugePageHeap(argv);
   return runApp("vofusion", body, argc, argv);
 }

@@ -129,9 +129,8 @@ TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   const std::string out = test::tempDir("grab_app_sigint");
   std::string log;
   // The whole 300-frame sequence takes 10 s; SIGINT 1 s after the app says it records stops it.
-  // Start-up is waited for, not guessed: on a loaded machine it (the restart for huge pages included)
-  // took over 3 s, and sh starts a background job with SIGINT ignored, so a SIGINT sent before the
-  // app's handler is in place is lost.
+  // Start-up is waited for, not guessed: on a loaded machine it took over 3 s, and sh starts a
+  // background job with SIGINT ignored, so a SIGINT sent before the app's handler is in place is lost.
   const std::string err = test::tempDir("grab_app_sigint_err") + "/stderr.txt";
   const int rc = test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out + " 2> " + err +
                                " & pid=$!; i=0; until grep -q \"Ctrl-C to stop\" " + err +
@@ -169,8 +168,7 @@ TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
     const double after = 3.0 * double(std::rand()) / RAND_MAX;  // s after its first record was written
     SCOPED_TRACE("killed " + std::to_string(after) + " s after the recording appeared");
     std::string log;
-    // Start-up is waited for, not guessed: the apps restart once at start (huge pages), which takes
-    // longer on a loaded machine (up to 30 s here).
+    // Start-up is waited for, not guessed: it takes longer on a loaded machine (up to 30 s here).
     test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out +
                   " --live --no-gui & pid=$!; i=0; while [ ! -s " + out + "/grab.rawlog ] && [ $i -lt 600 ]; do sleep 0.05; i=$((i+1)); done; sleep " +
                   std::to_string(after) + "; kill -9 $pid; wait $pid'",

@@ -32,8 +32,8 @@ inline double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-// Seconds since this process started, from /proc (10 ms steps): its start-up included, the one
-// restart for the heap too (an exec keeps the process). NaN without /proc.
+// Seconds since this process started, from /proc (10 ms steps): its start-up included (loading the
+// libraries). NaN without /proc.
 double secondsSinceProcessStart();
 
 // Adds the lifetime of this object to times[stage].
