@@ -14,7 +14,6 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/heap.h"
 #include "vofusion/core/timing.h"
-#include "support.h"
 
 using namespace vofusion;
 

@@ -185,7 +185,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   }
 
   s["peak_memory_mib"] = peakMemoryMiB();
-  s["heap_huge_pages"] = heapAsksForHugePages();  // whether the heap asks for huge pages (docs/memory.md)
+  s["heap_huge_pages"] = heapAsksForHugePages();  // whether the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
   writeFileAtomically(out.path("summary.json"), s.dump(2) + "\n");
   out.wrote("summary.json", "run statistics");
   if (m.rawlog) {

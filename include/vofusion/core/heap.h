@@ -5,7 +5,7 @@
 // run). Once the frames are done, meshing and CGAL allocate hundreds of MiB one region at a time:
 // kept in the heap, what one region freed stays counted in the process's RSS through the rest.
 // Pages are the kernel's default size: transparent huge pages (glibc.malloc.hugetlb=1) made meshing
-// slower and doubled the system time (docs/memory.md).
+// slower and its system time 1.3-7x as long in 2026-12-03's runs (docs/memory.md).
 
 namespace vofusion {
 
