@@ -4,6 +4,7 @@ choose a default"): it wins by more than 1 mm on each half of both shared sequen
 own, and on the synthetic set over several seeds, never on one.
 
     bench/run --rules --baseline OTHER_BUILD [--build DIR] [--config INI] [--candidate INI] [--seeds 1,2,3,4,5]
+                      [--perturb N]
     bench/run --rules --baseline build --candidate new_value.ini     # one key's new value, same build
 
 Runs `vofusion` of both builds (this one, --build, against --baseline) on:
@@ -17,6 +18,12 @@ with --candidate, this build's runs read the candidate's sections after it (a la
 Prints a markdown table (ATE RMSE per input and build, the difference in mm, rpy's 50 ms RPE p95), the
 verdict and whether every input is within +2 % (issue 31's rule for a cheaper stage), and writes it to
 <work>/rules.md. Runs are deterministic: one run per input and build.
+
+--perturb N runs each shared sequence and half N times per build, with `[motion] ransac_seed` 1..N (1 is
+the default run), and compares the means (the table shows each mean and its range). A 50-frame half
+moves by tenths of a millimetre under any change at all (2026-12-03-shake-fast-turns.md), more than the
++2 % a cheaper stage may cost there: the seeds show whether a difference is more than that. Both builds
+must know the key (built from 2026-12-03 on).
 """
 import argparse
 import json
@@ -98,6 +105,23 @@ def inputs(build, work, seeds):
     return runs
 
 
+def knows_seed(vofusion):
+    """Whether this vofusion reads [motion] ransac_seed (its --dump-config lists it)."""
+    done = subprocess.run([vofusion, "--dump-config"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    return done.returncode == 0 and "ransac_seed" in done.stdout
+
+
+def seeded_config(config, seed, work, tag):
+    """The build's config with RANSAC's seed set (read last: a later value of a key wins)."""
+    path = os.path.join(work, "%s_ransac_seed%d.ini" % (tag, seed))
+    if not os.path.exists(path):
+        with open(config) as f:
+            text = f.read()
+        with open(path, "w") as f:
+            f.write(text + "\n[motion]\nransac_seed = %d\n" % seed)
+    return path
+
+
 def run(vofusion, path, out, config):
     """summary.json of one run (kept in `out` for a second key of the same run: the loop scene's)."""
     summary = os.path.join(out, "summary.json")
@@ -154,9 +178,20 @@ def markdown(rows, rpe, seeds, this_name, base_name, command):
            "Compare figures only within one run: the same build gives other synthetic figures on another machine "
            "(bench/results/2026-11-29-first-frame.md).", "",
            "| input | baseline | this build | difference, mm |", "|---|---:|---:|---:|"]
+    def cell(r, tag):
+        runs = r.get(tag + "_runs", [])
+        if len(runs) < 2:
+            return "%.5f" % r[tag]
+        return "%.5f (%.5f-%.5f)" % (r[tag], min(runs), max(runs))
+    perturbed = [r for r in rows if len(r.get("this_runs", [])) > 1]
+    if perturbed:
+        out.insert(-2, "Shared sequences and halves: the mean of %d runs with `[motion] ransac_seed` 1-%d (their range in "
+                       "brackets); the difference is of the means." % (len(perturbed[0]["this_runs"]), len(perturbed[0]["this_runs"])))
+        out.insert(-2, "")
     for r in rows:
-        out.append("| %s | %.5f | %.5f | %+.2f |" % (r["name"], r["base"], r["this"], mm(r["base"], r["this"])))
-    out += ["", "rpy_first100's 50 ms translation RPE, 95th percentile [m]: baseline %.4f, this build %.4f." % rpe]
+        out.append("| %s | %s | %s | %+.2f |" % (r["name"], cell(r, "base"), cell(r, "this"), mm(r["base"], r["this"])))
+    out += ["", "rpy_first100's 50 ms translation RPE, 95th percentile [m]%s: baseline %.4f, this build %.4f." % (
+        (" (the runs' mean)" if perturbed else "",) + rpe)]
     out += ["", "Verdict (a default changes only if it wins by > 1 mm on each half and on the synthetic seeds):", ""]
     out += verdict(rows, seeds)
     return "\n".join(out) + "\n"
@@ -172,6 +207,8 @@ def main(argv):
                     help="INI added after the config to this build's runs only, starting with a [section]: "
                          "a key's new value (with --baseline the same build)")
     ap.add_argument("--seeds", default="1,2,3,4,5")
+    ap.add_argument("--perturb", type=int, default=1,
+                    help="runs of each shared sequence and half per build, [motion] ransac_seed 1..N; means compared")
     ap.add_argument("--work", default=None, help="inputs and run outputs (default <build>/bench-rules)")
     a = ap.parse_args(argv)
     try:
@@ -209,21 +246,37 @@ def main(argv):
     for b in list(builds.values()) + [os.path.join(a.build, "bin", "rgbd-simulate")]:
         if not os.access(b, os.X_OK):
             sys.exit("bench rules: no executable " + b)
+    if a.perturb < 1:
+        sys.exit("bench rules: --perturb %d: give the number of runs per shared input (1 = no perturbation)" % a.perturb)
+    if a.perturb > 1:
+        for exe in builds.values():
+            if not knows_seed(exe):
+                sys.exit("bench rules: %s does not read [motion] ransac_seed (built before 2026-12-03): --perturb needs "
+                         "both builds to know it" % exe)
     runs = inputs(a.build, work, seeds)
     rows, rpe = [], None
     start = time.time()
     for i, (name, kind, path, key) in enumerate(runs):
         row = {"name": name, "kind": kind}
         for tag, exe in builds.items():
-            out = os.path.join(work, tag, name.split(",")[0].replace(" ", "_"))
-            s = run(exe, path, out, configs[tag])
-            try:
-                row[tag] = s[key]["rmse"]
-                if name == "rpy":
-                    row["rpe_" + tag] = s["rpe_50ms"]["trans_m"]["p95"]
-            except KeyError as e:
-                sys.exit("bench rules: %s/summary.json has no %s (ground truth missing, or loop closure off in the config?)"
-                         % (out, e))
+            base_out = os.path.join(work, tag, name.split(",")[0].replace(" ", "_"))
+            perturbed = a.perturb > 1 and kind in ("whole", "half")
+            ates, rpes = [], []
+            for seed in range(1, a.perturb + 1) if perturbed else [None]:
+                out = base_out if seed is None else "%s_ransac_seed%d" % (base_out, seed)
+                config = configs[tag] if seed is None else seeded_config(configs[tag], seed, work, tag)
+                s = run(exe, path, out, config)
+                try:
+                    ates.append(s[key]["rmse"])
+                    if name == "rpy":
+                        rpes.append(s["rpe_50ms"]["trans_m"]["p95"])
+                except KeyError as e:
+                    sys.exit("bench rules: %s/summary.json has no %s (ground truth missing, or loop closure off in the config?)"
+                             % (out, e))
+            row[tag] = sum(ates) / len(ates)
+            row[tag + "_runs"] = ates
+            if rpes:
+                row["rpe_" + tag] = sum(rpes) / len(rpes)
         if name == "rpy":
             rpe = (row["rpe_base"], row["rpe_this"])
         rows.append(row)

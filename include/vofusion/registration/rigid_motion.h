@@ -48,7 +48,7 @@ struct RobustFitOptions {
                                    // this scale (iteratively reweighted least squares), 0 = plain
   bool ray_noise = true;           // Gauss-Newton whitens each residual by the Kinect noise along the
                                    // viewing rays (axial 0.0012 + 0.0019 (z-0.4)^2, lateral 1 px); else isotropic
-  std::uint32_t seed = 1;
+  int seed = 1;                    // of the draws: a run repeats exactly for a seed
 };
 // with_covariance false: RigidFit::covariance stays identity (a fit that only seeds the next one).
 RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& opts, bool with_covariance = true);
