@@ -17,10 +17,10 @@ Each run uses the config given (default: [output] mesh = false, write_rawlog = f
 with --candidate, this build's runs read the candidate's sections after it (a later value of a key wins).
 Prints a markdown table (ATE RMSE per input and build, the difference in mm, rpy's 50 ms RPE p95), the
 verdict and whether every input is within +2 % (issue 31's rule for a cheaper stage), and writes it to
-<work>/rules.md. Runs are deterministic: one run per input and build.
+<work>/rules.md. Runs are deterministic: one run per input and build (but see --perturb).
 
---perturb N runs each shared sequence and half N times per build, with `[motion] ransac_seed` 1..N (1 is
-the default run), and compares the means (the table shows each mean and its range). A 50-frame half
+--perturb N runs each shared sequence and half N times per build, with `[motion] ransac_seed` 1..N (the
+odometry's RANSAC; 1 is the default run), and compares the means (the table shows each mean and its range). A 50-frame half
 moves by tenths of a millimetre under any change at all (2026-12-03-shake-fast-turns.md), more than the
 +2 % a cheaper stage may cost there: the seeds show whether a difference is more than that. Both builds
 must know the key (built from 2026-12-03 on).
@@ -28,6 +28,7 @@ must know the key (built from 2026-12-03 on).
 import argparse
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -38,6 +39,7 @@ SHARED = os.path.join(os.path.dirname(ROOT), "shared", "data", "tum")
 HALVES = {"rgbd_dataset_freiburg1_xyz_first300": [(0, 150), (150, 300)],
           "rgbd_dataset_freiburg1_rpy_first100": [(0, 50), (50, 100)]}
 DEFAULT_CONFIG = "[output]\nmesh = false\nwrite_rawlog = false\n"
+SEED_KEY = re.compile(r"^\s*ransac_seed\s*=", re.MULTILINE)
 
 
 def log(msg):
@@ -108,7 +110,7 @@ def inputs(build, work, seeds):
 def knows_seed(vofusion):
     """Whether this vofusion reads [motion] ransac_seed (its --dump-config lists it)."""
     done = subprocess.run([vofusion, "--dump-config"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    return done.returncode == 0 and "ransac_seed" in done.stdout
+    return done.returncode == 0 and SEED_KEY.search(done.stdout) is not None
 
 
 def seeded_config(config, seed, work, tag):
@@ -161,7 +163,8 @@ def verdict(rows, seeds):
         synthetic_wins = synthetic_wins and diff < -1.0
         lines.append("- %s, mean over %d seeds: %+.2f mm, better by > 1 mm: %s (%d seeds worse by > 1 mm)" % (
             label, len(sel), diff, "yes" if diff < -1.0 else "no", worse))
-    # Issue 31's rule for a stage made cheaper: accuracy within +2 % on every input (not a mean).
+    # Issue 31's rule for a stage made cheaper: accuracy within +2 % on every input (not a mean over inputs;
+    # with --perturb, a shared input's figure is the mean of its runs).
     over = ["%s %+.1f %%" % (r["name"], 100.0 * (r["this"] / r["base"] - 1.0)) for r in rows if r["this"] > 1.02 * r["base"]]
     lines.append("- a cheaper stage's rule, every input within +2 %%: %s" % ("yes" if not over else "no (" + ", ".join(over) + ")"))
     if not set(range(1, 6)) <= set(seeds):
@@ -226,6 +229,21 @@ def main(argv):
     if not first_line.startswith("["):
         sys.exit("bench rules: %s: the candidate must start with a [section] (its keys would join the config's last one)"
                  % a.candidate)
+    # Everything that can refuse the run, before the work folder (the last run's results) is emptied.
+    builds = {"this": os.path.join(a.build, "bin", "vofusion"), "base": os.path.join(a.baseline, "bin", "vofusion")}
+    for b in list(builds.values()) + [os.path.join(a.build, "bin", "rgbd-simulate")]:
+        if not os.access(b, os.X_OK):
+            sys.exit("bench rules: no executable " + b)
+    if a.perturb < 1:
+        sys.exit("bench rules: --perturb %d: give the number of runs per shared input (1 = no perturbation)" % a.perturb)
+    if a.perturb > 1:
+        for path, text in ((a.config, config_text), (a.candidate, candidate_text or "")):
+            if SEED_KEY.search(text):
+                sys.exit("bench rules: %s sets ransac_seed, which --perturb sets for each run: drop one of the two" % path)
+        for exe in builds.values():
+            if not knows_seed(exe):
+                sys.exit("bench rules: %s does not read [motion] ransac_seed (built before 2026-12-03): --perturb needs "
+                         "both builds to know it" % exe)
     # Inputs and runs of this invocation only (builds change): emptied first, if this command made it.
     marker = os.path.join(work, ".bench-rules")
     if os.path.exists(work) and os.listdir(work) and not os.path.exists(marker):
@@ -242,17 +260,6 @@ def main(argv):
         configs["this"] = os.path.join(work, "candidate.ini")
         with open(configs["this"], "w") as f:
             f.write(config_text + "\n" + candidate_text + "\n")
-    builds = {"this": os.path.join(a.build, "bin", "vofusion"), "base": os.path.join(a.baseline, "bin", "vofusion")}
-    for b in list(builds.values()) + [os.path.join(a.build, "bin", "rgbd-simulate")]:
-        if not os.access(b, os.X_OK):
-            sys.exit("bench rules: no executable " + b)
-    if a.perturb < 1:
-        sys.exit("bench rules: --perturb %d: give the number of runs per shared input (1 = no perturbation)" % a.perturb)
-    if a.perturb > 1:
-        for exe in builds.values():
-            if not knows_seed(exe):
-                sys.exit("bench rules: %s does not read [motion] ransac_seed (built before 2026-12-03): --perturb needs "
-                         "both builds to know it" % exe)
     runs = inputs(a.build, work, seeds)
     rows, rpe = [], None
     start = time.time()
