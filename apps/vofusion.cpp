@@ -237,8 +237,8 @@ int body(int argc, char** argv) {
   if (plan.resume && RunSession::isCheckpoint(*plan.resume)) loop = resumeCheckpoint(plan, *source, run);
   else if (plan.resume) run.reconstruction().resumeVolume(*plan.resume);
   const std::size_t resumed_at = loop.done;
-  // Start-up (libraries, the input opened, a checkpoint read again): not part of
-  // the frame loop, nor of the time after its last frame.
+  // Start-up (libraries, the input opened, a checkpoint read again): not part of the frame loop, nor
+  // of the time after its last frame.
   const double before_frames = secondsSinceProcessStart();
   reconstructFrames(plan, *source, run, loop);
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");

@@ -20,10 +20,10 @@ verdict and whether every input is within +2 % (issue 31's rule for a cheaper st
 <work>/rules.md. Runs are deterministic: one run per input and build (but see --perturb).
 
 --perturb N runs each shared sequence and half N times per build, with `[motion] ransac_seed` 1..N (the
-odometry's RANSAC; 1 is the default run), and compares the means (the table shows each mean and its range). A 50-frame half
-moves by tenths of a millimetre under any change at all (2026-12-03-shake-fast-turns.md), more than the
-+2 % a cheaper stage may cost there: the seeds show whether a difference is more than that. Both builds
-must know the key (built from 2026-12-03 on).
+odometry's RANSAC; 1 is the default run), and compares the means (the table shows each mean and its
+range). A 50-frame half moves by tenths of a millimetre under any change at all
+(2026-12-03-shake-fast-turns.md), more than the +2 % a cheaper stage may cost there: the seeds show
+whether a difference is more than that. Both builds must know the key (built from 2026-12-03 on).
 """
 import argparse
 import json
