@@ -488,6 +488,15 @@ TEST(MeshClean, NearestTriangleFindsWhatCgalsAabbTreeFinds) {
     ASSERT_NEAR(grid.distance(q), expected, 1e-12) << "at " << q.transpose();
   }
   EXPECT_GT(far, 1000u);  // most of the box's queries are many cells from any triangle
+  // The bounding spheres pass over triangles without changing what is found: the squared distance is
+  // the smallest of every triangle's, to the last bit.
+  for (std::size_t i = 0; i < queries.size(); i += 3) {
+    const Eigen::Vector3d& q = queries[i];
+    double brute = std::numeric_limits<double>::infinity();
+    for (const auto& t : tris)
+      brute = std::min(brute, (closestPointOnTriangle(q, points[t[0]], points[t[1]], points[t[2]]) - q).squaredNorm());
+    ASSERT_EQ((grid.closestPoint(q) - q).squaredNorm(), brute) << "at " << q.transpose();
+  }
   EXPECT_TRUE(NearestTriangle({}, {}).empty());
 }
 

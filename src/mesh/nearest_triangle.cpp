@@ -55,6 +55,11 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
     tris_.push_back(v);
   }
   if (tris_.empty()) return;
+  bounds_.reserve(tris_.size());
+  for (const auto& v : tris_) {
+    const Eigen::Vector3d centre = (v[0] + v[1] + v[2]) / 3.0;
+    bounds_.push_back({centre, std::max({(v[0] - centre).norm(), (v[1] - centre).norm(), (v[2] - centre).norm()})});
+  }
   // Twice the mean longest edge: a triangle spans one or two cells a side, and a query near the
   // surface usually ends after its own cell and a few of its neighbours. A whole room's mesh, or a
   // flat one, would need too many such cells: then larger ones, at most eight cells per triangle.
@@ -117,7 +122,15 @@ void NearestTriangle::searchCell(const Cell& c, const Eigen::Vector3d& p, Eigen:
   }
   if (box_sq >= best_sq) return;
   for (std::uint32_t k = begin_[i]; k < begin_[i + 1]; ++k) {
-    const auto& v = tris_[listed_[k]];
+    const std::uint32_t id = listed_[k];
+    // A lower bound of the distance, less a margin far above rounding (1e-9 of the sizes involved,
+    // rounding is ~1e-16 of them): a triangle passed over could only have tied or lost, so the point
+    // found is the one the exact test of every listed triangle finds.
+    const Bound& s = bounds_[id];
+    const double to_centre = (p - s.centre).norm();
+    const double lower = to_centre - s.radius - 1e-9 * (to_centre + s.radius);
+    if (lower > 0 && lower * lower >= best_sq) continue;
+    const auto& v = tris_[id];
     const Eigen::Vector3d q = closestPointOnTriangle(p, v[0], v[1], v[2]);
     const double d = (q - p).squaredNorm();
     if (d < best_sq) best_sq = d, best = q;

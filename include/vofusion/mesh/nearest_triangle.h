@@ -34,6 +34,13 @@ class NearestTriangle {
   void searchCell(const Cell& c, const Eigen::Vector3d& p, Eigen::Vector3d& best, double& best_sq) const;
 
   std::vector<std::array<Eigen::Vector3d, 3>> tris_;
+  // Per triangle, a sphere holding it (centre, radius): most of a cell's triangles are farther than the
+  // best point found so far by more than their size, and are passed over without the exact test.
+  struct Bound {
+    Eigen::Vector3d centre;
+    double radius;
+  };
+  std::vector<Bound> bounds_;
   double cell_ = 1.0;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   Cell dims_{};                        // cells per axis
