@@ -489,14 +489,21 @@ TEST(MeshClean, NearestTriangleFindsWhatCgalsAabbTreeFinds) {
   }
   EXPECT_GT(far, 1000u);  // most of the box's queries are many cells from any triangle
   // The bounding spheres pass over triangles without changing what is found: the squared distance is
-  // the smallest of every triangle's, to the last bit.
-  for (std::size_t i = 0; i < queries.size(); i += 3) {
-    const Eigen::Vector3d& q = queries[i];
-    double brute = std::numeric_limits<double>::infinity();
-    for (const auto& t : tris)
-      brute = std::min(brute, (closestPointOnTriangle(q, points[t[0]], points[t[1]], points[t[2]]) - q).squaredNorm());
-    ASSERT_EQ((grid.closestPoint(q) - q).squaredNorm(), brute) << "at " << q.transpose();
-  }
+  // the smallest of every triangle's, to the last bit, here and with everything 10 km away (rounding
+  // grows with the coordinates, the triangles stay small).
+  const Eigen::Vector3d far_away(1e4, -2e4, 3e3);
+  std::vector<Eigen::Vector3d> moved;
+  for (const auto& v : points) moved.push_back(v + far_away);
+  const NearestTriangle moved_grid(moved, tris);
+  for (std::size_t i = 0; i < queries.size(); i += 3)
+    for (const auto* set : {&points, &moved}) {
+      const NearestTriangle& g = set == &points ? grid : moved_grid;
+      const Eigen::Vector3d q = queries[i] + (set == &points ? Eigen::Vector3d::Zero() : far_away);
+      double brute = std::numeric_limits<double>::infinity();
+      for (const auto& t : tris)
+        brute = std::min(brute, (closestPointOnTriangle(q, (*set)[t[0]], (*set)[t[1]], (*set)[t[2]]) - q).squaredNorm());
+      ASSERT_EQ((g.closestPoint(q) - q).squaredNorm(), brute) << "at " << q.transpose();
+    }
   EXPECT_TRUE(NearestTriangle({}, {}).empty());
 }
 

@@ -546,6 +546,7 @@ class Cleaner {
     r_.components_removed += drop.size();
   }
 
+  static constexpr std::size_t kFullSearchEdges = 200;
   void fillHoles() {
     std::vector<HD> cycles;
     PMP::extract_boundary_cycles(m_, std::back_inserter(cycles));
@@ -565,12 +566,13 @@ class Cleaner {
       std::vector<FD> new_faces;
       std::vector<VD> new_vertices;
       // CGAL's full search of the patch, not the one restricted to the 3D Delaunay triangulation of the
-      // border: on a border with coincident corners (a vertex split where the mesh was non-manifold) the
-      // restricted search gave different patches for the same mesh from run to run (loop scene, 300
-      // frames: 2 of 3 pairs of runs differed in one hole; the full search: 4 runs byte-identical, and
-      // the holes step 0.39 -> 0.31 s).
+      // border: the restricted search gave different patches for the same mesh from run to run, on a
+      // border with coincident corners (a vertex split where the mesh was non-manifold; loop scene, 300
+      // frames: 2 of 3 pairs of runs differed in one hole; the full search: 4 runs byte-identical, the
+      // holes step 0.39 -> 0.31 s). Why it varies was not found in CGAL's code. The full search costs
+      // ~n^3/6 patch weights: above kFullSearchEdges (the default max_hole_edges) the restricted one.
       PMP::triangulate_and_refine_hole(m_, start, std::back_inserter(new_faces), std::back_inserter(new_vertices),
-                                       CGAL::parameters::use_delaunay_triangulation(false));
+                                       CGAL::parameters::use_delaunay_triangulation(edges > kFullSearchEdges));
       if (p_.hole_fairing) fairPatch(new_vertices);
       if (new_faces.empty()) ++r_.holes_left;
       else ++r_.holes_filled;

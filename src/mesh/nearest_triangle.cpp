@@ -27,7 +27,9 @@ Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
   const double va = d3 * d6 - d5 * d4;
   if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
   const double denom = va + vb + vc;
-  if (!(std::abs(denom) > 0)) {  // degenerate (a segment or a point): the nearest of its edges' points
+  // Degenerate (a segment or a point), or a sliver whose rounding sent a point outside it here (a
+  // barycentric weight below zero): the nearest of its edges' points.
+  if (!(std::abs(denom) > 0) || va < 0 || vb < 0 || vc < 0) {
     Eigen::Vector3d best = a;
     for (const auto& [s, t] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) {
       const Eigen::Vector3d st = t - s;
@@ -123,12 +125,13 @@ void NearestTriangle::searchCell(const Cell& c, const Eigen::Vector3d& p, Eigen:
   if (box_sq >= best_sq) return;
   for (std::uint32_t k = begin_[i]; k < begin_[i + 1]; ++k) {
     const std::uint32_t id = listed_[k];
-    // A lower bound of the distance, less a margin far above rounding (1e-9 of the sizes involved,
-    // rounding is ~1e-16 of them): a triangle passed over could only have tied or lost, so the point
-    // found is the one the exact test of every listed triangle finds.
+    // A lower bound of the distance, less a margin far above rounding (the bound's terms and the
+    // closest point's coordinates are rounded to ~1e-16 of themselves): a triangle passed over could
+    // only have tied or lost, so the point found is the one the exact test of every listed triangle finds.
     const Bound& s = bounds_[id];
     const double to_centre = (p - s.centre).norm();
-    const double lower = to_centre - s.radius - 1e-9 * (to_centre + s.radius);
+    const double margin = 1e-9 * (to_centre + s.radius) + 1e-12 * p.cwiseAbs().maxCoeff();
+    const double lower = to_centre - s.radius - margin;
     if (lower > 0 && lower * lower >= best_sq) continue;
     const auto& v = tris_[id];
     const Eigen::Vector3d q = closestPointOnTriangle(p, v[0], v[1], v[2]);
