@@ -129,9 +129,8 @@ TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   const std::string out = test::tempDir("grab_app_sigint");
   std::string log;
   // The whole 300-frame sequence takes 10 s; SIGINT 1 s after the app says it records stops it.
-  // Start-up is waited for, not guessed: on a loaded machine it took over 3 s (with the heap's restart,
-  // since taken out), and sh starts a background job with SIGINT ignored, so a SIGINT sent before the
-  // app's handler is in place is lost.
+  // Start-up is waited for, not guessed: on a loaded machine it took over 3 s, and sh starts a
+  // background job with SIGINT ignored, so a SIGINT sent before the app's handler is in place is lost.
   const std::string err = test::tempDir("grab_app_sigint_err") + "/stderr.txt";
   const int rc = test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + tum + " --out " + out + " 2> " + err +
                                " & pid=$!; i=0; until grep -q \"Ctrl-C to stop\" " + err +
