@@ -1,0 +1,105 @@
+#include "vofusion/core/gzip_members.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+
+#include <tbb/task_arena.h>
+#include <tbb/task_group.h>
+
+#include "vofusion/core/deflate.h"
+#include "vofusion/core/errors.h"
+
+namespace vofusion {
+
+struct GzipMembersFile::Member {
+  std::vector<std::uint8_t> raw, gz;
+  std::exception_ptr error;
+  std::atomic<bool> done{false};
+  tbb::task_group task;
+};
+
+GzipMembersFile::GzipMembersFile(const std::string& path)
+    : path_(path),
+      // Two members a core: the cores stay busy while the writer fills the next, and at most a few MiB wait.
+      max_in_flight_(2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()))) {
+  file_ = std::fopen(path.c_str(), "wb");
+  if (!file_) throw InputError(path, std::string("cannot write: ") + std::strerror(errno));
+  buffer_.reserve(kMemberBytes);
+}
+
+GzipMembersFile::~GzipMembersFile() {
+  for (auto& m : in_flight_) m->task.wait();  // no task outlives its member
+  if (file_) std::fclose(file_);
+}
+
+size_t GzipMembersFile::Write(const void* data, size_t size) {
+  const auto* p = static_cast<const std::uint8_t*>(data);
+  for (size_t left = size; left > 0;) {
+    const size_t n = std::min(left, kMemberBytes - buffer_.size());
+    buffer_.insert(buffer_.end(), p, p + n);
+    p += n, left -= n;
+    if (buffer_.size() == kMemberBytes) startMember();
+  }
+  written_ += size;
+  return size;
+}
+
+void GzipMembersFile::startMember() {
+  in_flight_.push_back(std::make_unique<Member>());
+  Member& m = *in_flight_.back();
+  m.raw.swap(buffer_);
+  buffer_.reserve(kMemberBytes);
+  m.task.run([&m] {
+    try {
+      m.gz = gzipCompress(m.raw.data(), m.raw.size());
+    } catch (...) {
+      m.error = std::current_exception();
+    }
+    m.raw = {};
+    m.done.store(true, std::memory_order_release);
+  });
+  writeDone(false);
+  while (in_flight_.size() >= max_in_flight_) {
+    // The oldest first: the file takes members in order. This thread compresses queued ones meanwhile.
+    in_flight_.front()->task.wait();
+    writeDone(false);
+  }
+}
+
+void GzipMembersFile::writeDone(bool all) {
+  while (!in_flight_.empty()) {
+    Member& m = *in_flight_.front();
+    if (!all && !m.done.load(std::memory_order_acquire)) break;  // still compressing
+    m.task.wait();
+    writeMember(m);
+    in_flight_.pop_front();
+  }
+}
+
+void GzipMembersFile::writeMember(Member& m) {
+  if (m.error) std::rethrow_exception(m.error);
+  if (failed_) return;
+  if (std::fwrite(m.gz.data(), 1, m.gz.size(), file_) != m.gz.size()) failed_ = true, error_ = errno;
+}
+
+void GzipMembersFile::close() {
+  if (!file_) return;
+  // An empty file has one empty member, as gzip writes one: a reader finds a gzip header either way.
+  if (!buffer_.empty() || (written_ == 0 && in_flight_.empty())) startMember();
+  writeDone(true);
+  const int closed = std::fclose(file_);
+  if (closed != 0 && !failed_) failed_ = true, error_ = errno;
+  file_ = nullptr;
+  if (failed_) throw InputError(path_, std::string("cannot write: ") + std::strerror(error_));
+}
+
+size_t GzipMembersFile::Read(void*, size_t) { throw std::logic_error("GzipMembersFile is write-only"); }
+
+uint64_t GzipMembersFile::Seek(int64_t, mrpt::io::CStream::TSeekOrigin) {
+  throw std::logic_error("GzipMembersFile cannot seek");
+}
+
+}  // namespace vofusion
