@@ -51,7 +51,7 @@ void WorldModel::erase(std::uint64_t k) {
 }
 
 void WorldModel::put(std::unique_ptr<Brick> brick) {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::lock_guard<std::shared_mutex> lock(mutex_);
   const std::uint64_t k = key(brick->coord);
   erase(k);  // a brick already stored there is replaced
   lru_.push_front(k);
@@ -78,12 +78,14 @@ void WorldModel::readRecord(SpillFile::Record r, Brick& out) const {
   const auto t0 = std::chrono::steady_clock::now();
   const std::vector<std::uint8_t> bytes = spill_.read(r);
   if (!decompressBrick(bytes.data(), bytes.size(), out)) throw std::runtime_error("corrupt record in the world model's spill file");
-  ++stats_.reloaded;
-  stats_.spill_seconds += since(t0);
+  reloaded_.fetch_add(1, std::memory_order_relaxed);
+  reload_nanoseconds_.fetch_add(
+      std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count()),
+      std::memory_order_relaxed);
 }
 
 std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::lock_guard<std::shared_mutex> lock(mutex_);
   const std::uint64_t k = key(c);
   if (auto it = ram_.find(k); it != ram_.end()) {
     std::unique_ptr<Brick> b = std::move(it->second.brick);
@@ -101,7 +103,7 @@ std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
 }
 
 bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::shared_lock lock(mutex_);
   const std::uint64_t k = key(c);
   if (const auto it = ram_.find(k); it != ram_.end()) std::memcpy(out.voxels, it->second.brick->voxels, kVoxelBytes);
   else if (const auto record = disk_.find(k)) readRecord(*record, out);
@@ -117,7 +119,7 @@ void WorldModel::forEachKey(F&& f) const {
 }
 
 std::vector<Eigen::Vector3i> WorldModel::coordsInBox(const Eigen::Vector3i& lo, int n) const {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::shared_lock lock(mutex_);
   std::vector<Eigen::Vector3i> out;
   forEachKey([&](std::uint64_t k) {
     const Eigen::Vector3i c = decode(k);
@@ -127,17 +129,17 @@ std::vector<Eigen::Vector3i> WorldModel::coordsInBox(const Eigen::Vector3i& lo, 
 }
 
 std::size_t WorldModel::size() const {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::shared_lock lock(mutex_);
   return ram_.size() + disk_.size();
 }
 
 bool WorldModel::contains(const Eigen::Vector3i& c) const {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::shared_lock lock(mutex_);
   return ram_.count(key(c)) != 0 || disk_.find(key(c)).has_value();
 }
 
 std::vector<Eigen::Vector3i> WorldModel::coords() const {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::shared_lock lock(mutex_);
   std::vector<Eigen::Vector3i> out;
   out.reserve(ram_.size() + disk_.size());
   forEachKey([&](std::uint64_t k) { out.push_back(decode(k)); });
@@ -145,7 +147,7 @@ std::vector<Eigen::Vector3i> WorldModel::coords() const {
 }
 
 WorldModelStats WorldModel::stats() const {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::shared_lock lock(mutex_);
   WorldModelStats s = stats_;
   s.bricks = ram_.size() + disk_.size();
   s.bricks_in_ram = lru_.size();
@@ -153,6 +155,8 @@ WorldModelStats WorldModel::stats() const {
   s.index_bytes = disk_.bytes() + lru_.size() * 88 + spill_.freePlaces() * 96;
   s.spill_file_bytes = spill_.bytes();
   s.spill_free_bytes = spill_.freeBytes();
+  s.reloaded = reloaded_.load(std::memory_order_relaxed);
+  s.spill_seconds += 1e-9 * double(reload_nanoseconds_.load(std::memory_order_relaxed));
   return s;
 }
 

@@ -77,6 +77,7 @@ void marchingCubesByRegion(const std::vector<BrickRef>& bricks, float voxel_size
                            const std::function<void(RegionMesh&)>& sink);
 
 // The brick at a world brick coordinate: a pointer to one kept elsewhere, or `scratch` filled in.
+// Called on several threads at once, each with its own coordinate and scratch brick.
 using BrickFetch = std::function<const Brick*(const Eigen::Vector3i& coord, Brick& scratch)>;
 // The same mesh as marchingCubes over all `coords`, built region by region (region_bricks^3 bricks
 // each, plus their +1 neighbours): only one region's bricks are fetched at a time, so a world model

@@ -6,12 +6,15 @@
 // SpillFile in `spill_dir`. A brick on disk costs RAM only for its index entry (~40 bytes), so a long
 // walk's memory grows by that alone; a brick taken back frees its place in the file for the next.
 // Every member locks the store: the frame loop hands bricks over (put/take) while the region mesher
-// (pipeline/region_premesher.h) reads the regions the volume has left.
+// (pipeline/region_premesher.h) reads the regions the volume has left. Reads share the lock, so the
+// mesher's threads read and decompress spilled bricks side by side.
 #include <cstdint>
 #include <functional>
 #include <list>
 #include <memory>
+#include <atomic>
 #include <mutex>
+#include <shared_mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -53,7 +56,8 @@ class WorldModel {
   std::vector<Eigen::Vector3i> coordsInBox(const Eigen::Vector3i& lo, int n) const;
   // Coordinates of every stored brick.
   std::vector<Eigen::Vector3i> coords() const;
-  // Copies a stored brick without changing what is cached; false when there is none.
+  // Copies a stored brick without changing what is cached; false when there is none. Safe beside
+  // other reads on other threads.
   bool read(const Eigen::Vector3i& c, Brick& out) const;
 
   std::size_t size() const;
@@ -68,7 +72,7 @@ class WorldModel {
   };
   void evict();
   void erase(std::uint64_t k);
-  void readRecord(SpillFile::Record r, Brick& out) const;
+  void readRecord(SpillFile::Record r, Brick& out) const;  // under either lock
   template <class F> void forEachKey(F&& f) const;
 
   std::size_t cache_bytes_;
@@ -76,8 +80,10 @@ class WorldModel {
   std::unordered_map<std::uint64_t, Cached> ram_;             // the cache
   BrickIndex disk_;                            // the rest, by key
   std::list<std::uint64_t> lru_;               // keys of the bricks in RAM, most recent first
-  mutable WorldModelStats stats_;
-  mutable std::mutex mutex_;
+  WorldModelStats stats_;                      // but reloaded and spill_seconds' reading part:
+  mutable std::atomic<std::size_t> reloaded_{0};          // counted under a shared lock
+  mutable std::atomic<std::uint64_t> reload_nanoseconds_{0};
+  mutable std::shared_mutex mutex_;            // put/take exclusive, the rest shared
 };
 
 }  // namespace vofusion::fusion
