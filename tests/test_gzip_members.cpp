@@ -103,3 +103,28 @@ TEST(GzipMembers, IsWriteOnly) {
   EXPECT_THROW(f.Read(&b, 1), std::logic_error);
   EXPECT_THROW(f.Seek(0), std::logic_error);
 }
+
+TEST(GzipMembers, AFullDiskIsAnInputErrorNamingTheFile) {
+  const std::vector<std::uint8_t> data = content(3 * GzipMembersFile::kMemberBytes);
+  try {
+    GzipMembersFile f("/dev/full");
+    f.Write(data.data(), data.size());
+    f.close();
+    FAIL() << "wrote 3 MiB to /dev/full";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "/dev/full");
+  }
+}
+
+TEST(GzipMembers, DestroyedWithMembersInFlightWaitsForThem) {
+  const std::string path = test::tempDir("gzip_members_unclosed") + "/x.gz";
+  const std::vector<std::uint8_t> data = content(6 * GzipMembersFile::kMemberBytes);
+  {
+    GzipMembersFile f(path);
+    f.Write(data.data(), data.size());
+  }  // as when serialising throws: no close(); the members in flight finish before theirs are freed
+  EXPECT_TRUE(std::filesystem::exists(path));
+  GzipMembersFile f(path);
+  f.close();
+  EXPECT_THROW(f.Write(data.data(), 1), std::logic_error);
+}

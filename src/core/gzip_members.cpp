@@ -18,7 +18,9 @@ struct GzipMembersFile::Member {
   std::vector<std::uint8_t> raw, gz;
   std::exception_ptr error;
   std::atomic<bool> done{false};
-  tbb::task_group task;
+  // Its own context: a writer inside a TBB task whose group is cancelled still compresses every member.
+  tbb::task_group_context context{tbb::task_group_context::isolated};
+  tbb::task_group task{context};
 };
 
 GzipMembersFile::GzipMembersFile(const std::string& path)
@@ -36,6 +38,7 @@ GzipMembersFile::~GzipMembersFile() {
 }
 
 size_t GzipMembersFile::Write(const void* data, size_t size) {
+  if (!file_) throw std::logic_error("GzipMembersFile: write after close");
   const auto* p = static_cast<const std::uint8_t*>(data);
   for (size_t left = size; left > 0;) {
     const size_t n = std::min(left, kMemberBytes - buffer_.size());
@@ -61,39 +64,38 @@ void GzipMembersFile::startMember() {
     m.raw = {};
     m.done.store(true, std::memory_order_release);
   });
-  writeDone(false);
-  while (in_flight_.size() >= max_in_flight_) {
-    // The oldest first: the file takes members in order. This thread compresses queued ones meanwhile.
-    in_flight_.front()->task.wait();
-    writeDone(false);
-  }
+  while (!in_flight_.empty() && in_flight_.front()->done.load(std::memory_order_acquire)) writeOldest();
+  // The file takes members in order: past the limit, wait for the oldest (this thread compresses
+  // queued ones meanwhile).
+  while (in_flight_.size() >= max_in_flight_) writeOldest();
 }
 
-void GzipMembersFile::writeDone(bool all) {
-  while (!in_flight_.empty()) {
-    Member& m = *in_flight_.front();
-    if (!all && !m.done.load(std::memory_order_acquire)) break;  // still compressing
-    m.task.wait();
-    writeMember(m);
-    in_flight_.pop_front();
-  }
-}
-
-void GzipMembersFile::writeMember(Member& m) {
+void GzipMembersFile::writeOldest() {
+  Member& m = *in_flight_.front();
+  m.task.wait();
+  if (!m.done.load(std::memory_order_acquire)) throw std::runtime_error("GzipMembersFile: a compression did not run");
   if (m.error) std::rethrow_exception(m.error);
-  if (failed_) return;
-  if (std::fwrite(m.gz.data(), 1, m.gz.size(), file_) != m.gz.size()) failed_ = true, error_ = errno;
+  if (std::fwrite(m.gz.data(), 1, m.gz.size(), file_) != m.gz.size())
+    throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));  // stops the serialisation at once
+  in_flight_.pop_front();
 }
 
 void GzipMembersFile::close() {
   if (!file_) return;
-  // An empty file has one empty member, as gzip writes one: a reader finds a gzip header either way.
-  if (!buffer_.empty() || (written_ == 0 && in_flight_.empty())) startMember();
-  writeDone(true);
-  const int closed = std::fclose(file_);
-  if (closed != 0 && !failed_) failed_ = true, error_ = errno;
+  std::FILE* f = file_;
+  try {
+    // An empty file has one empty member, as gzip writes one: a reader finds a gzip header either way.
+    if (!buffer_.empty() || written_ == 0) startMember();
+    while (!in_flight_.empty()) writeOldest();
+  } catch (...) {
+    for (auto& m : in_flight_) m->task.wait();
+    in_flight_.clear();
+    file_ = nullptr;
+    std::fclose(f);
+    throw;
+  }
   file_ = nullptr;
-  if (failed_) throw InputError(path_, std::string("cannot write: ") + std::strerror(error_));
+  if (std::fclose(f) != 0) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
 }
 
 size_t GzipMembersFile::Read(void*, size_t) { throw std::logic_error("GzipMembersFile is write-only"); }

@@ -163,8 +163,8 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
 
   const SceneOptions scene_opts = m.sceneOptions(rec, s);
   const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
-  // The picture rendered on one core while the scene is compressed on the other (each took ~0.35 s
-  // of rpy_first100's time after its last frame, one after the other) where memory allows, else
+  // The picture rendered beside the scene's building and writing (each took ~0.35 s of rpy_first100's
+  // time after its last frame, one after the other) where memory allows, else
   // deferred: rendered by get(), after the scene. The render takes its own copy of the path (reading a
   // CPose3D's angles fills its cache) and its file name. `png` is declared after all it reads: if the
   // scene throws, its destructor waits for a render in flight first.

@@ -8,8 +8,9 @@
 //   mrpt::serialization::archiveFrom(f) << scene;
 //   f.close();                                     // throws InputError(path, ...) if a write failed
 //
-// A writer destroyed without close() (an exception) waits for its compressions and leaves a truncated
-// file: write it through AtomicPath, which removes it.
+// A failed write throws InputError(path, ...) from the Write or close() that meets it. A writer
+// destroyed without close() (an exception) waits for its compressions and leaves a truncated file:
+// write it through AtomicPath, which removes it.
 #include <cstdint>
 #include <cstdio>
 #include <deque>
@@ -30,8 +31,9 @@ class GzipMembersFile : public mrpt::io::CStream {
   GzipMembersFile(const GzipMembersFile&) = delete;
   GzipMembersFile& operator=(const GzipMembersFile&) = delete;
 
-  size_t Write(const void* data, size_t size) override;
-  // Compresses what is left, writes every member in order and closes the file; idempotent.
+  size_t Write(const void* data, size_t size) override;  // after close(): std::logic_error
+  // Compresses what is left, writes every member in order and closes the file. Once it has returned
+  // or thrown, the file is closed and a second call does nothing.
   void close();
 
   // Write-only: reading and seeking throw std::logic_error.
@@ -43,9 +45,8 @@ class GzipMembersFile : public mrpt::io::CStream {
 
  private:
   struct Member;
-  void startMember();          // hands the filled buffer to a compression task
-  void writeDone(bool all);    // writes finished members in order (all: waits for each)
-  void writeMember(Member& m);
+  void startMember();   // hands the filled buffer to a compression task, writes what is done
+  void writeOldest();   // waits for the oldest member in flight and writes it
 
   std::string path_;
   std::FILE* file_ = nullptr;
@@ -53,8 +54,6 @@ class GzipMembersFile : public mrpt::io::CStream {
   std::deque<std::unique_ptr<Member>> in_flight_;  // file order
   std::size_t max_in_flight_;
   std::uint64_t written_ = 0;
-  bool failed_ = false;
-  int error_ = 0;
 };
 
 }  // namespace vofusion

@@ -6,8 +6,8 @@
 // SpillFile in `spill_dir`. A brick on disk costs RAM only for its index entry (~40 bytes), so a long
 // walk's memory grows by that alone; a brick taken back frees its place in the file for the next.
 // Every member locks the store: the frame loop hands bricks over (put/take) while the region mesher
-// (pipeline/region_premesher.h) reads the regions the volume has left. Reads share the lock, so the
-// mesher's threads read and decompress spilled bricks side by side.
+// (pipeline/region_premesher.h) reads the regions the volume has left. Reads share the lock, so
+// meshing at the end reads and decompresses a region's spilled bricks on every core.
 #include <cstdint>
 #include <functional>
 #include <list>

@@ -65,7 +65,8 @@ std::shared_ptr<mrpt::opengl::COpenGLScene> buildScene(const TriangleMesh& mesh,
                                                         const Trajectory* ground_truth, const CameraIntrinsics& cam,
                                                         const SceneOptions& opt = {});
 
-// Writes the scene (COpenGLScene::saveToFile, gzip-compressed .3Dscene) whole or not at all;
+// Writes the scene (a gzip-compressed .3Dscene, as COpenGLScene::saveToFile writes it, compressed on
+// every core: core/gzip_members.h) whole or not at all;
 // throws InputError(path, ...) when it cannot be written.
 void exportScene(const std::string& path, const TriangleMesh& mesh, const Trajectory& path_est,
                  const Trajectory* ground_truth, const CameraIntrinsics& cam, const SceneOptions& opt = {});
