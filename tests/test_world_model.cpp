@@ -9,6 +9,7 @@
 #include <set>
 #include <unordered_map>
 #include <sstream>
+#include <array>
 #include <atomic>
 #include <thread>
 
@@ -218,6 +219,57 @@ TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit
   EXPECT_EQ(wm.stats().ram_bytes, 0u);
   EXPECT_FALSE(wm.take(Eigen::Vector3i(0, 0, 0)));
   EXPECT_EQ(wm.coordsInBox(Eigen::Vector3i(-10, -10, -10), 20).size(), 0u);
+}
+
+// A volume shift hands its bricks over at once (putAll / takeAll, the compression and decompression on
+// every core): the store ends each shift as handing them over one by one leaves it, down to the spill
+// file's size and free places (the same bricks spilled, in the same order, to the same places).
+TEST(WorldModel, ShiftsAtOnceLeaveTheStoreAsOneByOne) {
+  std::mt19937 rng(5);
+  WorldModel at_once(10 * sizeof(Brick), test::tempDir("world_model_at_once"));
+  WorldModel one_by_one(10 * sizeof(Brick), test::tempDir("world_model_one_by_one"));
+  std::set<std::array<int, 3>> stored;
+  const auto same = [](const WorldModelStats& a, const WorldModelStats& b) {
+    return a.bricks == b.bricks && a.bricks_in_ram == b.bricks_in_ram && a.ram_bytes == b.ram_bytes &&
+           a.spill_file_bytes == b.spill_file_bytes && a.spill_free_bytes == b.spill_free_bytes &&
+           a.spilled == b.spilled && a.reloaded == b.reloaded;
+  };
+  for (int shift = 0; shift < 40; ++shift) {
+    // Out: new bricks and bricks stored already (replaced), distinct within the shift.
+    std::set<std::array<int, 3>> out_coords;
+    const int out_n = int(rng() % 30);
+    while (int(out_coords.size()) < out_n) out_coords.insert({int(rng() % 12), int(rng() % 12), 0});
+    std::vector<std::unique_ptr<Brick>> batch;
+    for (const auto& c : out_coords) {
+      auto b = randomBrick(Eigen::Vector3i(c[0], c[1], c[2]), rng);
+      one_by_one.put(std::make_unique<Brick>(*b));
+      batch.push_back(std::move(b));
+      stored.insert(c);
+    }
+    at_once.putAll(std::move(batch));
+    ASSERT_TRUE(same(at_once.stats(), one_by_one.stats())) << "after putting, shift " << shift;
+    // Back: some of the stored ones, in RAM or on disk.
+    std::vector<Eigen::Vector3i> back;
+    for (auto it = stored.begin(); it != stored.end();)
+      if (rng() % 3 == 0) back.emplace_back((*it)[0], (*it)[1], (*it)[2]), it = stored.erase(it);
+      else ++it;
+    const std::vector<std::unique_ptr<Brick>> taken = at_once.takeAll(back);
+    ASSERT_EQ(taken.size(), back.size());
+    for (std::size_t i = 0; i < back.size(); ++i) {
+      const std::unique_ptr<Brick> b = one_by_one.take(back[i]);
+      ASSERT_TRUE(b && taken[i]);
+      EXPECT_EQ(taken[i]->coord, back[i]);
+      EXPECT_TRUE(sameVoxels(*taken[i], *b)) << "brick " << back[i].transpose();
+    }
+    ASSERT_TRUE(same(at_once.stats(), one_by_one.stats())) << "after taking, shift " << shift;
+  }
+  EXPECT_GT(one_by_one.stats().reloaded, 20u);  // bricks came back from disk, not only from RAM
+  Brick a, b;
+  for (const auto& c : stored) {
+    const Eigen::Vector3i v(c[0], c[1], c[2]);
+    ASSERT_TRUE(at_once.read(v, a) && one_by_one.read(v, b));
+    EXPECT_TRUE(sameVoxels(a, b));
+  }
 }
 
 // Reads share the store's lock (meshing fetches a region's bricks on every core): four readers, each

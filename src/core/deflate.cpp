@@ -45,6 +45,15 @@ std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size) {
   return compressWith(data, size, libdeflate_zlib_compress_bound, libdeflate_zlib_compress);
 }
 
+std::size_t zlibCompressBound(std::size_t size) { return libdeflate_zlib_compress_bound(&compressor(), size); }
+
+std::size_t zlibCompressInto(const void* data, std::size_t size, std::uint8_t* out, std::size_t capacity) {
+  if (size == 0) return 0;
+  const std::size_t n = libdeflate_zlib_compress(&compressor(), data, size, out, capacity);
+  if (n == 0) throw std::runtime_error("libdeflate: cannot compress");
+  return n;
+}
+
 bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
   if (size == 0) return data_size == 0;
   std::size_t got = 0;

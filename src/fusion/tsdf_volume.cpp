@@ -212,16 +212,20 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
     return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all();
   };
   // Bricks leaving the volume go to the world model...
+  std::vector<std::unique_ptr<Brick>> leaving;
   for (std::size_t s = 0; s < slots_.size(); ++s) {
     const std::int32_t id = slots_[s];
     if (id < 0 || inside(bricks_[id].coord)) continue;
-    world_->put(std::make_unique<Brick>(bricks_[id]));
+    leaving.push_back(std::make_unique<Brick>(bricks_[id]));
     removeBrick(static_cast<int>(s));
   }
+  world_->putAll(std::move(leaving));
   origin_ = o;
   updateCyclicTables();
   // ...and world-model bricks the volume now covers come back (camera revisiting a place).
-  for (const Eigen::Vector3i& c : world_->coordsInBox(origin_, n_)) setSlot(slotOf(c.x(), c.y(), c.z()), bricks_.add(*world_->take(c)));
+  const std::vector<Eigen::Vector3i> back = world_->coordsInBox(origin_, n_);
+  std::vector<std::unique_ptr<Brick>> taken = world_->takeAll(back);
+  for (std::size_t i = 0; i < back.size(); ++i) setSlot(slotOf(back[i].x(), back[i].y(), back[i].z()), bricks_.add(*taken[i]));
   bricks_.releaseUnusedPages();
 }
 

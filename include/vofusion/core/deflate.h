@@ -10,6 +10,11 @@ namespace vofusion {
 
 // A zlib stream of `size` bytes at `data`, at level 1 (fast, ~3x on TSDF bricks and depth); empty for size 0.
 std::vector<std::uint8_t> zlibCompress(const void* data, std::size_t size);
+// The same stream written into `out` (capacity at least zlibCompressBound(size)); returns its length.
+// For callers on worker threads: the buffer is the caller's, so nothing is allocated there (glibc keeps
+// what a worker thread frees in that thread's own heap).
+std::size_t zlibCompressBound(std::size_t size);
+std::size_t zlibCompressInto(const void* data, std::size_t size, std::uint8_t* out, std::size_t capacity);
 // Fills exactly `size` bytes at `out`; false when `data` is not a zlib stream of that length.
 bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size);
 // A gzip file's bytes (one member) of `size` bytes at `data`, at level 1.

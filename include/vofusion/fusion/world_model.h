@@ -17,6 +17,7 @@
 #include <shared_mutex>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "vofusion/core/spill_file.h"
@@ -52,6 +53,10 @@ class WorldModel {
   void put(std::unique_ptr<Brick> brick);
   // Slices back in: the brick at world brick coordinate c, removed from the store; null when none.
   std::unique_ptr<Brick> take(const Eigen::Vector3i& c);
+  // A volume shift's bricks at once, the same as put / take one by one in the order given (takeAll:
+  // coordinates distinct), the compression and decompression on every core.
+  void putAll(std::vector<std::unique_ptr<Brick>> bricks);
+  std::vector<std::unique_ptr<Brick>> takeAll(const std::vector<Eigen::Vector3i>& coords);
   // Coordinates of the stored bricks inside the box [lo, lo + n) (per axis).
   std::vector<Eigen::Vector3i> coordsInBox(const Eigen::Vector3i& lo, int n) const;
   // Coordinates of every stored brick.
@@ -70,7 +75,11 @@ class WorldModel {
     std::unique_ptr<Brick> brick;
     std::list<std::uint64_t>::iterator lru;    // its place in lru_
   };
-  void evict();
+  struct Evicted {  // bricks out of the cache, not yet on disk, oldest first
+    std::vector<std::pair<std::uint64_t, std::unique_ptr<Brick>>> bricks;
+    std::unordered_set<std::uint64_t> keys;
+  };
+  void spill(Evicted& due);  // to disk, in order; emptied
   void erase(std::uint64_t k);
   void readRecord(SpillFile::Record r, Brick& out) const;  // under either lock
   template <class F> void forEachKey(F&& f) const;
