@@ -1,6 +1,7 @@
 #include "vofusion/fusion/tsdf_volume.h"
 
 #include <algorithm>
+#include <utility>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -211,21 +212,31 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
   const auto inside = [&](const Eigen::Vector3i& c) {
     return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all();
   };
-  // Bricks leaving the volume go to the world model...
+  // Bricks leaving the volume go to the world model, a batch at a time (its compression on every core;
+  // the batch bounds what is held beside the map when the whole volume leaves)...
+  constexpr std::size_t kBatch = 512;
   std::vector<std::unique_ptr<Brick>> leaving;
   for (std::size_t s = 0; s < slots_.size(); ++s) {
     const std::int32_t id = slots_[s];
     if (id < 0 || inside(bricks_[id].coord)) continue;
     leaving.push_back(std::make_unique<Brick>(bricks_[id]));
     removeBrick(static_cast<int>(s));
+    if (leaving.size() == kBatch) world_->putAll(std::exchange(leaving, {}));
   }
   world_->putAll(std::move(leaving));
   origin_ = o;
   updateCyclicTables();
   // ...and world-model bricks the volume now covers come back (camera revisiting a place).
   const std::vector<Eigen::Vector3i> back = world_->coordsInBox(origin_, n_);
-  std::vector<std::unique_ptr<Brick>> taken = world_->takeAll(back);
-  for (std::size_t i = 0; i < back.size(); ++i) setSlot(slotOf(back[i].x(), back[i].y(), back[i].z()), bricks_.add(*taken[i]));
+  for (std::size_t first = 0; first < back.size(); first += kBatch) {
+    const std::vector<Eigen::Vector3i> batch(back.begin() + std::ptrdiff_t(first),
+                                             back.begin() + std::ptrdiff_t(std::min(back.size(), first + kBatch)));
+    std::vector<std::unique_ptr<Brick>> taken = world_->takeAll(batch);
+    for (std::size_t i = 0; i < batch.size(); ++i) {
+      setSlot(slotOf(batch[i].x(), batch[i].y(), batch[i].z()), bricks_.add(*taken[i]));
+      taken[i].reset();
+    }
+  }
   bricks_.releaseUnusedPages();
 }
 

@@ -9,6 +9,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/task_group.h>
 
 namespace vofusion {
 
@@ -23,6 +24,23 @@ void parallelFor(int begin, int end, const Body& body, int grain = 1, bool paral
   tbb::parallel_for(tbb::blocked_range<int>(begin, end, grain), [&body](const tbb::blocked_range<int>& r) {
     for (int i = r.begin(); i != r.end(); ++i) body(i);
   });
+}
+
+// parallelFor whose every index runs even when the calling task's group is cancelled (an isolated
+// context): for work whose skipping would lose data, such as bricks compressed before being spilled.
+template <class Body>
+void parallelForEvery(int begin, int end, const Body& body, int grain = 1) {
+  if (end - begin <= grain) {
+    for (int i = begin; i < end; ++i) body(i);
+    return;
+  }
+  tbb::task_group_context isolated(tbb::task_group_context::isolated);
+  tbb::parallel_for(
+      tbb::blocked_range<int>(begin, end, grain),
+      [&body](const tbb::blocked_range<int>& r) {
+        for (int i = r.begin(); i != r.end(); ++i) body(i);
+      },
+      tbb::auto_partitioner(), isolated);
 }
 
 // Sum-like reduction with a fixed split of [begin, end) into chunks of `grain`: the same inputs give

@@ -1,7 +1,7 @@
 #pragma once
 // The store of the bricks that left the moving volume (KinFu Large Scale's WorldModel): the volume
-// hands a brick over when it leaves (put) and takes it back when the volume covers it again (take);
-// nothing else crosses. Bricks are addressed by their world brick coordinate. Up to `cache_bytes` of
+// hands bricks over when they leave (putAll, a shift's batch) and takes them back when the volume
+// covers them again (takeAll); nothing else crosses. Bricks are addressed by their world brick coordinate. Up to `cache_bytes` of
 // them stay in RAM (least recently handed over first out); the rest are written zlib-compressed to a
 // SpillFile in `spill_dir`. A brick on disk costs RAM only for its index entry (~40 bytes), so a long
 // walk's memory grows by that alone; a brick taken back frees its place in the file for the next.
@@ -17,7 +17,6 @@
 #include <shared_mutex>
 #include <string>
 #include <unordered_map>
-#include <unordered_set>
 #include <vector>
 
 #include "vofusion/core/spill_file.h"
@@ -38,12 +37,12 @@ struct WorldModelStats {
   std::size_t spill_file_bytes = 0;  // the spill file's size: the records stored, and free places
   std::size_t spill_free_bytes = 0;  // of it, bricks taken back whose place no brick took since
   std::size_t spilled = 0, reloaded = 0;  // bricks written to / read back from the spill file
-  double spill_seconds = 0.0;      // compressing + writing + reading + decompressing
+  double spill_seconds = 0.0;      // wall time compressing + writing + reading + decompressing (batches on every core)
 };
 
 class WorldModel {
  public:
-  // cache_bytes: brick storage kept in RAM (at least one brick is always kept while handing over).
+  // cache_bytes: brick storage kept in RAM (0: every brick handed over is spilled).
   WorldModel(std::size_t cache_bytes, std::string spill_dir);
   ~WorldModel();
   WorldModel(const WorldModel&) = delete;
@@ -53,8 +52,9 @@ class WorldModel {
   void put(std::unique_ptr<Brick> brick);
   // Slices back in: the brick at world brick coordinate c, removed from the store; null when none.
   std::unique_ptr<Brick> take(const Eigen::Vector3i& c);
-  // A volume shift's bricks at once, the same as put / take one by one in the order given (takeAll:
-  // coordinates distinct), the compression and decompression on every core.
+  // A volume shift's bricks at once: the same as put / take one by one in the order given, the
+  // compression and decompression on every core. A brick stays cached until its record is on disk:
+  // a write that fails (disk full) leaves every brick handed over in the cache, over its limit.
   void putAll(std::vector<std::unique_ptr<Brick>> bricks);
   std::vector<std::unique_ptr<Brick>> takeAll(const std::vector<Eigen::Vector3i>& coords);
   // Coordinates of the stored bricks inside the box [lo, lo + n) (per axis).
@@ -74,12 +74,12 @@ class WorldModel {
   struct Cached {
     std::unique_ptr<Brick> brick;
     std::list<std::uint64_t>::iterator lru;    // its place in lru_
+    bool due = false;                          // beyond the cache: to be spilled (the back of lru_)
   };
-  struct Evicted {  // bricks out of the cache, not yet on disk, oldest first
-    std::vector<std::pair<std::uint64_t, std::unique_ptr<Brick>>> bricks;
-    std::unordered_set<std::uint64_t> keys;
-  };
-  void spill(Evicted& due);  // to disk, in order; emptied
+  // Marks the bricks beyond the cache as due, back to front; `due` counts them.
+  void markDue(std::size_t& due);
+  // Spills the `due` bricks at the back of lru_, oldest first; `due` is 0 after, whatever happens.
+  void spillDue(std::size_t& due);
   void erase(std::uint64_t k);
   void readRecord(SpillFile::Record r, Brick& out) const;  // under either lock
   template <class F> void forEachKey(F&& f) const;
