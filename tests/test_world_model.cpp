@@ -50,6 +50,17 @@ std::unique_ptr<Brick> randomBrick(const Eigen::Vector3i& c, std::mt19937& rng) 
 
 bool sameVoxels(const Brick& a, const Brick& b) { return std::memcmp(a.voxels, b.voxels, sizeof(a.voxels)) == 0; }
 
+// Puts n random bricks along x (y = z = 0) one at a time; returns copies of them.
+std::vector<std::unique_ptr<Brick>> putRow(WorldModel& wm, int n, std::mt19937& rng) {
+  std::vector<std::unique_ptr<Brick>> kept;
+  for (int i = 0; i < n; ++i) {
+    auto b = randomBrick(Eigen::Vector3i(i, 0, 0), rng);
+    kept.push_back(std::make_unique<Brick>(*b));
+    wm.put(std::move(b));
+  }
+  return kept;
+}
+
 // KinFu params for a fast synthetic run: a 1.54 m volume following the camera.
 KinFuParams smallKinFu(int cache_mib) {
   KinFuParams p;
@@ -285,12 +296,7 @@ TEST(WorldModel, ShiftsAtOnceLeaveTheStoreAsOneByOne) {
 TEST(WorldModel, FailedSpillKeepsEveryBrick) {
   std::mt19937 rng(9);
   WorldModel wm(4 * sizeof(Brick), test::tempDir("world_model_full"));
-  std::vector<std::unique_ptr<Brick>> kept;
-  for (int i = 0; i < 20; ++i) {
-    auto b = randomBrick(Eigen::Vector3i(i, 0, 0), rng);
-    kept.push_back(std::make_unique<Brick>(*b));
-    wm.put(std::move(b));
-  }
+  std::vector<std::unique_ptr<Brick>> kept = putRow(wm, 20, rng);
   std::vector<std::unique_ptr<Brick>> batch;
   for (int i = 0; i < 30; ++i) {
     auto b = randomBrick(Eigen::Vector3i(i, 1, 0), rng);
@@ -323,12 +329,7 @@ TEST(WorldModel, FailedSpillKeepsEveryBrick) {
 TEST(WorldModel, ReadsSideBySideBesideHandOversGiveEveryBrickWhole) {
   std::mt19937 rng(11);
   WorldModel wm(4 * sizeof(Brick), test::tempDir("world_model_shared_reads"));
-  std::vector<std::unique_ptr<Brick>> kept;
-  for (int i = 0; i < 120; ++i) {
-    auto b = randomBrick(Eigen::Vector3i(i, 0, 0), rng);
-    kept.push_back(std::make_unique<Brick>(*b));
-    wm.put(std::move(b));
-  }
+  std::vector<std::unique_ptr<Brick>> kept = putRow(wm, 120, rng);
   for (int i = 0; i < 4; ++i) wm.put(randomBrick(Eigen::Vector3i(i, 1, 0), rng));  // the last kept ones spill too
   ASSERT_EQ(wm.stats().bricks_in_ram, 4u);
   const std::size_t reloaded_before = wm.stats().reloaded;
