@@ -1,13 +1,13 @@
 #include "vofusion/fusion/tsdf_volume.h"
 
 #include <algorithm>
-#include <utility>
 #include <atomic>
 #include <cmath>
 #include <cstring>
 #include <istream>
 #include <ostream>
 #include <stdexcept>
+#include <utility>
 
 #include "vofusion/core/parallel.h"
 #include "vofusion/fusion/marching_cubes.h"
@@ -214,7 +214,7 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
   };
   // Bricks leaving the volume go to the world model, a batch at a time (its compression on every core;
   // the batch bounds what is held beside the map when the whole volume leaves)...
-  constexpr std::size_t kBatch = 512;
+  constexpr std::size_t kBatch = WorldModel::kBatchBricks;
   std::vector<std::unique_ptr<Brick>> leaving;
   for (std::size_t s = 0; s < slots_.size(); ++s) {
     const std::int32_t id = slots_[s];

@@ -51,17 +51,19 @@ void WorldModel::erase(std::uint64_t k) {
   }
 }
 
+void WorldModel::cache(std::unique_ptr<Brick> brick) {
+  const std::uint64_t k = key(brick->coord);
+  erase(k);  // a brick already stored there is replaced
+  lru_.push_front(k);
+  ram_[k] = {std::move(brick), lru_.begin()};
+  stats_.ram_bytes += kBrickBytes;
+}
+
 void WorldModel::put(std::unique_ptr<Brick> brick) {
   std::vector<std::unique_ptr<Brick>> one;
   one.push_back(std::move(brick));
   putAll(std::move(one));
 }
-
-namespace {
-// Bricks compressed at a time: their records' buffers (~3 KB each) are all that a spill holds beyond
-// the cache, however many bricks a shift hands over.
-constexpr std::size_t kSpillBatch = 512;
-}  // namespace
 
 void WorldModel::putAll(std::vector<std::unique_ptr<Brick>> bricks) {
   const std::lock_guard<std::shared_mutex> lock(mutex_);
@@ -73,22 +75,13 @@ void WorldModel::putAll(std::vector<std::unique_ptr<Brick>> bricks) {
       // what is due goes to disk first, so places are taken and freed in the order of one put at a time.
       const auto cached = ram_.find(k);
       if ((cached != ram_.end() && cached->second.due) || disk_.find(k)) spillDue(due);
-      erase(k);  // a brick already stored there is replaced
-      lru_.push_front(k);
-      ram_[k] = {std::move(bricks[i]), lru_.begin()};
-      stats_.ram_bytes += kBrickBytes;
+      cache(std::move(bricks[i]));
       markDue(due);
-      if (due >= kSpillBatch) spillDue(due);
+      if (due >= kBatchBricks) spillDue(due);
     } catch (...) {
       // The rest stay cached, over the cache's limit (a brick is never dropped for a failed write).
-      for (std::size_t j = i; j < bricks.size(); ++j) {
-        if (!bricks[j]) continue;  // stored already
-        const std::uint64_t kj = key(bricks[j]->coord);
-        erase(kj);
-        lru_.push_front(kj);
-        ram_[kj] = {std::move(bricks[j]), lru_.begin()};
-        stats_.ram_bytes += kBrickBytes;
-      }
+      for (std::size_t j = i; j < bricks.size(); ++j)
+        if (bricks[j]) cache(std::move(bricks[j]));  // null: stored already
       throw;
     }
   }

@@ -14,33 +14,29 @@
 namespace vofusion {
 
 // body(i) for i in [begin, end), `grain` indices per task at least; serial when `parallel` is false
-// (tiny images: a task costs more than the work).
+// (tiny images: a task costs more than the work). With `isolated`, every index runs even when the
+// calling task's group is cancelled: for work whose skipping would lose data (parallelForEvery).
 template <class Body>
-void parallelFor(int begin, int end, const Body& body, int grain = 1, bool parallel = true) {
+void parallelFor(int begin, int end, const Body& body, int grain = 1, bool parallel = true, bool isolated = false) {
   if (!parallel || end - begin <= grain) {
     for (int i = begin; i < end; ++i) body(i);
     return;
   }
-  tbb::parallel_for(tbb::blocked_range<int>(begin, end, grain), [&body](const tbb::blocked_range<int>& r) {
+  const auto range = [&body](const tbb::blocked_range<int>& r) {
     for (int i = r.begin(); i != r.end(); ++i) body(i);
-  });
-}
-
-// parallelFor whose every index runs even when the calling task's group is cancelled (an isolated
-// context): for work whose skipping would lose data, such as bricks compressed before being spilled.
-template <class Body>
-void parallelForEvery(int begin, int end, const Body& body, int grain = 1) {
-  if (end - begin <= grain) {
-    for (int i = begin; i < end; ++i) body(i);
+  };
+  if (!isolated) {
+    tbb::parallel_for(tbb::blocked_range<int>(begin, end, grain), range);
     return;
   }
-  tbb::task_group_context isolated(tbb::task_group_context::isolated);
-  tbb::parallel_for(
-      tbb::blocked_range<int>(begin, end, grain),
-      [&body](const tbb::blocked_range<int>& r) {
-        for (int i = r.begin(); i != r.end(); ++i) body(i);
-      },
-      tbb::auto_partitioner(), isolated);
+  tbb::task_group_context context(tbb::task_group_context::isolated);
+  tbb::parallel_for(tbb::blocked_range<int>(begin, end, grain), range, tbb::auto_partitioner(), context);
+}
+
+// Every index, whatever happens to the caller's task group: bricks compressed before being spilled.
+template <class Body>
+void parallelForEvery(int begin, int end, const Body& body, int grain = 1) {
+  parallelFor(begin, end, body, grain, true, true);
 }
 
 // Sum-like reduction with a fixed split of [begin, end) into chunks of `grain`: the same inputs give

@@ -52,6 +52,9 @@ class WorldModel {
   void put(std::unique_ptr<Brick> brick);
   // Slices back in: the brick at world brick coordinate c, removed from the store; null when none.
   std::unique_ptr<Brick> take(const Eigen::Vector3i& c);
+  // Bricks compressed or read at a time: a spill holds at most this many records' buffers (~3 KB each)
+  // beyond the cache, and a shift hands over and takes back this many at once, however many move.
+  static constexpr std::size_t kBatchBricks = 512;
   // A volume shift's bricks at once: the same as put / take one by one in the order given, the
   // compression and decompression on every core. A brick stays cached until its record is on disk:
   // a write that fails (disk full) leaves every brick handed over in the cache, over its limit.
@@ -80,6 +83,7 @@ class WorldModel {
   void markDue(std::size_t& due);
   // Spills the `due` bricks at the back of lru_, oldest first; `due` is 0 after, whatever happens.
   void spillDue(std::size_t& due);
+  void cache(std::unique_ptr<Brick> brick);  // into RAM at the front of lru_, replacing what is stored there
   void erase(std::uint64_t k);
   void readRecord(SpillFile::Record r, Brick& out) const;  // under either lock
   template <class F> void forEachKey(F&& f) const;
