@@ -80,6 +80,60 @@ std::array<double, 3> hsvToBgr(double h, double s, double v) {
   return {b + m, g + m, r + m};
 }
 
+// One cell of one texture layer (SyntheticSequence::Impl::texture): whether it holds a pattern,
+// which one, its shape's four random numbers and its colours (the alternate one for a checker's
+// dark squares), all drawn from the cell's hash.
+struct TextureCell {
+  bool empty = true;
+  int kind = 0;  // 0 rectangle, 1 disc, 2 checker patch
+  double r1 = 0, r2 = 0, r3 = 0, r4 = 0;
+  std::array<double, 3> colour{}, alt_colour{};
+};
+
+TextureCell textureCell(std::uint64_t surface_id, int level, double iu, double iv) {
+  TextureCell c;
+  const std::uint64_t h = hash(surface_id, std::uint64_t(level), std::uint64_t(std::int64_t(iu)), std::uint64_t(std::int64_t(iv)));
+  if (unit(h) > 0.55) return c;  // empty cell
+  c.empty = false;
+  c.r1 = unit(mix(h + 11)), c.r2 = unit(mix(h + 12)), c.r3 = unit(mix(h + 13)), c.r4 = unit(mix(h + 14));
+  c.kind = int(unit(mix(h + 15)) * 3);
+  const double hue = unit(mix(h + 16)), sat = 0.5 + 0.5 * unit(mix(h + 17));
+  c.colour = hsvToBgr(hue, sat, 0.55 + 0.45 * unit(mix(h + 19)));
+  if (c.kind == 2) c.alt_colour = hsvToBgr(hue, 0.2, 0.1 + 0.15 * unit(mix(h + 18)));
+  return c;
+}
+
+constexpr int kTextureLevels = 4;
+
+// The surface and the cells a row of pixels last looked up: neighbours mostly fall in the same cells
+// (a 9 cm cell is ~12 pixels wide at 2 m in a 320x240 frame), whose hashes and colours are then not
+// drawn again. Rendering a shake frame was 55 % texture, most of it these draws; the values are the same.
+class TextureMemo {
+ public:
+  // The surface's id and own colour, drawn when the surface differs from the last one.
+  template <typename Draw>
+  const std::pair<std::uint64_t, std::array<double, 3>>& surface(int surface, Draw draw) {
+    if (surface != surface_) surface_ = surface, base_ = draw(), valid_ = {};
+    return base_;
+  }
+  const TextureCell& cell(int level, double iu, double iv) {
+    Slot& s = slots_[level];
+    if (!valid_[level] || iu != s.iu || iv != s.iv)
+      s = {iu, iv, textureCell(base_.first, level, iu, iv)}, valid_[level] = true;
+    return s.cell;
+  }
+
+ private:
+  struct Slot {
+    double iu = 0, iv = 0;
+    TextureCell cell;
+  };
+  int surface_ = -1;  // -1: none yet (surface ids are >= 0)
+  std::pair<std::uint64_t, std::array<double, 3>> base_;
+  std::array<bool, kTextureLevels> valid_{};
+  std::array<Slot, kTextureLevels> slots_;
+};
+
 }  // namespace
 
 struct SyntheticSequence::Impl {
@@ -189,12 +243,12 @@ struct SyntheticSequence::Impl {
   }
 
   // The shaded colour seen along a ray (black where nothing is hit).
-  cv::Vec3d colourAlong(const Vec3& org, const Vec3& dw) const {
+  cv::Vec3d colourAlong(const Vec3& org, const Vec3& dw, TextureMemo& memo) const {
     static const Vec3 light = Vec3(0.3, 0.5, 0.8).normalized();
     const Hit h = cast(org, dw);
     if (!std::isfinite(h.s)) return cv::Vec3d(0, 0, 0);
     const double shade = 0.72 + 0.28 * std::abs(h.n.dot(light));
-    const auto col = texture(h.surface, h.tu, h.tv);
+    const auto col = texture(h.surface, h.tu, h.tv, memo);
     return cv::Vec3d(255.0 * col[0] * shade, 255.0 * col[1] * shade, 255.0 * col[2] * shade);
   }
   // Colour exposed from t - exposure/2 to t + exposure/2: the mean of sub-frames (motion blur).
@@ -209,7 +263,8 @@ struct SyntheticSequence::Impl {
       const Vec3 org(p.x(), p.y(), p.z());
       parallelFor(0, c.height, [&](int v) {
         cv::Vec3d* row = sum.ptr<cv::Vec3d>(v);
-        for (int u = 0; u < c.width; ++u) row[u] += colourAlong(org, R * Vec3((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0));
+        TextureMemo memo;
+        for (int u = 0; u < c.width; ++u) row[u] += colourAlong(org, R * Vec3((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0), memo);
       }, 4);
     }
     cv::Mat out;
@@ -219,39 +274,36 @@ struct SyntheticSequence::Impl {
 
   // Layered procedural texture: at each scale the surface is tiled in cells, a hashed share of which
   // hold a rectangle, a disc or a checker patch of a random colour; finer layers paint over coarser.
-  std::array<double, 3> texture(int surface, double tu, double tv) const {
+  std::array<double, 3> texture(int surface, double tu, double tv, TextureMemo& memo) const {
     if (!opts.textured) return {0.72, 0.74, 0.76};  // painted walls: a light grey, the same everywhere
-    const std::uint64_t sid = hash(opts.seed, 77, std::uint64_t(surface));
-    std::array<double, 3> col = hsvToBgr(unit(mix(sid)), 0.25 + 0.3 * unit(mix(sid + 1)), 0.45 + 0.3 * unit(mix(sid + 2)));
-    static const double kCell[] = {0.9, 0.42, 0.2, 0.09};
-    for (int level = 0; level < 4; ++level) {
+    std::array<double, 3> col = memo.surface(surface, [&] {
+      const std::uint64_t sid = hash(opts.seed, 77, std::uint64_t(surface));
+      return std::pair(sid, hsvToBgr(unit(mix(sid)), 0.25 + 0.3 * unit(mix(sid + 1)), 0.45 + 0.3 * unit(mix(sid + 2))));
+    }).second;
+    static const double kCell[kTextureLevels] = {0.9, 0.42, 0.2, 0.09};
+    for (int level = 0; level < kTextureLevels; ++level) {
       const double cell = kCell[level];
       const double fu = tu / cell, fv = tv / cell;
       const double iu = std::floor(fu), iv = std::floor(fv);
       const double lu = fu - iu, lv = fv - iv;  // position inside the cell, [0,1)
-      const std::uint64_t h = hash(sid, std::uint64_t(level), std::uint64_t(std::int64_t(iu)), std::uint64_t(std::int64_t(iv)));
-      if (unit(h) > 0.55) continue;  // empty cell
-      const double r1 = unit(mix(h + 11)), r2 = unit(mix(h + 12)), r3 = unit(mix(h + 13)), r4 = unit(mix(h + 14));
-      const int kind = int(unit(mix(h + 15)) * 3);
+      const TextureCell& c = memo.cell(level, iu, iv);
+      if (c.empty) continue;
       bool inside = false, alt = false;
-      if (kind == 0) {  // rectangle
-        const double w = 0.3 + 0.55 * r1, hgt = 0.3 + 0.55 * r2;
-        const double u0 = r3 * (1 - w), v0 = r4 * (1 - hgt);
+      if (c.kind == 0) {  // rectangle
+        const double w = 0.3 + 0.55 * c.r1, hgt = 0.3 + 0.55 * c.r2;
+        const double u0 = c.r3 * (1 - w), v0 = c.r4 * (1 - hgt);
         inside = lu >= u0 && lu < u0 + w && lv >= v0 && lv < v0 + hgt;
-      } else if (kind == 1) {  // disc
-        const double rad = 0.18 + 0.27 * r1;
-        const double cu = rad + r2 * (1 - 2 * rad), cv = rad + r3 * (1 - 2 * rad);
+      } else if (c.kind == 1) {  // disc
+        const double rad = 0.18 + 0.27 * c.r1;
+        const double cu = rad + c.r2 * (1 - 2 * rad), cv = rad + c.r3 * (1 - 2 * rad);
         inside = (lu - cu) * (lu - cu) + (lv - cv) * (lv - cv) < rad * rad;
       } else {  // checker patch, 2..4 squares a side, in an inset square
-        const int n = 2 + int(r1 * 3);
-        const double m = 0.1 + 0.1 * r2;
+        const int n = 2 + int(c.r1 * 3);
+        const double m = 0.1 + 0.1 * c.r2;
         inside = lu >= m && lu < 1 - m && lv >= m && lv < 1 - m;
         if (inside) alt = ((int((lu - m) / (1 - 2 * m) * n) + int((lv - m) / (1 - 2 * m) * n)) & 1) != 0;
       }
-      if (!inside) continue;
-      const double hue = unit(mix(h + 16)), sat = 0.5 + 0.5 * unit(mix(h + 17));
-      const double val = alt ? 0.1 + 0.15 * unit(mix(h + 18)) : 0.55 + 0.45 * unit(mix(h + 19));
-      col = hsvToBgr(hue, alt ? 0.2 : sat, val);
+      if (inside) col = alt ? c.alt_colour : c.colour;
     }
     return col;
   }
@@ -476,6 +528,7 @@ void SyntheticSequence::Impl::trace(double t, const mrpt::poses::CPose3D& camera
     // the middle row's. The colour stays at the frame's time.
     Eigen::Matrix3d R_row = R;
     Vec3 org_row = org;
+    TextureMemo memo;
     if (o.depth_readout > 0) {
       const mrpt::poses::CPose3D p = pose(t + o.depth_readout * ((v + 0.5) / c.height - 0.5));
       R_row = p.getRotationMatrix().asEigen();
@@ -490,7 +543,7 @@ void SyntheticSequence::Impl::trace(double t, const mrpt::poses::CPose3D& camera
       } else {
         // Lambert-like shading with a fixed light: depends on the surface only, not on the view.
         const double shade = 0.72 + 0.28 * std::abs(h.n.dot(light));
-        const auto col = texture(h.surface, h.tu, h.tv);
+        const auto col = texture(h.surface, h.tu, h.tv, memo);
         for (int k = 0; k < 3; ++k) crow[u][k] = cv::saturate_cast<unsigned char>(255.0 * col[k] * shade);
       }
       const Vec3 dw_row = R_row * dc;
