@@ -82,6 +82,13 @@ sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std
   return o;
 }
 
+std::vector<Frame> renderAll(const sim::SyntheticSequence& seq) {
+  std::vector<Frame> frames;
+  frames.reserve(seq.size());
+  for (std::size_t i = 0; i < seq.size(); ++i) frames.push_back(seq.render(i));
+  return frames;
+}
+
 ScopedTmpfs::ScopedTmpfs(const std::string& dir, const std::string& size) : dir_(dir) {
   mounted_ = ::mount("tmpfs", dir.c_str(), "tmpfs", 0, ("size=" + size).c_str()) == 0;
 }

@@ -54,6 +54,9 @@ class ScopedTmpfs {
 };
 // A synthetic sequence's options at 320x240, which keeps the suite quick.
 sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory = "smooth");
+// Every frame of seq, rendered once, for a test that runs the same frames more than once: rendering a
+// 320x240 shake frame (blurred colour) takes longer than reconstructing it. 90 frames at 320x240: 48 MB.
+std::vector<Frame> renderAll(const sim::SyntheticSequence& seq);
 // The pipeline's settings for quickSim's room: 1 cm voxels in a 2.56 m volume, tracking at the frames'
 // own resolution (already 320x240), the odometry on STAR keypoints only (PCL's NARF is not the question).
 mrpt::config::CConfigFileMemory quickRoomConfig();

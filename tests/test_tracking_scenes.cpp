@@ -23,7 +23,7 @@ struct Tracked {
 };
 
 // restamp: what the recording says of each frame's colour offset (default: the true one).
-Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::string& colour_time_velocity = "auto",
+Tracked track(const std::vector<Frame>& frames, TrackingMode mode, const std::string& colour_time_velocity = "auto",
               const std::function<double(std::size_t, double)>& restamp = {}) {
   mrpt::config::CConfigFileMemory cfg;
   cfg.write("odometry", "colour_time_velocity", colour_time_velocity);
@@ -33,8 +33,9 @@ Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::s
   cfg.write("kinfu", "tracking_downsample", 1);  // the frames are already 320x240
   Reconstruction rec(cfg, mode);
   Trajectory truth;
-  for (std::size_t i = 0; i < seq.size(); ++i) {
-    Frame f = seq.render(i);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    Frame f = frames[i];
+    f.rgb = f.rgb.clone(), f.depth = f.depth.clone();  // each run on its own images, whatever it does to them
     if (restamp) f.colour_offset = restamp(i, f.colour_offset);
     rec.process(f);
     truth.push_back({f.timestamp, *f.groundTruth});
@@ -52,7 +53,7 @@ Tracked track(const sim::SyntheticSequence& seq, TrackingMode mode, const std::s
 // odometry 1.24, kinfu 15.7). One seed guards what mode joint reaches; how it compares with its own
 // sources is the five seeds' test below.
 TEST(Tracking, ShakeThreeSecondsHeld) {
-  const sim::SyntheticSequence seq(test::quickSim("room", 90, "shake"));
+  const std::vector<Frame> seq = test::renderAll(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
   const Tracked joint = track(seq, TrackingMode::Joint);
   const Tracked kinfu = track(seq, TrackingMode::KinFu);
   const Tracked paper = track(seq, TrackingMode::PaperHandoff);
@@ -82,7 +83,7 @@ TEST(Tracking, ShakeOverFiveSeedsJointKeepsUpWithTheOdometry) {
   for (std::uint32_t seed = 1; seed <= 5; ++seed) {
     sim::SimOptions o = test::quickSim("room", 90, "shake");
     o.seed = seed;
-    const sim::SyntheticSequence seq(o);
+    const std::vector<Frame> seq = test::renderAll(sim::SyntheticSequence(o));
     const Tracked joint = track(seq, TrackingMode::Joint);
     const Tracked odometry = track(seq, TrackingMode::Odometry);
     std::printf("shake seed %u, 90 frames: ATE joint %.4f m, odometry %.4f m\n", seed, joint.ate, odometry.ate);
@@ -98,9 +99,9 @@ TEST(Tracking, ShakeOverFiveSeedsJointKeepsUpWithTheOdometry) {
 // offset. Both corrections then move the keypoints by the wrong offsets (no correction at all measured
 // 2.3 cm here); auto's vote only chooses the velocity, so it must do no worse than the interval mean.
 TEST(Tracking, StampsThatAreNotCaptureTimesNoWorseThanTheIntervalMean) {
-  const sim::SyntheticSequence seq(test::quickSim("room", 90, "shake"));
+  const std::vector<Frame> seq = test::renderAll(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
   std::vector<double> offsets(seq.size());
-  for (std::size_t i = 0; i < seq.size(); ++i) offsets[i] = seq.render(i).colour_offset;
+  for (std::size_t i = 0; i < seq.size(); ++i) offsets[i] = seq[i].colour_offset;
   // Another frame's offset, 37 frames on: unrelated to this frame's capture, with the same spread.
   const auto other = [&](std::size_t i, double) { return offsets[(i + 37) % offsets.size()]; };
   const Tracked automatic = track(seq, TrackingMode::Joint, "auto", other);
