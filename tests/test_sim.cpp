@@ -195,7 +195,7 @@ TEST(Sim, TrajectoriesAreSmoothAndHandHeld) {
       const double v01 = (t(p1) - t(p0)).norm() * o.fps;
       const auto rel = p1 - p0;
       const double w = mrpt::poses::Lie::SO<3>::log(rel.getRotationMatrix()).norm() * o.fps;
-      const auto acc = (t(p2) - 2 * t(p1) + t(p0)) * (o.fps * o.fps);
+      const Eigen::Vector3d acc = (t(p2) - 2 * t(p1) + t(p0)) * (o.fps * o.fps);  // not auto: an Eigen expression would outlive its temporaries
       max_v = std::max(max_v, v01);
       max_w = std::max(max_w, w);
       max_acc = std::max(max_acc, acc.norm());
