@@ -3,6 +3,7 @@
 #include <sys/mount.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
@@ -82,11 +83,19 @@ sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std
   return o;
 }
 
-std::vector<Frame> renderAll(const sim::SyntheticSequence& seq) {
+std::vector<Frame> renderFrames(const sim::SyntheticSequence& seq, std::size_t count) {
   std::vector<Frame> frames;
-  frames.reserve(seq.size());
-  for (std::size_t i = 0; i < seq.size(); ++i) frames.push_back(seq.render(i));
+  count = std::min(count, seq.size());
+  frames.reserve(count);
+  for (std::size_t i = 0; i < count; ++i) frames.push_back(seq.render(i));
   return frames;
+}
+
+Frame deepCopy(const Frame& frame) {
+  Frame f = frame;
+  f.rgb = frame.rgb.clone();
+  f.depth = frame.depth.clone();
+  return f;
 }
 
 ScopedTmpfs::ScopedTmpfs(const std::string& dir, const std::string& size) : dir_(dir) {

@@ -54,9 +54,12 @@ class ScopedTmpfs {
 };
 // A synthetic sequence's options at 320x240, which keeps the suite quick.
 sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory = "smooth");
-// Every frame of seq, rendered once, for a test that runs the same frames more than once: rendering a
-// 320x240 shake frame (blurred colour) takes longer than reconstructing it. 90 frames at 320x240: 48 MB.
-std::vector<Frame> renderAll(const sim::SyntheticSequence& seq);
+// The first `count` frames of seq (all by default), rendered once, for a test that runs the same frames
+// more than once: rendering a 320x240 shake frame (blurred colour) takes longer than reconstructing it.
+// 90 frames at 320x240: 48 MB; 80 at 640x480: 170 MB.
+std::vector<Frame> renderFrames(const sim::SyntheticSequence& seq, std::size_t count = std::size_t(-1));
+// The frame with images of its own (a copied cv::Mat shares its pixels): one run cannot change another's.
+Frame deepCopy(const Frame& frame);
 // The pipeline's settings for quickSim's room: 1 cm voxels in a 2.56 m volume, tracking at the frames'
 // own resolution (already 320x240), the odometry on STAR keypoints only (PCL's NARF is not the question).
 mrpt::config::CConfigFileMemory quickRoomConfig();

@@ -34,8 +34,7 @@ Tracked track(const std::vector<Frame>& frames, TrackingMode mode, const std::st
   Reconstruction rec(cfg, mode);
   Trajectory truth;
   for (std::size_t i = 0; i < frames.size(); ++i) {
-    Frame f = frames[i];
-    f.rgb = f.rgb.clone(), f.depth = f.depth.clone();  // each run on its own images, whatever it does to them
+    Frame f = test::deepCopy(frames[i]);
     if (restamp) f.colour_offset = restamp(i, f.colour_offset);
     rec.process(f);
     truth.push_back({f.timestamp, *f.groundTruth});
@@ -53,7 +52,7 @@ Tracked track(const std::vector<Frame>& frames, TrackingMode mode, const std::st
 // odometry 1.24, kinfu 15.7). One seed guards what mode joint reaches; how it compares with its own
 // sources is the five seeds' test below.
 TEST(Tracking, ShakeThreeSecondsHeld) {
-  const std::vector<Frame> seq = test::renderAll(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
+  const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
   const Tracked joint = track(seq, TrackingMode::Joint);
   const Tracked kinfu = track(seq, TrackingMode::KinFu);
   const Tracked paper = track(seq, TrackingMode::PaperHandoff);
@@ -83,7 +82,7 @@ TEST(Tracking, ShakeOverFiveSeedsJointKeepsUpWithTheOdometry) {
   for (std::uint32_t seed = 1; seed <= 5; ++seed) {
     sim::SimOptions o = test::quickSim("room", 90, "shake");
     o.seed = seed;
-    const std::vector<Frame> seq = test::renderAll(sim::SyntheticSequence(o));
+    const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(o));
     const Tracked joint = track(seq, TrackingMode::Joint);
     const Tracked odometry = track(seq, TrackingMode::Odometry);
     std::printf("shake seed %u, 90 frames: ATE joint %.4f m, odometry %.4f m\n", seed, joint.ate, odometry.ate);
@@ -99,7 +98,7 @@ TEST(Tracking, ShakeOverFiveSeedsJointKeepsUpWithTheOdometry) {
 // offset. Both corrections then move the keypoints by the wrong offsets (no correction at all measured
 // 2.3 cm here); auto's vote only chooses the velocity, so it must do no worse than the interval mean.
 TEST(Tracking, StampsThatAreNotCaptureTimesNoWorseThanTheIntervalMean) {
-  const std::vector<Frame> seq = test::renderAll(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
+  const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
   std::vector<double> offsets(seq.size());
   for (std::size_t i = 0; i < seq.size(); ++i) offsets[i] = seq[i].colour_offset;
   // Another frame's offset, 37 frames on: unrelated to this frame's capture, with the same spread.
@@ -124,14 +123,14 @@ TEST(Tracking, ACorridorAtRunningPaceKeepsToTheOdometry) {
   sim::SimOptions o = test::quickSim("loop", 300);
   o.camera = CameraIntrinsics{};
   o.seed = 3;
-  const sim::SyntheticSequence seq(o);
+  const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(o), 80);
   const auto run = [&](TrackingMode mode) {
     mrpt::config::CConfigFileMemory cfg;
     cfg.write("loop", "enabled", false);
     Reconstruction rec(cfg, mode);
     Trajectory truth;
-    for (std::size_t i = 0; i < 80; ++i) {
-      const Frame f = seq.render(i);
+    for (const Frame& rendered : frames) {
+      const Frame f = test::deepCopy(rendered);
       rec.process(f);
       truth.push_back({f.timestamp, *f.groundTruth});
     }
