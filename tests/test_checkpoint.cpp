@@ -39,9 +39,10 @@ struct Ending {
   std::size_t faces = 0, fallbacks = 0, keyframes = 0;
 };
 
-// Frames [from, to) of seq through rec; finish() and what the run ends with when to is the end.
-void feed(Reconstruction& rec, const sim::SyntheticSequence& seq, std::size_t from, std::size_t to) {
-  for (std::size_t i = from; i < to; ++i) rec.process(seq.render(i));
+// Frames [from, to) through rec, each with its own images; finish() and what the run ends with when to is
+// the end.
+void feed(Reconstruction& rec, const std::vector<Frame>& frames, std::size_t from, std::size_t to) {
+  for (std::size_t i = from; i < to; ++i) rec.process(test::deepCopy(frames[i]));
 }
 
 Ending finish(Reconstruction& rec) {
@@ -67,7 +68,7 @@ void expectIdentical(const Trajectory& a, const Trajectory& b, const std::string
 
 // The fast hand-held shake: fallbacks, colour-time evidence and keyframes all carry state across.
 TEST(Checkpoint, AReconstructionResumedAtAnyFrameEndsBitForBitAsAnUninterruptedOne) {
-  const sim::SyntheticSequence seq(test::quickSim("room", 30, "shake"));
+  const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 30, "shake")));
   const auto cfg = roomConfig();
   Reconstruction whole(cfg, TrackingMode::Joint);
   feed(whole, seq, 0, seq.size());
