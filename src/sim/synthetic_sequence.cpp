@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -105,32 +106,43 @@ TextureCell textureCell(std::uint64_t surface_id, int level, double iu, double i
 
 constexpr int kTextureLevels = 4;
 
+// A surface's texture seed (from --seed and the surface's id) and its own colour under the layers.
+struct SurfaceLook {
+  std::uint64_t id = 0;
+  std::array<double, 3> colour{};
+};
+
 // The surface and the cells a row of pixels last looked up: neighbours mostly fall in the same cells
 // (a 9 cm cell is ~12 pixels wide at 2 m in a 320x240 frame), whose hashes and colours are then not
-// drawn again. Rendering a shake frame was 55 % texture, most of it these draws; the values are the same.
+// drawn again. The texture was 55 % of rgbd-simulate's CPU on a 320x240 shake recording (perf), most of
+// it these draws; the values are the same.
 class TextureMemo {
  public:
-  // The surface's id and own colour, drawn when the surface differs from the last one.
+  // The surface's look, drawn (draw()) when the surface differs from the last one.
   template <typename Draw>
-  const std::pair<std::uint64_t, std::array<double, 3>>& surface(int surface, Draw draw) {
-    if (surface != surface_) surface_ = surface, base_ = draw(), valid_ = {};
-    return base_;
+  const SurfaceLook& surface(int surface, Draw draw) {
+    if (surface != surface_) {
+      surface_ = surface;
+      look_ = draw();
+      for (Slot& s : slots_) s.valid = false;
+    }
+    return look_;
   }
+  // The cell (iu, iv) of layer `level` on the last surface.
   const TextureCell& cell(int level, double iu, double iv) {
     Slot& s = slots_[level];
-    if (!valid_[level] || iu != s.iu || iv != s.iv)
-      s = {iu, iv, textureCell(base_.first, level, iu, iv)}, valid_[level] = true;
+    if (!s.valid || iu != s.iu || iv != s.iv) s = {true, iu, iv, textureCell(look_.id, level, iu, iv)};
     return s.cell;
   }
 
  private:
   struct Slot {
+    bool valid = false;
     double iu = 0, iv = 0;
     TextureCell cell;
   };
-  int surface_ = -1;  // -1: none yet (surface ids are >= 0)
-  std::pair<std::uint64_t, std::array<double, 3>> base_;
-  std::array<bool, kTextureLevels> valid_{};
+  std::optional<int> surface_;
+  SurfaceLook look_;
   std::array<Slot, kTextureLevels> slots_;
 };
 
@@ -278,8 +290,8 @@ struct SyntheticSequence::Impl {
     if (!opts.textured) return {0.72, 0.74, 0.76};  // painted walls: a light grey, the same everywhere
     std::array<double, 3> col = memo.surface(surface, [&] {
       const std::uint64_t sid = hash(opts.seed, 77, std::uint64_t(surface));
-      return std::pair(sid, hsvToBgr(unit(mix(sid)), 0.25 + 0.3 * unit(mix(sid + 1)), 0.45 + 0.3 * unit(mix(sid + 2))));
-    }).second;
+      return SurfaceLook{sid, hsvToBgr(unit(mix(sid)), 0.25 + 0.3 * unit(mix(sid + 1)), 0.45 + 0.3 * unit(mix(sid + 2)))};
+    }).colour;
     static const double kCell[kTextureLevels] = {0.9, 0.42, 0.2, 0.09};
     for (int level = 0; level < kTextureLevels; ++level) {
       const double cell = kCell[level];
