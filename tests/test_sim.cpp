@@ -129,6 +129,32 @@ TEST(Sim, DeterministicForSeedAndDifferentAcrossSeeds) {
   EXPECT_GT(cv::norm(a.rgb, c.rgb, cv::NORM_L1), 0.0);
 }
 
+// FNV-1a over an image's bytes, row by row.
+std::uint64_t fingerprint(const cv::Mat& image) {
+  std::uint64_t h = 0xcbf29ce484222325ull;
+  for (int y = 0; y < image.rows; ++y) {
+    const unsigned char* p = image.ptr<unsigned char>(y);
+    for (std::size_t i = 0; i < image.cols * image.elemSize(); ++i) h = (h ^ p[i]) * 0x100000001b3ull;
+  }
+  return h;
+}
+
+// Every synthetic figure in docs/ and bench/results/ was measured on the simulator's images: a change
+// to what it renders (textures, noise, blur, paths) must be deliberate, with the figures measured again.
+// Pinned on 2026-12-03 (8b67f97, before the texture memo, renders the same): a room frame and a shake frame
+// at 320x240.
+TEST(Sim, RendersTheImagesTheFiguresWereMeasuredOn) {
+  const Frame room = SyntheticSequence(small("room", true)).render(5);
+  SimOptions o = small("room", true);
+  o.trajectory = "shake";
+  o.seed = 3;
+  const Frame shake = SyntheticSequence(o).render(4);
+  EXPECT_EQ(fingerprint(room.rgb), 0xae9196445b42cb84ull) << "room colour";
+  EXPECT_EQ(fingerprint(room.depth), 0xe49fed9fda972d92ull) << "room depth";
+  EXPECT_EQ(fingerprint(shake.rgb), 0xd0d200e438a0ce21ull) << "shake colour (blurred)";
+  EXPECT_EQ(fingerprint(shake.depth), 0xbd9456825b772a5cull) << "shake depth";
+}
+
 TEST(Sim, ColourIsTexturedEverywhere) {
   // Plenty of structure for keypoints: strong gradients over most of the image.
   for (const char* scene : {"room", "corridor", "bare_wall"}) {
@@ -195,7 +221,8 @@ TEST(Sim, TrajectoriesAreSmoothAndHandHeld) {
       const double v01 = (t(p1) - t(p0)).norm() * o.fps;
       const auto rel = p1 - p0;
       const double w = mrpt::poses::Lie::SO<3>::log(rel.getRotationMatrix()).norm() * o.fps;
-      const Eigen::Vector3d acc = (t(p2) - 2 * t(p1) + t(p0)) * (o.fps * o.fps);  // not auto: an Eigen expression would outlive its temporaries
+      // Not auto: an Eigen expression would outlive the temporaries it refers to.
+      const Eigen::Vector3d acc = (t(p2) - 2 * t(p1) + t(p0)) * (o.fps * o.fps);
       max_v = std::max(max_v, v01);
       max_w = std::max(max_w, w);
       max_acc = std::max(max_acc, acc.norm());
