@@ -68,23 +68,23 @@ void expectIdentical(const Trajectory& a, const Trajectory& b, const std::string
 
 // The fast hand-held shake: fallbacks, colour-time evidence and keyframes all carry state across.
 TEST(Checkpoint, AReconstructionResumedAtAnyFrameEndsBitForBitAsAnUninterruptedOne) {
-  const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 30, "shake")));
+  const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 30, "shake")));
   const auto cfg = roomConfig();
   Reconstruction whole(cfg, TrackingMode::Joint);
-  feed(whole, seq, 0, seq.size());
+  feed(whole, frames, 0, frames.size());
   const Ending clean = finish(whole);
   ASSERT_GT(clean.faces, 1000u);
   ASSERT_GT(clean.keyframes, 2u) << "the loop closer should hold keyframes to carry over";
-  for (const std::size_t at : {std::size_t(1), std::size_t(13), seq.size() - 1}) {
+  for (const std::size_t at : {std::size_t(1), std::size_t(13), frames.size() - 1}) {
     std::stringstream saved;
     {
       Reconstruction first(cfg, TrackingMode::Joint);
-      feed(first, seq, 0, at);
+      feed(first, frames, 0, at);
       first.saveState(saved);
     }  // the first half's process-wide state (its loop thread, its spill files) is gone
     Reconstruction second(cfg, TrackingMode::Joint);
     second.loadState(saved);
-    feed(second, seq, at, seq.size());
+    feed(second, frames, at, frames.size());
     const Ending resumed = finish(second);
     const std::string what = "resumed at frame " + std::to_string(at);
     expectIdentical(clean.tracked, resumed.tracked, what + ", tracked");

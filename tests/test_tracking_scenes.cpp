@@ -52,10 +52,10 @@ Tracked track(const std::vector<Frame>& frames, TrackingMode mode, const std::st
 // odometry 1.24, kinfu 15.7). One seed guards what mode joint reaches; how it compares with its own
 // sources is the five seeds' test below.
 TEST(Tracking, ShakeThreeSecondsHeld) {
-  const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
-  const Tracked joint = track(seq, TrackingMode::Joint);
-  const Tracked kinfu = track(seq, TrackingMode::KinFu);
-  const Tracked paper = track(seq, TrackingMode::PaperHandoff);
+  const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
+  const Tracked joint = track(frames, TrackingMode::Joint);
+  const Tracked kinfu = track(frames, TrackingMode::KinFu);
+  const Tracked paper = track(frames, TrackingMode::PaperHandoff);
   std::printf("shake, 90 frames: ATE joint %.4f m, kinfu %.4f m, paper-handoff %.4f m\n", joint.ate, kinfu.ate, paper.ate);
   EXPECT_LT(joint.ate, 0.02);
   EXPECT_EQ(joint.lost, 0u);
@@ -65,7 +65,7 @@ TEST(Tracking, ShakeThreeSecondsHeld) {
   EXPECT_TRUE(joint.colour_time.capture);
   std::printf("shake, 90 frames: %d of %d frames compared fitted capture better\n", joint.colour_time.capture_better,
               joint.colour_time.compared);
-  const Tracked interval = track(seq, TrackingMode::Joint, "interval");
+  const Tracked interval = track(frames, TrackingMode::Joint, "interval");
   std::printf("shake, 90 frames, colour_time_velocity interval: ATE joint %.4f m\n", interval.ate);
   EXPECT_LT(joint.ate, 0.5 * interval.ate);  // moving each keypoint at its own frame's velocity
   EXPECT_FALSE(interval.colour_time.capture);
@@ -82,9 +82,9 @@ TEST(Tracking, ShakeOverFiveSeedsJointKeepsUpWithTheOdometry) {
   for (std::uint32_t seed = 1; seed <= 5; ++seed) {
     sim::SimOptions o = test::quickSim("room", 90, "shake");
     o.seed = seed;
-    const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(o));
-    const Tracked joint = track(seq, TrackingMode::Joint);
-    const Tracked odometry = track(seq, TrackingMode::Odometry);
+    const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(o));
+    const Tracked joint = track(frames, TrackingMode::Joint);
+    const Tracked odometry = track(frames, TrackingMode::Odometry);
     std::printf("shake seed %u, 90 frames: ATE joint %.4f m, odometry %.4f m\n", seed, joint.ate, odometry.ate);
     EXPECT_EQ(joint.lost, 0u) << "seed " << seed;
     joint_sum += joint.ate;
@@ -98,13 +98,13 @@ TEST(Tracking, ShakeOverFiveSeedsJointKeepsUpWithTheOdometry) {
 // offset. Both corrections then move the keypoints by the wrong offsets (no correction at all measured
 // 2.3 cm here); auto's vote only chooses the velocity, so it must do no worse than the interval mean.
 TEST(Tracking, StampsThatAreNotCaptureTimesNoWorseThanTheIntervalMean) {
-  const std::vector<Frame> seq = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
-  std::vector<double> offsets(seq.size());
-  for (std::size_t i = 0; i < seq.size(); ++i) offsets[i] = seq[i].colour_offset;
+  const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(test::quickSim("room", 90, "shake")));
+  std::vector<double> offsets(frames.size());
+  for (std::size_t i = 0; i < frames.size(); ++i) offsets[i] = frames[i].colour_offset;
   // Another frame's offset, 37 frames on: unrelated to this frame's capture, with the same spread.
   const auto other = [&](std::size_t i, double) { return offsets[(i + 37) % offsets.size()]; };
-  const Tracked automatic = track(seq, TrackingMode::Joint, "auto", other);
-  const Tracked interval = track(seq, TrackingMode::Joint, "interval", other);
+  const Tracked automatic = track(frames, TrackingMode::Joint, "auto", other);
+  const Tracked interval = track(frames, TrackingMode::Joint, "interval", other);
   std::printf("shake, 90 frames, offsets of other frames: ATE joint auto %.4f m (%d of %d frames compared fitted capture "
               "better), interval %.4f m\n",
               automatic.ate, automatic.colour_time.capture_better, automatic.colour_time.compared, interval.ate);
