@@ -129,6 +129,7 @@ TEST(Sim, DeterministicForSeedAndDifferentAcrossSeeds) {
   EXPECT_GT(cv::norm(a.rgb, c.rgb, cv::NORM_L1), 0.0);
 }
 
+namespace {
 // FNV-1a over an image's bytes, row by row.
 std::uint64_t fingerprint(const cv::Mat& image) {
   std::uint64_t h = 0xcbf29ce484222325ull;
@@ -138,6 +139,7 @@ std::uint64_t fingerprint(const cv::Mat& image) {
   }
   return h;
 }
+}  // namespace
 
 // Every synthetic figure in docs/ and bench/results/ was measured on the simulator's images: a change
 // to what it renders (textures, noise, blur, paths) must be deliberate, with the figures measured again.
