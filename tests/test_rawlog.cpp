@@ -31,10 +31,7 @@ std::vector<Frame> simFrames(std::size_t n) {
   sim::SimOptions o;
   o.frames = n;
   o.camera = o.camera.scaled(0.5);
-  sim::SyntheticSequence seq(o);
-  std::vector<Frame> out;
-  for (std::size_t i = 0; i < n; ++i) out.push_back(seq.render(i));
-  return out;
+  return test::renderFrames(sim::SyntheticSequence(o));
 }
 
 std::string writeRawlog(const std::string& path, const std::vector<Frame>& frames, const RawlogWriterOptions& o) {
