@@ -418,6 +418,39 @@ TEST(KinFuParams, SaveWritesEveryKeyAndLoadReadsItBack) {
   EXPECT_THROW(b.loadFromConfigFile(bad, "kinfu"), InputError);
 }
 
+// By default a frame tracks at half resolution from 640 px wide on and at its own size below: the
+// shake at 320x240 tracked at 160x120 was worse (docs/tracking.md). ICP's inliers are counted at the
+// finest tracking level, so a quarter of the pixels gives about a quarter of them.
+TEST(KinFuParams, TracksAtHalfResolutionFrom640PixelsWideOn) {
+  KinFuParams p = testParams();
+  p.tracking_downsample = 0;
+  EXPECT_EQ(p.trackingDownsample(640), 2);
+  EXPECT_EQ(p.trackingDownsample(1280), 2);
+  EXPECT_EQ(p.trackingDownsample(639), 1);
+  EXPECT_EQ(p.trackingDownsample(320), 1);
+  p.tracking_downsample = 2;
+  EXPECT_EQ(p.trackingDownsample(320), 2);  // a value given is kept
+  p.tracking_downsample = 1;
+  EXPECT_EQ(p.trackingDownsample(640), 1);
+
+  const sim::SyntheticSequence seq(simOpts("room", 3));
+  const std::vector<Frame> frames = test::renderFrames(seq, 3);
+  ASSERT_EQ(frames[0].depth.cols, 320);
+  const auto inliers = [&](int downsample) {
+    KinFuParams q = testParams();
+    q.tracking_downsample = downsample;
+    TrackedMap map(q, TrackingMode::KinFu, seq.groundTruth(0));
+    int last = 0;
+    for (const Frame& f : frames) last = map.process(f, nullptr).icp_inliers;
+    return last;
+  };
+  const int by_size = inliers(0), full = inliers(1), half = inliers(2);
+  std::printf("ICP inliers of the third frame: by size %d, full %d, half %d\n", by_size, full, half);
+  EXPECT_EQ(by_size, full);
+  EXPECT_GT(full, 3 * half);
+  EXPECT_GT(half, 1000);
+}
+
 TEST(KinFuParams, ShippedDefaultsFileMatchesTheCode) {
   const std::string path = test::shareDir() + "/kinfu.ini";
   mrpt::config::CConfigFile file(path);

@@ -46,19 +46,19 @@ struct Tracker::Impl {
                      const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity, const FusionResult& res);
 };
 
-// Tracking at half resolution: a quarter of the filtering, ray casting and ICP work; the finest ICP
-// level is then 320x240, which KinFu-style coarse-to-fine tracking hardly misses.
+// The tracking levels at TrackerParams::trackingDownsample's resolution.
 std::vector<DepthLevel> Tracker::Impl::trackingLevels(const Frame& frame, const FrameGeometry* geometry,
                                                       const CameraIntrinsics& cam, CameraIntrinsics& track_cam) const {
   const TrackerParams& P = params;
+  const int downsample = P.trackingDownsample(frame.depth.cols);
   track_cam = cam;
   if (geometry && geometry->points.size() == frame.depth.size() && geometry->normals.size() == frame.depth.size()) {
     // The frame's shared maps, averaged down: one back-projection and normal map serve BRAND and ICP.
-    std::vector<DepthLevel> levels = levelsFromGeometry(*geometry, frame.depth, cam, P.tracking_downsample, P.preprocess);
+    std::vector<DepthLevel> levels = levelsFromGeometry(*geometry, frame.depth, cam, downsample, P.preprocess);
     track_cam = levels[0].camera;
     return levels;
   }
-  if (P.tracking_downsample == 2) {
+  if (downsample == 2) {
     PreprocessParams pp = P.preprocess;
     pp.sigma_spatial *= 0.5f;
     pp.kernel = std::max(3, ((pp.kernel + 1) / 2) | 1);
@@ -169,7 +169,7 @@ void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLev
   FrameToFuse f;
   // A constant-velocity guess is not fused: nothing measured where the camera was.
   f.integrate = !res.predicted && (!res.fell_back || params.integrate_on_fallback);
-  f.depth = params.integrate_filtered && params.tracking_downsample == 1 ? levels[0].depth : frame.depth;
+  f.depth = params.integrate_filtered && params.trackingDownsample(frame.depth.cols) == 1 ? levels[0].depth : frame.depth;
   f.rgb = frame.rgb;
   f.hint = levels[0].depth;
   f.cam = cam;

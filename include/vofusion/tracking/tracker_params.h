@@ -11,8 +11,15 @@ struct TrackerParams {
   fusion::PreprocessParams preprocess;  // bilateral_*, min_depth, max_depth, max_normal_jump
   fusion::IcpParams icp;              // icp_iterations_l0..l2, icp_max_distance, icp_max_angle
 
-  int tracking_downsample = 2;        // 1 or 2: preprocessing, ray casting and ICP at full or half
-                                      // resolution (integration always fuses the full-resolution depth)
+  // Preprocessing, ray casting and ICP at full (1) or half (2) resolution; integration always fuses the
+  // full-resolution depth. 0: by the depth image's width (trackingDownsample).
+  int tracking_downsample = 0;
+  // Half resolution from 640 px wide on, so the finest ICP level is at least 320 px wide (a quarter of
+  // the work at 640x480, which coarse-to-fine ICP hardly misses); a smaller image tracks at its own size
+  // (the 320x240 shake tracked at 160x120 was 3.7 mm worse, docs/tracking.md).
+  int trackingDownsample(int depth_width) const {
+    return tracking_downsample > 0 ? tracking_downsample : depth_width >= 640 ? 2 : 1;
+  }
   // Tracking failure (divergence, degeneracy) detection; the conditioning bound is fixed in code
   // (tracking::kMinCondition).
   float min_inlier_ratio = 0.10f;     // inliers / valid pixels at full resolution
@@ -20,7 +27,7 @@ struct TrackerParams {
   float max_jump_rotation = 5.0f;     // degrees, same
   bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback
   bool integrate_filtered = false;    // fuse the bilateral-filtered depth instead of the raw one
-                                      // (with tracking_downsample 1 only)
+                                      // (when tracking at full resolution only)
   // Mode joint: one Gauss-Newton over the ICP residuals and the prior's point matches (its robust
   // kernels and the initial guess's margin are fixed in code: tracking/joint_policy.h).
   double joint_icp_sigma = 0.005;     // m, noise of one finest-level point-to-plane residual (smaller:
