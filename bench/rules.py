@@ -19,11 +19,12 @@ Prints a markdown table (ATE RMSE per input and build, the difference in mm, rpy
 verdict and whether every input is within +2 % (issue 31's rule for a cheaper stage), and writes it to
 <work>/rules.md. Runs are deterministic: one run per input and build (but see --perturb).
 
---perturb N runs each shared sequence and half N times per build, with `[motion] ransac_seed` 1..N (the
-odometry's RANSAC; 1 is the default run), and compares the means (the table shows each mean and its
-range). A 50-frame half moves by tenths of a millimetre under any change at all
-(2026-12-03-shake-fast-turns.md), more than the +2 % a cheaper stage may cost there: the seeds show
-whether a difference is more than that. Both builds must know the key (built from 2026-12-03 on).
+--perturb N runs each shared sequence, half and shake seed N times per build, with `[motion] ransac_seed`
+1..N (the odometry's RANSAC; 1 is the default run), and compares the means (the table shows each mean and
+its range); the loop scene runs once (its 300 frames at 640x480 would multiply the run's time). A 50-frame
+half moves by tenths of a millimetre under any change at all (2026-12-03-shake-fast-turns.md), more than the
++2 % a cheaper stage may cost there, and a shake seed by millimetres: the seeds show whether a difference is
+more than that. Both builds must know the key (built from 2026-12-03 on).
 """
 import argparse
 import json
@@ -188,7 +189,7 @@ def markdown(rows, rpe, seeds, this_name, base_name, command):
         return "%.5f (%.5f-%.5f)" % (r[tag], min(runs), max(runs))
     perturbed = [r for r in rows if len(r.get("this_runs", [])) > 1]
     if perturbed:
-        out.insert(-2, "Shared sequences and halves: the mean of %d runs with `[motion] ransac_seed` 1-%d (their range in "
+        out.insert(-2, "Shared sequences, halves and shake seeds: the mean of %d runs with `[motion] ransac_seed` 1-%d (their range in "
                        "brackets); the difference is of the means." % (len(perturbed[0]["this_runs"]), len(perturbed[0]["this_runs"])))
         out.insert(-2, "")
     for r in rows:
@@ -211,7 +212,7 @@ def main(argv):
                          "a key's new value (with --baseline the same build)")
     ap.add_argument("--seeds", default="1,2,3,4,5")
     ap.add_argument("--perturb", type=int, default=1,
-                    help="runs of each shared sequence and half per build, [motion] ransac_seed 1..N; means compared")
+                    help="runs of each shared sequence, half and shake seed per build, [motion] ransac_seed 1..N; means compared")
     ap.add_argument("--work", default=None, help="inputs and run outputs (default <build>/bench-rules)")
     a = ap.parse_args(argv)
     try:
@@ -235,7 +236,7 @@ def main(argv):
         if not os.access(b, os.X_OK):
             sys.exit("bench rules: no executable " + b)
     if a.perturb < 1:
-        sys.exit("bench rules: --perturb %d: give the number of runs per shared input (1 = no perturbation)" % a.perturb)
+        sys.exit("bench rules: --perturb %d: give the number of runs per shared input and shake seed (1 = no perturbation)" % a.perturb)
     if a.perturb > 1:
         for path, text in ((a.config, config_text), (a.candidate, candidate_text or "")):
             if SEED_KEY.search(text):
@@ -267,7 +268,7 @@ def main(argv):
         row = {"name": name, "kind": kind}
         for tag, exe in builds.items():
             base_out = os.path.join(work, tag, name.split(",")[0].replace(" ", "_"))
-            perturbed = a.perturb > 1 and kind in ("whole", "half")
+            perturbed = a.perturb > 1 and kind in ("whole", "half", "shake")
             ates, rpes = [], []
             for seed in range(1, a.perturb + 1) if perturbed else [None]:
                 out = base_out if seed is None else "%s_ransac_seed%d" % (base_out, seed)
