@@ -165,7 +165,7 @@ def verdict(rows, seeds):
         lines.append("- %s, mean over %d seeds: %+.2f mm, better by > 1 mm: %s (%d seeds worse by > 1 mm)" % (
             label, len(sel), diff, "yes" if diff < -1.0 else "no", worse))
     # Issue 31's rule for a stage made cheaper: accuracy within +2 % on every input (not a mean over inputs;
-    # with --perturb, a shared input's figure is the mean of its runs).
+    # with --perturb, a shared input's or shake seed's figure is the mean of its runs).
     over = ["%s %+.1f %%" % (r["name"], 100.0 * (r["this"] / r["base"] - 1.0)) for r in rows if r["this"] > 1.02 * r["base"]]
     lines.append("- a cheaper stage's rule, every input within +2 %%: %s" % ("yes" if not over else "no (" + ", ".join(over) + ")"))
     if not set(range(1, 6)) <= set(seeds):

@@ -12,6 +12,7 @@
 
 #include "support.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/point_maps.h"
 #include "vofusion/fusion/tracked_map.h"
 #include "vofusion/pipeline/mesh_by_region.h"
 #include "vofusion/pipeline/region_premesher.h"
@@ -28,7 +29,7 @@ KinFuParams testParams() {
   p.tsdf.volume_voxels = 256;
   p.tsdf.voxel_size = 0.01f;
   p.tsdf.truncation = 0.04f;
-  p.tracking_downsample = 1;  // the frames are already 320x240
+  p.tracking_downsample = 1;  // pinned at the frames' own resolution (as the default tracks 320x240)
   return p;
 }
 
@@ -436,19 +437,29 @@ TEST(KinFuParams, TracksAtHalfResolutionFrom640PixelsWideOn) {
   const sim::SyntheticSequence seq(simOpts("room", 3));
   const std::vector<Frame> frames = test::renderFrames(seq, 3);
   ASSERT_EQ(frames[0].depth.cols, 320);
-  const auto inliers = [&](int downsample) {
+  // Both ways the tracker makes its levels: from the depth alone, and from the odometry's point and normal
+  // maps (vofusion's joint mode).
+  const auto inliers = [&](int downsample, bool with_geometry) {
     KinFuParams q = testParams();
     q.tracking_downsample = downsample;
     TrackedMap map(q, TrackingMode::KinFu, seq.groundTruth(0));
     int last = 0;
-    for (const Frame& f : frames) last = map.process(f, nullptr).icp_inliers;
+    for (const Frame& f : frames) {
+      FrameGeometry g;
+      g.points = depthToPointMap(f.depth, f.camera);
+      g.normals = computeNormalMap(g.points, 4, 0.05f);
+      last = map.process(f, nullptr, with_geometry ? &g : nullptr).icp_inliers;
+    }
     return last;
   };
-  const int by_size = inliers(0), full = inliers(1), half = inliers(2);
-  std::printf("ICP inliers of the third frame: by size %d, full %d, half %d\n", by_size, full, half);
-  EXPECT_EQ(by_size, full);
-  EXPECT_GT(full, 3 * half);
-  EXPECT_GT(half, 1000);
+  for (const bool with_geometry : {false, true}) {
+    SCOPED_TRACE(with_geometry ? "levels from the point and normal maps" : "levels from the depth");
+    const int by_size = inliers(0, with_geometry), full = inliers(1, with_geometry), half = inliers(2, with_geometry);
+    std::printf("ICP inliers of the third frame: by size %d, full %d, half %d\n", by_size, full, half);
+    EXPECT_EQ(by_size, full);
+    EXPECT_GT(full, 3 * half);
+    EXPECT_GT(half, 1000);
+  }
 }
 
 TEST(KinFuParams, ShippedDefaultsFileMatchesTheCode) {

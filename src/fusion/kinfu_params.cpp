@@ -31,7 +31,7 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 of it", 0.0, 100.0},
       {"icp_max_distance", &p.icp.max_distance, "m, correspondence distance threshold", 0.001, 10.0},
       {"icp_max_angle", &p.icp.max_angle, "degrees, correspondence normal angle threshold", 0.0, 180.0},
-      {"tracking_downsample", &p.tracking_downsample, "1 or 2: tracking (filter, ray cast, ICP) at full or half resolution; 0 = by the image: half from 640 px wide on, else full", 0.0, 2.0},
+      {"tracking_downsample", &p.tracking_downsample, "0: tracking (filter, ray cast, ICP) by the image's width, at half resolution from 640 px wide on, else full; 1 or 2: at full or half resolution", 0.0, 2.0},
       {"shift_threshold", &p.shift_threshold, "m, focus point to volume centre distance that shifts the volume", 0.0, 100.0},
       {"focus_distance", &p.focus_distance, "m, the volume follows the point this far along the optical axis", 0.0, 10.0},
       {"min_inlier_ratio", &p.min_inlier_ratio, "ICP inliers / valid pixels below which ICP is rejected", 0.0, 1.0},

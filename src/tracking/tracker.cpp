@@ -169,7 +169,9 @@ void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLev
   FrameToFuse f;
   // A constant-velocity guess is not fused: nothing measured where the camera was.
   f.integrate = !res.predicted && (!res.fell_back || params.integrate_on_fallback);
-  f.depth = params.integrate_filtered && params.trackingDownsample(frame.depth.cols) == 1 ? levels[0].depth : frame.depth;
+  // The filtered depth only where tracking ran at the frame's own resolution.
+  const bool full_resolution = levels[0].depth.size() == frame.depth.size();
+  f.depth = params.integrate_filtered && full_resolution ? levels[0].depth : frame.depth;
   f.rgb = frame.rgb;
   f.hint = levels[0].depth;
   f.cam = cam;

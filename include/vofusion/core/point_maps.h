@@ -1,7 +1,7 @@
 #pragma once
 // A frame's geometry, computed once and read by every stage that needs it: the back-projected point
 // map and the normal map of its depth image at full resolution. BRAND's geometric tests read it, and
-// KinectFusion's ICP reads it averaged over 2x2 blocks (tracking at half resolution).
+// KinectFusion's ICP reads it averaged over 2x2 blocks when tracking at half resolution.
 #include <opencv2/core.hpp>
 
 #include "vofusion/core/camera.h"

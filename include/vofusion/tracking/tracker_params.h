@@ -14,15 +14,15 @@ struct TrackerParams {
   // Preprocessing, ray casting and ICP at full (1) or half (2) resolution; integration always fuses the
   // full-resolution depth. 0: by the depth image's width (trackingDownsample).
   int tracking_downsample = 0;
-  // Half resolution from 640 px wide on, so the finest ICP level is at least 320 px wide (a quarter of
-  // the work at 640x480, which coarse-to-fine ICP hardly misses); a smaller image tracks at its own size
+  // Half resolution from 640 px wide on (a quarter of the work at 640x480, which coarse-to-fine ICP hardly
+  // misses), so halving stops at a 320 px wide tracking image; a narrower image tracks at its own size
   // (the 320x240 shake tracked at 160x120 was 3.7 mm worse, docs/tracking.md).
   int trackingDownsample(int depth_width) const {
     return tracking_downsample > 0 ? tracking_downsample : depth_width >= 640 ? 2 : 1;
   }
   // Tracking failure (divergence, degeneracy) detection; the conditioning bound is fixed in code
   // (tracking::kMinCondition).
-  float min_inlier_ratio = 0.10f;     // inliers / valid pixels at full resolution
+  float min_inlier_ratio = 0.10f;     // inliers / valid pixels at the finest tracking level
   float max_jump_translation = 0.05f; // m, ICP pose vs the prior's prediction (modes joint, paper-handoff)
   float max_jump_rotation = 5.0f;     // degrees, same
   bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback
