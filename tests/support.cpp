@@ -69,7 +69,6 @@ mrpt::config::CConfigFileMemory quickRoomConfig() {
   mrpt::config::CConfigFileMemory cfg;
   cfg.write("kinfu", "volume_voxels", 256);
   cfg.write("kinfu", "voxel_size", 0.01);
-  cfg.write("kinfu", "tracking_downsample", 1);
   cfg.write("odometry", "keypoints", "star");
   return cfg;
 }

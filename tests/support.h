@@ -60,9 +60,8 @@ sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std
 std::vector<Frame> renderFrames(const sim::SyntheticSequence& seq, std::size_t count = std::size_t(-1));
 // The frame with images of its own (a copied cv::Mat shares its pixels): one run cannot change another's.
 Frame deepCopy(const Frame& frame);
-// The pipeline's settings for quickSim's room: 1 cm voxels in a 2.56 m volume, tracking pinned at the
-// frames' own resolution (as the default tracks 320x240), the odometry on STAR keypoints only (PCL's NARF
-// is not the question).
+// The pipeline's settings for quickSim's room: 1 cm voxels in a 2.56 m volume, the odometry on STAR
+// keypoints only (PCL's NARF is not the question).
 mrpt::config::CConfigFileMemory quickRoomConfig();
 
 }  // namespace vofusion::test

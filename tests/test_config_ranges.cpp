@@ -130,7 +130,6 @@ TEST(ConfigRanges, SweepNeverCrashesNorPoisonsARun) {
         cfg.write("kinfu", "voxel_size", 0.04);
         cfg.write("kinfu", "truncation", 0.12);
       }
-      cfg.write("kinfu", "tracking_downsample", 1);
       cfg.write(k.section, k.key, std::string(value));
       const std::vector<ConfigSection> sections = allSections();
       try {

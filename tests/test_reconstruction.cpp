@@ -28,7 +28,6 @@ PipelineRun reconstruct(const sim::SyntheticSequence& seq, bool overlap, Trackin
   cfg.write("kinfu", "volume_voxels", 256);
   cfg.write("kinfu", "voxel_size", 0.01);
   cfg.write("kinfu", "truncation", 0.04);
-  cfg.write("kinfu", "tracking_downsample", 1);  // pinned at the frames' own resolution (as the default tracks 320x240)
   cfg.write("kinfu", "overlap_fusion", overlap);
   cfg.write("odometry", "keypoints", "star");  // PCL's NARF is not part of this question
   Reconstruction rec(cfg, mode);

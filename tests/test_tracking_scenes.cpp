@@ -30,7 +30,6 @@ Tracked track(const std::vector<Frame>& frames, TrackingMode mode, const std::st
   cfg.write("kinfu", "volume_voxels", 256);
   cfg.write("kinfu", "voxel_size", 0.012);
   cfg.write("kinfu", "truncation", 0.05);
-  cfg.write("kinfu", "tracking_downsample", 1);  // pinned at the frames' own resolution (as the default tracks 320x240)
   Reconstruction rec(cfg, mode);
   Trajectory truth;
   for (std::size_t i = 0; i < frames.size(); ++i) {

@@ -50,6 +50,7 @@ constexpr RetiredKey kRetiredKeys[] = {
     {"kinfu", "joint_photometric_huber", "docs/tracking.md"},
     {"kinfu", "joint_photometric_min_gradient", "docs/tracking.md"},
     {"kinfu", "min_condition", "docs/tracking.md"},
+    {"kinfu", "tracking_downsample", "docs/tracking.md"},
     {"loop", "loop_sigma_rotation", "docs/loop-closure.md"},
     {"loop", "loop_sigma_translation", "docs/loop-closure.md"},
     {"loop", "max_chain_chi2", "docs/loop-closure.md"},

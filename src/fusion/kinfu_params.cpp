@@ -31,7 +31,6 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 of it", 0.0, 100.0},
       {"icp_max_distance", &p.icp.max_distance, "m, correspondence distance threshold", 0.001, 10.0},
       {"icp_max_angle", &p.icp.max_angle, "degrees, correspondence normal angle threshold", 0.0, 180.0},
-      {"tracking_downsample", &p.tracking_downsample, "0: tracking (filter, ray cast, ICP) by the image's width, at half resolution from 640 px wide on, else full; 1 or 2: at full or half resolution", 0.0, 2.0},
       {"shift_threshold", &p.shift_threshold, "m, focus point to volume centre distance that shifts the volume", 0.0, 100.0},
       {"focus_distance", &p.focus_distance, "m, the volume follows the point this far along the optical axis", 0.0, 10.0},
       {"min_inlier_ratio", &p.min_inlier_ratio, "ICP inliers / valid pixels below which ICP is rejected", 0.0, 1.0},
@@ -60,7 +59,6 @@ void KinFuParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
     throw InputError(where, "volume_voxels must be a positive multiple of 8");
   if (!(tsdf.voxel_size > 0.f) || !(tsdf.truncation > tsdf.voxel_size))
     throw InputError(where, "voxel_size must be positive and truncation larger than it");
-  if (tracking_downsample < 0 || tracking_downsample > 2) throw InputError(where, "tracking_downsample must be 0, 1 or 2");
   if (tsdf.max_weight < 1 || tsdf.max_weight > 255) throw InputError(where, "max_weight must be in 1..255");
   if (!(preprocess.min_depth < preprocess.max_depth)) throw InputError(where, "min_depth must be below max_depth");
   if (!(tsdf.min_depth < tsdf.max_depth)) throw InputError(where, "integrate_min_depth must be below integrate_max_depth");

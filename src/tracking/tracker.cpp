@@ -46,11 +46,11 @@ struct Tracker::Impl {
                      const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity, const FusionResult& res);
 };
 
-// The tracking levels at TrackerParams::trackingDownsample's resolution.
+// The tracking levels at trackingDownsample's resolution.
 std::vector<DepthLevel> Tracker::Impl::trackingLevels(const Frame& frame, const FrameGeometry* geometry,
                                                       const CameraIntrinsics& cam, CameraIntrinsics& track_cam) const {
   const TrackerParams& P = params;
-  const int downsample = P.trackingDownsample(frame.depth.cols);
+  const int downsample = trackingDownsample(frame.depth.cols);
   track_cam = cam;
   if (geometry && geometry->points.size() == frame.depth.size() && geometry->normals.size() == frame.depth.size()) {
     // The frame's shared maps, averaged down: one back-projection and normal map serve BRAND and ICP.

@@ -7,19 +7,17 @@
 
 namespace vofusion {
 
+// The factor (1 or 2) preprocessing, ray casting and ICP divide the depth image's resolution by;
+// integration always fuses the full-resolution depth. Half from 640 px wide on (a quarter of the work at
+// 640x480, which coarse-to-fine ICP hardly misses), so halving stops at a 320 px wide tracking image; a
+// narrower image tracks at its own size (the 320x240 shake tracked at 160x120 was 3.7 mm worse,
+// docs/tracking.md). Was the key [kinfu] tracking_downsample (2 for every input).
+inline int trackingDownsample(int depth_width) { return depth_width >= 640 ? 2 : 1; }
+
 struct TrackerParams {
   fusion::PreprocessParams preprocess;  // bilateral_*, min_depth, max_depth, max_normal_jump
   fusion::IcpParams icp;              // icp_iterations_l0..l2, icp_max_distance, icp_max_angle
 
-  // Preprocessing, ray casting and ICP at full (1) or half (2) resolution; integration always fuses the
-  // full-resolution depth. 0: by the depth image's width (trackingDownsample).
-  int tracking_downsample = 0;
-  // Half resolution from 640 px wide on (a quarter of the work at 640x480, which coarse-to-fine ICP hardly
-  // misses), so halving stops at a 320 px wide tracking image; a narrower image tracks at its own size
-  // (the 320x240 shake tracked at 160x120 was 3.7 mm worse, docs/tracking.md).
-  int trackingDownsample(int depth_width) const {
-    return tracking_downsample > 0 ? tracking_downsample : depth_width >= 640 ? 2 : 1;
-  }
   // Tracking failure (divergence, degeneracy) detection; the conditioning bound is fixed in code
   // (tracking::kMinCondition).
   float min_inlier_ratio = 0.10f;     // inliers / valid pixels at the finest tracking level
