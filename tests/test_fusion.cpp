@@ -13,6 +13,7 @@
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/point_maps.h"
+#include "vofusion/features/brand.h"
 #include "vofusion/fusion/tracked_map.h"
 #include "vofusion/pipeline/mesh_by_region.h"
 #include "vofusion/pipeline/region_premesher.h"
@@ -432,15 +433,16 @@ TEST(Tracking, HalfResolutionFrom640PixelsWideOnOwnSizeBelow) {
   sim::SimOptions full_size = simOpts("room", 3);
   full_size.camera = CameraIntrinsics{};
   const sim::SyntheticSequence small(simOpts("room", 3)), large(full_size);
-  // Both ways the tracker makes its levels: from the depth alone, and from the odometry's point and normal
-  // maps (vofusion's joint mode).
+  // Both ways the tracker makes its levels: from the depth alone, and from the point and normal maps the
+  // odometry hands over in vofusion's joint mode (made here as RgbdOdometry makes them, BRAND's defaults).
+  const BrandParams brand;
   const auto inliers = [&](const sim::SyntheticSequence& seq, bool with_geometry) {
     TrackedMap map(testParams(), TrackingMode::KinFu, seq.groundTruth(0));
     int last = 0;
     for (const Frame& f : test::renderFrames(seq)) {
       FrameGeometry g;
       g.points = depthToPointMap(f.depth, f.camera);
-      g.normals = computeNormalMap(g.points, 4, 0.05f);
+      g.normals = computeNormalMap(g.points, brand.normal_window, float(brand.max_depth_step));
       last = map.process(f, nullptr, with_geometry ? &g : nullptr).icp_inliers;
     }
     return last;
