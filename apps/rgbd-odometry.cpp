@@ -58,22 +58,23 @@ Args parseArgs(const CommandLine& cl) {
   return a;
 }
 
-// The [odometry] parameters: defaults, then the --config file, then the --set overrides.
+// The [odometry] parameters: defaults, then the --config file, then the --set overrides. Each is
+// checked on its own, so that a bad key or value names where it was written.
 OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known) {
   auto cfg = loadConfig(a.config);
+  checkConfigKeys(cfg, a.config, known);
+  OdometryParams params;
+  loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
+  if (a.sets.empty()) return params;
+  mrpt::config::CConfigFileMemory sets;
   for (const std::string& s : a.sets) {
     const auto dot = s.find('.'), eq = s.find('=');
     if (dot == std::string::npos || eq == std::string::npos || eq < dot)
       throw InputError("--set " + s, "expected section.key=value");
-    cfg.write(s.substr(0, dot), s.substr(dot + 1, eq - dot - 1), s.substr(eq + 1));
+    for (auto* c : {&sets, &cfg}) c->write(s.substr(0, dot), s.substr(dot + 1, eq - dot - 1), s.substr(eq + 1));
   }
-  checkConfigKeys(cfg, a.config.empty() ? "--set" : a.config, known);
-  OdometryParams params;
-  try {
-    params.loadFromConfigFile(cfg, "odometry");
-  } catch (const InputError& e) {  // name the file the bad value came from
-    throw InputError(a.config.empty() ? "--set" : a.config, e.what());
-  }
+  checkConfigKeys(sets, "--set", known);
+  loadNamingOrigin("--set", [&] { params.loadFromConfigFile(cfg, "odometry"); });
   return params;
 }
 

@@ -184,9 +184,12 @@ GrabPlan planGrab(const Args& args) {
   if (plan.config.empty() && args.replay.empty()) plan.config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
   plan.cfg = loadConfig(plan.config);
   checkOwnSections(plan.cfg, plan.config, ownSections(LiveOptions(), OutputParams(), MeshCleanParams()));
-  plan.opts.loadFromConfigFile(plan.cfg, kSection);
-  plan.out_params.loadFromConfigFile(plan.cfg, "output");
-  plan.mesh_params.loadFromConfigFile(plan.cfg, "mesh");
+  loadNamingOrigin(plan.config, [&] {
+    plan.opts.loadFromConfigFile(plan.cfg, kSection);
+    plan.out_params.loadFromConfigFile(plan.cfg, "output");
+    plan.mesh_params.loadFromConfigFile(plan.cfg, "mesh");
+    if (args.live) checkReconstructionValues(plan.cfg);  // now, before the recording is created
+  });
   if (args.max_frames) plan.opts.max_frames = *args.max_frames;
   if (args.queue) plan.opts.queue_capacity = *args.queue;
   if (args.speed) plan.opts.replay_speed = *args.speed;

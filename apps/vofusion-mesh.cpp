@@ -50,7 +50,7 @@ int body(int argc, char** argv) {
     cfg.getAllKeys("mesh", keys);
     for (const auto& k : keys) mesh_only.write("mesh", k, cfg.read_string("mesh", k, ""));
     checkConfigKeys(mesh_only, *config, {{"mesh", &params}});
-    params.loadFromConfigFile(cfg, "mesh");
+    loadNamingOrigin(*config, [&] { params.loadFromConfigFile(cfg, "mesh"); });
   }
 
   Trajectory traj;

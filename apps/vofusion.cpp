@@ -121,16 +121,11 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   if (cl.value("--work-dir")) cfg.write("kinfu", "work_dir", *cl.value("--work-dir"));
   else if (const std::string w = cfg.read_string("kinfu", "work_dir", "auto"); w.empty() || w == "auto")
     cfg.write("kinfu", "work_dir", plan.default_work);
-  try {
+  loadNamingOrigin(plan.config_path, [&] {
     plan.out_params.loadFromConfigFile(cfg, "output");
     plan.mesh_params.loadFromConfigFile(cfg, "mesh");
-    OdometryParams().loadFromConfigFile(cfg, "odometry");
-    KinFuParams().loadFromConfigFile(cfg, "kinfu");
-    loop::LoopParams().loadFromConfigFile(cfg, "loop");
-  } catch (const InputError& e) {
-    if (plan.config_path.empty()) throw;
-    throw InputError(plan.config_path, e.what());
-  }
+    checkReconstructionValues(cfg);
+  });
   if (cl.flag("--raw-mesh")) plan.out_params.save_raw_mesh = true;
 }
 

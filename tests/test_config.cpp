@@ -2,6 +2,7 @@
 #include <fstream>
 
 #include <mrpt/config/CConfigFileBase.h>
+#include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
 #include "vofusion/core/config.h"
@@ -74,4 +75,51 @@ TEST(Config, DumpHoldsEveryKey) {
   const std::string text = dumpConfig({{"kinfu", &p}});
   EXPECT_NE(text.find("voxel"), std::string::npos);
   EXPECT_NE(text.find("weight_cap"), std::string::npos);
+}
+
+// MRPT reads INI numbers with atoi / atof, so "1cm" was 1 and "true # on" false, without a word. A value
+// is now either wholly a number (a switch: true / false, yes / no, on / off, 1 / 0) or a one-line error.
+TEST(Config, ValueThatIsNotWhollyANumberIsRefused) {
+  struct Keys {
+    int cap = 64;
+    double voxel = 0.006;
+    bool enabled = false;
+    std::vector<ConfigKey> table() {
+      return {{"cap", &cap, "frames", 1, 1000}, {"voxel", &voxel, "m", 0.001, 1}, {"enabled", &enabled, "switch"}};
+    }
+  };
+  auto message = [](const std::string& key, const std::string& value) -> std::string {
+    mrpt::config::CConfigFileMemory cfg;
+    cfg.setContent("[s]\n" + key + " = " + value + "\n");
+    Keys k;
+    try {
+      loadKeys(cfg, "s", k.table());
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(message("voxel", "1cm"), "[s] voxel: '1cm' is not a number");
+  EXPECT_EQ(message("voxel", "0,3"), "[s] voxel: '0,3' is not a number");
+  EXPECT_EQ(message("cap", "ten"), "[s] cap: 'ten' is not an integer");
+  EXPECT_EQ(message("cap", "2.5"), "[s] cap: '2.5' is not an integer");
+  EXPECT_EQ(message("cap", ""), "[s] cap: '' is not an integer");
+  EXPECT_EQ(message("enabled", "true  # comment"), "[s] enabled: 'true  # comment' is not true or false");
+  EXPECT_EQ(message("enabled", "maybe"), "[s] enabled: 'maybe' is not true or false");
+  EXPECT_EQ(message("cap", "5e3"), "[s] cap: must be in [1, 1000], got 5000");  // the range sees the value as typed
+
+  // What MRPT writes and people type still loads, a trailing "// comment" included (MRPT cuts it).
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.setContent("[s]\ncap = +1e2 // frames\nvoxel =  2.5e-3\nenabled = On\n");
+  Keys k;
+  loadKeys(cfg, "s", k.table());
+  EXPECT_EQ(k.cap, 100);
+  EXPECT_DOUBLE_EQ(k.voxel, 0.0025);
+  EXPECT_TRUE(k.enabled);
+  for (const char* off : {"false", "no", "off", "0", "FALSE"}) {
+    cfg.setContent(std::string("[s]\nenabled = ") + off + "\n");
+    k.enabled = true;
+    loadKeys(cfg, "s", k.table());
+    EXPECT_FALSE(k.enabled) << off;
+  }
 }

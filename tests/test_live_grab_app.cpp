@@ -123,6 +123,20 @@ TEST(GrabApp, UnknownKeyInOwnSectionIsReported) {
   EXPECT_NE(log.find("queue_capacty"), std::string::npos) << log;
 }
 
+// A bad reconstruction value fails before the recording is created (it used to fail once the live
+// session started, leaving grab.rawlog and grab_Images behind, so the same --out was refused next time).
+TEST(GrabApp, BadLiveValueFailsBeforeAnythingIsRecorded) {
+  const std::string dir = test::tempDir("grab_app_badvalue");
+  std::ofstream(dir + "/bad.ini") << "[kinfu]\nvoxel_size = 1cm\n";
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --config " + dir + "/bad.ini --replay " + test::tumFirst300() +
+                          " --out " + dir + "/out --live --no-gui",
+                      &log),
+            2);
+  EXPECT_NE(log.find(dir + "/bad.ini: [kinfu] voxel_size: '1cm' is not a number"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out")) << log;
+}
+
 TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);

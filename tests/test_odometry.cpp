@@ -145,6 +145,12 @@ TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + test::tempDir("odo-bad2") +
                           " --set motion.typo_key=3", &log), 2);
   EXPECT_NE(log.find("unknown key 'typo_key'"), std::string::npos) << log;
+  // Beside a --config file, what --set wrote is blamed on --set, not on the file.
+  const std::string dir = test::tempDir("odo-bad3");
+  std::ofstream(dir + "/ok.ini") << "[odometry]\nreferences = 2\n";
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + dir + "/out --config " + dir +
+                          "/ok.ini --set odometry.references=two", &log), 2);
+  EXPECT_EQ(log, "--set: [odometry] references: 'two' is not an integer\n");
 }
 
 TEST(OdometryParams, ShareIniHoldsEveryKeyWithTheDefaults) {

@@ -1,9 +1,12 @@
 #include "vofusion/core/config.h"
 
 #include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include "vofusion/core/errors.h"
@@ -115,26 +118,68 @@ static std::string rangeText(const ConfigKey& k) {
   return r.str();
 }
 
+namespace {
+// A value as the user typed it (MRPT has already cut a trailing "// comment"), or nullopt when absent.
+std::optional<std::string> valueText(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const char* key) {
+  if (!cfg.keyExists(section, key)) return std::nullopt;
+  return trimmed(cfg.read_string(section, key, ""));
+}
+
+// The whole text as a number, or nullopt. MRPT's own readers are atoi/atof, which take "1cm" as 1,
+// "0,3" as 0 and "true # on" as false without a word; a value is either all number or refused.
+std::optional<double> parseNumber(std::string text) {
+  if (!text.empty() && text[0] == '+') text.erase(0, 1);
+  double x = 0.0;
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, x);
+  if (text.empty() || ec != std::errc() || ptr != end) return std::nullopt;
+  return x;
+}
+
+// true / false as MRPT writes them, and the usual spellings of a switch.
+std::optional<bool> parseSwitch(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (text == "true" || text == "yes" || text == "on" || text == "1") return true;
+  if (text == "false" || text == "no" || text == "off" || text == "0") return false;
+  return std::nullopt;
+}
+
+std::string keyName(const std::string& section, const char* key) { return "[" + section + "] " + key; }
+}  // namespace
+
+double readNumber(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const char* key, double fallback,
+                  bool integer) {
+  const auto text = valueText(cfg, section, key);
+  if (!text) return fallback;
+  const auto x = parseNumber(*text);
+  if (!x || (integer && std::isfinite(*x) && std::floor(*x) != *x))
+    throw InputError(keyName(section, key), "'" + *text + "' is not " + (integer ? "an integer" : "a number"));
+  return *x;
+}
+
 void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
   for (const ConfigKey& k : keys)
     std::visit(
         [&](auto* v) {
           using T = std::remove_pointer_t<decltype(v)>;
-          if constexpr (std::is_same_v<T, int>) *v = cfg.read_int(section, k.name, *v);
-          else if constexpr (std::is_same_v<T, float>) *v = cfg.read_float(section, k.name, *v);
-          else if constexpr (std::is_same_v<T, double>) *v = cfg.read_double(section, k.name, *v);
-          else if constexpr (std::is_same_v<T, bool>) *v = cfg.read_bool(section, k.name, *v);
-          else {
+          if constexpr (std::is_same_v<T, bool>) {
+            const auto text = valueText(cfg, section, k.name);
+            if (!text) return;
+            const auto on = parseSwitch(*text);
+            if (!on) throw InputError(keyName(section, k.name), "'" + *text + "' is not true or false");
+            *v = *on;
+          } else if constexpr (std::is_same_v<T, std::string>) {
             *v = cfg.read_string(section, k.name, *v);
             if (!k.choices.empty()) checkChoice(section, k.name, *v, k.choices);
-          }
-          if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
-            const double x = double(*v);
+          } else {
+            // The range is checked on the value as typed, before it is narrowed to the key's type.
+            const double x = readNumber(cfg, section, k.name, double(*v), std::is_same_v<T, int>);
             if (!std::isnan(k.lo) && !(x >= k.lo && x <= k.hi)) {
               std::ostringstream got;
               got << x;
-              throw InputError("[" + section + "] " + k.name, "must be in " + rangeText(k) + ", got " + got.str());
+              throw InputError(keyName(section, k.name), "must be in " + rangeText(k) + ", got " + got.str());
             }
+            *v = static_cast<T>(x);
           }
         },
         k.value);

@@ -33,6 +33,12 @@ std::vector<ConfigSection> reconstructionConfigSections() {
   return {{"odometry", &defaultOdometry()}, {"kinfu", &defaultKinFu()}, {"loop", &defaultLoop()}};
 }
 
+void checkReconstructionValues(const mrpt::config::CConfigFileBase& cfg) {
+  OdometryParams().loadFromConfigFile(cfg, "odometry");
+  KinFuParams().loadFromConfigFile(cfg, "kinfu");
+  loop::LoopParams().loadFromConfigFile(cfg, "loop");
+}
+
 struct Reconstruction::Impl {
   TrackingMode mode;
   OdometryParams odo_params;

@@ -11,6 +11,8 @@
 #include <mrpt/config/CConfigFileMemory.h>
 #include <mrpt/config/CLoadableOptions.h>
 
+#include "vofusion/core/errors.h"
+
 namespace vofusion {
 
 // One stage's parameters and the section they live in.
@@ -51,10 +53,29 @@ struct ConfigKey {
     return k;
   }
 };
+// Runs load(), which reads a configuration whose text came from origin (a file, "--set"): a bad
+// value's InputError("[s] key", ...) comes out as InputError(origin, "[s] key: ..."). With an empty
+// origin (the defaults alone) the error is left as it is.
+template <class Load>
+void loadNamingOrigin(const std::string& origin, Load&& load) {
+  try {
+    load();
+  } catch (const InputError& e) {
+    if (origin.empty()) throw;
+    throw InputError(origin, e.what());
+  }
+}
+
 // Throws InputError("[section] key", "must be one of a | b, got 'x'") unless value is one of choices.
 void checkChoice(const std::string& section, const char* key, const std::string& value,
                  const std::vector<std::string>& choices);
+// Loads each key that cfg has; a value that is not wholly a number (int keys: an integer; bool keys: true
+// / false, yes / no, on / off, 1 / 0) or is out of range throws InputError("[section] key", ...).
 void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
+// One numeric value read as loadKeys reads it (fallback when the key is absent), for a stage without a
+// key table; throws InputError("[section] key", "'1cm' is not a number") (or "not an integer").
+double readNumber(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const char* key, double fallback,
+                  bool integer = false);
 void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
 
 }  // namespace vofusion

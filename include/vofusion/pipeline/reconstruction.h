@@ -52,6 +52,9 @@ struct ColourTimeStats {
 // The sections every stage reads ([odometry...], [kinfu], [loop]), with the stages' defaults: for
 // checkConfigKeys() and dumpConfig().
 std::vector<ConfigSection> reconstructionConfigSections();
+// Reads those sections of cfg as a Reconstruction would, so that a bad value fails before any output
+// is made: InputError("[section] key", ...).
+void checkReconstructionValues(const mrpt::config::CConfigFileBase& cfg);
 
 class Reconstruction {
  public:
