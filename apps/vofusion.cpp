@@ -12,6 +12,7 @@
 #include <iostream>
 #include <optional>
 
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
@@ -129,6 +130,13 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   if (cl.flag("--raw-mesh")) plan.out_params.save_raw_mesh = true;
 }
 
+// --save-volume's file is written after the whole run: a path that cannot be one fails now.
+void checkMapPath(const std::string& path) {
+  if (std::filesystem::is_directory(path)) throw InputError(path, "is a folder (--save-volume wants a file's path)");
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  ensureWritableDirectory(parent.empty() ? "." : parent.string());
+}
+
 RunPlan planRun(const CommandLine& cl) {
   if (cl.positional().size() > 1) throw InputError("usage", "more than one input given");
   const auto out_dir = cl.value("--out");
@@ -145,6 +153,7 @@ RunPlan planRun(const CommandLine& cl) {
   plan.resume = cl.value("--resume");
   plan.strict = cl.flag("--strict");
   plan.save_volume = cl.value("--save-volume");
+  if (plan.save_volume) checkMapPath(*plan.save_volume);
   plan.checkpoint_every = cl.number("--checkpoint-every", 0.0, -1e-9, 1e6);
   plan.checkpoint_path = (std::filesystem::path(plan.out_dir) / "checkpoint").string();
   plan.origin = runOrigin(plan, cl);

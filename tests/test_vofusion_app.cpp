@@ -133,6 +133,20 @@ TEST(VofusionApp, UnknownConfigKeyFailsInOneLineAndKeepsEarlierResults) {
   EXPECT_EQ(line, "earlier result");
 }
 
+// --save-volume's file is written after the run: a path that cannot be a file fails before the first
+// frame, in one line (it used to fail at the end and take trajectory.txt, the mesh and summary.json with it).
+TEST(VofusionApp, SaveVolumeToAFolderFailsBeforeTheRun) {
+  const std::string dir = test::tempDir("vofusion_app_savevolume");
+  fs::create_directories(dir + "/a_folder");
+  std::string log;
+  const int rc = test::run("{ " + test::app("vofusion") + " synthetic:room --max-frames 3 --out " + dir +
+                               "/out --save-volume " + dir + "/a_folder 2>&1 >/dev/null; }",
+                           &log);
+  EXPECT_EQ(rc, 2);
+  EXPECT_EQ(log, "vofusion: error: " + dir + "/a_folder: is a folder (--save-volume wants a file's path)\n");
+  EXPECT_FALSE(fs::exists(dir + "/out/summary.json"));
+}
+
 TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);

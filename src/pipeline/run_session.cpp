@@ -2,6 +2,7 @@
 
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -216,8 +217,18 @@ nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std:
   rec_.finish();
   if (premesher_) premesher_->stop();  // before the map is fused again or released
   if (write_mesh_ || save_volume) refuse(info, reopen);  // the map is not used otherwise
-  if (save_volume) rec_.saveVolume(*save_volume);
-  return recorder_.finish(rec_, info, stderr, premesher_.get());
+  // A map that cannot be written costs the map, not the run's other outputs: its error comes after them.
+  std::exception_ptr map_failed;
+  if (save_volume) {
+    try {
+      rec_.saveVolume(*save_volume);
+    } catch (const std::exception&) {
+      map_failed = std::current_exception();
+    }
+  }
+  nlohmann::json summary = recorder_.finish(rec_, info, stderr, premesher_.get());
+  if (map_failed) std::rethrow_exception(map_failed);
+  return summary;
 }
 
 }  // namespace vofusion
