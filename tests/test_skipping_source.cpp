@@ -102,3 +102,60 @@ TEST(SkippingSource, MoreThanOneFrameInFiveDamagedStopsTheRun) {
     EXPECT_NE(std::string(e.what()).find("3 of 10 frames are damaged"), std::string::npos) << e.what();
   }
 }
+
+namespace {
+// n frames from `first_good` on readable, those before it all damaged the same way; `odd` frames after
+// it damaged too.
+class BadStart : public IndexedFrameSource {
+ public:
+  BadStart(std::size_t n, std::size_t first_good, bool odd = false) : n_(n), first_good_(first_good), odd_(odd) {}
+  Frame read(std::size_t i) const override {
+    if (i < first_good_ || (odd_ && i % 2 == 1))
+      throw InputError("depth/" + std::to_string(i) + ".png", "depth image must be 16-bit single channel");
+    Frame f;
+    f.index = i;
+    return f;
+  }
+  std::size_t size() const override { return n_; }
+  std::string name() const override { return "recording"; }
+
+ private:
+  std::size_t n_, first_good_;
+  bool odd_;
+};
+}  // namespace
+
+// A problem every frame has (8-bit depth PNGs, say) is one line naming the first file, not one line per
+// frame until a fifth of a long recording is gone.
+TEST(SkippingSource, TheSameProblemOnEveryFirstFrameIsOneLine) {
+  std::vector<std::string> lines;
+  SkippingSource src(std::make_unique<BadStart>(2000, 2000), false, [&](const std::string& l) { lines.push_back(l); });
+  try {
+    indicesRead(src);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "depth/0.png: depth image must be 16-bit single channel, and so is every one of the first 10 "
+                           "frames: the recording needs looking at");
+  }
+  EXPECT_TRUE(lines.empty());
+  // A few damaged frames before the first good one are listed once it is read, as any others.
+  lines.clear();
+  SkippingSource late(std::make_unique<BadStart>(2000, 2), false, [&](const std::string& l) { lines.push_back(l); });
+  Frame f;
+  ASSERT_TRUE(late.next(f));
+  EXPECT_EQ(f.index, 2u);
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_EQ(lines[0], "depth/0.png: depth image must be 16-bit single channel (frame 0 skipped)");
+}
+
+// A problem met on many frames is listed for the first few, then one line says the rest are not.
+TEST(SkippingSource, AProblemOnManyFramesIsListedAFewTimes) {
+  std::vector<std::string> lines;
+  SkippingSource src(std::make_unique<BadStart>(1000, 0, true), false, [&](const std::string& l) { lines.push_back(l); });
+  Frame f;
+  for (int i = 0; i < 30; ++i) ASSERT_TRUE(src.next(f));  // frames 0, 2, .., 58 read; 1, 3, .., 57 skipped
+  EXPECT_EQ(src.skipped().size(), 29u);
+  ASSERT_EQ(lines.size(), SkippingSource::kLinesPerProblem);
+  EXPECT_EQ(lines.back(), "depth/5.png: depth image must be 16-bit single channel (frame 5 skipped); later frames with "
+                          "this problem are not listed (a finished run's summary.json lists them all)");
+}

@@ -11,12 +11,38 @@ void SkippingSource::skip(const DamagedFrame& e) {
   if (strict_) throw InputError(e.file(), e.problem());
   skipped_.push_back({met_, e.file(), e.problem()});
   ++met_;
-  if (warn_) warn_(std::string(e.what()) + " (frame " + std::to_string(skipped_.back().position) + " skipped)");
+  const std::string line = std::string(e.what()) + " (frame " + std::to_string(skipped_.back().position) + " skipped)";
+  if (read_ > 0) {
+    warn(e.problem(), line);
+  } else {
+    // Nothing read yet: the same problem on every frame so far is the recording's, said once.
+    const bool all_alike = std::all_of(skipped_.begin(), skipped_.end(), [&](const SkippedFrame& s) { return s.problem == e.problem(); });
+    if (all_alike && skipped_.size() >= kLeadingDamaged)
+      throw InputError(skipped_.front().file, e.problem() + ", and so is every one of the first " + std::to_string(skipped_.size()) +
+                                                  " frames: the recording needs looking at");
+    held_.emplace_back(e.problem(), line);
+  }
   const std::size_t of = std::max(inner_->size(), met_);
-  if ((inner_->size() > 0 || met_ >= 10) && double(skipped_.size()) > kMaxDamagedShare * double(of))
+  if ((inner_->size() > 0 || met_ >= 10) && double(skipped_.size()) > kMaxDamagedShare * double(of)) {
+    releaseHeld();
     throw InputError(inner_->name(), std::to_string(skipped_.size()) + " of " + std::to_string(of) +
                                          " frames are damaged (more than one in five): the recording needs looking at; "
-                                         "the lines above name the files");
+                                         "the lines above name the first of them");
+  }
+}
+
+// A problem's first kLinesPerProblem frames are listed, then one line says the rest are not.
+void SkippingSource::warn(const std::string& problem, const std::string& line) {
+  if (!warn_) return;
+  const std::size_t n = ++warned_[problem];
+  if (n < kLinesPerProblem) warn_(line);
+  else if (n == kLinesPerProblem)
+    warn_(line + "; later frames with this problem are not listed (a finished run's summary.json lists them all)");
+}
+
+void SkippingSource::releaseHeld() {
+  for (const auto& [problem, line] : held_) warn(problem, line);
+  held_.clear();
 }
 
 bool SkippingSource::next(Frame& frame) {
@@ -25,6 +51,8 @@ bool SkippingSource::next(Frame& frame) {
     try {
       if (inner_->next(frame)) {
         ++met_;
+        ++read_;
+        releaseHeld();
         return true;
       }
       break;
@@ -32,11 +60,13 @@ bool SkippingSource::next(Frame& frame) {
       skip(e);
     } catch (const RecordingCutShort& e) {
       if (strict_) throw InputError(e.file(), e.problem());
+      releaseHeld();
       cut_short_ = e.problem();
       if (warn_) warn_(std::string(e.what()) + " (the " + std::to_string(met_) + " frames before it are read)");
       break;
     }
   }
+  releaseHeld();
   ended_ = true;
   return false;
 }
@@ -45,7 +75,9 @@ void SkippingSource::rewind() {
   inner_->rewind();
   skipped_.clear();
   cut_short_.clear();
-  met_ = 0;
+  met_ = read_ = 0;
+  held_.clear();
+  warned_.clear();
   ended_ = false;
 }
 

@@ -3,12 +3,15 @@
 // read (DamagedFrame), each reported once; a recording cut short is read to its last whole frame.
 // The tracker sees the gap as a longer step between two frames. Strict mode stops at the first
 // damage instead, and more than one damaged frame in five stops the run: such a recording needs
-// looking at, not a reconstruction.
+// looking at, not a reconstruction. So does the same problem on each of the first kLeadingDamaged frames
+// (a wrong depth format, say), in one line, and a problem met on many frames is listed for the first
+// kLinesPerProblem of them only.
 //
 //   SkippingSource src(openFrameSource(path, opts), strict, [](const std::string& line) { warn(line); });
 //   while (src.next(frame)) ...;
 //   for (const SkippedFrame& s : src.skipped()) ...;   // summary.json "skipped_frames"
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -28,9 +31,14 @@ class SkippingSource : public FrameSource {
   // More damaged frames than this share of the recording (of the frames met so far when its length is
   // unknown, from 10 on) stop the run.
   static constexpr double kMaxDamagedShare = 0.2;
+  // Before any frame is read: this many damaged frames, all with the same problem, stop the run.
+  static constexpr std::size_t kLeadingDamaged = 10;
+  // Lines per problem (the last says that later frames with it are not listed).
+  static constexpr std::size_t kLinesPerProblem = 3;
 
-  // warn: one line for each frame skipped ("<file>: <problem> (frame N skipped)") and for a recording
-  // cut short; null: silent (a second reading of the same recording).
+  // warn: one line for each frame skipped ("<file>: <problem> (frame N skipped)", up to kLinesPerProblem
+  // per problem; those before the first frame read are held until it is) and for a recording cut short;
+  // null: silent (a second reading of the same recording).
   SkippingSource(std::unique_ptr<FrameSource> inner, bool strict, std::function<void(const std::string&)> warn = nullptr);
 
   bool next(Frame& frame) override;
@@ -44,12 +52,17 @@ class SkippingSource : public FrameSource {
 
  private:
   void skip(const DamagedFrame& e);
+  void warn(const std::string& problem, const std::string& line);
+  void releaseHeld();  // the lines held while no frame was read
   std::unique_ptr<FrameSource> inner_;
   bool strict_;
   std::function<void(const std::string&)> warn_;
   std::vector<SkippedFrame> skipped_;
   std::string cut_short_;
   std::size_t met_ = 0;  // frames read or skipped
+  std::size_t read_ = 0;
+  std::vector<std::pair<std::string, std::string>> held_;  // (problem, line) met before the first frame read
+  std::map<std::string, std::size_t> warned_;              // frames skipped so far, by problem
   bool ended_ = false;
 };
 
