@@ -78,6 +78,24 @@ TEST(CameraFiles, CameraYamlAsOpenCvWritesIt) {
   EXPECT_NE(errorOf(dir).find("camera.yaml: camera_matrix must be a 3x3 matrix"), std::string::npos) << errorOf(dir);
 }
 
+// ROS's camera_info YAML (camera_calibration writes it: no %YAML line, matrices as rows, cols, data) is
+// read as it is; a matrix OpenCV cannot read is one line naming the file, not OpenCV's assertion.
+TEST(CameraFiles, CameraYamlAsRosWritesIt) {
+  const std::string dir = oneFrameFolder(test::tempDir("cam_ros") + "/seq", 320, 240, 1200);
+  std::ofstream(dir + "/camera.yaml") << "image_width: 320\nimage_height: 240\ncamera_name: xtion\n"
+                                         "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [310, 0, 158, 0, 309, 121, 0, 0, 1]\n"
+                                         "distortion_model: plumb_bob\n"
+                                         "distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [0.01, 0.02, 0, 0, 0]\n";
+  TumFolderSource src(dir, {});
+  EXPECT_DOUBLE_EQ(src.camera().fx, 310);
+  EXPECT_DOUBLE_EQ(src.camera().fy, 309);
+  EXPECT_DOUBLE_EQ(src.camera().cy, 121);
+  EXPECT_DOUBLE_EQ(src.camera().dist[1], 0.02);
+  std::ofstream(dir + "/camera.yaml") << "%YAML:1.0\ncamera_matrix: [310, 0, 158, 0, 309, 121, 0, 0, 1]\n";
+  EXPECT_EQ(errorOf(dir), dir + "/camera.yaml: camera_matrix must be a matrix (OpenCV's rows, cols, dt, data or ROS's rows, "
+                                "cols, data)");
+}
+
 // Without a camera file, only a 640x480 recording gets a guess, and the guess is said; another size
 // is an error that says what to do.
 TEST(CameraFiles, GuessOnlyFor640x480AndAnnounced) {

@@ -107,9 +107,11 @@ double CommandLine::number(const std::string& name, double fallback, double abov
 bool CommandLine::flag(const std::string& name) const { return flags_.count(name) > 0; }
 
 namespace {
+// One line whatever threw (OpenCV's and MRPT's messages span several).
 void report(const char* app_name, const std::exception& e) {
-  if (app_name) std::fprintf(stderr, "%s: error: %s\n", app_name, e.what());
-  else std::fprintf(stderr, "%s\n", e.what());
+  const std::string line = oneLineMessage(e);
+  if (app_name) std::fprintf(stderr, "%s: error: %s\n", app_name, line.c_str());
+  else std::fprintf(stderr, "%s\n", line.c_str());
 }
 }  // namespace
 

@@ -158,26 +158,52 @@ CameraFile readIntrinsicsFile(const std::string& path) {
   return f;
 }
 
+namespace {
+// A matrix of the YAML file as doubles, one row: OpenCV's (!!opencv-matrix: rows, cols, dt, data) or
+// ROS camera_info's (rows, cols, data, as camera_calibration writes it); empty when the key is absent.
+cv::Mat yamlMatrix(const cv::FileNode& node, const std::string& path, const std::string& key) {
+  if (node.empty()) return {};
+  const std::string expected = key + " must be a matrix (OpenCV's rows, cols, dt, data or ROS's rows, cols, data)";
+  std::vector<double> values;
+  try {
+    if (node.isMap() && node["dt"].empty() && node["data"].isSeq()) {
+      node["data"] >> values;
+    } else {
+      cv::Mat m, row;
+      node >> m;
+      if (!m.empty()) m.reshape(1, 1).convertTo(row, CV_64F);
+      values.assign(row.begin<double>(), row.end<double>());
+    }
+  } catch (const cv::Exception&) {
+    throw InputError(path, expected);
+  }
+  if (values.empty()) throw InputError(path, expected);
+  return cv::Mat(values, true).reshape(1, 1);
+}
+}  // namespace
+
 CameraFile readCameraYaml(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream text;
+  if (!(in && text << in.rdbuf())) throw InputError(path, "cannot read");
+  // OpenCV reads YAML only after its "%YAML:1.0" line, which ROS's files do not have.
+  std::string yaml = text.str();
+  if (yaml.rfind("%YAML", 0) != 0) yaml = "%YAML:1.0\n---\n" + yaml;
   cv::FileStorage fsr;
   try {
-    if (!fsr.open(path, cv::FileStorage::READ | cv::FileStorage::FORMAT_YAML)) throw InputError(path, "cannot read");
+    if (!fsr.open(yaml, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML))
+      throw InputError(path, "cannot read");
   } catch (const cv::Exception&) {
     throw InputError(path, "not an OpenCV YAML file (camera_matrix, distortion_coefficients, image_width, ...)");
   }
-  cv::Mat K, d;
-  fsr["camera_matrix"] >> K;
-  if (K.rows != 3 || K.cols != 3) throw InputError(path, "camera_matrix must be a 3x3 matrix");
-  K.convertTo(K, CV_64F);
+  const cv::Mat K = yamlMatrix(fsr["camera_matrix"], path, "camera_matrix"),
+                d = yamlMatrix(fsr["distortion_coefficients"], path, "distortion_coefficients");
+  if (K.rows * K.cols != 9) throw InputError(path, "camera_matrix must be a 3x3 matrix");
   CameraFile f;
-  f.camera.fx = K.at<double>(0, 0); f.camera.fy = K.at<double>(1, 1);
-  f.camera.cx = K.at<double>(0, 2); f.camera.cy = K.at<double>(1, 2);
+  f.camera.fx = K.at<double>(0); f.camera.fy = K.at<double>(4);
+  f.camera.cx = K.at<double>(2); f.camera.cy = K.at<double>(5);
   f.camera.dist = {};
-  fsr["distortion_coefficients"] >> d;
-  if (!d.empty()) {
-    d.convertTo(d, CV_64F);
-    for (int i = 0; i < std::min<int>(5, int(d.total())); ++i) f.camera.dist[i] = d.at<double>(i);
-  }
+  for (int i = 0; i < std::min<int>(5, int(d.total())); ++i) f.camera.dist[i] = d.at<double>(i);
   if (!fsr["image_width"].empty() && !fsr["image_height"].empty()) {
     f.camera.width = int(fsr["image_width"]);
     f.camera.height = int(fsr["image_height"]);
