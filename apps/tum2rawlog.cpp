@@ -1,14 +1,16 @@
 // tum2rawlog <tum_dir> <out.rawlog> [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy] [--max-frames N]
-//            [--format obs|sf] [--embed-images] [--range-units 2e-4|1e-3]
+//            [--format obs|sf] [--embed-images] [--range-units 2e-4|1e-3] [--strict]
 // One CObservation3DRangeScan per associated colour/depth pair; images in "<out>_Images"; ground truth
 // as CObservationRobotPose "GROUND_TRUTH" per frame plus "<out>.groundtruth.txt" (the full TUM file).
 #include <iostream>
+#include <memory>
 #include <string>
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/io/skipping_source.h"
 #include "vofusion/io/tum_source.h"
 
 using namespace vofusion;
@@ -16,17 +18,18 @@ using namespace vofusion;
 namespace {
 const char* kUsage =
     "usage: tum2rawlog <tum_dir> <out.rawlog> [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy] [--max-frames N]\n"
-    "                  [--depth-scale S] [--format obs|sf] [--embed-images] [--range-units U]\n"
+    "                  [--depth-scale S] [--format obs|sf] [--embed-images] [--range-units U] [--strict]\n"
     "  --intrinsics   camera preset or values (default: from the folder name freiburg1/2/3)\n"
     "  --max-frames   convert only the first N associated frames\n"
     "  --depth-scale  depth PNG units per metre (default: intrinsics.txt / camera.yaml, else 5000 as TUM)\n"
     "  --format       obs: observations only (default); sf: action/sensory-frame pairs\n"
     "  --embed-images keep images inside the rawlog instead of <out>_Images/\n"
-    "  --range-units  metres per range unit (default 2e-4 = TUM's 1/5000, lossless)\n";
+    "  --range-units  metres per range unit (default 2e-4 = TUM's 1/5000, lossless)\n"
+    "  --strict       stop at the first damaged frame (default: skip it, say so, convert the rest)\n";
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--intrinsics", "--max-frames", "--format", "--range-units", "--depth-scale"},
-                       {"--embed-images", "--help"});
+                       {"--embed-images", "--strict", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
     return 0;
@@ -46,18 +49,22 @@ int body(int argc, char** argv) {
   if (pos.size() != 2) throw InputError("usage", "expected <tum_dir> <out.rawlog> (see --help)");
 
   if (so.intrinsics) CameraIntrinsics::parse(*so.intrinsics);  // before touching anything
-  TumFolderSource src(pos[0], so);  // validates the lists before any output exists
+  auto tum = std::make_unique<TumFolderSource>(pos[0], so);  // validates the lists before any output exists
+  const Trajectory ground_truth = tum->groundTruth();
+  // A damaged frame costs that frame, as in vofusion (io/skipping_source.h).
+  SkippingSource src(std::move(tum), cl.flag("--strict"), printWarning);
   RawlogWriter out(pos[1], wo);
-  if (!src.groundTruth().empty()) out.writeGroundTruth(src.groundTruth());
+  if (!ground_truth.empty()) out.writeGroundTruth(ground_truth);
   Progress progress("tum2rawlog", src.size());
   Frame f;
   std::size_t n = 0;
   while (src.next(f)) {
     out.write(f);
-    progress.update(++n);
+    progress.update(++n + src.skipped().size());
   }
   out.commit();
-  progress.finish("-> " + pos[1]);
+  const std::size_t skipped = src.skipped().size();
+  progress.finish("-> " + pos[1] + (skipped ? " (" + std::to_string(skipped) + " damaged frames skipped)" : ""));
   return 0;
 }
 

@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <Eigen/Dense>
 // The I/O apps end to end: rgbd-simulate, tum2rawlog (round trip on real data), rgbd-eval, bad input.
 #include <filesystem>
@@ -136,6 +137,25 @@ TEST(AppsIo, Tum2RawlogMaxFramesIntrinsicsAndSfFormat) {
   EXPECT_DOUBLE_EQ(f.camera.fy, 261.0);
 }
 
+// A damaged frame costs that frame, as in vofusion: tum2rawlog skips it and says so; --strict stops.
+TEST(AppsIo, Tum2RawlogSkipsADamagedFrame) {
+  const std::string dir = test::tempDir("apps_t2r_damaged");
+  std::string out;
+  ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/seq --frames 10 --size 160x120", &out), 0) << out;
+  std::vector<fs::path> depth;
+  for (const auto& e : fs::directory_iterator(dir + "/seq/depth")) depth.push_back(e.path());
+  std::sort(depth.begin(), depth.end());
+  ASSERT_EQ(depth.size(), 10u);
+  std::ofstream(depth[3], std::ios::trunc) << "not a png";
+  ASSERT_EQ(run(app("tum2rawlog") + " " + dir + "/seq " + dir + "/o.rawlog", &out), 0) << out;
+  EXPECT_NE(out.find("warning: " + depth[3].string() + ": "), std::string::npos) << out;
+  EXPECT_NE(out.find("(frame 3 skipped)"), std::string::npos) << out;
+  EXPECT_NE(out.find("(1 damaged frames skipped)"), std::string::npos) << out;
+  EXPECT_EQ(RawlogSource(dir + "/o.rawlog", {}).size(), 9u);
+  EXPECT_EQ(run(app("tum2rawlog") + " " + dir + "/seq " + dir + "/strict.rawlog --strict", &out), 2) << out;
+  EXPECT_FALSE(fs::exists(dir + "/strict.rawlog"));
+}
+
 TEST(AppsIo, EvalGroundTruthAgainstItselfIsZero) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);
@@ -187,7 +207,8 @@ TEST(AppsIoBadInput, MissingCorruptWrongSizeAndDepthPng) {
   const auto list = readTumList(tum + "/depth.txt");
   const auto rgb = readTumList(tum + "/rgb.txt");
   const std::string outdir = test::tempDir("bad_png_out");
-  const std::string cmd = app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog";
+  // --strict: each damage stops the conversion (by default it skips the frame: Tum2RawlogSkipsADamagedFrame).
+  const std::string cmd = app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog --strict";
   // Missing depth PNG (the third frame: output was already being written when it fails).
   const std::string d2 = tum + "/" + list[2].file;
   fs::rename(d2, d2 + ".bak");
