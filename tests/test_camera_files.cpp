@@ -96,6 +96,22 @@ TEST(CameraFiles, CameraYamlAsRosWritesIt) {
                                 "cols, data)");
 }
 
+// The image size is the first readable colour image's: a missing first one costs its frame, not the
+// run (it used to make the size 640x480, so a 320x240 camera file was refused as for other images).
+TEST(CameraFiles, AMissingFirstColourImageDoesNotDecideTheSize) {
+  const std::string dir = oneFrameFolder(test::tempDir("cam_first") + "/seq", 320, 240, 1200);
+  cv::imwrite(dir + "/rgb/0.033333.png", cv::Mat(240, 320, CV_8UC3, cv::Scalar(90, 120, 150)));
+  cv::imwrite(dir + "/depth/0.033333.png", cv::Mat(240, 320, CV_16UC1, cv::Scalar(1200)));
+  std::ofstream(dir + "/rgb.txt") << "0.000000 rgb/0.000000.png\n0.033333 rgb/0.033333.png\n";
+  std::ofstream(dir + "/depth.txt") << "0.000000 depth/0.000000.png\n0.033333 depth/0.033333.png\n";
+  std::ofstream(dir + "/intrinsics.txt") << "300 300 160 120\nsize 320 240\n";
+  fs::remove(dir + "/rgb/0.000000.png");
+  TumFolderSource src(dir, {});
+  EXPECT_EQ(src.camera().width, 320);
+  EXPECT_THROW(src.read(0), InputError);
+  EXPECT_EQ(src.read(1).rgb.cols, 320);
+}
+
 // Without a camera file, only a 640x480 recording gets a guess, and the guess is said; another size
 // is an error that says what to do.
 TEST(CameraFiles, GuessOnlyFor640x480AndAnnounced) {

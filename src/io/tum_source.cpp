@@ -234,6 +234,22 @@ double medianRaw(const cv::Mat& raw) {
 
 }  // namespace
 
+namespace {
+// The image size comes from the data itself: the first colour image of the first frames that can be
+// read sets it for the whole sequence (a missing or damaged one is its own frame's problem, said when
+// that frame is read); 640x480 when none can.
+cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssociation>& pairs) {
+  constexpr std::size_t kFramesTried = 30;
+  for (std::size_t i = 0; i < std::min(pairs.size(), kFramesTried); ++i) {
+    const std::string path = (fs::path(folder) / pairs[i].rgb.file).string();
+    if (!fs::is_regular_file(path) || isTruncatedPng(path)) continue;
+    const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
+    if (!image.empty()) return image.size();
+  }
+  return {640, 480};
+}
+}  // namespace
+
 TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
   if (!fs::is_directory(folder)) throw InputError(folder, "no such folder");
   const std::string rgb_list = (fs::path(folder) / "rgb.txt").string();
@@ -255,10 +271,8 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   std::string origin = folder;
   if (fs::exists(txt)) file = readIntrinsicsFile(txt), origin = txt;
   else if (fs::exists(yaml)) file = readCameraYaml(yaml), origin = yaml;
-  // Image size comes from the data itself; the first colour frame sets it for the whole sequence.
-  const std::string first_path = (fs::path(folder) / pairs_[0].rgb.file).string();
-  const cv::Mat first = isTruncatedPng(first_path) ? cv::Mat() : cv::imread(first_path, cv::IMREAD_COLOR);
-  const int width = first.empty() ? 640 : first.cols, height = first.empty() ? 480 : first.rows;
+  const cv::Size image = colourImageSize(folder, pairs_);
+  const int width = image.width, height = image.height;
   const std::string size = std::to_string(width) + "x" + std::to_string(height);
   if (opts.intrinsics) {
     camera_ = CameraIntrinsics::parse(*opts.intrinsics);
