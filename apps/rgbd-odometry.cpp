@@ -162,7 +162,8 @@ int body(int argc, char** argv) {
   so.max_frames = args.max_frames;
   if (cl.value("--depth-scale")) so.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   // A damaged frame costs that frame (io/skipping_source.h), unless --strict.
-  SkippingSource source(openFrameSource(args.input, so), cl.flag("--strict"), printWarning);
+  so.strict = cl.flag("--strict");
+  SkippingSource source(openFrameSource(args.input, so), so.strict, printWarning);
   ensureWritableDirectory(args.out);
   const std::string traj_path = (std::filesystem::path(args.out) / "trajectory.txt").string();
   std::unique_ptr<RawlogWriter> writer;

@@ -48,11 +48,12 @@ int body(int argc, char** argv) {
   const auto& pos = cl.positional();
   if (pos.size() != 2) throw InputError("usage", "expected <tum_dir> <out.rawlog> (see --help)");
 
+  so.strict = cl.flag("--strict");
   if (so.intrinsics) CameraIntrinsics::parse(*so.intrinsics);  // before touching anything
   auto tum = std::make_unique<TumFolderSource>(pos[0], so);  // validates the lists before any output exists
   const Trajectory ground_truth = tum->groundTruth();
   // A damaged frame costs that frame, as in vofusion (io/skipping_source.h).
-  SkippingSource src(std::move(tum), cl.flag("--strict"), printWarning);
+  SkippingSource src(std::move(tum), so.strict, printWarning);
   RawlogWriter out(pos[1], wo);
   if (!ground_truth.empty()) out.writeGroundTruth(ground_truth);
   Progress progress("tum2rawlog", src.size());

@@ -39,8 +39,9 @@ const char* kUsage =
     "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
     "                [--depth-scale S] [--no-loop-closure] [--strict] [--raw-mesh] [--dump-config]\n"
     "                [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]\n"
-    "  --strict       stop at the first damaged frame (missing or corrupt image, unreadable record) or at a\n"
-    "                 recording cut short; by default such a frame is skipped with one line naming its file,\n"
+    "  --strict       stop at the first damaged frame (missing or corrupt image, unreadable record), at a\n"
+    "                 recording cut short or at a damaged ground truth; by default such a frame is skipped\n"
+    "                 with one line naming its file (a damaged ground truth costs the evaluation),\n"
     "                 counted in summary.json (frames_skipped), and the run goes on\n"
     "  --depth-scale  TUM-layout folders: depth PNG units per metre (default: the folder's intrinsics.txt /\n"
     "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n"
@@ -151,7 +152,7 @@ RunPlan planRun(const CommandLine& cl) {
   if (cl.value("--depth-scale")) plan.src_opts.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   plan.input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
   plan.resume = cl.value("--resume");
-  plan.strict = cl.flag("--strict");
+  plan.strict = plan.src_opts.strict = cl.flag("--strict");
   plan.save_volume = cl.value("--save-volume");
   if (plan.save_volume) checkMapPath(*plan.save_volume);
   plan.checkpoint_every = cl.number("--checkpoint-every", 0.0, -1e-9, 1e6);

@@ -112,6 +112,22 @@ TEST(CameraFiles, AMissingFirstColourImageDoesNotDecideTheSize) {
   EXPECT_EQ(src.read(1).rgb.cols, 320);
 }
 
+// A damaged groundtruth.txt costs the evaluation, in one line naming it, not the run; --strict stops.
+TEST(CameraFiles, ADamagedGroundTruthCostsTheEvaluation) {
+  const std::string dir = oneFrameFolder(test::tempDir("cam_gt") + "/seq", 640, 480, 1200);
+  std::ofstream(dir + "/groundtruth.txt") << "0.2 1 0 0 0 0 0 1\n0.1 1 0 0 0 0 0 1\n";
+  SourceOptions so;
+  so.intrinsics = "fr1";
+  testing::internal::CaptureStderr();
+  TumFolderSource src(dir, so);
+  const std::string log = testing::internal::GetCapturedStderr();
+  EXPECT_TRUE(src.groundTruth().empty());
+  EXPECT_NE(log.find(dir + "/groundtruth.txt: "), std::string::npos) << log;
+  EXPECT_NE(log.find("(the run is not evaluated against it)"), std::string::npos) << log;
+  so.strict = true;
+  EXPECT_NE(errorOf(dir, so).find(dir + "/groundtruth.txt: "), std::string::npos);
+}
+
 // Without a camera file, only a 640x480 recording gets a guess, and the guess is said; another size
 // is an error that says what to do.
 TEST(CameraFiles, GuessOnlyFor640x480AndAnnounced) {

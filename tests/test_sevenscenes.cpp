@@ -99,21 +99,38 @@ TEST(SevenScenes, IntrinsicsOverrideMaxFramesAndUnknownPose) {
   EXPECT_FALSE(f.groundTruth.has_value());
 }
 
-TEST(SevenScenes, BadPoseFileNamesTheFile) {
+// A damaged pose file costs that frame's evaluation, in one line naming the file, not the run.
+TEST(SevenScenes, BadPoseFileNamesTheFileAndCostsItsFrame) {
   const std::string dir = test::tempDir("sevenscenes_badpose");
-  writeFrame(dir, 0, poseOf(0));
+  for (int n = 0; n < 3; ++n) writeFrame(dir, n, poseOf(n));
   { std::ofstream(stem(dir, 0) + ".pose.txt") << "1 0 0 0\n0 1 0 0\n0 0 1 0\n"; }
-  try {
-    SevenScenesSource src(dir, {});
-    FAIL() << "no error";
-  } catch (const InputError& e) {
-    EXPECT_EQ(e.file(), stem(dir, 0) + ".pose.txt");
-    EXPECT_NE(std::string(e.what()).find("12 numbers"), std::string::npos) << e.what();
-  }
-  { std::ofstream(stem(dir, 0) + ".pose.txt") << "2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"; }
-  EXPECT_THROW(SevenScenesSource(dir, {}), InputError);  // not a rotation
+  { std::ofstream(stem(dir, 2) + ".pose.txt") << "2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"; }  // not a rotation
+  testing::internal::CaptureStderr();
+  SevenScenesSource src(dir, {});
+  const std::string log = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(src.groundTruth().size(), 1u);
+  EXPECT_NE(log.find(stem(dir, 0) + ".pose.txt: holds 12 numbers, expected 16 (4x4 matrix) (frame not evaluated)"),
+            std::string::npos) << log;
+  EXPECT_NE(log.find(stem(dir, 2) + ".pose.txt: not a rigid camera-to-world transform"), std::string::npos) << log;
+  EXPECT_FALSE(src.read(0).groundTruth.has_value());
+  EXPECT_TRUE(src.read(1).groundTruth.has_value());
   mrpt::poses::CPose3D p;
   EXPECT_THROW(parseSevenScenesPose("1 0 0 x 0 1 0 0 0 0 1 0 0 0 0 1", "p.txt", p), InputError);
+}
+
+// A missing colour image costs its frame (the source used to refuse the whole folder), and so does a
+// damaged first one, whose size the next readable image gives instead.
+TEST(SevenScenes, AMissingOrDamagedColourImageCostsItsFrame) {
+  const std::string dir = test::tempDir("sevenscenes_colour");
+  for (int n = 0; n < 4; ++n) writeFrame(dir, n, poseOf(n));
+  std::filesystem::remove(stem(dir, 2) + ".color.png");
+  { std::ofstream(stem(dir, 0) + ".color.png", std::ios::trunc) << "\x89PNG\r\n\x1a\n"; }  // cut short
+  SevenScenesSource src(dir, {});
+  EXPECT_EQ(src.size(), 4u);
+  EXPECT_EQ(src.read(1).camera.width, src.read(1).rgb.cols);
+  EXPECT_THROW(src.read(0), InputError);
+  EXPECT_THROW(src.read(2), InputError);
+  EXPECT_NO_THROW(src.read(3));
 }
 
 TEST(SevenScenes, NotASequenceFolder) {

@@ -13,6 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/io/tum_source.h"
 
 namespace fs = std::filesystem;
@@ -95,16 +96,18 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
     Entry en;
     en.stem = (fs::path(folder) / n.substr(0, n.find('.'))).string();
     en.number = std::stoi(m[1].str());
-    en.colour = colourFor(en.stem);
-    if (en.colour.empty()) throw InputError(en.stem + ".color.png", "colour image is missing");
+    en.colour = colourFor(en.stem);  // empty: missing, that frame's problem when it is read
     frames_.push_back(std::move(en));
   }
   if (frames_.empty()) throw InputError(folder, "folder holds no 7-Scenes frames (frame-XXXXXX.depth.png)");
   std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });
   if (opts.max_frames > 0 && frames_.size() > opts.max_frames) frames_.resize(opts.max_frames);
 
-  const cv::Mat first = cv::imread(frames_[0].colour, cv::IMREAD_COLOR);
-  if (first.empty()) throw InputError(frames_[0].colour, "cannot decode colour image (corrupt or truncated?)");
+  // The first colour image that can be read gives the size (a damaged one is its own frame's problem).
+  cv::Mat first;
+  for (std::size_t i = 0; i < std::min<std::size_t>(frames_.size(), 30) && first.empty(); ++i)
+    if (!frames_[i].colour.empty() && !isTruncatedPng(frames_[i].colour)) first = cv::imread(frames_[i].colour, cv::IMREAD_COLOR);
+  if (first.empty()) throw InputError(folder, "none of the first colour images can be read (frame-XXXXXX.color.png)");
   // The published intrinsics are for 640x480; resized copies of the dataset get them scaled.
   camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : defaultIntrinsics().scaled(first.cols / 640.0);
   camera_.width = first.cols;
@@ -119,7 +122,13 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
     std::ostringstream ss;
     ss << f.rdbuf();
     mrpt::poses::CPose3D p;
-    if (!parseSevenScenesPose(ss.str(), pose_file, p)) continue;
+    try {
+      if (!parseSevenScenesPose(ss.str(), pose_file, p)) continue;
+    } catch (const InputError& e) {  // a damaged pose costs that frame's evaluation, not the run
+      if (opts.strict) throw;
+      printWarning(std::string(e.what()) + " (frame not evaluated)");
+      continue;
+    }
     gt_index_[i] = int(gt_.size());
     gt_.push_back({frames_[i].number / kFps, p});
   }
@@ -127,6 +136,7 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
 
 Frame SevenScenesSource::read(std::size_t i) const {
   const Entry& e = frames_.at(i);
+  if (e.colour.empty()) throw InputError(e.stem + ".color.png", "colour image is missing");
   Frame f;
   f.index = i;
   f.timestamp = e.number / kFps;

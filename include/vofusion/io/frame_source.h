@@ -63,6 +63,7 @@ struct SourceOptions {
   std::size_t max_frames = 0;             // 0 = all
   double max_time_diff = 0.02;            // s, colour<->depth association (TUM benchmark tolerance)
   bool unique_depth = false;              // TUM: one-to-one pairs (associate.py), else nearest colour per depth frame
+  bool strict = false;                    // a damaged ground truth stops the run (else it costs the evaluation)
 };
 
 }  // namespace vofusion
