@@ -10,6 +10,7 @@
 #include <vector>
 
 #include <mrpt/io/CFileGZInputStream.h>
+#include <mrpt/io/CFileGZOutputStream.h>
 
 #include "support.h"
 #include "vofusion/core/errors.h"
@@ -127,4 +128,26 @@ TEST(GzipMembers, DestroyedWithMembersInFlightWaitsForThem) {
   GzipMembersFile f(path);
   f.close();
   EXPECT_THROW(f.Write(data.data(), 1), std::logic_error);
+}
+
+// A rawlog MRPT's gzip stream wrote is whole when its trailer gives the length written; one cut short
+// is not (MRPT's close() does not say when the last flush failed).
+TEST(GzipMembers, TrailerTellsAWholeFileFromOneCutShort) {
+  const std::string path = test::tempDir("gzip_trailer") + "/x.gz";
+  const std::vector<std::uint8_t> data = content(300000);
+  std::uint64_t written = 0;
+  {
+    mrpt::io::CFileGZOutputStream gz(path);
+    gz.Write(data.data(), data.size());
+    written = gz.getPosition();
+  }
+  EXPECT_EQ(written, data.size());
+  EXPECT_TRUE(gzipTrailerSays(path, written));
+  EXPECT_FALSE(gzipTrailerSays(path, written + 1));
+  const auto size = std::filesystem::file_size(path);
+  std::filesystem::resize_file(path, size - 1);
+  EXPECT_FALSE(gzipTrailerSays(path, written));
+  std::filesystem::resize_file(path, size / 2);
+  EXPECT_FALSE(gzipTrailerSays(path, written));
+  EXPECT_FALSE(gzipTrailerSays(path + ".missing", written));
 }

@@ -23,6 +23,19 @@ struct GzipMembersFile::Member {
   tbb::task_group task{context};
 };
 
+bool gzipTrailerSays(const std::string& path, std::uint64_t uncompressed_bytes) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return false;
+  std::uint8_t head[2] = {0, 0}, tail[4] = {0, 0, 0, 0};
+  const bool read = std::fread(head, 1, 2, f) == 2 && std::fseek(f, -4, SEEK_END) == 0 && std::fread(tail, 1, 4, f) == 4;
+  const long size = std::ftell(f);
+  std::fclose(f);
+  if (!read || size < 18 || head[0] != 0x1f || head[1] != 0x8b) return false;  // 18: header and trailer alone
+  const std::uint32_t isize = std::uint32_t(tail[0]) | std::uint32_t(tail[1]) << 8 | std::uint32_t(tail[2]) << 16 |
+                              std::uint32_t(tail[3]) << 24;
+  return isize == std::uint32_t(uncompressed_bytes);
+}
+
 GzipMembersFile::GzipMembersFile(const std::string& path)
     : path_(path),
       // Two members a core: the cores stay busy while the writer fills the next, and at most a few MiB wait.

@@ -27,6 +27,7 @@
 
 #include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/gzip_members.h"
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -573,7 +574,10 @@ void RawlogWriter::commit() {
     impl_->records->sync();
     return;
   }
+  const std::uint64_t written = impl_->gz.getPosition();
+  const std::string file = impl_->gz.filePathAtUse();
   impl_->gz.close();
+  if (!gzipTrailerSays(file, written)) throw InputError(path_, "write failed while closing the rawlog (disk full?)");
   if (opts_.external_images) impl_->images->commit();
   impl_->rawlog->commit();
 }

@@ -22,6 +22,12 @@
 
 namespace vofusion {
 
+// Whether the one-member gzip file at `path` ends with the trailer of `uncompressed_bytes` (ISIZE, RFC
+// 1952: the length mod 2^32). MRPT's CFileGZOutputStream::close() drops gzclose's result, so a write
+// that failed while the last block and the trailer were flushed (a full disk) shows only here; a file
+// cut short ends in deflate data, whose last four bytes match by a 1 in 2^32 chance.
+bool gzipTrailerSays(const std::string& path, std::uint64_t uncompressed_bytes);
+
 class GzipMembersFile : public mrpt::io::CStream {
  public:
   static constexpr std::size_t kMemberBytes = std::size_t(1) << 20;
