@@ -33,7 +33,8 @@ const char* kUsage =
     "  --depth-scale S    TUM-layout folders: depth PNG units per metre (default: the folder's camera file, else 5000)\n"
     "  --set S.K=V        override one key, e.g. --set odometry.motion_method=paper\n"
     "  --no-rawlog        write only trajectory.txt\n"
-    "  --strict           stop at the first damaged frame (default: skip it with one warning line and go on)\n"
+    "  --strict           stop at the first damaged frame or a damaged ground truth (default: skip the frame with\n"
+    "                     a warning line, the first three with each problem, and go on)\n"
     "  --dump-config      print the defaults as INI and exit\n";
 
 // The command line's options besides --help, --dump-config and --depth-scale.
@@ -67,11 +68,16 @@ OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known
   loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
   if (a.sets.empty()) return params;
   mrpt::config::CConfigFileMemory sets;
+  auto trimmed = [](const std::string& t) {
+    const auto b = t.find_first_not_of(" \t"), e = t.find_last_not_of(" \t");
+    return b == std::string::npos ? std::string() : t.substr(b, e - b + 1);
+  };
   for (const std::string& s : a.sets) {
     const auto dot = s.find('.'), eq = s.find('=');
     if (dot == std::string::npos || eq == std::string::npos || eq < dot)
       throw InputError("--set " + s, "expected section.key=value");
-    for (auto* c : {&sets, &cfg}) c->write(s.substr(0, dot), s.substr(dot + 1, eq - dot - 1), s.substr(eq + 1));
+    const std::string section = trimmed(s.substr(0, dot)), key = trimmed(s.substr(dot + 1, eq - dot - 1));
+    for (auto* c : {&sets, &cfg}) c->write(section, key, trimmed(s.substr(eq + 1)));
   }
   checkConfigKeys(sets, "--set", known);
   loadNamingOrigin("--set", [&] { params.loadFromConfigFile(cfg, "odometry"); });

@@ -41,7 +41,8 @@ const char* kUsage =
     "                [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]\n"
     "  --strict       stop at the first damaged frame (missing or corrupt image, unreadable record), at a\n"
     "                 recording cut short or at a damaged ground truth; by default such a frame is skipped\n"
-    "                 with one line naming its file (a damaged ground truth costs the evaluation),\n"
+    "                 with one line naming its file (the first three with each problem; a damaged ground\n"
+    "                 truth costs the evaluation),\n"
     "                 counted in summary.json (frames_skipped), and the run goes on\n"
     "  --depth-scale  TUM-layout folders: depth PNG units per metre (default: the folder's intrinsics.txt /\n"
     "                 camera.yaml, else 5000 as TUM; 1000 for millimetres: RealSense, Azure Kinect, Open3D)\n"
@@ -133,7 +134,8 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
 
 // --save-volume's file is written after the whole run: a path that cannot be one fails now.
 void checkMapPath(const std::string& path) {
-  if (std::filesystem::is_directory(path)) throw InputError(path, "is a folder (--save-volume wants a file's path)");
+  if (std::filesystem::is_directory(path) || std::filesystem::path(path).filename().empty())
+    throw InputError(path, "is a folder (--save-volume wants a file's path)");
   const std::filesystem::path parent = std::filesystem::path(path).parent_path();
   ensureWritableDirectory(parent.empty() ? "." : parent.string());
 }

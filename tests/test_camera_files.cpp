@@ -91,6 +91,12 @@ TEST(CameraFiles, CameraYamlAsRosWritesIt) {
   EXPECT_DOUBLE_EQ(src.camera().fy, 309);
   EXPECT_DOUBLE_EQ(src.camera().cy, 121);
   EXPECT_DOUBLE_EQ(src.camera().dist[1], 0.02);
+  // A fisheye (equidistant) model is not k1 k2 p1 p2 k3: refused, not misread.
+  std::ofstream(dir + "/camera.yaml") << "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [310, 0, 158, 0, 309, 121, 0, 0, 1]\n"
+                                         "distortion_model: equidistant\n"
+                                         "distortion_coefficients:\n  rows: 1\n  cols: 4\n  data: [0.1, 0.01, 0, 0]\n";
+  EXPECT_EQ(errorOf(dir), dir + "/camera.yaml: distortion 'equidistant' with 4 coefficients: only k1 k2 p1 p2 k3 (plumb_bob) "
+                                "can be used");
   std::ofstream(dir + "/camera.yaml") << "%YAML:1.0\ncamera_matrix: [310, 0, 158, 0, 309, 121, 0, 0, 1]\n";
   EXPECT_EQ(errorOf(dir), dir + "/camera.yaml: camera_matrix must be a matrix (OpenCV's rows, cols, dt, data or ROS's rows, "
                                 "cols, data)");
@@ -110,6 +116,9 @@ TEST(CameraFiles, AMissingFirstColourImageDoesNotDecideTheSize) {
   EXPECT_EQ(src.camera().width, 320);
   EXPECT_THROW(src.read(0), InputError);
   EXPECT_EQ(src.read(1).rgb.cols, 320);
+  // None readable: one line naming the first, not a size made up.
+  fs::remove(dir + "/rgb/0.033333.png");
+  EXPECT_EQ(errorOf(dir), dir + "/rgb/0.000000.png: colour image cannot be read, nor can any of the first 2 listed in rgb.txt");
 }
 
 // A damaged groundtruth.txt costs the evaluation, in one line naming it, not the run; --strict stops.

@@ -12,6 +12,7 @@
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/core/heap.h"
 #include "vofusion/core/timing.h"
 
@@ -158,4 +159,15 @@ TEST(Timing, TheProcessClockCountsFromTheProcessStart) {
   // The sleep at least, all the time since the first reading at most, within two 10 ms steps.
   EXPECT_GE(b - a, 0.08 - 0.02);
   EXPECT_LE(b - a, elapsed + 0.02);
+}
+
+// A warning is said once per process: a recording opened a second time (the re-fusion) says nothing new.
+TEST(Warnings, EachLineOncePerProcess) {
+  testing::internal::CaptureStderr();
+  printWarning("Warnings.EachLineOncePerProcess: first");
+  printWarning("Warnings.EachLineOncePerProcess: second");
+  printWarning("Warnings.EachLineOncePerProcess: first");
+  const std::string log = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(log.find("first"), log.rfind("first")) << log;
+  EXPECT_NE(log.find("warning: Warnings.EachLineOncePerProcess: second"), std::string::npos) << log;
 }

@@ -541,7 +541,7 @@ TEST(FaultsOutput, DiskFullTmpfs) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Damaged frames: vofusion skips them (one warning line each), counts them in summary.json and
+// Damaged frames: vofusion skips them (one warning line each, the first three with each problem), counts them in summary.json and
 // writes every output; the path is as good as the clean run's.
 
 namespace {

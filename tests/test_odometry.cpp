@@ -151,6 +151,10 @@ TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + dir + "/out --config " + dir +
                           "/ok.ini --set odometry.references=two", &log), 2);
   EXPECT_EQ(log, "--set: [odometry] references: 'two' is not an integer\n");
+  // Spaces around the '=' are the key's and value's, not part of them.
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + dir + "/out2 --max-frames 2 --set 'odometry.references = 0'",
+                      &log), 2);
+  EXPECT_NE(log.find("--set: [odometry] references: must be"), std::string::npos) << log;
 }
 
 TEST(OdometryParams, ShareIniHoldsEveryKeyWithTheDefaults) {

@@ -1,5 +1,7 @@
 #include "vofusion/core/progress.h"
 
+#include <set>
+#include <mutex>
 #include <unistd.h>
 
 #include <algorithm>
@@ -60,6 +62,15 @@ void printAboveProgress(const std::string& line) {
   std::fprintf(stderr, "%s%s\n", ::isatty(STDERR_FILENO) ? "\r\033[K" : "", line.c_str());
 }
 
-void printWarning(const std::string& line) { printAboveProgress("warning: " + line); }
+// Once per process: a recording opened a second time (the re-fusion) has nothing new to say.
+void printWarning(const std::string& line) {
+  static std::mutex mutex;
+  static std::set<std::string> said;
+  {
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (!said.insert(line).second) return;
+  }
+  printAboveProgress("warning: " + line);
+}
 
 }  // namespace vofusion

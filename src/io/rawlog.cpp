@@ -28,6 +28,7 @@
 #include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/gzip_members.h"
+#include "vofusion/core/progress.h"
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -325,7 +326,12 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
                                std::to_string(scan.objects) + " entries read)");
   const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
   if (fs::exists(gt_file)) {
-    gt_ = readTumTrajectory(gt_file);
+    try {
+      gt_ = readTumTrajectory(gt_file);
+    } catch (const InputError& e) {  // it only evaluates the run: a damaged one costs the evaluation
+      if (opts.strict) throw;
+      printWarning(std::string(e.what()) + " (the run is not evaluated against it)");
+    }
   } else {
     std::sort(embedded_gt.begin(), embedded_gt.end(),
               [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
@@ -569,8 +575,8 @@ void RawlogWriter::commit() {
     *impl_->arch << impl_->pending_actions << sf;
     impl_->endRecord();
   }
-  if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
   if (impl_->records) {
+    if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
     impl_->records->sync();
     return;
   }
@@ -578,6 +584,7 @@ void RawlogWriter::commit() {
   const std::string file = impl_->gz.filePathAtUse();
   impl_->gz.close();
   if (!gzipTrailerSays(file, written)) throw InputError(path_, "write failed while closing the rawlog (disk full?)");
+  if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);  // beside a whole rawlog only
   if (opts_.external_images) impl_->images->commit();
   impl_->rawlog->commit();
 }

@@ -115,6 +115,8 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
   camera_.validate(opts.intrinsics ? "--intrinsics" : folder);
 
   gt_index_.assign(frames_.size(), -1);
+  std::size_t damaged_poses = 0;  // a damaged pose costs that frame's evaluation, not the run
+  constexpr std::size_t kPoseLines = 3;
   for (std::size_t i = 0; i < frames_.size(); ++i) {
     const std::string pose_file = frames_[i].stem + ".pose.txt";
     std::ifstream f(pose_file);
@@ -124,14 +126,16 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
     mrpt::poses::CPose3D p;
     try {
       if (!parseSevenScenesPose(ss.str(), pose_file, p)) continue;
-    } catch (const InputError& e) {  // a damaged pose costs that frame's evaluation, not the run
+    } catch (const InputError& e) {
       if (opts.strict) throw;
-      printWarning(std::string(e.what()) + " (frame not evaluated)");
+      if (++damaged_poses <= kPoseLines) printWarning(std::string(e.what()) + " (frame not evaluated)");
       continue;
     }
     gt_index_[i] = int(gt_.size());
     gt_.push_back({frames_[i].number / kFps, p});
   }
+  if (damaged_poses > kPoseLines)
+    printWarning(folder + ": " + std::to_string(damaged_poses) + " pose files in all are damaged (those frames are not evaluated)");
 }
 
 Frame SevenScenesSource::read(std::size_t i) const {

@@ -37,7 +37,7 @@ void SkippingSource::warn(const std::string& problem, const std::string& line) {
   const std::size_t n = ++warned_[problem];
   if (n < kLinesPerProblem) warn_(line);
   else if (n == kLinesPerProblem)
-    warn_(line + "; later frames with this problem are not listed (a finished run's summary.json lists them all)");
+    warn_(line + "; later frames with this problem are counted, not listed");
 }
 
 void SkippingSource::releaseHeld() {

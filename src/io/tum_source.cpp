@@ -203,6 +203,13 @@ CameraFile readCameraYaml(const std::string& path) {
   f.camera.fx = K.at<double>(0); f.camera.fy = K.at<double>(4);
   f.camera.cx = K.at<double>(2); f.camera.cy = K.at<double>(5);
   f.camera.dist = {};
+  // k1 k2 p1 p2 k3 (OpenCV's and ROS's plumb_bob); ROS's rational_polynomial adds k4..k6, which only
+  // fit this model at zero, and equidistant is another model altogether.
+  const std::string model = fsr["distortion_model"].empty() ? "plumb_bob" : std::string(fsr["distortion_model"]);
+  const bool beyond_five = std::any_of(d.begin<double>() + std::min<int>(5, int(d.total())), d.end<double>(), [](double k) { return k != 0.0; });
+  if ((model != "plumb_bob" && model != "rational_polynomial") || beyond_five)
+    throw InputError(path, "distortion '" + model + "' with " + std::to_string(d.total()) +
+                               " coefficients: only k1 k2 p1 p2 k3 (plumb_bob) can be used");
   for (int i = 0; i < std::min<int>(5, int(d.total())); ++i) f.camera.dist[i] = d.at<double>(i);
   if (!fsr["image_width"].empty() && !fsr["image_height"].empty()) {
     f.camera.width = int(fsr["image_width"]);
@@ -237,7 +244,7 @@ double medianRaw(const cv::Mat& raw) {
 namespace {
 // The image size comes from the data itself: the first colour image of the first frames that can be
 // read sets it for the whole sequence (a missing or damaged one is its own frame's problem, said when
-// that frame is read); 640x480 when none can.
+// that frame is read); an error naming the first when none of them can.
 cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssociation>& pairs) {
   constexpr std::size_t kFramesTried = 30;
   for (std::size_t i = 0; i < std::min(pairs.size(), kFramesTried); ++i) {
@@ -246,7 +253,9 @@ cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssocia
     const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
     if (!image.empty()) return image.size();
   }
-  return {640, 480};
+  throw InputError((fs::path(folder) / pairs[0].rgb.file).string(),
+                   "colour image cannot be read, nor can any of the first " + std::to_string(std::min(pairs.size(), kFramesTried)) +
+                       " listed in rgb.txt");
 }
 }  // namespace
 

@@ -222,8 +222,9 @@ nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std:
   if (save_volume) {
     try {
       rec_.saveVolume(*save_volume);
-    } catch (const std::exception&) {
+    } catch (const std::exception& e) {
       map_failed = std::current_exception();
+      info.extra["save_volume_error"] = oneLineMessage(e);
     }
   }
   nlohmann::json summary = recorder_.finish(rec_, info, stderr, premesher_.get());

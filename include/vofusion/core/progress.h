@@ -10,7 +10,7 @@ namespace vofusion {
 // progress line being redrawn, which the next update() draws again below it.
 void printAboveProgress(const std::string& line);
 // "warning: <line>" the same way: something assumed or skipped, the run goes on.
-void printWarning(const std::string& line);
+void printWarning(const std::string& line);  // "warning: <line>", once per process for each line
 
 class Progress {
  public:

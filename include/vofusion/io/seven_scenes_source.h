@@ -23,7 +23,9 @@ class SevenScenesSource : public IndexedFrameSource {
   // True if the folder holds at least one frame-XXXXXX.depth.png with a colour image beside it.
   static bool looksLike(const std::string& folder);
 
-  // Throws InputError(folder or file, problem) when the folder holds no frames or a pose is malformed.
+  // Throws InputError(folder or file, problem) when the folder holds no frames or no readable colour image
+  // among the first; a malformed pose file costs its frame's evaluation (one line, or the stop with
+  // opts.strict), a missing colour image its frame (read() throws).
   SevenScenesSource(const std::string& folder, const SourceOptions& opts);
   std::size_t size() const override { return frames_.size(); }
   std::string name() const override { return folder_; }

@@ -7,8 +7,9 @@
 //   SourceOptions::intrinsics (--intrinsics);
 //   intrinsics.txt in the folder: a line "fx fy cx cy [k1 k2 p1 p2 k3]", optional lines
 //     "size W H" and "depth_scale S", '#' comments (rgbd-simulate writes one);
-//   camera.yaml in the folder (OpenCV FileStorage, as OpenCV's calibration writes it): camera_matrix,
-//     optional distortion_coefficients, image_width, image_height, depth_scale;
+//   camera.yaml in the folder (OpenCV FileStorage, as OpenCV's calibration writes it, or ROS's camera_info
+//     YAML): camera_matrix, optional distortion_coefficients (k1 k2 p1 p2 k3), image_width, image_height,
+//     depth_scale;
 //   a guess, announced on stderr: TUM's preset for a folder named freiburg1/2/3, else fx = fy = 525,
 //   c = (319.5, 239.5), both only for 640x480 images (anything else is an error).
 // Intrinsics that do not fit the images (another size, principal point outside) are an error, and a
@@ -83,8 +84,8 @@ struct CameraFile {
 // intrinsics.txt: "fx fy cx cy [k1 k2 p1 p2 k3]" (first non-comment line), then optional "size W H",
 // "depth_scale S"; throws InputError(path, ...).
 CameraFile readIntrinsicsFile(const std::string& path);
-// camera.yaml (OpenCV FileStorage): camera_matrix, [distortion_coefficients, image_width, image_height,
-// depth_scale]; throws InputError(path, ...).
+// camera.yaml (OpenCV FileStorage, or ROS camera_info YAML): camera_matrix, [distortion_coefficients,
+// image_width, image_height, depth_scale]; throws InputError(path, ...).
 CameraFile readCameraYaml(const std::string& path);
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h);
 
