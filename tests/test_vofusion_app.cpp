@@ -147,6 +147,29 @@ TEST(VofusionApp, SaveVolumeToAFolderFailsBeforeTheRun) {
   EXPECT_FALSE(fs::exists(dir + "/out/summary.json"));
 }
 
+// The map is written after the run: when that write fails (here a file size limit, as a full disk
+// fails it) the run's other outputs are written all the same, the summary says why the map is missing,
+// the error is one line naming the map's file, and a map already there is left as it was.
+TEST(VofusionApp, AMapThatCannotBeWrittenCostsTheMapOnly) {
+  const std::string dir = test::tempDir("vofusion_app_savevolume_late");
+  const std::string cfg = dir + "/path_only.ini", map = dir + "/map.bin", out = dir + "/out";
+  std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  std::ofstream(map) << "EARLIER";
+  std::string log;
+  // The three-frame room's map is ~6 MB, its other outputs under 200 kB.
+  const int rc = test::run("{ trap '' XFSZ; ulimit -f 1024; " + test::app("vofusion") + " synthetic:room --max-frames 3 --out " +
+                               out + " --config " + cfg + " --save-volume " + map + " 2>&1 >/dev/null | grep -v '^vofusion \\[\\|^  wrote\\|^vofusion: synthetic'; }",
+                           &log);
+  EXPECT_EQ(log, "vofusion: error: " + map + ": cannot write the map: write failed (disk full?)\n") << "rc " << rc;
+  std::ifstream earlier(map);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(earlier), {}), "EARLIER");
+  EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), 3u);
+  const auto summary = readJson(out + "/summary.json");
+  EXPECT_EQ(summary.value("save_volume_error", ""), map + ": cannot write the map: write failed (disk full?)");
+  for (const auto& e : fs::directory_iterator(dir))
+    EXPECT_TRUE(e.path() == map || e.path() == cfg || e.path() == out) << "left behind: " << e.path();
+}
+
 TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);

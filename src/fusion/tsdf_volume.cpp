@@ -320,7 +320,7 @@ void TsdfVolume::save(std::ostream& os) const {
     write(scratch.coord, compressBrick(scratch));
   }
   os.write("END\n", 4);
-  if (!os) throw std::runtime_error("write failed");
+  if (!os) throw std::runtime_error("write failed (disk full?)");
 }
 
 void TsdfVolume::load(std::istream& is) {
