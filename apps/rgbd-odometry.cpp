@@ -193,4 +193,4 @@ int body(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) { return runApp(nullptr, body, argc, argv); }
+int main(int argc, char** argv) { return runApp("rgbd-odometry", body, argc, argv); }

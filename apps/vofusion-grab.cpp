@@ -100,7 +100,7 @@ Args parseArgs(int argc, char** argv) {
     std::fputs(kUsage, stdout);
     std::exit(0);
   }
-  if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "'");
+  if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "' (see --help)");
   Args a;
   a.config = cl.value("--config", "");
   a.sensor = cl.value("--sensor", "");
@@ -364,19 +364,11 @@ int run(const Args& args) {
   return finishGrab(stats, plan, *source, writer.get(), session.get(), args, checkpoints);
 }
 
+int body(int argc, char** argv) { return run(parseArgs(argc, argv)); }
+
 }  // namespace
 
-int main(int argc, char** argv) {
-  // As vofusion (runApp): freed frame buffers stay in the heap. Without it the live loop page-faulted
-  // its frame-sized buffers in again every frame (362k minor faults, 3.2 s of system time on xyz_first300).
-  keepFreedHeapForFrames();
-  try {
-    return run(parseArgs(argc, argv));
-  } catch (const InputError& e) {
-    std::fprintf(stderr, "vofusion-grab: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "vofusion-grab: %s\n", oneLineMessage(e).c_str());
-    return 1;
-  }
-}
+// runApp: one error line "vofusion-grab: error: ...", exit code 2 for bad input; freed frame buffers
+// stay in the heap (without it the live loop page-faulted its frame-sized buffers in again every frame:
+// 362k minor faults, 3.2 s of system time on xyz_first300).
+int main(int argc, char** argv) { return runApp("vofusion-grab", body, argc, argv); }

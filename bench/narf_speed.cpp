@@ -13,6 +13,7 @@
 #include <cstring>
 #include <string>
 
+#include "vofusion/core/cli.h"
 #include "vofusion/features/narf_detector.h"
 #include "vofusion/io/tum_source.h"
 
@@ -41,7 +42,7 @@ int matched(const std::vector<cv::KeyPoint>& a, const std::vector<cv::KeyPoint>&
 }
 }  // namespace
 
-int main(int argc, char** argv) {
+int body(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr, "usage: narf_speed <tum_dir> [--every 3] [--repeat 3] [--threads 1]\n");
     return 2;
@@ -91,3 +92,5 @@ int main(int argc, char** argv) {
   std::printf("frames with identical keypoints and responses: %ld / %ld\n", identical, frames);
   return 0;
 }
+
+int main(int argc, char** argv) { return runApp("narf_speed", body, argc, argv); }

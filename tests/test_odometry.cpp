@@ -141,7 +141,7 @@ TEST(RgbdOdometryApp, WritesTrajectoryAndRawlog) {
 TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
   std::string log;
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " /nonexistent --out " + test::tempDir("odo-bad"), &log), 2);
-  EXPECT_EQ(log, "/nonexistent: no such file or folder\n");
+  EXPECT_EQ(log, "rgbd-odometry: error: /nonexistent: no such file or folder\n");
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + test::tempDir("odo-bad2") +
                           " --set motion.typo_key=3", &log), 2);
   EXPECT_NE(log.find("unknown key 'typo_key'"), std::string::npos) << log;
@@ -150,7 +150,7 @@ TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
   std::ofstream(dir + "/ok.ini") << "[odometry]\nreferences = 2\n";
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + dir + "/out --config " + dir +
                           "/ok.ini --set odometry.references=two", &log), 2);
-  EXPECT_EQ(log, "--set: [odometry] references: 'two' is not an integer\n");
+  EXPECT_EQ(log, "rgbd-odometry: error: --set: [odometry] references: 'two' is not an integer\n");
   // Spaces around the '=' are the key's and value's, not part of them.
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --out " + dir + "/out2 --max-frames 2 --set 'odometry.references = 0'",
                       &log), 2);
