@@ -137,6 +137,23 @@ TEST(GrabApp, BadLiveValueFailsBeforeAnythingIsRecorded) {
   EXPECT_FALSE(std::filesystem::exists(dir + "/out")) << log;
 }
 
+// A live run that fails before its first frame (here: no display for the window) leaves no empty
+// recording behind, so the same --out can be used at once (it used to be refused: "a recording is
+// already there").
+TEST(GrabApp, AFailureBeforeTheFirstFrameLeavesNoRecording) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string out = test::tempDir("grab_app_nodisplay") + "/out";
+  const std::string cmd = "env -u DISPLAY -u WAYLAND_DISPLAY " + test::app("vofusion-grab") + " --replay " + tum + " --out " + out;
+  std::string log;
+  EXPECT_EQ(test::run(cmd + " --live --max-frames 3", &log), 2);
+  EXPECT_NE(log.find("--no-gui"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(out + "/grab.rawlog")) << log;
+  EXPECT_FALSE(std::filesystem::exists(out + "/grab_Images")) << log;
+  EXPECT_EQ(test::run(cmd + " --max-frames 3", &log), 0) << log;
+  EXPECT_TRUE(std::filesystem::exists(out + "/grab.rawlog")) << log;
+}
+
 TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);

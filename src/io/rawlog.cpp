@@ -489,7 +489,17 @@ RawlogWriter::RawlogWriter(const std::string& path, const RawlogWriterOptions& o
 }
 
 RawlogWriter::~RawlogWriter() {
-  if (impl_ && !impl_->records) impl_->gz.close();  // before AtomicPath removes the temporary
+  if (!impl_) return;
+  if (!impl_->records) {
+    impl_->gz.close();  // before AtomicPath removes the temporary
+    return;
+  }
+  if (committed_ || frames_ > 0) return;
+  impl_->arch.reset();
+  impl_->records.reset();
+  std::error_code ec;
+  fs::remove(impl_->rawlog_file, ec);
+  fs::remove_all(impl_->images_dir, ec);  // this writer made it (openInPlace refuses one already there); no record names its files
 }
 
 void RawlogWriter::writeAction(const mrpt::obs::CAction& action) {
@@ -578,6 +588,7 @@ void RawlogWriter::commit() {
   if (impl_->records) {
     if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
     impl_->records->sync();
+    committed_ = true;
     return;
   }
   const std::uint64_t written = impl_->gz.getPosition();

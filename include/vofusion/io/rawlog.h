@@ -97,7 +97,9 @@ class RawlogWriter {
  public:
   // Throws InputError(path, ...) if the output cannot be created.
   explicit RawlogWriter(const std::string& path, const RawlogWriterOptions& opts = {});
-  ~RawlogWriter();  // without commit(): temporaries removed, an earlier output left untouched (in place: kept)
+  // Without commit(): temporaries removed, an earlier output left untouched. In place: kept, unless it
+  // holds no frame (a run that failed before its first frame leaves no recording to block the folder).
+  ~RawlogWriter();
   RawlogWriter(const RawlogWriter&) = delete;
   RawlogWriter& operator=(const RawlogWriter&) = delete;
 
@@ -128,6 +130,7 @@ class RawlogWriter {
   std::string path_;
   RawlogWriterOptions opts_;
   std::size_t frames_ = 0;
+  bool committed_ = false;
   std::unique_ptr<Impl> impl_;
 };
 
