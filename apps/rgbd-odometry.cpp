@@ -1,5 +1,5 @@
 // rgbd-odometry <tum_dir|in.rawlog|synthetic[:scene]> --out <dir> [--config f.ini] [--max-frames N]
-//               [--set section.key=value]... [--no-rawlog] [--dump-config]
+//               [--depth-scale S] [--set section.key=value]... [--no-rawlog] [--strict] [--dump-config]
 // The 6D RGB-D odometry alone (Figueroa et al. §3.1): writes <dir>/trajectory.txt (TUM format) and
 // <dir>/odometry.rawlog (the input observations, each preceded by the visual-odometry action).
 // With ground truth in the input it also prints ATE and RPE (1 s).

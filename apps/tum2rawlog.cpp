@@ -25,7 +25,8 @@ const char* kUsage =
     "  --format       obs: observations only (default); sf: action/sensory-frame pairs\n"
     "  --embed-images keep images inside the rawlog instead of <out>_Images/\n"
     "  --range-units  metres per range unit (default 2e-4 = TUM's 1/5000, lossless)\n"
-    "  --strict       stop at the first damaged frame (default: skip it, say so, convert the rest)\n";
+    "  --strict       stop at the first damaged frame or a damaged groundtruth.txt (default: skip the frame,\n"
+    "                 or convert without ground truth, say so, convert the rest)\n";
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--intrinsics", "--max-frames", "--format", "--range-units", "--depth-scale"},

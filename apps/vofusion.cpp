@@ -134,8 +134,13 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
 
 // --save-volume's file is written after the whole run: a path that cannot be one fails now.
 void checkMapPath(const std::string& path) {
-  if (std::filesystem::is_directory(path) || std::filesystem::path(path).filename().empty())
-    throw InputError(path, "is a folder (--save-volume wants a file's path)");
+  if (path.empty()) throw InputError("usage", "--save-volume needs a file's path");
+  std::error_code ec;
+  const bool folder = std::filesystem::is_directory(path, ec);
+  if (ec && ec != std::errc::no_such_file_or_directory) throw InputError(path, ec.message());
+  if (folder) throw InputError(path, "is a folder (--save-volume wants a file's path)");
+  if (std::filesystem::path(path).filename().empty())
+    throw InputError(path, "names a folder, not a file (--save-volume wants a file's path)");
   const std::filesystem::path parent = std::filesystem::path(path).parent_path();
   ensureWritableDirectory(parent.empty() ? "." : parent.string());
 }

@@ -43,10 +43,7 @@ int matched(const std::vector<cv::KeyPoint>& a, const std::vector<cv::KeyPoint>&
 }  // namespace
 
 int body(int argc, char** argv) {
-  if (argc < 2) {
-    std::fprintf(stderr, "usage: narf_speed <tum_dir> [--every 3] [--repeat 3] [--threads 1]\n");
-    return 2;
-  }
+  if (argc < 2) throw InputError("usage", "narf_speed <tum_dir> [--every 3] [--repeat 3] [--threads 1] [--only fast|pcl]");
   int every = 3, repeat = 3, threads = 1;
   std::string only;
   for (int i = 2; i + 1 < argc; i += 2) {

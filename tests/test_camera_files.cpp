@@ -132,7 +132,7 @@ TEST(CameraFiles, ADamagedGroundTruthCostsTheEvaluation) {
   const std::string log = testing::internal::GetCapturedStderr();
   EXPECT_TRUE(src.groundTruth().empty());
   EXPECT_NE(log.find(dir + "/groundtruth.txt: "), std::string::npos) << log;
-  EXPECT_NE(log.find("(the run is not evaluated against it)"), std::string::npos) << log;
+  EXPECT_NE(log.find("(read without ground truth: nothing is evaluated or converted from it)"), std::string::npos) << log;
   so.strict = true;
   EXPECT_NE(errorOf(dir, so).find(dir + "/groundtruth.txt: "), std::string::npos);
 }

@@ -330,7 +330,7 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
       gt_ = readTumTrajectory(gt_file);
     } catch (const InputError& e) {  // it only evaluates the run: a damaged one costs the evaluation
       if (opts.strict) throw;
-      printWarning(std::string(e.what()) + " (the run is not evaluated against it)");
+      printWarning(std::string(e.what()) + " (read without ground truth: nothing is evaluated or converted from it)");
     }
   } else {
     std::sort(embedded_gt.begin(), embedded_gt.end(),

@@ -329,7 +329,7 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
       gt_ = readTumTrajectory(gt);
     } catch (const InputError& e) {  // it only evaluates the run: a damaged one costs the evaluation
       if (opts.strict) throw;
-      printWarning(std::string(e.what()) + " (the run is not evaluated against it)");
+      printWarning(std::string(e.what()) + " (read without ground truth: nothing is evaluated or converted from it)");
     }
   }
 
