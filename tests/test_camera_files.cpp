@@ -97,6 +97,11 @@ TEST(CameraFiles, CameraYamlAsRosWritesIt) {
                                          "distortion_coefficients:\n  rows: 1\n  cols: 4\n  data: [0.1, 0.01, 0, 0]\n";
   EXPECT_EQ(errorOf(dir), dir + "/camera.yaml: distortion 'equidistant' with 4 coefficients: only k1 k2 p1 p2 k3 (plumb_bob) "
                                 "can be used");
+  // Eight coefficients and no model named (OpenCV's own calibration file): k4..k6 are not zero.
+  std::ofstream(dir + "/camera.yaml") << "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [310, 0, 158, 0, 309, 121, 0, 0, 1]\n"
+                                         "distortion_coefficients:\n  rows: 1\n  cols: 8\n  data: [0.1, 0.01, 0, 0, 0, 0.2, 0, 0]\n";
+  EXPECT_EQ(errorOf(dir), dir + "/camera.yaml: distortion with 8 coefficients, some beyond k3 not zero: only k1 k2 p1 p2 k3 "
+                                "(plumb_bob) can be used");
   std::ofstream(dir + "/camera.yaml") << "%YAML:1.0\ncamera_matrix: [310, 0, 158, 0, 309, 121, 0, 0, 1]\n";
   EXPECT_EQ(errorOf(dir), dir + "/camera.yaml: camera_matrix must be a matrix (OpenCV's rows, cols, dt, data or ROS's rows, "
                                 "cols, data)");

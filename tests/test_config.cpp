@@ -104,6 +104,8 @@ TEST(Config, ValueThatIsNotWhollyANumberIsRefused) {
   EXPECT_EQ(message("cap", "ten"), "[s] cap: 'ten' is not an integer");
   EXPECT_EQ(message("cap", "2.5"), "[s] cap: '2.5' is not an integer");
   EXPECT_EQ(message("cap", ""), "[s] cap: '' is not an integer");
+  EXPECT_EQ(message("cap", "inf"), "[s] cap: 'inf' is not an integer");
+  EXPECT_EQ(message("voxel", "+-0.01"), "[s] voxel: '+-0.01' is not a number");
   EXPECT_EQ(message("enabled", "true  # comment"), "[s] enabled: 'true  # comment' is not true or false");
   EXPECT_EQ(message("enabled", "maybe"), "[s] enabled: 'maybe' is not true or false");
   EXPECT_EQ(message("cap", "5e3"), "[s] cap: must be in [1, 1000], got 5000");  // the range sees the value as typed

@@ -1,10 +1,13 @@
 #include <Eigen/Dense>
 // MRPT rawlog reading and writing: a real OpenNI2 capture, round trips in both formats, bad input.
 #include <algorithm>
+#include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <tuple>
+
+#include <sys/resource.h>
 
 #include <mrpt/core/Clock.h>
 #include <mrpt/io/CFileGZOutputStream.h>
@@ -182,6 +185,116 @@ TEST(Rawlog, GroundTruthCompanionFile) {
   ASSERT_TRUE(src.next(f));
   ASSERT_TRUE(f.groundTruth.has_value());
   EXPECT_LT((f.groundTruth->asVectorVal() - frames[0].groundTruth->asVectorVal()).norm(), 1e-5);
+}
+
+// A rawlog written again without ground truth takes the earlier one's companion file away: RawlogSource
+// reads that file first, so it would evaluate the new frames against the old path.
+TEST(Rawlog, AGroundTruthFileIsTheRawlogsOwnOrNone) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_gt_stale");
+  RawlogWriterOptions o;
+  o.ground_truth_observations = false;
+  {
+    RawlogWriter w(dir + "/g.rawlog", o);
+    Trajectory gt;
+    for (const auto& f : frames) {
+      w.write(f);
+      gt.push_back({f.timestamp, *f.groundTruth});
+    }
+    w.writeGroundTruth(gt);
+    w.commit();
+  }
+  ASSERT_TRUE(fs::exists(dir + "/g.groundtruth.txt"));
+  {
+    RawlogWriter w(dir + "/g.rawlog", o);
+    w.write(frames[0]);
+    // not committed: the earlier rawlog and its ground truth stay as they were
+  }
+  EXPECT_EQ(RawlogSource(dir + "/g.rawlog", {}).groundTruth().size(), 2u);
+  {
+    RawlogWriter w(dir + "/g.rawlog", o);
+    w.write(frames[0]);
+    w.commit();
+  }
+  EXPECT_FALSE(fs::exists(dir + "/g.groundtruth.txt"));
+  EXPECT_TRUE(RawlogSource(dir + "/g.rawlog", {}).groundTruth().empty());
+}
+
+// The disk fills while the rawlog's last buffered bytes are flushed (MRPT's close() drops gzclose's
+// result): commit() says so naming the rawlog, and the earlier rawlog, its ground truth and the folder
+// stay as they were.
+TEST(Rawlog, AFlushThatFailsAtTheEndFailsTheCommitAndKeepsTheEarlierRawlog) {
+  const auto frames = simFrames(3);
+  const std::string dir = test::tempDir("rawlog_close_fails");
+  RawlogWriterOptions o;
+  o.external_images = false;
+  o.ground_truth_observations = false;
+  Trajectory gt;
+  for (const auto& f : frames) gt.push_back({f.timestamp, *f.groundTruth});
+  {
+    RawlogWriter w(dir + "/g.rawlog", o);
+    w.write(frames[0]);
+    w.writeGroundTruth({gt[0]});
+    w.commit();
+  }
+  const auto size_before = fs::file_size(dir + "/g.rawlog");
+  const auto entries = [&dir] {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  const std::vector<std::string> before = entries();
+  {
+    RawlogWriter w(dir + "/g.rawlog", o);
+    for (const auto& f : frames) w.write(f);
+    w.writeGroundTruth(gt);
+    // Whatever zlib still buffers cannot reach the disk: the file may not grow past what it has now.
+    std::uintmax_t on_disk = 0;
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().filename().string().rfind("g.rawlog.tmp-", 0) == 0) on_disk = e.file_size();
+    struct rlimit old_limit {};
+    ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old_limit), 0);
+    const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);  // the write fails with EFBIG instead
+    struct rlimit limit = old_limit;
+    limit.rlim_cur = rlim_t(on_disk);
+    ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &limit), 0);
+    std::string error;
+    try {
+      w.commit();
+    } catch (const InputError& e) {
+      error = e.what();
+    }
+    setrlimit(RLIMIT_FSIZE, &old_limit);
+    std::signal(SIGXFSZ, old_handler);
+    EXPECT_EQ(error, dir + "/g.rawlog: write failed while closing the rawlog (disk full?)");
+  }
+  EXPECT_EQ(entries(), before);
+  EXPECT_EQ(fs::file_size(dir + "/g.rawlog"), size_before);
+  RawlogSource back(dir + "/g.rawlog", {});
+  EXPECT_EQ(back.size(), 1u);
+  EXPECT_EQ(back.groundTruth().size(), 1u);
+}
+
+// A damaged companion ground truth costs the evaluation, not the rawlog's frames; --strict stops at it.
+TEST(Rawlog, ADamagedGroundTruthFileCostsTheGroundTruthUnlessStrict) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_gt_damaged");
+  RawlogWriterOptions o;
+  o.ground_truth_observations = false;
+  const std::string path = writeRawlog(dir + "/g.rawlog", frames, o);
+  std::ofstream(dir + "/g.groundtruth.txt") << "2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n";  // out of order
+  RawlogSource src(path, {});
+  EXPECT_EQ(src.size(), 2u);
+  EXPECT_TRUE(src.groundTruth().empty());
+  SourceOptions strict;
+  strict.strict = true;
+  try {
+    RawlogSource stops(path, strict);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(dir + "/g.groundtruth.txt: ", 0), 0u) << e.what();
+  }
 }
 
 TEST(Rawlog, IntrinsicsOverrideAndMaxFrames) {

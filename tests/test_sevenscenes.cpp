@@ -131,6 +131,14 @@ TEST(SevenScenes, AMissingOrDamagedColourImageCostsItsFrame) {
   EXPECT_THROW(src.read(0), InputError);
   EXPECT_THROW(src.read(2), InputError);
   EXPECT_NO_THROW(src.read(3));
+  // No colour image to take the size from: one line naming the first.
+  for (int n : {1, 3}) std::filesystem::remove(stem(dir, n) + ".color.png");
+  try {
+    SevenScenesSource none(dir, {});
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), stem(dir, 0) + ".color.png: colour image cannot be read, nor can any of the first 4 frames'");
+  }
 }
 
 TEST(SevenScenes, NotASequenceFolder) {

@@ -148,6 +148,38 @@ TEST(SkippingSource, TheSameProblemOnEveryFirstFrameIsOneLine) {
   EXPECT_EQ(lines[0], "depth/0.png: depth image must be 16-bit single channel (frame 0 skipped)");
 }
 
+// The recording's problem is one line even when another problem sits beside it (the first colour image
+// missing as well), and in a recording too short to reach the tenth frame before a fifth is gone.
+TEST(SkippingSource, TheRecordingsProblemIsOneLineBesideAnotherAndInAShortRecording) {
+  class TwoProblems : public BadStart {
+   public:
+    using BadStart::BadStart;
+    Frame read(std::size_t i) const override {
+      if (i == 0) throw InputError("rgb/0.png", "cannot read the colour image");
+      return BadStart::read(i);
+    }
+  };
+  std::vector<std::string> lines;
+  SkippingSource src(std::make_unique<TwoProblems>(2000, 2000), false, [&](const std::string& l) { lines.push_back(l); });
+  try {
+    indicesRead(src);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "depth/1.png: depth image must be 16-bit single channel, and so are 10 of the first 11 frames: "
+                           "the recording needs looking at");
+  }
+  EXPECT_TRUE(lines.empty());
+  SkippingSource short_one(std::make_unique<BadStart>(20, 20), false, [&](const std::string& l) { lines.push_back(l); });
+  try {
+    indicesRead(short_one);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "depth/0.png: depth image must be 16-bit single channel, and so is every one of the first 5 "
+                           "frames: the recording needs looking at");
+  }
+  EXPECT_TRUE(lines.empty());
+}
+
 // A problem met on many frames is listed for the first few, then one line says the rest are not.
 TEST(SkippingSource, AProblemOnManyFramesIsListedAFewTimes) {
   std::vector<std::string> lines;

@@ -128,7 +128,10 @@ std::optional<std::string> valueText(const mrpt::config::CConfigFileBase& cfg, c
 // The whole text as a number, or nullopt. MRPT's own readers are atoi/atof, which take "1cm" as 1,
 // "0,3" as 0 and "true # on" as false without a word; a value is either all number or refused.
 std::optional<double> parseNumber(std::string text) {
-  if (!text.empty() && text[0] == '+') text.erase(0, 1);
+  if (!text.empty() && text[0] == '+') {
+    text.erase(0, 1);
+    if (!text.empty() && (text[0] == '+' || text[0] == '-')) return std::nullopt;  // "+-5", "++5"
+  }
   double x = 0.0;
   const char* end = text.data() + text.size();
   const auto [ptr, ec] = std::from_chars(text.data(), end, x);
@@ -152,7 +155,7 @@ double readNumber(const mrpt::config::CConfigFileBase& cfg, const std::string& s
   const auto text = valueText(cfg, section, key);
   if (!text) return fallback;
   const auto x = parseNumber(*text);
-  if (!x || (integer && std::isfinite(*x) && std::floor(*x) != *x))
+  if (!x || (integer && (!std::isfinite(*x) || std::floor(*x) != *x)))
     throw InputError(keyName(section, key), "'" + *text + "' is not " + (integer ? "an integer" : "a number"));
   return *x;
 }

@@ -595,9 +595,22 @@ void RawlogWriter::commit() {
   const std::string file = impl_->gz.filePathAtUse();
   impl_->gz.close();
   if (!gzipTrailerSays(file, written)) throw InputError(path_, "write failed while closing the rawlog (disk full?)");
-  if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);  // beside a whole rawlog only
+  // The ground truth beside the rawlog is its own or none: RawlogSource reads that file before the
+  // rawlog's GROUND_TRUTH entries, so an earlier conversion's left there would evaluate this one.
+  const std::string gt_path = groundTruthPathFor(path_);
+  std::optional<AtomicPath> gt;
+  if (impl_->gt) {
+    gt.emplace(gt_path);
+    writeTumTrajectory(gt->tmp(), *impl_->gt);
+  }
   if (opts_.external_images) impl_->images->commit();
   impl_->rawlog->commit();
+  if (gt) {
+    gt->commit();
+  } else {
+    std::error_code ec;
+    fs::remove(gt_path, ec);
+  }
 }
 
 }  // namespace vofusion

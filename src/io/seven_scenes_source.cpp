@@ -107,7 +107,10 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
   cv::Mat first;
   for (std::size_t i = 0; i < std::min<std::size_t>(frames_.size(), 30) && first.empty(); ++i)
     if (!frames_[i].colour.empty() && !isTruncatedPng(frames_[i].colour)) first = cv::imread(frames_[i].colour, cv::IMREAD_COLOR);
-  if (first.empty()) throw InputError(folder, "none of the first colour images can be read (frame-XXXXXX.color.png)");
+  if (first.empty())
+    throw InputError(frames_.front().colour.empty() ? frames_.front().stem + ".color.png" : frames_.front().colour,
+                     "colour image cannot be read, nor can any of the first " +
+                         std::to_string(std::min<std::size_t>(frames_.size(), 30)) + " frames'");
   // The published intrinsics are for 640x480; resized copies of the dataset get them scaled.
   camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : defaultIntrinsics().scaled(first.cols / 640.0);
   camera_.width = first.cols;

@@ -15,20 +15,29 @@ void SkippingSource::skip(const DamagedFrame& e) {
   if (read_ > 0) {
     warn(e.problem(), line);
   } else {
-    // Nothing read yet: the same problem on every frame so far is the recording's, said once.
-    const bool all_alike = std::all_of(skipped_.begin(), skipped_.end(), [&](const SkippedFrame& s) { return s.problem == e.problem(); });
-    if (all_alike && skipped_.size() >= kLeadingDamaged)
-      throw InputError(skipped_.front().file, e.problem() + ", and so is every one of the first " + std::to_string(skipped_.size()) +
-                                                  " frames: the recording needs looking at");
+    // Nothing read yet: a problem on the first kLeadingDamaged frames it could be on is the recording's
+    // (another problem beside it, a missing first colour image say, does not hide it), said once.
+    LeadingProblem& lead = leading_[e.problem()];
+    if (lead.frames++ == 0) lead.first_file = e.file();
+    if (lead.frames >= kLeadingDamaged) throw recordingsProblem(e.problem());
     held_.emplace_back(e.problem(), line);
   }
   const std::size_t of = std::max(inner_->size(), met_);
   if ((inner_->size() > 0 || met_ >= 10) && double(skipped_.size()) > kMaxDamagedShare * double(of)) {
+    // A short recording reaches a fifth before the tenth frame: one problem on every frame is still one line.
+    if (read_ == 0 && leading_.size() == 1) throw recordingsProblem(e.problem());
     releaseHeld();
     throw InputError(inner_->name(), std::to_string(skipped_.size()) + " of " + std::to_string(of) +
                                          " frames are damaged (more than one in five): the recording needs looking at; "
                                          "the lines above name the first of them");
   }
+}
+
+InputError SkippingSource::recordingsProblem(const std::string& problem) const {
+  const LeadingProblem& lead = leading_.at(problem);
+  const std::string where = lead.frames == met_ ? "is every one of the first " + std::to_string(met_) + " frames"
+                                                : "are " + std::to_string(lead.frames) + " of the first " + std::to_string(met_) + " frames";
+  return InputError(lead.first_file, problem + ", and so " + where + ": the recording needs looking at");
 }
 
 // A problem's first kLinesPerProblem frames are listed, then one line says the rest are not.
@@ -78,6 +87,7 @@ void SkippingSource::rewind() {
   met_ = read_ = 0;
   held_.clear();
   warned_.clear();
+  leading_.clear();
   ended_ = false;
 }
 

@@ -205,11 +205,13 @@ CameraFile readCameraYaml(const std::string& path) {
   f.camera.dist = {};
   // k1 k2 p1 p2 k3 (OpenCV's and ROS's plumb_bob); ROS's rational_polynomial adds k4..k6, which only
   // fit this model at zero, and equidistant is another model altogether.
-  const std::string model = fsr["distortion_model"].empty() ? "plumb_bob" : std::string(fsr["distortion_model"]);
+  const bool named = !fsr["distortion_model"].empty();
+  const std::string model = named ? std::string(fsr["distortion_model"]) : "plumb_bob";
   const bool beyond_five = std::any_of(d.begin<double>() + std::min<int>(5, int(d.total())), d.end<double>(), [](double k) { return k != 0.0; });
   if ((model != "plumb_bob" && model != "rational_polynomial") || beyond_five)
-    throw InputError(path, "distortion '" + model + "' with " + std::to_string(d.total()) +
-                               " coefficients: only k1 k2 p1 p2 k3 (plumb_bob) can be used");
+    throw InputError(path, (named ? "distortion '" + model + "' with " : "distortion with ") + std::to_string(d.total()) +
+                               " coefficients" + (beyond_five ? ", some beyond k3 not zero" : "") +
+                               ": only k1 k2 p1 p2 k3 (plumb_bob) can be used");
   for (int i = 0; i < std::min<int>(5, int(d.total())); ++i) f.camera.dist[i] = d.at<double>(i);
   if (!fsr["image_width"].empty() && !fsr["image_height"].empty()) {
     f.camera.width = int(fsr["image_width"]);

@@ -3,9 +3,10 @@
 // read (DamagedFrame), the first few with each problem reported; a recording cut short is read to its last whole frame.
 // The tracker sees the gap as a longer step between two frames. Strict mode stops at the first
 // damage instead, and more than one damaged frame in five stops the run: such a recording needs
-// looking at, not a reconstruction. So does the same problem on each of the first kLeadingDamaged frames
-// (a wrong depth format, say), in one line, and a problem met on many frames is listed for the first
-// kLinesPerProblem of them only.
+// looking at, not a reconstruction. So does one problem on kLeadingDamaged frames before any frame was
+// read (a wrong depth format, say, whatever other problem some of them have too), or on every frame
+// until a short recording's fifth is gone, in one line; a problem met on many frames is listed for the
+// first kLinesPerProblem of them only.
 //
 //   SkippingSource src(openFrameSource(path, opts), strict, [](const std::string& line) { warn(line); });
 //   while (src.next(frame)) ...;
@@ -54,6 +55,12 @@ class SkippingSource : public FrameSource {
   void skip(const DamagedFrame& e);
   void warn(const std::string& problem, const std::string& line);
   void releaseHeld();  // the lines held while no frame was read
+  // One problem on the frames met before any was read, as one line naming its first file.
+  InputError recordingsProblem(const std::string& problem) const;
+  struct LeadingProblem {
+    std::size_t frames = 0;
+    std::string first_file;
+  };
   std::unique_ptr<FrameSource> inner_;
   bool strict_;
   std::function<void(const std::string&)> warn_;
@@ -63,6 +70,7 @@ class SkippingSource : public FrameSource {
   std::size_t read_ = 0;
   std::vector<std::pair<std::string, std::string>> held_;  // (problem, line) met before the first frame read
   std::map<std::string, std::size_t> warned_;              // frames skipped so far, by problem
+  std::map<std::string, LeadingProblem> leading_;          // before the first frame read, by problem
   bool ended_ = false;
 };
 
