@@ -48,6 +48,20 @@ std::string writeRawlog(const std::string& path, const std::vector<Frame>& frame
   return path;
 }
 
+// frames into `path` with their ground truth in the companion file only; committed.
+void writeWithGroundTruthFile(const std::string& path, const std::vector<Frame>& frames) {
+  RawlogWriterOptions o;
+  o.ground_truth_observations = false;
+  RawlogWriter w(path, o);
+  Trajectory gt;
+  for (const auto& f : frames) {
+    w.write(f);
+    gt.push_back({f.timestamp, *f.groundTruth});
+  }
+  w.writeGroundTruth(gt);
+  w.commit();
+}
+
 void expectSameFrames(const std::vector<Frame>& a, FrameSource& src, double depth_tol) {
   ASSERT_EQ(src.size(), a.size());
   Frame f;
@@ -168,16 +182,7 @@ TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {
 TEST(Rawlog, GroundTruthCompanionFile) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_gt");
-  RawlogWriterOptions o;
-  o.ground_truth_observations = false;
-  RawlogWriter w(dir + "/g.rawlog", o);
-  Trajectory gt;
-  for (const auto& f : frames) {
-    w.write(f);
-    gt.push_back({f.timestamp, *f.groundTruth});
-  }
-  w.writeGroundTruth(gt);
-  w.commit();
+  writeWithGroundTruthFile(dir + "/g.rawlog", frames);
   ASSERT_TRUE(fs::exists(dir + "/g.groundtruth.txt"));
   RawlogSource src(dir + "/g.rawlog", {});
   ASSERT_EQ(src.groundTruth().size(), 2u);
@@ -192,19 +197,10 @@ TEST(Rawlog, GroundTruthCompanionFile) {
 TEST(Rawlog, AGroundTruthFileIsTheRawlogsOwnOrNone) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_gt_stale");
+  writeWithGroundTruthFile(dir + "/g.rawlog", frames);
+  ASSERT_TRUE(fs::exists(dir + "/g.groundtruth.txt"));
   RawlogWriterOptions o;
   o.ground_truth_observations = false;
-  {
-    RawlogWriter w(dir + "/g.rawlog", o);
-    Trajectory gt;
-    for (const auto& f : frames) {
-      w.write(f);
-      gt.push_back({f.timestamp, *f.groundTruth});
-    }
-    w.writeGroundTruth(gt);
-    w.commit();
-  }
-  ASSERT_TRUE(fs::exists(dir + "/g.groundtruth.txt"));
   {
     RawlogWriter w(dir + "/g.rawlog", o);
     w.write(frames[0]);

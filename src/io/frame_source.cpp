@@ -1,5 +1,7 @@
 #include "vofusion/io/frame_source.h"
 
+#include "vofusion/core/progress.h"
+
 namespace vofusion {
 
 bool IndexedFrameSource::next(Frame& frame) {
@@ -11,6 +13,16 @@ bool IndexedFrameSource::next(Frame& frame) {
     throw DamagedFrame(e);
   }
   return true;
+}
+
+Trajectory readGroundTruthFile(const std::string& path, const SourceOptions& opts) {
+  try {
+    return readTumTrajectory(path);
+  } catch (const InputError& e) {
+    if (opts.strict) throw;
+    printWarning(std::string(e.what()) + " (read without ground truth: nothing is evaluated or converted from it)");
+    return {};
+  }
 }
 
 }  // namespace vofusion

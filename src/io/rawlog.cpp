@@ -28,7 +28,6 @@
 #include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/gzip_members.h"
-#include "vofusion/core/progress.h"
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -326,12 +325,7 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
                                std::to_string(scan.objects) + " entries read)");
   const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
   if (fs::exists(gt_file)) {
-    try {
-      gt_ = readTumTrajectory(gt_file);
-    } catch (const InputError& e) {  // it only evaluates the run: a damaged one costs the evaluation
-      if (opts.strict) throw;
-      printWarning(std::string(e.what()) + " (read without ground truth: nothing is evaluated or converted from it)");
-    }
+    gt_ = readGroundTruthFile(gt_file, opts);
   } else {
     std::sort(embedded_gt.begin(), embedded_gt.end(),
               [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });

@@ -326,14 +326,7 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   }
 
   const std::string gt = (fs::path(folder) / "groundtruth.txt").string();
-  if (fs::exists(gt)) {
-    try {
-      gt_ = readTumTrajectory(gt);
-    } catch (const InputError& e) {  // it only evaluates the run: a damaged one costs the evaluation
-      if (opts.strict) throw;
-      printWarning(std::string(e.what()) + " (read without ground truth: nothing is evaluated or converted from it)");
-    }
-  }
+  if (fs::exists(gt)) gt_ = readGroundTruthFile(gt, opts);
 
   // The Kinect's accelerometer reads the reaction to gravity ("up") with its x and y axes opposite to
   // the optical frame's (checked on fr1 xyz and rpy against their ground truth).

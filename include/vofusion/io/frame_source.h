@@ -9,6 +9,7 @@
 #include "vofusion/core/camera.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/frame.h"
+#include "vofusion/core/trajectory.h"
 
 namespace vofusion {
 
@@ -65,5 +66,9 @@ struct SourceOptions {
   bool unique_depth = false;              // TUM: one-to-one pairs (associate.py), else nearest colour per depth frame
   bool strict = false;                    // a damaged ground truth stops the run (else it costs the evaluation)
 };
+
+// A recording's ground-truth file (TUM format). Damaged: strict, the InputError naming it; else one
+// warning line and no ground truth, since it only evaluates (or goes along with) the frames.
+Trajectory readGroundTruthFile(const std::string& path, const SourceOptions& opts);
 
 }  // namespace vofusion
