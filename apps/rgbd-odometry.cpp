@@ -68,16 +68,9 @@ OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known
   loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
   if (a.sets.empty()) return params;
   mrpt::config::CConfigFileMemory sets;
-  auto trimmed = [](const std::string& t) {
-    const auto b = t.find_first_not_of(" \t"), e = t.find_last_not_of(" \t");
-    return b == std::string::npos ? std::string() : t.substr(b, e - b + 1);
-  };
-  for (const std::string& s : a.sets) {
-    const auto dot = s.find('.'), eq = s.find('=');
-    if (dot == std::string::npos || eq == std::string::npos || eq < dot)
-      throw InputError("--set " + s, "expected section.key=value");
-    const std::string section = trimmed(s.substr(0, dot)), key = trimmed(s.substr(dot + 1, eq - dot - 1));
-    for (auto* c : {&sets, &cfg}) c->write(section, key, trimmed(s.substr(eq + 1)));
+  for (const std::string& text : a.sets) {
+    const Setting s = parseSetting(text);
+    for (auto* c : {&sets, &cfg}) c->write(s.section, s.key, s.value);
   }
   checkConfigKeys(sets, "--set", known);
   loadNamingOrigin("--set", [&] { params.loadFromConfigFile(cfg, "odometry"); });

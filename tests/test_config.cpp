@@ -79,6 +79,16 @@ TEST(Config, DumpHoldsEveryKey) {
 
 // MRPT reads INI numbers with atoi / atof, so "1cm" was 1 and "true # on" false, without a word. A value
 // is now either wholly a number (a switch: true / false, yes / no, on / off, 1 / 0) or a one-line error.
+TEST(Config, ASettingIsSectionKeyAndValueWithoutTheSpacesAround) {
+  const Setting s = parseSetting(" odometry . references = 2 ");
+  EXPECT_EQ(s.section, "odometry");
+  EXPECT_EQ(s.key, "references");
+  EXPECT_EQ(s.value, "2");
+  EXPECT_EQ(parseSetting("kinfu.work_dir=/tmp/a=b").value, "/tmp/a=b");  // the first '=' ends the key
+  for (const char* bad : {"odometry", "odometry=2", "references=odometry.2"})
+    EXPECT_THROW(parseSetting(bad), InputError) << bad;
+}
+
 TEST(Config, ValueThatIsNotWhollyANumberIsRefused) {
   struct Keys {
     int cap = 64;

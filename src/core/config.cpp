@@ -32,6 +32,12 @@ static std::string trimmed(const std::string& s) {
   return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
 }
 
+Setting parseSetting(const std::string& text) {
+  const auto dot = text.find('.'), eq = text.find('=');
+  if (dot == std::string::npos || eq == std::string::npos || eq < dot) throw InputError("--set " + text, "expected section.key=value");
+  return {trimmed(text.substr(0, dot)), trimmed(text.substr(dot + 1, eq - dot - 1)), trimmed(text.substr(eq + 1))};
+}
+
 static mrpt::config::CConfigFileMemory defaultsOf(const std::vector<ConfigSection>& known) {
   mrpt::config::CConfigFileMemory mem;
   for (const auto& [section, params] : known) params->saveToConfigFile(mem, section);

@@ -1,11 +1,11 @@
 #include "vofusion/core/progress.h"
 
-#include <set>
-#include <mutex>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <mutex>
+#include <set>
 
 namespace vofusion {
 

@@ -104,17 +104,16 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
   if (opts.max_frames > 0 && frames_.size() > opts.max_frames) frames_.resize(opts.max_frames);
 
   // The first colour image that can be read gives the size (a damaged one is its own frame's problem).
-  cv::Mat first;
-  for (std::size_t i = 0; i < std::min<std::size_t>(frames_.size(), 30) && first.empty(); ++i)
-    if (!frames_[i].colour.empty() && !isTruncatedPng(frames_[i].colour)) first = cv::imread(frames_[i].colour, cv::IMREAD_COLOR);
-  if (first.empty())
-    throw InputError(frames_.front().colour.empty() ? frames_.front().stem + ".color.png" : frames_.front().colour,
-                     "colour image cannot be read, nor can any of the first " +
-                         std::to_string(std::min<std::size_t>(frames_.size(), 30)) + " frames'");
+  std::vector<std::string> colours;
+  for (std::size_t i = 0; i < std::min(frames_.size(), kFramesForImageSize); ++i) colours.push_back(frames_[i].colour);
+  const auto size = firstReadableImageSize(colours);
+  if (!size)
+    throw InputError(colours.front().empty() ? frames_.front().stem + ".color.png" : colours.front(),
+                     "colour image cannot be read, nor can any of the first " + std::to_string(colours.size()) + " frames'");
   // The published intrinsics are for 640x480; resized copies of the dataset get them scaled.
-  camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : defaultIntrinsics().scaled(first.cols / 640.0);
-  camera_.width = first.cols;
-  camera_.height = first.rows;
+  camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : defaultIntrinsics().scaled(size->width / 640.0);
+  camera_.width = size->width;
+  camera_.height = size->height;
   camera_.validate(opts.intrinsics ? "--intrinsics" : folder);
 
   gt_index_.assign(frames_.size(), -1);

@@ -243,21 +243,25 @@ double medianRaw(const cv::Mat& raw) {
 
 }  // namespace
 
-namespace {
-// The image size comes from the data itself: the first colour image of the first frames that can be
-// read sets it for the whole sequence (a missing or damaged one is its own frame's problem, said when
-// that frame is read); an error naming the first when none of them can.
-cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssociation>& pairs) {
-  constexpr std::size_t kFramesTried = 30;
-  for (std::size_t i = 0; i < std::min(pairs.size(), kFramesTried); ++i) {
-    const std::string path = (fs::path(folder) / pairs[i].rgb.file).string();
-    if (!fs::is_regular_file(path) || isTruncatedPng(path)) continue;
+std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths) {
+  for (const std::string& path : paths) {
+    if (path.empty() || !fs::is_regular_file(path) || isTruncatedPng(path)) continue;
     const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
     if (!image.empty()) return image.size();
   }
-  throw InputError((fs::path(folder) / pairs[0].rgb.file).string(),
-                   "colour image cannot be read, nor can any of the first " + std::to_string(std::min(pairs.size(), kFramesTried)) +
-                       " listed in rgb.txt");
+  return std::nullopt;
+}
+
+namespace {
+// The image size comes from the data itself: the first colour image of the first frames that can be
+// read sets it for the whole sequence; an error naming the first when none of them can.
+cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssociation>& pairs) {
+  std::vector<std::string> paths;
+  for (std::size_t i = 0; i < std::min(pairs.size(), kFramesForImageSize); ++i)
+    paths.push_back((fs::path(folder) / pairs[i].rgb.file).string());
+  if (const auto size = firstReadableImageSize(paths)) return *size;
+  throw InputError(paths.front(), "colour image cannot be read, nor can any of the first " + std::to_string(paths.size()) +
+                                      " listed in rgb.txt");
 }
 }  // namespace
 

@@ -66,6 +66,13 @@ void loadNamingOrigin(const std::string& origin, Load&& load) {
   }
 }
 
+// One command-line override, "section.key=value" (spaces around each part dropped); throws
+// InputError("--set <text>", "expected section.key=value") when it is not one.
+struct Setting {
+  std::string section, key, value;
+};
+Setting parseSetting(const std::string& text);
+
 // Throws InputError("[section] key", "must be one of a | b, got 'x'") unless value is one of choices.
 void checkChoice(const std::string& section, const char* key, const std::string& value,
                  const std::vector<std::string>& choices);

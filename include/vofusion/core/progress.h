@@ -9,8 +9,9 @@ namespace vofusion {
 // One line on stderr of its own (a warning during a long job): on a terminal it first clears the
 // progress line being redrawn, which the next update() draws again below it.
 void printAboveProgress(const std::string& line);
-// "warning: <line>" the same way: something assumed or skipped, the run goes on.
-void printWarning(const std::string& line);  // "warning: <line>", once per process for each line
+// "warning: <line>" the same way, once per process for each line: something assumed or skipped, the
+// run goes on.
+void printWarning(const std::string& line);
 
 class Progress {
  public:

@@ -1,6 +1,7 @@
 #pragma once
 // A damaged frame costs that frame, not the run: wraps a source and steps over the frames it cannot
-// read (DamagedFrame), the first few with each problem reported; a recording cut short is read to its last whole frame.
+// read (DamagedFrame), the first few with each problem reported; a recording cut short is read to its
+// last whole frame.
 // The tracker sees the gap as a longer step between two frames. Strict mode stops at the first
 // damage instead, and more than one damaged frame in five stops the run: such a recording needs
 // looking at, not a reconstruction. So does one problem on kLeadingDamaged frames before any frame was

@@ -16,6 +16,7 @@
 // depth scale under which the first frame's median reading is beyond 5 m or within 0.4 m is announced.
 // accelerometer.txt ("timestamp ax ay az", the Kinect's accelerometer), when present, gives each frame
 // its "up" (Frame::up): the mean reading within 0.1 s, its x and y axes turned into the optical frame's.
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -75,6 +76,11 @@ cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, con
 // True for a PNG cut short (no IEND chunk at the end). Checked before decoding, because libpng
 // prints its own line to stderr for such a file.
 bool isTruncatedPng(const std::string& path);
+// The size of the first colour image of `paths` that can be read (missing, cut short or undecodable ones
+// are passed over: each is its own frame's problem); nullopt when none can. Sources look at this many of
+// their first frames' images for it.
+constexpr std::size_t kFramesForImageSize = 30;
+std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths);
 // A camera description read from a file: intrinsics, and what else the file says.
 struct CameraFile {
   CameraIntrinsics camera;
