@@ -150,10 +150,12 @@ void checkOwnSections(const mrpt::config::CConfigFileBase& cfg, const std::strin
   checkConfigKeys(own, origin, known);
 }
 
-std::string summaryText(const LiveStats& s, const std::string& source, std::size_t recorded, std::size_t queue) {
+std::string summaryText(const LiveStats& s, const std::string& source, std::size_t recorded, std::size_t queue,
+                        std::size_t skipped) {
   std::ostringstream o;
   o << "source: " << source << "\n"
     << "frames_played: " << s.played << "\n"
+    << "frames_skipped: " << skipped << "\n"
     << "frames_processed: " << s.processed << "\n"
     << "frames_dropped: " << s.dropped << "\n"
     << "frames_recorded: " << recorded << "\n"
@@ -197,19 +199,30 @@ GrabPlan planGrab(const Args& args) {
   return plan;
 }
 
+// What frames come from: a replay, or the sensor.
+struct GrabSource {
+  std::unique_ptr<LiveSource> live;
+  const SkippingSource* replayed = nullptr;  // a replay's frames, with the damaged ones it skipped
+  std::size_t skipped() const { return replayed ? replayed->skipped().size() : 0; }
+};
+
 // A replay, or the sensor (fails here, in one line, when none can be opened); `label` gets the
 // sensor's label for the recording.
-std::unique_ptr<LiveSource> openLiveSource(const Args& args, const GrabPlan& plan, std::string& label) {
+GrabSource openGrabSource(const Args& args, const GrabPlan& plan, std::string& label) {
+  GrabSource src;
   if (!args.replay.empty()) {
     SourceOptions so;
     so.depth_scale = args.depth_scale;
     // A damaged frame of the recording costs that frame, as in vofusion (io/skipping_source.h).
     auto frames = std::make_unique<SkippingSource>(openFrameSource(args.replay, so), false, printWarning);
-    return std::make_unique<ReplaySource>(std::move(frames), plan.opts.replay_speed);
+    src.replayed = frames.get();
+    src.live = std::make_unique<ReplaySource>(std::move(frames), plan.opts.replay_speed);
+    return src;
   }
   const std::string section = findSensorSection(plan.cfg, args.sensor, plan.config);
   label = plan.cfg.read_string(section, "sensorLabel", label);
-  return std::make_unique<SensorSource>(plan.cfg, section, plan.opts.sensor_timeout, plan.config, args.verbose);
+  src.live = std::make_unique<SensorSource>(plan.cfg, section, plan.opts.sensor_timeout, plan.config, args.verbose);
+  return src;
 }
 
 // --checkpoint-every: the reconstruction so far to DIR/checkpoint, between two frames, for `vofusion
@@ -261,12 +274,12 @@ struct LiveConsumer {
 
 // The reconstruction's end: the same outputs as vofusion, the map fused again from grab.rawlog when
 // loops moved the poses and the run recorded.
-void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, const std::string& source_name,
+void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, const GrabSource& source,
                 const std::string& out, std::size_t recorded, const LiveCheckpoints& checkpoints) {
   if (run.reconstruction().framesProcessed() == 0) return;
   RunInfo info;
   info.app = "vofusion-grab";
-  info.input = source_name;
+  info.input = source.live->name();
   info.config = plan.config;
   info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
   info.seconds = stats.seconds;
@@ -275,6 +288,7 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   if (checkpoints.every > 0)
     info.extra["checkpoints"] = {{"every_seconds", checkpoints.every}, {"written", checkpoints.written},
                                  {"seconds_writing", checkpoints.seconds_writing}};
+  if (source.replayed) reportSkipped(*source.replayed, info);
   RunSession::Reopen reopen;
   if (recorded > 0)
     reopen = [out] { return openFrameSource((fs::path(out) / "grab.rawlog").string(), SourceOptions{}); };
@@ -287,14 +301,14 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
 
 // Everything recorded so far is written, whatever stopped the run; then the reconstruction's outputs
 // and grab-summary.txt.
-int finishGrab(const LiveStats& stats, const GrabPlan& plan, const LiveSource& source, RawlogWriter* writer,
+int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& source, RawlogWriter* writer,
                RunSession* session, const Args& args, const LiveCheckpoints& checkpoints) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   try {
     if (writer) writer->commit();
-    if (session) finishLive(*session, stats, plan, source.name(), args.out, recorded, checkpoints);
+    if (session) finishLive(*session, stats, plan, source, args.out, recorded, checkpoints);
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
-                        summaryText(stats, source.name(), recorded, plan.opts.queue_capacity));
+                        summaryText(stats, source.live->name(), recorded, plan.opts.queue_capacity, source.skipped()));
   } catch (const InputError&) {
     if (stats.ok()) throw;
     // What stopped the run (a full disk) stops the outputs after it too: that first cause is the one
@@ -303,8 +317,9 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const LiveSource& s
                  recorded);
     return 2;
   }
-  std::fprintf(stderr, "vofusion-grab: %zu played, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,
-               stats.processed, stats.dropped, recorded, args.out.c_str());
+  const std::string skipped = source.skipped() ? ", " + std::to_string(source.skipped()) + " skipped as damaged" : "";
+  std::fprintf(stderr, "vofusion-grab: %zu played%s, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,
+               skipped.c_str(), stats.processed, stats.dropped, recorded, args.out.c_str());
   if (!stats.ok()) {
     std::fprintf(stderr, "vofusion-grab: stopped: %s (everything recorded so far was written)\n", stats.error.c_str());
     return 1;
@@ -322,7 +337,7 @@ int run(const Args& args) {
   const GrabPlan plan = planGrab(args);
   ensureWritableDirectory(args.out);
   std::string label = "KINECT";
-  const std::unique_ptr<LiveSource> source = openLiveSource(args, plan, label);
+  const GrabSource source = openGrabSource(args, plan, label);
   std::unique_ptr<RawlogWriter> writer;
   if (args.record) {
     RawlogWriterOptions wopts;
@@ -333,7 +348,7 @@ int run(const Args& args) {
   std::unique_ptr<RunSession> session;  // the same outputs as vofusion, for what was reconstructed
   if (plan.mode) session = std::make_unique<RunSession>(plan.cfg, *plan.mode, args.out, plan.out_params, plan.mesh_params);
   std::unique_ptr<LiveViewer> viewer;
-  if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source->name());
+  if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source.live->name());
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 
@@ -348,7 +363,7 @@ int run(const Args& args) {
   LiveHooks hooks;
   hooks.stop = &g_stop;
   if (writer) hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { f.recorded = writer->write(f); };
-  std::size_t total = source->size();
+  std::size_t total = source.live->size();
   if (plan.opts.max_frames > 0 && (total == 0 || total > plan.opts.max_frames)) total = plan.opts.max_frames;
   Progress progress(args.live ? "live" : "recording", total);
   hooks.on_tick = [&](const LiveStats& s) {
@@ -357,11 +372,11 @@ int run(const Args& args) {
     if (viewer) viewer->status(s);
   };
   std::fprintf(stderr, "vofusion-grab: %s from %s (queue %zu, Ctrl-C to stop)\n",
-               args.live ? "reconstructing" : "recording", source->name().c_str(), plan.opts.queue_capacity);
-  const LiveStats stats = runLive(*source, std::ref(consumer), plan.opts, hooks);
+               args.live ? "reconstructing" : "recording", source.live->name().c_str(), plan.opts.queue_capacity);
+  const LiveStats stats = runLive(*source.live, std::ref(consumer), plan.opts, hooks);
   progress.finish("processed " + std::to_string(stats.processed) + "  dropped " + std::to_string(stats.dropped) +
                   "  (" + stopReasonName(stats.stop) + ")");
-  return finishGrab(stats, plan, *source, writer.get(), session.get(), args, checkpoints);
+  return finishGrab(stats, plan, source, writer.get(), session.get(), args, checkpoints);
 }
 
 int body(int argc, char** argv) { return run(parseArgs(argc, argv)); }

@@ -103,15 +103,6 @@ Input openInput(const RunPlan& plan, bool warn) {
   return in;
 }
 
-// summary.json's account of the damaged frames.
-void reportSkipped(const SkippingSource& frames, RunInfo& info) {
-  nlohmann::json list = nlohmann::json::array();
-  for (const SkippedFrame& s : frames.skipped()) list.push_back({{"frame", s.position}, {"file", s.file}, {"problem", s.problem}});
-  info.extra["frames_skipped"] = frames.skipped().size();
-  info.extra["skipped_frames"] = list;
-  if (!frames.cutShort().empty()) info.extra["recording_cut_short"] = frames.cutShort();
-}
-
 // The configuration file with the command line's overrides; out-of-range values name the file.
 void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   plan.cfg = loadConfig(plan.config_path);

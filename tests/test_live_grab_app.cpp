@@ -230,7 +230,8 @@ TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
   }
 }
 
-// Replaying a damaged recording: the damaged frame is skipped with one warning, the rest recorded.
+// Replaying a damaged recording: the damaged frame is skipped with one warning, the rest recorded, and
+// the count is in grab-summary.txt, the last line and, live, summary.json (as vofusion's).
 TEST(GrabApp, ReplaySkipsADamagedFrame) {
   const std::string dir = test::tempDir("grab_app_damaged");
   ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 20 --size 320x240"), 0);
@@ -244,11 +245,26 @@ TEST(GrabApp, ReplaySkipsADamagedFrame) {
             0)
       << log;
   EXPECT_NE(log.find("warning: " + depth[7].string() + ": depth image is missing (frame 7 skipped)"), std::string::npos) << log;
+  EXPECT_NE(log.find("19 played, 1 skipped as damaged"), std::string::npos) << log;
+  EXPECT_EQ(readSummary(dir + "/out/grab-summary.txt").at("frames_skipped"), "1");
   auto back = openFrameSource(dir + "/out/grab.rawlog");
   std::size_t n = 0;
   Frame f;
   while (back->next(f)) ++n;
   EXPECT_EQ(n, 19u);
+
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  ASSERT_EQ(test::run(test::app("vofusion-grab") + " --replay " + dir + "/rec --out " + dir + "/live --live --no-gui --config " +
+                          dir + "/nomesh.ini",
+                      &log),
+            0)
+      << log;
+  std::ifstream summary_file(dir + "/live/summary.json");
+  const auto summary = nlohmann::json::parse(summary_file);
+  EXPECT_EQ(summary.at("frames_skipped"), 1) << summary.dump();
+  ASSERT_EQ(summary.at("skipped_frames").size(), 1u);
+  EXPECT_EQ(summary["skipped_frames"][0].at("frame"), 7);
+  EXPECT_EQ(summary["skipped_frames"][0].at("file"), depth[7].string());
 }
 
 // An earlier recording in the output folder is never overwritten: the grab refuses in one line.

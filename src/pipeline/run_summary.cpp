@@ -6,6 +6,7 @@
 #include <mrpt/poses/Lie/SO.h>
 
 #include "vofusion/core/pose_eigen.h"
+#include "vofusion/io/skipping_source.h"
 
 using nlohmann::json;
 
@@ -135,6 +136,14 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
                                   {"spill_free_mib", ks.world.spill_free_bytes / 1048576.0}, {"spill_seconds", ks.world.spill_seconds}}}};
   if (!info.extra.is_null()) s.update(info.extra);
   return s;
+}
+
+void reportSkipped(const SkippingSource& frames, RunInfo& info) {
+  json list = json::array();
+  for (const SkippedFrame& f : frames.skipped()) list.push_back({{"frame", f.position}, {"file", f.file}, {"problem", f.problem}});
+  info.extra["frames_skipped"] = frames.skipped().size();
+  info.extra["skipped_frames"] = list;
+  if (!frames.cutShort().empty()) info.extra["recording_cut_short"] = frames.cutShort();
 }
 
 }  // namespace vofusion

@@ -20,6 +20,7 @@
 namespace vofusion {
 
 class RegionPremesher;
+class SkippingSource;
 
 // INI section [output].
 struct OutputParams : public mrpt::config::CLoadableOptions {
@@ -47,6 +48,10 @@ struct RunInfo {
   double seconds = 0.0;        // wall time of the frame loop
   nlohmann::json extra;        // caller-specific facts (e.g. live: played/dropped), merged into summary
 };
+
+// Adds the recording's damaged frames to info.extra: `frames_skipped` (how many), `skipped_frames` (frame,
+// file, problem each) and, when the recording ends in a damaged record, `recording_cut_short`.
+void reportSkipped(const SkippingSource& frames, RunInfo& info);
 
 class RunRecorder {
  public:
