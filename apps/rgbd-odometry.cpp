@@ -21,6 +21,8 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/skipping_source.h"
 #include "vofusion/odometry/odometry_source.h"
+#include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/pipeline/run_outputs.h"
 #include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
@@ -28,7 +30,8 @@ using namespace vofusion;
 namespace {
 const char* kUsage =
     "usage: rgbd-odometry <tum_dir|in.rawlog|synthetic[:scene]> --out <dir> [options]\n"
-    "  --config F         INI file ([odometry] [star] [narf] [brand] [matching] [motion]; see share/odometry.ini)\n"
+    "  --config F         INI file ([odometry] [star] [narf] [brand] [matching] [motion]; see share/odometry.ini);\n"
+    "                     a whole vofusion config is fine: its other sections are checked, not used\n"
     "  --max-frames N     process at most N frames\n"
     "  --depth-scale S    TUM-layout folders: depth PNG units per metre (default: the folder's camera file, else 5000)\n"
     "  --set S.K=V        override one key, e.g. --set odometry.motion_method=paper\n"
@@ -59,11 +62,22 @@ Args parseArgs(const CommandLine& cl) {
   return a;
 }
 
-// The [odometry] parameters: defaults, then the --config file, then the --set overrides. Each is
-// checked on its own, so that a bad key or value names where it was written.
+// Every section a vofusion config may hold: such a file is accepted whole, as vofusion reads it.
+std::vector<ConfigSection> vofusionSections() {
+  static const OutputParams output;
+  static const MeshCleanParams mesh;
+  auto sections = reconstructionConfigSections();
+  sections.push_back({"mesh", &mesh});
+  sections.push_back({"output", &output});
+  return sections;
+}
+
+// The odometry's parameters: defaults, then the --config file, then the --set overrides. Each is
+// checked on its own, so that a bad key or value names where it was written; --set takes the odometry's
+// sections only (nothing else is run).
 OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known) {
   auto cfg = loadConfig(a.config);
-  checkConfigKeys(cfg, a.config, known);
+  checkConfigKeys(cfg, a.config, vofusionSections());
   OdometryParams params;
   loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
   if (a.sets.empty()) return params;

@@ -157,6 +157,24 @@ TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
   EXPECT_NE(log.find("--set: [odometry] references: must be"), std::string::npos) << log;
 }
 
+// The one vofusion config serves rgbd-odometry too: share/vofusion.ini is taken whole (only the odometry's
+// sections are read), and a typo in another section is still refused, naming the file.
+TEST(RgbdOdometryApp, TakesAWholeVofusionConfig) {
+  const std::string dir = test::tempDir("odo-vofusion-ini");
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --max-frames 2 --no-rawlog --out " + dir + "/out --config " +
+                          test::shareDir() + "/vofusion.ini",
+                      &log),
+            0)
+      << log;
+  std::ofstream(dir + "/typo.ini") << "[kinfu]\nvoxel_sise = 0.006\n";
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --max-frames 2 --out " + dir + "/out2 --config " + dir +
+                          "/typo.ini",
+                      &log),
+            2);
+  EXPECT_EQ(log, "rgbd-odometry: error: " + dir + "/typo.ini: unknown key 'voxel_sise' in section [kinfu]\n");
+}
+
 TEST(OdometryParams, ShareIniHoldsEveryKeyWithTheDefaults) {
   const std::string ini = test::shareDir() + "/odometry.ini";
   auto cfg = loadConfig(ini);
