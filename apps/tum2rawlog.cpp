@@ -19,7 +19,8 @@ namespace {
 const char* kUsage =
     "usage: tum2rawlog <tum_dir> <out.rawlog> [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy] [--max-frames N]\n"
     "                  [--depth-scale S] [--format obs|sf] [--embed-images] [--range-units U] [--strict]\n"
-    "  --intrinsics   camera preset or values (default: from the folder name freiburg1/2/3)\n"
+    "  --intrinsics   camera preset or values (default: the folder's intrinsics.txt / camera.yaml, else\n"
+    "                 freiburg1/2/3 from its name, else 525/319.5/239.5)\n"
     "  --max-frames   convert only the first N associated frames\n"
     "  --depth-scale  depth PNG units per metre (default: intrinsics.txt / camera.yaml, else 5000 as TUM)\n"
     "  --format       obs: observations only (default); sf: action/sensory-frame pairs\n"

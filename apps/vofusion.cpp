@@ -1,6 +1,6 @@
 // vofusion: an RGB-D recording in, a trajectory, a clean coloured mesh and an MRPT 3D scene out.
-//   vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]
-//            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]
+//   vofusion [<tum_dir|in.rawlog|synthetic[:scene][:shake]>] --out <dir> [--config f.ini]
+//            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy]
 //            [--depth-scale S] [--no-loop-closure] [--strict]
 //            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
@@ -35,10 +35,12 @@ std::atomic<bool> g_stop{false};
 void onSigint(int) { g_stop = true; }
 
 const char* kUsage =
-    "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene]>] --out <dir> [--config f.ini]\n"
-    "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|fx,fy,cx,cy]\n"
+    "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene][:shake]>] --out <dir> [--config f.ini]\n"
+    "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy]\n"
     "                [--depth-scale S] [--no-loop-closure] [--strict] [--raw-mesh] [--dump-config]\n"
     "                [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]\n"
+    "  synthetic      a rendered recording with exact ground truth: scene room (default), corridor, bare_wall,\n"
+    "                 loop, lookalike or longwalk, trajectory smooth (default) or shake (rgbd-simulate --help)\n"
     "  --strict       stop at the first damaged frame (missing or corrupt image, unreadable record), at a\n"
     "                 recording cut short or at a damaged ground truth. By default a damaged frame is skipped\n"
     "                 with a line naming its file (the first three with each problem), counted in summary.json\n"

@@ -63,11 +63,13 @@ std::size_t pingPong(std::size_t k, std::size_t n) {
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--frames", "--every", "--mode", "--config", "--json"}, {"--help"});
-  if (cl.flag("--help") || cl.positional().size() != 1) {
-    std::cerr << "usage: longrun <tum_dir|synthetic:scene> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] "
-                 "[--config f.ini] [--json out.json]\n";
-    return 2;
+  const char* usage = "usage: longrun <tum_dir|synthetic:scene> [--frames 10000] [--every 1000] "
+                      "[--mode joint|paper-handoff|kinfu|odometry] [--config f.ini] [--json out.json]\n";
+  if (cl.flag("--help")) {
+    std::cout << usage;
+    return 0;
   }
+  if (cl.positional().size() != 1) throw InputError("usage", "expected one input (see --help)");
   const std::size_t total = cl.count("--frames", 10000), every = std::max<std::size_t>(1, cl.count("--every", 1000));
   const std::string config_path = cl.value("--config", "");
   const auto cfg = loadConfig(config_path);

@@ -10,10 +10,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
+#include <iostream>
 #include <string>
 
 #include "vofusion/core/cli.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/features/narf_detector.h"
 #include "vofusion/io/tum_source.h"
 
@@ -43,16 +44,18 @@ int matched(const std::vector<cv::KeyPoint>& a, const std::vector<cv::KeyPoint>&
 }  // namespace
 
 int body(int argc, char** argv) {
-  if (argc < 2) throw InputError("usage", "narf_speed <tum_dir> [--every 3] [--repeat 3] [--threads 1] [--only fast|pcl]");
-  int every = 3, repeat = 3, threads = 1;
-  std::string only;
-  for (int i = 2; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--every")) every = std::max(1, std::atoi(argv[i + 1]));
-    else if (!std::strcmp(argv[i], "--repeat")) repeat = std::max(1, std::atoi(argv[i + 1]));
-    else if (!std::strcmp(argv[i], "--threads")) threads = std::max(1, std::atoi(argv[i + 1]));
-    else if (!std::strcmp(argv[i], "--only")) only = argv[i + 1];
+  const CommandLine cl(argc, argv, {"--every", "--repeat", "--threads", "--only"}, {"--help"});
+  if (cl.flag("--help")) {
+    std::cout << "usage: narf_speed <tum_dir> [--every 3] [--repeat 3] [--threads 1] [--only fast|pcl]\n"
+                 "  NARF keypoints of every --every-th frame, our implementation against PCL's: time and agreement\n";
+    return 0;
   }
-  TumFolderSource src(argv[1], {});
+  if (cl.positional().size() != 1) throw InputError("usage", "expected one TUM folder (see --help)");
+  const int every = int(cl.count("--every", 3, 1)), repeat = int(cl.count("--repeat", 3, 1));
+  const int threads = int(cl.count("--threads", 1, 1));
+  const std::string only = cl.value("--only", "");
+  if (!only.empty() && only != "fast" && only != "pcl") throw InputError("--only", "must be fast or pcl, got '" + only + "'");
+  TumFolderSource src(cl.positional()[0], {});
   NarfParams fast, pcl;
   fast.implementation = "fast";
   pcl.implementation = "pcl";
