@@ -21,7 +21,6 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/skipping_source.h"
 #include "vofusion/odometry/odometry_source.h"
-#include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
 #include "vofusion/sim/any_source.h"
 
@@ -62,22 +61,12 @@ Args parseArgs(const CommandLine& cl) {
   return a;
 }
 
-// Every section a vofusion config may hold: such a file is accepted whole, as vofusion reads it.
-std::vector<ConfigSection> vofusionSections() {
-  static const OutputParams output;
-  static const MeshCleanParams mesh;
-  auto sections = reconstructionConfigSections();
-  sections.push_back({"mesh", &mesh});
-  sections.push_back({"output", &output});
-  return sections;
-}
-
 // The odometry's parameters: defaults, then the --config file, then the --set overrides. Each is
 // checked on its own, so that a bad key or value names where it was written; --set takes the odometry's
 // sections only (nothing else is run).
 OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known) {
   auto cfg = loadConfig(a.config);
-  checkConfigKeys(cfg, a.config, vofusionSections());
+  checkConfigKeys(cfg, a.config, vofusionConfigSections());  // a whole vofusion config is fine
   OdometryParams params;
   loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
   if (a.sets.empty()) return params;

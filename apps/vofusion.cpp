@@ -59,13 +59,6 @@ const char* kUsage =
     "                 uninterrupted run gives. A map saved with --save-volume: the camera continues from the\n"
     "                 saved pose, the map keeps its frame (the input should continue where the saved run stopped)\n";
 
-std::vector<ConfigSection> allSections(const OutputParams& out, const MeshCleanParams& mesh) {
-  auto sections = reconstructionConfigSections();
-  sections.push_back({"mesh", &mesh});
-  sections.push_back({"output", &out});
-  return sections;
-}
-
 // What one run was asked for: the command line and the configuration it names, checked.
 struct RunPlan {
   std::string out_dir, config_path, input, default_work;
@@ -108,7 +101,7 @@ Input openInput(const RunPlan& plan, bool warn) {
 // The configuration file with the command line's overrides; out-of-range values name the file.
 void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   plan.cfg = loadConfig(plan.config_path);
-  checkConfigKeys(plan.cfg, plan.config_path, allSections(OutputParams(), MeshCleanParams()));
+  checkConfigKeys(plan.cfg, plan.config_path, vofusionConfigSections());
   auto& cfg = plan.cfg;
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
   // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.
@@ -228,7 +221,7 @@ int body(int argc, char** argv) {
     return 0;
   }
   if (cl.flag("--dump-config")) {
-    std::cout << dumpConfig(allSections(OutputParams(), MeshCleanParams()));
+    std::cout << dumpConfig(vofusionConfigSections());
     return 0;
   }
   const RunPlan plan = planRun(cl);

@@ -26,14 +26,7 @@ struct NumericKey {
   std::string section, key, value, comment;
 };
 
-std::vector<ConfigSection> allSections() {
-  static const MeshCleanParams mesh;
-  static const OutputParams output;
-  auto s = reconstructionConfigSections();
-  s.push_back({"mesh", &mesh});
-  s.push_back({"output", &output});
-  return s;
-}
+std::vector<ConfigSection> allSections() { return vofusionConfigSections(); }
 
 // The numeric keys of the dumped defaults ("key = value // comment").
 std::vector<NumericKey> numericKeys() {

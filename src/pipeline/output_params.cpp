@@ -3,6 +3,7 @@
 
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
 
 namespace vofusion {
@@ -32,6 +33,15 @@ void OutputParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, co
 
 void OutputParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
   saveKeys(c, s, outputKeys(const_cast<OutputParams&>(*this)));
+}
+
+std::vector<ConfigSection> vofusionConfigSections() {
+  static const MeshCleanParams mesh;
+  static const OutputParams output;
+  auto sections = reconstructionConfigSections();
+  sections.push_back({"mesh", &mesh});
+  sections.push_back({"output", &output});
+  return sections;
 }
 
 }  // namespace vofusion

@@ -10,10 +10,12 @@
 // Used by the offline app and the live one alike.
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <mrpt/config/CLoadableOptions.h>
 #include <nlohmann/json.hpp>
 
+#include "vofusion/core/config.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/pipeline/reconstruction.h"
 
@@ -48,6 +50,10 @@ struct RunInfo {
   double seconds = 0.0;        // wall time of the frame loop
   nlohmann::json extra;        // caller-specific facts (e.g. live: played/dropped), merged into summary
 };
+
+// Every section of a vofusion config, at its defaults: the reconstruction's, [mesh] and [output]
+// (vofusion's --dump-config; the sections any app taking that file checks for typos).
+std::vector<ConfigSection> vofusionConfigSections();
 
 // Adds the recording's damaged frames to info.extra: `frames_skipped` (how many), `skipped_frames` (frame,
 // file, problem each) and, when the recording ends in a damaged record, `recording_cut_short`.
