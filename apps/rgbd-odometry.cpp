@@ -30,10 +30,10 @@ namespace {
 const char* kUsage =
     "usage: rgbd-odometry <tum_dir|in.rawlog|synthetic[:scene]> --out <dir> [options]\n"
     "  --config F         INI file ([odometry] [star] [narf] [brand] [matching] [motion]; see share/odometry.ini);\n"
-    "                     a whole vofusion config is fine: its other sections are checked, not used\n"
+    "                     a whole vofusion config is fine: its other sections' keys are checked for typos, not used\n"
     "  --max-frames N     process at most N frames\n"
     "  --depth-scale S    TUM-layout folders: depth PNG units per metre (default: the folder's camera file, else 5000)\n"
-    "  --set S.K=V        override one key, e.g. --set odometry.motion_method=paper\n"
+    "  --set S.K=V        override one key of the odometry's sections, e.g. --set odometry.motion_method=paper\n"
     "  --no-rawlog        write only trajectory.txt\n"
     "  --strict           stop at the first damaged frame or a damaged ground truth (default: skip the frame with\n"
     "                     a warning line, the first three with each problem, and go on)\n"

@@ -130,11 +130,9 @@ Args parseArgs(int argc, char** argv) {
 }
 
 // Our sections are checked for typos; the sensor sections belong to MRPT's drivers.
-std::vector<ConfigSection> ownSections(const LiveOptions& live, const OutputParams& out, const MeshCleanParams& mesh) {
-  auto sections = reconstructionConfigSections();
+std::vector<ConfigSection> ownSections(const LiveOptions& live) {
+  auto sections = vofusionConfigSections();
   sections.push_back({kSection, &live});
-  sections.push_back({"output", &out});
-  sections.push_back({"mesh", &mesh});
   return sections;
 }
 
@@ -185,7 +183,7 @@ GrabPlan planGrab(const Args& args) {
   plan.config = args.config;
   if (plan.config.empty() && args.replay.empty()) plan.config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
   plan.cfg = loadConfig(plan.config);
-  checkOwnSections(plan.cfg, plan.config, ownSections(LiveOptions(), OutputParams(), MeshCleanParams()));
+  checkOwnSections(plan.cfg, plan.config, ownSections(LiveOptions()));
   loadNamingOrigin(plan.config, [&] {
     plan.opts.loadFromConfigFile(plan.cfg, kSection);
     plan.out_params.loadFromConfigFile(plan.cfg, "output");
@@ -202,7 +200,7 @@ GrabPlan planGrab(const Args& args) {
 // What frames come from: a replay, or the sensor.
 struct GrabSource {
   std::unique_ptr<LiveSource> live;
-  const SkippingSource* replayed = nullptr;  // a replay's frames, with the damaged ones it skipped
+  const SkippingSource* replayed = nullptr;  // a replay's frames (owned by `live`), with the damaged ones it skipped
   std::size_t skipped() const { return replayed ? replayed->skipped().size() : 0; }
 };
 
@@ -331,7 +329,7 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
 
 int run(const Args& args) {
   if (args.dump) {
-    std::fputs(dumpConfig(ownSections(LiveOptions(), OutputParams(), MeshCleanParams())).c_str(), stdout);
+    std::fputs(dumpConfig(ownSections(LiveOptions())).c_str(), stdout);
     return 0;
   }
   const GrabPlan plan = planGrab(args);

@@ -1,5 +1,5 @@
 // vofusion: an RGB-D recording in, a trajectory, a clean coloured mesh and an MRPT 3D scene out.
-//   vofusion [<tum_dir|in.rawlog|synthetic[:scene][:shake]>] --out <dir> [--config f.ini]
+//   vofusion [<tum_dir|in.rawlog|synthetic[:scene[:shake]]>] --out <dir> [--config f.ini]
 //            [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy]
 //            [--depth-scale S] [--no-loop-closure] [--strict]
 //            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]
@@ -35,7 +35,7 @@ std::atomic<bool> g_stop{false};
 void onSigint(int) { g_stop = true; }
 
 const char* kUsage =
-    "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene][:shake]>] --out <dir> [--config f.ini]\n"
+    "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene[:shake]]>] --out <dir> [--config f.ini]\n"
     "                [--mode joint|paper-handoff|kinfu|odometry] [--max-frames N] [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy]\n"
     "                [--depth-scale S] [--no-loop-closure] [--strict] [--raw-mesh] [--dump-config]\n"
     "                [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]\n"

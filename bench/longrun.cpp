@@ -4,8 +4,8 @@
 // current RSS, fps, volume shifts, world-model size and tracking counts every K frames.
 // With synthetic:<scene> (e.g. synthetic:longwalk, a straight corridor walked at 1 m/s) the frames are
 // rendered in order instead, and each checkpoint also gives the path walked so far (ground truth).
-//   longrun <tum_dir|synthetic:scene> [--frames 10000] [--every 1000] [--mode paper|kinfu|odometry] [--config f.ini]
-//           [--json out.json]
+//   longrun <tum_dir|synthetic:scene> [--frames 10000] [--every 1000] [--mode joint|paper-handoff|kinfu|odometry]
+//           [--config f.ini] [--json out.json]
 // Built by CMake as build/bin/longrun (a benchmark, not a test: run it by hand, see bench/README.md).
 #include <malloc.h>
 #include <sys/resource.h>
@@ -27,6 +27,7 @@
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/tum_source.h"
 #include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/pipeline/run_outputs.h"
 #include "vofusion/sim/any_source.h"
 
 using namespace vofusion;
@@ -73,7 +74,7 @@ int body(int argc, char** argv) {
   const std::size_t total = cl.count("--frames", 10000), every = std::max<std::size_t>(1, cl.count("--every", 1000));
   const std::string config_path = cl.value("--config", "");
   const auto cfg = loadConfig(config_path);
-  checkConfigKeys(cfg, config_path, reconstructionConfigSections());
+  checkConfigKeys(cfg, config_path, vofusionConfigSections());
   const TrackingMode mode = parseTrackingMode(cl.value("--mode", "joint"));
 
   const std::string input = cl.positional()[0];

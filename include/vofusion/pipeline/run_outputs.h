@@ -7,7 +7,7 @@
 //   scene.3Dscene    mesh, camera path, frustums, grid for SceneViewer3D
 //   trajectory.png   path (and ground truth + error when known); mesh.png an off-screen rendering
 //   summary.json     frames, failures, fps per stage, peak memory, mesh statistics, ATE/RPE
-// Used by the offline app and the live one alike.
+// Used by the offline app and the live one alike; the config sections by every app that reads a vofusion config.
 #include <memory>
 #include <string>
 #include <vector>
