@@ -77,8 +77,7 @@ TEST(Config, DumpHoldsEveryKey) {
   EXPECT_NE(text.find("weight_cap"), std::string::npos);
 }
 
-// MRPT reads INI numbers with atoi / atof, so "1cm" was 1 and "true # on" false, without a word. A value
-// is now either wholly a number (a switch: true / false, yes / no, on / off, 1 / 0) or a one-line error.
+// rgbd-odometry's --set section.key=value.
 TEST(Config, ASettingIsSectionKeyAndValueWithoutTheSpacesAround) {
   const Setting s = parseSetting(" odometry . references = 2 ");
   EXPECT_EQ(s.section, "odometry");
@@ -89,6 +88,8 @@ TEST(Config, ASettingIsSectionKeyAndValueWithoutTheSpacesAround) {
     EXPECT_THROW(parseSetting(bad), InputError) << bad;
 }
 
+// MRPT reads INI numbers with atoi / atof, so "1cm" was 1 and "true # on" false, without a word. A value
+// is now either wholly a number (a switch: true / false, yes / no, on / off, 1 / 0) or a one-line error.
 TEST(Config, ValueThatIsNotWhollyANumberIsRefused) {
   struct Keys {
     int cap = 64;

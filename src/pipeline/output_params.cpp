@@ -1,4 +1,5 @@
 // [output] INI section: one table lists every key, so loading and saving can never disagree.
+// Also the list of a vofusion config's sections, [output] among them.
 #include <mrpt/config/CConfigFileBase.h>
 
 #include "vofusion/core/config.h"
