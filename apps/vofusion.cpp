@@ -31,8 +31,11 @@ using namespace vofusion;
 
 namespace {
 
-std::atomic<bool> g_stop{false};
-void onSigint(int) { g_stop = true; }
+// Ctrl-C, or SIGTERM (a batch system's time limit, scancel, GNU parallel's --timeout): stop after the
+// frame in hand and write what was built, a checkpoint first (--checkpoint-every) for --resume.
+std::atomic<int> g_stop_signal{0};
+void onStopSignal(int signal) { g_stop_signal = signal; }
+const char* signalName(int signal) { return signal == SIGTERM ? "SIGTERM" : "SIGINT"; }
 
 const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene[:shake]]>] --out <dir> [--config f.ini]\n"
@@ -52,12 +55,14 @@ const char* kUsage =
     "  --work-dir     folder of the spill file of bricks that left the volume beyond [kinfu] world_cache_mib\n"
     "                 (default <out>/.tmp; the file is deleted as soon as it is created, so it never stays)\n"
     "  --save-volume  at the end, the map (volume + world model) and the camera pose to file f\n"
-    "  --checkpoint-every  every S seconds of the frame loop (and at Ctrl-C), the whole run so far to\n"
-    "                 <out>/checkpoint, atomically (the map, every stage's state, the position in the input);\n"
-    "                 deleted when the run ends with its outputs written\n"
+    "  --checkpoint-every  every S seconds of the frame loop (and at Ctrl-C or SIGTERM), the whole run so\n"
+    "                 far to <out>/checkpoint, atomically (the map, every stage's state, the position in the\n"
+    "                 input); deleted when the run ends with its outputs written\n"
     "  --resume       a checkpoint: the same command goes on from it, to the trajectory and mesh an\n"
     "                 uninterrupted run gives. A map saved with --save-volume: the camera continues from the\n"
-    "                 saved pose, the map keeps its frame (the input should continue where the saved run stopped)\n";
+    "                 saved pose, the map keeps its frame (the input should continue where the saved run stopped)\n"
+    "Ctrl-C or SIGTERM (a batch system's time limit) stops after the frame in hand and writes what was built\n"
+    "(summary.json: interrupted, stop_signal; exit 130 or 143); a second one while writing kills at once.\n";
 
 // What one run was asked for: the command line and the configuration it names, checked.
 struct RunPlan {
@@ -156,6 +161,7 @@ RunPlan planRun(const CommandLine& cl) {
 struct FrameLoop {
   std::size_t done = 0, frames_with_depth = 0;
   bool interrupted = false;
+  int stop_signal = 0;   // what interrupted it: SIGINT or SIGTERM
   double seconds = 0.0;  // of the frame loop, a resumed checkpoint's included
   std::size_t checkpoints = 0;
   double checkpoint_seconds = 0.0;  // writing them
@@ -180,10 +186,12 @@ FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession&
   return loop;
 }
 
-// Every frame of the source through the run, with progress and checkpoints, until the end or Ctrl-C.
+// Every frame of the source through the run, with progress and checkpoints, until the end, Ctrl-C or
+// SIGTERM.
 void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run, FrameLoop& loop) {
   const Reconstruction& rec = run.reconstruction();
-  std::signal(SIGINT, onSigint);
+  std::signal(SIGINT, onStopSignal);
+  std::signal(SIGTERM, onStopSignal);
   Progress progress("vofusion [" + toString(plan.mode) + "]", source.size());
   progress.startAt(loop.done);
   const double before = loop.seconds;
@@ -196,7 +204,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     ++loop.checkpoints;
   };
   Frame frame;
-  while (!g_stop && source.next(frame)) {
+  while (!g_stop_signal && source.next(frame)) {
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
     run.process(frame);
     ++loop.done;
@@ -205,10 +213,13 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
     progress.update(loop.done, status);
   }
-  loop.interrupted = g_stop;
+  loop.stop_signal = g_stop_signal;
+  loop.interrupted = loop.stop_signal != 0;
   if (loop.interrupted && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C while writing outputs kills as usual
-  progress.finish(loop.interrupted ? "(interrupted: writing what was built so far)" : "");
+  // A second Ctrl-C or SIGTERM while writing outputs kills as usual.
+  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGTERM, SIG_DFL);
+  progress.finish(loop.interrupted ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + progress.elapsedSeconds();
 }
 
@@ -245,6 +256,7 @@ int body(int argc, char** argv) {
   info.input = source->name();
   info.config = plan.config_path;
   info.interrupted = loop.interrupted;
+  if (loop.interrupted) info.extra["stop_signal"] = signalName(loop.stop_signal);
   info.seconds = loop.seconds;
   if (std::isfinite(before_frames)) info.extra["seconds_before_frames"] = before_frames;
   if (plan.checkpoint_every > 0 || resumed_at)
@@ -267,7 +279,7 @@ int body(int argc, char** argv) {
   // The outputs are whole: a checkpoint of this run has nothing left to resume.
   if (!loop.interrupted) std::filesystem::remove(plan.checkpoint_path, ec);
   std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
-  return loop.interrupted ? 130 : 0;
+  return loop.interrupted ? 128 + loop.stop_signal : 0;  // as the shell reports a signal: 130, 143
 }
 
 }  // namespace

@@ -61,7 +61,7 @@ def row(folder, name, recording=None):
         except (OSError, ValueError) as e:
             r["status"] = "failed: %s: %s" % (summary_path, e)
             return r
-    if s is not None and code in (None, 0, 130):
+    if s is not None and code in (None, 0, 130, 143):  # 130, 143: stopped by SIGINT, SIGTERM, outputs written
         r["input"] = r["input"] or s.get("input")
         r["mode"] = s.get("mode")
         r["frames"] = s.get("frames")
@@ -71,7 +71,10 @@ def row(folder, name, recording=None):
         r["fallbacks"] = s.get("icp_fallbacks_to_odometry")
         r["peak_rss_mib"] = s.get("peak_memory_mib")
         r["mesh_faces"] = (s.get("mesh") or {}).get("faces")
-        r["status"] = "interrupted" if s.get("interrupted") or code == 130 else "ok"
+        if s.get("interrupted") or code in (130, 143):
+            r["status"] = "interrupted" + (" (%s)" % s["stop_signal"] if s.get("stop_signal") else "")
+        else:
+            r["status"] = "ok"
     elif not os.path.isdir(folder):
         r["status"] = "failed: not run"
     elif code is None and not os.path.exists(log_path):

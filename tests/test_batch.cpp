@@ -229,6 +229,45 @@ TEST(Batch, FailedRecordingLeavesTheOthersAndResumeRerunsIt) {
   EXPECT_EQ(rows[1][9], "ok");
 }
 
+// A Slurm time limit or scancel (scripts/slurm: --signal=B:TERM) signals the job's shell, batch-job:
+// it passes SIGTERM on to vofusion, which writes what it has built and its checkpoint, and records
+// vofusion's exit code. The job run again goes on from the checkpoint.
+TEST(Batch, ATermToAJobLetsVofusionWriteWhatItBuiltAndTheJobRunAgainResumes) {
+  VOFUSION_REQUIRE_DATA(test::tumFirst300());
+  const std::string dir = test::tempDir("batch_term");
+  const std::string out = dir + "/out";
+  const std::string job = test::sourceDir() + "/scripts/batch-job " + test::app("vofusion") + " " + out + " xyz 0 " +
+                          test::tumFirst300() + " --config " + smallConfig(dir) + " --checkpoint-every 1000";
+  // TERM to batch-job alone (not its process group) once vofusion's progress shows a few frames.
+  std::string log;
+  test::run("(" + job + " > " + dir + "/job.txt 2>&1 & pid=$!; for i in $(seq 1 600); do grep -q ' [3-9]/300 frames\\| "
+            "[1-9][0-9]/300 frames' " + out + "/xyz/vofusion.log 2>/dev/null && break; sleep 0.2; done; kill -TERM $pid; "
+            "wait $pid; echo rc=$?)",
+            &log);
+  EXPECT_NE(log.find("rc=143"), std::string::npos) << log << slurp(out + "/xyz/vofusion.log");
+  EXPECT_EQ(slurp(out + "/xyz/exit_code"), "143\n");
+  EXPECT_EQ(slurp(dir + "/job.txt").rfind("STOPPED xyz (exit 143: what was built is written): vofusion: ", 0), 0u)
+      << slurp(dir + "/job.txt");
+  const auto stopped = nlohmann::json::parse(slurp(out + "/xyz/summary.json"));
+  EXPECT_TRUE(stopped["interrupted"].get<bool>());
+  EXPECT_EQ(stopped.value("stop_signal", ""), "SIGTERM");
+  const int frames = stopped["frames"].get<int>();
+  EXPECT_LT(frames, 300);
+  std::string table;
+  ASSERT_EQ(test::run("python3 " + test::sourceDir() + "/bench/collect.py " + out, &table), 0) << table;
+  const auto rows = tableRows(table);
+  ASSERT_EQ(rows.size(), 1u) << table;
+  EXPECT_EQ(rows[0][9], "interrupted (SIGTERM)") << table;
+
+  ASSERT_EQ(test::run(job, &log), 0) << log << slurp(out + "/xyz/vofusion.log");
+  EXPECT_NE(slurp(out + "/xyz/vofusion.log").find("--resume " + out + "/xyz/checkpoint"), std::string::npos);
+  const auto resumed = nlohmann::json::parse(slurp(out + "/xyz/summary.json"));
+  EXPECT_FALSE(resumed["interrupted"].get<bool>());
+  EXPECT_EQ(resumed["frames"].get<int>(), 300);
+  EXPECT_EQ(resumed["checkpoints"]["resumed_at_frame"].get<int>(), frames);
+  EXPECT_FALSE(fs::exists(out + "/xyz/checkpoint")) << "a finished run leaves no checkpoint";
+}
+
 TEST(Batch, BadArgumentsFailInOneLine) {
   const std::string dir = test::tempDir("batch_args");
   struct Case {

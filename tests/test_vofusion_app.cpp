@@ -16,6 +16,7 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/mesh_io.h"
+#include "vofusion/pipeline/run_session.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;
@@ -176,27 +177,54 @@ TEST(VofusionApp, AMapThatCannotBeWrittenCostsTheMapOnly) {
     EXPECT_TRUE(e.is_regular_file() && e.path().filename().string()[0] != '.') << "left behind: " << e.path();
 }
 
-TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
-  const std::string tum = test::tumFirst300();
-  VOFUSION_REQUIRE_DATA(tum);
-  const std::string dir = test::tempDir("vofusion_app_sigint");
-  const std::string out = dir + "/out";
-  // Interrupt once a few frames are done (the progress line shows them), then wait for the exit code.
-  const std::string cmd = "(" + test::app("vofusion") + " " + tum + " --config " + validConfig(dir) + " --out " + out +
-                          " > " + dir + "/log.txt 2>&1 & pid=$!; "
+// Runs vofusion on first300 into <dir>/out and sends `signal` (kill's name for it) once a few frames
+// are done (the progress line shows them); returns what the shell printed, with "rc=<exit code>".
+std::string interruptedRun(const std::string& dir, const std::string& signal, const std::string& options = "") {
+  const std::string cmd = "(" + test::app("vofusion") + " " + test::tumFirst300() + " --config " + validConfig(dir) +
+                          " --out " + dir + "/out " + options + " > " + dir + "/log.txt 2>&1 & pid=$!; "
                           "for i in $(seq 1 600); do grep -q ' [3-9]/300 frames\\| [1-9][0-9]/300 frames' " +
-                          dir + "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -INT $pid; wait $pid; echo rc=$?)";
+                          dir + "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -" + signal + " $pid; wait $pid; echo rc=$?)";
   std::string log;
   test::run(cmd, &log);
+  return log;
+}
+
+TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
+  VOFUSION_REQUIRE_DATA(test::tumFirst300());
+  const std::string dir = test::tempDir("vofusion_app_sigint");
+  const std::string out = dir + "/out";
+  const std::string log = interruptedRun(dir, "INT");
   EXPECT_NE(log.find("rc=130"), std::string::npos) << log;
   const auto summary = readJson(out + "/summary.json");
   EXPECT_TRUE(summary["interrupted"].get<bool>());
+  EXPECT_EQ(summary.value("stop_signal", ""), "SIGINT");
   const int frames = summary["frames"].get<int>();
   EXPECT_GE(frames, 3);
   EXPECT_LT(frames, 300);
   EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), std::size_t(frames));
   EXPECT_TRUE(fs::exists(out + "/mesh.ply"));
   EXPECT_TRUE(fs::exists(out + "/scene.3Dscene"));
+}
+
+// A batch system's time limit (Slurm, GNU parallel --timeout) sends SIGTERM: the same as Ctrl-C, so
+// an hour's run is not lost, and with --checkpoint-every it leaves a checkpoint at the last frame.
+TEST(VofusionApp, SigtermStopsAsCtrlCDoesAndLeavesACheckpointToResume) {
+  VOFUSION_REQUIRE_DATA(test::tumFirst300());
+  const std::string dir = test::tempDir("vofusion_app_sigterm");
+  const std::string out = dir + "/out";
+  const std::string log = interruptedRun(dir, "TERM", "--checkpoint-every 1000");
+  EXPECT_NE(log.find("rc=143"), std::string::npos) << log;
+  const auto summary = readJson(out + "/summary.json");
+  EXPECT_TRUE(summary["interrupted"].get<bool>());
+  EXPECT_EQ(summary.value("stop_signal", ""), "SIGTERM");
+  const int frames = summary["frames"].get<int>();
+  EXPECT_GE(frames, 3);
+  EXPECT_LT(frames, 300);
+  EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), std::size_t(frames));
+  EXPECT_TRUE(fs::exists(out + "/mesh.ply"));
+  const auto checkpoint = RunSession::peek(out + "/checkpoint");
+  ASSERT_TRUE(checkpoint.has_value()) << "the checkpoint written at SIGTERM";
+  EXPECT_EQ(checkpoint->frames, std::size_t(frames));
 }
 
 // Ground truth never steers the tracker or the map: the same TUM frames with and without
