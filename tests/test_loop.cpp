@@ -455,6 +455,34 @@ TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
   EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
 }
 
+// A spill file that cannot be created (or written: a full disk) keeps every keyframe in RAM, reported
+// once in spill_error, instead of stopping the loop closer and the run with it.
+TEST(LoopKeyframeStore, ASpillFileThatCannotBeMadeKeepsEveryKeyframeInRam) {
+  sim::SimOptions o;
+  o.scene = "loop";
+  o.frames = 30;
+  const sim::SyntheticSequence seq(o);
+  const std::string file = test::tempDir("keyframe_spill_none") + "/a_file";
+  std::ofstream(file) << "not a folder";
+  KeyframeStore store(0, file + "/spill");  // no budget, and no folder can be made there
+  std::vector<Keyframe> made;
+  for (std::size_t i = 0; i < 3; ++i) {
+    made.push_back(keyframeOf(seq, 10 * i, pose(0.1 * double(i), 0, 0, 0), 0.1 * double(i), i));
+    ASSERT_NO_THROW(store.add(made.back()));
+  }
+  const KeyframeStoreStats st = store.stats();
+  EXPECT_EQ(st.spilled, 0u);
+  EXPECT_EQ(st.in_ram, 3u);
+  EXPECT_NE(st.spill_error.find("cannot create the keyframes' spill file"), std::string::npos) << st.spill_error;
+  for (std::size_t i = 0; i < made.size(); ++i) {
+    const Keyframe k = store.load(i);
+    ASSERT_FALSE(k.depth.empty());
+    EXPECT_EQ(cv::norm(k.depth, made[i].depth, cv::NORM_INF), 0.0);
+    ASSERT_TRUE(k.features);
+    EXPECT_EQ(k.features->points.size(), made[i].features->points.size());
+  }
+}
+
 // Two places 3 m apart in the look-alike corridor look the same; the camera's tracked path says they
 // are 3 m apart, so joining them is refused.
 TEST(LoopVerifier, LookAlikePlacesAreNotJoined) {

@@ -1,6 +1,7 @@
 // The vofusion app end to end: every output written and loadable, Ctrl-C keeps what was built,
 // a failing run leaves earlier results alone.
 #include <Eigen/Dense>
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -204,6 +205,36 @@ TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), std::size_t(frames));
   EXPECT_TRUE(fs::exists(out + "/mesh.ply"));
   EXPECT_TRUE(fs::exists(out + "/scene.3Dscene"));
+}
+
+// A work folder whose spill files cannot be made or written (here a path under a file; a full disk
+// alike) costs the spilling only: one warning for each file, both errors in summary.json, every brick
+// and keyframe kept in RAM, and the same trajectory as with a usable folder.
+TEST(VofusionApp, AWorkFolderThatCannotBeWrittenCostsTheSpillingOnly) {
+  const std::string dir = test::tempDir("vofusion_app_spill");
+  const std::string cfg = dir + "/spill_everything.ini";
+  std::ofstream(cfg) << "[kinfu]\nworld_cache_mib = 0\nvolume_voxels = 192\n[loop]\nkeyframe_cache_mib = 0\n"
+                        "[output]\nwrite_rawlog = false\nmesh = false\n";
+  std::ofstream(dir + "/a_file") << "not a folder";
+  const std::string run = test::app("vofusion") + " synthetic:corridor --max-frames 60 --config " + cfg;
+  std::string log, ok_log;
+  ASSERT_EQ(test::run(run + " --out " + dir + "/out --work-dir " + dir + "/a_file/spill", &log), 0) << log;
+  ASSERT_EQ(test::run(run + " --out " + dir + "/usable", &ok_log), 0) << ok_log;
+  for (const char* what : {"the world model's spill file", "the keyframes' spill file"}) {
+    const std::string line = "warning: " + dir + "/a_file/spill: cannot create " + what + ": Not a directory";
+    const auto lines = test::lines(log);
+    EXPECT_EQ(std::count_if(lines.begin(), lines.end(), [&](const std::string& l) { return l.rfind(line, 0) == 0; }), 1)
+        << log;
+  }
+  const auto summary = readJson(dir + "/out/summary.json");
+  EXPECT_NE(summary["fusion"]["world_model"].value("spill_error", "").find("cannot create the world model's spill file"),
+            std::string::npos);
+  EXPECT_NE(summary["loop_closure"].value("keyframe_spill_error", "").find("cannot create the keyframes' spill file"),
+            std::string::npos);
+  EXPECT_GT(readJson(dir + "/usable/summary.json")["fusion"]["world_model"]["bricks_spilled"].get<int>(), 0)
+      << "the run spills where it can";
+  std::ifstream a(dir + "/out/trajectory.txt"), b(dir + "/usable/trajectory.txt");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(a), {}), std::string(std::istreambuf_iterator<char>(b), {}));
 }
 
 // A batch system's time limit (Slurm, GNU parallel --timeout) sends SIGTERM: the same as Ctrl-C, so

@@ -291,12 +291,14 @@ TEST(WorldModel, ShiftsAtOnceLeaveTheStoreAsOneByOne) {
  }
 }
 
-// A spill that cannot be written (a file size limit, as a full disk) loses no brick: the error reaches
-// the caller and every brick handed over stays readable, cached over the limit.
-TEST(WorldModel, FailedSpillKeepsEveryBrick) {
+// A spill that cannot be written (a file size limit, as a full disk) loses no brick and does not stop
+// the run: it is reported once (spill_error), every brick handed over stays readable, and from then on
+// every brick stays in RAM, over the limit (a run whose work folder fills keeps what it built).
+TEST(WorldModel, ASpillThatCannotBeWrittenKeepsEveryBrickInRam) {
   std::mt19937 rng(9);
   WorldModel wm(4 * sizeof(Brick), test::tempDir("world_model_full"));
   std::vector<std::unique_ptr<Brick>> kept = putRow(wm, 20, rng);
+  const std::size_t spilled_before = wm.stats().spilled;
   std::vector<std::unique_ptr<Brick>> batch;
   for (int i = 0; i < 30; ++i) {
     auto b = randomBrick(Eigen::Vector3i(i, 1, 0), rng);
@@ -309,17 +311,22 @@ TEST(WorldModel, FailedSpillKeepsEveryBrick) {
   struct rlimit limit = old_limit;
   limit.rlim_cur = rlim_t(wm.stats().spill_file_bytes + 2000);  // a brick or two more
   ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &limit), 0);
-  EXPECT_THROW(wm.putAll(std::move(batch)), std::exception);
+  EXPECT_NO_THROW(wm.putAll(std::move(batch)));
   setrlimit(RLIMIT_FSIZE, &old_limit);
   std::signal(SIGXFSZ, old_handler);
+  const WorldModelStats after = wm.stats();
+  EXPECT_NE(after.spill_error.find("cannot write the world model's spill file: File too large"), std::string::npos)
+      << after.spill_error;
+  EXPECT_LE(after.spilled, spilled_before + 2);
   EXPECT_EQ(wm.size(), kept.size());
   Brick got;
   for (const auto& k : kept) {
     ASSERT_TRUE(wm.read(k->coord, got)) << "brick " << k->coord.transpose();
     EXPECT_TRUE(sameVoxels(got, *k)) << "brick " << k->coord.transpose();
   }
-  wm.put(randomBrick(Eigen::Vector3i(0, 2, 0), rng));  // the limit lifted, it spills again
-  EXPECT_LE(wm.stats().bricks_in_ram, 4u);
+  wm.put(randomBrick(Eigen::Vector3i(0, 2, 0), rng));  // no write is tried again: it stays in RAM
+  EXPECT_EQ(wm.stats().spilled, after.spilled);
+  EXPECT_EQ(wm.stats().bricks_in_ram, after.bricks_in_ram + 1);
 }
 
 // Reads share the store's lock (meshing fetches a region's bricks on every core): four readers, each

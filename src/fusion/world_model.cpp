@@ -2,10 +2,13 @@
 
 #include <chrono>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include "vofusion/core/deflate.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/core/parallel.h"
+#include "vofusion/core/progress.h"
 
 namespace vofusion::fusion {
 
@@ -124,6 +127,17 @@ void WorldModel::spillDue(std::size_t& due) {
       stats_.ram_bytes -= kBrickBytes;
       ++stats_.spilled;
     }
+  } catch (const InputError& e) {
+    // The spill file cannot be created or written (disk full): what is not on disk stays in RAM, and
+    // so does every brick handed over from now on, beyond the cache's limit. The run goes on and
+    // keeps what it built; memory grows instead.
+    for (std::uint64_t k : keys)
+      if (const auto it = ram_.find(k); it != ram_.end()) it->second.due = false;
+    due = 0;
+    cache_bytes_ = std::numeric_limits<std::size_t>::max();
+    stats_.spill_error = e.what();
+    printWarning(stats_.spill_error + ": bricks that leave the volume stay in memory from now on");
+    return;
   } catch (...) {
     for (std::uint64_t k : keys)
       if (const auto it = ram_.find(k); it != ram_.end()) it->second.due = false;  // back to plain cached

@@ -72,23 +72,25 @@ json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std:
   for (const auto& [stage, sec] : t.seconds) back += sec;
   const loop::KeyframeStoreStats store = lc.storeStats();
   const auto [max_queued, frame_loop_waits] = lc.queueStats();
-  return {{"enabled", true},
-          {"max_queued_keyframes", max_queued},
-          {"frame_loop_waits_for_thread", frame_loop_waits},
-          {"keyframes", lc.keyframes().size()},
-          {"frames_strained", lc.strainedFrames()},
-          {"keyframes_in_ram", store.in_ram},
-          {"keyframes_spilled", store.spilled},
-          {"keyframe_spill_mib", double(store.spill_file_bytes) / (1 << 20)},
-          {"loops_accepted", active},
-          {"loops_removed_after_optimisation", removed},
-          {"candidates_rejected", lc.rejections()},
-          {"max_pose_correction_m", rec.maxLoopCorrection()},
-          {"map_reintegrated", rec.reintegrated()},
-          {"frame_loop_ms_per_frame", frames ? front * 1e3 / frames : 0.0},
-          {"thread_ms_per_frame", frames ? back * 1e3 / frames : 0.0},
-          {"thread_cpu_ms_per_frame", frames ? lc.threadCpuSeconds() * 1e3 / frames : 0.0},
-          {"stages", timesJson(t, frames)}};
+  json j = {{"enabled", true},
+            {"max_queued_keyframes", max_queued},
+            {"frame_loop_waits_for_thread", frame_loop_waits},
+            {"keyframes", lc.keyframes().size()},
+            {"frames_strained", lc.strainedFrames()},
+            {"keyframes_in_ram", store.in_ram},
+            {"keyframes_spilled", store.spilled},
+            {"keyframe_spill_mib", double(store.spill_file_bytes) / (1 << 20)},
+            {"loops_accepted", active},
+            {"loops_removed_after_optimisation", removed},
+            {"candidates_rejected", lc.rejections()},
+            {"max_pose_correction_m", rec.maxLoopCorrection()},
+            {"map_reintegrated", rec.reintegrated()},
+            {"frame_loop_ms_per_frame", frames ? front * 1e3 / frames : 0.0},
+            {"thread_ms_per_frame", frames ? back * 1e3 / frames : 0.0},
+            {"thread_cpu_ms_per_frame", frames ? lc.threadCpuSeconds() * 1e3 / frames : 0.0},
+            {"stages", timesJson(t, frames)}};
+  if (!store.spill_error.empty()) j["keyframe_spill_error"] = store.spill_error;
+  return j;
 }
 
 json simplificationJson(const MeshSimplification& s, std::size_t raw_faces) {
@@ -134,6 +136,7 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
                  {"world_model", {{"cache_mib", ks.world.ram_bytes / 1048576.0}, {"bricks_spilled", ks.world.spilled},
                                   {"bricks_reloaded", ks.world.reloaded}, {"spill_file_mib", ks.world.spill_file_bytes / 1048576.0},
                                   {"spill_free_mib", ks.world.spill_free_bytes / 1048576.0}, {"spill_seconds", ks.world.spill_seconds}}}};
+  if (!ks.world.spill_error.empty()) s["fusion"]["world_model"]["spill_error"] = ks.world.spill_error;
   if (!info.extra.is_null()) s.update(info.extra);
   return s;
 }

@@ -38,6 +38,7 @@ struct WorldModelStats {
   std::size_t spill_free_bytes = 0;  // of it, bricks taken back whose place no brick took since
   std::size_t spilled = 0, reloaded = 0;  // bricks written to / read back from the spill file
   double spill_seconds = 0.0;      // wall time compressing + writing + reading + decompressing (batches on every core)
+  std::string spill_error;         // why the spill file could not be written (disk full); empty when it could
 };
 
 class WorldModel {
@@ -56,8 +57,9 @@ class WorldModel {
   // beyond the cache, and a shift hands over and takes back this many at once, however many move.
   static constexpr std::size_t kBatchBricks = 512;
   // A volume shift's bricks at once: the same as put / take one by one in the order given, the
-  // compression and decompression on every core. A brick stays cached until its record is on disk:
-  // a write that fails (disk full) leaves every brick handed over in the cache, over its limit.
+  // compression and decompression on every core. A brick stays cached until its record is on disk.
+  // A spill file that cannot be created or written (disk full) is warned of once (stats().spill_error):
+  // from then on every brick stays in the cache, over its limit, and nothing is lost.
   void putAll(std::vector<std::unique_ptr<Brick>> bricks);
   std::vector<std::unique_ptr<Brick>> takeAll(const std::vector<Eigen::Vector3i>& coords);
   // Coordinates of the stored bricks inside the box [lo, lo + n) (per axis).

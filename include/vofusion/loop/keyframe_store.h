@@ -21,12 +21,15 @@ struct KeyframeStoreStats {
   std::size_t keyframes = 0, in_ram = 0;  // in_ram: keyframes whose features and depth are in RAM
   std::size_t spilled = 0, reloaded = 0;
   std::uint64_t spill_file_bytes = 0;
+  std::string spill_error;  // why the spill file could not be written (disk full); empty when it could
 };
 
 class KeyframeStore {
  public:
   KeyframeStore(std::size_t cache_bytes, std::string spill_dir);
   // The next keyframe (ids 0, 1, 2, ... in order); the oldest ones in RAM beyond the budget are spilled.
+  // A spill file that cannot be created or written (disk full) is warned of once (stats().spill_error):
+  // from then on every keyframe stays in RAM, over the budget.
   void add(Keyframe k);
   std::size_t size() const { return keyframes_.size(); }
   // The stored keyframe: its features and depth are null / empty once spilled (load() has them).
@@ -44,6 +47,7 @@ class KeyframeStore {
   std::vector<SpillFile::Record> records_;  // per keyframe, its place in spill_ (id < spilled_)
   std::size_t spilled_ = 0;                 // keyframes [0, spilled_) are on disk
   std::size_t ram_bytes_ = 0;
+  std::string spill_error_;
   mutable std::size_t reloaded_ = 0;
 };
 
