@@ -178,33 +178,44 @@ TEST(VofusionApp, AMapThatCannotBeWrittenCostsTheMapOnly) {
     EXPECT_TRUE(e.is_regular_file() && e.path().filename().string()[0] != '.') << "left behind: " << e.path();
 }
 
-// Runs vofusion on first300 into <dir>/out and sends `signal` (kill's name for it) once a few frames
-// are done (the progress line shows them); returns what the shell printed, with "rc=<exit code>".
-std::string interruptedRun(const std::string& dir, const std::string& signal, const std::string& options = "") {
+// Runs vofusion on first300 into <dir>/out and sends `signal` (kill's name for it: INT, TERM) once a
+// few frames are done (the progress line shows them); expects the exit code a shell reports for it and
+// the outputs of the frames done. Returns how many that was.
+int expectAnInterruptedRunsOutputs(const std::string& dir, const std::string& signal, int exit_code,
+                                   const std::string& options = "") {
   const std::string cmd = "(" + test::app("vofusion") + " " + test::tumFirst300() + " --config " + validConfig(dir) +
                           " --out " + dir + "/out " + options + " > " + dir + "/log.txt 2>&1 & pid=$!; "
                           "for i in $(seq 1 600); do grep -q ' [3-9]/300 frames\\| [1-9][0-9]/300 frames' " +
                           dir + "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -" + signal + " $pid; wait $pid; echo rc=$?)";
   std::string log;
   test::run(cmd, &log);
-  return log;
+  EXPECT_NE(log.find("rc=" + std::to_string(exit_code)), std::string::npos) << log;
+  const auto summary = readJson(dir + "/out/summary.json");
+  EXPECT_TRUE(summary["interrupted"].get<bool>());
+  EXPECT_EQ(summary.value("stop_signal", ""), "SIG" + signal);
+  const int frames = summary["frames"].get<int>();
+  EXPECT_GE(frames, 3);
+  EXPECT_LT(frames, 300);
+  EXPECT_EQ(readTumTrajectory(dir + "/out/trajectory.txt").size(), std::size_t(frames));
+  EXPECT_TRUE(fs::exists(dir + "/out/mesh.ply"));
+  EXPECT_TRUE(fs::exists(dir + "/out/scene.3Dscene"));
+  return frames;
 }
 
 TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   VOFUSION_REQUIRE_DATA(test::tumFirst300());
-  const std::string dir = test::tempDir("vofusion_app_sigint");
-  const std::string out = dir + "/out";
-  const std::string log = interruptedRun(dir, "INT");
-  EXPECT_NE(log.find("rc=130"), std::string::npos) << log;
-  const auto summary = readJson(out + "/summary.json");
-  EXPECT_TRUE(summary["interrupted"].get<bool>());
-  EXPECT_EQ(summary.value("stop_signal", ""), "SIGINT");
-  const int frames = summary["frames"].get<int>();
-  EXPECT_GE(frames, 3);
-  EXPECT_LT(frames, 300);
-  EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), std::size_t(frames));
-  EXPECT_TRUE(fs::exists(out + "/mesh.ply"));
-  EXPECT_TRUE(fs::exists(out + "/scene.3Dscene"));
+  expectAnInterruptedRunsOutputs(test::tempDir("vofusion_app_sigint"), "INT", 130);
+}
+
+// A batch system's time limit (Slurm, GNU parallel --timeout) sends SIGTERM: the same as Ctrl-C, so
+// an hour's run is not lost, and with --checkpoint-every it leaves a checkpoint at the last frame.
+TEST(VofusionApp, SigtermStopsAsCtrlCDoesAndLeavesACheckpointToResume) {
+  VOFUSION_REQUIRE_DATA(test::tumFirst300());
+  const std::string dir = test::tempDir("vofusion_app_sigterm");
+  const int frames = expectAnInterruptedRunsOutputs(dir, "TERM", 143, "--checkpoint-every 1000");
+  const auto checkpoint = RunSession::peek(dir + "/out/checkpoint");
+  ASSERT_TRUE(checkpoint.has_value()) << "the checkpoint written at SIGTERM";
+  EXPECT_EQ(checkpoint->frames, std::size_t(frames));
 }
 
 // A work folder whose spill files cannot be made or written (here a path under a file; a full disk
@@ -235,27 +246,6 @@ TEST(VofusionApp, AWorkFolderThatCannotBeWrittenCostsTheSpillingOnly) {
       << "the run spills where it can";
   std::ifstream a(dir + "/out/trajectory.txt"), b(dir + "/usable/trajectory.txt");
   EXPECT_EQ(std::string(std::istreambuf_iterator<char>(a), {}), std::string(std::istreambuf_iterator<char>(b), {}));
-}
-
-// A batch system's time limit (Slurm, GNU parallel --timeout) sends SIGTERM: the same as Ctrl-C, so
-// an hour's run is not lost, and with --checkpoint-every it leaves a checkpoint at the last frame.
-TEST(VofusionApp, SigtermStopsAsCtrlCDoesAndLeavesACheckpointToResume) {
-  VOFUSION_REQUIRE_DATA(test::tumFirst300());
-  const std::string dir = test::tempDir("vofusion_app_sigterm");
-  const std::string out = dir + "/out";
-  const std::string log = interruptedRun(dir, "TERM", "--checkpoint-every 1000");
-  EXPECT_NE(log.find("rc=143"), std::string::npos) << log;
-  const auto summary = readJson(out + "/summary.json");
-  EXPECT_TRUE(summary["interrupted"].get<bool>());
-  EXPECT_EQ(summary.value("stop_signal", ""), "SIGTERM");
-  const int frames = summary["frames"].get<int>();
-  EXPECT_GE(frames, 3);
-  EXPECT_LT(frames, 300);
-  EXPECT_EQ(readTumTrajectory(out + "/trajectory.txt").size(), std::size_t(frames));
-  EXPECT_TRUE(fs::exists(out + "/mesh.ply"));
-  const auto checkpoint = RunSession::peek(out + "/checkpoint");
-  ASSERT_TRUE(checkpoint.has_value()) << "the checkpoint written at SIGTERM";
-  EXPECT_EQ(checkpoint->frames, std::size_t(frames));
 }
 
 // Ground truth never steers the tracker or the map: the same TUM frames with and without
