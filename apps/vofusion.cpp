@@ -31,10 +31,19 @@ using namespace vofusion;
 
 namespace {
 
-// Ctrl-C, or SIGTERM (a batch system's time limit, scancel, GNU parallel's --timeout): stop after the
-// frame in hand and write what was built, a checkpoint first (--checkpoint-every) for --resume.
+// Ctrl-C or SIGTERM (a Slurm time limit): the first stops the frame loop after the frame in hand, and
+// what was built is written, a checkpoint first (--checkpoint-every) for --resume; before the first
+// frame it ends the run with nothing written; once every frame is in, the outputs are written as
+// usual. The second kills at once (signal() and raise() are async-signal-safe).
 std::atomic<int> g_stop_signal{0};
-void onStopSignal(int signal) { g_stop_signal = signal; }
+void onStopSignal(int signal) {
+  if (g_stop_signal == 0) {
+    g_stop_signal = signal;
+    return;
+  }
+  std::signal(signal, SIG_DFL);
+  std::raise(signal);
+}
 const char* signalName(int signal) { return signal == SIGTERM ? "SIGTERM" : "SIGINT"; }
 
 const char* kUsage =
@@ -62,7 +71,8 @@ const char* kUsage =
     "                 uninterrupted run gives. A map saved with --save-volume: the camera continues from the\n"
     "                 saved pose, the map keeps its frame (the input should continue where the saved run stopped)\n"
     "Ctrl-C or SIGTERM (a batch system's time limit) stops after the frame in hand and writes what was built\n"
-    "(summary.json: interrupted, stop_signal; exit 130 or 143); a second one while writing kills at once.\n";
+    "(summary.json: interrupted, stop_signal; exit 130 or 143). Before the first frame it stops the run with\n"
+    "nothing written; after the last, the outputs are written as usual. A second one kills at once.\n";
 
 // What one run was asked for: the command line and the configuration it names, checked.
 struct RunPlan {
@@ -174,7 +184,7 @@ FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession&
   Progress progress("vofusion [resuming: reading the checkpoint's frames again]", c.frames);
   FrameLoop loop;
   Frame frame;
-  while (run.replaying()) {
+  while (run.replaying() && !g_stop_signal) {
     if (!source.next(frame))
       throw InputError(*plan.resume, "the input ends before frame " + std::to_string(c.frames) + ", where the checkpoint was made");
     if (!run.replay(frame)) continue;
@@ -190,8 +200,6 @@ FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession&
 // SIGTERM.
 void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run, FrameLoop& loop) {
   const Reconstruction& rec = run.reconstruction();
-  std::signal(SIGINT, onStopSignal);
-  std::signal(SIGTERM, onStopSignal);
   Progress progress("vofusion [" + toString(plan.mode) + "]", source.size());
   progress.startAt(loop.done);
   const double before = loop.seconds;
@@ -215,10 +223,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   }
   loop.stop_signal = g_stop_signal;
   loop.interrupted = loop.stop_signal != 0;
-  if (loop.interrupted && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
-  // A second Ctrl-C or SIGTERM while writing outputs kills as usual.
-  std::signal(SIGINT, SIG_DFL);
-  std::signal(SIGTERM, SIG_DFL);
+  if (loop.interrupted && loop.done > 0 && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
   progress.finish(loop.interrupted ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + progress.elapsedSeconds();
 }
@@ -235,6 +240,8 @@ int body(int argc, char** argv) {
     std::cout << dumpConfig(vofusionConfigSections());
     return 0;
   }
+  std::signal(SIGINT, onStopSignal);  // from here: a background job starts with SIGINT ignored
+  std::signal(SIGTERM, onStopSignal);
   const RunPlan plan = planRun(cl);
   Input input = openInput(plan, true);
   auto& source = input.source;
@@ -248,7 +255,13 @@ int body(int argc, char** argv) {
   // Start-up (libraries, the input opened, a checkpoint read again): not part of the frame loop, nor
   // of the time after its last frame.
   const double before_frames = secondsSinceProcessStart();
-  reconstructFrames(plan, *source, run, loop);
+  if (!run.replaying()) reconstructFrames(plan, *source, run, loop);
+  if (g_stop_signal && (loop.done == 0 || run.replaying())) {  // stopped while starting
+    const std::string kept = plan.resume ? "; " + *plan.resume + " is kept" : "";
+    std::fprintf(stderr, "vofusion: stopped (%s) before the first frame: nothing written%s\n", signalName(g_stop_signal),
+                 kept.c_str());
+    return 128 + g_stop_signal;
+  }
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");
   if (loop.frames_with_depth == 0 && !loop.interrupted)
     throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");

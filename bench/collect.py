@@ -61,7 +61,9 @@ def row(folder, name, recording=None):
         except (OSError, ValueError) as e:
             r["status"] = "failed: %s: %s" % (summary_path, e)
             return r
-    if s is not None and code in (None, 0, 130, 143):  # 130, 143: stopped by SIGINT, SIGTERM, outputs written
+    # 130, 143: stopped by SIGINT, SIGTERM, with what was built written (unless before the first frame)
+    stopped_early = code in (130, 143) and "nothing written" in last_line(log_path)
+    if s is not None and code in (None, 0, 130, 143) and not stopped_early:
         r["input"] = r["input"] or s.get("input")
         r["mode"] = s.get("mode")
         r["frames"] = s.get("frames")

@@ -121,7 +121,10 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
     }
     return "";
   };
-  EXPECT_NE(refusal(path, "input corridor\n").find("made by another run"), std::string::npos);
+  EXPECT_EQ(refusal(path, "input corridor\n"),
+            "made by another run ('input room' where this run has 'input corridor'): resume with the same input, "
+            "--config, --mode and options, or delete it to start over");
+  EXPECT_NE(refusal(path, "input room\nmode kinfu\n").find("('(nothing)' where this run has 'mode kinfu')"), std::string::npos);
   // Cut short anywhere past the header, or a map saved with --save-volume instead.
   const std::string bytes = [&] {
     std::ifstream is(path, std::ios::binary);

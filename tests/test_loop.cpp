@@ -1,9 +1,12 @@
 // Loop closure's parts on their own: keyframe selection, the LSH place index, the MRPT pose graph
 // (drift spread over a loop, a false loop removed instead of bending the map), and the loop
 // verification on rendered frames of the synthetic loop and look-alike scenes.
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -455,31 +458,43 @@ TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
   EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
 }
 
-// A spill file that cannot be created (or written: a full disk) keeps every keyframe in RAM, reported
-// once in spill_error, instead of stopping the loop closer and the run with it.
-TEST(LoopKeyframeStore, ASpillFileThatCannotBeMadeKeepsEveryKeyframeInRam) {
+// A spill file that cannot be written (a file size limit, as a full disk) keeps every later keyframe in
+// RAM, reported once in spill_error, instead of stopping the loop closer and the run with it; the
+// keyframes spilled before stay readable.
+TEST(LoopKeyframeStore, ASpillFileThatCannotBeWrittenKeepsTheKeyframesInRam) {
   sim::SimOptions o;
   o.scene = "loop";
-  o.frames = 30;
+  o.frames = 40;
   const sim::SyntheticSequence seq(o);
-  const std::string file = test::tempDir("keyframe_spill_none") + "/a_file";
-  std::ofstream(file) << "not a folder";
-  KeyframeStore store(0, file + "/spill");  // no budget, and no folder can be made there
+  KeyframeStore store(0, test::tempDir("keyframe_spill_full"));  // no budget: all but the newest spilled
   std::vector<Keyframe> made;
-  for (std::size_t i = 0; i < 3; ++i) {
+  const auto add = [&](std::size_t i) {
     made.push_back(keyframeOf(seq, 10 * i, pose(0.1 * double(i), 0, 0, 0), 0.1 * double(i), i));
-    ASSERT_NO_THROW(store.add(made.back()));
-  }
+    store.add(made.back());
+  };
+  add(0);
+  add(1);
+  ASSERT_EQ(store.stats().spilled, 1u);
+  struct rlimit old_limit {};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old_limit), 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);  // the write fails with EFBIG instead
+  struct rlimit limit = old_limit;
+  limit.rlim_cur = rlim_t(store.stats().spill_file_bytes);  // not a byte more
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &limit), 0);
+  EXPECT_NO_THROW(add(2));
+  EXPECT_NO_THROW(add(3));
+  setrlimit(RLIMIT_FSIZE, &old_limit);
+  std::signal(SIGXFSZ, old_handler);
   const KeyframeStoreStats st = store.stats();
-  EXPECT_EQ(st.spilled, 0u);
+  EXPECT_EQ(st.spilled, 1u);
   EXPECT_EQ(st.in_ram, 3u);
-  EXPECT_NE(st.spill_error.find("cannot create the keyframes' spill file"), std::string::npos) << st.spill_error;
+  EXPECT_NE(st.spill_error.find("cannot write the keyframes' spill file: File too large"), std::string::npos) << st.spill_error;
   for (std::size_t i = 0; i < made.size(); ++i) {
     const Keyframe k = store.load(i);
-    ASSERT_FALSE(k.depth.empty());
+    ASSERT_FALSE(k.depth.empty()) << "keyframe " << i;
     EXPECT_EQ(cv::norm(k.depth, made[i].depth, cv::NORM_INF), 0.0);
     ASSERT_TRUE(k.features);
-    EXPECT_EQ(k.features->points.size(), made[i].features->points.size());
+    EXPECT_EQ(cv::norm(k.features->descriptors, made[i].features->descriptors, cv::NORM_HAMMING), 0.0);
   }
 }
 

@@ -44,6 +44,32 @@ nlohmann::json readJson(const std::string& path) {
   return nlohmann::json::parse(f);
 }
 
+// Runs vofusion on first300 into <dir>/out and sends `signal` (kill's name for it: INT, TERM) once a
+// few frames are done (the progress line shows them); expects the exit code a shell reports for it and
+// the outputs of the frames done. Returns how many that was.
+int expectAnInterruptedRunsOutputs(const std::string& dir, const std::string& signal, int exit_code,
+                                   const std::string& options = "") {
+  SCOPED_TRACE("SIG" + signal);
+  const std::string some_frames = "' [3-9]/300 frames\\| [1-9][0-9]/300 frames\\| [12][0-9][0-9]/300 frames'";
+  const std::string cmd = "(" + test::app("vofusion") + " " + test::tumFirst300() + " --config " + validConfig(dir) +
+                          " --out " + dir + "/out " + options + " > " + dir + "/log.txt 2>&1 & pid=$!; "
+                          "for i in $(seq 1 600); do grep -q " + some_frames + " " + dir +
+                          "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -" + signal + " $pid; wait $pid; echo rc=$?)";
+  std::string log;
+  test::run(cmd, &log);
+  EXPECT_NE(log.find("rc=" + std::to_string(exit_code)), std::string::npos) << log;
+  const auto summary = readJson(dir + "/out/summary.json");
+  EXPECT_TRUE(summary["interrupted"].get<bool>());
+  EXPECT_EQ(summary.value("stop_signal", ""), "SIG" + signal);
+  const int frames = summary["frames"].get<int>();
+  EXPECT_GE(frames, 3);
+  EXPECT_LT(frames, 300);
+  EXPECT_EQ(readTumTrajectory(dir + "/out/trajectory.txt").size(), std::size_t(frames));
+  EXPECT_TRUE(fs::exists(dir + "/out/mesh.ply"));
+  EXPECT_TRUE(fs::exists(dir + "/out/scene.3Dscene"));
+  return frames;
+}
+
 }  // namespace
 
 TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
@@ -178,36 +204,12 @@ TEST(VofusionApp, AMapThatCannotBeWrittenCostsTheMapOnly) {
     EXPECT_TRUE(e.is_regular_file() && e.path().filename().string()[0] != '.') << "left behind: " << e.path();
 }
 
-// Runs vofusion on first300 into <dir>/out and sends `signal` (kill's name for it: INT, TERM) once a
-// few frames are done (the progress line shows them); expects the exit code a shell reports for it and
-// the outputs of the frames done. Returns how many that was.
-int expectAnInterruptedRunsOutputs(const std::string& dir, const std::string& signal, int exit_code,
-                                   const std::string& options = "") {
-  const std::string cmd = "(" + test::app("vofusion") + " " + test::tumFirst300() + " --config " + validConfig(dir) +
-                          " --out " + dir + "/out " + options + " > " + dir + "/log.txt 2>&1 & pid=$!; "
-                          "for i in $(seq 1 600); do grep -q ' [3-9]/300 frames\\| [1-9][0-9]/300 frames' " +
-                          dir + "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -" + signal + " $pid; wait $pid; echo rc=$?)";
-  std::string log;
-  test::run(cmd, &log);
-  EXPECT_NE(log.find("rc=" + std::to_string(exit_code)), std::string::npos) << log;
-  const auto summary = readJson(dir + "/out/summary.json");
-  EXPECT_TRUE(summary["interrupted"].get<bool>());
-  EXPECT_EQ(summary.value("stop_signal", ""), "SIG" + signal);
-  const int frames = summary["frames"].get<int>();
-  EXPECT_GE(frames, 3);
-  EXPECT_LT(frames, 300);
-  EXPECT_EQ(readTumTrajectory(dir + "/out/trajectory.txt").size(), std::size_t(frames));
-  EXPECT_TRUE(fs::exists(dir + "/out/mesh.ply"));
-  EXPECT_TRUE(fs::exists(dir + "/out/scene.3Dscene"));
-  return frames;
-}
-
 TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   VOFUSION_REQUIRE_DATA(test::tumFirst300());
   expectAnInterruptedRunsOutputs(test::tempDir("vofusion_app_sigint"), "INT", 130);
 }
 
-// A batch system's time limit (Slurm, GNU parallel --timeout) sends SIGTERM: the same as Ctrl-C, so
+// A batch system's time limit (Slurm's, before its SIGKILL) sends SIGTERM: the same as Ctrl-C, so
 // an hour's run is not lost, and with --checkpoint-every it leaves a checkpoint at the last frame.
 TEST(VofusionApp, SigtermStopsAsCtrlCDoesAndLeavesACheckpointToResume) {
   VOFUSION_REQUIRE_DATA(test::tumFirst300());

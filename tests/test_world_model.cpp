@@ -318,6 +318,8 @@ TEST(WorldModel, ASpillThatCannotBeWrittenKeepsEveryBrickInRam) {
   EXPECT_NE(after.spill_error.find("cannot write the world model's spill file: File too large"), std::string::npos)
       << after.spill_error;
   EXPECT_LE(after.spilled, spilled_before + 2);
+  EXPECT_EQ(after.ram_bytes, after.bricks_in_ram * sizeof(Brick));
+  EXPECT_EQ(after.bricks, kept.size());
   EXPECT_EQ(wm.size(), kept.size());
   Brick got;
   for (const auto& k : kept) {

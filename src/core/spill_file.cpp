@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <iterator>
@@ -23,13 +24,15 @@ void SpillFile::open() {
   std::lock_guard<std::mutex> lock(open_mu_);
   if (fd_ >= 0) return;
   namespace fs = std::filesystem;
-  const fs::path dir = dir_.empty() || dir_ == "auto" ? fs::temp_directory_path() : fs::path(dir_);
   std::error_code ec;
+  const fs::path dir = dir_.empty() || dir_ == "auto" ? fs::temp_directory_path(ec) : fs::path(dir_);
+  if (ec) throw InputError(std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "TMPDIR", "cannot create " + what_ + ": " + ec.message());
   fs::create_directories(dir, ec);
   std::string name = (dir / "vofusion-spill-XXXXXX").string();
   const int fd = ::mkstemp(name.data());
   if (fd < 0) throw InputError(dir.string(), "cannot create " + what_ + ": " + std::strerror(errno));
   ::unlink(name.c_str());  // gone with the process, whatever happens to it
+  folder_ = dir.string();
   fd_ = fd;
 }
 
@@ -41,7 +44,14 @@ SpillFile::Record SpillFile::append(const std::vector<std::uint8_t>& bytes) {
   while (done < bytes.size()) {
     const ssize_t w = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(at + done));
     if (w < 0 && errno == EINTR) continue;
-    if (w <= 0) throw InputError(dir_.empty() ? "auto" : dir_, "cannot write " + what_ + ": " + std::strerror(errno));
+    if (w <= 0) {
+      const std::string why = std::strerror(errno);
+      Record lost;
+      lost.offset = at;
+      lost.length = bytes.size();
+      release(lost);  // the place is free again, as the statistics count it
+      throw InputError(folder_, "cannot write " + what_ + ": " + why);
+    }
     done += static_cast<std::size_t>(w);
   }
   Record r;

@@ -82,7 +82,7 @@ void WorldModel::putAll(std::vector<std::unique_ptr<Brick>> bricks) {
       markDue(due);
       if (due >= kBatchBricks) spillDue(due);
     } catch (...) {
-      // The rest stay cached, over the cache's limit (a brick is never dropped for a failed write).
+      // Anything else than a write that failed (no memory, say): the rest stay cached, over the limit.
       for (std::size_t j = i; j < bricks.size(); ++j)
         if (bricks[j]) cache(std::move(bricks[j]));  // null: stored already
       throw;

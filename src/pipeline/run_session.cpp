@@ -24,6 +24,18 @@ namespace {
 
 constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-1\n";
 
+// The first line where two checkpoint origins differ, as "'<saved>' where this run has '<now>'".
+std::string firstDifference(const std::string& saved, const std::string& now) {
+  std::istringstream a(saved), b(now);
+  std::string la, lb;
+  for (;;) {
+    const bool more_a = bool(std::getline(a, la)), more_b = bool(std::getline(b, lb));
+    if (!more_a) la = "(nothing)";
+    if (!more_b) lb = "(nothing)";
+    if (la != lb || (!more_a && !more_b)) return "'" + la + "' where this run has '" + lb + "'";
+  }
+}
+
 // What poses.rawlog and the summary take from a frame's report.
 FrameReport outputsPart(const FrameReport& r) {
   FrameReport s;
@@ -143,8 +155,8 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
       uint64_t frames = 0;
       a >> saved_origin;
       if (saved_origin != origin)
-        throw InputError(path, "made by another run (" + saved_origin.substr(0, saved_origin.find('\n')) +
-                                   "): resume with the same input, --config, --mode and options");
+        throw InputError(path, "made by another run (" + firstDifference(saved_origin, origin) +
+                                   "): resume with the same input, --config, --mode and options, or delete it to start over");
       a >> frames >> c.seconds;
       c.frames = frames;
       reports_.clear();

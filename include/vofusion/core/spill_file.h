@@ -30,7 +30,8 @@ class SpillFile {
   SpillFile(const SpillFile&) = delete;
   SpillFile& operator=(const SpillFile&) = delete;
 
-  // Throws InputError(dir, ...) when the file cannot be created or written (disk full).
+  // Throws InputError(folder, ...) when the file cannot be created or written (disk full); the place a
+  // failed write took is free again.
   Record append(const std::vector<std::uint8_t>& bytes);
   // Throws std::runtime_error when the record cannot be read whole.
   std::vector<std::uint8_t> read(Record r) const;
@@ -46,6 +47,7 @@ class SpillFile {
   std::uint64_t place(std::uint64_t size);  // where `size` bytes go: a free place, else the end
   void addFree(std::uint64_t offset, std::uint64_t size);
   std::string dir_, what_;
+  std::string folder_;  // where the file was made (dir_, or the temporary folder for "auto")
   std::mutex open_mu_;
   std::atomic<int> fd_{-1};
   std::atomic<std::uint64_t> end_{0};

@@ -3,7 +3,8 @@
 // hands bricks over when they leave (putAll, a shift's batch) and takes them back when the volume
 // covers them again (takeAll); nothing else crosses. Bricks are addressed by their world brick
 // coordinate. Up to `cache_bytes` of them stay in RAM (least recently handed over first out); the
-// rest are written zlib-compressed to a SpillFile in `spill_dir`. A brick on disk costs RAM only for its index entry (~40 bytes), so a long
+// rest are written zlib-compressed to a SpillFile in `spill_dir` (while it can be written: then every
+// brick stays in RAM). A brick on disk costs RAM only for its index entry (~40 bytes), so a long
 // walk's memory grows by that alone; a brick taken back frees its place in the file for the next.
 // Every member locks the store: the frame loop hands bricks over (put/take) while the region mesher
 // (pipeline/region_premesher.h) reads the regions the volume has left. Reads share the lock, so

@@ -2,7 +2,8 @@
 // The run's keyframes, with memory bounded by a budget rather than by the path: every keyframe's
 // pose and path length stay in RAM (the pose graph and the candidates' eligibility need them), but
 // its features and depth (~0.2 MB) only for the newest ones within `cache_bytes`; older ones go
-// zlib-compressed to a SpillFile and are read back when a loop candidate is verified against them.
+// zlib-compressed to a SpillFile (while it can be written: then all stay in RAM) and are read back
+// when a loop candidate is verified against them.
 #include <cstddef>
 #include <cstdint>
 #include <string>
