@@ -408,17 +408,17 @@ TEST(WorldModel, SpillStreamsAreZlibsBothWays) {
 TEST(WorldModel, SpillFileWritesReleasedPlacesAgain) {
   SpillFile f(test::tempDir("spill_reuse"), "a test spill file");
   const auto bytes = [](std::size_t n, std::uint8_t v) { return std::vector<std::uint8_t>(n, v); };
-  const SpillFile::Record a = f.append(bytes(100, 1)), b = f.append(bytes(50, 2)), c = f.append(bytes(80, 3));
-  const SpillFile::Record d = f.append(bytes(10, 4));
+  const SpillFile::Record a = *f.append(bytes(100, 1)), b = *f.append(bytes(50, 2)), c = *f.append(bytes(80, 3));
+  const SpillFile::Record d = *f.append(bytes(10, 4));
   EXPECT_EQ(f.bytes(), 240u);
   f.release(c);
   f.release(a);
   EXPECT_EQ(f.freeBytes(), 180u);
-  const SpillFile::Record e = f.append(bytes(70, 5));  // best fit: c's 80, not a's 100
+  const SpillFile::Record e = *f.append(bytes(70, 5));  // best fit: c's 80, not a's 100
   EXPECT_EQ(e.offset, c.offset);
   EXPECT_EQ(f.freeBytes(), 110u);
   f.release(b);  // merges with a before it (and not with e's rest, which is not next to it)
-  const SpillFile::Record g = f.append(bytes(150, 6));
+  const SpillFile::Record g = *f.append(bytes(150, 6));
   EXPECT_EQ(g.offset, a.offset);
   EXPECT_EQ(f.bytes(), 240u);  // nothing appended at the end
   EXPECT_EQ(f.freeBytes(), 10u);
@@ -426,8 +426,20 @@ TEST(WorldModel, SpillFileWritesReleasedPlacesAgain) {
   EXPECT_EQ(f.read(g), bytes(150, 6));
   EXPECT_EQ(f.read(e), bytes(70, 5));
   EXPECT_EQ(f.read(d), bytes(10, 4));
-  const SpillFile::Record h = f.append(bytes(11, 7));  // larger than any free place: at the end
+  const SpillFile::Record h = *f.append(bytes(11, 7));  // larger than any free place: at the end
   EXPECT_EQ(h.offset, 240u);
+}
+
+// A spill file that cannot be made (or written) answers no place instead of throwing: the first
+// failure is kept, and later appends try nothing more.
+TEST(WorldModel, SpillFileThatCannotBeMadeAnswersNoPlace) {
+  const std::string dir = test::tempDir("spill_file_none");
+  std::ofstream(dir + "/a_file") << "not a folder";
+  SpillFile f(dir + "/a_file/spill", "the test's spill file");
+  EXPECT_FALSE(f.append(std::vector<std::uint8_t>(100, 1)).has_value());
+  EXPECT_EQ(f.failure(), dir + "/a_file/spill: cannot create the test's spill file: Not a directory");
+  EXPECT_FALSE(f.append(std::vector<std::uint8_t>(10, 2)).has_value());
+  EXPECT_EQ(f.bytes(), 0u);
 }
 
 // Walking back and forth over the same place: every brick taken back frees its place in the spill

@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 
 namespace vofusion {
 
@@ -36,9 +37,15 @@ void SpillFile::open() {
   fd_ = fd;
 }
 
-SpillFile::Record SpillFile::append(const std::vector<std::uint8_t>& bytes) {
+std::optional<SpillFile::Record> SpillFile::append(const std::vector<std::uint8_t>& bytes) {
   if (bytes.size() > kMaxRecordBytes) throw std::runtime_error(what_ + ": a record of " + std::to_string(bytes.size()) + " bytes is over 16 MiB");
-  if (fd_ < 0) open();
+  if (failed_.load(std::memory_order_acquire)) return std::nullopt;
+  try {
+    if (fd_ < 0) open();
+  } catch (const InputError& e) {
+    fail(e.what());
+    return std::nullopt;
+  }
   const std::uint64_t at = place(bytes.size());
   std::size_t done = 0;
   while (done < bytes.size()) {
@@ -50,7 +57,8 @@ SpillFile::Record SpillFile::append(const std::vector<std::uint8_t>& bytes) {
       lost.offset = at;
       lost.length = bytes.size();
       release(lost);  // the place is free again, as the statistics count it
-      throw InputError(folder_, "cannot write " + what_ + ": " + why);
+      fail(folder_ + ": cannot write " + what_ + ": " + why);
+      return std::nullopt;
     }
     done += static_cast<std::size_t>(w);
   }
@@ -58,6 +66,20 @@ SpillFile::Record SpillFile::append(const std::vector<std::uint8_t>& bytes) {
   r.offset = at;
   r.length = bytes.size();
   return r;
+}
+
+void SpillFile::fail(const std::string& why) {
+  {
+    const std::lock_guard<std::mutex> lock(open_mu_);
+    failure_ = why;
+  }
+  failed_.store(true, std::memory_order_release);
+  printWarning(why + ": what would go to it stays in memory from now on");
+}
+
+std::string SpillFile::failure() const {
+  const std::lock_guard<std::mutex> lock(open_mu_);
+  return failure_;
 }
 
 std::vector<std::uint8_t> SpillFile::read(Record r) const {

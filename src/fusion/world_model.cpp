@@ -6,9 +6,7 @@
 #include <stdexcept>
 
 #include "vofusion/core/deflate.h"
-#include "vofusion/core/errors.h"
 #include "vofusion/core/parallel.h"
-#include "vofusion/core/progress.h"
 
 namespace vofusion::fusion {
 
@@ -82,7 +80,7 @@ void WorldModel::putAll(std::vector<std::unique_ptr<Brick>> bricks) {
       markDue(due);
       if (due >= kBatchBricks) spillDue(due);
     } catch (...) {
-      // Anything else than a write that failed (no memory, say): the rest stay cached, over the limit.
+      // No memory, say: the rest stay cached, over the cache's limit.
       for (std::size_t j = i; j < bricks.size(); ++j)
         if (bricks[j]) cache(std::move(bricks[j]));  // null: stored already
       throw;
@@ -121,23 +119,21 @@ void WorldModel::spillDue(std::size_t& due) {
       bytes[i].resize(zlibCompressInto(b.voxels, kVoxelBytes, bytes[i].data(), bytes[i].size()));
     }, 8);
     for (std::size_t i = 0; i < keys.size(); ++i) {
-      disk_.set(keys[i], spill_.append(bytes[i]));
+      const std::optional<SpillFile::Record> record = spill_.append(bytes[i]);
+      if (!record) {
+        // The spill file cannot be written (disk full; SpillFile warns): what is not on disk stays
+        // in RAM, and so does every brick handed over from now on, beyond the cache's limit.
+        for (std::size_t j = i; j < keys.size(); ++j) ram_.find(keys[j])->second.due = false;
+        cache_bytes_ = std::numeric_limits<std::size_t>::max();
+        due = 0;
+        return;
+      }
+      disk_.set(keys[i], *record);
       ram_.erase(keys[i]);
       lru_.pop_back();
       stats_.ram_bytes -= kBrickBytes;
       ++stats_.spilled;
     }
-  } catch (const InputError& e) {
-    // The spill file cannot be created or written (disk full): what is not on disk stays in RAM, and
-    // so does every brick handed over from now on, beyond the cache's limit. The run goes on and
-    // keeps what it built; memory grows instead.
-    for (std::uint64_t k : keys)
-      if (const auto it = ram_.find(k); it != ram_.end()) it->second.due = false;
-    due = 0;
-    cache_bytes_ = std::numeric_limits<std::size_t>::max();
-    stats_.spill_error = e.what();
-    printWarning(stats_.spill_error + ": bricks that leave the volume stay in memory from now on");
-    return;
   } catch (...) {
     for (std::uint64_t k : keys)
       if (const auto it = ram_.find(k); it != ram_.end()) it->second.due = false;  // back to plain cached
@@ -249,6 +245,7 @@ WorldModelStats WorldModel::stats() const {
   s.index_bytes = disk_.bytes() + lru_.size() * 88 + spill_.freePlaces() * 96;
   s.spill_file_bytes = spill_.bytes();
   s.spill_free_bytes = spill_.freeBytes();
+  s.spill_error = spill_.failure();
   s.reloaded = reloaded_.load(std::memory_order_relaxed);
   s.spill_seconds += 1e-9 * double(reload_nanoseconds_.load(std::memory_order_relaxed));
   return s;

@@ -5,8 +5,6 @@
 #include <stdexcept>
 
 #include "vofusion/core/deflate.h"
-#include "vofusion/core/errors.h"
-#include "vofusion/core/progress.h"
 
 namespace vofusion::loop {
 
@@ -101,16 +99,14 @@ void KeyframeStore::add(Keyframe k) {
   // The newest keyframe always stays (it is about to be matched); older ones leave oldest first.
   while (ram_bytes_ > cache_bytes_ && spilled_ + 1 < keyframes_.size()) {
     Keyframe& old = keyframes_[spilled_];
-    try {
-      records_.push_back(spill_.append(encodeKeyframeData(old)));
-    } catch (const InputError& e) {
-      // The spill file cannot be created or written (disk full): every keyframe stays in RAM from
-      // now on, beyond the budget, and loops are still found among them all.
+    const std::optional<SpillFile::Record> record = spill_.append(encodeKeyframeData(old));
+    if (!record) {
+      // The spill file cannot be written (disk full; SpillFile warns): every keyframe stays in RAM
+      // from now on, beyond the budget, and loops are still found among them all.
       cache_bytes_ = std::numeric_limits<std::size_t>::max();
-      spill_error_ = e.what();
-      printWarning(spill_error_ + ": keyframes stay in memory from now on");
       return;
     }
+    records_.push_back(*record);
     ++spilled_;
     ram_bytes_ -= dataBytes(old);
     old.features.reset();
@@ -133,7 +129,7 @@ KeyframeStoreStats KeyframeStore::stats() const {
   s.spilled = spilled_;
   s.reloaded = reloaded_;
   s.spill_file_bytes = spill_.bytes();
-  s.spill_error = spill_error_;
+  s.spill_error = spill_.failure();
   return s;
 }
 

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -30,9 +31,14 @@ class SpillFile {
   SpillFile(const SpillFile&) = delete;
   SpillFile& operator=(const SpillFile&) = delete;
 
-  // Throws InputError(folder, ...) when the file cannot be created or written (disk full); the place a
-  // failed write took is free again.
-  Record append(const std::vector<std::uint8_t>& bytes);
+  // The record's place; std::nullopt when the file cannot be created or written (a full disk): the
+  // first failure is warned of once ("<folder>: cannot write <what>: <why>: what would go to it stays
+  // in memory from now on") and kept (failure()), and every later append returns std::nullopt without
+  // trying. The caller keeps in RAM what it could not spill, so nothing is lost. Throws
+  // std::runtime_error for a record over kMaxRecordBytes.
+  std::optional<Record> append(const std::vector<std::uint8_t>& bytes);
+  // Why the file could not be created or written; empty while it could.
+  std::string failure() const;
   // Throws std::runtime_error when the record cannot be read whole.
   std::vector<std::uint8_t> read(Record r) const;
   // r's place may be written again: only once nothing will read r (the world model releases a brick
@@ -43,12 +49,15 @@ class SpillFile {
   std::size_t freePlaces() const;                       // the free places those bytes make up
 
  private:
-  void open();
+  void open();  // throws InputError(folder, ...)
+  void fail(const std::string& why);  // the first failure: kept and warned of
   std::uint64_t place(std::uint64_t size);  // where `size` bytes go: a free place, else the end
   void addFree(std::uint64_t offset, std::uint64_t size);
   std::string dir_, what_;
   std::string folder_;  // where the file was made (dir_, or the temporary folder for "auto")
-  std::mutex open_mu_;
+  mutable std::mutex open_mu_;
+  std::string failure_;  // under open_mu_
+  std::atomic<bool> failed_{false};
   std::atomic<int> fd_{-1};
   std::atomic<std::uint64_t> end_{0};
   mutable std::mutex free_mu_;

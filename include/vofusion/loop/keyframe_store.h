@@ -48,7 +48,6 @@ class KeyframeStore {
   std::vector<SpillFile::Record> records_;  // per keyframe, its place in spill_ (id < spilled_)
   std::size_t spilled_ = 0;                 // keyframes [0, spilled_) are on disk
   std::size_t ram_bytes_ = 0;
-  std::string spill_error_;
   mutable std::size_t reloaded_ = 0;
 };
 
