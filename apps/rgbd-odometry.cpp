@@ -15,6 +15,7 @@
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/stop_signals.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/io/frame_source.h"
@@ -37,7 +38,9 @@ const char* kUsage =
     "  --no-rawlog        write only trajectory.txt\n"
     "  --strict           stop at the first damaged frame or a damaged ground truth (default: skip the frame with\n"
     "                     a warning line, the first three with each problem, and go on)\n"
-    "  --dump-config      print the defaults as INI and exit\n";
+    "  --dump-config      print the defaults as INI and exit\n"
+    "Ctrl-C or SIGTERM stops after the frame in hand and writes trajectory.txt and the rawlog so far (exit 130\n"
+    "or 143); a second one kills at once.\n";
 
 // The command line's options besides --help, --dump-config and --depth-scale.
 struct Args {
@@ -94,12 +97,13 @@ struct RunStats {
   std::size_t frames_with_depth = 0;
 };
 
-// Runs the odometry over every frame of `source`, writing the frames and actions to `writer` (if any).
+// Runs the odometry over every frame of `source` (until Ctrl-C or SIGTERM), writing the frames and
+// actions to `writer` (if any).
 RunStats runOdometry(FrameSource& source, OdometrySource& odo, RawlogWriter* writer) {
   RunStats run;
   Progress progress("odometry", source.size());
   Frame frame;
-  while (true) {
+  while (!stopRequested()) {
     {
       ScopedStageTimer t(run.io_times, "read");
       if (!source.next(frame)) break;
@@ -120,7 +124,7 @@ RunStats runOdometry(FrameSource& source, OdometrySource& odo, RawlogWriter* wri
                   r.inliers, odo.failures());
     progress.update(odo.frames(), extra);
   }
-  progress.finish();
+  progress.finish(stopSignal() ? std::string("(") + signalName(stopSignal()) + ": writing what was done so far)" : "");
   return run;
 }
 
@@ -172,9 +176,14 @@ int body(int argc, char** argv) {
   if (args.rawlog) writer = openOdometryRawlog(args.out);
 
   OdometrySource odo(params);
+  installStopSignals();  // the first Ctrl-C or SIGTERM writes what was done; a second one kills at once
   const RunStats run = runOdometry(source, odo, writer.get());
+  if (run.est.empty() && stopSignal()) {
+    std::fprintf(stderr, "rgbd-odometry: stopped (%s) before the first frame: nothing written\n", signalName(stopSignal()));
+    return 128 + stopSignal();
+  }
   if (run.est.empty()) throw InputError(args.input, "no frames");
-  if (run.frames_with_depth == 0)
+  if (run.frames_with_depth == 0 && !stopSignal())
     throw InputError(args.input, "no depth readings in any frame (all depth images are zero)");
   writeTumTrajectory(traj_path, run.est);
   if (writer) {
@@ -184,7 +193,7 @@ int body(int argc, char** argv) {
   if (!source.skipped().empty()) std::fprintf(stderr, "%zu damaged frames skipped\n", source.skipped().size());
   printTimes(odo, run);
   printAccuracy(run.gt, run.est);
-  return 0;
+  return stopSignal() ? 128 + stopSignal() : 0;  // the shell's code for the signal: 130, 143
 }
 
 }  // namespace

@@ -1,6 +1,5 @@
 // vofusion-grab: record an RGB-D sensor (MRPT hwdrivers, e.g. COpenNI2Sensor) into a rawlog, and
 // optionally reconstruct live. --replay plays a TUM folder or rawlog through the same live path.
-#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -18,6 +17,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/heap.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/stop_signals.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/skipping_source.h"
@@ -69,12 +69,6 @@ const char* kUsage =
     "  reconstruction to DIR/checkpoint. After a crash, `vofusion DIR/grab.rawlog --out DIR --resume\n"
     "  DIR/checkpoint` finishes it from there; a session that ends normally deletes it.\n";
 
-std::atomic<bool> g_stop{false};
-
-void onSignal(int) {
-  g_stop = true;
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C kills at once
-}
 
 struct Args {
   std::string config, sensor, out, replay, mode;
@@ -266,7 +260,7 @@ struct LiveConsumer {
                               : "LOST" + (r.note.empty() ? std::string() : ": " + r.note);
     if (const loop::LoopCloser* lc = rec.loopCloser()) addNewLoops(*lc, loops_shown, view);
     viewer->show(view, latest);
-    if (!viewer->isOpen()) g_stop = true;  // closing the window ends the run
+    if (!viewer->isOpen()) requestStop();  // closing the window ends the run
   }
 };
 
@@ -347,8 +341,7 @@ int run(const Args& args) {
   if (plan.mode) session = std::make_unique<RunSession>(plan.cfg, *plan.mode, args.out, plan.out_params, plan.mesh_params);
   std::unique_ptr<LiveViewer> viewer;
   if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source.live->name());
-  std::signal(SIGINT, onSignal);
-  std::signal(SIGTERM, onSignal);
+  installStopSignals();  // Ctrl-C or SIGTERM stops cleanly; a second one kills at once
 
   LiveCheckpoints checkpoints;
   if (session) {
@@ -359,7 +352,7 @@ int run(const Args& args) {
   LiveStats latest;
   LiveConsumer consumer{args, session.get(), viewer.get(), latest, checkpoints};
   LiveHooks hooks;
-  hooks.stop = &g_stop;
+  hooks.stop = &stopFlag();
   if (writer) hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { f.recorded = writer->write(f); };
   std::size_t total = source.live->size();
   if (plan.opts.max_frames > 0 && (total == 0 || total > plan.opts.max_frames)) total = plan.opts.max_frames;

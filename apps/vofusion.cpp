@@ -6,7 +6,6 @@
 // With no input, the bundled synthetic recording (rendered on first run) is used.
 #include <atomic>
 #include <cmath>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -17,6 +16,7 @@
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/stop_signals.h"
 #include "vofusion/core/timing.h"
 #include "vofusion/sim/default_recording.h"
 #include "vofusion/io/frame_source.h"
@@ -30,21 +30,6 @@
 using namespace vofusion;
 
 namespace {
-
-// Ctrl-C or SIGTERM (a Slurm time limit): the first stops the frame loop after the frame in hand, and
-// what was built is written, a checkpoint first (--checkpoint-every) for --resume; before the first
-// frame it ends the run with nothing written; once every frame is in, the outputs are written as
-// usual. The second kills at once (signal() and raise() are async-signal-safe).
-std::atomic<int> g_stop_signal{0};
-void onStopSignal(int signal) {
-  if (g_stop_signal == 0) {
-    g_stop_signal = signal;
-    return;
-  }
-  std::signal(signal, SIG_DFL);
-  std::raise(signal);
-}
-const char* signalName(int signal) { return signal == SIGTERM ? "SIGTERM" : "SIGINT"; }
 
 const char* kUsage =
     "usage: vofusion [<tum_dir|in.rawlog|synthetic[:scene[:shake]]>] --out <dir> [--config f.ini]\n"
@@ -184,7 +169,7 @@ FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession&
   Progress progress("vofusion [resuming: reading the checkpoint's frames again]", c.frames);
   FrameLoop loop;
   Frame frame;
-  while (run.replaying() && !g_stop_signal) {
+  while (run.replaying() && !stopRequested()) {
     if (!source.next(frame))
       throw InputError(*plan.resume, "the input ends before frame " + std::to_string(c.frames) + ", where the checkpoint was made");
     if (!run.replay(frame)) continue;
@@ -212,7 +197,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     ++loop.checkpoints;
   };
   Frame frame;
-  while (!g_stop_signal && source.next(frame)) {
+  while (!stopRequested() && source.next(frame)) {
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
     run.process(frame);
     ++loop.done;
@@ -221,7 +206,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
     progress.update(loop.done, status);
   }
-  loop.stop_signal = g_stop_signal;
+  loop.stop_signal = stopSignal();
   loop.interrupted = loop.stop_signal != 0;
   if (loop.interrupted && loop.done > 0 && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
   progress.finish(loop.interrupted ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
@@ -240,8 +225,11 @@ int body(int argc, char** argv) {
     std::cout << dumpConfig(vofusionConfigSections());
     return 0;
   }
-  std::signal(SIGINT, onStopSignal);  // from here: a background job starts with SIGINT ignored
-  std::signal(SIGTERM, onStopSignal);
+  // Ctrl-C or SIGTERM (a Slurm time limit): the first stops the frame loop after the frame in hand, and
+  // what was built is written, a checkpoint first (--checkpoint-every) for --resume; before the first
+  // frame it ends the run with nothing written; once every frame is in, the outputs are written as
+  // usual. The second kills at once.
+  installStopSignals();
   const RunPlan plan = planRun(cl);
   Input input = openInput(plan, true);
   auto& source = input.source;
@@ -256,11 +244,11 @@ int body(int argc, char** argv) {
   // of the time after its last frame.
   const double before_frames = secondsSinceProcessStart();
   if (!run.replaying()) reconstructFrames(plan, *source, run, loop);
-  if (g_stop_signal && (loop.done == 0 || run.replaying())) {  // stopped while starting
+  if (stopRequested() && (loop.done == 0 || run.replaying())) {  // stopped while starting
     const std::string kept = plan.resume ? "; " + *plan.resume + " is kept" : "";
-    std::fprintf(stderr, "vofusion: stopped (%s) before the first frame: nothing written%s\n", signalName(g_stop_signal),
+    std::fprintf(stderr, "vofusion: stopped (%s) before the first frame: nothing written%s\n", signalName(stopSignal()),
                  kept.c_str());
-    return 128 + g_stop_signal;
+    return 128 + stopSignal();
   }
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");
   if (loop.frames_with_depth == 0 && !loop.interrupted)

@@ -1,9 +1,12 @@
 // vofusion::CommandLine and runApp: what the thin apps rely on for parsing and error reporting; the
-// heap's huge-page report and the process clock they start with.
+// heap's huge-page report, the process clock they start with, and their Ctrl-C / SIGTERM handling.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -13,6 +16,7 @@
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/stop_signals.h"
 #include "vofusion/core/heap.h"
 #include "vofusion/core/timing.h"
 
@@ -170,4 +174,50 @@ TEST(Warnings, EachLineOncePerProcess) {
   const std::string log = testing::internal::GetCapturedStderr();
   EXPECT_EQ(log.find("first"), log.rfind("first")) << log;
   EXPECT_NE(log.find("warning: Warnings.EachLineOncePerProcess: second"), std::string::npos) << log;
+}
+
+namespace {
+
+// In a child process (the handlers are the process's): installs the stop signals, raises `first` and
+// `second`, and exits 0 when the first was taken as a stop request; how the child ended comes back.
+int childRaising(int first, int second) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    installStopSignals();
+    std::raise(first);
+    const bool asked = stopRequested() && stopSignal() == first && stopFlag().load();
+    std::raise(second);  // kills here
+    _exit(asked ? 0 : 1);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return status;
+}
+
+}  // namespace
+
+// Ctrl-C or SIGTERM asks to stop (the app writes what it has); the second kills at once, whichever
+// signal it is, as a user pressing Ctrl-C twice or Slurm after its grace time expects.
+TEST(StopSignals, TheFirstAsksToStopAndTheSecondKills) {
+  for (const auto& [first, second] : {std::pair{SIGINT, SIGINT}, std::pair{SIGTERM, SIGTERM}, std::pair{SIGINT, SIGTERM}}) {
+    SCOPED_TRACE(std::string(signalName(first)) + " then " + signalName(second));
+    const int status = childRaising(first, second);
+    ASSERT_TRUE(WIFSIGNALED(status)) << "the second signal did not kill: exit " << WEXITSTATUS(status);
+    EXPECT_EQ(WTERMSIG(status), second);
+  }
+  EXPECT_STREQ(signalName(SIGINT), "SIGINT");
+  EXPECT_STREQ(signalName(SIGTERM), "SIGTERM");
+}
+
+// A stop asked for without a signal (vofusion-grab's window closed) is no signal's.
+TEST(StopSignals, AStopRequestedInTheAppIsNoSignal) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    requestStop();
+    _exit(stopRequested() && stopSignal() == 0 ? 0 : 1);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
 }

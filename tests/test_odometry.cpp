@@ -11,6 +11,7 @@
 #include "vofusion/core/trajectory.h"
 #include "vofusion/odometry/odometry_source.h"
 #include "vofusion/odometry/rgbd_odometry.h"
+#include "vofusion/sim/any_source.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
 using namespace vofusion;
@@ -136,6 +137,31 @@ TEST(RgbdOdometryApp, WritesTrajectoryAndRawlog) {
   EXPECT_TRUE(std::filesystem::exists(out + "/odometry.rawlog"));
   EXPECT_NE(log.find("ATE rmse"), std::string::npos) << log;
   EXPECT_NE(log.find("per-stage time"), std::string::npos) << log;
+}
+
+// Ctrl-C (or SIGTERM) stops after the frame in hand: the trajectory and the rawlog of the frames done
+// are written, whole, and the exit code is the shell's for the signal.
+TEST(RgbdOdometryApp, CtrlCWritesWhatWasDone) {
+  VOFUSION_REQUIRE_DATA(test::tumFirst300());
+  const std::string out = test::tempDir("rgbd-odometry_sigint");
+  const std::string some_frames = "' [3-9]/300 frames\\| [1-9][0-9]/300 frames\\| [12][0-9][0-9]/300 frames'";
+  std::string log;
+  test::run("(" + test::app("rgbd-odometry") + " " + test::tumFirst300() + " --out " + out + " > " + out +
+                "/log.txt 2>&1 & pid=$!; for i in $(seq 1 600); do grep -q " + some_frames + " " + out +
+                "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -INT $pid; wait $pid; echo rc=$?)",
+            &log);
+  std::ifstream err(out + "/log.txt");
+  log += std::string(std::istreambuf_iterator<char>(err), {});
+  EXPECT_NE(log.find("rc=130"), std::string::npos) << log;
+  EXPECT_NE(log.find("(SIGINT: writing what was done so far)"), std::string::npos) << log;
+  const Trajectory t = readTumTrajectory(out + "/trajectory.txt");
+  EXPECT_GE(t.size(), 3u);
+  EXPECT_LT(t.size(), 300u);
+  auto back = openFrameSource(out + "/odometry.rawlog");
+  std::size_t frames = 0;
+  Frame f;
+  while (back->next(f)) ++frames;
+  EXPECT_EQ(frames, t.size());
 }
 
 TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
