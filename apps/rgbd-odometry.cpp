@@ -40,7 +40,7 @@ const char* kUsage =
     "                     a warning line, the first three with each problem, and go on)\n"
     "  --dump-config      print the defaults as INI and exit\n"
     "Ctrl-C or SIGTERM stops after the frame in hand and writes trajectory.txt and the rawlog so far (exit 130\n"
-    "or 143); a second one kills at once.\n";
+    "or 143; before the first frame nothing is written); a second one kills at once.\n";
 
 // The command line's options besides --help, --dump-config and --depth-scale.
 struct Args {
@@ -95,6 +95,7 @@ struct RunStats {
   StageTimes io_times;
   double odo_seconds = 0;
   std::size_t frames_with_depth = 0;
+  int stopped_by = 0;  // SIGINT or SIGTERM when one stopped the loop before the input's end
 };
 
 // Runs the odometry over every frame of `source` (until Ctrl-C or SIGTERM), writing the frames and
@@ -103,7 +104,11 @@ RunStats runOdometry(FrameSource& source, OdometrySource& odo, RawlogWriter* wri
   RunStats run;
   Progress progress("odometry", source.size());
   Frame frame;
-  while (!stopRequested()) {
+  while (true) {
+    if (stopRequested()) {  // read here: a signal after the last frame changes nothing
+      run.stopped_by = stopSignal();
+      break;
+    }
     {
       ScopedStageTimer t(run.io_times, "read");
       if (!source.next(frame)) break;
@@ -124,7 +129,8 @@ RunStats runOdometry(FrameSource& source, OdometrySource& odo, RawlogWriter* wri
                   r.inliers, odo.failures());
     progress.update(odo.frames(), extra);
   }
-  progress.finish(stopSignal() ? std::string("(") + signalName(stopSignal()) + ": writing what was done so far)" : "");
+  const bool done_some = run.stopped_by && !run.est.empty();
+  progress.finish(done_some ? std::string("(") + signalName(run.stopped_by) + ": writing what was done so far)" : "");
   return run;
 }
 
@@ -178,12 +184,12 @@ int body(int argc, char** argv) {
   OdometrySource odo(params);
   installStopSignals();  // the first Ctrl-C or SIGTERM writes what was done; a second one kills at once
   const RunStats run = runOdometry(source, odo, writer.get());
-  if (run.est.empty() && stopSignal()) {
-    std::fprintf(stderr, "rgbd-odometry: stopped (%s) before the first frame: nothing written\n", signalName(stopSignal()));
-    return 128 + stopSignal();
+  if (run.est.empty() && run.stopped_by) {
+    std::fprintf(stderr, "rgbd-odometry: stopped (%s) before the first frame: nothing written\n", signalName(run.stopped_by));
+    return 128 + run.stopped_by;
   }
   if (run.est.empty()) throw InputError(args.input, "no frames");
-  if (run.frames_with_depth == 0 && !stopSignal())
+  if (run.frames_with_depth == 0 && !run.stopped_by)
     throw InputError(args.input, "no depth readings in any frame (all depth images are zero)");
   writeTumTrajectory(traj_path, run.est);
   if (writer) {
@@ -193,7 +199,7 @@ int body(int argc, char** argv) {
   if (!source.skipped().empty()) std::fprintf(stderr, "%zu damaged frames skipped\n", source.skipped().size());
   printTimes(odo, run);
   printAccuracy(run.gt, run.est);
-  return stopSignal() ? 128 + stopSignal() : 0;  // the shell's code for the signal: 130, 143
+  return run.stopped_by ? 128 + run.stopped_by : 0;  // the shell's code for the signal: 130, 143
 }
 
 }  // namespace

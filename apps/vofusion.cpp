@@ -197,7 +197,13 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     ++loop.checkpoints;
   };
   Frame frame;
-  while (!stopRequested() && source.next(frame)) {
+  while (true) {
+    if (stopRequested()) {  // read here: a signal after the last frame lets the outputs be written
+      loop.interrupted = true;
+      loop.stop_signal = stopSignal();
+      break;
+    }
+    if (!source.next(frame)) break;
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
     run.process(frame);
     ++loop.done;
@@ -206,10 +212,9 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
     progress.update(loop.done, status);
   }
-  loop.stop_signal = stopSignal();
-  loop.interrupted = loop.stop_signal != 0;
-  if (loop.interrupted && loop.done > 0 && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
-  progress.finish(loop.interrupted ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
+  const bool built = loop.interrupted && loop.done > 0;
+  if (built && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
+  progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + progress.elapsedSeconds();
 }
 

@@ -152,6 +152,10 @@ TEST(RgbdOdometryApp, CtrlCWritesWhatWasDone) {
             &log);
   std::ifstream err(out + "/log.txt");
   log += std::string(std::istreambuf_iterator<char>(err), {});
+  // Progress shows every 2 s when not on a terminal: a machine fast enough to finish in 2 s never shows
+  // a count between 3 and 299.
+  if (log.find("rc=0") != std::string::npos && readTumTrajectory(out + "/trajectory.txt").size() == 300u)
+    GTEST_SKIP() << "the 300 frames were done before a progress line showed a count to interrupt at";
   EXPECT_NE(log.find("rc=130"), std::string::npos) << log;
   EXPECT_NE(log.find("(SIGINT: writing what was done so far)"), std::string::npos) << log;
   const Trajectory t = readTumTrajectory(out + "/trajectory.txt");
@@ -162,6 +166,7 @@ TEST(RgbdOdometryApp, CtrlCWritesWhatWasDone) {
   Frame f;
   while (back->next(f)) ++frames;
   EXPECT_EQ(frames, t.size());
+  EXPECT_EQ(readTumTrajectory(out + "/odometry.groundtruth.txt").size(), t.size()) << "its ground truth, the same frames";
 }
 
 TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {

@@ -71,9 +71,10 @@ std::optional<SpillFile::Record> SpillFile::append(const std::vector<std::uint8_
 void SpillFile::fail(const std::string& why) {
   {
     const std::lock_guard<std::mutex> lock(open_mu_);
+    if (failed_.load()) return;  // the first is kept and warned of
     failure_ = why;
+    failed_.store(true, std::memory_order_release);
   }
-  failed_.store(true, std::memory_order_release);
   printWarning(why + ": what would go to it stays in memory from now on");
 }
 

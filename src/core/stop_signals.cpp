@@ -1,20 +1,38 @@
 #include "vofusion/core/stop_signals.h"
 
 #include <csignal>
+#include <cstdint>
+#include <ctime>
 
 namespace vofusion {
 
 namespace {
 
+static_assert(std::atomic<bool>::is_always_lock_free && std::atomic<int>::is_always_lock_free &&
+                  std::atomic<std::int64_t>::is_always_lock_free,
+              "the handler touches only lock-free atomics");
+
 std::atomic<bool> g_stop{false};
 std::atomic<int> g_signal{0};
+std::atomic<std::int64_t> g_first_ns{0};  // when the signal that asked to stop came
 
-// Only async-signal-safe work: lock-free atomics, signal() and raise().
+std::int64_t monotonicNs() {
+  timespec t{};
+  clock_gettime(CLOCK_MONOTONIC, &t);  // async-signal-safe
+  return std::int64_t(t.tv_sec) * 1000000000 + t.tv_nsec;
+}
+
+// Only async-signal-safe work: lock-free atomics, clock_gettime(), signal() and raise().
 void onStopSignal(int signal) {
-  if (g_signal.exchange(signal) == 0) {
-    g_stop = true;
+  const std::int64_t now = monotonicNs();
+  if (!g_stop.exchange(true)) {  // the first stop request
+    g_signal = signal;
+    g_first_ns = now;
     return;
   }
+  // One request can come twice at once: Slurm signals every process of a job, and batch-job passes
+  // the same signal on to vofusion.
+  if (signal == g_signal && now - g_first_ns < std::int64_t(kSameRequestSeconds * 1e9)) return;
   std::signal(signal, SIG_DFL);  // the second: what the signal does without a handler, now
   std::raise(signal);
 }

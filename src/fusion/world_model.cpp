@@ -126,6 +126,7 @@ void WorldModel::spillDue(std::size_t& due) {
         for (std::size_t j = i; j < keys.size(); ++j) ram_.find(keys[j])->second.due = false;
         cache_bytes_ = std::numeric_limits<std::size_t>::max();
         due = 0;
+        stats_.spill_seconds += since(t0);
         return;
       }
       disk_.set(keys[i], *record);

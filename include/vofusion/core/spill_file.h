@@ -4,7 +4,8 @@
 // once, so it never outlives the process. Records are read back by their place. A released record's
 // place is written again by later appends (best fit among the free places, neighbours merged), so a
 // map walked back and forth keeps its file at the size of what is stored, not of all it ever stored.
-// append() and read() may run on different threads (pwrite/pread at fixed offsets).
+// append() and read() may run on different threads (pwrite/pread at fixed offsets); appends come from
+// one thread at a time.
 #include <atomic>
 #include <cstdint>
 #include <map>
