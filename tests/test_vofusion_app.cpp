@@ -58,6 +58,11 @@ int expectAnInterruptedRunsOutputs(const std::string& dir, const std::string& si
   std::string log;
   test::run(cmd, &log);
   EXPECT_NE(log.find("rc=" + std::to_string(exit_code)), std::string::npos) << log;
+  std::ifstream err(dir + "/log.txt");
+  const std::string said(std::istreambuf_iterator<char>(err), {});
+  EXPECT_NE(said.find("\nstopping after the frame in hand; what was done is written (Ctrl-C again to kill)\n"),
+            std::string::npos)
+      << said;
   const auto summary = readJson(dir + "/out/summary.json");
   EXPECT_TRUE(summary["interrupted"].get<bool>());
   EXPECT_EQ(summary.value("stop_signal", ""), "SIG" + signal);

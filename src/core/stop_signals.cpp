@@ -1,5 +1,7 @@
 #include "vofusion/core/stop_signals.h"
 
+#include <unistd.h>
+
 #include <csignal>
 #include <cstdint>
 #include <ctime>
@@ -22,12 +24,16 @@ std::int64_t monotonicNs() {
   return std::int64_t(t.tv_sec) * 1000000000 + t.tv_nsec;
 }
 
-// Only async-signal-safe work: lock-free atomics, clock_gettime(), signal() and raise().
+// Said at once, so that a stop during a long start-up (rendering, a checkpoint read again) is seen.
+constexpr char kStopping[] = "\nstopping after the frame in hand; what was done is written (Ctrl-C again to kill)\n";
+
+// Only async-signal-safe work: lock-free atomics, clock_gettime(), write(), signal() and raise().
 void onStopSignal(int signal) {
   const std::int64_t now = monotonicNs();
   if (!g_stop.exchange(true)) {  // the first stop request
     g_signal = signal;
     g_first_ns = now;
+    [[maybe_unused]] const ssize_t n = ::write(STDERR_FILENO, kStopping, sizeof(kStopping) - 1);
     return;
   }
   // One request can come twice at once: Slurm signals every process of a job, and batch-job passes

@@ -1,7 +1,8 @@
 #pragma once
 // Ctrl-C and SIGTERM (a batch system's time limit, Slurm's scancel) as a request to stop cleanly:
 // the first stop request (a signal, or requestStop(): vofusion-grab's window closed) sets the stop
-// flag, and the app finishes the frame in hand and writes what it has; a signal after that kills at
+// flag (a signal also prints "stopping after the frame in hand ..." on stderr at once), and the app
+// finishes the frame in hand and writes what it has; a signal after that kills at
 // once, as without a handler. The same signal again within kSameRequestSeconds of the one that asked
 // is the same request delivered twice (a batch system signals the job's processes and batch-job
 // passes it on), not a second one. For long-running apps (vofusion, vofusion-grab, rgbd-odometry),
