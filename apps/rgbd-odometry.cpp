@@ -185,8 +185,7 @@ int body(int argc, char** argv) {
   installStopSignals();  // the first Ctrl-C or SIGTERM writes what was done; a second one kills at once
   const RunStats run = runOdometry(source, odo, writer.get());
   if (run.est.empty() && run.stopped_by) {
-    std::fprintf(stderr, "rgbd-odometry: stopped (%s) before the first frame: nothing written\n", signalName(run.stopped_by));
-    return 128 + run.stopped_by;
+    return stoppedBeforeTheFirstFrame("rgbd-odometry");
   }
   if (run.est.empty()) throw InputError(args.input, "no frames");
   if (run.frames_with_depth == 0 && !run.stopped_by)

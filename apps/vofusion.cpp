@@ -4,7 +4,6 @@
 //            [--depth-scale S] [--no-loop-closure] [--strict]
 //            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
-#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -155,8 +154,8 @@ RunPlan planRun(const CommandLine& cl) {
 
 struct FrameLoop {
   std::size_t done = 0, frames_with_depth = 0;
-  bool interrupted = false;
-  int stop_signal = 0;   // what interrupted it: SIGINT or SIGTERM
+  int stop_signal = 0;   // SIGINT or SIGTERM when one stopped the loop before the input's end
+  bool interrupted() const { return stop_signal != 0; }
   double seconds = 0.0;  // of the frame loop, a resumed checkpoint's included
   std::size_t checkpoints = 0;
   double checkpoint_seconds = 0.0;  // writing them
@@ -199,7 +198,6 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   Frame frame;
   while (true) {
     if (stopRequested()) {  // read here: a signal after the last frame lets the outputs be written
-      loop.interrupted = true;
       loop.stop_signal = stopSignal();
       break;
     }
@@ -212,7 +210,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
     progress.update(loop.done, status);
   }
-  const bool built = loop.interrupted && loop.done > 0;
+  const bool built = loop.interrupted() && loop.done > 0;
   if (built && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + progress.elapsedSeconds();
@@ -230,11 +228,7 @@ int body(int argc, char** argv) {
     std::cout << dumpConfig(vofusionConfigSections());
     return 0;
   }
-  // Ctrl-C or SIGTERM (a Slurm time limit): the first stops the frame loop after the frame in hand, and
-  // what was built is written, a checkpoint first (--checkpoint-every) for --resume; before the first
-  // frame it ends the run with nothing written; once every frame is in, the outputs are written as
-  // usual. The second kills at once.
-  installStopSignals();
+  installStopSignals();  // what a stop does here: kUsage's last lines
   const RunPlan plan = planRun(cl);
   Input input = openInput(plan, true);
   auto& source = input.source;
@@ -250,19 +244,16 @@ int body(int argc, char** argv) {
   const double before_frames = secondsSinceProcessStart();
   if (!run.replaying()) reconstructFrames(plan, *source, run, loop);
   if (stopRequested() && (loop.done == 0 || run.replaying())) {  // stopped while starting
-    const std::string kept = plan.resume ? "; " + *plan.resume + " is kept" : "";
-    std::fprintf(stderr, "vofusion: stopped (%s) before the first frame: nothing written%s\n", signalName(stopSignal()),
-                 kept.c_str());
-    return 128 + stopSignal();
+    return stoppedBeforeTheFirstFrame("vofusion", plan.resume ? *plan.resume + " is kept" : "");
   }
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");
-  if (loop.frames_with_depth == 0 && !loop.interrupted)
+  if (loop.frames_with_depth == 0 && !loop.interrupted())
     throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
   RunInfo info;
   info.input = source->name();
   info.config = plan.config_path;
-  info.interrupted = loop.interrupted;
-  if (loop.interrupted) info.extra["stop_signal"] = signalName(loop.stop_signal);
+  info.interrupted = loop.interrupted();
+  if (loop.interrupted()) info.extra["stop_signal"] = signalName(loop.stop_signal);
   info.seconds = loop.seconds;
   if (std::isfinite(before_frames)) info.extra["seconds_before_frames"] = before_frames;
   if (plan.checkpoint_every > 0 || resumed_at)
@@ -272,7 +263,7 @@ int body(int argc, char** argv) {
   reportSkipped(*input.frames, info);
   source.reset();
   RunSession::Reopen reopen;  // an interrupted run is not fused again: the user asked it to stop
-  if (!loop.interrupted)
+  if (!loop.interrupted())
     reopen = [&]() -> std::unique_ptr<FrameSource> { return openInput(plan, false).source; };
   const auto summary = run.finish(info, reopen, plan.save_volume);
   const Reconstruction& rec = run.reconstruction();
@@ -283,9 +274,9 @@ int body(int argc, char** argv) {
   std::fprintf(stderr, "\n");
   std::error_code ec;
   // The outputs are whole: a checkpoint of this run has nothing left to resume.
-  if (!loop.interrupted) std::filesystem::remove(plan.checkpoint_path, ec);
+  if (!loop.interrupted()) std::filesystem::remove(plan.checkpoint_path, ec);
   std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
-  return loop.interrupted ? 128 + loop.stop_signal : 0;  // as the shell reports a signal: 130, 143
+  return loop.interrupted() ? 128 + loop.stop_signal : 0;  // as the shell reports a signal: 130, 143
 }
 
 }  // namespace

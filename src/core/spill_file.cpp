@@ -27,7 +27,10 @@ void SpillFile::open() {
   namespace fs = std::filesystem;
   std::error_code ec;
   const fs::path dir = dir_.empty() || dir_ == "auto" ? fs::temp_directory_path(ec) : fs::path(dir_);
-  if (ec) throw InputError(std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "TMPDIR", "cannot create " + what_ + ": " + ec.message());
+  if (ec) {
+    const char* tmpdir = std::getenv("TMPDIR");
+    throw InputError(tmpdir ? tmpdir : "TMPDIR", "cannot create " + what_ + ": " + ec.message());
+  }
   fs::create_directories(dir, ec);
   std::string name = (dir / "vofusion-spill-XXXXXX").string();
   const int fd = ::mkstemp(name.data());

@@ -4,6 +4,7 @@
 
 #include <csignal>
 #include <cstdint>
+#include <cstdio>
 #include <ctime>
 
 namespace vofusion {
@@ -54,6 +55,12 @@ bool stopRequested() { return g_stop.load(); }
 const std::atomic<bool>& stopFlag() { return g_stop; }
 void requestStop() { g_stop = true; }
 int stopSignal() { return g_signal.load(); }
+int stoppedBeforeTheFirstFrame(const char* app, const std::string& more) {
+  std::fprintf(stderr, "%s: stopped (%s) before the first frame: nothing written%s\n", app, signalName(stopSignal()),
+               more.empty() ? "" : ("; " + more).c_str());
+  return 128 + stopSignal();
+}
+
 const char* signalName(int signal) { return signal == SIGTERM ? "SIGTERM" : signal == SIGINT ? "SIGINT" : "a signal"; }
 
 }  // namespace vofusion

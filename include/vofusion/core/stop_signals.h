@@ -16,6 +16,7 @@
 //   }
 //   return stopped_by ? 128 + stopped_by : 0;   // the shell's code for the signal: 130, 143
 #include <atomic>
+#include <string>
 
 namespace vofusion {
 
@@ -30,5 +31,8 @@ void requestStop();
 // SIGINT or SIGTERM when a signal made the stop request; 0 otherwise.
 int stopSignal();
 const char* signalName(int signal);  // "SIGINT", "SIGTERM"
+// A stop before the first frame was done: "<app>: stopped (SIGTERM) before the first frame: nothing
+// written[; <more>]" on stderr; returns the exit code, 128 + the signal.
+int stoppedBeforeTheFirstFrame(const char* app, const std::string& more = "");
 
 }  // namespace vofusion
