@@ -268,6 +268,29 @@ TEST(Batch, ATermToAJobLetsVofusionWriteWhatItBuiltAndTheJobRunAgainResumes) {
   EXPECT_FALSE(fs::exists(out + "/xyz/checkpoint")) << "a finished run leaves no checkpoint";
 }
 
+// A TERM that reaches batch-job as it starts vofusion. With the traps installed after the start, the
+// job died alone in that instant and its vofusion ran on: this loop left one running in each of its 3
+// runs against that script. The stand-in for vofusion sleeps 20 s; each job gets TERM 0-19.9 ms after
+// it starts (about half of them reached the stand-in here).
+TEST(Batch, ATermAsTheJobStartsNeverLeavesVofusionRunningAlone) {
+  const std::string dir = test::tempDir("batch_term_at_start");
+  const std::string stand_in = dir + "/stand-in-vofusion";
+  fs::create_directories(dir + "/pids");
+  {
+    std::ofstream f(stand_in);
+    f << "#!/bin/bash\ntouch " << dir << "/pids/$$\ntrap 'kill $s; exit 143' TERM INT\nsleep 20 & s=$!\nwait\n";
+  }
+  fs::permissions(stand_in, fs::perms::owner_all);
+  const std::string job = test::sourceDir() + "/scripts/batch-job " + stand_in + " " + dir + "/out j$i 0 " + dir;
+  std::string log;
+  test::run("for i in $(seq 1 600); do " + job + " >/dev/null 2>&1 & p=$!; sleep $(printf 0.%04d $((i % 200))); " +
+                "kill -TERM $p; wait $p; done; sleep 0.3; cd " + dir + "/pids && echo started=$(ls | wc -l) && " +
+                "for pid in *; do kill -0 $pid 2>/dev/null && echo alone=$pid && kill $pid; done",
+            &log);
+  EXPECT_EQ(log.find("alone="), std::string::npos) << log;
+  EXPECT_EQ(log.find("started=0"), std::string::npos) << "no job reached vofusion: " << log;
+}
+
 TEST(Batch, BadArgumentsFailInOneLine) {
   const std::string dir = test::tempDir("batch_args");
   struct Case {
