@@ -1,11 +1,13 @@
 // rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake] [--frames N] [--fps F] [--pace X]
 //               [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]
-//               [--blackout T:S]
+//               [--blackout T:S] [--overwrite]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
+#include <set>
 #include <string>
 
 #include <opencv2/imgcodecs.hpp>
@@ -14,6 +16,7 @@
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/stop_signals.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
@@ -24,8 +27,9 @@ namespace {
 const char* kUsage =
     "usage: rgbd-simulate --out <dir | file.rawlog> [--scene room|corridor|bare_wall|loop|lookalike|longwalk] [--trajectory smooth|shake]\n"
     "                     [--frames N] [--fps F] [--pace X] [--no-noise] [--plain] [--seed S] [--size WxH] [--exposure S] [--colour-offset S] [--depth-readout S]\n"
-    "                     [--blackout T:S]\n"
-    "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/)\n"
+    "                     [--blackout T:S] [--overwrite]\n"
+    "  --out      a folder (TUM RGB-D layout) or a .rawlog file (images in <name>_Images/). A folder this app\n"
+    "             wrote is replaced, any other never; a .rawlog only with --overwrite (it may be a recording)\n"
     "  --scene    room (default), corridor (long, camera travels along it), bare_wall (flat textured wall),\n"
     "             loop (a corridor around a block, walked once round: loop closure), lookalike (a corridor repeating every 3 m:\n"
     "             places that look the same and must not be joined), longwalk (a straight corridor walked at 1 m/s:\n"
@@ -42,7 +46,8 @@ const char* kUsage =
     "             largest colour-to-depth capture offset (default 0.015 s, [0, 0.05])\n"
     "  --depth-readout S  depth rows read one after another over S seconds, top first (rolling shutter;\n"
     "             Kinect v1 ~0.03; default 0: all at once, [0, 0.1]); ground truth at the middle row's time\n"
-    "  --blackout T:S  the camera covered from T s for S s: no depth, black colour, while the path goes on\n";
+    "  --blackout T:S  the camera covered from T s for S s: no depth, black colour, while the path goes on\n"
+    "Ctrl-C or SIGTERM stops the rendering and writes nothing (an earlier output stays as it was).\n";
 
 // "WxH" with a 4:3 aspect: the default camera scaled to that size.
 CameraIntrinsics cameraForSize(const std::string& size) {
@@ -53,19 +58,36 @@ CameraIntrinsics cameraForSize(const std::string& size) {
   return sim::SimOptions().camera.scaled(w / 640.0);
 }
 
-void writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
-  if (fs::exists(dir) && (!fs::is_directory(dir) || (!fs::is_empty(dir) && !fs::exists(fs::path(dir) / "rgb.txt"))))
-    throw InputError(dir, "exists and is not a TUM sequence folder; refusing to replace it");
+constexpr const char* kIntrinsicsHeader = "# fx fy cx cy (pixels, ";
+
+// What this app writes into a TUM folder; it replaces a folder only when that is all it holds and its
+// intrinsics.txt is this app's: a recorded TUM sequence (or anything else) in its place is never lost.
+bool madeByThisApp(const fs::path& dir) {
+  const std::set<std::string> ours = {"rgb", "depth", "rgb.txt", "depth.txt", "groundtruth.txt", "intrinsics.txt"};
+  for (const auto& e : fs::directory_iterator(dir))
+    if (!ours.count(e.path().filename().string())) return false;
+  std::ifstream intrinsics(dir / "intrinsics.txt");
+  std::string first;
+  return std::getline(intrinsics, first) && first.rfind(kIntrinsicsHeader, 0) == 0;
+}
+
+// False when a stop was asked for before the last frame (nothing written).
+bool writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
+  if (fs::exists(dir) && (!fs::is_directory(dir) || (!fs::is_empty(dir) && !madeByThisApp(dir))))
+    throw InputError(dir, "exists and is not a folder rgbd-simulate wrote; refusing to replace it");
   const fs::path parent = fs::absolute(dir).parent_path();
   ensureWritableDirectory(parent.string());
   AtomicPath out(dir);
-  fs::create_directories(fs::path(out.tmp()) / "rgb");
-  fs::create_directories(fs::path(out.tmp()) / "depth");
+  std::error_code made;
+  fs::create_directories(fs::path(out.tmp()) / "rgb", made);
+  if (!made) fs::create_directories(fs::path(out.tmp()) / "depth", made);
+  if (made) throw InputError(dir, "cannot create the folder: " + made.message());
   std::string rgb_txt = "# colour images\n# timestamp filename\n", depth_txt = "# depth maps\n# timestamp filename\n";
   std::string gt_txt = "# ground truth trajectory (camera-to-world)\n# timestamp tx ty tz qx qy qz qw\n";
   Trajectory gt;
   Progress progress("rgbd-simulate", seq.size());
   for (std::size_t i = 0; i < seq.size(); ++i) {
+    if (stopRequested()) return false;
     const Frame f = seq.render(i);
     char name[64];
     std::snprintf(name, sizeof name, "%.6f.png", f.timestamp);
@@ -88,18 +110,22 @@ void writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
   // The TUM layout has no place for intrinsics; TumFolderSource reads this file when present.
   const CameraIntrinsics& c = seq.options().camera;
   char intr[160];
-  std::snprintf(intr, sizeof intr, "# fx fy cx cy (pixels, %dx%d, depth registered to colour)\n%.6f %.6f %.6f %.6f\n", c.width,
-                c.height, c.fx, c.fy, c.cx, c.cy);
+  std::snprintf(intr, sizeof intr, "%s%dx%d, depth registered to colour)\n%.6f %.6f %.6f %.6f\n", kIntrinsicsHeader,
+                c.width, c.height, c.fx, c.fy, c.cx, c.cy);
   writeFileAtomically((fs::path(out.tmp()) / "intrinsics.txt").string(), intr);
   out.commit();
   progress.finish("-> " + dir);
+  return true;
 }
 
-void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
-  RawlogWriter out(path);
+bool writeRawlog(const sim::SyntheticSequence& seq, const std::string& path, bool overwrite) {
+  RawlogWriterOptions options;
+  options.replace = overwrite;
+  RawlogWriter out(path, options);
   Trajectory gt;
   Progress progress("rgbd-simulate", seq.size());
   for (std::size_t i = 0; i < seq.size(); ++i) {
+    if (stopRequested()) return false;
     const Frame f = seq.render(i);
     out.write(f);
     gt.push_back({f.timestamp, *f.groundTruth});
@@ -108,11 +134,12 @@ void writeRawlog(const sim::SyntheticSequence& seq, const std::string& path) {
   out.writeGroundTruth(gt);
   out.commit();
   progress.finish("-> " + path);
+  return true;
 }
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--pace", "--size", "--exposure", "--depth-readout",
                                      "--colour-offset", "--blackout"},
-                       {"--no-noise", "--plain", "--help"});
+                       {"--no-noise", "--plain", "--overwrite", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
     return 0;
@@ -140,9 +167,10 @@ int body(int argc, char** argv) {
   if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");
 
   const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
-  if (fs::path(out).extension() == ".rawlog") writeRawlog(seq, out);
-  else writeTum(seq, out);
-  return 0;
+  installStopSignals("\nstopping; nothing is written (Ctrl-C again to kill)\n");
+  const bool done = fs::path(out).extension() == ".rawlog" ? writeRawlog(seq, out, cl.flag("--overwrite")) : writeTum(seq, out);
+  // A part of a sequence is no sequence: nothing is written (the writers remove their temporaries).
+  return done ? 0 : stoppedWithNothingWritten("rgbd-simulate", "");
 }
 
 }  // namespace

@@ -1,5 +1,5 @@
 // tum2rawlog <tum_dir> <out.rawlog> [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy] [--max-frames N]
-//            [--format obs|sf] [--embed-images] [--range-units 2e-4|1e-3] [--strict]
+//            [--format obs|sf] [--embed-images] [--range-units 2e-4|1e-3] [--strict] [--overwrite]
 // One CObservation3DRangeScan per associated colour/depth pair; images in "<out>_Images"; ground truth
 // as CObservationRobotPose "GROUND_TRUTH" per frame plus "<out>.groundtruth.txt" (the full TUM file).
 #include <iostream>
@@ -9,6 +9,7 @@
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/stop_signals.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/skipping_source.h"
 #include "vofusion/io/tum_source.h"
@@ -19,6 +20,7 @@ namespace {
 const char* kUsage =
     "usage: tum2rawlog <tum_dir> <out.rawlog> [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy] [--max-frames N]\n"
     "                  [--depth-scale S] [--format obs|sf] [--embed-images] [--range-units U] [--strict]\n"
+    "                  [--overwrite]\n"
     "  --intrinsics   camera preset or values (default: the folder's intrinsics.txt / camera.yaml, else\n"
     "                 freiburg1/2/3 from its name, else 525/319.5/239.5)\n"
     "  --max-frames   convert only the first N associated frames\n"
@@ -27,11 +29,14 @@ const char* kUsage =
     "  --embed-images keep images inside the rawlog instead of <out>_Images/\n"
     "  --range-units  metres per range unit (default 2e-4 = TUM's 1/5000, lossless)\n"
     "  --strict       stop at the first damaged frame or a damaged groundtruth.txt (default: skip the frame,\n"
-    "                 or convert without ground truth, say so, convert the rest)\n";
+    "                 or convert without ground truth, say so, convert the rest)\n"
+    "  --overwrite    replace <out.rawlog> (and <out>_Images/) when they exist (default: refuse; it may be a\n"
+    "                 sensor recording)\n"
+    "Ctrl-C or SIGTERM stops the conversion and writes nothing (an earlier <out.rawlog> stays as it was).\n";
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--intrinsics", "--max-frames", "--format", "--range-units", "--depth-scale"},
-                       {"--embed-images", "--strict", "--help"});
+                       {"--embed-images", "--strict", "--overwrite", "--help"});
   if (cl.flag("--help")) {
     std::cout << kUsage;
     return 0;
@@ -47,6 +52,7 @@ int body(int argc, char** argv) {
   else throw InputError("--format", "expected obs or sf, got '" + format + "'");
   wo.external_images = !cl.flag("--embed-images");
   wo.range_units = cl.number("--range-units", wo.range_units, 0.0, 0.01);
+  wo.replace = cl.flag("--overwrite");
   const auto& pos = cl.positional();
   if (pos.size() != 2) throw InputError("usage", "expected <tum_dir> <out.rawlog> (see --help)");
 
@@ -56,12 +62,15 @@ int body(int argc, char** argv) {
   const Trajectory ground_truth = tum->groundTruth();
   // A damaged frame costs that frame, as in vofusion (io/skipping_source.h).
   SkippingSource src(std::move(tum), so.strict, printWarning);
+  installStopSignals("\nstopping; nothing is written (Ctrl-C again to kill)\n");
   RawlogWriter out(pos[1], wo);
   if (!ground_truth.empty()) out.writeGroundTruth(ground_truth);
   Progress progress("tum2rawlog", src.size());
   Frame f;
   std::size_t n = 0;
   while (src.next(f)) {
+    // A part of a conversion is no recording: nothing is written (`out` removes its temporaries).
+    if (stopRequested()) return stoppedWithNothingWritten("tum2rawlog", " after " + std::to_string(n) + " frames");
     out.write(f);
     progress.update(++n + src.skipped().size());
   }

@@ -102,7 +102,7 @@ def inputs(build, work, seeds):
                      ["--scene", "room", "--trajectory", "shake", "--size", "320x240", "--frames", "90", "--seed", str(s)]),
                      "ate"))
     for s in seeds:
-        rawlog = simulate(build, os.path.join(work, "inputs", "loop_s%d.rawlog" % s), ["--scene", "loop", "--seed", str(s)])
+        rawlog = simulate(build, os.path.join(work, "inputs", "loop_s%d.rawlog" % s), ["--scene", "loop", "--seed", str(s), "--overwrite"])
         runs.append(("loop seed %d" % s, "loop", rawlog, "ate_tracked"))
         runs.append(("loop seed %d, loop closure" % s, "loop_lc", rawlog, "ate"))
     return runs

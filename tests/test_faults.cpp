@@ -517,7 +517,7 @@ TEST(FaultsOutput, DiskFullFileSizeLimit) {
   }
   const std::string out = test::tempDir("faults_fsize_rawlog");
   writeText(out + "/x.rawlog", kEarlier);
-  expectCleanFailure(quote(test::app("tum2rawlog")) + " " + quote(f.dir) + " " + quote(out + "/x.rawlog"),
+  expectCleanFailure(quote(test::app("tum2rawlog")) + " " + quote(f.dir) + " " + quote(out + "/x.rawlog") + " --overwrite",
                      out + "/x_Images/", "write|File too large", out, "trap \"\" XFSZ; ulimit -f 64; ");
   EXPECT_EQ(readAll(out + "/x.rawlog"), kEarlier);
 }
@@ -536,7 +536,7 @@ TEST(FaultsOutput, DiskFullTmpfs) {
     expectCleanFailure(trackCmd(app, f.dir, out), out, "write|No space left", out);
   }
   writeText(mnt + "/x.rawlog", kEarlier);
-  expectCleanFailure(quote(test::app("tum2rawlog")) + " " + quote(f.dir) + " " + quote(mnt + "/x.rawlog"),
+  expectCleanFailure(quote(test::app("tum2rawlog")) + " " + quote(f.dir) + " " + quote(mnt + "/x.rawlog") + " --overwrite",
                      mnt + "/x_Images/", "write|No space left", mnt);
 }
 

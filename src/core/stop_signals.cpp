@@ -27,6 +27,7 @@ std::int64_t monotonicNs() {
 
 // Said at once, so that a stop during a long start-up (rendering, a checkpoint read again) is seen.
 constexpr char kStopping[] = "\nstopping after the frame in hand; what was done is written (Ctrl-C again to kill)\n";
+std::atomic<const char*> g_stopping{kStopping};
 
 // Only async-signal-safe work: lock-free atomics, clock_gettime(), write(), signal() and raise().
 void onStopSignal(int signal) {
@@ -34,7 +35,10 @@ void onStopSignal(int signal) {
   if (!g_stop.exchange(true)) {  // the first stop request
     g_signal = signal;
     g_first_ns = now;
-    [[maybe_unused]] const ssize_t n = ::write(STDERR_FILENO, kStopping, sizeof(kStopping) - 1);
+    const char* said = g_stopping.load();
+    std::size_t length = 0;
+    while (said[length]) ++length;
+    [[maybe_unused]] const ssize_t n = ::write(STDERR_FILENO, said, length);
     return;
   }
   // One request can come twice at once: Slurm signals every process of a job, and batch-job passes
@@ -46,7 +50,9 @@ void onStopSignal(int signal) {
 
 }  // namespace
 
-void installStopSignals() {
+void installStopSignals(const char* stopping) {
+  static_assert(std::atomic<const char*>::is_always_lock_free);
+  if (stopping) g_stopping = stopping;
   std::signal(SIGINT, onStopSignal);  // also where a background job started with SIGINT ignored
   std::signal(SIGTERM, onStopSignal);
 }
@@ -55,8 +61,8 @@ bool stopRequested() { return g_stop.load(); }
 const std::atomic<bool>& stopFlag() { return g_stop; }
 void requestStop() { g_stop = true; }
 int stopSignal() { return g_signal.load(); }
-int stoppedBeforeTheFirstFrame(const char* app, const std::string& more) {
-  std::fprintf(stderr, "%s: stopped (%s) before the first frame: nothing written%s\n", app, signalName(stopSignal()),
+int stoppedWithNothingWritten(const char* app, const std::string& when, const std::string& more) {
+  std::fprintf(stderr, "%s: stopped (%s)%s: nothing written%s\n", app, signalName(stopSignal()), when.c_str(),
                more.empty() ? "" : ("; " + more).c_str());
   return 128 + stopSignal();
 }

@@ -472,6 +472,8 @@ RawlogWriter::RawlogWriter(const std::string& path, const RawlogWriterOptions& o
   const fs::path parent = fs::absolute(path).parent_path();
   ensureWritableDirectory(parent.string());
   if (fs::is_directory(path)) throw InputError(path, "output path is a folder, expected a .rawlog file name");
+  if (!opts.in_place && !opts.replace && (fs::exists(path) || fs::exists(imagesDirFor(path))))
+    throw InputError(fs::exists(path) ? path : imagesDirFor(path), "already exists; not replaced (--overwrite replaces it)");
   impl_ = std::make_unique<Impl>();
   if (opts.in_place) impl_->openInPlace(path);
   else impl_->openAtomic(path);

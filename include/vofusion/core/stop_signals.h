@@ -22,7 +22,9 @@ namespace vofusion {
 
 inline constexpr double kSameRequestSeconds = 1.0;
 
-void installStopSignals();
+// `stopping`: what the first signal says at once, when not the default "stopping after the frame in
+// hand; what was done is written (Ctrl-C again to kill)" (a string that outlives the run).
+void installStopSignals(const char* stopping = nullptr);
 // True once a stop was asked for, by a signal or by requestStop().
 bool stopRequested();
 // The flag itself, for loops on other threads that poll it (live/live_loop.h's LiveHooks::stop).
@@ -31,8 +33,11 @@ void requestStop();
 // SIGINT or SIGTERM when a signal made the stop request; 0 otherwise.
 int stopSignal();
 const char* signalName(int signal);  // "SIGINT", "SIGTERM"
-// A stop before the first frame was done: "<app>: stopped (SIGTERM) before the first frame: nothing
-// written[; <more>]" on stderr; returns the exit code, 128 + the signal.
-int stoppedBeforeTheFirstFrame(const char* app, const std::string& more = "");
+// A stop that leaves nothing written: "<app>: stopped (SIGTERM)<when>: nothing written[; <more>]" on
+// stderr; returns the exit code, 128 + the signal.
+int stoppedWithNothingWritten(const char* app, const std::string& when, const std::string& more = "");
+inline int stoppedBeforeTheFirstFrame(const char* app, const std::string& more = "") {
+  return stoppedWithNothingWritten(app, " before the first frame", more);
+}
 
 }  // namespace vofusion

@@ -91,6 +91,10 @@ struct RawlogWriterOptions {
   // leaves a rawlog that reads to its last frame (plain, not gzip; synced to the disk once a second).
   // Never replaces an existing recording. Default: a temporary name renamed whole by commit().
   bool in_place = false;
+  // Not in place: whether a rawlog (or an images folder) already at the path is replaced. The
+  // converters (tum2rawlog, rgbd-simulate) replace only when asked (--overwrite, as MRPT's rawlog-edit):
+  // what is there may be a sensor recording, which nothing can make again.
+  bool replace = true;
 };
 
 class RawlogWriter {
