@@ -1,6 +1,8 @@
 // Readers and writers of different rawlogs in one process (issue 34): each resolves its own external
 // files, never through MRPT's process-wide images folder, so none reads or writes another's images.
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <thread>
 #include <vector>
 
@@ -10,6 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "support.h"
+#include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/io/external_files.h"
 #include "vofusion/io/prefetching_source.h"
@@ -141,5 +144,80 @@ TEST(RawlogThreads, RangeImageThatCannotBeWrittenNamesTheFile) {
     FAIL() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent_folder_vofusion/x_DEPTH.bin: "), std::string::npos) << e.what();
+  }
+}
+
+// A range image file is read checked whole: the same matrix as MRPT's load() reads from MRPT's own file,
+// and one cut short, with a flipped bit, or of another size is an InputError naming it.
+TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
+  const std::string dir = test::tempDir("range_image_checked");
+  auto ours = observationFromFrame(markedFrame(3, 41));
+  auto mrpts = observationFromFrame(markedFrame(3, 41));
+  mrpts->rangeImage_convertToExternalStorage("mrpt_DEPTH.bin", dir + "/");
+  resolveExternalFiles(*mrpts, dir);
+  *ours = *mrpts;
+  mrpts->load();
+  loadExternalRangeImage(*ours);
+  EXPECT_FALSE(ours->rangeImage_isExternallyStored());
+  EXPECT_EQ(ours->rangeImage.asEigen(), mrpts->rangeImage.asEigen());
+
+  const std::string file = dir + "/mrpt_DEPTH.bin";
+  std::string bytes;
+  {
+    std::ifstream in(file, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  std::string flipped = bytes;
+  flipped[bytes.size() / 2] ^= 0x10;
+  const std::vector<unsigned char> other_size = [] {
+    const std::uint32_t dims[2] = {24, 33};  // one reading short of 24 x 33
+    std::vector<unsigned char> raw(sizeof dims + (24 * 33 - 1) * 2, 7);
+    std::memcpy(raw.data(), dims, sizeof dims);
+    return gzipCompress(raw.data(), raw.size());
+  }();
+  const std::vector<std::pair<std::string, std::string>> damaged = {
+      {bytes.substr(0, bytes.size() / 2), "cut short or damaged"},
+      {flipped, "cut short or damaged"},
+      {std::string(other_size.begin(), other_size.end()), "its size is not rows x cols readings"},
+      {"", "cut short or damaged"},
+  };
+  for (const auto& [content, problem] : damaged) {
+    std::ofstream(file, std::ios::binary | std::ios::trunc) << content;
+    auto obs = observationFromFrame(markedFrame(3, 41));
+    useExternalRangeImage(*obs, file);
+    try {
+      loadExternalRangeImage(*obs);
+      ADD_FAILURE() << "no error for: " << problem;
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()).rfind(file + ": corrupt range image file (" + problem, 0), 0u) << e.what();
+    }
+  }
+}
+
+// Through a rawlog: the frame whose range image file is damaged is skipped as damaged, naming the file;
+// the others read as written.
+TEST(RawlogThreads, AFrameWithADamagedRangeImageFileIsSkipped) {
+  const std::string dir = test::tempDir("range_image_damaged");
+  writeMarked(dir + "/a.rawlog", 2, 5);
+  std::string damaged;
+  for (const auto& e : fs::directory_iterator(dir + "/a_Images"))
+    if (e.path().filename().string().rfind("KINECT_000002_", 0) == 0 && e.path().extension() == ".bin") damaged = e.path();
+  ASSERT_FALSE(damaged.empty());
+  fs::resize_file(damaged, fs::file_size(damaged) - 9);
+  RawlogSource src(dir + "/a.rawlog", SourceOptions{});
+  Frame f;
+  for (std::size_t i = 0; i < 5; ++i) {
+    if (i == 2) {
+      try {
+        src.next(f);
+        ADD_FAILURE() << "frame 2 read";
+      } catch (const DamagedFrame& e) {
+        EXPECT_NE(std::string(e.what()).find(fs::path(damaged).filename().string() + ": corrupt range image file"),
+                  std::string::npos) << e.what();
+      }
+      continue;
+    }
+    ASSERT_TRUE(src.next(f));
+    EXPECT_TRUE(isMarkedFrame(f, 2, i)) << i;
   }
 }

@@ -49,6 +49,34 @@ void resolveExternalFiles(CObservation3DRangeScan& obs, const std::string& image
     obs.*ExternalNames::points_file = resolved(obs.*ExternalNames::points_file, dir);
 }
 
+void loadExternalRangeImage(CObservation3DRangeScan& obs) {
+  if (!(obs.*ExternalNames::range_stored)) return;
+  const std::string path = obs.*ExternalNames::range_file;
+  std::vector<std::uint8_t> packed, raw;
+  if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
+    std::uint8_t buf[1 << 16];
+    for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) packed.insert(packed.end(), buf, buf + n);
+    const bool failed = std::ferror(f);
+    std::fclose(f);
+    if (failed) throw InputError(path, "cannot read the range image file");
+  } else {
+    throw InputError(path, "cannot load external range image (missing: " + std::string(std::strerror(errno)) + ")");
+  }
+  constexpr std::size_t kLargest = 8 + std::size_t(8192) * 8192 * 2;  // rows, cols and 8192 x 8192 readings
+  if (!gzipUncompress(packed.data(), packed.size(), raw, kLargest))
+    throw InputError(path, "corrupt range image file (cut short or damaged: its gzip check fails)");
+  std::uint32_t dims[2] = {0, 0};
+  if (raw.size() >= sizeof dims) std::memcpy(dims, raw.data(), sizeof dims);
+  if (raw.size() < sizeof dims || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2 || dims[0] == 0)
+    throw InputError(path, "corrupt range image file (its size is not rows x cols readings)");
+  auto& ri = obs.rangeImage;
+  ri.setSize(dims[0], dims[1]);
+  static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are read as they are in memory");
+  std::memcpy(ri.data(), raw.data() + sizeof dims, raw.size() - sizeof dims);
+  obs.*ExternalNames::range_stored = false;
+  (obs.*ExternalNames::range_file).clear();
+}
+
 void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& file_name, const std::string& dir) {
   const std::string path = (fs::path(dir) / file_name).string();
   if (obs.rangeImage_isExternallyStored()) throw std::logic_error(path + ": range image is already external");

@@ -355,6 +355,7 @@ bool RawlogSource::next(Frame& frame) {
   if (opts_.intrinsics) cam = CameraIntrinsics::parse(*opts_.intrinsics);
   const std::size_t index = pos_++;
   try {
+    loadExternalRangeImage(*obs);
     frame = frameFromObservation(*obs, path_, cam);
   } catch (const InputError& e) {
     throw DamagedFrame(e);  // this record's images; the next record is read as usual

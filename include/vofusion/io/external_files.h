@@ -22,6 +22,13 @@ namespace vofusion {
 // global state. Absolute names are kept as they are.
 void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::string& images_dir);
 
+// When obs's range image is stored externally (named absolutely: resolveExternalFiles), reads it into
+// obs.rangeImage, checked whole, and the observation no longer refers to the file. MRPT's load() reads
+// such a file unchecked: one cut short or with flipped bits gave a frame of wrong depths, used as it
+// came. Throws InputError(file, ...) when it is missing, cut short, damaged (its gzip CRC-32), or holds
+// other than rows x cols readings.
+void loadExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs);
+
 // Writes obs.rangeImage to dir/file_name in MRPT's external format (gzip: rows, cols as uint32, then
 // the uint16 ranges, little-endian) and marks it externally stored under the relative file_name,
 // releasing the matrix. What rangeImage_convertToExternalStorage(file_name, dir) writes, without its
