@@ -1,4 +1,5 @@
 // Unknown keys and sections in user configs are errors, checked against the stages' own defaults.
+#include <filesystem>
 #include <fstream>
 
 #include <mrpt/config/CConfigFileBase.h>
@@ -9,6 +10,7 @@
 #include "vofusion/core/errors.h"
 
 using namespace vofusion;
+namespace fs = std::filesystem;
 
 namespace {
 struct DemoParams : mrpt::config::CLoadableOptions {
@@ -69,6 +71,46 @@ TEST(Config, RetiredKeySaysItsValueIsFixedInCode) {
 }
 
 TEST(Config, MissingFileIsError) { EXPECT_THROW(loadConfig("/nonexistent/x.ini"), InputError); }
+
+// MRPT's reader passed over lines it could not read, and the run went on with the defaults: a key
+// without '=', an @include (no such directive in MRPT 2.5), an unclosed section, a binary file given as
+// the config. Each is now a one-line error naming the file and the line; an unknown ${NAME} too (it
+// named neither). A byte order mark, CRLF line ends, comments and MRPT's @define still read.
+TEST(Config, ALineTheReaderCannotReadIsAnErrorNamingFileAndLine) {
+  const std::string dir = test::tempDir("config_lines");
+  const auto error = [&](const std::string& text) -> std::string {
+    std::ofstream(dir + "/c.ini", std::ios::binary | std::ios::trunc) << text;
+    try {
+      loadConfig(dir + "/c.ini");
+      return "";
+    } catch (const InputError& e) {
+      return e.what();
+    }
+  };
+  const std::string at = dir + "/c.ini: ";
+  EXPECT_EQ(error("[odometry]\nreferences 99\n"),
+            at + "line 2: expected key = value, a [section] or a comment, got 'references 99'");
+  EXPECT_EQ(error("; settings\n@include other.ini\n"),
+            at + "line 2: expected key = value, a [section] or a comment, got '@include other.ini'");
+  EXPECT_EQ(error("[odometry\nreferences = 2\n"),
+            at + "line 1: expected key = value, a [section] or a comment, got '[odometry'");
+  EXPECT_EQ(error(std::string("\x7f" "ELF\x02\x01\x00\x00 = x", 12)),
+            at + "line 1: expected key = value, a [section] or a comment, got '?ELF???? = x'");
+  EXPECT_EQ(error("[odometry]\nkeypoints = ${NO_SUCH_NAME}\n"), at + "Line 2: Unknown variable `${NO_SUCH_NAME}`");
+  EXPECT_EQ(error("\xEF\xBB\xBF[odometry]\r\n# a comment\r\n// another\r\n@define KP star\r\nkeypoints = ${KP}\r\n\r\n"), "");
+  EXPECT_EQ(loadConfig(dir + "/c.ini").read_string("odometry", "keypoints", ""), "star");
+  fs::create_directories(dir + "/folder.ini");
+  EXPECT_THROW(
+      {
+        try {
+          loadConfig(dir + "/folder.ini");
+        } catch (const InputError& e) {
+          EXPECT_EQ(std::string(e.what()), dir + "/folder.ini: is a folder, expected a config file");
+          throw;
+        }
+      },
+      InputError);
+}
 
 TEST(Config, DumpHoldsEveryKey) {
   DemoParams p;

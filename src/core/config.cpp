@@ -13,15 +13,57 @@
 
 namespace vofusion {
 
+namespace {
+
+// A text as shown in an error: at most `longest` characters, anything unprintable as '?'.
+std::string shown(const std::string& text, std::size_t longest = 40) {
+  std::string s = text.substr(0, longest);
+  for (char& c : s)
+    if (!std::isprint(static_cast<unsigned char>(c))) c = '?';
+  return text.size() > longest ? s + "..." : s;
+}
+
+// MRPT's INI reader passes over any line it cannot read: "references 99" (no '='), "@include x.ini"
+// (no such directive in MRPT 2.5) or a binary file given as --config ran with the defaults. Each line is
+// a comment, a [section], key = value or MRPT's "@define NAME VALUE"; anything else is a one-line error.
+void checkIniLines(const std::string& text, const std::string& path) {
+  std::istringstream in(text.rfind("\xEF\xBB\xBF", 0) == 0 ? text.substr(3) : text);  // a UTF-8 byte order mark
+  std::size_t number = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    const auto b = line.find_first_not_of(" \t");
+    if (b == std::string::npos) continue;
+    const std::string t = line.substr(b);
+    const bool comment = t[0] == ';' || t[0] == '#' || t.rfind("//", 0) == 0;
+    const bool section = t[0] == '[' && t.find(']') != std::string::npos;
+    const bool define = t.rfind("@define ", 0) == 0;
+    const bool key = t[0] != '@' && t[0] != '=' && t.find('=') != std::string::npos;
+    const bool text_only = std::none_of(line.begin(), line.end(), [](char c) { return c == '\0'; });
+    if (!text_only || !(comment || section || define || key))
+      throw InputError(path, "line " + std::to_string(number) + ": expected key = value, a [section] or a comment, got '" +
+                                 shown(t) + "'");
+  }
+}
+
+}  // namespace
+
 mrpt::config::CConfigFileMemory loadConfig(const std::string& path) {
   mrpt::config::CConfigFileMemory cfg;
   if (path.empty()) return cfg;
+  if (std::filesystem::is_directory(path)) throw InputError(path, "is a folder, expected a config file");
   if (!std::filesystem::is_regular_file(path)) throw InputError(path, "config file not found");
   std::ifstream f(path);
   if (!f) throw InputError(path, "cannot read config file");
   std::ostringstream ss;
   ss << f.rdbuf();
-  cfg.setContent(ss.str());
+  checkIniLines(ss.str(), path);
+  try {
+    cfg.setContent(ss.str());  // MRPT's preprocessor: @define, ${NAME}, $env{NAME}, $eval{...}
+  } catch (const std::exception& e) {
+    const std::string what = e.what();
+    throw InputError(path, shown(what.substr(0, what.find('\n')), 160));  // "Line 2: Unknown variable `${X}`"
+  }
   return cfg;
 }
 
