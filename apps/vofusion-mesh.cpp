@@ -4,15 +4,15 @@
 #include <string>
 #include <vector>
 
-#include <mrpt/config/CConfigFileMemory.h>
-
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/mesh_io.h"
+#include "vofusion/pipeline/run_outputs.h"
 #include "vofusion/scene/scene_export.h"
 
 using namespace vofusion;
@@ -45,12 +45,9 @@ int body(int argc, char** argv) {
 
   if (const auto config = cl.value("--config")) {
     const auto cfg = loadConfig(*config);
-    // A full vofusion config is fine here: only [mesh] is read, and checked for unknown keys.
-    mrpt::config::CConfigFileMemory mesh_only;
-    std::vector<std::string> keys;
-    cfg.getAllKeys("mesh", keys);
-    for (const auto& k : keys) mesh_only.write("mesh", k, cfg.read_string("mesh", k, ""));
-    checkConfigKeys(mesh_only, *config, {{"mesh", &params}});
+    // A full vofusion config is fine here (only [mesh] is read), checked for typos in every section as
+    // vofusion checks it: a file vofusion would refuse is refused here too.
+    checkConfigKeys(cfg, *config, vofusionConfigSections());
     loadNamingOrigin(*config, [&] { params.loadFromConfigFile(cfg, "mesh"); });
   }
 
@@ -58,6 +55,7 @@ int body(int argc, char** argv) {
   if (const auto t = cl.value("--trajectory")) traj = readTumTrajectory(*t);
 
   TriangleMesh mesh = readPly(in);
+  if (mesh.faces.empty()) throw InputError(in, "holds no faces (a point cloud?): nothing to clean");
   const auto ref_path = cl.value("--distance-to");
   const TriangleMesh ref = ref_path ? readPly(*ref_path) : TriangleMesh();
   const std::size_t v0 = mesh.vertices.size(), f0 = mesh.faces.size();
@@ -65,6 +63,9 @@ int body(int argc, char** argv) {
   const MeshCleanReport report = cleanMesh(mesh, params, cl.value("--full") ? &full : nullptr);
   if (const auto rp = cl.value("--report")) writeFileAtomically(*rp, report.toJson() + "\n");
   if (!report.success) throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
+  if (mesh.faces.empty())
+    printWarning(in + ": every face was in a fragment of fewer than [mesh] min_component_faces = " +
+                 std::to_string(params.min_component_faces) + " faces; " + out + " is empty");
   writeMesh(out, mesh);
   if (const auto f = cl.value("--full")) writeMesh(*f, full);
   if (const auto png = cl.value("--png")) renderMeshPng(*png, mesh, traj.empty() ? nullptr : &traj);

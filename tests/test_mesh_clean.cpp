@@ -661,6 +661,27 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
                       &out),
             2);
   EXPECT_NE(out.find("max_hole_perimetre"), std::string::npos) << out;
+  // The other sections of a vofusion config are checked as vofusion checks them (before: only [mesh]).
+  std::ofstream(dir + "/typo.ini") << "[mesh]\nmin_component_faces = 10\n[kinfu]\nvoxel_sise = 0.01\n";
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/o.ply --config " + dir + "/typo.ini",
+                      &out),
+            2);
+  EXPECT_EQ(out, "vofusion-mesh: error: " + dir + "/typo.ini: unknown key 'voxel_sise' in section [kinfu]\n");
+  // A point cloud has nothing to clean: one line, nothing written (before: an empty mesh, exit 0).
+  TriangleMesh cloud = m;
+  cloud.faces.clear();
+  writePly(dir + "/cloud.ply", cloud);
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/cloud.ply " + dir + "/o.ply", &out), 2);
+  EXPECT_EQ(out, "vofusion-mesh: error: " + dir + "/cloud.ply: holds no faces (a point cloud?): nothing to clean\n");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/o.ply"));
+  // Every face in fragments: the (empty) mesh is written, and a warning says why it is empty.
+  TriangleMesh one = m;
+  one.faces.resize(1);
+  writePly(dir + "/one.ply", one);
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/one.ply " + dir + "/o.ply", &out), 0) << out;
+  EXPECT_EQ(out.rfind("warning: " + dir + "/one.ply: every face was in a fragment of fewer than [mesh] min_component_faces = 50 faces; " +
+                          dir + "/o.ply is empty\n", 0),
+            0u) << out;
 }
 
 TEST(MeshClean, EmptyAndInvalidMeshes) {
