@@ -221,3 +221,24 @@ TEST(RawlogThreads, AFrameWithADamagedRangeImageFileIsSkipped) {
     EXPECT_TRUE(isMarkedFrame(f, 2, i)) << i;
   }
 }
+
+// A reading beyond 16 bits of the range units is written as no reading (0), not clipped to the largest
+// value (a surface at the wrong distance); the others are kept to their unit.
+TEST(RawlogThreads, AReadingBeyondTheRangeUnitsIsWrittenAsNoReading) {
+  const std::string dir = test::tempDir("range_units_reach");
+  Frame f = markedFrame(1, 0);
+  f.depth.at<float>(3, 4) = 7.0f;  // 70 000 units of 0.1 mm: beyond 6.5535 m
+  RawlogWriterOptions options;
+  options.range_units = 1e-4;
+  {
+    RawlogWriter w(dir + "/r.rawlog", options);
+    w.write(f);
+    w.commit();
+  }
+  RawlogSource src(dir + "/r.rawlog", SourceOptions{});
+  Frame back;
+  ASSERT_TRUE(src.next(back));
+  EXPECT_EQ(back.depth.at<float>(3, 4), 0.f);
+  f.depth.at<float>(3, 4) = 0.f;
+  EXPECT_LT(cv::norm(back.depth, f.depth, cv::NORM_INF), 0.6e-4);
+}

@@ -28,6 +28,7 @@
 #include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/gzip_members.h"
+#include "vofusion/core/progress.h"
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -394,18 +395,24 @@ CObservation3DRangeScan::Ptr observationWithoutPixels(const Frame& f, double ran
   return obs;
 }
 
-// The depth (metres) as the observation's range image, in its rangeUnits.
-void setRangeImage(CObservation3DRangeScan& obs, const cv::Mat& depth) {
+// The depth (metres) as the observation's range image, in its rangeUnits; returns how many readings
+// lie beyond what 16 bits of those units hold. They become "no reading": clipped to the largest value,
+// they were surfaces at the wrong distance (--range-units 1e-9 turned a whole recording into a wall at
+// 65 um).
+std::size_t setRangeImage(CObservation3DRangeScan& obs, const cv::Mat& depth) {
   const double scale = 1.0 / exactUnits(obs.rangeUnits);
   obs.rangeImage_setSize(depth.rows, depth.cols);
+  std::size_t beyond = 0;
   for (int r = 0; r < depth.rows; ++r) {
     const float* in = depth.ptr<float>(r);
     for (int c = 0; c < depth.cols; ++c) {
       const double z = in[c];
-      const double v = (std::isfinite(z) && z > 0) ? std::round(z * scale) : 0.0;
-      obs.rangeImage(r, c) = static_cast<uint16_t>(std::min(v, 65535.0));
+      double v = (std::isfinite(z) && z > 0) ? std::round(z * scale) : 0.0;
+      if (v > 65535.0) v = 0.0, ++beyond;
+      obs.rangeImage(r, c) = static_cast<uint16_t>(v);
     }
   }
+  return beyond;
 }
 }  // namespace
 
@@ -518,8 +525,11 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
 void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
 
 std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
-  auto obs = opts_.external_images ? observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label)
-                                   : observationFromFrame(frame, opts_.range_units, opts_.sensor_label);
+  auto obs = observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label);
+  if (!opts_.external_images) {
+    readings_beyond_range_ += setRangeImage(*obs, frame.depth);
+    obs->intensityImage = mrpt::img::CImage(frame.rgb, mrpt::img::DEEP_COPY);
+  }
   std::optional<RecordedImages> images;
   if (opts_.external_images) {
     char stem[128];
@@ -535,7 +545,7 @@ std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
     if (rec && rec->range_units == opts_.range_units && linkFile(rec->depth, dir + "/" + bin)) {
       useExternalRangeImage(*obs, bin);
     } else {
-      setRangeImage(*obs, frame.depth);
+      readings_beyond_range_ += setRangeImage(*obs, frame.depth);
       writeRangeImageExternally(*obs, bin, dir);
     }
     impl_->images_used = true;
@@ -574,6 +584,12 @@ std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
 }
 
 void RawlogWriter::commit() {
+  if (readings_beyond_range_ > 0) {
+    char reach[64];
+    std::snprintf(reach, sizeof reach, "%.3g m", 65535.0 * opts_.range_units);
+    printWarning(path_ + ": " + std::to_string(readings_beyond_range_) + " depth readings beyond " + reach +
+                 " (65535 range units) written as no reading; a larger --range-units keeps them");
+  }
   if (opts_.format == RawlogWriterOptions::Format::ActionsSensoryFrames &&
       (impl_->pending_actions.size() > 0 || !impl_->pending_obs.empty())) {
     // Trailing actions/observations still need their pair.

@@ -134,6 +134,7 @@ class RawlogWriter {
   std::string path_;
   RawlogWriterOptions opts_;
   std::size_t frames_ = 0;
+  std::size_t readings_beyond_range_ = 0;  // depth readings too far for 16 bits of range_units
   bool committed_ = false;
   std::unique_ptr<Impl> impl_;
 };
