@@ -82,6 +82,25 @@ TEST(Trajectory, WriteReadRoundTrip) {
   }
 }
 
+// A line that is no pose names the file and the line: a huge coordinate (1e300 made rgbd-eval's RMSE
+// inf and its JSON invalid), a quaternion off unit length, a field too many.
+TEST(Trajectory, ALineThatIsNoPoseNamesTheLine) {
+  const auto error = [](const std::string& text) -> std::string {
+    try {
+      parseTumTrajectory(text, "t.txt");
+      return "";
+    } catch (const InputError& e) {
+      return e.what();
+    }
+  };
+  const std::string ok = "# t tx ty tz qx qy qz qw\n1.0 0 0 0 0 0 0 1\n";
+  EXPECT_EQ(error(ok + "2.0 1e300 0 0 0 0 0 1\n"), "t.txt: line 3: position beyond 10 000 km");
+  EXPECT_EQ(error(ok + "2.0 0 0 -2e7 0 0 0 1\n"), "t.txt: line 3: position beyond 10 000 km");
+  EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 2\n"), "t.txt: line 3: quaternion is not unit length");
+  EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 1 x\n"), "t.txt: line 3: unexpected extra field 'x'");
+  EXPECT_EQ(error(ok + "2.0 9e6 0 0 0 0 0 1\n"), "");
+}
+
 TEST(Trajectory, InterpolatesMidway) {
   Trajectory t{{0.0, mrpt::poses::CPose3D(0, 0, 0, 0, 0, 0)}, {1.0, mrpt::poses::CPose3D(2, 0, 0, 0.2, 0, 0)}};
   mrpt::poses::CPose3D p;

@@ -26,6 +26,11 @@ Trajectory parseTumTrajectory(const std::string& text, const std::string& origin
         throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp tx ty tz qx qy qz qw'");
     std::string extra;
     if (ls >> extra) throw InputError(origin, "line " + std::to_string(n) + ": unexpected extra field '" + extra + "'");
+    // A camera's path spans metres to kilometres. Beyond this, a value is no position (1e300 made
+    // rgbd-eval's RMSE inf and its JSON invalid), and its square would leave double's range.
+    constexpr double kFarthest = 1e7;  // m
+    if (std::abs(v[1]) > kFarthest || std::abs(v[2]) > kFarthest || std::abs(v[3]) > kFarthest)
+      throw InputError(origin, "line " + std::to_string(n) + ": position beyond 10 000 km");
     const double qn = std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]);
     if (std::abs(qn - 1.0) > 1e-2)
       throw InputError(origin, "line " + std::to_string(n) + ": quaternion is not unit length");
