@@ -317,6 +317,16 @@ TEST(AppsIoBadInput, MissingCorruptWrongSizeAndDepthPng) {
   // A colour frame of the wrong size.
   cv::imwrite(tum + "/" + rgb[1].file, cv::Mat(240, 320, CV_8UC3, cv::Scalar(1, 2, 3)));
   expectCleanFailure(cmd, rgb[1].file + ": colour image is 320x240", outdir);
+  // A depth map listed as colour (it read as a grey picture of the depths, used as colour).
+  cv::imwrite(tum + "/" + rgb[1].file, cv::Mat(120, 160, CV_16UC1, cv::Scalar(7000)));
+  expectCleanFailure(cmd, rgb[1].file + ": colour image is 16-bit single channel, as depth images are", outdir);
+  // 8-bit grey and 16-bit colour PNGs are colour images, made 8-bit BGR.
+  cv::imwrite(tum + "/" + rgb[1].file, cv::Mat(120, 160, CV_8UC1, cv::Scalar(90)));
+  TumFolderSource grey(tum, {});
+  EXPECT_EQ(grey.read(1).rgb.at<cv::Vec3b>(5, 5), cv::Vec3b(90, 90, 90));
+  cv::imwrite(tum + "/" + rgb[1].file, cv::Mat(120, 160, CV_16UC3, cv::Scalar(256 * 10, 256 * 20, 256 * 30)));
+  TumFolderSource deep(tum, {});
+  EXPECT_EQ(deep.read(1).rgb.at<cv::Vec3b>(5, 5), cv::Vec3b(10, 20, 30));
 }
 
 TEST(AppsIoBadInput, EmptyFolderUnknownPresetAndMissingInput) {
