@@ -162,6 +162,16 @@ int body(int argc, char** argv) {
     if (std::sscanf(blackout->c_str(), "%lf:%lf%c", &o.blackout_start, &o.blackout_seconds, &tail) != 2)
       throw InputError("--blackout", "expected T:S (start and length in s), e.g. 4:1.5, got '" + *blackout + "'");
   }
+  // Options that would change nothing are refused, not ignored: the user expects their effect.
+  for (const char* shake_only : {"--exposure", "--colour-offset"})
+    if (cl.value(shake_only) && o.trajectory != "shake")
+      throw InputError(shake_only, "takes effect with --trajectory shake only");
+  if (cl.value("--blackout") && o.fps > 0 && o.blackout_start >= o.frames / o.fps) {
+    char why[160];
+    std::snprintf(why, sizeof why, "starts at %g s, when the sequence has ended (%zu frames at %g fps: %g s)",
+                  o.blackout_start, std::size_t(o.frames), o.fps, o.frames / o.fps);
+    throw InputError("--blackout", why);
+  }
   if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "' (see --help)");
   const std::string out = cl.value("--out", "");
   if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");

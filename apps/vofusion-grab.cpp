@@ -108,11 +108,13 @@ Args parseArgs(int argc, char** argv) {
   a.record = !cl.flag("--no-record");
   a.verbose = cl.flag("--verbose");
   a.dump = cl.flag("--dump-config");
-  if (cl.value("--max-frames")) a.max_frames = cl.count("--max-frames", 0);
+  if (cl.value("--max-frames")) a.max_frames = cl.count("--max-frames", 0, 1);
   if (cl.value("--queue")) a.queue = cl.count("--queue", 0);
   if (cl.value("--speed")) a.speed = cl.number("--speed", 1.0);
   a.work_ms = int(cl.count("--simulate-work-ms", 0));
   if (a.speed && *a.speed < 0) throw InputError("--speed", "must not be negative");
+  if (!a.replay.empty() && !a.sensor.empty())
+    throw InputError("--sensor", "with --replay the frames come from the recording, not a sensor: give one of the two");
   a.checkpoint_every = a.live && a.record ? kDefaultCheckpointSeconds : 0.0;
   if (cl.value("--checkpoint-every")) {
     if (!a.live || !a.record)

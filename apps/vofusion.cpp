@@ -138,7 +138,7 @@ RunPlan planRun(const CommandLine& cl) {
   plan.config_path = cl.value("--config", "");
   loadConfiguration(cl, plan);
   plan.mode = parseTrackingMode(cl.value("--mode", "joint"));
-  plan.src_opts.max_frames = cl.count("--max-frames", 0);
+  plan.src_opts.max_frames = cl.count("--max-frames", 0, 1);  // not given: every frame
   plan.src_opts.intrinsics = cl.value("--intrinsics");
   if (cl.value("--depth-scale")) plan.src_opts.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   plan.input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];

@@ -396,10 +396,13 @@ TEST(Sim, ColourOffsetAndExposureFlags) {
     ++n;
   }
   EXPECT_EQ(n, 3);
-  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "2 --colour-offset 0.2", &log), 2);
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "2 --trajectory shake --colour-offset 0.2", &log), 2);
   EXPECT_NE(log.find("--colour-offset"), std::string::npos) << log;
-  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --exposure -1", &log), 2);
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --trajectory shake --exposure -1", &log), 2);
   EXPECT_NE(log.find("--exposure"), std::string::npos) << log;
+  // Without the shake they would change nothing: refused, not ignored.
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "4 --colour-offset 0.01 2>&1", &log), 2);
+  EXPECT_EQ(log, "rgbd-simulate: error: --colour-offset: takes effect with --trajectory shake only\n");
   EXPECT_FALSE(std::filesystem::exists(dir + "2"));
 }
 
@@ -428,6 +431,9 @@ TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
   EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "2 --blackout 3", &log), 2);
   EXPECT_NE(log.find("--blackout"), std::string::npos) << log;
   EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;
+  // A cover that starts when the sequence has ended would change nothing: refused, not ignored.
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --frames 8 --fps 10 --blackout 0.8:1 2>&1", &log), 2);
+  EXPECT_EQ(log, "rgbd-simulate: error: --blackout: starts at 0.8 s, when the sequence has ended (8 frames at 10 fps: 0.8 s)\n");
 }
 
 // --pace plays the scene's path faster: frame i at pace 2 is where frame 2i is at pace 1.
