@@ -140,6 +140,13 @@ TEST(CameraFiles, ADamagedGroundTruthCostsTheEvaluation) {
   EXPECT_NE(log.find("(read without ground truth: nothing is evaluated or converted from it)"), std::string::npos) << log;
   so.strict = true;
   EXPECT_NE(errorOf(dir, so).find(dir + "/groundtruth.txt: "), std::string::npos);
+  // An empty one is said too (it was taken silently as no ground truth).
+  std::ofstream(dir + "/groundtruth.txt", std::ios::trunc) << "# timestamp tx ty tz qx qy qz qw\n";
+  so.strict = false;
+  testing::internal::CaptureStderr();
+  TumFolderSource empty(dir, so);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(),
+            "warning: " + dir + "/groundtruth.txt: holds no poses (read without ground truth: nothing is evaluated or converted from it)\n");
 }
 
 // Without a camera file, only a 640x480 recording gets a guess, and the guess is said; another size

@@ -99,6 +99,18 @@ TEST(Trajectory, ALineThatIsNoPoseNamesTheLine) {
   EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 2\n"), "t.txt: line 3: quaternion is not unit length");
   EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 1 x\n"), "t.txt: line 3: unexpected extra field 'x'");
   EXPECT_EQ(error(ok + "2.0 9e6 0 0 0 0 0 1\n"), "");
+  // A folder given for a trajectory says so (it read as a file without poses).
+  const std::string dir = test::tempDir("traj_folder");
+  EXPECT_THROW(
+      {
+        try {
+          readTumTrajectory(dir);
+        } catch (const InputError& e) {
+          EXPECT_EQ(std::string(e.what()), dir + ": is a folder, expected a file");
+          throw;
+        }
+      },
+      InputError);
 }
 
 TEST(Trajectory, InterpolatesMidway) {

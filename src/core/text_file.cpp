@@ -1,5 +1,6 @@
 #include "vofusion/core/text_file.h"
 
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -8,6 +9,7 @@
 namespace vofusion {
 
 std::string readTextFile(const std::string& path) {
+  if (std::filesystem::is_directory(path)) throw InputError(path, "is a folder, expected a file");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");
   std::ostringstream ss;

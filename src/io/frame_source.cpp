@@ -17,7 +17,10 @@ bool IndexedFrameSource::next(Frame& frame) {
 
 Trajectory readGroundTruthFile(const std::string& path, const SourceOptions& opts) {
   try {
-    return readTumTrajectory(path);
+    Trajectory gt = readTumTrajectory(path);
+    // Present but empty (a download cut short, a file left to fill in): said, as a damaged one is.
+    if (gt.empty()) throw InputError(path, "holds no poses");
+    return gt;
   } catch (const InputError& e) {
     if (opts.strict) throw;
     printWarning(std::string(e.what()) + " (read without ground truth: nothing is evaluated or converted from it)");
