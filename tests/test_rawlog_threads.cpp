@@ -242,3 +242,28 @@ TEST(RawlogThreads, AReadingBeyondTheRangeUnitsIsWrittenAsNoReading) {
   f.depth.at<float>(3, 4) = 0.f;
   EXPECT_LT(cv::norm(back.depth, f.depth, cv::NORM_INF), 0.6e-4);
 }
+
+// A colour image cut short is the frame's damage in one line of ours (libpng printed its own line
+// before it, "libpng error: PNG input buffer is incomplete").
+TEST(RawlogThreads, AColourImageCutShortIsSaidOnceByUs) {
+  const std::string dir = test::tempDir("intensity_cut_short");
+  writeMarked(dir + "/a.rawlog", 4, 3);
+  std::string damaged;
+  for (const auto& e : fs::directory_iterator(dir + "/a_Images"))
+    if (e.path().filename().string().rfind("KINECT_000001_", 0) == 0 && e.path().extension() == ".png") damaged = e.path();
+  ASSERT_FALSE(damaged.empty());
+  fs::resize_file(damaged, fs::file_size(damaged) / 2);
+  RawlogSource src(dir + "/a.rawlog", SourceOptions{});
+  Frame f;
+  ASSERT_TRUE(src.next(f));
+  testing::internal::CaptureStderr();
+  try {
+    src.next(f);
+    ADD_FAILURE() << "frame 1 read";
+  } catch (const DamagedFrame& e) {
+    EXPECT_EQ(std::string(e.what()), damaged + ": cannot load intensity image (truncated PNG)");
+  }
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+  ASSERT_TRUE(src.next(f));
+  EXPECT_TRUE(isMarkedFrame(f, 4, 2));
+}

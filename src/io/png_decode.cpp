@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <vector>
 
 #include <libdeflate.h>  // its CRC-32
@@ -192,6 +193,20 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
   const std::uint8_t* h = bytes.data();
   return bytes.size() >= 29 && std::memcmp(h, kSignature, 8) == 0 && isChunk(h + 12, "IHDR") &&
          be32(h + 16) == std::uint32_t(width) && be32(h + 20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
+}
+
+// A PNG that does not end with its IEND chunk is truncated. Caught before OpenCV sees the file,
+// because libpng prints its own "libpng error" line to stderr before OpenCV gives up.
+bool isTruncatedPng(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  char sig[8] = {};
+  if (!f.read(sig, 8) || std::string(sig, 8) != "\x89PNG\r\n\x1a\n") return false;  // not a PNG: OpenCV decides
+  f.seekg(0, std::ios::end);
+  const auto size = static_cast<long long>(f.tellg());
+  if (size < 8 + 12) return true;
+  char tail[8] = {};
+  f.seekg(size - 8);
+  return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
 }
 
 }  // namespace vofusion

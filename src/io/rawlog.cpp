@@ -186,6 +186,8 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   }
 
   if (obs.hasIntensityImage) {
+    if (obs.intensityImage.isExternallyStored() && isTruncatedPng(obs.intensityImage.getExternalStorageFileAbsolutePath()))
+      throw InputError(obs.intensityImage.getExternalStorageFileAbsolutePath(), "cannot load intensity image (truncated PNG)");
     cv::Mat img;
     try {
       img = obs.intensityImage.asCvMat<cv::Mat>(mrpt::img::SHALLOW_COPY);

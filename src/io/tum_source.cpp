@@ -21,20 +21,6 @@ namespace fs = std::filesystem;
 
 namespace vofusion {
 
-// A PNG that does not end with its IEND chunk is truncated. Caught before OpenCV sees the file,
-// because libpng prints its own "libpng error" line to stderr before OpenCV gives up.
-bool isTruncatedPng(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  char sig[8] = {};
-  if (!f.read(sig, 8) || std::string(sig, 8) != "\x89PNG\r\n\x1a\n") return false;  // not a PNG: OpenCV decides
-  f.seekg(0, std::ios::end);
-  const auto size = static_cast<long long>(f.tellg());
-  if (size < 8 + 12) return true;
-  char tail[8] = {};
-  f.seekg(size - 8);
-  return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
-}
-
 std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin) {
   std::vector<TumEntry> out;
   for (const auto& [n, line] : dataLines(text)) {

@@ -26,5 +26,8 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes);
 // Whether `bytes` is a PNG whose header says 8-bit RGB of width x height (nothing decoded): the
 // rawlog writer then copies a recording's colour PNG instead of encoding its pixels again.
 bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
+// True for a PNG cut short (no IEND chunk at the end). Checked before decoding, because libpng
+// prints its own line to stderr for such a file.
+bool isTruncatedPng(const std::string& path);
 
 }  // namespace vofusion

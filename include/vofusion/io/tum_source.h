@@ -73,9 +73,6 @@ cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double
 // A 16-bit single-channel depth PNG of the expected size, in its raw units (CV_16UC1); throws
 // InputError(path, ...) when it is missing, undecodable, of another type (message + unit_note) or size.
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note = "");
-// True for a PNG cut short (no IEND chunk at the end). Checked before decoding, because libpng
-// prints its own line to stderr for such a file.
-bool isTruncatedPng(const std::string& path);
 // The size of the first colour image of `paths` that can be read (missing, cut short or undecodable ones
 // are passed over: each is its own frame's problem); nullopt when none can. Sources look at this many of
 // their first frames' images for it.
