@@ -1,5 +1,6 @@
 // Readers and writers of different rawlogs in one process (issue 34): each resolves its own external
 // files, never through MRPT's process-wide images folder, so none reads or writes another's images.
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -69,6 +70,16 @@ std::size_t readMarked(const std::string& path, int recording, int passes, std::
     wrong += src.size() - i;
   }
   return wrong;
+}
+
+// Frame `frame`'s file with extension `ext` (".png" colour, ".bin" range image) in a rawlog's images
+// folder written by RawlogWriter; empty when there is none.
+std::string imageFile(const std::string& images_dir, std::size_t frame, const std::string& ext) {
+  char stem[32];
+  std::snprintf(stem, sizeof stem, "KINECT_%06zu_", frame);
+  for (const auto& e : fs::directory_iterator(images_dir))
+    if (e.path().filename().string().rfind(stem, 0) == 0 && e.path().extension() == ext) return e.path().string();
+  return "";
 }
 
 std::vector<unsigned char> gunzip(const std::string& path) {
@@ -199,9 +210,7 @@ TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
 TEST(RawlogThreads, AFrameWithADamagedRangeImageFileIsSkipped) {
   const std::string dir = test::tempDir("range_image_damaged");
   writeMarked(dir + "/a.rawlog", 2, 5);
-  std::string damaged;
-  for (const auto& e : fs::directory_iterator(dir + "/a_Images"))
-    if (e.path().filename().string().rfind("KINECT_000002_", 0) == 0 && e.path().extension() == ".bin") damaged = e.path();
+  const std::string damaged = imageFile(dir + "/a_Images", 2, ".bin");
   ASSERT_FALSE(damaged.empty());
   fs::resize_file(damaged, fs::file_size(damaged) - 9);
   RawlogSource src(dir + "/a.rawlog", SourceOptions{});
@@ -248,9 +257,7 @@ TEST(RawlogThreads, AReadingBeyondTheRangeUnitsIsWrittenAsNoReading) {
 TEST(RawlogThreads, AColourImageCutShortIsSaidOnceByUs) {
   const std::string dir = test::tempDir("intensity_cut_short");
   writeMarked(dir + "/a.rawlog", 4, 3);
-  std::string damaged;
-  for (const auto& e : fs::directory_iterator(dir + "/a_Images"))
-    if (e.path().filename().string().rfind("KINECT_000001_", 0) == 0 && e.path().extension() == ".png") damaged = e.path();
+  const std::string damaged = imageFile(dir + "/a_Images", 1, ".png");
   ASSERT_FALSE(damaged.empty());
   fs::resize_file(damaged, fs::file_size(damaged) / 2);
   RawlogSource src(dir + "/a.rawlog", SourceOptions{});
