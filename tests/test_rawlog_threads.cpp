@@ -20,6 +20,7 @@
 #include "vofusion/io/rawlog.h"
 
 using namespace vofusion;
+using mrpt::obs::CObservation3DRangeScan;
 namespace fs = std::filesystem;
 
 namespace {
@@ -159,7 +160,7 @@ TEST(RawlogThreads, RangeImageThatCannotBeWrittenNamesTheFile) {
 }
 
 // A range image file is read checked whole: the same matrix as MRPT's load() reads from MRPT's own file,
-// and one cut short, with a flipped bit, or of another size is an InputError naming it.
+// and one cut short, with a flipped bit, or empty is an InputError naming it.
 TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
   const std::string dir = test::tempDir("range_image_checked");
   auto ours = observationFromFrame(markedFrame(3, 41));
@@ -180,29 +181,62 @@ TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
   }
   std::string flipped = bytes;
   flipped[bytes.size() / 2] ^= 0x10;
-  const std::vector<unsigned char> other_size = [] {
-    const std::uint32_t dims[2] = {24, 33};  // one reading short of 24 x 33
-    std::vector<unsigned char> raw(sizeof dims + (24 * 33 - 1) * 2, 7);
-    std::memcpy(raw.data(), dims, sizeof dims);
-    return gzipCompress(raw.data(), raw.size());
-  }();
-  const std::vector<std::pair<std::string, std::string>> damaged = {
-      {bytes.substr(0, bytes.size() / 2), "cut short or damaged"},
-      {flipped, "cut short or damaged"},
-      {std::string(other_size.begin(), other_size.end()), "its size is not rows x cols readings"},
-      {"", "cut short or damaged"},
-  };
-  for (const auto& [content, problem] : damaged) {
+  for (const auto& [content, problem] : std::vector<std::pair<std::string, std::string>>{
+           {bytes.substr(0, bytes.size() / 2), "cut short"}, {flipped, "a flipped bit"}}) {
     std::ofstream(file, std::ios::binary | std::ios::trunc) << content;
     auto obs = observationFromFrame(markedFrame(3, 41));
     useExternalRangeImage(*obs, file);
     try {
       loadExternalRangeImage(*obs);
-      ADD_FAILURE() << "no error for: " << problem;
+      ADD_FAILURE() << "no error for a file " << problem;
     } catch (const InputError& e) {
-      EXPECT_EQ(std::string(e.what()).rfind(file + ": corrupt range image file (" + problem, 0), 0u) << e.what();
+      EXPECT_EQ(std::string(e.what()), file + ": corrupt range image file (cut short or damaged: its gzip check fails)");
     }
   }
+  std::ofstream(file, std::ios::binary | std::ios::trunc).flush();
+  auto empty = observationFromFrame(markedFrame(3, 41));
+  useExternalRangeImage(*empty, file);
+  EXPECT_THROW(
+      {
+        try {
+          loadExternalRangeImage(*empty);
+        } catch (const InputError& e) {
+          EXPECT_EQ(std::string(e.what()), file + ": corrupt range image file (empty)");
+          throw;
+        }
+      },
+      InputError);
+}
+
+// What is not MRPT's gzip .bin of rows, cols and readings is left to MRPT's load(): a .txt
+// (EXTERNALS_AS_TEXT), a plain .bin, a whole gzip of another layout (older rawlogs hold floats).
+TEST(RawlogThreads, OtherRangeImageFilesAreLeftToMrpt) {
+  const std::string dir = test::tempDir("range_image_others");
+  const auto leftToMrpt = [&](const std::string& name) {
+    auto obs = observationFromFrame(markedFrame(5, 3));
+    useExternalRangeImage(*obs, (fs::path(dir) / name).string());
+    loadExternalRangeImage(*obs);
+    return obs->rangeImage_isExternallyStored();
+  };
+  auto text = observationFromFrame(markedFrame(5, 3));
+  const auto expected = text->rangeImage;
+  CObservation3DRangeScan::EXTERNALS_AS_TEXT(true);
+  text->rangeImage_convertToExternalStorage("t_DEPTH.txt", dir + "/");
+  CObservation3DRangeScan::EXTERNALS_AS_TEXT(false);
+  EXPECT_TRUE(leftToMrpt("t_DEPTH.txt"));
+  resolveExternalFiles(*text, dir);
+  loadExternalRangeImage(*text);
+  text->load();
+  EXPECT_EQ(text->rangeImage.asEigen(), expected.asEigen());
+
+  std::ofstream(dir + "/plain_DEPTH.bin", std::ios::binary) << "not gzip";
+  EXPECT_TRUE(leftToMrpt("plain_DEPTH.bin"));
+  const std::uint32_t dims[2] = {24, 33};  // with 4-byte readings, not 2
+  std::vector<unsigned char> raw(sizeof dims + 24 * 33 * 4, 7);
+  std::memcpy(raw.data(), dims, sizeof dims);
+  const auto packed = gzipCompress(raw.data(), raw.size());
+  std::ofstream(dir + "/floats_DEPTH.bin", std::ios::binary).write(reinterpret_cast<const char*>(packed.data()), packed.size());
+  EXPECT_TRUE(leftToMrpt("floats_DEPTH.bin"));
 }
 
 // Through a rawlog: the frame whose range image file is damaged is skipped as damaged, naming the file;

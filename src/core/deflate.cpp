@@ -2,6 +2,7 @@
 
 #include <libdeflate.h>
 
+#include <algorithm>
 #include <memory>
 #include <new>
 #include <stdexcept>
@@ -70,7 +71,7 @@ bool gzipUncompress(const std::uint8_t* data, std::size_t data_size, std::vector
   // The trailer's last four bytes: the length modulo 2^32 (what it says is checked by the decompression).
   const std::size_t size = std::size_t(data[data_size - 4]) | std::size_t(data[data_size - 3]) << 8 |
                            std::size_t(data[data_size - 2]) << 16 | std::size_t(data[data_size - 1]) << 24;
-  if (size > max_size) return false;
+  if (size > std::min<std::size_t>(max_size, 0xFFFFFFFFu)) return false;
   out.resize(size);
   std::size_t in = 0, got = 0;
   return libdeflate_gzip_decompress_ex(&decompressor(), data, data_size, out.data(), size, &in, &got) ==

@@ -9,6 +9,7 @@
 
 #include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/io/png_decode.h"  // readWholeFile
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -52,23 +53,22 @@ void resolveExternalFiles(CObservation3DRangeScan& obs, const std::string& image
 void loadExternalRangeImage(CObservation3DRangeScan& obs) {
   if (!(obs.*ExternalNames::range_stored)) return;
   const std::string path = obs.*ExternalNames::range_file;
-  std::vector<std::uint8_t> packed, raw;
-  if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
-    std::uint8_t buf[1 << 16];
-    for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) packed.insert(packed.end(), buf, buf + n);
-    const bool failed = std::ferror(f);
-    std::fclose(f);
-    if (failed) throw InputError(path, "cannot read the range image file");
-  } else {
-    throw InputError(path, "cannot load external range image (missing: " + std::string(std::strerror(errno)) + ")");
-  }
+  // Only MRPT's gzip .bin is read here. A .txt (EXTERNALS_AS_TEXT), a plain .bin, or a whole gzip of
+  // another layout (rawlogs older than MRPT's serialisation v9 hold floats) is left to MRPT's load().
+  if (fs::path(path).extension() != ".bin") return;
   constexpr std::size_t kLargest = 8 + std::size_t(8192) * 8192 * 2;  // rows, cols and 8192 x 8192 readings
+  std::error_code ec;
+  const std::uintmax_t stored = fs::file_size(path, ec);
+  std::vector<std::uint8_t> packed, raw;
+  if (ec || !readWholeFile(path, packed)) throw InputError(path, "cannot load external range image (missing or unreadable)");
+  if (stored > kLargest) throw InputError(path, "corrupt range image file (larger than any range image)");
+  if (packed.empty()) throw InputError(path, "corrupt range image file (empty)");
+  if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return;  // not gzip
   if (!gzipUncompress(packed.data(), packed.size(), raw, kLargest))
     throw InputError(path, "corrupt range image file (cut short or damaged: its gzip check fails)");
   std::uint32_t dims[2] = {0, 0};
   if (raw.size() >= sizeof dims) std::memcpy(dims, raw.data(), sizeof dims);
-  if (raw.size() < sizeof dims || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2 || dims[0] == 0)
-    throw InputError(path, "corrupt range image file (its size is not rows x cols readings)");
+  if (dims[0] == 0 || dims[1] == 0 || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2) return;
   auto& ri = obs.rangeImage;
   ri.setSize(dims[0], dims[1]);
   static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are read as they are in memory");

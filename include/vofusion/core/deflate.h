@@ -20,7 +20,8 @@ bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, 
 // A gzip file's bytes (one member) of `size` bytes at `data`, at level 1.
 std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size);
 // A gzip file of one member, checked whole (its CRC-32 and length), into `out`; false when it is cut
-// short, damaged, not gzip, followed by more bytes, or longer than max_size.
+// short, damaged, not gzip, followed by more bytes, or longer than max_size (at most 4 GiB - 1: the
+// length field holds the size modulo 2^32).
 bool gzipUncompress(const std::uint8_t* data, std::size_t data_size, std::vector<std::uint8_t>& out, std::size_t max_size);
 // All three throw std::bad_alloc when libdeflate cannot allocate its state.
 
