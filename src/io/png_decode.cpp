@@ -7,6 +7,7 @@
 #include <vector>
 
 #include <libdeflate.h>  // its CRC-32
+#include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/deflate.h"
 
@@ -207,6 +208,16 @@ bool isTruncatedPng(const std::string& path) {
   char tail[8] = {};
   f.seekg(size - 8);
   return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
+}
+
+cv::Mat asBgr8(const cv::Mat& image) {
+  cv::Mat img = image;
+  if (img.depth() != CV_8U) img.convertTo(img, CV_8U, img.depth() == CV_16U ? 1.0 / 256 : 255.0);
+  cv::Mat bgr;
+  if (img.channels() == 1) cv::cvtColor(img, bgr, cv::COLOR_GRAY2BGR);
+  else if (img.channels() == 4) cv::cvtColor(img, bgr, cv::COLOR_BGRA2BGR);
+  else bgr = img.data == image.data ? img.clone() : img;
+  return bgr;
 }
 
 }  // namespace vofusion

@@ -29,6 +29,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/gzip_members.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/text_file.h"
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -202,10 +203,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
                            ? obs.intensityImage.getExternalStorageFileAbsolutePath()
                            : origin,
                        "cannot load intensity image (missing or corrupt)");
-    if (img.depth() != CV_8U) img.convertTo(img, CV_8U, img.depth() == CV_16U ? 1.0 / 256 : 255.0);
-    if (img.channels() == 1) cv::cvtColor(img, f.rgb, cv::COLOR_GRAY2BGR);
-    else if (img.channels() == 4) cv::cvtColor(img, f.rgb, cv::COLOR_BGRA2BGR);
-    else f.rgb = img.clone();
+    f.rgb = asBgr8(img);
     // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
     // depth camera. A registered one at another resolution (e.g. 1280x1024 over 640x480) is resized.
     if (!override_camera && !colourRegisteredToDepth(obs)) {
@@ -327,7 +325,8 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
     throw InputError(path, "contains no CObservation3DRangeScan with a range image (" +
                                std::to_string(scan.objects) + " entries read)");
   const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
-  if (fs::exists(gt_file)) {
+  // The file beside the rawlog wins, unless it holds no pose and the rawlog has its own.
+  if (fs::exists(gt_file) && (embedded_gt.empty() || !dataLines(readTextFile(gt_file)).empty())) {
     gt_ = readGroundTruthFile(gt_file, opts);
   } else {
     std::sort(embedded_gt.begin(), embedded_gt.end(),
@@ -416,13 +415,20 @@ std::size_t setRangeImage(CObservation3DRangeScan& obs, const cv::Mat& depth) {
   }
   return beyond;
 }
+
+// observationFromFrame, adding to `beyond` the readings too far for the range units.
+CObservation3DRangeScan::Ptr observationWithPixels(const Frame& f, double range_units, const std::string& sensor_label,
+                                                   std::size_t& beyond) {
+  auto obs = observationWithoutPixels(f, range_units, sensor_label);
+  beyond += setRangeImage(*obs, f.depth);
+  obs->intensityImage = mrpt::img::CImage(f.rgb, mrpt::img::DEEP_COPY);
+  return obs;
+}
 }  // namespace
 
 CObservation3DRangeScan::Ptr observationFromFrame(const Frame& f, double range_units, const std::string& sensor_label) {
-  auto obs = observationWithoutPixels(f, range_units, sensor_label);
-  setRangeImage(*obs, f.depth);
-  obs->intensityImage = mrpt::img::CImage(f.rgb, mrpt::img::DEEP_COPY);
-  return obs;
+  std::size_t beyond = 0;
+  return observationWithPixels(f, range_units, sensor_label, beyond);
 }
 
 mrpt::obs::CActionRobotMovement3D makeOdometryAction(const mrpt::poses::CPose3D& delta, double timestamp,
@@ -527,11 +533,9 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
 void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
 
 std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
-  auto obs = observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label);
-  if (!opts_.external_images) {
-    readings_beyond_range_ += setRangeImage(*obs, frame.depth);
-    obs->intensityImage = mrpt::img::CImage(frame.rgb, mrpt::img::DEEP_COPY);
-  }
+  auto obs = opts_.external_images
+                 ? observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label)
+                 : observationWithPixels(frame, opts_.range_units, opts_.sensor_label, readings_beyond_range_);
   std::optional<RecordedImages> images;
   if (opts_.external_images) {
     char stem[128];

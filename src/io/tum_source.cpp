@@ -10,7 +10,6 @@
 
 #include <opencv2/core/persistence.hpp>
 #include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
@@ -108,11 +107,7 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
     // A depth map read as colour gave a grey picture of the depths, tracked as if it were colour.
     if (img.type() == CV_16UC1)
       throw InputError(path, "colour image is 16-bit single channel, as depth images are (a depth file in rgb.txt?)");
-    if (!img.empty()) {
-      if (img.depth() != CV_8U) img.convertTo(img, CV_8U, img.depth() == CV_16U ? 1.0 / 256 : 1.0);
-      if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2BGR);
-      else if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_BGRA2BGR);
-    }
+    if (!img.empty()) img = asBgr8(img);
   }
   if (img.empty()) throw InputError(path, "cannot decode colour image (corrupt or truncated?)");
   if (img.cols != expect_w || img.rows != expect_h)

@@ -70,7 +70,8 @@ Eigen::Isometry3d colourFromDepth(const mrpt::obs::CObservation3DRangeScan& obs)
 // (io/colour_registration.h); override_camera (the sensor's registered colour intrinsics) skips that.
 Frame frameFromObservation(const mrpt::obs::CObservation3DRangeScan& obs, const std::string& origin,
                            const std::optional<CameraIntrinsics>& override_camera = std::nullopt);
-// Builds an observation (images embedded) from a Frame; depth quantised to range_units metres.
+// Builds an observation (images embedded) from a Frame; depth quantised to range_units metres (a reading
+// beyond 65535 units becomes no reading, 0).
 mrpt::obs::CObservation3DRangeScan::Ptr observationFromFrame(const Frame& frame, double range_units = 2e-4,
                                                              const std::string& sensor_label = "KINECT");
 // An odometry action for the action/sensory-frame format: pose change between consecutive frames
