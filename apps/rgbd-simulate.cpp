@@ -113,6 +113,7 @@ bool writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
   std::snprintf(intr, sizeof intr, "%s%dx%d, depth registered to colour)\n%.6f %.6f %.6f %.6f\n", kIntrinsicsHeader,
                 c.width, c.height, c.fx, c.fy, c.cx, c.cy);
   writeFileAtomically((fs::path(out.tmp()) / "intrinsics.txt").string(), intr);
+  if (stopRequested()) return false;
   out.commit();
   progress.finish("-> " + dir);
   return true;
@@ -132,6 +133,7 @@ bool writeRawlog(const sim::SyntheticSequence& seq, const std::string& path, boo
     progress.update(i + 1);
   }
   out.writeGroundTruth(gt);
+  if (stopRequested()) return false;
   out.commit();
   progress.finish("-> " + path);
   return true;
@@ -166,10 +168,11 @@ int body(int argc, char** argv) {
   for (const char* shake_only : {"--exposure", "--colour-offset"})
     if (cl.value(shake_only) && o.trajectory != "shake")
       throw InputError(shake_only, "takes effect with --trajectory shake only");
-  if (cl.value("--blackout") && o.fps > 0 && o.blackout_start >= o.frames / o.fps) {
+  const double last_frame_time = (double(o.frames) - 1) / o.fps;  // frame i is at i / fps
+  if (cl.value("--blackout") && o.fps > 0 && o.blackout_start > last_frame_time) {
     char why[160];
-    std::snprintf(why, sizeof why, "starts at %g s, when the sequence has ended (%zu frames at %g fps: %g s)",
-                  o.blackout_start, std::size_t(o.frames), o.fps, o.frames / o.fps);
+    std::snprintf(why, sizeof why, "starts at %g s, after the last frame (at %g s: %zu frames at %g fps)",
+                  o.blackout_start, last_frame_time, std::size_t(o.frames), o.fps);
     throw InputError("--blackout", why);
   }
   if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "' (see --help)");

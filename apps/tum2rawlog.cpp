@@ -74,6 +74,7 @@ int body(int argc, char** argv) {
     out.write(f);
     progress.update(++n + src.skipped().size());
   }
+  if (stopRequested()) return stoppedWithNothingWritten("tum2rawlog", " after the last frame");
   out.commit();
   const std::size_t skipped = src.skipped().size();
   progress.finish("-> " + pos[1] + (skipped ? " (" + std::to_string(skipped) + " damaged frames skipped)" : ""));

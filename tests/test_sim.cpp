@@ -432,8 +432,8 @@ TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
   EXPECT_NE(log.find("--blackout"), std::string::npos) << log;
   EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;
   // A cover that starts when the sequence has ended would change nothing: refused, not ignored.
-  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --frames 8 --fps 10 --blackout 0.8:1 2>&1", &log), 2);
-  EXPECT_EQ(log, "rgbd-simulate: error: --blackout: starts at 0.8 s, when the sequence has ended (8 frames at 10 fps: 0.8 s)\n");
+  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --frames 8 --fps 10 --blackout 0.75:1 2>&1", &log), 2);
+  EXPECT_EQ(log, "rgbd-simulate: error: --blackout: starts at 0.75 s, after the last frame (at 0.7 s: 8 frames at 10 fps)\n");
 }
 
 // --pace plays the scene's path faster: frame i at pace 2 is where frame 2i is at pace 1.
