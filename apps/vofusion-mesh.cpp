@@ -4,6 +4,8 @@
 #include <string>
 #include <vector>
 
+#include <mrpt/config/CConfigFileMemory.h>
+
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
@@ -45,9 +47,16 @@ int body(int argc, char** argv) {
 
   if (const auto config = cl.value("--config")) {
     const auto cfg = loadConfig(*config);
-    // A full vofusion config is fine here (only [mesh] is read), checked for typos in every section as
-    // vofusion checks it: a file vofusion would refuse is refused here too.
-    checkConfigKeys(cfg, *config, vofusionConfigSections());
+    // Only [mesh] is read. The other sections of a vofusion config are checked for typos as vofusion
+    // checks them; sections vofusion does not know (a vofusion-grab config's sensor) are not this app's.
+    const auto known = vofusionConfigSections();
+    mrpt::config::CConfigFileMemory ours;
+    for (const auto& section : known) {
+      std::vector<std::string> keys;
+      cfg.getAllKeys(section.first, keys);
+      for (const auto& k : keys) ours.write(section.first, k, cfg.read_string(section.first, k, ""));
+    }
+    checkConfigKeys(ours, *config, known);
     loadNamingOrigin(*config, [&] { params.loadFromConfigFile(cfg, "mesh"); });
   }
 
@@ -64,8 +73,8 @@ int body(int argc, char** argv) {
   if (const auto rp = cl.value("--report")) writeFileAtomically(*rp, report.toJson() + "\n");
   if (!report.success) throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
   if (mesh.faces.empty())
-    printWarning(in + ": every face was in a fragment of fewer than [mesh] min_component_faces = " +
-                 std::to_string(params.min_component_faces) + " faces; " + out + " is empty");
+    printWarning(in + ": no face is left (fragments below [mesh] min_component_faces / min_component_area, " +
+                 "degenerate or duplicate faces); " + out + " is empty");
   writeMesh(out, mesh);
   if (const auto f = cl.value("--full")) writeMesh(*f, full);
   if (const auto png = cl.value("--png")) renderMeshPng(*png, mesh, traj.empty() ? nullptr : &traj);

@@ -97,8 +97,12 @@ TEST(Config, ALineTheReaderCannotReadIsAnErrorNamingFileAndLine) {
   EXPECT_EQ(error(std::string("\x7f" "ELF\x02\x01\x00\x00 = x", 12)),
             at + "line 1: expected key = value, a [section] or a comment, got '?ELF???? = x'");
   EXPECT_EQ(error("[odometry]\nkeypoints = ${NO_SUCH_NAME}\n"), at + "Line 2: Unknown variable `${NO_SUCH_NAME}`");
-  EXPECT_EQ(error("\xEF\xBB\xBF[odometry]\r\n# a comment\r\n// another\r\n@define KP star\r\nkeypoints = ${KP}\r\n\r\n"), "");
+  EXPECT_EQ(error("\xEF\xBB\xBF[odometry]\r\n# a comment\r\n// another\r\n@define\tKP star\r\nkeypoints = ${KP}\r\n\r\n"), "");
   EXPECT_EQ(loadConfig(dir + "/c.ini").read_string("odometry", "keypoints", ""), "star");
+  // A value continued on the next line with a trailing '\', as MRPT reads it.
+  EXPECT_EQ(error("[loop]\nnote = first part \\\n  second part\nrest = 1\n"), "");
+  EXPECT_EQ(error("[loop]\nnote = first part \\\n  second part\nrest 1\n"),
+            at + "line 4: expected key = value, a [section] or a comment, got 'rest 1'");
   fs::create_directories(dir + "/folder.ini");
   EXPECT_THROW(
       {

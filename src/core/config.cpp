@@ -26,18 +26,23 @@ std::string shown(const std::string& text, std::size_t longest = 40) {
 // MRPT's INI reader passes over any line it cannot read: "references 99" (no '='), "@include x.ini"
 // (no such directive in MRPT 2.5) or a binary file given as --config ran with the defaults. Each line is
 // a comment, a [section], key = value or MRPT's "@define NAME VALUE"; anything else is a one-line error.
+// A line ending in '\' goes on on the next one, as MRPT joins them.
 void checkIniLines(const std::string& text, const std::string& path) {
   std::istringstream in(text.rfind("\xEF\xBB\xBF", 0) == 0 ? text.substr(3) : text);  // a UTF-8 byte order mark
   std::size_t number = 0;
+  bool continued = false;
   for (std::string line; std::getline(in, line);) {
     ++number;
     if (!line.empty() && line.back() == '\r') line.pop_back();
+    const bool continues = continued;
+    continued = !line.empty() && line.back() == '\\';
+    if (continues) continue;  // the rest of the line before
     const auto b = line.find_first_not_of(" \t");
     if (b == std::string::npos) continue;
     const std::string t = line.substr(b);
     const bool comment = t[0] == ';' || t[0] == '#' || t.rfind("//", 0) == 0;
     const bool section = t[0] == '[' && t.find(']') != std::string::npos;
-    const bool define = t.rfind("@define ", 0) == 0;
+    const bool define = t.rfind("@define", 0) == 0 && t.size() > 7 && std::isspace(static_cast<unsigned char>(t[7]));
     const bool key = t[0] != '@' && t[0] != '=' && t.find('=') != std::string::npos;
     const bool text_only = std::none_of(line.begin(), line.end(), [](char c) { return c == '\0'; });
     if (!text_only || !(comment || section || define || key))
@@ -51,8 +56,9 @@ void checkIniLines(const std::string& text, const std::string& path) {
 mrpt::config::CConfigFileMemory loadConfig(const std::string& path) {
   mrpt::config::CConfigFileMemory cfg;
   if (path.empty()) return cfg;
-  if (std::filesystem::is_directory(path)) throw InputError(path, "is a folder, expected a config file");
-  if (!std::filesystem::is_regular_file(path)) throw InputError(path, "config file not found");
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw InputError(path, "is a folder, expected a config file");
+  if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path, "config file not found");
   std::ifstream f(path);
   if (!f) throw InputError(path, "cannot read config file");
   std::ostringstream ss;

@@ -9,7 +9,8 @@
 namespace vofusion {
 
 std::string readTextFile(const std::string& path) {
-  if (std::filesystem::is_directory(path)) throw InputError(path, "is a folder, expected a file");
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw InputError(path, "is a folder, expected a file");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");
   std::ostringstream ss;
