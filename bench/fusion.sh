@@ -3,7 +3,7 @@
 # per mode ATE/RPE, whole-process fps, per-stage ms/frame, peak memory and mesh size, from each run's
 # summary.json. The machine's load average is printed: stage times are wall clock, so a loaded machine
 # inflates them.
-#   bench/fusion.sh [build_dir] [data_dir] [max_frames] [extra vofusion args...]
+#   bench/fusion.sh [build_dir] [data_dir] [max_frames (0: every frame)] [extra vofusion args...]
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${1:-$root/build}"
@@ -11,12 +11,14 @@ data="${2:-$root/../shared/data/tum/rgbd_dataset_freiburg1_xyz_first300}"
 frames="${3:-300}"
 shift $(( $# < 3 ? $# : 3 ))
 ninja -C "$build" vofusion >/dev/null
+limit=()
+[ "$frames" = 0 ] || limit=(--max-frames "$frames")  # vofusion takes no --max-frames 0
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
 
 echo "data: $data ($frames frames), $(nproc) cores, load average before: $(cut -d' ' -f1-3 /proc/loadavg)"
 for mode in paper kinfu odometry; do
-  "$build/bin/vofusion" "$data" --out "$tmp/$mode" --mode "$mode" --max-frames "$frames" "$@" >"$tmp/$mode.log" 2>&1 ||
+  "$build/bin/vofusion" "$data" --out "$tmp/$mode" --mode "$mode" "${limit[@]}" "$@" >"$tmp/$mode.log" 2>&1 ||
     { echo "$mode: vofusion failed: $(tail -1 "$tmp/$mode.log")"; continue; }
 done
 python3 - "$tmp" <<'PY'
