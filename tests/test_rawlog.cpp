@@ -216,6 +216,23 @@ TEST(Rawlog, AGroundTruthFileIsTheRawlogsOwnOrNone) {
   EXPECT_TRUE(RawlogSource(dir + "/g.rawlog", {}).groundTruth().empty());
 }
 
+// A companion file beside the rawlog is read before the rawlog's GROUND_TRUTH entries, unless it holds
+// no pose: then the rawlog's own ground truth is used, not dropped.
+TEST(Rawlog, ACompanionFileWithNoPoseGivesWayToTheEmbeddedGroundTruth) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_gt_embedded");
+  writeRawlog(dir + "/g.rawlog", frames, RawlogWriterOptions{});
+  std::ofstream(dir + "/g.groundtruth.txt") << "# timestamp tx ty tz qx qy qz qw\n";
+  const auto gt = RawlogSource(dir + "/g.rawlog", {}).groundTruth();
+  ASSERT_EQ(gt.size(), 2u);
+  EXPECT_LT((gt[1].pose.asVectorVal() - frames[1].groundTruth->asVectorVal()).norm(), 1e-5);
+  // One that holds a pose wins.
+  std::ofstream(dir + "/g.groundtruth.txt") << "# timestamp tx ty tz qx qy qz qw\n5 1 2 3 0 0 0 1\n";
+  const auto own = RawlogSource(dir + "/g.rawlog", {}).groundTruth();
+  ASSERT_EQ(own.size(), 1u);
+  EXPECT_DOUBLE_EQ(own[0].timestamp, 5.0);
+}
+
 // The disk fills while the rawlog's last buffered bytes are flushed (MRPT's close() drops gzclose's
 // result): commit() says so naming the rawlog, and the earlier rawlog, its ground truth and the folder
 // stay as they were.
