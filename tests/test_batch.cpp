@@ -1,6 +1,7 @@
 // scripts/batch for real on this machine: synthetic recordings through GNU parallel, two at a time,
 // one table at the end; a failed recording leaves the others alone and --resume reruns only it.
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -289,6 +290,37 @@ TEST(Batch, ATermAsTheJobStartsNeverLeavesVofusionRunningAlone) {
             &log);
   EXPECT_EQ(log.find("alone="), std::string::npos) << log;
   EXPECT_EQ(log.find("started=0"), std::string::npos) << "no job reached vofusion: " << log;
+}
+
+// A Ctrl-C (SIGINT) to a job, as a terminal's sends it to a job of its own. vofusion, started in the
+// background by batch-job, begins with SIGINT ignored (the shell's rule without job control), so an INT
+// passed on as INT reached a vofusion still starting (and the stand-in here, a script, never) and the job
+// waited for it to end: passed on as TERM, each job stops within seconds.
+TEST(Batch, ACtrlCToAJobStopsItsVofusion) {
+  const std::string dir = test::tempDir("batch_int");
+  const std::string stand_in = dir + "/stand-in-vofusion";
+  {
+    std::ofstream f(stand_in);
+    f << "#!/bin/bash\ntrap 'kill $s; exit 143' TERM INT\nsleep 20 & s=$!\nwait\n";
+  }
+  fs::permissions(stand_in, fs::perms::owner_all);
+  const std::string job = test::sourceDir() + "/scripts/batch-job " + stand_in + " " + dir + "/out j$i 0 " + dir;
+  // bash with set -m: each job in a process group of its own, with SIGINT not ignored, as from a terminal.
+  // INT to batch-job alone (jobs 1-2), and to the job's process group as a terminal sends it (3-4).
+  std::ofstream(dir + "/four-jobs") << "set -m\nfor i in 1 2 3 4; do " + job + " >/dev/null 2>&1 & p=$!; " +
+                                           "sleep 0.$i; s=$(date +%s%N); kill -INT $([ $i -le 2 ] || echo -)$p; " +
+                                           "wait $p; echo \"rc=$? ms=$(( ($(date +%s%N) - s) / 1000000 ))\"; done\n";
+  std::string log;
+  test::run("bash " + dir + "/four-jobs", &log);
+  std::istringstream lines(log);
+  int jobs = 0;
+  for (std::string line; std::getline(lines, line); ++jobs) {
+    int rc = 0, ms = 0;
+    ASSERT_EQ(std::sscanf(line.c_str(), "rc=%d ms=%d", &rc, &ms), 2) << log;
+    EXPECT_EQ(rc, 143) << log;
+    EXPECT_LT(ms, 10000) << "the job waited for its vofusion to end by itself: " << log;
+  }
+  EXPECT_EQ(jobs, 4) << log;
 }
 
 TEST(Batch, BadArgumentsFailInOneLine) {

@@ -41,9 +41,9 @@ void onStopSignal(int signal) {
     [[maybe_unused]] const ssize_t n = ::write(STDERR_FILENO, said, length);
     return;
   }
-  // One request can come twice at once: Slurm signals every process of a job, and batch-job passes
-  // the same signal on to vofusion.
-  if (signal == g_signal && now - g_first_ns < std::int64_t(kSameRequestSeconds * 1e9)) return;
+  // One request can come twice at once: Slurm signals every process of a job, a terminal's Ctrl-C
+  // reaches batch-job too, and batch-job passes it on (an INT as TERM).
+  if (now - g_first_ns < std::int64_t(kSameRequestSeconds * 1e9)) return;
   std::signal(signal, SIG_DFL);  // the second: what the signal does without a handler, now
   std::raise(signal);
 }
