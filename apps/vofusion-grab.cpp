@@ -133,18 +133,6 @@ std::vector<ConfigSection> ownSections(const LiveOptions& live) {
   return sections;
 }
 
-void checkOwnSections(const mrpt::config::CConfigFileBase& cfg, const std::string& origin,
-                      const std::vector<ConfigSection>& known) {
-  mrpt::config::CConfigFileMemory own;
-  for (const auto& [section, params] : known) {
-    std::vector<std::string> keys;
-    cfg.getAllKeys(section, keys);
-    for (const auto& k : keys)
-      if (k != "rawlog-grabber-ignore") own.write(section, k, cfg.read_string(section, k, ""));
-  }
-  checkConfigKeys(own, origin, known);
-}
-
 std::string summaryText(const LiveStats& s, const std::string& source, std::size_t recorded, std::size_t queue,
                         std::size_t skipped) {
   std::ostringstream o;
@@ -180,7 +168,7 @@ GrabPlan planGrab(const Args& args) {
   plan.config = args.config;
   if (plan.config.empty() && args.replay.empty()) plan.config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
   plan.cfg = loadConfig(plan.config);
-  checkOwnSections(plan.cfg, plan.config, ownSections(LiveOptions()));
+  checkKnownSections(plan.cfg, plan.config, ownSections(LiveOptions()));
   loadNamingOrigin(plan.config, [&] {
     plan.opts.loadFromConfigFile(plan.cfg, kSection);
     plan.out_params.loadFromConfigFile(plan.cfg, "output");

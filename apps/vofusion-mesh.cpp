@@ -4,8 +4,6 @@
 #include <string>
 #include <vector>
 
-#include <mrpt/config/CConfigFileMemory.h>
-
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
@@ -47,16 +45,9 @@ int body(int argc, char** argv) {
 
   if (const auto config = cl.value("--config")) {
     const auto cfg = loadConfig(*config);
-    // Only [mesh] is read. The other sections of a vofusion config are checked for typos as vofusion
-    // checks them; sections vofusion does not know (a vofusion-grab config's sensor) are not this app's.
-    const auto known = vofusionConfigSections();
-    mrpt::config::CConfigFileMemory ours;
-    for (const auto& section : known) {
-      std::vector<std::string> keys;
-      cfg.getAllKeys(section.first, keys);
-      for (const auto& k : keys) ours.write(section.first, k, cfg.read_string(section.first, k, ""));
-    }
-    checkConfigKeys(ours, *config, known);
+    // Only [mesh] is read. vofusion's other sections are checked for typos as vofusion checks them;
+    // a vofusion-grab config's sensor sections are not this app's.
+    checkKnownSections(cfg, *config, vofusionConfigSections());
     loadNamingOrigin(*config, [&] { params.loadFromConfigFile(cfg, "mesh"); });
   }
 

@@ -674,8 +674,9 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/cloud.ply " + dir + "/o.ply", &out), 2);
   EXPECT_EQ(out, "vofusion-mesh: error: " + dir + "/cloud.ply: holds no faces (a point cloud?): nothing to clean\n");
   EXPECT_FALSE(std::filesystem::exists(dir + "/o.ply"));
-  // A vofusion-grab config's sensor section is not this app's to check.
-  std::ofstream(dir + "/grab.ini") << "[mesh]\nmin_component_faces = 10\n[OPENNI2]\ndriver = COpenNI2Sensor\n";
+  // A vofusion-grab config's sensor section is not this app's to check, nor rawlog-grabber's key.
+  std::ofstream(dir + "/grab.ini")
+      << "[mesh]\nmin_component_faces = 10\nrawlog-grabber-ignore = true\n[OPENNI2]\ndriver = COpenNI2Sensor\n";
   EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/o.ply --config " + dir + "/grab.ini",
                       &out),
             0)

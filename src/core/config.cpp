@@ -148,6 +148,18 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
   }
 }
 
+void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::string& origin,
+                        const std::vector<ConfigSection>& known) {
+  mrpt::config::CConfigFileMemory ours;
+  for (const auto& [section, params] : known) {
+    std::vector<std::string> keys;
+    user.getAllKeys(section, keys);
+    for (const auto& k : keys)
+      if (k != "rawlog-grabber-ignore") ours.write(section, k, user.read_string(section, k, ""));
+  }
+  checkConfigKeys(ours, origin, known);
+}
+
 std::string dumpConfig(const std::vector<ConfigSection>& known) { return defaultsOf(known).getContent(); }
 
 }  // namespace vofusion

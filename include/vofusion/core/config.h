@@ -28,6 +28,12 @@ mrpt::config::CConfigFileMemory loadConfig(const std::string& path);
 void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                      const std::vector<ConfigSection>& known);
 
+// checkConfigKeys over the sections of `known` alone: a file that also holds other programs' sections
+// (a vofusion-grab config's sensor sections, read by MRPT's drivers) is checked in ours. The key
+// rawlog-grabber-ignore, which rawlog-grabber reads in every section, is accepted in ours.
+void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::string& origin,
+                        const std::vector<ConfigSection>& known);
+
 // The defaults of all given stages as INI text (for --dump-config and the documented share/ file).
 std::string dumpConfig(const std::vector<ConfigSection>& known);
 
