@@ -216,8 +216,8 @@ TEST(Rawlog, AGroundTruthFileIsTheRawlogsOwnOrNone) {
   EXPECT_TRUE(RawlogSource(dir + "/g.rawlog", {}).groundTruth().empty());
 }
 
-// A companion file beside the rawlog is read before the rawlog's GROUND_TRUTH entries, unless it holds
-// no pose: then the rawlog's own ground truth is used, not dropped.
+// A companion file beside the rawlog is read before the rawlog's GROUND_TRUTH entries, unless it gives
+// no pose (none, or damaged): then the rawlog's own ground truth is used, not dropped.
 TEST(Rawlog, ACompanionFileWithNoPoseGivesWayToTheEmbeddedGroundTruth) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_gt_embedded");
@@ -231,6 +231,12 @@ TEST(Rawlog, ACompanionFileWithNoPoseGivesWayToTheEmbeddedGroundTruth) {
   const auto own = RawlogSource(dir + "/g.rawlog", {}).groundTruth();
   ASSERT_EQ(own.size(), 1u);
   EXPECT_DOUBLE_EQ(own[0].timestamp, 5.0);
+  // A damaged one is said and gives way too; with --strict it stops the run.
+  std::ofstream(dir + "/g.groundtruth.txt") << "5 1 2 3 0 0 0\n";
+  EXPECT_EQ(RawlogSource(dir + "/g.rawlog", {}).groundTruth().size(), 2u);
+  SourceOptions strict;
+  strict.strict = true;
+  EXPECT_THROW(RawlogSource(dir + "/g.rawlog", strict), InputError);
 }
 
 // The disk fills while the rawlog's last buffered bytes are flushed (MRPT's close() drops gzclose's

@@ -29,7 +29,6 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/gzip_members.h"
 #include "vofusion/core/progress.h"
-#include "vofusion/core/text_file.h"
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -191,7 +190,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
       throw InputError(obs.intensityImage.getExternalStorageFileAbsolutePath(), "cannot load intensity image (truncated PNG)");
     cv::Mat img;
     try {
-      img = obs.intensityImage.asCvMat<cv::Mat>(mrpt::img::SHALLOW_COPY);
+      img = obs.intensityImage.asCvMat<cv::Mat>(mrpt::img::DEEP_COPY);  // the frame's own pixels
     } catch (const std::exception&) {
       throw InputError(obs.intensityImage.isExternallyStored()
                            ? obs.intensityImage.getExternalStorageFileAbsolutePath()
@@ -296,6 +295,21 @@ struct RawlogSource::Reader {
   }
 };
 
+namespace {
+// The ground truth file beside a rawlog that has GROUND_TRUTH entries too: the file wins when it
+// gives poses; one that holds none or cannot be read leaves the rawlog's own (said when damaged).
+Trajectory companionOrEmbedded(const std::string& file, Trajectory embedded, bool strict) {
+  try {
+    Trajectory gt = readTumTrajectory(file);
+    if (!gt.empty()) return gt;
+  } catch (const InputError& e) {
+    if (strict) throw;
+    printWarning(std::string(e.what()) + " (the rawlog's own GROUND_TRUTH entries are used)");
+  }
+  return embedded;
+}
+}  // namespace
+
 RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) : path_(path), opts_(opts) {
   if (!fs::exists(path)) throw InputError(path, "no such file");
   if (fs::is_directory(path)) throw InputError(path, "is a folder, expected a .rawlog file");
@@ -324,15 +338,12 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
   if (count_ == 0)
     throw InputError(path, "contains no CObservation3DRangeScan with a range image (" +
                                std::to_string(scan.objects) + " entries read)");
+  std::sort(embedded_gt.begin(), embedded_gt.end(),
+            [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
   const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
-  // The file beside the rawlog wins, unless it holds no pose and the rawlog has its own.
-  if (fs::exists(gt_file) && (embedded_gt.empty() || !dataLines(readTextFile(gt_file)).empty())) {
-    gt_ = readGroundTruthFile(gt_file, opts);
-  } else {
-    std::sort(embedded_gt.begin(), embedded_gt.end(),
-              [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
-    gt_ = std::move(embedded_gt);
-  }
+  if (!fs::exists(gt_file)) gt_ = std::move(embedded_gt);
+  else if (embedded_gt.empty()) gt_ = readGroundTruthFile(gt_file, opts);
+  else gt_ = companionOrEmbedded(gt_file, std::move(embedded_gt), opts.strict);
   rewind();
 }
 
