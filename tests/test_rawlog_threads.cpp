@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <tuple>
 #include <fstream>
 #include <thread>
 #include <vector>
@@ -181,16 +182,20 @@ TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
   }
   std::string flipped = bytes;
   flipped[bytes.size() / 2] ^= 0x10;
-  for (const auto& [content, problem] : std::vector<std::pair<std::string, std::string>>{
-           {bytes.substr(0, bytes.size() / 2), "cut short"}, {flipped, "a flipped bit"}}) {
-    std::ofstream(file, std::ios::binary | std::ios::trunc) << content;
+  // MRPT reads every name but a .txt as binary: an upper-case .BIN is checked too.
+  const std::string upper = dir + "/upper_DEPTH.BIN";
+  for (const auto& [name, content, problem] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {file, bytes.substr(0, bytes.size() / 2), "cut short"},
+           {file, flipped, "a flipped bit"},
+           {upper, flipped, "a flipped bit, named .BIN"}}) {
+    std::ofstream(name, std::ios::binary | std::ios::trunc) << content;
     auto obs = observationFromFrame(markedFrame(3, 41));
-    useExternalRangeImage(*obs, file);
+    useExternalRangeImage(*obs, name);
     try {
       loadExternalRangeImage(*obs);
       ADD_FAILURE() << "no error for a file " << problem;
     } catch (const InputError& e) {
-      EXPECT_EQ(std::string(e.what()), file + ": corrupt range image file (cut short or damaged: its gzip check fails)");
+      EXPECT_EQ(std::string(e.what()), name + ": corrupt range image file (cut short or damaged: its gzip check fails)");
     }
   }
   std::ofstream(file, std::ios::binary | std::ios::trunc).flush();

@@ -1,5 +1,7 @@
 #include "vofusion/io/external_files.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstdint>
 #include <cstdio>
@@ -53,15 +55,19 @@ void resolveExternalFiles(CObservation3DRangeScan& obs, const std::string& image
 void loadExternalRangeImage(CObservation3DRangeScan& obs) {
   if (!(obs.*ExternalNames::range_stored)) return;
   const std::string path = obs.*ExternalNames::range_file;
-  // Only MRPT's gzip .bin is read here. A .txt (EXTERNALS_AS_TEXT), a plain .bin, or a whole gzip of
-  // another layout (rawlogs older than MRPT's serialisation v9 hold floats) is left to MRPT's load().
-  if (fs::path(path).extension() != ".bin") return;
+  // Only MRPT's gzip binary file is read here. A .txt (EXTERNALS_AS_TEXT; MRPT reads any other name as
+  // binary), a plain binary file, or a whole gzip of another layout (rawlogs older than MRPT's
+  // serialisation v9 hold floats) is left to MRPT's load().
+  std::string extension = fs::path(path).extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (extension == ".txt") return;
   constexpr std::size_t kLargest = 8 + std::size_t(8192) * 8192 * 2;  // rows, cols and 8192 x 8192 readings
   std::error_code ec;
   const std::uintmax_t stored = fs::file_size(path, ec);
-  std::vector<std::uint8_t> packed, raw;
-  if (ec || !readWholeFile(path, packed)) throw InputError(path, "cannot load external range image (missing or unreadable)");
+  if (ec) throw InputError(path, "cannot load external range image (missing or unreadable)");
   if (stored > kLargest) throw InputError(path, "corrupt range image file (larger than any range image)");
+  std::vector<std::uint8_t> packed, raw;
+  if (!readWholeFile(path, packed)) throw InputError(path, "cannot load external range image (missing or unreadable)");
   if (packed.empty()) throw InputError(path, "corrupt range image file (empty)");
   if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return;  // not gzip
   if (!gzipUncompress(packed.data(), packed.size(), raw, kLargest))
