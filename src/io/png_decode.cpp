@@ -210,14 +210,13 @@ bool isTruncatedPng(const std::string& path) {
   return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
 }
 
-cv::Mat asBgr8(const cv::Mat& image) {
-  cv::Mat img = image;
-  if (img.depth() != CV_8U) img.convertTo(img, CV_8U, img.depth() == CV_16U ? 1.0 / 256 : 255.0);
-  cv::Mat bgr;
-  if (img.channels() == 1) cv::cvtColor(img, bgr, cv::COLOR_GRAY2BGR);
-  else if (img.channels() == 4) cv::cvtColor(img, bgr, cv::COLOR_BGRA2BGR);
-  else bgr = img.data == image.data ? img.clone() : img;
-  return bgr;
+cv::Mat asBgr8(cv::Mat image) {
+  const int depth = image.depth();
+  if (depth != CV_8U)
+    image.convertTo(image, CV_8U, depth == CV_32F || depth == CV_64F ? 255.0 : depth == CV_16U ? 1.0 / 256 : 1.0);
+  if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
+  else if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
+  return image;
 }
 
 }  // namespace vofusion
