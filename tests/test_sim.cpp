@@ -434,6 +434,11 @@ TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
   // A cover that starts when the sequence has ended would change nothing: refused, not ignored.
   EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "3 --frames 8 --fps 10 --blackout 0.75:1 2>&1", &log), 2);
   EXPECT_EQ(log, "rgbd-simulate: error: --blackout: starts at 0.75 s, after the last frame (at 0.7 s: 8 frames at 10 fps)\n");
+  // One that starts at the last frame covers it.
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "4 --frames 8 --size 160x120 --fps 10 --blackout 0.7:1", &log), 0)
+      << log;
+  auto last = openFrameSource(dir + "4", SourceOptions());
+  while (last->next(f)) EXPECT_EQ(cv::countNonZero(f.depth) == 0, f.index == 7) << f.index;
 }
 
 // --pace plays the scene's path faster: frame i at pace 2 is where frame 2i is at pace 1.
