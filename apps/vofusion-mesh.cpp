@@ -45,8 +45,8 @@ int body(int argc, char** argv) {
 
   if (const auto config = cl.value("--config")) {
     const auto cfg = loadConfig(*config);
-    // Only [mesh] is read. vofusion's other sections are checked for typos as vofusion checks them;
-    // a vofusion-grab config's sensor sections are not this app's.
+    // Only [mesh] is read. The keys of vofusion's other sections are checked for typos; other sections
+    // (a vofusion-grab config's sensor sections) are not this app's, so a misspelt section name passes.
     checkKnownSections(cfg, *config, vofusionConfigSections());
     loadNamingOrigin(*config, [&] { params.loadFromConfigFile(cfg, "mesh"); });
   }

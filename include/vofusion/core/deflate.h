@@ -1,7 +1,7 @@
 #pragma once
 // Deflate streams through libdeflate, one compressor and decompressor per thread: the zlib streams of
 // spilled and saved TSDF bricks, keyframe depths and PNG image data, and the gzip files of the range
-// images we write. The same bytes zlib reads and writes, in less time.
+// images we write and read. The same bytes zlib reads and writes, in less time.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -23,6 +23,6 @@ std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size);
 // short, damaged, not gzip, followed by more bytes, or longer than max_size (at most 4 GiB - 1: the
 // length field holds the size modulo 2^32).
 bool gzipUncompress(const std::uint8_t* data, std::size_t data_size, std::vector<std::uint8_t>& out, std::size_t max_size);
-// All three throw std::bad_alloc when libdeflate cannot allocate its state.
+// All of these throw std::bad_alloc when libdeflate cannot allocate its state.
 
 }  // namespace vofusion

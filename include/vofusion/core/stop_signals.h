@@ -5,8 +5,9 @@
 // finishes the frame in hand and writes what it has; a signal after that kills at
 // once, as without a handler. A stop signal within kSameRequestSeconds of the one that asked is the
 // same request delivered twice, not a second one: a batch system signals the job's processes, a
-// terminal's Ctrl-C reaches batch-job and vofusion alike, and batch-job passes it on (as SIGTERM). For long-running apps (vofusion, vofusion-grab, rgbd-odometry),
-// installed from main's thread once the command line is read:
+// terminal's Ctrl-C reaches batch-job and vofusion alike, and batch-job passes it on (as SIGTERM).
+// For long-running apps (vofusion, vofusion-grab, rgbd-odometry, tum2rawlog, rgbd-simulate), installed
+// from main's thread once the command line is read:
 //
 //   installStopSignals();
 //   while (true) {

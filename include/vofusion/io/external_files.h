@@ -25,8 +25,9 @@ void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::st
 // When obs's range image is stored externally (named absolutely: resolveExternalFiles), reads it into
 // obs.rangeImage, checked whole, and the observation no longer refers to the file. MRPT's load() reads
 // such a file unchecked: one cut short or with flipped bits gave a frame of wrong depths, used as it
-// came. Throws InputError(file, ...) when it is missing, cut short, damaged (its gzip CRC-32), or holds
-// other than rows x cols readings.
+// came. Throws InputError(file, ...) when it is missing, empty, cut short or damaged (its gzip CRC-32).
+// A file of another kind (a .txt, a plain binary one, a gzip of older rawlogs' float layout) is left
+// for MRPT's load().
 void loadExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs);
 
 // Writes obs.rangeImage to dir/file_name in MRPT's external format (gzip: rows, cols as uint32, then

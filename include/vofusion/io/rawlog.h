@@ -35,7 +35,8 @@ namespace vofusion {
 // sensory frames), with embedded or external ("<name>_Images") images and range images in any
 // rangeUnits. Colour: the intensity image as BGR (grey images are expanded; a missing one becomes
 // mid-grey). Intrinsics: cameraParams (depth camera), unless SourceOptions::intrinsics overrides.
-// Ground truth: "<name>.groundtruth.txt" if present, else CObservationRobotPose "GROUND_TRUTH" entries.
+// Ground truth: "<name>.groundtruth.txt" if it gives poses, else CObservationRobotPose "GROUND_TRUTH"
+// entries (a companion file that is empty or damaged gives way to them; said when damaged).
 // A truncated or corrupt file throws InputError ("<file>: ... at entry N"); while an entry is
 // deserialised, MRPT may allocate at most 64 MiB per buffer and 256 MiB in all (ScopedAllocationLimit),
 // so corrupt length fields cannot make it allocate gigabytes first.
