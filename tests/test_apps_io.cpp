@@ -157,7 +157,7 @@ TEST(AppsIo, AStoppedConversionOrRenderingWritesNothingAndLeavesNoTemporary) {
       EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << "left behind: " << e.path();
   }
   const std::string tum = test::tumFirst300();
-  if (!fs::exists(tum)) return;  // the conversion's case needs the real recording (long enough to stop)
+  VOFUSION_REQUIRE_DATA(tum);  // the conversion's case needs the real recording (long enough to stop)
   run("(" + app("tum2rawlog") + " " + tum + " " + dir + "/s.rawlog --overwrite > " + dir +
       "/log.txt 2>&1 & pid=$!; for i in $(seq 1 300); do grep -q ' [1-9][0-9]*/300 frames' " + dir +
       "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -INT $pid; wait $pid; echo rc=$? >> " + dir + "/log.txt)");

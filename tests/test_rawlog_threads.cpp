@@ -281,7 +281,11 @@ TEST(RawlogThreads, AReadingBeyondTheRangeUnitsIsWrittenAsNoReading) {
   {
     RawlogWriter w(dir + "/r.rawlog", options);
     w.write(f);
+    testing::internal::CaptureStderr();
     w.commit();
+    EXPECT_EQ(testing::internal::GetCapturedStderr(),
+              "warning: " + dir + "/r.rawlog: 1 depth readings beyond 6.55 m (65535 range units) written as no " +
+                  "reading; a larger --range-units keeps them\n");
   }
   RawlogSource src(dir + "/r.rawlog", SourceOptions{});
   Frame back;

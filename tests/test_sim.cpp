@@ -438,7 +438,9 @@ TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
   ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "4 --frames 8 --size 160x120 --fps 10 --blackout 0.7:1", &log), 0)
       << log;
   auto last = openFrameSource(dir + "4", SourceOptions());
-  while (last->next(f)) EXPECT_EQ(cv::countNonZero(f.depth) == 0, f.index == 7) << f.index;
+  int frames = 0;
+  for (; last->next(f); ++frames) EXPECT_EQ(cv::countNonZero(f.depth) == 0, f.index == 7) << f.index;
+  EXPECT_EQ(frames, 8);
 }
 
 // --pace plays the scene's path faster: frame i at pace 2 is where frame 2i is at pace 1.
