@@ -180,7 +180,7 @@ int body(int argc, char** argv) {
   if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");
 
   const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
-  installStopSignals("\nstopping; nothing is written (Ctrl-C again to kill)\n");
+  installStopSignals(kStoppingWithNothingWritten);
   const bool done = fs::path(out).extension() == ".rawlog" ? writeRawlog(seq, out, cl.flag("--overwrite")) : writeTum(seq, out);
   // A part of a sequence is no sequence: nothing is written (the writers remove their temporaries).
   return done ? 0 : stoppedWithNothingWritten("rgbd-simulate", "");

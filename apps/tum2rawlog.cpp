@@ -62,7 +62,7 @@ int body(int argc, char** argv) {
   const Trajectory ground_truth = tum->groundTruth();
   // A damaged frame costs that frame, as in vofusion (io/skipping_source.h).
   SkippingSource src(std::move(tum), so.strict, printWarning);
-  installStopSignals("\nstopping; nothing is written (Ctrl-C again to kill)\n");
+  installStopSignals(kStoppingWithNothingWritten);
   RawlogWriter out(pos[1], wo);
   if (!ground_truth.empty()) out.writeGroundTruth(ground_truth);
   Progress progress("tum2rawlog", src.size());

@@ -5,11 +5,11 @@
 #include <charconv>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <optional>
 #include <sstream>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
 
 namespace vofusion {
 
@@ -59,13 +59,10 @@ mrpt::config::CConfigFileMemory loadConfig(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) throw InputError(path, "is a folder, expected a config file");
   if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path, "config file not found");
-  std::ifstream f(path);
-  if (!f) throw InputError(path, "cannot read config file");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  checkIniLines(ss.str(), path);
+  const std::string text = readTextFile(path);
+  checkIniLines(text, path);
   try {
-    cfg.setContent(ss.str());  // MRPT's preprocessor: @define, ${NAME}, $env{NAME}, $eval{...}
+    cfg.setContent(text);  // MRPT's preprocessor: @define, ${NAME}, $env{NAME}, $eval{...}
   } catch (const std::exception& e) {
     const std::string what = e.what();
     throw InputError(path, shown(what.substr(0, what.find('\n')), 160));  // "Line 2: Unknown variable `${X}`"

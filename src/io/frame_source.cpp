@@ -15,17 +15,19 @@ bool IndexedFrameSource::next(Frame& frame) {
   return true;
 }
 
-Trajectory readGroundTruthFile(const std::string& path, const SourceOptions& opts) {
+Trajectory readGroundTruthFile(const std::string& path, const SourceOptions& opts, Trajectory instead) {
   try {
     Trajectory gt = readTumTrajectory(path);
+    if (!gt.empty()) return gt;
     // Present but empty (a download cut short, a file left to fill in): said, as a damaged one is.
-    if (gt.empty()) throw InputError(path, "holds no poses");
-    return gt;
+    if (instead.empty()) throw InputError(path, "holds no poses");
   } catch (const InputError& e) {
     if (opts.strict) throw;
-    printWarning(std::string(e.what()) + " (read without ground truth: nothing is evaluated or converted from it)");
-    return {};
+    printWarning(std::string(e.what()) + (instead.empty()
+                                              ? " (read without ground truth: nothing is evaluated or converted from it)"
+                                              : " (the recording's own ground truth is used)"));
   }
+  return instead;
 }
 
 }  // namespace vofusion

@@ -295,21 +295,6 @@ struct RawlogSource::Reader {
   }
 };
 
-namespace {
-// The ground truth file beside a rawlog that has GROUND_TRUTH entries too: the file wins when it
-// gives poses; one that holds none or cannot be read leaves the rawlog's own (said when damaged).
-Trajectory companionOrEmbedded(const std::string& file, Trajectory embedded, bool strict) {
-  try {
-    Trajectory gt = readTumTrajectory(file);
-    if (!gt.empty()) return gt;
-  } catch (const InputError& e) {
-    if (strict) throw;
-    printWarning(std::string(e.what()) + " (the rawlog's own GROUND_TRUTH entries are used)");
-  }
-  return embedded;
-}
-}  // namespace
-
 RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) : path_(path), opts_(opts) {
   if (!fs::exists(path)) throw InputError(path, "no such file");
   if (fs::is_directory(path)) throw InputError(path, "is a folder, expected a .rawlog file");
@@ -341,9 +326,8 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
   std::sort(embedded_gt.begin(), embedded_gt.end(),
             [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
   const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
-  if (!fs::exists(gt_file)) gt_ = std::move(embedded_gt);
-  else if (embedded_gt.empty()) gt_ = readGroundTruthFile(gt_file, opts);
-  else gt_ = companionOrEmbedded(gt_file, std::move(embedded_gt), opts.strict);
+  // The file beside the rawlog wins when it gives poses.
+  gt_ = fs::exists(gt_file) ? readGroundTruthFile(gt_file, opts, std::move(embedded_gt)) : std::move(embedded_gt);
   rewind();
 }
 

@@ -26,6 +26,8 @@ inline constexpr double kSameRequestSeconds = 1.0;
 // `stopping`: what the first signal says at once, when not the default "stopping after the frame in
 // hand; what was done is written (Ctrl-C again to kill)" (a string that outlives the run).
 void installStopSignals(const char* stopping = nullptr);
+// The `stopping` of apps whose part-done work is no result (a conversion, a rendering).
+inline constexpr char kStoppingWithNothingWritten[] = "\nstopping; nothing is written (Ctrl-C again to kill)\n";
 // True once a stop was asked for, by a signal or by requestStop().
 bool stopRequested();
 // The flag itself, for loops on other threads that poll it (live/live_loop.h's LiveHooks::stop).

@@ -68,7 +68,8 @@ struct SourceOptions {
 };
 
 // A recording's ground-truth file (TUM format). Damaged: strict, the InputError naming it; else one
-// warning line and no ground truth, since it only evaluates (or goes along with) the frames.
-Trajectory readGroundTruthFile(const std::string& path, const SourceOptions& opts);
+// warning line and `instead` (the recording's own ground truth, or none), since it only evaluates (or
+// goes along with) the frames. Empty: `instead`, said as damaged when that is empty too.
+Trajectory readGroundTruthFile(const std::string& path, const SourceOptions& opts, Trajectory instead = {});
 
 }  // namespace vofusion
