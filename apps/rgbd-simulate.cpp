@@ -168,13 +168,6 @@ int body(int argc, char** argv) {
   for (const char* shake_only : {"--exposure", "--colour-offset"})
     if (cl.value(shake_only) && o.trajectory != "shake")
       throw InputError(shake_only, "takes effect with --trajectory shake only");
-  const double last_frame_time = (double(o.frames) - 1) / o.fps;  // frame i is at i / fps
-  if (cl.value("--blackout") && o.fps > 0 && o.blackout_start > last_frame_time) {
-    char why[160];
-    std::snprintf(why, sizeof why, "starts at %g s, after the last frame (at %g s: %zu frames at %g fps)",
-                  o.blackout_start, last_frame_time, std::size_t(o.frames), o.fps);
-    throw InputError("--blackout", why);
-  }
   if (!cl.positional().empty()) throw InputError("usage", "unexpected argument '" + cl.positional()[0] + "' (see --help)");
   const std::string out = cl.value("--out", "");
   if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");
