@@ -153,6 +153,20 @@ TEST(Rawlog, ExternalImagesCopySourcePngsWhenTheyMatch) {
   EXPECT_NE(fileBytes(written[1]), fileBytes(grey_png));
   RawlogSource src(path, {});
   expectSameFrames(frames, src, 1e-4 + 1e-6);
+  // Frames read from a rawlog name its colour PNGs: a rawlog written from them (vofusion's result of a
+  // rawlog input) copies those bytes too (level 9 again, not our level 1).
+  src.rewind();
+  std::vector<Frame> again(2);
+  for (auto& f : again) ASSERT_TRUE(src.next(f));
+  EXPECT_EQ(again[0].colour_file, fs::absolute(written[0]).string());
+  writeRawlog(dir + "/again.rawlog", again, {});
+  std::vector<std::string> copied;
+  for (const auto& e : fs::directory_iterator(dir + "/again_Images"))
+    if (e.path().extension() == ".png") copied.push_back(e.path().string());
+  std::sort(copied.begin(), copied.end());
+  ASSERT_EQ(copied.size(), 2u);
+  EXPECT_EQ(fileBytes(copied[0]), fileBytes(rgb_png));
+  EXPECT_EQ(fileBytes(copied[1]), fileBytes(written[1]));
 }
 
 TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {

@@ -144,6 +144,28 @@ bool colourRegisteredToDepth(const mrpt::obs::CObservation3DRangeScan& obs) {
   return same_pose && (same_camera || scaled);
 }
 
+namespace {
+// The observation's colour as 8-bit BGR pixels of the frame's own. An external 8-bit RGB PNG (what
+// rawlogs hold) is decoded by io/png_decode, as a TUM folder's (libpng and zlib were 6 % of a kinfu
+// run's CPU in the reader: bench/results/2026-12-04-rawlog-input-speed.md); anything else goes through
+// MRPT's CImage, after the truncation check (libpng prints its own line for a file cut short).
+cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin) {
+  const bool external = obs.intensityImage.isExternallyStored();
+  const std::string file = external ? obs.intensityImage.getExternalStorageFileAbsolutePath() : origin;
+  if (external) {
+    if (cv::Mat plain = readPlainPng(file); plain.type() == CV_8UC3) return plain;
+    if (isTruncatedPng(file)) throw InputError(file, "cannot load intensity image (truncated PNG)");
+  }
+  cv::Mat img;
+  try {
+    img = obs.intensityImage.asCvMat<cv::Mat>(mrpt::img::DEEP_COPY);  // the frame's own pixels
+  } catch (const std::exception&) {
+  }
+  if (img.empty()) throw InputError(file, "cannot load intensity image (missing or corrupt)");
+  return asBgr8(img);
+}
+}  // namespace
+
 Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string& origin,
                            const std::optional<CameraIntrinsics>& override_camera) {
   try {
@@ -186,23 +208,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   }
 
   if (obs.hasIntensityImage) {
-    if (obs.intensityImage.isExternallyStored() && isTruncatedPng(obs.intensityImage.getExternalStorageFileAbsolutePath()))
-      throw InputError(obs.intensityImage.getExternalStorageFileAbsolutePath(), "cannot load intensity image (truncated PNG)");
-    cv::Mat img;
-    try {
-      img = obs.intensityImage.asCvMat<cv::Mat>(mrpt::img::DEEP_COPY);  // the frame's own pixels
-    } catch (const std::exception&) {
-      throw InputError(obs.intensityImage.isExternallyStored()
-                           ? obs.intensityImage.getExternalStorageFileAbsolutePath()
-                           : origin,
-                       "cannot load intensity image (missing or corrupt)");
-    }
-    if (img.empty())
-      throw InputError(obs.intensityImage.isExternallyStored()
-                           ? obs.intensityImage.getExternalStorageFileAbsolutePath()
-                           : origin,
-                       "cannot load intensity image (missing or corrupt)");
-    f.rgb = asBgr8(img);
+    f.rgb = colourOf(obs, origin);
     // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
     // depth camera. A registered one at another resolution (e.g. 1280x1024 over 640x480) is resized.
     if (!override_camera && !colourRegisteredToDepth(obs)) {
@@ -215,6 +221,10 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
       f.rgb = colourInDepthCamera(f.rgb, f.depth, f.camera, colour_cam, colourFromDepth(obs));
     } else if (f.rgb.cols != cols || f.rgb.rows != rows) {
       cv::resize(f.rgb, f.rgb, cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
+    } else if (obs.intensityImage.isExternallyStored()) {
+      // The pixels as the file holds them: a rawlog written from the frame copies its bytes (encoding
+      // them again was a quarter of a kinfu run's CPU on a rawlog input).
+      f.colour_file = obs.intensityImage.getExternalStorageFileAbsolutePath();
     }
     obs.intensityImage.unload();
   } else {
