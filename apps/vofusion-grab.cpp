@@ -61,7 +61,7 @@ const char* kUsage =
     "                     [--mode joint|paper-handoff|kinfu|odometry] [--no-record] [--simulate-work-ms MS]\n"
     "                     [--checkpoint-every S] [--verbose] [--dump-config]\n"
     "  Records the sensor of --config (default share/grab-openni2.ini) to DIR/grab.rawlog until\n"
-    "  Ctrl-C, SIGTERM or --max-frames (0: until Ctrl-C, as the config's max_frames = 0; a second\n"
+    "  Ctrl-C, SIGTERM or --max-frames (0: no limit, as the config's max_frames = 0; a second\n"
     "  Ctrl-C or SIGTERM kills at once). --live also\n"
     "  reconstructs online (window unless --no-gui) and writes the same outputs as vofusion into DIR.\n"
     "  --replay plays a recording at its recorded rate instead of a sensor. Frames the processing\n"
@@ -109,7 +109,7 @@ Args parseArgs(int argc, char** argv) {
   a.record = !cl.flag("--no-record");
   a.verbose = cl.flag("--verbose");
   a.dump = cl.flag("--dump-config");
-  // 0 as in the config's max_frames: until Ctrl-C (lifts a limit the config sets).
+  // 0 as in the config's max_frames: no limit (lifts one the config sets).
   if (cl.value("--max-frames")) a.max_frames = cl.count("--max-frames", 0);
   if (cl.value("--queue")) a.queue = cl.count("--queue", 0);
   if (cl.value("--speed")) a.speed = cl.number("--speed", 1.0);

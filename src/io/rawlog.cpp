@@ -149,11 +149,16 @@ namespace {
 // rawlogs hold) is decoded by io/png_decode, as a TUM folder's (libpng and zlib were 6 % of a kinfu
 // run's CPU in the reader: bench/results/2026-12-04-rawlog-input-speed.md); anything else goes through
 // MRPT's CImage, after the truncation check (libpng prints its own line for a file cut short).
-cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin) {
+// `plain`: whether the pixels are exactly the plain PNG's (its bytes can stand for them).
+cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, bool& plain) {
   const bool external = obs.intensityImage.isExternallyStored();
   const std::string file = external ? obs.intensityImage.getExternalStorageFileAbsolutePath() : origin;
+  plain = false;
   if (external) {
-    if (cv::Mat plain = readPlainPng(file); plain.type() == CV_8UC3) return plain;
+    if (cv::Mat decoded = readPlainPng(file); decoded.type() == CV_8UC3) {
+      plain = true;
+      return decoded;
+    }
     if (isTruncatedPng(file)) throw InputError(file, "cannot load intensity image (truncated PNG)");
   }
   cv::Mat img;
@@ -208,7 +213,8 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   }
 
   if (obs.hasIntensityImage) {
-    f.rgb = colourOf(obs, origin);
+    bool plain = false;
+    f.rgb = colourOf(obs, origin, plain);
     // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
     // depth camera. A registered one at another resolution (e.g. 1280x1024 over 640x480) is resized.
     if (!override_camera && !colourRegisteredToDepth(obs)) {
@@ -221,7 +227,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
       f.rgb = colourInDepthCamera(f.rgb, f.depth, f.camera, colour_cam, colourFromDepth(obs));
     } else if (f.rgb.cols != cols || f.rgb.rows != rows) {
       cv::resize(f.rgb, f.rgb, cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
-    } else if (obs.intensityImage.isExternallyStored()) {
+    } else if (plain) {
       // The pixels as the file holds them: a rawlog written from the frame copies its bytes (encoding
       // them again was a quarter of a kinfu run's CPU on a rawlog input).
       f.colour_file = obs.intensityImage.getExternalStorageFileAbsolutePath();

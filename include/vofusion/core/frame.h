@@ -25,7 +25,7 @@ struct Frame {
   double colour_offset = 0.0; // seconds; colour capture time minus `timestamp` (TUM fr1: within +-20 ms)
   cv::Mat rgb;                // CV_8UC3, BGR order (OpenCV convention), registered to depth
   std::string colour_file;    // the image file rgb was decoded from, unchanged (empty if none): writers
-                              // may copy its bytes instead of encoding rgb again
+                              // may copy its bytes instead of encoding rgb again. Clear it when rgb changes.
   cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
   CameraIntrinsics camera;
   std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
