@@ -2,7 +2,6 @@
 
 #include <libdeflate.h>
 
-#include <algorithm>
 #include <memory>
 #include <new>
 #include <stdexcept>
@@ -68,10 +67,9 @@ std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size) {
 
 bool gzipUncompress(const std::uint8_t* data, std::size_t data_size, std::vector<std::uint8_t>& out, std::size_t max_size) {
   if (data_size < 18) return false;  // a gzip header and trailer
-  // The trailer's last four bytes: the length modulo 2^32 (what it says is checked by the decompression).
-  const std::size_t size = std::size_t(data[data_size - 4]) | std::size_t(data[data_size - 3]) << 8 |
-                           std::size_t(data[data_size - 2]) << 16 | std::size_t(data[data_size - 1]) << 24;
-  if (size > std::min<std::size_t>(max_size, 0xFFFFFFFFu)) return false;
+  // What the trailer says is checked by the decompression.
+  const std::size_t size = gzipStoredLength(data + data_size);
+  if (size > max_size) return false;
   out.resize(size);
   std::size_t in = 0, got = 0;
   return libdeflate_gzip_decompress_ex(&decompressor(), data, data_size, out.data(), size, &in, &got) ==

@@ -31,9 +31,7 @@ bool gzipTrailerSays(const std::string& path, std::uint64_t uncompressed_bytes) 
   const long size = std::ftell(f);
   std::fclose(f);
   if (!read || size < 18 || head[0] != 0x1f || head[1] != 0x8b) return false;  // 18: header and trailer alone
-  const std::uint32_t isize = std::uint32_t(tail[0]) | std::uint32_t(tail[1]) << 8 | std::uint32_t(tail[2]) << 16 |
-                              std::uint32_t(tail[3]) << 24;
-  return isize == std::uint32_t(uncompressed_bytes);
+  return gzipStoredLength(tail + 4) == std::uint32_t(uncompressed_bytes);
 }
 
 GzipMembersFile::GzipMembersFile(const std::string& path)

@@ -66,7 +66,7 @@ void loadExternalRangeImage(CObservation3DRangeScan& obs) {
   const std::uintmax_t stored = fs::file_size(path, ec);
   if (ec) throw InputError(path, "cannot load external range image (missing or unreadable)");
   if (stored > kLargest) throw InputError(path, "corrupt range image file (larger than any range image)");
-  std::vector<std::uint8_t> packed, raw;
+  thread_local std::vector<std::uint8_t> packed, raw;  // a frame's worth, kept for the reader's next frames
   if (!readWholeFile(path, packed)) throw InputError(path, "cannot load external range image (missing or unreadable)");
   if (packed.empty()) throw InputError(path, "corrupt range image file (empty)");
   if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return;  // not gzip

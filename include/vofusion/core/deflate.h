@@ -19,6 +19,12 @@ std::size_t zlibCompressInto(const void* data, std::size_t size, std::uint8_t* o
 bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size);
 // A gzip file's bytes (one member) of `size` bytes at `data`, at level 1.
 std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size);
+// What a gzip member's trailer says its data's length is, modulo 2^32 (RFC 1952's ISIZE): the
+// little-endian 32 bits of its last four bytes, at `trailer_end - 4`.
+inline std::uint32_t gzipStoredLength(const std::uint8_t* trailer_end) {
+  return std::uint32_t(trailer_end[-4]) | std::uint32_t(trailer_end[-3]) << 8 | std::uint32_t(trailer_end[-2]) << 16 |
+         std::uint32_t(trailer_end[-1]) << 24;
+}
 // A gzip file of one member, checked whole (its CRC-32 and length), into `out`; false when it is cut
 // short, damaged, not gzip, followed by more bytes, or longer than max_size (at most 4 GiB - 1: the
 // length field holds the size modulo 2^32).
