@@ -17,6 +17,8 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/core/stop_signals.h"
+#include "vofusion/io/external_files.h"
+#include "vofusion/io/png_encode.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
@@ -93,8 +95,9 @@ bool writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
     std::snprintf(name, sizeof name, "%.6f.png", f.timestamp);
     cv::Mat d16;
     f.depth.convertTo(d16, CV_16U, 5000.0);  // TUM: 5000 units per metre (rounded)
-    if (!cv::imwrite((fs::path(out.tmp()) / "rgb" / name).string(), f.rgb) ||
-        !cv::imwrite((fs::path(out.tmp()) / "depth" / name).string(), d16))
+    writeExternalFile((fs::path(out.tmp()) / "rgb" / name).string(), encodeRgb8Png(f.rgb),
+                      (fs::path(dir) / "rgb" / name).string(), "image");
+    if (!cv::imwrite((fs::path(out.tmp()) / "depth" / name).string(), d16))
       throw InputError(dir, "cannot write images (disk full?)");
     // The colour image under its own capture time (the shake trajectory's colour/depth offset).
     char rgb_stamp[32];

@@ -1,6 +1,7 @@
 // decodePlainPng gives cv::imdecode's pixels for 16-bit grey and 8-bit RGB PNGs, with each of PNG's
 // five row filters (PNGs made here row by row) and on the shared TUM sequence's real files; for
-// anything else it gives an empty Mat, so that the caller's cv::imread decides.
+// anything else it gives an empty Mat, so that the caller's cv::imread decides. encodeRgb8Png's files
+// decode, by OpenCV and by decodePlainPng, to exactly the pixels encoded.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -11,6 +12,7 @@
 
 #include "support.h"
 #include "vofusion/io/png_decode.h"
+#include "vofusion/io/png_encode.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;
@@ -170,4 +172,45 @@ TEST(PngDecode, TumFilesAsOpenCvDecodesThem) {
       expectSameAs(readPlainPng(path), cv::imread(path, depth ? cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR : cv::IMREAD_COLOR));
     }
   EXPECT_GT(n, 500);
+}
+
+TEST(PngEncode, DecodesToExactlyThePixelsEncoded) {
+  cv::Mat smooth(48, 64, CV_8UC3);
+  for (int y = 0; y < smooth.rows; ++y)
+    for (int x = 0; x < smooth.cols; ++x) smooth.at<cv::Vec3b>(y, x) = cv::Vec3b(uchar(4 * x), uchar(5 * y), uchar(x + y));
+  std::vector<cv::Mat> images = {smooth, colourImage(1, 1), colourImage(7, 1), colourImage(1, 7), colourImage(33, 17),
+                                 colourImage(640, 480)};
+  images.push_back(colourImage(80, 60)(cv::Rect(5, 3, 31, 20)));  // a view into a wider image: its own stride
+  for (const cv::Mat& image : images) {
+    SCOPED_TRACE(std::to_string(image.cols) + "x" + std::to_string(image.rows));
+    const std::vector<std::uint8_t> png = encodeRgb8Png(image);
+    EXPECT_TRUE(isRgb8Png(png, image.cols, image.rows));
+    expectSameAs(cv::imdecode(png, cv::IMREAD_UNCHANGED), image);
+    expectSameAs(decode(png), image);
+  }
+}
+
+TEST(PngEncode, RefusesAnythingButEightBitBgr) {
+  EXPECT_THROW(encodeRgb8Png(cv::Mat()), std::invalid_argument);
+  EXPECT_THROW(encodeRgb8Png(cv::Mat(4, 4, CV_8UC1)), std::invalid_argument);
+  EXPECT_THROW(encodeRgb8Png(cv::Mat(4, 4, CV_16UC3)), std::invalid_argument);
+  EXPECT_THROW(encodeRgb8Png(cv::Mat(4, 4, CV_8UC4)), std::invalid_argument);
+}
+
+// The files are no larger than OpenCV's at its fastest level on real colour (TUM's, as a Kinect records it).
+TEST(PngEncode, TumColourAsSmallAsOpenCvsFastestFiles) {
+  const std::string seq = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(seq);
+  std::size_t ours = 0, opencv = 0;
+  int n = 0;
+  for (const auto& e : fs::directory_iterator(fs::path(seq) / "rgb")) {
+    if (n++ % 50 != 0) continue;  // 6 of the 300 files
+    const cv::Mat image = cv::imread(e.path().string(), cv::IMREAD_COLOR);
+    const std::vector<std::uint8_t> png = encodeRgb8Png(image);
+    expectSameAs(decode(png), image);
+    std::vector<std::uint8_t> level1;
+    ASSERT_TRUE(cv::imencode(".png", image, level1, {cv::IMWRITE_PNG_COMPRESSION, 1}));
+    ours += png.size(), opencv += level1.size();
+  }
+  EXPECT_LT(double(ours), 1.02 * double(opencv)) << "ours " << ours << " bytes, OpenCV's " << opencv;
 }

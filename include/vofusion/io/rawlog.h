@@ -87,7 +87,6 @@ struct RawlogWriterOptions {
   double range_units = 2e-4;             // m per range unit: 2e-4 keeps TUM depth exact (5000/m), max 13.1 m
   std::string sensor_label = "KINECT";
   bool ground_truth_observations = true; // CObservationRobotPose "GROUND_TRUTH" for frames with groundTruth
-  int png_compression = 1;               // 0..9, external colour PNGs (1 = fast)
   // A recording (vofusion-grab) rather than a result: written under its final names, each frame's
   // images and then its record on disk before the next frame, so that a crash, a kill or a full disk
   // leaves a rawlog that reads to its last frame (plain, not gzip; synced to the disk once a second).
