@@ -169,6 +169,56 @@ TEST(Rawlog, ExternalImagesCopySourcePngsWhenTheyMatch) {
   EXPECT_EQ(fileBytes(copied[1]), fileBytes(written[1]));
 }
 
+// Frames read from a rawlog name their range-image files: a rawlog written from them at the same
+// units copies those bytes instead of compressing the depth again; at other units, or when the file no
+// longer holds the frame's readings, the depth is written anew.
+TEST(Rawlog, RangeImageFilesOfARawlogInputAreCopiedAtTheirUnits) {
+  const std::string dir = test::tempDir("rawlog_copy_bin");
+  writeRawlog(dir + "/src.rawlog", simFrames(3), {});
+  std::vector<std::string> bins;
+  for (const auto& e : fs::directory_iterator(dir + "/src_Images"))
+    if (e.path().extension() == ".bin") bins.push_back(e.path().string());
+  std::sort(bins.begin(), bins.end());
+  ASSERT_EQ(bins.size(), 3u);
+  for (const std::string& bin : bins) {  // gzip's OS byte (no checksum covers it): these bytes are no writer's own
+    std::string b = fileBytes(bin);
+    b[9] = 7;
+    std::ofstream(bin, std::ios::binary) << b;
+  }
+  RawlogSource src(dir + "/src.rawlog", {});
+  std::vector<Frame> frames(3);
+  for (auto& f : frames) ASSERT_TRUE(src.next(f));
+  EXPECT_EQ(frames[0].depth_file, fs::absolute(bins[0]).string());
+  EXPECT_EQ(float(frames[0].depth_file_units), float(RawlogWriterOptions{}.range_units));
+  cv::resize(frames[2].depth, frames[2].depth, cv::Size(), 0.5, 0.5, cv::INTER_NEAREST);  // its file no longer holds it
+  frames[2].camera = frames[2].camera.scaled(0.5);
+  frames[2].rgb = cv::Mat(frames[2].depth.size(), CV_8UC3, cv::Scalar(9, 9, 9));
+  frames[2].colour_file.clear();
+  auto binsOf = [&](const std::string& name) {
+    std::vector<std::string> out, paths;
+    for (const auto& e : fs::directory_iterator(dir + "/" + name + "_Images"))
+      if (e.path().extension() == ".bin") paths.push_back(e.path().string());
+    std::sort(paths.begin(), paths.end());
+    for (const auto& p : paths) out.push_back(fileBytes(p));
+    return out;
+  };
+  writeRawlog(dir + "/same.rawlog", frames, {});
+  const auto same = binsOf("same");
+  ASSERT_EQ(same.size(), 3u);
+  EXPECT_EQ(same[0], fileBytes(bins[0]));
+  EXPECT_EQ(same[1], fileBytes(bins[1]));
+  EXPECT_NE(same[2], fileBytes(bins[2]));
+  RawlogWriterOptions mm;
+  mm.range_units = 1e-3;
+  writeRawlog(dir + "/mm.rawlog", frames, mm);
+  const auto other = binsOf("mm");
+  ASSERT_EQ(other.size(), 3u);
+  EXPECT_NE(other[0], fileBytes(bins[0]));
+  RawlogSource same_src(dir + "/same.rawlog", {}), mm_src(dir + "/mm.rawlog", {});
+  expectSameFrames(frames, same_src, 1e-4 + 1e-6);
+  expectSameFrames(frames, mm_src, 5e-4 + 1e-6);
+}
+
 TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {
   const auto frames = simFrames(3);
   const std::string dir = test::tempDir("rawlog_sf");

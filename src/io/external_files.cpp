@@ -52,15 +52,15 @@ void resolveExternalFiles(CObservation3DRangeScan& obs, const std::string& image
     obs.*ExternalNames::points_file = resolved(obs.*ExternalNames::points_file, dir);
 }
 
-void loadExternalRangeImage(CObservation3DRangeScan& obs) {
-  if (!(obs.*ExternalNames::range_stored)) return;
+std::string loadExternalRangeImage(CObservation3DRangeScan& obs) {
+  if (!(obs.*ExternalNames::range_stored)) return {};
   const std::string path = obs.*ExternalNames::range_file;
   // Only MRPT's gzip binary file is read here. A .txt (EXTERNALS_AS_TEXT; MRPT reads any other name as
   // binary), a plain binary file, or a whole gzip of another layout (rawlogs older than MRPT's
   // serialisation v9 hold floats) is left to MRPT's load().
   std::string extension = fs::path(path).extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (extension == ".txt") return;
+  if (extension == ".txt") return {};
   constexpr std::size_t kLargest = 8 + std::size_t(8192) * 8192 * 2;  // rows, cols and 8192 x 8192 readings
   std::error_code ec;
   const std::uintmax_t stored = fs::file_size(path, ec);
@@ -69,18 +69,19 @@ void loadExternalRangeImage(CObservation3DRangeScan& obs) {
   thread_local std::vector<std::uint8_t> packed, raw;  // a frame's worth, kept for the reader's next frames
   if (!readWholeFile(path, packed)) throw InputError(path, "cannot load external range image (missing or unreadable)");
   if (packed.empty()) throw InputError(path, "corrupt range image file (empty)");
-  if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return;  // not gzip
+  if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return {};  // not gzip
   if (!gzipUncompress(packed.data(), packed.size(), raw, kLargest))
     throw InputError(path, "corrupt range image file (cut short or damaged: its gzip check fails)");
   std::uint32_t dims[2] = {0, 0};
   if (raw.size() >= sizeof dims) std::memcpy(dims, raw.data(), sizeof dims);
-  if (dims[0] == 0 || dims[1] == 0 || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2) return;
+  if (dims[0] == 0 || dims[1] == 0 || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2) return {};
   auto& ri = obs.rangeImage;
   ri.setSize(dims[0], dims[1]);
   static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are read as they are in memory");
   std::memcpy(ri.data(), raw.data() + sizeof dims, raw.size() - sizeof dims);
   obs.*ExternalNames::range_stored = false;
   (obs.*ExternalNames::range_file).clear();
+  return path;
 }
 
 void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& file_name, const std::string& dir) {

@@ -27,6 +27,9 @@ struct Frame {
   std::string colour_file;    // the image file rgb was decoded from, unchanged (empty if none): writers
                               // may copy its bytes instead of encoding rgb again. Clear it when rgb changes.
   cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
+  std::string depth_file;     // the range-image file (MRPT's gzip .bin, read checked) depth came from, unchanged,
+  double depth_file_units = 0;  // in these metres per unit (empty if none): a rawlog writer at the same units
+                                // may copy its bytes instead of compressing depth again. Clear it when depth changes.
   CameraIntrinsics camera;
   std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
   std::optional<Eigen::Vector3d> up;  // unit "up" (against gravity) in the camera frame, from the

@@ -27,8 +27,8 @@ void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::st
 // such a file unchecked: one cut short or with flipped bits gave a frame of wrong depths, used as it
 // came. Throws InputError(file, ...) when it is missing, empty, cut short or damaged (its gzip CRC-32).
 // A file of another kind (a .txt, a plain binary one, a gzip of older rawlogs' float layout) is left
-// for MRPT's load().
-void loadExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs);
+// for MRPT's load(). Returns the file read here (empty when there was none, or it was left to MRPT).
+std::string loadExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs);
 
 // Writes obs.rangeImage to dir/file_name in MRPT's external format (gzip: rows, cols as uint32, then
 // the uint16 ranges, little-endian) and marks it externally stored under the relative file_name,
