@@ -10,7 +10,10 @@ in alternating order, and each figure is the median of its rounds (this machine'
     wall time of the process, to the last output written), the start-up before the first frame, the
     time from the last frame to the last output against the frame loop's, ATE RMSE, peak RSS;
   - `vofusion-grab --replay <seq> --out o --live --no-gui` (recording included, at the recorded rate):
-    frames processed of those played.
+    frames processed of those played;
+  - the same replay of the sequence as a rawlog with its images inside (`tum2rawlog --embed-images`, made
+    once by this build): the recording then encodes each colour PNG and compresses each depth as it
+    does for a real sensor, where a TUM folder's replay copies its PNGs.
 The earlier build (default 618a78c, the build issue 31 was filed on) is checked out with `git worktree`
 and built (apps only) under <build>/bench-baseline/, once. Writes bench/results/realtime.md.
 """
@@ -98,6 +101,16 @@ def live(bin_dir, seq, out):
     return {"played": int(kv["frames_played"]), "processed": int(kv["frames_processed"])}
 
 
+def embedded_rawlog(bin_dir, seq, work):
+    """The sequence as a rawlog with its images inside, made once (this build's tum2rawlog)."""
+    path = os.path.join(work, os.path.basename(os.path.normpath(seq)) + "_embedded.rawlog")
+    if not os.path.exists(path):
+        rc, _, _ = run_timed([os.path.join(bin_dir, "tum2rawlog"), seq, path, "--embed-images"], path + ".log")
+        if rc != 0:
+            sys.exit("tum2rawlog failed, see " + path + ".log")
+    return path
+
+
 def median(values):
     """The median (the upper one of an even count) of the values that are not None, or None."""
     values = [v for v in values if v is not None]
@@ -145,9 +158,12 @@ def main():
              "start-up: from the process's start to the first frame (summary.json `seconds_before_frames`; for a "
              "build without it, the wall time of `vofusion --help`); tail: from the last frame to the last output "
              "(wall time minus start-up and frame loop). Live: `vofusion-grab --replay <seq> --live --no-gui`, "
-             "recording included, frames processed of those played." % rounds, "", "Machine: " + machine.describe() + ".", ""]
+             "recording included, frames processed of those played; as a sensor records it: the same replay of the "
+             "sequence as a rawlog with its images inside (`tum2rawlog --embed-images`), so the recording encodes "
+             "each colour PNG and compresses each depth, as for a real sensor (a TUM folder's PNGs are copied)." % rounds, "", "Machine: " + machine.describe() + ".", ""]
     for seq in seqs:
         name = os.path.basename(os.path.normpath(seq))
+        as_sensor = embedded_rawlog(builds[1][1], seq, work)
         runs = {label: [] for label, _ in builds}
         for k in range(rounds):
             for label, bins in (builds if k % 2 == 0 else builds[::-1]):
@@ -156,6 +172,9 @@ def main():
                 r = offline(bins, seq, os.path.join(work, "%s_%s" % (name, tag)))
                 log("%s: %s live, round %d of %d" % (name, label, k + 1, rounds))
                 r.update(live(bins, seq, os.path.join(work, "%s_%s_live" % (name, tag))))
+                log("%s: %s live as a sensor records, round %d of %d" % (name, label, k + 1, rounds))
+                sensor = live(bins, as_sensor, os.path.join(work, "%s_%s_live_sensor" % (name, tag)))
+                r.update({"sensor_played": sensor["played"], "sensor_processed": sensor["processed"]})
                 r["tail_share"] = r["tail_s"] / r["loop_s"]
                 runs[label].append(r)
         res = {label: medians(rs) for label, rs in runs.items()}
@@ -176,6 +195,9 @@ def main():
                   "| live: processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
                       b["processed"], b["played"], 100.0 * b["processed"] / b["played"],
                       t["processed"], t["played"], 100.0 * t["processed"] / t["played"]),
+                  "| live as a sensor records it (colour PNG encoded, depth compressed): processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
+                      b["sensor_processed"], b["sensor_played"], 100.0 * b["sensor_processed"] / b["sensor_played"],
+                      t["sensor_processed"], t["sensor_played"], 100.0 * t["sensor_processed"] / t["sensor_played"]),
                   "| ATE RMSE, m | %.4f | %.4f | %s | within +2 %% |" % (b["ate"], t["ate"], ratio("ate")),
                   "| peak RSS, MiB | %.0f | %.0f | | <= 700 |" % (b["rss"], t["rss"]), ""]
     os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
