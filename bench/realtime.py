@@ -12,7 +12,7 @@ in alternating order, and each figure is the median of its rounds (this machine'
   - `vofusion-grab --replay <seq> --out o --live --no-gui` (recording included, at the recorded rate):
     frames processed of those played;
   - the same replay of the sequence as a rawlog with its images inside (`tum2rawlog --embed-images`, made
-    once by this build): the recording then encodes each colour PNG and compresses each depth as it
+    by this build): the recording then encodes each colour PNG and compresses each depth as it
     does for a real sensor, where a TUM folder's replay copies its PNGs.
 The earlier build (default 618a78c, the build issue 31 was filed on) is checked out with `git worktree`
 and built (apps only) under <build>/bench-baseline/, once. Writes bench/results/realtime.md.
@@ -101,13 +101,11 @@ def live(bin_dir, seq, out):
     return {"played": int(kv["frames_played"]), "processed": int(kv["frames_processed"])}
 
 
-def embedded_rawlog(bin_dir, seq, work):
-    """The sequence as a rawlog with its images inside, made once (this build's tum2rawlog)."""
-    path = os.path.join(work, os.path.basename(os.path.normpath(seq)) + "_embedded.rawlog")
-    if not os.path.exists(path):
-        rc, _, _ = run_timed([os.path.join(bin_dir, "tum2rawlog"), seq, path, "--embed-images"], path + ".log")
-        if rc != 0:
-            sys.exit("tum2rawlog failed, see " + path + ".log")
+def embedded_rawlog(bin_dir, seq, path):
+    """The sequence as a rawlog with its images inside, made anew by this build's tum2rawlog."""
+    rc, _, _ = run_timed([os.path.join(bin_dir, "tum2rawlog"), seq, path, "--embed-images", "--overwrite"], path + ".log")
+    if rc != 0:
+        sys.exit("tum2rawlog failed, see " + path + ".log")
     return path
 
 
@@ -163,7 +161,7 @@ def main():
              "each colour PNG and compresses each depth, as for a real sensor (a TUM folder's PNGs are copied)." % rounds, "", "Machine: " + machine.describe() + ".", ""]
     for seq in seqs:
         name = os.path.basename(os.path.normpath(seq))
-        as_sensor = embedded_rawlog(builds[1][1], seq, work)
+        as_sensor = embedded_rawlog(builds[1][1], seq, os.path.join(work, name + "_embedded.rawlog"))
         runs = {label: [] for label, _ in builds}
         for k in range(rounds):
             for label, bins in (builds if k % 2 == 0 else builds[::-1]):

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <zlib.h>
 
 #include "support.h"
@@ -195,6 +196,8 @@ TEST(PngEncode, RefusesAnythingButEightBitBgr) {
   EXPECT_THROW(encodeRgb8Png(cv::Mat(4, 4, CV_8UC1)), std::invalid_argument);
   EXPECT_THROW(encodeRgb8Png(cv::Mat(4, 4, CV_16UC3)), std::invalid_argument);
   EXPECT_THROW(encodeRgb8Png(cv::Mat(4, 4, CV_8UC4)), std::invalid_argument);
+  const int sizes[3] = {2, 2, 2};
+  EXPECT_THROW(encodeRgb8Png(cv::Mat(3, sizes, CV_8UC3)), std::invalid_argument);
 }
 
 // The files are no larger than OpenCV's at its fastest level on real colour (TUM's, as a Kinect records it).
@@ -213,4 +216,20 @@ TEST(PngEncode, TumColourAsSmallAsOpenCvsFastestFiles) {
     ours += png.size(), opencv += level1.size();
   }
   EXPECT_LT(double(ours), 1.02 * double(opencv)) << "ours " << ours << " bytes, OpenCV's " << opencv;
+}
+
+TEST(PngDecode, AnyColourImageBecomesEightBitBgr) {
+  const cv::Mat bgr = colourImage(6, 4);
+  cv::Mat grey, grey_alpha, bgra, wide;
+  cv::cvtColor(bgr, grey, cv::COLOR_BGR2GRAY);
+  cv::merge(std::vector<cv::Mat>{grey, cv::Mat(grey.size(), CV_8UC1, cv::Scalar(255))}, grey_alpha);
+  cv::cvtColor(bgr, bgra, cv::COLOR_BGR2BGRA);
+  bgr.convertTo(wide, CV_16U, 256.0);
+  cv::Mat grey_bgr;
+  cv::cvtColor(grey, grey_bgr, cv::COLOR_GRAY2BGR);
+  expectSameAs(asBgr8(bgr), bgr);
+  expectSameAs(asBgr8(grey), grey_bgr);
+  expectSameAs(asBgr8(grey_alpha), grey_bgr);
+  expectSameAs(asBgr8(bgra), bgr);
+  expectSameAs(asBgr8(wide), bgr);
 }

@@ -170,8 +170,8 @@ TEST(Rawlog, ExternalImagesCopySourcePngsWhenTheyMatch) {
 }
 
 // Frames read from a rawlog name their range-image files: a rawlog written from them at the same
-// units copies those bytes instead of compressing the depth again; at other units, or when the file no
-// longer holds the frame's readings, the depth is written anew.
+// units copies those bytes instead of compressing the depth again; at other units, or when the file is
+// no longer the one read, the depth is written anew.
 TEST(Rawlog, RangeImageFilesOfARawlogInputAreCopiedAtTheirUnits) {
   const std::string dir = test::tempDir("rawlog_copy_bin");
   writeRawlog(dir + "/src.rawlog", simFrames(3), {});
@@ -188,9 +188,16 @@ TEST(Rawlog, RangeImageFilesOfARawlogInputAreCopiedAtTheirUnits) {
   RawlogSource src(dir + "/src.rawlog", {});
   std::vector<Frame> frames(3);
   for (auto& f : frames) ASSERT_TRUE(src.next(f));
-  EXPECT_EQ(frames[0].depth_file, fs::absolute(bins[0]).string());
-  EXPECT_EQ(float(frames[0].depth_file_units), float(RawlogWriterOptions{}.range_units));
-  cv::resize(frames[2].depth, frames[2].depth, cv::Size(), 0.5, 0.5, cv::INTER_NEAREST);  // its file no longer holds it
+  ASSERT_TRUE(frames[0].depth_file);
+  EXPECT_EQ(frames[0].depth_file->path, fs::absolute(bins[0]).string());
+  EXPECT_EQ(float(frames[0].depth_file->units), float(RawlogWriterOptions{}.range_units));
+  {  // frame 1's file changed since it was read: its CRC-32 (the readings in memory are what counts)
+    std::string b = fileBytes(bins[1]);
+    b[b.size() - 8] ^= 1;
+    std::ofstream(bins[1], std::ios::binary) << b;
+  }
+  cv::resize(frames[2].depth, frames[2].depth, cv::Size(), 0.5, 0.5, cv::INTER_NEAREST);  // changed: no file holds it
+  frames[2].depth_file.reset();
   frames[2].camera = frames[2].camera.scaled(0.5);
   frames[2].rgb = cv::Mat(frames[2].depth.size(), CV_8UC3, cv::Scalar(9, 9, 9));
   frames[2].colour_file.clear();
@@ -206,7 +213,7 @@ TEST(Rawlog, RangeImageFilesOfARawlogInputAreCopiedAtTheirUnits) {
   const auto same = binsOf("same");
   ASSERT_EQ(same.size(), 3u);
   EXPECT_EQ(same[0], fileBytes(bins[0]));
-  EXPECT_EQ(same[1], fileBytes(bins[1]));
+  EXPECT_NE(same[1], fileBytes(bins[1]));
   EXPECT_NE(same[2], fileBytes(bins[2]));
   RawlogWriterOptions mm;
   mm.range_units = 1e-3;

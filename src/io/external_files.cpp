@@ -41,6 +41,14 @@ std::string resolved(const std::string& name, const fs::path& dir) {
 void resolveImage(mrpt::img::CImage& img, const fs::path& dir) {
   if (img.isExternallyStored()) img.setExternalStorage(resolved(img.getExternalStorageFile(), dir));
 }
+
+// A gzip file's last 8 bytes (its content's CRC-32 and length) as one number: what tells one range
+// image's file from another of the same size without inflating it.
+std::uint64_t gzipTrailer(const std::vector<std::uint8_t>& bytes) {
+  std::uint64_t t = 0;
+  if (bytes.size() >= 8) std::memcpy(&t, bytes.data() + bytes.size() - 8, 8);
+  return t;
+}
 }  // namespace
 
 void resolveExternalFiles(CObservation3DRangeScan& obs, const std::string& images_dir) {
@@ -52,15 +60,15 @@ void resolveExternalFiles(CObservation3DRangeScan& obs, const std::string& image
     obs.*ExternalNames::points_file = resolved(obs.*ExternalNames::points_file, dir);
 }
 
-std::string loadExternalRangeImage(CObservation3DRangeScan& obs) {
-  if (!(obs.*ExternalNames::range_stored)) return {};
+std::optional<DepthFile> loadExternalRangeImage(CObservation3DRangeScan& obs) {
+  if (!(obs.*ExternalNames::range_stored)) return std::nullopt;
   const std::string path = obs.*ExternalNames::range_file;
   // Only MRPT's gzip binary file is read here. A .txt (EXTERNALS_AS_TEXT; MRPT reads any other name as
   // binary), a plain binary file, or a whole gzip of another layout (rawlogs older than MRPT's
   // serialisation v9 hold floats) is left to MRPT's load().
   std::string extension = fs::path(path).extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (extension == ".txt") return {};
+  if (extension == ".txt") return std::nullopt;
   constexpr std::size_t kLargest = 8 + std::size_t(8192) * 8192 * 2;  // rows, cols and 8192 x 8192 readings
   std::error_code ec;
   const std::uintmax_t stored = fs::file_size(path, ec);
@@ -69,19 +77,27 @@ std::string loadExternalRangeImage(CObservation3DRangeScan& obs) {
   thread_local std::vector<std::uint8_t> packed, raw;  // a frame's worth, kept for the reader's next frames
   if (!readWholeFile(path, packed)) throw InputError(path, "cannot load external range image (missing or unreadable)");
   if (packed.empty()) throw InputError(path, "corrupt range image file (empty)");
-  if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return {};  // not gzip
+  if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return std::nullopt;  // not gzip
   if (!gzipUncompress(packed.data(), packed.size(), raw, kLargest))
     throw InputError(path, "corrupt range image file (cut short or damaged: its gzip check fails)");
   std::uint32_t dims[2] = {0, 0};
   if (raw.size() >= sizeof dims) std::memcpy(dims, raw.data(), sizeof dims);
-  if (dims[0] == 0 || dims[1] == 0 || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2) return {};
+  if (dims[0] == 0 || dims[1] == 0 || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2) return std::nullopt;
   auto& ri = obs.rangeImage;
   ri.setSize(dims[0], dims[1]);
   static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are read as they are in memory");
   std::memcpy(ri.data(), raw.data() + sizeof dims, raw.size() - sizeof dims);
   obs.*ExternalNames::range_stored = false;
   (obs.*ExternalNames::range_file).clear();
-  return path;
+  return DepthFile{path, double(obs.rangeUnits), packed.size(), gzipTrailer(packed)};
+}
+
+bool copyRangeImageFile(const DepthFile& file, double units, const std::string& path, const std::string& shown) {
+  if (float(file.units) != float(units)) return false;  // MRPT keeps rangeUnits as a float
+  thread_local std::vector<std::uint8_t> bytes;
+  if (!readWholeFile(file.path, bytes) || bytes.size() != file.size || gzipTrailer(bytes) != file.trailer) return false;
+  writeExternalFile(path, bytes, shown, "range image");
+  return true;
 }
 
 void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& file_name, const std::string& dir) {

@@ -214,6 +214,7 @@ cv::Mat asBgr8(cv::Mat image) {
   const int depth = image.depth();
   if (depth != CV_8U)
     image.convertTo(image, CV_8U, depth == CV_32F || depth == CV_64F ? 255.0 : depth == CV_16U ? 1.0 / 256 : 1.0);
+  if (image.channels() == 2) cv::extractChannel(image, image, 0);  // grey and alpha: the grey
   if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
   else if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
   return image;

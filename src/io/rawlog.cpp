@@ -74,20 +74,6 @@ void writeColourPng(const Frame& frame, const std::string& path, const std::stri
   writeExternalFile(path, bytes, shown, "image");
 }
 
-// The frame's range-image file copied as it is when it holds the frame's depth at the writer's units
-// (a rawlog input's, read checked): compressing the depth again was 2.6 ms of CPU a frame. False when
-// there is none, or the file no longer says it holds rows x cols readings (gzip's length field); the
-// caller then writes the depth.
-bool copyRangeImageFile(const Frame& frame, float units, const std::string& path, const std::string& shown) {
-  if (frame.depth_file.empty() || float(frame.depth_file_units) != units) return false;
-  thread_local std::vector<std::uint8_t> bytes;
-  if (!readWholeFile(frame.depth_file, bytes) || bytes.size() < 18 || bytes[0] != 0x1f || bytes[1] != 0x8b) return false;
-  const std::size_t stored = 8 + std::size_t(frame.depth.rows) * std::size_t(frame.depth.cols) * 2;  // rows, cols, readings
-  if (gzipStoredLength(bytes.data() + bytes.size()) != std::uint32_t(stored)) return false;
-  writeExternalFile(path, bytes, shown, "range image");
-  return true;
-}
-
 std::string truncatedAt(std::size_t entry) { return "truncated rawlog (ends inside entry " + std::to_string(entry) + ")"; }
 
 // Counts delivered bytes, so a clean end of file (EOF before an object starts) can be told apart
@@ -242,7 +228,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
       cv::resize(f.rgb, f.rgb, cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
     } else if (plain) {
       // The pixels as the file holds them: a rawlog written from the frame copies its bytes (encoding
-      // them again was a quarter of a kinfu run's CPU on a rawlog input).
+      // them again with OpenCV's encoder was a quarter of a kinfu run's CPU on a rawlog input).
       f.colour_file = obs.intensityImage.getExternalStorageFileAbsolutePath();
     }
     obs.intensityImage.unload();
@@ -381,12 +367,9 @@ bool RawlogSource::next(Frame& frame) {
   if (opts_.intrinsics) cam = CameraIntrinsics::parse(*opts_.intrinsics);
   const std::size_t index = pos_++;
   try {
-    const std::string range_file = loadExternalRangeImage(*obs);
+    const std::optional<DepthFile> range_file = loadExternalRangeImage(*obs);
     frame = frameFromObservation(*obs, path_, cam);
-    if (!range_file.empty() && obs->range_is_depth) {  // ranges along the rays are not the depth a writer stores
-      frame.depth_file = range_file;
-      frame.depth_file_units = obs->rangeUnits;
-    }
+    if (obs->range_is_depth) frame.depth_file = range_file;  // ranges along the rays are not the depth a writer stores
   } catch (const InputError& e) {
     throw DamagedFrame(e);  // this record's images; the next record is read as usual
   }
@@ -577,7 +560,8 @@ std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
       writeColourPng(frame, dir + "/" + png, imagesDirFor(path_) + "/" + png);
     obs->intensityImage.setExternalStorage(png);
     if ((rec && rec->range_units == opts_.range_units && linkFile(rec->depth, dir + "/" + bin)) ||
-        copyRangeImageFile(frame, float(opts_.range_units), dir + "/" + bin, imagesDirFor(path_) + "/" + bin)) {
+        (frame.depth_file &&
+         copyRangeImageFile(*frame.depth_file, opts_.range_units, dir + "/" + bin, imagesDirFor(path_) + "/" + bin))) {
       useExternalRangeImage(*obs, bin);
     } else {
       readings_beyond_range_ += setRangeImage(*obs, frame.depth);

@@ -1,6 +1,7 @@
 #pragma once
 // The unit that flows through the pipeline: one associated colour + depth pair.
 #include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -19,6 +20,16 @@ struct RecordedImages {
   double range_units = 0.0;
 };
 
+// The range-image file a frame's depth was read from (MRPT's gzip .bin, read checked whole), in `units`
+// metres per unit, with what tells its content: its size and its gzip trailer (CRC-32 and length of the
+// readings). A rawlog writer at the same units copies the file, while it still is that file, instead of
+// compressing the depth again.
+struct DepthFile {
+  std::string path;
+  double units = 0.0;
+  std::uint64_t size = 0, trailer = 0;
+};
+
 struct Frame {
   std::size_t index = 0;      // 0-based position in its source
   double timestamp = 0.0;     // seconds (UNIX time for real data); when the depth image was taken
@@ -27,9 +38,7 @@ struct Frame {
   std::string colour_file;    // the image file rgb was decoded from, unchanged (empty if none): writers
                               // may copy its bytes instead of encoding rgb again. Clear it when rgb changes.
   cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
-  std::string depth_file;     // the range-image file (MRPT's gzip .bin, read checked) depth came from, unchanged,
-  double depth_file_units = 0;  // in these metres per unit (empty if none): a rawlog writer at the same units
-                                // may copy its bytes instead of compressing depth again. Clear it when depth changes.
+  std::optional<DepthFile> depth_file;  // where depth was read from, unchanged (none if not a file). Reset it when depth changes.
   CameraIntrinsics camera;
   std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
   std::optional<Eigen::Vector3d> up;  // unit "up" (against gravity) in the camera frame, from the

@@ -10,10 +10,13 @@
 // - a record written keeps MRPT's relative names (the rawlog stays relocatable) but its range image is
 //   written here, into an explicit folder (writeRangeImageExternally).
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <mrpt/obs/CObservation3DRangeScan.h>
+
+#include "vofusion/core/frame.h"
 
 namespace vofusion {
 
@@ -27,8 +30,12 @@ void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::st
 // such a file unchecked: one cut short or with flipped bits gave a frame of wrong depths, used as it
 // came. Throws InputError(file, ...) when it is missing, empty, cut short or damaged (its gzip CRC-32).
 // A file of another kind (a .txt, a plain binary one, a gzip of older rawlogs' float layout) is left
-// for MRPT's load(). Returns the file read here (empty when there was none, or it was left to MRPT).
-std::string loadExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs);
+// for MRPT's load(). Returns the file read here (none when there was none, or it was left to MRPT).
+std::optional<DepthFile> loadExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs);
+// Copies a range-image file that was read (loadExternalRangeImage) to `path` when it holds readings in
+// `units` and is still the file that was read (its size and gzip trailer); false, writing nothing,
+// otherwise. Throws InputError(shown, ...) when the copy cannot be written.
+bool copyRangeImageFile(const DepthFile& file, double units, const std::string& path, const std::string& shown);
 
 // Writes obs.rangeImage to dir/file_name in MRPT's external format (gzip: rows, cols as uint32, then
 // the uint16 ranges, little-endian) and marks it externally stored under the relative file_name,

@@ -111,8 +111,9 @@ class RawlogWriter {
   // One CObservation3DRangeScan (+ ground-truth observation). Action/SF format: written as the
   // pending actions followed by a sensory frame holding the observation(s). External images: a frame
   // already recorded (Frame::recorded) gets hard links to the recording's files (its range image only
-  // at the same range_units), else they are written. A writer in place (a recording) returns where it
-  // wrote the images (absolute paths); others return nothing.
+  // at the same range_units); else the files a frame was read from are copied (Frame::colour_file, and
+  // Frame::depth_file at the same range_units), else the images are encoded and written. A writer in
+  // place (a recording) returns where it wrote the images (absolute paths); others return nothing.
   std::optional<RecordedImages> write(const Frame& frame);
   // Action/SF format only (std::logic_error otherwise): goes into the action collection preceding the
   // next frame's sensory frame.
