@@ -27,7 +27,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/allocation_limit.h"
-#include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/gzip_members.h"
 #include "vofusion/core/progress.h"

@@ -38,7 +38,8 @@ struct Frame {
   std::string colour_file;    // the image file rgb was decoded from, unchanged (empty if none): writers
                               // may copy its bytes instead of encoding rgb again. Clear it when rgb changes.
   cv::Mat depth;              // CV_32FC1, metres along the optical axis, 0 = no reading
-  std::optional<DepthFile> depth_file;  // where depth was read from, unchanged (none if not a file). Reset it when depth changes.
+  std::optional<DepthFile> depth_file;  // the file depth was read from, unchanged (none if it came from no file):
+                                        // writers may copy it. Reset it when depth changes.
   CameraIntrinsics camera;
   std::optional<mrpt::poses::CPose3D> groundTruth;  // camera-to-world, when the source knows it
   std::optional<Eigen::Vector3d> up;  // unit "up" (against gravity) in the camera frame, from the

@@ -27,8 +27,8 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes);
 // rawlog writer then copies a recording's colour PNG instead of encoding its pixels again.
 bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
 // A colour image of 1 to 4 channels (8- or 16-bit, or float in [0, 1]) as 8-bit BGR: what the
-// frames carry whatever the file held (grey, grey and alpha, BGRA, 16 bits a channel). An 8-bit BGR image comes back
-// as it is (its pixels shared).
+// frames carry whatever the file held (grey, grey and alpha, BGRA, 16 bits a channel). An 8-bit
+// BGR image comes back as it is (its pixels shared).
 cv::Mat asBgr8(cv::Mat image);
 // True for a PNG cut short (no IEND chunk at the end). Checked before decoding, because libpng
 // prints its own line to stderr for such a file.
