@@ -9,6 +9,8 @@
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
+#include "vofusion/io/external_files.h"
+#include "vofusion/io/rawlog.h"
 #include "vofusion/odometry/odometry_source.h"
 #include "vofusion/odometry/rgbd_odometry.h"
 #include "vofusion/sim/any_source.h"
@@ -125,6 +127,35 @@ TEST(OdometrySource, AccumulatesPoseAndEmitsVisualOdometryActions) {
   const mrpt::poses::CPose3D inc = a.poseChange.mean - (seq.groundTruth(3) - seq.groundTruth(2));
   EXPECT_LT(inc.translation().norm(), 0.003);
   EXPECT_GT(a.poseChange.cov(0, 0), 0.0);
+}
+
+// A caller's observation whose range image is in a file: the file is read checked whole, as a rawlog's
+// is. One cut short is an InputError naming it (MRPT's load() took it as it came: wrong depths), and
+// the observation still names its file afterwards.
+TEST(OdometrySource, ExternalRangeImagesAreReadCheckedAndLeftExternal) {
+  const auto seq = room(false);
+  const std::string dir = test::tempDir("odometry_source_external");
+  std::vector<mrpt::obs::CObservation3DRangeScan::Ptr> obs;
+  for (std::size_t i = 0; i < 3; ++i) {
+    obs.push_back(observationFromFrame(seq.render(i)));
+    const std::string name = "f" + std::to_string(i) + "_DEPTH.bin";
+    writeRangeImageExternally(*obs.back(), name, dir);
+    useExternalRangeImage(*obs.back(), dir + "/" + name);  // named absolutely, as a loaded rawlog's are
+  }
+  const std::string cut = dir + "/f2_DEPTH.bin";
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) - 9);
+  OdometrySource src(OdometryParams{}, seq.groundTruth(0));
+  src.process(*obs[0]);
+  src.process(*obs[1]);
+  EXPECT_EQ(src.failures(), 0u);
+  EXPECT_TRUE(obs[1]->rangeImage_isExternallyStored());
+  try {
+    src.process(*obs[2]);
+    FAIL() << "a range image file cut short was taken";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("f2_DEPTH.bin"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(obs[2]->rangeImage_isExternallyStored());
 }
 
 TEST(RgbdOdometryApp, WritesTrajectoryAndRawlog) {

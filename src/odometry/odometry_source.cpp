@@ -1,5 +1,6 @@
 #include "vofusion/odometry/odometry_source.h"
 
+#include "vofusion/io/external_files.h"
 #include "vofusion/io/rawlog.h"
 
 namespace vofusion {
@@ -10,7 +11,14 @@ OdometrySource::OdometrySource(const OdometryParams& params, const mrpt::poses::
 }
 
 OdometryResult OdometrySource::process(const mrpt::obs::CObservation3DRangeScan& obs) {
-  return process(frameFromObservation(obs, obs.sensorLabel.empty() ? "observation" : obs.sensorLabel));
+  const std::string origin = obs.sensorLabel.empty() ? "observation" : obs.sensorLabel;
+  if (!obs.rangeImage_isExternallyStored()) return process(frameFromObservation(obs, origin));
+  // An external range image is read checked whole, as RawlogSource reads one (MRPT's load() takes a
+  // file cut short as it comes), from a copy: the caller's observation keeps naming its file.
+  mrpt::obs::CObservation3DRangeScan checked(obs);
+  useExternalRangeImage(checked, obs.rangeImage_getExternalStorageFileAbsolutePath(""));
+  loadExternalRangeImage(checked);
+  return process(frameFromObservation(checked, origin));
 }
 
 OdometryResult OdometrySource::process(const Frame& input) {

@@ -21,7 +21,8 @@ class OdometrySource {
 
   // Frames are numbered by this object in arrival order (Frame::index is not trusted).
   OdometryResult process(const Frame& frame);
-  // Converts with the io stage's frameFromObservation (throws InputError on unusable observations).
+  // Converts with the io stage's frameFromObservation (throws InputError on unusable observations); an
+  // external range image is read checked whole (io/external_files.h), the observation left as it is.
   OdometryResult process(const mrpt::obs::CObservation3DRangeScan& obs);
 
   // Camera-to-world of the last frame processed. A frame whose motion failed moves on by the last
