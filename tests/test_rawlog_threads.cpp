@@ -1,7 +1,9 @@
 // Readers and writers of different rawlogs in one process (issue 34): each resolves its own external
 // files, never through MRPT's process-wide images folder, so none reads or writes another's images.
 #include <cstdio>
+#include <cmath>
 #include <cstring>
+#include <limits>
 #include <filesystem>
 #include <tuple>
 #include <fstream>
@@ -293,6 +295,33 @@ TEST(RawlogThreads, AReadingBeyondTheRangeUnitsIsWrittenAsNoReading) {
   EXPECT_EQ(back.depth.at<float>(3, 4), 0.f);
   f.depth.at<float>(3, 4) = 0.f;
   EXPECT_LT(cv::norm(back.depth, f.depth, cv::NORM_INF), 0.6e-4);
+}
+
+// Depth to range units rounds as std::round does, halves away from zero, at the edges too: values a
+// hair either side of a half, the largest unit, what lies beyond it, and readings that are none.
+TEST(RawlogThreads, RangeUnitsRoundAsStdRound) {
+  Frame f = markedFrame(1, 0);
+  const double scale = 1024.0;  // units of 1/1024 m: every depth below is a float, its units x exact
+  std::vector<float> z;
+  for (const double units : {0.0, 1.0, 7.0, 1234.0, 5000.0, 65534.0, 65535.0})
+    for (const double frac : {0.0, 0.25, 0.5, 0.75}) {
+      const float d = float((units + frac) / scale);
+      z.insert(z.end(), {d, std::nextafter(d, 0.f), std::nextafter(d, 100.f)});
+    }
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  z.insert(z.end(), {65535.5f / 1024, 70000.f / 1024, 1e30f, -0.5f, 0.f, inf, -inf, nan});
+  ASSERT_LE(z.size(), std::size_t(f.depth.total()));
+  f.depth.setTo(0.f);
+  std::copy(z.begin(), z.end(), f.depth.ptr<float>(0));
+  const auto obs = observationFromFrame(f, 1.0 / 1024);
+  int beyond = 0;
+  for (std::size_t i = 0; i < z.size(); ++i) {
+    const double x = double(z[i]) * scale;
+    double want = (std::isfinite(x) && x > 0) ? std::round(x) : 0.0;
+    if (want > 65535.0) want = 0.0, ++beyond;
+    EXPECT_EQ(obs->rangeImage(int(i / f.depth.cols), int(i % f.depth.cols)), std::uint16_t(want)) << "depth " << z[i];
+  }
+  EXPECT_EQ(beyond, 8);  // 65535.5 and above: 2 at 65535.5, 3 at 65535.75, the last three
 }
 
 // A colour image cut short is the frame's damage in one line of ours (libpng printed its own line

@@ -416,11 +416,19 @@ std::size_t setRangeImage(CObservation3DRangeScan& obs, const cv::Mat& depth) {
   std::size_t beyond = 0;
   for (int r = 0; r < depth.rows; ++r) {
     const float* in = depth.ptr<float>(r);
+    std::uint16_t* out = obs.rangeImage.data() + std::size_t(r) * std::size_t(depth.cols);  // row-major rows
     for (int c = 0; c < depth.cols; ++c) {
-      const double z = in[c];
-      double v = (std::isfinite(z) && z > 0) ? std::round(z * scale) : 0.0;
-      if (v > 65535.0) v = 0.0, ++beyond;
-      obs.rangeImage(r, c) = static_cast<uint16_t>(v);
+      const double x = double(in[c]) * scale;
+      if (!(x > 0) || std::isinf(x)) {  // no reading (0, negative, NaN or infinite)
+        out[c] = 0;
+      } else if (x >= 65535.5) {  // rounds beyond 16 bits
+        out[c] = 0, ++beyond;
+      } else {
+        // std::round without its libm call (plain x86-64 has no rounding instruction): x - trunc(x) is
+        // exact, so ">= 0.5" rounds halves away from zero as std::round does.
+        const std::uint32_t t = std::uint32_t(x);
+        out[c] = std::uint16_t(t + (x - double(t) >= 0.5));
+      }
     }
   }
   return beyond;
