@@ -41,14 +41,6 @@ std::string resolved(const std::string& name, const fs::path& dir) {
 void resolveImage(mrpt::img::CImage& img, const fs::path& dir) {
   if (img.isExternallyStored()) img.setExternalStorage(resolved(img.getExternalStorageFile(), dir));
 }
-
-// A gzip file's last 8 bytes (its content's CRC-32 and length) as one number: what tells one range
-// image's file from another of the same size without inflating it.
-std::uint64_t gzipTrailer(const std::vector<std::uint8_t>& bytes) {
-  std::uint64_t t = 0;
-  if (bytes.size() >= 8) std::memcpy(&t, bytes.data() + bytes.size() - 8, 8);
-  return t;
-}
 }  // namespace
 
 void resolveExternalFiles(CObservation3DRangeScan& obs, const std::string& images_dir) {
@@ -89,13 +81,15 @@ std::optional<DepthFile> loadExternalRangeImage(CObservation3DRangeScan& obs) {
   std::memcpy(ri.data(), raw.data() + sizeof dims, raw.size() - sizeof dims);
   obs.*ExternalNames::range_stored = false;
   (obs.*ExternalNames::range_file).clear();
-  return DepthFile{path, double(obs.rangeUnits), packed.size(), gzipTrailer(packed)};
+  return DepthFile{path, double(obs.rangeUnits), packed.size(), gzipTrailer(packed.data() + packed.size())};
 }
 
 bool copyRangeImageFile(const DepthFile& file, double units, const std::string& path, const std::string& shown) {
   if (float(file.units) != float(units)) return false;  // MRPT keeps rangeUnits as a float
   thread_local std::vector<std::uint8_t> bytes;
-  if (!readWholeFile(file.path, bytes) || bytes.size() != file.size || gzipTrailer(bytes) != file.trailer) return false;
+  if (!readWholeFile(file.path, bytes) || bytes.size() != file.size || bytes.size() < 18 ||
+      gzipTrailer(bytes.data() + bytes.size()) != file.trailer)
+    return false;
   writeExternalFile(path, bytes, shown, "range image");
   return true;
 }

@@ -25,6 +25,12 @@ inline std::uint32_t gzipStoredLength(const std::uint8_t* trailer_end) {
   return std::uint32_t(trailer_end[-4]) | std::uint32_t(trailer_end[-3]) << 8 | std::uint32_t(trailer_end[-2]) << 16 |
          std::uint32_t(trailer_end[-1]) << 24;
 }
+// A gzip member's whole trailer (its data's CRC-32 and length) as one number, from its last eight
+// bytes at `trailer_end - 8`: what tells one file's content from another's of the same size without
+// inflating either.
+inline std::uint64_t gzipTrailer(const std::uint8_t* trailer_end) {
+  return std::uint64_t(gzipStoredLength(trailer_end - 4)) << 32 | gzipStoredLength(trailer_end);
+}
 // A gzip file of one member, checked whole (its CRC-32 and length), into `out`; false when it is cut
 // short, damaged, not gzip, followed by more bytes, or longer than max_size (at most 4 GiB - 1: the
 // length field holds the size modulo 2^32).
