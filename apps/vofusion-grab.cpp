@@ -346,7 +346,10 @@ int run(const Args& args) {
   LiveConsumer consumer{args, session.get(), viewer.get(), latest, checkpoints};
   LiveHooks hooks;
   hooks.stop = &stopFlag();
-  if (writer) hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { f.recorded = writer->write(f); };
+  if (writer)
+    hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) {
+      if (auto files = writer->write(f)) f.colour_file = files->colour, f.depth_file = files->depth;  // linked by poses.rawlog
+    };
   std::size_t total = source.live->size();
   if (plan.opts.max_frames > 0 && (total == 0 || total > plan.opts.max_frames)) total = plan.opts.max_frames;
   Progress progress(args.live ? "live" : "recording", total);

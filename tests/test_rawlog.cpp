@@ -141,8 +141,8 @@ TEST(Rawlog, ExternalImagesCopySourcePngsWhenTheyMatch) {
   cv::cvtColor(frames[1].rgb, grey, cv::COLOR_BGR2GRAY);
   ASSERT_TRUE(cv::imwrite(grey_png, grey));
   cv::cvtColor(grey, frames[1].rgb, cv::COLOR_GRAY2BGR);
-  frames[0].colour_file = rgb_png;
-  frames[1].colour_file = grey_png;
+  frames[0].colour_file = ColourFile{rgb_png};
+  frames[1].colour_file = ColourFile{grey_png};
   const std::string path = writeRawlog(dir + "/seq.rawlog", frames, {});
   std::vector<std::string> written;
   for (const auto& e : fs::directory_iterator(dir + "/seq_Images"))
@@ -158,7 +158,9 @@ TEST(Rawlog, ExternalImagesCopySourcePngsWhenTheyMatch) {
   src.rewind();
   std::vector<Frame> again(2);
   for (auto& f : again) ASSERT_TRUE(src.next(f));
-  EXPECT_EQ(again[0].colour_file, fs::absolute(written[0]).string());
+  ASSERT_TRUE(again[0].colour_file);
+  EXPECT_EQ(again[0].colour_file->path, fs::absolute(written[0]).string());
+  EXPECT_FALSE(again[0].colour_file->recorded);
   writeRawlog(dir + "/again.rawlog", again, {});
   std::vector<std::string> copied;
   for (const auto& e : fs::directory_iterator(dir + "/again_Images"))
@@ -200,7 +202,7 @@ TEST(Rawlog, RangeImageFilesOfARawlogInputAreCopiedAtTheirUnits) {
   frames[2].depth_file.reset();
   frames[2].camera = frames[2].camera.scaled(0.5);
   frames[2].rgb = cv::Mat(frames[2].depth.size(), CV_8UC3, cv::Scalar(9, 9, 9));
-  frames[2].colour_file.clear();
+  frames[2].colour_file.reset();
   auto binsOf = [&](const std::string& name) {
     std::vector<std::string> out, paths;
     for (const auto& e : fs::directory_iterator(dir + "/" + name + "_Images"))
@@ -519,7 +521,13 @@ TEST(Rawlog, RecordedFramesLinkTheRecordingsImages) {
   RawlogWriterOptions in_place;
   in_place.in_place = true;
   RawlogWriter recording(dir + "/grab.rawlog", in_place);
-  for (Frame& f : frames) f.recorded = recording.write(f);
+  for (Frame& f : frames) {
+    const std::optional<RecordedFiles> files = recording.write(f);
+    ASSERT_TRUE(files);
+    EXPECT_TRUE(files->colour.recorded && files->depth.recorded);
+    EXPECT_EQ(files->depth.size, fs::file_size(files->depth.path));
+    f.colour_file = files->colour, f.depth_file = files->depth;
+  }
   recording.commit();
   for (const double units : {2e-4, 1e-3}) {
     SCOPED_TRACE(units);
@@ -530,10 +538,9 @@ TEST(Rawlog, RecordedFramesLinkTheRecordingsImages) {
     const std::string images = RawlogWriter::imagesDirFor(path);
     std::size_t linked_colour = 0, linked_depth = 0;
     for (const Frame& f : frames) {
-      ASSERT_TRUE(f.recorded);
       for (const auto& e : fs::directory_iterator(images)) {
         const bool colour = e.path().string().find("_INTENSITY.png") != std::string::npos;
-        if (fs::equivalent(e.path(), colour ? f.recorded->colour : f.recorded->depth)) ++(colour ? linked_colour : linked_depth);
+        if (fs::equivalent(e.path(), colour ? f.colour_file->path : f.depth_file->path)) ++(colour ? linked_colour : linked_depth);
       }
     }
     EXPECT_EQ(linked_colour, 2u);
@@ -543,7 +550,7 @@ TEST(Rawlog, RecordedFramesLinkTheRecordingsImages) {
   }
   // The links hold the bytes the writer writes for the frames it does not know recorded.
   auto unrecorded = frames;
-  for (Frame& f : unrecorded) f.recorded.reset();
+  for (Frame& f : unrecorded) f.colour_file.reset(), f.depth_file.reset();
   const std::string plain = RawlogWriter::imagesDirFor(writeRawlog(dir + "/plain.rawlog", unrecorded, {}));
   std::size_t compared = 0;
   for (const auto& e : fs::directory_iterator(plain)) {
@@ -551,12 +558,19 @@ TEST(Rawlog, RecordedFramesLinkTheRecordingsImages) {
     ++compared;
   }
   EXPECT_EQ(compared, 4u);
-  // A recording's file gone: the image is written instead.
-  fs::remove(frames[0].recorded->colour);
+  // Frame 0's colour file gone, frame 1's range image no longer the one recorded (its CRC-32; a file
+  // of the same size): those two are written instead.
+  fs::remove(frames[0].colour_file->path);
+  {
+    std::string b = fileBytes(frames[1].depth_file->path);
+    b[b.size() - 8] ^= 1;
+    std::ofstream(frames[1].depth_file->path, std::ios::binary) << b;
+  }
   const std::string after = writeRawlog(dir + "/after.rawlog", frames, {});
   for (const auto& e : fs::directory_iterator(RawlogWriter::imagesDirFor(after))) {
-    const bool written = e.path().filename().string().find("000000_") != std::string::npos &&
-                         e.path().extension() == ".png";
+    const std::string name = e.path().filename().string();
+    const bool written = (name.find("000000_") != std::string::npos && e.path().extension() == ".png") ||
+                         (name.find("000001_") != std::string::npos && e.path().extension() == ".bin");
     EXPECT_EQ(fs::hard_link_count(e.path()) == 1, written) << e.path();
   }
   RawlogSource src(after, {});

@@ -11,7 +11,7 @@
 
 #include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
-#include "vofusion/io/png_decode.h"  // readWholeFile
+#include "vofusion/io/png_decode.h"  // readWholeFile, isRgb8Png
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -32,6 +32,16 @@ struct ExternalNames : CObservation3DRangeScan {
 // MRPT's own test of an absolute name (mrpt::io::lazy_load_absolute_path).
 bool isAbsolute(const std::string& f) {
   return !f.empty() && (f[0] == '/' || (f.size() > 2 && f[1] == ':' && (f[2] == '\\' || f[2] == '/')));
+}
+
+// A hard link at `to` to `from`; false where the file system refuses (another device, no hard links)
+// or `from` is gone. Whatever was at `to` is removed first, so that a file written there instead never
+// writes through a link into the recording.
+bool linkFile(const std::string& from, const std::string& to) {
+  std::error_code ec;
+  fs::remove(to, ec);
+  fs::create_hard_link(from, to, ec);
+  return !ec;
 }
 
 std::string resolved(const std::string& name, const fs::path& dir) {
@@ -81,20 +91,40 @@ std::optional<DepthFile> loadExternalRangeImage(CObservation3DRangeScan& obs) {
   std::memcpy(ri.data(), raw.data() + sizeof dims, raw.size() - sizeof dims);
   obs.*ExternalNames::range_stored = false;
   (obs.*ExternalNames::range_file).clear();
-  return DepthFile{path, double(obs.rangeUnits), packed.size(), gzipTrailer(packed.data() + packed.size())};
+  return DepthFile{path, double(obs.rangeUnits), packed.size(), gzipTrailer(packed.data() + packed.size()), false};
 }
 
-bool copyRangeImageFile(const DepthFile& file, double units, const std::string& path, const std::string& shown) {
-  if (float(file.units) != float(units)) return false;  // MRPT keeps rangeUnits as a float
+std::optional<DepthFile> reuseRangeImageFile(const DepthFile& file, double units, const std::string& path,
+                                             const std::string& shown) {
+  if (float(file.units) != float(units)) return std::nullopt;  // MRPT keeps rangeUnits as a float
+  const DepthFile reused{path, file.units, file.size, file.trailer, false};
+  if (file.recorded) {
+    std::uint8_t tail[8];
+    std::error_code ec;
+    if (file.size < sizeof tail || fs::file_size(file.path, ec) != file.size || ec) return std::nullopt;
+    std::FILE* f = std::fopen(file.path.c_str(), "rb");
+    const bool read = f && std::fseek(f, -long(sizeof tail), SEEK_END) == 0 && std::fread(tail, 1, sizeof tail, f) == sizeof tail;
+    if (f) std::fclose(f);
+    if (!read || gzipTrailer(tail + sizeof tail) != file.trailer || !linkFile(file.path, path)) return std::nullopt;
+    return reused;
+  }
   thread_local std::vector<std::uint8_t> bytes;
   if (!readWholeFile(file.path, bytes) || bytes.size() != file.size || bytes.size() < 18 ||
       gzipTrailer(bytes.data() + bytes.size()) != file.trailer)
-    return false;
+    return std::nullopt;
   writeExternalFile(path, bytes, shown, "range image");
+  return reused;
+}
+
+bool reuseColourFile(const ColourFile& file, int width, int height, const std::string& path, const std::string& shown) {
+  if (file.recorded) return linkFile(file.path, path);
+  thread_local std::vector<std::uint8_t> bytes;
+  if (!readWholeFile(file.path, bytes) || !isRgb8Png(bytes, width, height)) return false;
+  writeExternalFile(path, bytes, shown, "image");
   return true;
 }
 
-void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& file_name, const std::string& dir) {
+DepthFile writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& file_name, const std::string& dir) {
   const std::string path = (fs::path(dir) / file_name).string();
   if (obs.rangeImage_isExternallyStored()) throw std::logic_error(path + ": range image is already external");
   // What MRPT's CFileGZOutputStream + CArchive wrote (and its load() reads): a gzip file of rows and
@@ -107,8 +137,10 @@ void writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& 
   static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are written as they are in memory");
   std::memcpy(raw.data(), dims, sizeof dims);
   if (ri.size() != 0) std::memcpy(raw.data() + sizeof dims, ri.data(), std::size_t(ri.size()) * 2);
-  writeExternalFile(path, gzipCompress(raw.data(), raw.size()), path, "range image");
+  const std::vector<std::uint8_t> packed = gzipCompress(raw.data(), raw.size());
+  writeExternalFile(path, packed, path, "range image");
   useExternalRangeImage(obs, file_name);
+  return DepthFile{path, double(obs.rangeUnits), packed.size(), gzipTrailer(packed.data() + packed.size()), false};
 }
 
 void writeExternalFile(const std::string& path, const std::vector<std::uint8_t>& bytes, const std::string& shown,

@@ -52,25 +52,11 @@ constexpr std::size_t kMaxEntryTotal = std::size_t(256) << 20;
 
 std::string mebibytes(std::size_t n) { return std::to_string((n + (1u << 20) - 1) >> 20) + " MiB"; }
 
-// A hard link at `to` to the recording's file `from`; false where the file system refuses (another
-// device, no hard links) or `from` is gone. Whatever was at `to` is removed first, so that a file
-// written there instead never writes through a link into the recording.
-bool linkFile(const std::string& from, const std::string& to) {
-  std::error_code ec;
-  fs::remove(to, ec);
-  fs::create_hard_link(from, to, ec);
-  return !ec;
-}
-
-// The frame's colour image as a PNG at `path` (`shown` names it in errors: its final name).
+// The frame's colour image as a PNG at `path` (`shown` names it in errors: its final name): the file
+// it came from when that can be reused (even our encoder takes ~6 ms of CPU a frame), else encoded.
 void writeColourPng(const Frame& frame, const std::string& path, const std::string& shown) {
-  std::vector<std::uint8_t> bytes;
-  // A TUM/7-Scenes colour PNG is copied as it is: even our encoder takes ~6 ms of CPU per frame.
-  // A PNG of 8-bit RGB pixels of this size decodes to exactly the frame's colour image: its bytes
-  // stand for it.
-  if (frame.colour_file.empty() || !readWholeFile(frame.colour_file, bytes) || !isRgb8Png(bytes, frame.rgb.cols, frame.rgb.rows))
-    bytes = encodeRgb8Png(frame.rgb);  // in memory, then written here: a full disk is our one line
-  writeExternalFile(path, bytes, shown, "image");
+  if (frame.colour_file && reuseColourFile(*frame.colour_file, frame.rgb.cols, frame.rgb.rows, path, shown)) return;
+  writeExternalFile(path, encodeRgb8Png(frame.rgb), shown, "image");  // in memory first: a full disk is our one line
 }
 
 std::string truncatedAt(std::size_t entry) { return "truncated rawlog (ends inside entry " + std::to_string(entry) + ")"; }
@@ -228,7 +214,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     } else if (plain) {
       // The pixels as the file holds them: a rawlog written from the frame copies its bytes (encoding
       // them again with OpenCV's encoder was a quarter of a kinfu run's CPU on a rawlog input).
-      f.colour_file = obs.intensityImage.getExternalStorageFileAbsolutePath();
+      f.colour_file = ColourFile{obs.intensityImage.getExternalStorageFileAbsolutePath()};
     }
     obs.intensityImage.unload();
   } else {
@@ -550,34 +536,34 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
 
 void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
 
-std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
+std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
   auto obs = opts_.external_images
                  ? observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label)
                  : observationWithPixels(frame, opts_.range_units, opts_.sensor_label, readings_beyond_range_);
-  std::optional<RecordedImages> images;
+  std::optional<RecordedFiles> files;
   if (opts_.external_images) {
     char stem[128];
     std::snprintf(stem, sizeof stem, "%s_%06zu_%.6f", opts_.sensor_label.c_str(), frames_, frame.timestamp);
     const std::string png = std::string(stem) + "_INTENSITY.png", bin = std::string(stem) + "_DEPTH.bin";
-    const std::string dir = impl_->images_dir;
-    // The same frame's files from its recording (poses.rawlog beside grab.rawlog): linked, not written
-    // twice (the range image's compression was 2.6 ms a frame, a colour image's encoding ~6 ms).
-    const std::optional<RecordedImages>& rec = frame.recorded;
-    if (!rec || !linkFile(rec->colour, dir + "/" + png))
-      writeColourPng(frame, dir + "/" + png, imagesDirFor(path_) + "/" + png);
+    const std::string dir = impl_->images_dir, shown = imagesDirFor(path_) + "/";
+    // The files the frame came from (a recording's linked, others copied), else written.
+    writeColourPng(frame, dir + "/" + png, shown + png);
     obs->intensityImage.setExternalStorage(png);
-    if ((rec && rec->range_units == opts_.range_units && linkFile(rec->depth, dir + "/" + bin)) ||
-        (frame.depth_file &&
-         copyRangeImageFile(*frame.depth_file, opts_.range_units, dir + "/" + bin, imagesDirFor(path_) + "/" + bin))) {
+    std::optional<DepthFile> depth;
+    if (frame.depth_file) depth = reuseRangeImageFile(*frame.depth_file, opts_.range_units, dir + "/" + bin, shown + bin);
+    if (depth) {
       useExternalRangeImage(*obs, bin);
     } else {
       readings_beyond_range_ += setRangeImage(*obs, frame.depth);
-      writeRangeImageExternally(*obs, bin, dir);
+      depth = writeRangeImageExternally(*obs, bin, dir);
     }
     impl_->images_used = true;
     // Only a recording's files keep their names: a result's folder is renamed by commit().
-    if (opts_.in_place)
-      images = RecordedImages{fs::absolute(dir + "/" + png).string(), fs::absolute(dir + "/" + bin).string(), opts_.range_units};
+    if (opts_.in_place) {
+      depth->path = fs::absolute(dir + "/" + bin).string();
+      depth->recorded = true;
+      files = RecordedFiles{ColourFile{fs::absolute(dir + "/" + png).string(), true}, *depth};
+    }
   }
   std::vector<mrpt::obs::CObservation::Ptr> obs_list{obs};
   if (frame.groundTruth && opts_.ground_truth_observations) {
@@ -606,7 +592,7 @@ std::optional<RecordedImages> RawlogWriter::write(const Frame& frame) {
     throw InputError(path_, "write failed (disk full?)");
   }
   ++frames_;
-  return images;
+  return files;
 }
 
 void RawlogWriter::commit() {

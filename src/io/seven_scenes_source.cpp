@@ -148,7 +148,7 @@ Frame SevenScenesSource::read(std::size_t i) const {
   f.timestamp = e.number / kFps;
   f.camera = camera_;
   f.rgb = loadColour(e.colour, camera_.width, camera_.height);
-  f.colour_file = e.colour;
+  f.colour_file = ColourFile{e.colour};
   f.depth = loadMillimetreDepth(e.stem + ".depth.png", camera_.width, camera_.height);
   if (gt_index_[i] >= 0) f.groundTruth = gt_[std::size_t(gt_index_[i])].pose;
   return f;

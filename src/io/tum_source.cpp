@@ -347,8 +347,8 @@ Frame TumFolderSource::read(std::size_t i) const {
   f.timestamp = a.depth.timestamp;
   f.colour_offset = a.rgb.timestamp - a.depth.timestamp;  // the odometry's keypoint bearings come from colour
   f.camera = camera_;
-  f.colour_file = (fs::path(folder_) / a.rgb.file).string();
-  f.rgb = loadColour(f.colour_file, camera_.width, camera_.height);
+  f.colour_file = ColourFile{(fs::path(folder_) / a.rgb.file).string()};
+  f.rgb = loadColour(f.colour_file->path, camera_.width, camera_.height);
   f.depth = loadTumDepth((fs::path(folder_) / a.depth.file).string(), camera_.width, camera_.height, depth_scale_);
   mrpt::poses::CPose3D gt;
   if (interpolatePose(gt_, f.timestamp, 0.05, gt)) f.groundTruth = gt;

@@ -32,23 +32,29 @@ void resolveExternalFiles(mrpt::obs::CObservation3DRangeScan& obs, const std::st
 // A file of another kind (a .txt, a plain binary one, a gzip of older rawlogs' float layout) is left
 // for MRPT's load(). Returns the file read here (none when there was none, or it was left to MRPT).
 std::optional<DepthFile> loadExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs);
-// Copies a range-image file that was read (loadExternalRangeImage) to `path` when it holds readings in
-// `units` and is still the file that was read (its size and gzip trailer); false, writing nothing,
-// otherwise. Throws InputError(shown, ...) when the copy cannot be written.
-bool copyRangeImageFile(const DepthFile& file, double units, const std::string& path, const std::string& shown);
+// Puts a frame's range-image file at `path` instead of writing its depth again, when the file holds
+// readings in `units` and still is the file it was (its size and gzip trailer): a hard link to our own
+// recording's file, a copy of another's. Returns the file at `path` (not recorded), or none, having
+// written nothing. Throws InputError(shown, ...) when a copy cannot be written.
+std::optional<DepthFile> reuseRangeImageFile(const DepthFile& file, double units, const std::string& path,
+                                             const std::string& shown);
+// The same for a frame's colour PNG: our recording's file is linked; another's is copied when it is an
+// 8-bit RGB PNG of width x height (so it decodes to the frame's pixels). False: nothing written.
+bool reuseColourFile(const ColourFile& file, int width, int height, const std::string& path, const std::string& shown);
 
 // Writes obs.rangeImage to dir/file_name in MRPT's external format (gzip: rows, cols as uint32, then
 // the uint16 ranges, little-endian) and marks it externally stored under the relative file_name,
 // releasing the matrix. What rangeImage_convertToExternalStorage(file_name, dir) writes, without its
-// global. Throws InputError(dir/file_name, ...) when the file cannot be written.
-void writeRangeImageExternally(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name,
+// global. Returns the file written (not recorded). Throws InputError(dir/file_name, ...) when it cannot
+// be written.
+DepthFile writeRangeImageExternally(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name,
                                const std::string& dir);
 // Writes `bytes` to `path`, or removes what it wrote and throws InputError(shown, "cannot write <what>:
 // <why>"): no half-written image is left. `shown` names the file as the user will find it.
 void writeExternalFile(const std::string& path, const std::vector<std::uint8_t>& bytes, const std::string& shown,
                        const std::string& what);
 // Marks obs's range image externally stored under the relative file_name, a file that already holds
-// it (a link to a recording's), releasing the matrix.
+// it (reuseRangeImageFile's), releasing the matrix.
 void useExternalRangeImage(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name);
 
 }  // namespace vofusion

@@ -98,6 +98,12 @@ struct RawlogWriterOptions {
   bool replace = true;
 };
 
+// The image files a recording wrote for a frame (RawlogWriter::write in place).
+struct RecordedFiles {
+  ColourFile colour;
+  DepthFile depth;
+};
+
 class RawlogWriter {
  public:
   // Throws InputError(path, ...) if the output cannot be created.
@@ -109,12 +115,12 @@ class RawlogWriter {
   RawlogWriter& operator=(const RawlogWriter&) = delete;
 
   // One CObservation3DRangeScan (+ ground-truth observation). Action/SF format: written as the
-  // pending actions followed by a sensory frame holding the observation(s). External images: a frame
-  // already recorded (Frame::recorded) gets hard links to the recording's files (its range image only
-  // at the same range_units); else the files a frame was read from are copied (Frame::colour_file, and
-  // Frame::depth_file at the same range_units), else the images are encoded and written. A writer in
-  // place (a recording) returns where it wrote the images (absolute paths); others return nothing.
-  std::optional<RecordedImages> write(const Frame& frame);
+  // pending actions followed by a sensory frame holding the observation(s). External images: the
+  // frame's own files are reused (Frame::colour_file, and Frame::depth_file at the same range_units:
+  // a recording's linked, others copied), else the images are encoded and written. A writer in place
+  // (a recording) returns the files it wrote, named absolutely, for the frame to carry to later
+  // writers (vofusion-grab's poses.rawlog); others return nothing.
+  std::optional<RecordedFiles> write(const Frame& frame);
   // Action/SF format only (std::logic_error otherwise): goes into the action collection preceding the
   // next frame's sensory frame.
   void writeAction(const mrpt::obs::CAction& action);
