@@ -161,6 +161,23 @@ TEST(GrabApp, AFailureBeforeTheFirstFrameLeavesNoRecording) {
   EXPECT_TRUE(std::filesystem::exists(out + "/grab.rawlog")) << log;
 }
 
+// A run that stops before its first frame is recorded (here every frame damaged; a sensor that fails at
+// once is the same) leaves no empty recording: the next run in the folder records.
+TEST(GrabApp, ARunThatRecordsNoFrameLeavesNoRecording) {
+  const std::string dir = test::tempDir("grab_app_no_frame");
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 3 --size 320x240"), 0);
+  const std::string cmd = test::app("vofusion-grab") + " --replay " + dir + "/rec --out " + dir + "/out --no-gui --speed 4";
+  fs::rename(dir + "/rec/depth", dir + "/depth");
+  std::string log;
+  EXPECT_EQ(test::run(cmd, &log), 1) << log;
+  EXPECT_NE(log.find("0 recorded"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(dir + "/out/grab.rawlog")) << log;
+  EXPECT_FALSE(fs::exists(dir + "/out/grab_Images")) << log;
+  fs::rename(dir + "/depth", dir + "/rec/depth");
+  ASSERT_EQ(test::run(cmd, &log), 0) << log;
+  EXPECT_EQ(readSummary(dir + "/out/grab-summary.txt").at("frames_recorded"), "3") << log;
+}
+
 TEST(GrabApp, CtrlCStopsCleanlyAndWritesTheRecording) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);

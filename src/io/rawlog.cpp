@@ -611,6 +611,9 @@ void RawlogWriter::commit() {
     impl_->endRecord();
   }
   if (impl_->records) {
+    // No frame, no recording: the destructor removes the empty file and folder, so that they do not
+    // block the next run's recording in this folder (a sensor that failed on its first frame).
+    if (frames_ == 0) return;
     if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
     impl_->records->sync();
     committed_ = true;
