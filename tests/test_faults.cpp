@@ -619,6 +619,36 @@ TEST(DamagedFrames, EachCostsOneFrameAndThePathStaysAsGood) {
   EXPECT_EQ(r.poses, kFrames - positions.size());
 }
 
+// A list line naming a folder, and a colour PNG of full length with a byte flipped inside its image
+// data: each costs its frame in one line of ours (libpng prints its own line for a file it finds
+// damaged, so the check comes before OpenCV's decoder; a folder once ended the run in bad_alloc).
+TEST(DamagedFrames, AFolderOrAFlippedByteCostsOneFrameInOneLine) {
+  REQUIRE_TUM();
+  constexpr std::size_t kFrames = 20;
+  TumFixture f = makeTum("damaged_folder_crc", kFrames);
+  const std::string folder = f.dir + "/depth_folder";
+  fs::create_directories(folder);
+  f.pairs[5].depth.file = folder;
+  f.writeLists();
+  const std::string flipped = replaceImage(f, 12, false, [](const std::string& dst, const std::string& src) {
+    std::string bytes = readAll(src);
+    const std::size_t idat = bytes.find("IDAT");
+    ASSERT_NE(idat, std::string::npos);
+    bytes[idat + 4 + 100] ^= 0x10;
+    writeText(dst, bytes);
+  });
+  const SkipRun r = runSkipping(f.dir, "damaged_folder_crc_out", kFrames);
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_NE(r.log.find("warning: " + folder + ": depth image is not a file (a folder?) (frame 5 skipped)"), std::string::npos)
+      << r.log;
+  EXPECT_NE(r.log.find("warning: " + flipped + ": cannot decode colour image (damaged PNG: its IDAT chunk fails its CRC)"),
+            std::string::npos)
+      << r.log;
+  EXPECT_EQ(r.log.find("libpng"), std::string::npos) << r.log;
+  EXPECT_EQ(r.summary["frames_skipped"], 2);
+  EXPECT_EQ(r.poses, kFrames - 2);
+}
+
 TEST(DamagedFrames, MoreThanOneInFiveStopsTheRun) {
   REQUIRE_TUM();
   TumFixture f = makeTum("damaged_many", 20);

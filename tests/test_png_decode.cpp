@@ -233,3 +233,31 @@ TEST(PngDecode, AnyColourImageBecomesEightBitBgr) {
   expectSameAs(asBgr8(bgra), bgr);
   expectSameAs(asBgr8(wide), bgr);
 }
+
+// What is wrong with a PNG file, said before OpenCV's decoder (whose libpng prints its own line).
+TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
+  const std::string dir = test::tempDir("png_damage");
+  cv::Mat img(48, 64, CV_8UC3);
+  cv::randu(img, 0, 255);
+  std::vector<std::uint8_t> png;
+  ASSERT_TRUE(cv::imencode(".png", img, png));
+  const auto write = [&](const std::string& name, const std::vector<std::uint8_t>& bytes) {
+    const std::string path = dir + "/" + name;
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    std::fwrite(bytes.data(), 1, bytes.size(), f);
+    std::fclose(f);
+    return path;
+  };
+  EXPECT_EQ(pngDamage(write("whole.png", png)), "");
+  EXPECT_EQ(pngDamage(write("cut.png", std::vector<std::uint8_t>(png.begin(), png.end() - 5))), "truncated PNG");
+  EXPECT_EQ(pngDamage(write("header.png", std::vector<std::uint8_t>(png.begin(), png.begin() + 20))), "truncated PNG");
+  auto flipped = png;
+  const std::size_t idat = std::string(png.begin(), png.end()).find("IDAT");
+  ASSERT_NE(idat, std::string::npos);
+  flipped[idat + 10] ^= 1;
+  EXPECT_EQ(pngDamage(write("flipped.png", flipped)), "damaged PNG: its IDAT chunk fails its CRC");
+  EXPECT_EQ(pngDamage(write("text.png", {'n', 'o', 't'})), "");  // no PNG: OpenCV decides
+  EXPECT_EQ(pngDamage(dir), "");                                 // a folder is no file to read
+  std::vector<std::uint8_t> bytes{1, 2, 3};
+  EXPECT_FALSE(readWholeFile(dir, bytes));
+}

@@ -1,5 +1,7 @@
 #include "vofusion/io/png_decode.h"
 
+#include <sys/stat.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -174,7 +176,10 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
 bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
-  const long size = std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
+  // A folder opens too, and seeks to a huge "end" on some file systems (ext4: LLONG_MAX).
+  struct stat st {};
+  const bool regular = fstat(fileno(f), &st) == 0 && S_ISREG(st.st_mode);
+  const long size = regular && std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
   bool read = size >= 0 && std::fseek(f, 0, SEEK_SET) == 0;
   if (read) {
     bytes.resize(std::size_t(size));
@@ -198,16 +203,22 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
 
 // A PNG that does not end with its IEND chunk is truncated. Caught before OpenCV sees the file,
 // because libpng prints its own "libpng error" line to stderr before OpenCV gives up.
-bool isTruncatedPng(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  char sig[8] = {};
-  if (!f.read(sig, 8) || std::string(sig, 8) != "\x89PNG\r\n\x1a\n") return false;  // not a PNG: OpenCV decides
-  f.seekg(0, std::ios::end);
-  const auto size = static_cast<long long>(f.tellg());
-  if (size < 8 + 12) return true;
-  char tail[8] = {};
-  f.seekg(size - 8);
-  return !f.read(tail, 8) || std::string(tail, 4) != "IEND";
+std::string pngDamage(const std::string& path) {
+  thread_local std::vector<std::uint8_t> bytes;
+  if (!readWholeFile(path, bytes) || bytes.size() < 8 || std::memcmp(bytes.data(), kSignature, 8) != 0)
+    return {};  // unreadable or not a PNG: OpenCV decides
+  const std::uint8_t* p = bytes.data();
+  const std::size_t n = bytes.size();
+  std::size_t at = 8;
+  for (; at + 12 <= n; at += 12 + std::size_t(be32(p + at))) {
+    const std::uint32_t len = be32(p + at);
+    if (len > n - at - 12) break;  // the chunk runs past the end
+    const std::uint8_t* tag = p + at + 4;
+    if (libdeflate_crc32(0, tag, len + 4) != be32(tag + 4 + len))
+      return "damaged PNG: its " + std::string(reinterpret_cast<const char*>(tag), 4) + " chunk fails its CRC";
+    if (isChunk(tag, "IEND")) return {};
+  }
+  return "truncated PNG";
 }
 
 cv::Mat asBgr8(cv::Mat image) {

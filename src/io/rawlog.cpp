@@ -132,7 +132,7 @@ namespace {
 // The observation's colour as 8-bit BGR pixels of the frame's own. An external 8-bit RGB PNG (what
 // rawlogs hold) is decoded by io/png_decode, as a TUM folder's (libpng and zlib were 6 % of a kinfu
 // run's CPU in the reader: bench/results/2026-12-04-rawlog-input-speed.md); anything else goes through
-// MRPT's CImage, after the truncation check (libpng prints its own line for a file cut short).
+// MRPT's CImage, after the damage check (libpng prints its own line for a file cut short or damaged).
 // `plain`: whether the pixels are exactly the plain PNG's (its bytes can stand for them).
 cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, bool& plain) {
   const bool external = obs.intensityImage.isExternallyStored();
@@ -143,7 +143,8 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
       plain = true;
       return decoded;
     }
-    if (isTruncatedPng(file)) throw InputError(file, "cannot load intensity image (truncated PNG)");
+    if (const std::string damage = pngDamage(file); !damage.empty())
+      throw InputError(file, "cannot load intensity image (" + damage + ")");
   }
   cv::Mat img;
   try {

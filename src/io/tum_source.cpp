@@ -75,13 +75,25 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
   return out;
 }
 
+namespace {
+// An image file named by a list: missing, or a folder (a list line naming "rgb/"), is the frame's
+// damage in one line.
+void requireImageFile(const std::string& path, const char* what) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (!fs::exists(st)) throw InputError(path, std::string(what) + " image is missing");
+  if (!fs::is_regular_file(st)) throw InputError(path, std::string(what) + " image is not a file (a folder?)");
+}
+}  // namespace
+
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note) {
-  if (!fs::exists(path)) throw InputError(path, "depth image is missing");
+  requireImageFile(path, "depth");
   // A 16-bit grey PNG in about half OpenCV's time; only a whole file decodes (IEND, CRCs), so the
   // truncation check is needed (and the file opened again) only for what OpenCV gets.
   cv::Mat raw = readPlainPng(path);
   if (raw.empty()) {
-    if (isTruncatedPng(path)) throw InputError(path, "cannot decode depth image (truncated PNG)");
+    if (const std::string damage = pngDamage(path); !damage.empty())
+      throw InputError(path, "cannot decode depth image (" + damage + ")");
     raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   }
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
@@ -99,10 +111,11 @@ cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double
 }
 
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
-  if (!fs::exists(path)) throw InputError(path, "colour image is missing");
+  requireImageFile(path, "colour");
   cv::Mat img = readPlainPng(path);  // an 8-bit RGB PNG, as loadRawDepthPng does
   if (img.type() != CV_8UC3) {
-    if (isTruncatedPng(path)) throw InputError(path, "cannot decode colour image (truncated PNG)");
+    if (const std::string damage = pngDamage(path); !damage.empty())
+      throw InputError(path, "cannot decode colour image (" + damage + ")");
     img = cv::imread(path, cv::IMREAD_UNCHANGED);
     // A depth map read as colour gave a grey picture of the depths, tracked as if it were colour.
     if (img.type() == CV_16UC1)
@@ -235,7 +248,7 @@ double medianRaw(const cv::Mat& raw) {
 
 std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths) {
   for (const std::string& path : paths) {
-    if (path.empty() || !fs::is_regular_file(path) || isTruncatedPng(path)) continue;
+    if (path.empty() || !fs::is_regular_file(path) || !pngDamage(path).empty()) continue;
     const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
     if (!image.empty()) return image.size();
   }

@@ -21,7 +21,7 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size);
 // The same for a file (empty also when it cannot be read).
 cv::Mat readPlainPng(const std::string& path);
 
-// The file's bytes into `bytes` (its storage reused); false when it cannot be read.
+// The file's bytes into `bytes` (its storage reused); false when it cannot be read or is no regular file.
 bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes);
 // Whether `bytes` is a PNG whose header says 8-bit RGB of width x height (nothing decoded): the
 // rawlog writer then copies a recording's colour PNG instead of encoding its pixels again.
@@ -30,8 +30,9 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
 // frames carry whatever the file held (grey, grey and alpha, BGRA, 16 bits a channel). An 8-bit
 // BGR image comes back as it is (its pixels shared).
 cv::Mat asBgr8(cv::Mat image);
-// True for a PNG cut short (no IEND chunk at the end). Checked before decoding, because libpng
-// prints its own line to stderr for such a file.
-bool isTruncatedPng(const std::string& path);
+// What is wrong with a PNG file cut short ("truncated PNG") or with a chunk whose CRC fails ("damaged
+// PNG: its IDAT chunk fails its CRC"); empty for a whole PNG, or a file that is no PNG. Checked before
+// cv::imread, because libpng prints its own line to stderr for such a file.
+std::string pngDamage(const std::string& path);
 
 }  // namespace vofusion
