@@ -298,6 +298,29 @@ TEST(FaultsInput, GroundTruthOutOfOrder) {
 // ---------------------------------------------------------------------------------------------
 // Images
 
+// A damaged accelerometer.txt (a last line cut short by a download) costs its "up", not the run, as a
+// damaged groundtruth.txt costs the evaluation; --strict stops at it.
+TEST(FaultsInput, AccelerometerLineCutShort) {
+  REQUIRE_TUM();
+  TumFixture f = makeTum("faults_accel", 3);
+  const std::string accel = f.dir + "/accelerometer.txt";
+  writeText(accel, "# accelerometer data\n" + std::to_string(f.pairs[0].depth.timestamp) + " -0.1 9.8 0.2\n" +
+                       std::to_string(f.pairs[1].depth.timestamp) + " -0.1 9.8\n");
+  const std::string out = test::tempDir("faults_accel_out");
+  std::string log;
+  EXPECT_EQ(test::run(quote(test::app("vofusion")) + " " + quote(f.dir) + " --out " + quote(out) + " --config " +
+                          quote(fastVofusionConfig()),
+                      &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("warning: " + accel + ": line 3: expected 'timestamp ax ay az' (read without the accelerometer's up)"),
+            std::string::npos)
+      << log;
+  EXPECT_TRUE(fs::exists(out + "/trajectory.txt")) << log;
+  const std::string strict_out = outWithEarlierResult("faults_accel_strict_out");
+  expectCleanFailure(trackCmd(test::app("vofusion"), f.dir, strict_out), accel, "line 3: expected", strict_out);
+}
+
 TEST(FaultsImages, ColourPngMissing) {
   REQUIRE_TUM();
   for (const auto& app : trackers()) {

@@ -234,7 +234,8 @@ TEST(PngDecode, AnyColourImageBecomesEightBitBgr) {
   expectSameAs(asBgr8(wide), bgr);
 }
 
-// What is wrong with a PNG file, said before OpenCV's decoder (whose libpng prints its own line).
+// What is wrong with an image file, said before OpenCV's decoder (libpng prints its own line, libjpeg
+// fills a cut JPEG with grey).
 TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
   const std::string dir = test::tempDir("png_damage");
   cv::Mat img(48, 64, CV_8UC3);
@@ -248,16 +249,20 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
     std::fclose(f);
     return path;
   };
-  EXPECT_EQ(pngDamage(write("whole.png", png)), "");
-  EXPECT_EQ(pngDamage(write("cut.png", std::vector<std::uint8_t>(png.begin(), png.end() - 5))), "truncated PNG");
-  EXPECT_EQ(pngDamage(write("header.png", std::vector<std::uint8_t>(png.begin(), png.begin() + 20))), "truncated PNG");
+  EXPECT_EQ(imageFileDamage(write("whole.png", png)), "");
+  EXPECT_EQ(imageFileDamage(write("cut.png", std::vector<std::uint8_t>(png.begin(), png.end() - 5))), "truncated PNG");
+  EXPECT_EQ(imageFileDamage(write("header.png", std::vector<std::uint8_t>(png.begin(), png.begin() + 20))), "truncated PNG");
   auto flipped = png;
   const std::size_t idat = std::string(png.begin(), png.end()).find("IDAT");
   ASSERT_NE(idat, std::string::npos);
   flipped[idat + 10] ^= 1;
-  EXPECT_EQ(pngDamage(write("flipped.png", flipped)), "damaged PNG: its IDAT chunk fails its CRC");
-  EXPECT_EQ(pngDamage(write("text.png", {'n', 'o', 't'})), "");  // no PNG: OpenCV decides
-  EXPECT_EQ(pngDamage(dir), "");                                 // a folder is no file to read
+  EXPECT_EQ(imageFileDamage(write("flipped.png", flipped)), "damaged PNG: its IDAT chunk fails its CRC");
+  std::vector<std::uint8_t> jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", img, jpeg));
+  EXPECT_EQ(imageFileDamage(write("whole.jpg", jpeg)), "");
+  EXPECT_EQ(imageFileDamage(write("cut.jpg", std::vector<std::uint8_t>(jpeg.begin(), jpeg.end() - 100))), "truncated JPEG");
+  EXPECT_EQ(imageFileDamage(write("text.png", {'n', 'o', 't'})), "");  // neither: OpenCV decides
+  EXPECT_EQ(imageFileDamage(dir), "");                                 // a folder is no file to read
   std::vector<std::uint8_t> bytes{1, 2, 3};
   EXPECT_FALSE(readWholeFile(dir, bytes));
 }

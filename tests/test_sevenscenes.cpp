@@ -131,6 +131,29 @@ TEST(SevenScenes, AMissingOrDamagedColourImageCostsItsFrame) {
   EXPECT_THROW(src.read(0), InputError);
   EXPECT_THROW(src.read(2), InputError);
   EXPECT_NO_THROW(src.read(3));
+  // A JPEG cut short: libjpeg would fill its missing rows with grey.
+  writeFrame(dir, 3, poseOf(3), true);
+  std::filesystem::remove(stem(dir, 3) + ".color.png");
+  const std::string jpg = stem(dir, 3) + ".color.jpg";
+  std::string bytes;
+  {
+    std::ifstream in(jpg, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  ASSERT_GT(bytes.size(), 200u);
+  EXPECT_NO_THROW(SevenScenesSource(dir, {}).read(3));
+  { std::ofstream(jpg, std::ios::binary | std::ios::trunc) << bytes.substr(0, bytes.size() - 100); }
+  try {
+    SevenScenesSource(dir, {}).read(3);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), jpg + ": cannot decode colour image (truncated JPEG)");
+  }
+  std::filesystem::remove(jpg);
+  // More digits than a frame number has is no frame (std::stoi threw out_of_range, unnamed).
+  writeFrame(dir, 4, poseOf(4));
+  std::filesystem::rename(stem(dir, 4) + ".depth.png", dir + "/frame-99999999999.depth.png");
+  EXPECT_EQ(SevenScenesSource(dir, {}).size(), 4u);
   // No colour image to take the size from: one line naming the first.
   for (int n : {1, 3}) std::filesystem::remove(stem(dir, n) + ".color.png");
   try {

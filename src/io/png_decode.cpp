@@ -203,14 +203,18 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
 
 // A PNG that does not end with its IEND chunk is truncated. Caught before OpenCV sees the file,
 // because libpng prints its own "libpng error" line to stderr before OpenCV gives up.
-std::string pngDamage(const std::string& path) {
+std::string imageFileDamage(const std::string& path) {
   thread_local std::vector<std::uint8_t> bytes;
-  if (!readWholeFile(path, bytes) || bytes.size() < 8 || std::memcmp(bytes.data(), kSignature, 8) != 0)
-    return {};  // unreadable or not a PNG: OpenCV decides
+  if (!readWholeFile(path, bytes)) return {};
   const std::uint8_t* p = bytes.data();
   const std::size_t n = bytes.size();
-  std::size_t at = 8;
-  for (; at + 12 <= n; at += 12 + std::size_t(be32(p + at))) {
+  if (n >= 2 && p[0] == 0xFF && p[1] == 0xD8) {  // JPEG: its end-of-image marker, which some writers pad after
+    for (std::size_t i = n - 1; i >= 2 && i + 64 >= n; --i)
+      if (p[i - 1] == 0xFF && p[i] == 0xD9) return {};
+    return "truncated JPEG";
+  }
+  if (n < 8 || std::memcmp(p, kSignature, 8) != 0) return {};  // neither: OpenCV decides
+  for (std::size_t at = 8; at + 12 <= n; at += 12 + std::size_t(be32(p + at))) {
     const std::uint32_t len = be32(p + at);
     if (len > n - at - 12) break;  // the chunk runs past the end
     const std::uint8_t* tag = p + at + 4;

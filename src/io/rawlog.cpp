@@ -143,7 +143,7 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
       plain = true;
       return decoded;
     }
-    if (const std::string damage = pngDamage(file); !damage.empty())
+    if (const std::string damage = imageFileDamage(file); !damage.empty())
       throw InputError(file, "cannot load intensity image (" + damage + ")");
   }
   cv::Mat img;

@@ -22,7 +22,7 @@ namespace vofusion {
 
 namespace {
 
-const std::regex kDepthName(R"(frame-(\d+)\.depth\.png)");
+const std::regex kDepthName(R"(frame-(\d{1,9})\.depth\.png)");  // 7-Scenes: 6 digits; more than an int holds is no frame
 
 // Colour image beside a frame stem: PNG first, then JPEG (both occur in 7-Scenes mirrors).
 std::string colourFor(const std::string& stem) {

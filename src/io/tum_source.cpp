@@ -92,7 +92,7 @@ cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, con
   // truncation check is needed (and the file opened again) only for what OpenCV gets.
   cv::Mat raw = readPlainPng(path);
   if (raw.empty()) {
-    if (const std::string damage = pngDamage(path); !damage.empty())
+    if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode depth image (" + damage + ")");
     raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   }
@@ -114,7 +114,7 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   requireImageFile(path, "colour");
   cv::Mat img = readPlainPng(path);  // an 8-bit RGB PNG, as loadRawDepthPng does
   if (img.type() != CV_8UC3) {
-    if (const std::string damage = pngDamage(path); !damage.empty())
+    if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode colour image (" + damage + ")");
     img = cv::imread(path, cv::IMREAD_UNCHANGED);
     // A depth map read as colour gave a grey picture of the depths, tracked as if it were colour.
@@ -248,7 +248,7 @@ double medianRaw(const cv::Mat& raw) {
 
 std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths) {
   for (const std::string& path : paths) {
-    if (path.empty() || !fs::is_regular_file(path) || !pngDamage(path).empty()) continue;
+    if (path.empty() || !fs::is_regular_file(path) || !imageFileDamage(path).empty()) continue;
     const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
     if (!image.empty()) return image.size();
   }
@@ -338,15 +338,22 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   // The Kinect's accelerometer reads the reaction to gravity ("up") with its x and y axes opposite to
   // the optical frame's (checked on fr1 xyz and rpy against their ground truth).
   const std::string accel = (fs::path(folder) / "accelerometer.txt").string();
-  if (fs::exists(accel))
-    for (const auto& l : dataLines(readTextFile(accel))) {
-      std::istringstream ls(l.text);
-      double t, a[3];
-      std::string extra;
-      if (!(ls >> t >> a[0] >> a[1] >> a[2]) || (ls >> extra) || !std::isfinite(t))
-        throw InputError(accel, "line " + std::to_string(l.number) + ": expected 'timestamp ax ay az'");
-      const Eigen::Vector3d up(-a[0], -a[1], a[2]);
-      if (up.allFinite() && up.norm() > 1.0) accel_.emplace_back(t, up);  // m/s^2; ~0 = no reading
+  // Like the ground truth it only goes along with the frames: damaged, it costs the pictures' measured
+  // "up" (they are then oriented as for a recording without one), not the run, unless --strict.
+  if (fs::exists(accel)) try {
+      for (const auto& l : dataLines(readTextFile(accel))) {
+        std::istringstream ls(l.text);
+        double t, a[3];
+        std::string extra;
+        if (!(ls >> t >> a[0] >> a[1] >> a[2]) || (ls >> extra) || !std::isfinite(t))
+          throw InputError(accel, "line " + std::to_string(l.number) + ": expected 'timestamp ax ay az'");
+        const Eigen::Vector3d up(-a[0], -a[1], a[2]);
+        if (up.allFinite() && up.norm() > 1.0) accel_.emplace_back(t, up);  // m/s^2; ~0 = no reading
+      }
+    } catch (const InputError& e) {
+      if (opts.strict) throw;
+      accel_.clear();
+      printWarning(std::string(e.what()) + " (read without the accelerometer's up)");
     }
   std::sort(accel_.begin(), accel_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
 }

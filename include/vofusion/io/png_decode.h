@@ -30,9 +30,10 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
 // frames carry whatever the file held (grey, grey and alpha, BGRA, 16 bits a channel). An 8-bit
 // BGR image comes back as it is (its pixels shared).
 cv::Mat asBgr8(cv::Mat image);
-// What is wrong with a PNG file cut short ("truncated PNG") or with a chunk whose CRC fails ("damaged
-// PNG: its IDAT chunk fails its CRC"); empty for a whole PNG, or a file that is no PNG. Checked before
-// cv::imread, because libpng prints its own line to stderr for such a file.
-std::string pngDamage(const std::string& path);
+// What is wrong with an image file: a PNG cut short ("truncated PNG") or with a chunk whose CRC fails
+// ("damaged PNG: its IDAT chunk fails its CRC"), a JPEG cut short ("truncated JPEG"); empty for a whole
+// one, or a file of another kind. Checked before cv::imread: libpng prints its own line to stderr for
+// such a PNG, and libjpeg fills a cut JPEG's missing rows with grey and returns it.
+std::string imageFileDamage(const std::string& path);
 
 }  // namespace vofusion
