@@ -243,8 +243,15 @@ struct LiveConsumer {
     if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
     if (!run) return;
     const FrameReport r = run->process(frame);
-    checkpoints.maybeWrite(*run);
-    if (!viewer) return;
+    try {
+      checkpoints.maybeWrite(*run);
+      if (viewer) show(frame, r);
+    } catch (const std::exception& e) {
+      throw FrameDoneError(e.what());  // the frame is in the reconstruction (and summary.json): processed
+    }
+  }
+
+  void show(const Frame& frame, const FrameReport& r) {
     const Reconstruction& rec = run->reconstruction();
     LiveView view;
     view.image = rec.renderView(frame.camera);

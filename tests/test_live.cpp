@@ -125,6 +125,28 @@ TEST(LiveLoop, ConsumerExceptionStopsWithoutLosingCount) {
   EXPECT_EQ(s.processed + s.dropped, s.played);
 }
 
+// A consumer that finished its frame and then failed (vofusion-grab's checkpoint on a full disk, its
+// window): the frame counts as processed, as the reconstruction holds it; the run stops.
+TEST(LiveLoop, AFailureAfterTheFrameCountsItProcessed) {
+  for (const bool done : {false, true}) {
+    SCOPED_TRACE(done);
+    FakeSource src(100, 1);
+    std::size_t seen = 0;
+    const LiveStats s = runLive(src,
+                                [&](const Frame& f) {
+                                  ++seen;
+                                  if (f.index < 10) return;
+                                  if (done) throw FrameDoneError("checkpoint: disk full");
+                                  throw std::runtime_error("boom");
+                                },
+                                queueOf(2));
+    EXPECT_EQ(s.stop, StopReason::ConsumerError);
+    EXPECT_EQ(s.error, done ? "checkpoint: disk full" : "boom");
+    EXPECT_EQ(s.processed, done ? seen : seen - 1);
+    EXPECT_EQ(s.processed + s.dropped, s.played);
+  }
+}
+
 TEST(LiveLoop, ExternalStopFlagInterrupts) {
   FakeSource src(100000, 1);
   std::atomic<bool> stop{false};

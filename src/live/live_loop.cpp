@@ -162,7 +162,9 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
       consumer(frame);
     } catch (const std::exception& e) {
       std::lock_guard<std::mutex> lk(sh.m);
-      ++sh.stats.dropped;  // not finished: counted as dropped so processed stays honest
+      // Not finished: counted as dropped so processed stays honest; finished, then a later step failed:
+      // processed, as the reconstruction holds it.
+      ++(dynamic_cast<const FrameDoneError*>(&e) ? sh.stats.processed : sh.stats.dropped);
       sh.stats.stop = StopReason::ConsumerError;
       sh.stats.error = e.what();
       sh.stop = true;

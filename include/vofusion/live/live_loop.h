@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cstddef>
 #include <functional>
+#include <stdexcept>
 #include <string>
 
 #include <mrpt/config/CLoadableOptions.h>
@@ -45,10 +46,14 @@ struct LiveStats {
   double processedFps() const { return seconds > 0 ? processed / seconds : 0.0; }
 };
 
-// Runs on the calling thread (GUI, reconstruction), may be slow.
+// Runs on the calling thread (GUI, reconstruction), may be slow. An exception stops the run; the frame
+// counts as dropped, unless the consumer throws FrameDoneError: the frame was done, a step after it failed.
 using FrameConsumer = std::function<void(const Frame&)>;
+struct FrameDoneError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 // Runs on the producer thread for EVERY played frame, before queueing (the rawlog recorder: a
-// recording never has drops; it notes in Frame::recorded where it wrote the frame). `raw` is the
+// recording never has drops; it names in Frame::colour_file / depth_file the files it wrote). `raw` is the
 // sensor's own observation, or null for a replay.
 using FrameTap = std::function<void(Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr& raw)>;
 // Called on the calling thread about every 0.1 s and after each processed frame (progress, GUI).
