@@ -447,6 +447,19 @@ TEST(MarchingCubes, RegionByRegionGivesTheWholeWorldMeshAndClosedSeams) {
   EXPECT_EQ(open, 0u);
 }
 
+// A map with no surface (a run stopped before any depth was fused) streams a raw mesh of nothing:
+// a valid PLY of 0 vertices and 0 faces, not a "cannot write" error.
+TEST(MarchingCubes, MeshByRegionOfNoRegionsWritesAnEmptyRawPly) {
+  const std::string raw_path = testing::TempDir() + "/mesh_by_region_empty.ply";
+  std::remove(raw_path.c_str());
+  const RegionMeshResult r = meshByRegion([](const std::function<void(RegionMesh&)>&) {}, MeshCleanParams{}, raw_path);
+  EXPECT_EQ(r.raw_faces, 0u);
+  EXPECT_TRUE(r.mesh.faces.empty());
+  const TriangleMesh back = readPly(raw_path);
+  EXPECT_TRUE(back.vertices.empty());
+  EXPECT_TRUE(back.faces.empty());
+}
+
 TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
   const Eigen::Vector3f centre(-0.05f, 0.13f, 0.02f);
   const SphereBricks sphere(centre, 0.3f, 0.01f, 0.04f);

@@ -53,6 +53,7 @@ class PlyStream {
   void finish() {
     v_.close();
     f_.close();
+    if (!v_ || !f_) throw InputError(path_, "cannot write");  // a side file cut short (disk full)
     std::ofstream out(path_, std::ios::binary);
     out << "ply\nformat binary_little_endian 1.0\ncomment written by vofusion\nelement vertex " << vertices()
         << "\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
@@ -60,7 +61,8 @@ class PlyStream {
         << faces_ << "\nproperty list uchar int vertex_indices\nend_header\n";
     for (const std::string& side : {path_ + ".vertices", path_ + ".faces"}) {
       std::ifstream in(side, std::ios::binary);
-      out << in.rdbuf();
+      // Copying an empty file (a map with no surface) sets out's failbit: nothing to copy, no failure.
+      if (in.peek() != std::ifstream::traits_type::eof()) out << in.rdbuf();
       in.close();
       std::remove(side.c_str());
     }
