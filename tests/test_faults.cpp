@@ -537,6 +537,11 @@ TEST(FaultsOutput, DiskFullFileSizeLimit) {
   for (const auto& app : trackers()) {
     const std::string out = outWithEarlierResult("faults_fsize_out");
     expectCleanFailure(trackCmd(app, f.dir, out), out, "write|File too large", out, "trap \"\" XFSZ; ulimit -f 64; ");
+    // The file it names is where the user looks: not its staged copy (a folder gone by then).
+    const Outcome o = runSplit(trackCmd(app, f.dir, out), "trap \"\" XFSZ; ulimit -f 64; ");
+    ASSERT_EQ(o.error_lines.size(), 1u) << o.stderr_text;
+    EXPECT_EQ(o.error_lines[0].find(".staging"), std::string::npos) << o.error_lines[0];
+    EXPECT_EQ(o.error_lines[0].find(".tmp-"), std::string::npos) << o.error_lines[0];
   }
   const std::string out = test::tempDir("faults_fsize_rawlog");
   writeText(out + "/x.rawlog", kEarlier);

@@ -152,48 +152,53 @@ SceneOptions RunRecorder::Impl::sceneOptions(const Reconstruction& rec, json& s)
 json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log, RegionPremesher* premeshed) {
   Impl& m = *impl_;
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
-  json s = runSummary(rec, info);
-  if (m.rawlog) m.rawlog->finish(rec, m.ground_truth);
-  const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
+  try {
+    json s = runSummary(rec, info);
+    if (m.rawlog) m.rawlog->finish(rec, m.ground_truth);
+    const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
 
-  returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
-  TriangleMesh mesh;
-  if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed);
-  else rec.releaseMap();
+    returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
+    TriangleMesh mesh;
+    if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed);
+    else rec.releaseMap();
 
-  const SceneOptions scene_opts = m.sceneOptions(rec, s);
-  const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
-  // The picture rendered beside the scene's building and writing (each took ~0.35 s of rpy_first100's
-  // time after its last frame, one after the other) where memory allows, else
-  // deferred: rendered by get(), after the scene. The render takes its own copy of the path (reading a
-  // CPose3D's angles fills its cache) and its file name. `png` is declared after all it reads: if the
-  // scene throws, its destructor waits for a render in flight first.
-  const bool beside = !mesh.empty() && pictureBesideScene(mesh);
-  std::future<void> png;
-  if (!mesh.empty())
-    png = std::async(beside ? std::launch::async | std::launch::deferred : std::launch::deferred,
-                     [&mesh, &m, &scene_opts, path = rec.trajectory(), file = out.path("mesh.png")] {
-                       renderMeshPng(file, mesh, &path, m.params.image_width, m.params.image_height,
-                                     scene_opts.up_vector);
-                     });
-  exportScene(out.path("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam, scene_opts);
-  out.wrote("scene.3Dscene", "open with SceneViewer3D");
-  if (png.valid()) {
-    png.get();  // rethrows what the render threw
-    out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height) +
-                              (beside ? ", rendered beside the scene" : ""));
+    const SceneOptions scene_opts = m.sceneOptions(rec, s);
+    const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
+    // The picture rendered beside the scene's building and writing (each took ~0.35 s of rpy_first100's
+    // time after its last frame, one after the other) where memory allows, else
+    // deferred: rendered by get(), after the scene. The render takes its own copy of the path (reading a
+    // CPose3D's angles fills its cache) and its file name. `png` is declared after all it reads: if the
+    // scene throws, its destructor waits for a render in flight first.
+    const bool beside = !mesh.empty() && pictureBesideScene(mesh);
+    std::future<void> png;
+    if (!mesh.empty())
+      png = std::async(beside ? std::launch::async | std::launch::deferred : std::launch::deferred,
+                       [&mesh, &m, &scene_opts, path = rec.trajectory(), file = out.path("mesh.png")] {
+                         renderMeshPng(file, mesh, &path, m.params.image_width, m.params.image_height,
+                                       scene_opts.up_vector);
+                       });
+    exportScene(out.path("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam,
+                scene_opts);
+    out.wrote("scene.3Dscene", "open with SceneViewer3D");
+    if (png.valid()) {
+      png.get();  // rethrows what the render threw
+      out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height) +
+                                (beside ? ", rendered beside the scene" : ""));
+    }
+
+    s["peak_memory_mib"] = peakMemoryMiB();
+    s["heap_huge_pages"] = heapAsksForHugePages();  // the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
+    writeFileAtomically(out.path("summary.json"), s.dump(2) + "\n");
+    out.wrote("summary.json", "run statistics");
+    if (m.rawlog) {
+      m.rawlog->writer().commit();
+      out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);
+    }
+    out.commit(log);
+    return s;
+  } catch (const InputError& e) {
+    throw out.named(e);  // the file as the user will find it, not its staged copy
   }
-
-  s["peak_memory_mib"] = peakMemoryMiB();
-  s["heap_huge_pages"] = heapAsksForHugePages();  // whether the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
-  writeFileAtomically(out.path("summary.json"), s.dump(2) + "\n");
-  out.wrote("summary.json", "run statistics");
-  if (m.rawlog) {
-    m.rawlog->writer().commit();
-    out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);
-  }
-  out.commit(log);
-  return s;
 }
 
 }  // namespace vofusion

@@ -22,6 +22,13 @@ class StagedOutputs {
     std::filesystem::create_directories(staging_.tmp());
   }
   std::string path(const std::string& name) const { return (std::filesystem::path(staging_.tmp()) / name).string(); }
+  // An error a writer threw naming its staged copy, naming the file as the user will find it (the
+  // staging folder is gone by the time the error is read).
+  InputError named(const InputError& e) const {
+    const std::string staged = staging_.tmp() + "/";
+    if (e.file().rfind(staged, 0) != 0) return e;
+    return InputError(final_path_(e.file().substr(staged.size())), e.problem());
+  }
   // `name` is done; staged = false: it was written in place (the rawlog, committed by its writer).
   void wrote(const std::string& name, const std::string& what, bool staged = true) {
     const auto now = std::chrono::steady_clock::now();
