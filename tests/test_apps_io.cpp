@@ -341,6 +341,17 @@ TEST(AppsIoBadInput, EmptyFolderUnknownPresetAndMissingInput) {
   expectCleanFailure(app("tum2rawlog") + " " + empty + "/seq " + outdir + "/o.rawlog", "rgb.txt: lists no frames", outdir);
 }
 
+// --depth-scale is read by a TUM folder only: any other input refuses it rather than ignore it.
+TEST(AppsIoBadInput, DepthScaleOfAnInputWithItsOwnUnits) {
+  const std::string dir = test::tempDir("bad_depth_scale");
+  ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/x.rawlog --frames 2 --size 160x120"), 0);
+  const std::string outdir = test::tempDir("bad_depth_scale_out");
+  for (const std::string& input : {dir + "/x.rawlog", std::string("synthetic")})
+    for (const std::string& tracker : {app("rgbd-odometry"), app("vofusion")})
+      expectCleanFailure(tracker + " " + input + " --out " + outdir + "/o --depth-scale 1000",
+                         input + ": --depth-scale is for a TUM folder's depth PNGs", outdir);
+}
+
 TEST(AppsIoBadInput, EvalBadFiles) {
   const std::string dir = test::tempDir("bad_eval");
   const std::string outdir = test::tempDir("bad_eval_out");

@@ -463,6 +463,8 @@ TEST(FaultsIntrinsics, UnknownOrInconsistentPreset) {
       {"fr9", "unknown intrinsics 'fr9'"},
       {"525,525,319.5", "unknown intrinsics"},
       {"525,525,abc,239.5", "unknown intrinsics"},
+      {"inf,inf,319.5,239.5", "unknown intrinsics"},
+      {"525,525,319.5,239.5,", "unknown intrinsics"},
       {"525,525,900,239.5", "principal point .* outside"},
       {"-525,525,319.5,239.5", "focal"},
   };

@@ -1,5 +1,6 @@
 #include "vofusion/core/camera.h"
 
+#include <cmath>
 #include <sstream>
 #include <vector>
 
@@ -28,12 +29,13 @@ CameraIntrinsics CameraIntrinsics::parse(const std::string& spec, const std::str
     try {
       std::size_t used = 0;
       v.push_back(std::stod(tok, &used));
-      if (used != tok.size()) v.clear(), v.resize(99);
+      if (used != tok.size() || !std::isfinite(v.back())) v.clear(), v.resize(99);  // "inf,inf,..." passed fx > 0
     } catch (const std::exception&) {
       v.resize(99);
       break;
     }
   }
+  if (!spec.empty() && spec.back() == ',') v.resize(99);  // "1,2,3,4," (getline drops the empty last field)
   if (v.size() != 4)
     throw InputError(origin, "unknown intrinsics '" + spec + "' (expected fr1, fr2, fr3, ros or fx,fy,cx,cy)");
   CameraIntrinsics c = make(v[0], v[1], v[2], v[3]);

@@ -90,7 +90,9 @@ double CommandLine::number(const std::string& name, double fallback) const {
   } catch (const std::exception&) {
     used = 0;
   }
-  if (used == 0 || used != v->size()) throw InputError("usage", name + " expects a number, got '" + *v + "'");
+  // std::stod also takes "inf", "nan" and hex floats: none is an option's value (--max-dt inf paired every pose).
+  if (used == 0 || used != v->size() || !std::isfinite(x) || v->find_first_of("xXpP") != std::string::npos)
+    throw InputError("usage", name + " expects a number, got '" + *v + "'");
   return x;
 }
 

@@ -12,16 +12,33 @@ namespace fs = std::filesystem;
 
 namespace vofusion {
 
+namespace {
+// --depth-scale is read by a TUM folder's source only: any other input saying nothing of it would be
+// run with the option silently ignored.
+void refuseDepthScale(const SourceOptions& opts, const std::string& path, const std::string& kind) {
+  if (opts.depth_scale != 0.0)
+    throw InputError(path, "--depth-scale is for a TUM folder's depth PNGs; " + kind + " carries its own depth units");
+}
+}  // namespace
+
 std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts) {
-  if (path.rfind("synthetic", 0) == 0 && !fs::exists(path))
+  if (path.rfind("synthetic", 0) == 0 && !fs::exists(path)) {
+    refuseDepthScale(opts, path, "a synthetic recording");
     return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));
+  }
   if (fs::is_directory(path)) {
     if (fs::exists(fs::path(path) / "rgb.txt")) return std::make_unique<TumFolderSource>(path, opts);
-    if (SevenScenesSource::looksLike(path)) return std::make_unique<SevenScenesSource>(path, opts);
+    if (SevenScenesSource::looksLike(path)) {
+      refuseDepthScale(opts, path, "a 7-Scenes folder (millimetres)");
+      return std::make_unique<SevenScenesSource>(path, opts);
+    }
     throw InputError(path, "folder is not a TUM RGB-D sequence (no rgb.txt) nor a 7-Scenes one (no frame-XXXXXX.depth.png)");
   }
   if (!fs::exists(path)) throw InputError(path, "no such file or folder");
-  if (fs::path(path).extension() == ".rawlog") return std::make_unique<RawlogSource>(path, opts);
+  if (fs::path(path).extension() == ".rawlog") {
+    refuseDepthScale(opts, path, "a rawlog");
+    return std::make_unique<RawlogSource>(path, opts);
+  }
   throw InputError(path, "unknown input type (expected a TUM folder, a .rawlog file or 'synthetic')");
 }
 
