@@ -4,6 +4,8 @@
 #include <iostream>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
@@ -29,6 +31,12 @@ std::string statsJson(const ErrorStats& s) {
   return b;
 }
 
+// A path or message as a JSON string, quoted and escaped (a folder named "seq\1" made the output no JSON);
+// bytes that are no UTF-8 become U+FFFD.
+std::string jsonString(const std::string& text) {
+  return nlohmann::json(text).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--delta", "--max-dt", "--plot"}, {"--json", "--help"});
   if (cl.flag("--help")) {
@@ -51,13 +59,13 @@ int body(int argc, char** argv) {
   const RpeResult rpe = computeRpe(gt, est, delta, max_dt);
 
   if (json) {
-    std::printf("{\"groundtruth\": \"%s\", \"estimate\": \"%s\",\n \"ate_m\": %s,\n", pos[0].c_str(), pos[1].c_str(),
-                statsJson(ate.trans).c_str());
+    std::printf("{\"groundtruth\": %s, \"estimate\": %s,\n \"ate_m\": %s,\n", jsonString(pos[0]).c_str(),
+                jsonString(pos[1]).c_str(), statsJson(ate.trans).c_str());
     if (rpe.success)
       std::printf(" \"rpe\": {\"delta_s\": %.9g, \"trans_m\": %s,\n         \"rot_deg\": %s}}\n", delta,
                   statsJson(rpe.trans).c_str(), statsJson(rpe.rot_deg).c_str());
     else
-      std::printf(" \"rpe\": null, \"rpe_error\": \"%s\"}\n", rpe.message.c_str());
+      std::printf(" \"rpe\": null, \"rpe_error\": %s}\n", jsonString(rpe.message).c_str());
   } else {
     std::printf("%zu poses associated (ATE), %zu pose pairs %.3g s apart (RPE)\n", ate.trans.count,
                 rpe.trans.count, delta);

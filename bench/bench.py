@@ -197,6 +197,8 @@ def run_sequence(seq, args, command):
             entry["eval"] = evaluate(args.rgbd_eval, gt, os.path.join(out, "trajectory.txt"), png)
             if "error" not in entry["eval"]:
                 entry["figure"] = os.path.relpath(png, args.results)
+            else:
+                log("[%s] %s: evaluation FAILED: %s" % (name, mode, entry["eval"]["error"]))
         result["modes"][mode] = entry
         # Written after every mode: an interrupted benchmark keeps what it measured.
         result["complete"] = mode == args.modes[-1]
@@ -330,6 +332,9 @@ def markdown(res, command):
     failed = [m for m in modes if m not in ok]
     for m in failed:
         L.append("- `%s` failed (exit %s): %s" % (m, res["modes"][m]["exit_code"], res["modes"][m].get("error")))
+    for m in ok:
+        if "error" in (res["modes"][m].get("eval") or {}):
+            L.append("- `%s`: evaluation failed: %s" % (m, res["modes"][m]["eval"]["error"]))
     figs = [(m, res["modes"][m]["figure"]) for m in ok if res["modes"][m].get("figure")]
     if figs:
         L.append("## Figures")
@@ -403,7 +408,13 @@ def main():
                 f.write(text)
             os.replace(tmp, path)
     print(summary)
-    return 0
+    # A mode that failed, or whose trajectory could not be evaluated, fails the benchmark (after it wrote
+    # everything it measured).
+    failures = [(r["sequence"], m) for r in results for m, e in r["modes"].items()
+                if e.get("exit_code") != 0 or "error" in (e.get("eval") or {})]
+    for seq, m in failures:
+        print("bench/run: %s, mode %s failed (see its results)" % (seq, m), file=sys.stderr)
+    return 1 if failures else 0
 
 
 if __name__ == "__main__":

@@ -63,7 +63,10 @@ def row(folder, name, recording=None):
             return r
     # 130, 143: stopped by SIGINT, SIGTERM, with what was built written (unless before the first frame)
     stopped_early = code in (130, 143) and "nothing written" in last_line(log_path)
-    if s is not None and code in (None, 0, 130, 143) and not stopped_early:
+    # A batch's job (recording given) without an exit code never finished (killed): a summary.json
+    # there is an earlier run's. A folder of a plain vofusion run has none and is judged by its summary.
+    unfinished_job = code is None and recording is not None
+    if s is not None and code in (None, 0, 130, 143) and not stopped_early and not unfinished_job:
         r["input"] = r["input"] or s.get("input")
         r["mode"] = s.get("mode")
         r["frames"] = s.get("frames")
@@ -81,6 +84,8 @@ def row(folder, name, recording=None):
         r["status"] = "failed: not run"
     elif code is None and not os.path.exists(log_path):
         r["status"] = "failed: no summary.json and no vofusion.log"
+    elif unfinished_job:
+        r["status"] = "failed: the job did not finish (no exit code): %s" % last_line(log_path)
     else:
         r["status"] = "failed%s: %s" % ("" if code is None else " (exit %d)" % code, last_line(log_path))
     return r

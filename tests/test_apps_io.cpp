@@ -6,6 +6,7 @@
 #include <regex>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "support.h"
@@ -278,6 +279,14 @@ TEST(AppsIo, EvalKnownOffsetThroughFiles) {
   ASSERT_EQ(run(app("rgbd-eval") + " " + dir + "/gt.txt " + dir + "/est.txt --json", &out), 0) << out;
   EXPECT_NE(out.find("\"count\": 100"), std::string::npos) << out;
   EXPECT_TRUE(std::regex_search(out, std::regex("\"ate_m\": \\{\"count\": 100, \"rmse\": [0-9.e-]+"))) << out;
+  // --json is JSON whatever the paths hold (a backslash, quotes, a tab).
+  const std::string odd = dir + "/seq\\1 \"q\"\t";
+  fs::create_directories(odd);
+  fs::copy_file(dir + "/gt.txt", odd + "/gt.txt");
+  ASSERT_EQ(run(app("rgbd-eval") + " '" + odd + "/gt.txt' '" + dir + "/est.txt' --json", &out), 0) << out;
+  const nlohmann::json parsed = nlohmann::json::parse(out);
+  EXPECT_EQ(parsed.at("groundtruth"), odd + "/gt.txt");
+  EXPECT_EQ(parsed.at("ate_m").at("count"), 100);
 }
 
 // ---- Bad input: one line naming the file, exit != 0, nothing left behind.

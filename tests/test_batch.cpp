@@ -323,6 +323,35 @@ TEST(Batch, ACtrlCToAJobStopsItsVofusion) {
   EXPECT_EQ(jobs, 4) << log;
 }
 
+// A --list line: blank lines and # comments skipped, a '#' inside a path kept (it cut /data/take#2 to
+// /data/take, a recording that was not there or, worse, another one).
+TEST(Batch, AListKeepsAHashInsideAPath) {
+  const std::string dir = test::tempDir("batch_list");
+  fs::create_directories(dir + "/take#2");
+  fs::create_directories(dir + "/take");
+  std::ofstream(dir + "/list.txt") << "# the recordings\n" << dir << "/take#2   # the second take\n\n  " << dir << "/take\n";
+  std::string log;
+  ASSERT_EQ(test::run(batch() + " --out " + dir + "/o --list " + dir + "/list.txt --dry-run", &log), 0) << log;
+  EXPECT_EQ(log, "take_2\t" + dir + "/take#2\ntake\t" + dir + "/take\n");
+}
+
+// A batch's job that was killed (no exit_code) is a failure, though an earlier run's summary.json is
+// still in its folder; a folder of a plain vofusion run (no jobs list) is judged by its summary.
+TEST(Batch, AKilledJobIsNotTheEarlierRunsResult) {
+  const std::string dir = test::tempDir("batch_killed");
+  fs::create_directories(dir + "/a");
+  std::ofstream(dir + "/a/summary.json") << R"({"input": "/rec/a", "frames": 10, "fps": 20.0})";
+  std::ofstream(dir + "/a/vofusion.log") << "vofusion [joint] 3/10 frames\n";
+  std::ofstream(dir + "/jobs.tsv") << "a\t/rec/a\n";
+  const std::string collect = "python3 " + test::sourceDir() + "/bench/collect.py " + dir + " --json";
+  std::string log;
+  ASSERT_EQ(test::run(collect + " --jobs " + dir + "/jobs.tsv", &log), 0) << log;
+  EXPECT_EQ(nlohmann::json::parse(log)[0].at("status"), "failed: the job did not finish (no exit code): vofusion [joint] 3/10 frames")
+      << log;
+  ASSERT_EQ(test::run(collect, &log), 0) << log;
+  EXPECT_EQ(nlohmann::json::parse(log)[0].at("status"), "ok") << log;
+}
+
 TEST(Batch, BadArgumentsFailInOneLine) {
   const std::string dir = test::tempDir("batch_args");
   struct Case {
