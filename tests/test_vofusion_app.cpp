@@ -166,6 +166,29 @@ TEST(VofusionApp, UnknownConfigKeyFailsInOneLineAndKeepsEarlierResults) {
   EXPECT_EQ(line, "earlier result");
 }
 
+// A run that writes fewer outputs than an earlier one in its folder (here no mesh) leaves the earlier
+// run's files as they were, and says which they are, so that they do not pass for this run's.
+TEST(VofusionApp, AnEarlierRunsOutputsLeftInTheFolderAreNamed) {
+  const std::string dir = test::tempDir("vofusion_app_earlier");
+  const std::string out = dir + "/out";
+  fs::create_directories(out);
+  std::ofstream(out + "/mesh.ply") << "an earlier mesh\n";
+  std::ofstream(out + "/mesh.png") << "an earlier picture\n";
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  std::string log;
+  ASSERT_EQ(test::run("{ " + test::app("vofusion") + " synthetic:room --max-frames 3 --config " + dir + "/nomesh.ini --out " +
+                          out + " 2>&1 >/dev/null; }",
+                      &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("warning: " + out + ": mesh.ply, mesh.png are an earlier run's (this run wrote none)\n"),
+            std::string::npos)
+      << log;
+  std::ifstream mesh(out + "/mesh.ply");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(mesh), {}), "an earlier mesh\n");
+  EXPECT_TRUE(fs::exists(out + "/trajectory.txt"));
+}
+
 // --save-volume's file is written after the run: a path that cannot be a file fails before the first
 // frame, in one line (it used to fail at the end and take trajectory.txt, the mesh and summary.json with it).
 TEST(VofusionApp, SaveVolumeToAFolderFailsBeforeTheRun) {

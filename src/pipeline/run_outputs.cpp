@@ -9,6 +9,7 @@
 #include "staged_outputs.h"
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/heap.h"
+#include "vofusion/core/progress.h"  // printWarning
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/eval/trajectory_eval.h"
 #include "vofusion/scene/scene_export.h"
@@ -149,6 +150,23 @@ SceneOptions RunRecorder::Impl::sceneOptions(const Reconstruction& rec, json& s)
   return o;
 }
 
+namespace {
+// Every file a run may write into its folder, whichever outputs its config asks for.
+const std::vector<std::string> kRunOutputs = {
+    "trajectory.txt", "trajectory_fused.txt", "trajectory_tracked.txt", "trajectory.png", "mesh.ply", "mesh_raw.ply",
+    "mesh_full.ply", "mesh.png", "scene.3Dscene", "summary.json", "poses.rawlog"};
+
+// A folder that also holds an earlier run's outputs (this run asked for fewer: mesh = false, no
+// ground truth) says so, rather than leave them to pass for this run's.
+void warnOfEarlierOutputs(const StagedOutputs& out, const std::string& dir) {
+  const std::vector<std::string> left = out.leftFromEarlier(kRunOutputs);
+  if (left.empty()) return;
+  std::string names;
+  for (const std::string& n : left) names += (names.empty() ? "" : ", ") + n;
+  printWarning(dir + ": " + names + (left.size() == 1 ? " is" : " are") + " an earlier run's (this run wrote none)");
+}
+}  // namespace
+
 json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log, RegionPremesher* premeshed) {
   Impl& m = *impl_;
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
@@ -195,6 +213,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
       out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);
     }
     out.commit(log);
+    warnOfEarlierOutputs(out, m.dir);
     return s;
   } catch (const InputError& e) {
     throw out.named(e);  // the file as the user will find it, not its staged copy

@@ -1,5 +1,6 @@
 #pragma once
 // The run's outputs staged and moved into place together. Private to src/pipeline/.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -37,7 +38,20 @@ class StagedOutputs {
                   std::chrono::duration<double>(now - last_).count());
     log_lines_.push_back(line);
     if (staged) names_.push_back(name);
+    written_.push_back(name);
     last_ = now;
+  }
+  // Of the files a run may write (`every`), those in the folder that this run did not write: an
+  // earlier run's, left as they were (nothing written is removed) but no longer this folder's results.
+  std::vector<std::string> leftFromEarlier(const std::vector<std::string>& every) const {
+    std::vector<std::string> left;
+    for (const std::string& name : every) {
+      std::error_code ec;
+      if (std::find(written_.begin(), written_.end(), name) == written_.end() &&
+          std::filesystem::exists(final_path_(name), ec))
+        left.push_back(name);
+    }
+    return left;
   }
   void commit(std::FILE* log) {
     for (const std::string& name : names_) {
@@ -53,7 +67,7 @@ class StagedOutputs {
   std::function<std::string(const std::string&)> final_path_;
   AtomicPath staging_;
   std::chrono::steady_clock::time_point last_;
-  std::vector<std::string> names_, log_lines_;
+  std::vector<std::string> names_, written_, log_lines_;
 };
 
 }  // namespace vofusion
