@@ -388,4 +388,9 @@ TEST(AppsIoBadInput, RawlogInputs) {
   }
   expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x.rawlog --scene moon", "unknown scene 'moon'", outdir);
   expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --frames 0", "--frames", outdir);
+  expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --seed 4294967297", "--seed expects a whole number below 2^32",
+                     outdir);
+  // A cover of no length, or between two frames (30 fps: 0.01 to 0.02 s), covers no frame.
+  for (const char* cover : {"1:0", "0.01:0.01"})
+    expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --frames 5 --blackout " + cover, "covers no frame", outdir);
 }

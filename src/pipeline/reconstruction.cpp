@@ -142,8 +142,12 @@ FrameReport Reconstruction::process(const Frame& frame) {
   }
   m.waitFusion();
   // Lost: the frame is tracked only once a keyframe places it (from there, as its prior: not from a
-  // frame before the loss), and counts when the map agrees; until then it stays lost, its pose held,
-  // never guessed (ICP from the held pose may converge anywhere once the camera has moved on).
+  // frame before the loss), verified against that keyframe as a loop is; until then it stays lost, its
+  // pose held, never guessed (ICP from the held pose may converge anywhere once the camera has moved on).
+  // ICP against the map then refines the keyframe's pose, or, where it rejects, the frame keeps that
+  // pose (a fallback, fused as fallbacks are). Asking the map to agree as well was measured: the brisk
+  // blackout's seed 2 resumed 22 frames after the view came back instead of 0 (ATE after it 4.0 against
+  // 7.7 mm), over issue 30's 10.
   const bool searching = m.searching;
   const mrpt::poses::CPose3D held = m.kinfu->pose();
   std::optional<loop::Relocalisation> found;

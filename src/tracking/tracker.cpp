@@ -72,6 +72,13 @@ std::vector<DepthLevel> Tracker::Impl::trackingLevels(const Frame& frame, const 
 Eigen::Isometry3d Tracker::Impl::trackOdometry(const Frame& frame, const MotionPrior* prior, FusionResult& res) const {
   const Eigen::Isometry3d* ref_pose = prior ? history.poseOf(prior->reference_index) : nullptr;
   res.tracked = true;
+  // Relocalised (a keyframe placed the frame; no odometry reaches across the loss): the keyframe's
+  // pose, verified as a loop is. This mode has no map to check it against; predicting from the held
+  // pose instead kept every later frame lost.
+  if (!ref_pose && placed) {
+    res.guess = InitialGuess::Prior;
+    return *placed;
+  }
   res.guess = ref_pose ? InitialGuess::Prior : InitialGuess::ConstantVelocity;
   res.predicted = !ref_pose;
   if (ref_pose) return *ref_pose * prior->T_ref_cur;
