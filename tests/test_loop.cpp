@@ -569,3 +569,23 @@ TEST(LoopParams, ShippedDefaultsFileMatchesTheCode) {
   EXPECT_EQ(keys, expected);
   for (const auto& k : expected) EXPECT_EQ(file.read_string("loop", k, "?"), mem.read_string("loop", k, "!")) << k;
 }
+
+// A failure on the loop closer's thread (here descriptors the place index refuses; a keyframe that
+// cannot be read back from its spill file is another) reaches the caller's thread, where the app
+// names it in one line; it used to end the process in std::terminate.
+TEST(LoopCloser, AFailureOnItsThreadIsTheCallersToCatch) {
+  sim::SimOptions o = test::quickSim("room", 4);
+  const sim::SyntheticSequence seq(o);
+  auto features = std::make_shared<DescribedKeypoints>();
+  features->descriptors = cv::Mat(40, 16, CV_8U, cv::Scalar(7));  // BRAND's rows are 32 bytes
+  for (int i = 0; i < 40; ++i) features->points.emplace_back(0.01 * i, 0.0, 1.0);
+  loop::LoopCloser closer(loop::LoopParams{});
+  std::string what;
+  try {
+    for (std::size_t i = 0; i < 4; ++i) closer.addFrame(seq.render(i), pose(0.5 * double(i), 0, 0, 0), true, 0.001, features);
+    closer.finish();
+  } catch (const std::exception& e) {
+    what = e.what();
+  }
+  EXPECT_NE(what.find("place index: descriptors must be CV_8U with 32 bytes a row"), std::string::npos) << what;
+}

@@ -4,6 +4,7 @@
 #include <condition_variable>
 #include <algorithm>
 #include <deque>
+#include <exception>
 #include <mutex>
 #include <optional>
 #include <thread>
@@ -57,6 +58,7 @@ struct LoopCloser::Impl {
   StageTimes times;
   double cpu_seconds = 0.0;  // the thread's CPU time in process()
   KeyframeStoreStats store;
+  std::exception_ptr failure;  // what ended the thread (guarded by mu): rethrown on the caller's thread
   std::thread worker;
 
   Impl(const LoopParams& p, const std::string& spill_dir)
@@ -85,7 +87,19 @@ struct LoopCloser::Impl {
         busy = true;
         taken.notify_all();
       }
-      alone.execute([&] { process(std::move(k)); });
+      try {
+        alone.execute([&] { process(std::move(k)); });
+      } catch (...) {
+        // A keyframe that could not be read back (spill file), a failure inside OpenCV: the thread
+        // ends, and the caller's thread rethrows it at its next hand-over (it was std::terminate).
+        std::lock_guard<std::mutex> lock(mu);
+        failure = std::current_exception();
+        queue.clear();
+        busy = false;
+        idle.notify_all();
+        taken.notify_all();
+        return;
+      }
     }
   }
 
@@ -198,9 +212,11 @@ struct LoopCloser::Impl {
   // the frame loop, not a checkpoint's keyframes being handed over again).
   void enqueue(Keyframe k, bool from_frame_loop = true) {
     std::unique_lock<std::mutex> lock(mu);
+    if (failure) std::rethrow_exception(failure);
     if (queue.size() >= kMaxQueued) {
       frame_loop_waits += from_frame_loop;
-      taken.wait(lock, [&] { return queue.size() < kMaxQueued; });
+      taken.wait(lock, [&] { return failure || queue.size() < kMaxQueued; });
+      if (failure) std::rethrow_exception(failure);
     }
     queue.push_back(std::move(k));
     if (from_frame_loop) max_queued = std::max(max_queued, queue.size());
@@ -209,6 +225,7 @@ struct LoopCloser::Impl {
   void waitIdle() {
     std::unique_lock<std::mutex> lock(mu);
     idle.wait(lock, [&] { return queue.empty() && !busy; });
+    if (failure) std::rethrow_exception(failure);
   }
 
   void publish(const std::vector<LoopRecord>& accepted, const std::vector<std::size_t>& removed,
