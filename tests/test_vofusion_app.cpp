@@ -232,6 +232,23 @@ TEST(VofusionApp, AMapThatCannotBeWrittenCostsTheMapOnly) {
     EXPECT_TRUE(e.is_regular_file() && e.path().filename().string()[0] != '.') << "left behind: " << e.path();
 }
 
+// A checkpoint that cannot be written (a file size limit, as a full disk) is one line naming the
+// checkpoint: the map's part of it said "write failed (disk full?)" and named nothing.
+TEST(VofusionApp, ACheckpointThatCannotBeWrittenIsNamed) {
+  const std::string dir = test::tempDir("vofusion_app_checkpoint_full");
+  const std::string cfg = dir + "/path_only.ini", out = dir + "/out", err = dir + "/err.txt";
+  std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  std::string log;
+  test::run("{ trap '' XFSZ; ulimit -f 1024; " + test::app("vofusion") + " synthetic:room --max-frames 3 --out " + out +
+                " --config " + cfg + " --checkpoint-every 0.000001 2>" + err + " >/dev/null; echo rc=$?; }",
+            &log);
+  EXPECT_EQ(log, "rc=2\n");
+  std::ifstream err_in(err);
+  const std::vector<std::string> lines = test::lines(std::string(std::istreambuf_iterator<char>(err_in), {}));
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.back().rfind("vofusion: error: " + out + "/checkpoint: cannot write the checkpoint", 0), 0u) << lines.back();
+}
+
 TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   VOFUSION_REQUIRE_DATA(test::tumFirst300());
   expectAnInterruptedRunsOutputs(test::tempDir("vofusion_app_sigint"), "INT", 130);

@@ -102,7 +102,7 @@ FrameReport RunSession::process(const Frame& frame) {
 
 void RunSession::saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const {
   AtomicPath out(path);
-  {
+  try {
     std::ofstream os(out.tmp(), std::ios::binary);
     if (!os) throw InputError(path, "cannot write the checkpoint");
     os.write(kCheckpointMagic, sizeof(kCheckpointMagic) - 1);
@@ -116,6 +116,12 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
     state::tag(a, "end");
     os.close();
     if (!os) throw InputError(path, "cannot write the checkpoint (disk full?)");
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& e) {
+    // What a part of the state threw as it was written (the map's "write failed (disk full?)", MRPT's
+    // archive): said of the checkpoint, the file the user asked for.
+    throw InputError(path, "cannot write the checkpoint: " + oneLineMessage(e));
   }
   out.commit();
 }
