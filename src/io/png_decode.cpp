@@ -201,8 +201,8 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
          be32(h + 16) == std::uint32_t(width) && be32(h + 20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
 }
 
-// A PNG that does not end with its IEND chunk is truncated. Caught before OpenCV sees the file,
-// because libpng prints its own "libpng error" line to stderr before OpenCV gives up.
+// A PNG's chunks walked to IEND, each critical one's CRC checked (libpng stops at a bad one with its
+// own "libpng error" line; an ancillary chunk with a bad CRC it only drops); a JPEG's end marker.
 std::string imageFileDamage(const std::string& path) {
   thread_local std::vector<std::uint8_t> bytes;
   if (!readWholeFile(path, bytes)) return {};
@@ -218,7 +218,8 @@ std::string imageFileDamage(const std::string& path) {
     const std::uint32_t len = be32(p + at);
     if (len > n - at - 12) break;  // the chunk runs past the end
     const std::uint8_t* tag = p + at + 4;
-    if (libdeflate_crc32(0, tag, len + 4) != be32(tag + 4 + len))
+    const bool critical = !(tag[0] & 0x20);  // IHDR, PLTE, IDAT, IEND: an upper-case first letter
+    if (critical && libdeflate_crc32(0, tag, len + 4) != be32(tag + 4 + len))
       return "damaged PNG: its " + std::string(reinterpret_cast<const char*>(tag), 4) + " chunk fails its CRC";
     if (isChunk(tag, "IEND")) return {};
   }

@@ -76,6 +76,22 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
 }
 
 namespace {
+// accelerometer.txt: "timestamp ax ay az" per line, as the "up" the sensor feels (the reaction to
+// gravity), in the optical frame.
+std::vector<std::pair<double, Eigen::Vector3d>> readAccelerometer(const std::string& path) {
+  std::vector<std::pair<double, Eigen::Vector3d>> ups;
+  for (const auto& l : dataLines(readTextFile(path))) {
+    std::istringstream ls(l.text);
+    double t, a[3];
+    std::string extra;
+    if (!(ls >> t >> a[0] >> a[1] >> a[2]) || (ls >> extra) || !std::isfinite(t))
+      throw InputError(path, "line " + std::to_string(l.number) + ": expected 'timestamp ax ay az'");
+    const Eigen::Vector3d up(-a[0], -a[1], a[2]);
+    if (up.allFinite() && up.norm() > 1.0) ups.emplace_back(t, up);  // m/s^2; ~0 = no reading
+  }
+  return ups;
+}
+
 // An image file named by a list: missing, or a folder (a list line naming "rgb/"), is the frame's
 // damage in one line.
 void requireImageFile(const std::string& path, const char* what) {
@@ -340,21 +356,14 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   const std::string accel = (fs::path(folder) / "accelerometer.txt").string();
   // Like the ground truth it only goes along with the frames: damaged, it costs the pictures' measured
   // "up" (they are then oriented as for a recording without one), not the run, unless --strict.
-  if (fs::exists(accel)) try {
-      for (const auto& l : dataLines(readTextFile(accel))) {
-        std::istringstream ls(l.text);
-        double t, a[3];
-        std::string extra;
-        if (!(ls >> t >> a[0] >> a[1] >> a[2]) || (ls >> extra) || !std::isfinite(t))
-          throw InputError(accel, "line " + std::to_string(l.number) + ": expected 'timestamp ax ay az'");
-        const Eigen::Vector3d up(-a[0], -a[1], a[2]);
-        if (up.allFinite() && up.norm() > 1.0) accel_.emplace_back(t, up);  // m/s^2; ~0 = no reading
-      }
+  if (fs::exists(accel)) {
+    try {
+      accel_ = readAccelerometer(accel);
     } catch (const InputError& e) {
       if (opts.strict) throw;
-      accel_.clear();
       printWarning(std::string(e.what()) + " (read without the accelerometer's up)");
     }
+  }
   std::sort(accel_.begin(), accel_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
 }
 
