@@ -291,17 +291,18 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
                          "(record with the reconstruction to have it fused again at the corrected ones)\n");
 }
 
-// Everything recorded so far is written, whatever stopped the run; then the reconstruction's outputs
-// and grab-summary.txt.
+// Everything recorded so far is written, whatever stopped the run; then grab-summary.txt and the
+// reconstruction's outputs.
 int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& source, RawlogWriter* writer,
                RunSession* session, const Args& args, const LiveCheckpoints& checkpoints) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   try {
     if (writer) writer->commit();
-    if (session) finishLive(*session, stats, plan, source, args.out, recorded, checkpoints);
+    // The grab's own counts before the reconstruction's outputs, which may fail after a failed run.
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
                         summaryText(stats, source.live->name(), recorded, plan.opts.queue_capacity, source.skipped()));
-  } catch (const InputError&) {
+    if (session) finishLive(*session, stats, plan, source, args.out, recorded, checkpoints);
+  } catch (const std::exception&) {
     if (stats.ok()) throw;
     // What stopped the run (a full disk) stops the outputs after it too: that first cause is the one
     // line; the recording, written frame by frame, holds every frame before it.

@@ -260,6 +260,9 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
   std::vector<std::uint8_t> jpeg;
   ASSERT_TRUE(cv::imencode(".jpg", img, jpeg));
   EXPECT_EQ(imageFileDamage(write("whole.jpg", jpeg)), "");
+  auto padded = jpeg;  // data appended after the end marker (some writers do): still whole
+  padded.insert(padded.end(), 300, std::uint8_t(0));
+  EXPECT_EQ(imageFileDamage(write("padded.jpg", padded)), "");
   EXPECT_EQ(imageFileDamage(write("cut.jpg", std::vector<std::uint8_t>(jpeg.begin(), jpeg.end() - 100))), "truncated JPEG");
   EXPECT_EQ(imageFileDamage(write("text.png", {'n', 'o', 't'})), "");  // neither: OpenCV decides
   EXPECT_EQ(imageFileDamage(dir), "");                                 // a folder is no file to read

@@ -208,8 +208,8 @@ std::string imageFileDamage(const std::string& path) {
   if (!readWholeFile(path, bytes)) return {};
   const std::uint8_t* p = bytes.data();
   const std::size_t n = bytes.size();
-  if (n >= 2 && p[0] == 0xFF && p[1] == 0xD8) {  // JPEG: its end-of-image marker, which some writers pad after
-    for (std::size_t i = n - 1; i >= 2 && i + 64 >= n; --i)
+  if (n >= 2 && p[0] == 0xFF && p[1] == 0xD8) {  // JPEG: an end-of-image marker, the last one searched
+    for (std::size_t i = n - 1; i >= 3; --i)        // from the end (a writer may append data after it)
       if (p[i - 1] == 0xFF && p[i] == 0xD9) return {};
     return "truncated JPEG";
   }

@@ -61,6 +61,7 @@ class PlyStream {
         << faces_ << "\nproperty list uchar int vertex_indices\nend_header\n";
     for (const std::string& side : {path_ + ".vertices", path_ + ".faces"}) {
       std::ifstream in(side, std::ios::binary);
+      if (!in) throw InputError(path_, "cannot write (its side file " + side + " cannot be read back)");
       // Copying an empty file (a map with no surface) sets out's failbit: nothing to copy, no failure.
       if (in.peek() != std::ifstream::traits_type::eof()) out << in.rdbuf();
       in.close();

@@ -102,8 +102,8 @@ FrameReport RunSession::process(const Frame& frame) {
 
 void RunSession::saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const {
   AtomicPath out(path);
+  std::ofstream os(out.tmp(), std::ios::binary);
   try {
-    std::ofstream os(out.tmp(), std::ios::binary);
     if (!os) throw InputError(path, "cannot write the checkpoint");
     os.write(kCheckpointMagic, sizeof(kCheckpointMagic) - 1);
     {
@@ -119,8 +119,10 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
   } catch (const InputError&) {
     throw;
   } catch (const std::exception& e) {
-    // What a part of the state threw as it was written (the map's "write failed (disk full?)", MRPT's
-    // archive): said of the checkpoint, the file the user asked for.
+    // A write that failed under a part of the state (the map's "write failed (disk full?)", MRPT's
+    // archive) is said of the checkpoint, the file the user asked for; anything else (the loop
+    // closer's thread failing) is not the checkpoint's and goes on as it is.
+    if (os.good()) throw;
     throw InputError(path, "cannot write the checkpoint: " + oneLineMessage(e));
   }
   out.commit();
