@@ -1,6 +1,8 @@
 // vofusion-mesh: clean up any triangle mesh PLY with the [mesh] post-processing of vofusion.
 #include <cstdio>
+#include <functional>
 #include <iostream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -33,6 +35,29 @@ const char* kUsage =
     "--png renders the result off-screen, --scene writes an MRPT scene for SceneViewer3D; both show\n"
     "the camera path of --trajectory (TUM format, camera-to-world) when given.\n";
 
+// The outputs, each written to its temporary and all moved into place together once every one is
+// written: one that fails (an off-screen render without EGL, a full disk, a folder that is not there)
+// leaves the earlier files at every path as they were. Errors name the file asked for.
+class StagedFiles {
+ public:
+  void write(const std::string& path, const std::function<void(const std::string&)>& write_to) {
+    auto file = std::make_unique<AtomicPath>(path);
+    try {
+      write_to(file->tmp());
+    } catch (const InputError& e) {
+      if (e.file() != file->tmp()) throw;
+      throw InputError(path, e.problem());
+    }
+    files_.push_back(std::move(file));
+  }
+  void commit() {
+    for (auto& f : files_) f->commit();
+  }
+
+ private:
+  std::vector<std::unique_ptr<AtomicPath>> files_;
+};
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--config", "--report", "--png", "--scene", "--trajectory", "--full", "--distance-to"}, {"--dump-config", "--help"});
   MeshCleanParams params;
@@ -61,15 +86,20 @@ int body(int argc, char** argv) {
   const std::size_t v0 = mesh.vertices.size(), f0 = mesh.faces.size();
   TriangleMesh full;
   const MeshCleanReport report = cleanMesh(mesh, params, cl.value("--full") ? &full : nullptr);
-  if (const auto rp = cl.value("--report")) writeFileAtomically(*rp, report.toJson() + "\n");
+  if (const auto rp = cl.value("--report")) writeFileAtomically(*rp, report.toJson() + "\n");  // also when it failed
   if (!report.success) throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
   if (mesh.faces.empty())
     printWarning(in + ": no face is left (fragments below [mesh] min_component_faces / min_component_area, " +
                  "degenerate or duplicate faces); " + out + " is empty");
-  writeMesh(out, mesh);
-  if (const auto f = cl.value("--full")) writeMesh(*f, full);
-  if (const auto png = cl.value("--png")) renderMeshPng(*png, mesh, traj.empty() ? nullptr : &traj);
-  if (const auto scene = cl.value("--scene")) exportScene(*scene, mesh, traj, nullptr, CameraIntrinsics{});
+  StagedFiles outputs;
+  outputs.write(out, [&](const std::string& tmp) { writeMesh(tmp, mesh, meshFormatOf(out)); });
+  if (const auto f = cl.value("--full"))
+    outputs.write(*f, [&](const std::string& tmp) { writeMesh(tmp, full, meshFormatOf(*f)); });
+  if (const auto png = cl.value("--png"))
+    outputs.write(*png, [&](const std::string& tmp) { renderMeshPng(tmp, mesh, traj.empty() ? nullptr : &traj); });
+  if (const auto scene = cl.value("--scene"))
+    outputs.write(*scene, [&](const std::string& tmp) { exportScene(tmp, mesh, traj, nullptr, CameraIntrinsics{}); });
+  outputs.commit();
   double seconds = 0;
   for (const auto& s : report.steps) seconds += s.seconds;
   std::fprintf(stderr,

@@ -112,8 +112,14 @@ def sensor_rawlog(bin_dir, seq, path):
     with gzip.open(packed, "rb") as src, open(path, "wb") as dst:  # MRPT reads a plain rawlog as well
         shutil.copyfileobj(src, dst, 1 << 20)
     os.remove(packed)
-    os.remove(path + ".gz.groundtruth.txt")  # tum2rawlog's companion; the rawlog holds the ground truth too
+    if os.path.exists(path + ".gz.groundtruth.txt"):  # tum2rawlog's companion (a sequence with ground truth);
+        os.remove(path + ".gz.groundtruth.txt")       # the rawlog holds the ground truth too
     return path
+
+
+def fmt4(x):
+    """A figure to 4 decimals, or "-" where there is none (a sequence without ground truth has no ATE)."""
+    return "-" if x is None else "%.4f" % x
 
 
 def median(values):
@@ -204,7 +210,7 @@ def main():
                   "| live as a sensor records it (colour PNG encoded, depth compressed): processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
                       b["sensor_processed"], b["sensor_played"], 100.0 * b["sensor_processed"] / b["sensor_played"],
                       t["sensor_processed"], t["sensor_played"], 100.0 * t["sensor_processed"] / t["sensor_played"]),
-                  "| ATE RMSE, m | %.4f | %.4f | %s | within +2 %% |" % (b["ate"], t["ate"], ratio("ate")),
+                  "| ATE RMSE, m | %s | %s | %s | within +2 %% |" % (fmt4(b["ate"]), fmt4(t["ate"]), ratio("ate")),
                   "| peak RSS, MiB | %.0f | %.0f | | <= 700 |" % (b["rss"], t["rss"]), ""]
     os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
     with open(os.path.join(HERE, "results", "realtime.md"), "w") as f:

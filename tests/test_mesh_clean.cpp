@@ -630,6 +630,13 @@ TEST(MeshClean, SharedIniDocumentsEveryKeyWithItsDefault) {
     EXPECT_DOUBLE_EQ(shipped.read_double("mesh", k, -12345), dumped.read_double("mesh", k, -54321)) << k;
 }
 
+namespace {
+std::string fileText(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+}  // namespace
+
 TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   const std::string dir = test::tempDir("mesh_app");
   TriangleMesh m = icosphere(2, 0.2f);
@@ -689,6 +696,18 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   EXPECT_EQ(out.rfind("warning: " + dir + "/one.ply: no face is left (fragments below [mesh] min_component_faces / " +
                           "min_component_area, degenerate or duplicate faces); " + dir + "/o.ply is empty\n", 0),
             0u) << out;
+  // The outputs go into place together: one that cannot be written (a scene in a folder that is not
+  // there) leaves the mesh already at out.ply as it was, and the error names the file asked for.
+  const std::string before = fileText(dir + "/out.ply");
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.ply --scene " + dir +
+                          "/no_such_folder/s.3Dscene",
+                      &out),
+            2)
+      << out;
+  EXPECT_EQ(out.rfind("vofusion-mesh: error: " + dir + "/no_such_folder/s.3Dscene: ", 0), 0u) << out;
+  EXPECT_EQ(fileText(dir + "/out.ply"), before);
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << "left behind: " << e.path();
 }
 
 TEST(MeshClean, EmptyAndInvalidMeshes) {

@@ -88,8 +88,10 @@ MeshFormat meshFormatOf(const std::string& path) {
                              " (the extension must be .ply, .obj or .stl)");
 }
 
-void writeMesh(const std::string& path, const TriangleMesh& mesh) {
-  switch (meshFormatOf(path)) {
+void writeMesh(const std::string& path, const TriangleMesh& mesh) { writeMesh(path, mesh, meshFormatOf(path)); }
+
+void writeMesh(const std::string& path, const TriangleMesh& mesh, MeshFormat format) {
+  switch (format) {
     case MeshFormat::Ply: writePly(path, mesh); return;
     case MeshFormat::Obj: writeObj(path, mesh); return;
     case MeshFormat::Stl: writeStl(path, mesh); return;

@@ -23,5 +23,7 @@ enum class MeshFormat { Ply, Obj, Stl };
 MeshFormat meshFormatOf(const std::string& path);
 // Writes PLY, OBJ or STL by the extension of `path`.
 void writeMesh(const std::string& path, const TriangleMesh& mesh);
+// The same in the given format, whatever the path's extension (a temporary of the file asked for).
+void writeMesh(const std::string& path, const TriangleMesh& mesh, MeshFormat format);
 
 }  // namespace vofusion
