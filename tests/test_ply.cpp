@@ -152,6 +152,11 @@ TEST(Ply, MalformedFilesAreInputErrors) {
       {"number", head + "0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n"},
       {"short", head + "0 0 0\n1 0 0\n0 1 0\n3 0 1\n"},
       {"nan", head + "0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n"},
+      {"nanindex", head + "0 0 0\n1 0 0\n0 1 0\n3 0 1 nan\n"},       // NaN passed the range check as vertex 0
+      {"fraction", head + "0 0 0\n1 0 0\n0 1 0\n3 0 1 1.9\n"},       // was vertex 1
+      {"nancount", head + "0 0 0\n1 0 0\n0 1 0\nnan 0 1 2\n"},
+      {"hugeedges", head.substr(0, head.size() - 11) + "element edge 1000000000000000000\nproperty int vertex1\nend_header\n" +
+                        "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"},
       {"novertex", "ply\nformat ascii 1.0\nend_header\n"},
       {"huge", "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
                "property float z\nend_header\n"},
@@ -162,6 +167,11 @@ TEST(Ply, MalformedFilesAreInputErrors) {
     EXPECT_THROW(readPly(p), InputError) << name;
   }
   EXPECT_THROW(readPly(dir + "/missing.ply"), InputError);
+  // An element without properties holds no bytes, however many it announces: read at once (a loop over
+  // 10^18 of them did nothing for as long).
+  writeText(dir + "/empty_elements.ply", head.substr(0, head.size() - 11) + "element edge 1000000000000000000\nend_header\n" +
+                                             "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  EXPECT_EQ(readPly(dir + "/empty_elements.ply").faces.size(), 1u);
 }
 
 TEST(Ply, FailedWriteKeepsEarlierFile) {

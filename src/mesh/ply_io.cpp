@@ -297,15 +297,21 @@ struct BodyParser {
         const Property& p = e.props[k];
         if (!p.is_list) { body.read(p.type, "faces"); continue; }
         const double nd = body.read(p.count_type, "faces");
-        if (nd < 0 || nd > 1e6) throw InputError(path, "face " + std::to_string(i) + " has a bad vertex count");
+        // Written so that NaN (an ASCII "nan", a float list) fails too; a fraction is no count.
+        if (!(nd >= 0 && nd <= 1e6) || nd != std::floor(nd))
+          throw InputError(path, "face " + std::to_string(i) + " has a bad vertex count");
         const auto n = static_cast<std::size_t>(nd);
         poly.clear();
         for (std::size_t j = 0; j < n; ++j) {
           const double idx = body.read(p.type, "faces");
           if (static_cast<int>(k) != il) continue;
-          if (idx < 0 || idx >= static_cast<double>(mesh.vertices.size()) || !have_vertices)
+          if (!(idx >= 0 && idx < static_cast<double>(mesh.vertices.size())) || !have_vertices)
             throw InputError(path, "face " + std::to_string(i) + " references vertex " +
-                                       std::to_string(static_cast<long long>(idx)) + " out of range");
+                                       (std::isfinite(idx) ? std::to_string(static_cast<long long>(idx)) : "nan") +
+                                       " out of range");
+          if (idx != std::floor(idx))  // "1.9" was vertex 1
+            throw InputError(path, "face " + std::to_string(i) + " references vertex " + std::to_string(idx) +
+                                       " (not a whole number)");
           poly.push_back(static_cast<std::uint32_t>(idx));
         }
         if (static_cast<int>(k) != il) continue;
@@ -317,10 +323,17 @@ struct BodyParser {
 
   // Unknown element (edges, materials...): read and discard.
   void skipElement(const Element& e) {
+    // Each record takes at least a byte (a list its count), so more records than bytes left is a lie;
+    // an element without properties is nothing to read however many it announces.
+    if (e.props.empty()) return;
+    if (e.count > data.size())
+      throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " " + e.name + ")");
     for (std::size_t i = 0; i < e.count; ++i)
       for (const Property& p : e.props) {
         if (!p.is_list) { body.read(p.type, e.name.c_str()); continue; }
-        const auto n = static_cast<long long>(body.read(p.count_type, e.name.c_str()));
+        const double nd = body.read(p.count_type, e.name.c_str());
+        if (!(nd >= 0 && nd <= 1e6)) throw InputError(path, e.name + " " + std::to_string(i) + " has a bad list count");
+        const auto n = static_cast<long long>(nd);
         for (long long j = 0; j < n; ++j) body.read(p.type, e.name.c_str());
       }
   }
