@@ -103,6 +103,13 @@ TEST(Config, ALineTheReaderCannotReadIsAnErrorNamingFileAndLine) {
   EXPECT_EQ(error("[loop]\nnote = first part \\\n  second part\nrest = 1\n"), "");
   EXPECT_EQ(error("[loop]\nnote = first part \\\n  second part\nrest 1\n"),
             at + "line 4: expected key = value, a [section] or a comment, got 'rest 1'");
+  // Two lines MRPT reads without a word but loses a key of: a comment ending in '\' (the next line
+  // joins it), and a key after a section's name on its line.
+  EXPECT_EQ(error("[kinfu]\n# recorded on D:\\rec\\\nvoxel_size = 0.004\n"),
+            at + "line 2: a comment ends in '\\', which joins line 3 to it (MRPT would not read that line)");
+  EXPECT_EQ(error("[kinfu] voxel_size = 0.004\n"),
+            at + "line 1: text after the section name ('voxel_size = 0.004' would be dropped): put a key on a line of its own");
+  EXPECT_EQ(error("[kinfu]  ; the map\n[loop] # loops\n"), "");
   fs::create_directories(dir + "/folder.ini");
   EXPECT_THROW(
       {

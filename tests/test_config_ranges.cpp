@@ -105,6 +105,25 @@ TEST(ConfigRanges, OutOfRangeIsOneLineNamingSectionAndKey) {
   }
 }
 
+// The range a key's table gives (and --dump-config shows) is the one checked: [output] refused
+// frustum_every = 0 and images below 64 px with a message of its own while its table said [0, ...]
+// and [16, ...].
+TEST(ConfigRanges, TheRangeShownIsTheRangeChecked) {
+  for (const auto& [key, below, lowest] : {std::tuple{"frustum_every", "0", "1"}, std::tuple{"image_width", "63", "64"}}) {
+    mrpt::config::CConfigFileMemory cfg;
+    cfg.write("output", key, std::string(below));
+    OutputParams out;
+    try {
+      out.loadFromConfigFile(cfg, "output");
+      ADD_FAILURE() << key << " = " << below << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()).rfind(std::string("[output] ") + key + ": must be in [" + lowest + ", ", 0), 0u) << e.what();
+    }
+    cfg.write("output", key, std::string(lowest));
+    EXPECT_NO_THROW(out.loadFromConfigFile(cfg, "output")) << key << " = " << lowest;
+  }
+}
+
 // The sweep: every numeric key at 0, -1 and 1e9 (each alone, the rest default). A run uses 6 frames
 // of the synthetic room at 160x120 with a small volume, so ~300 cases stay within a minute or two.
 TEST(ConfigRanges, SweepNeverCrashesNorPoisonsARun) {

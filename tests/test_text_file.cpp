@@ -23,6 +23,11 @@ TEST(TextFile, DataLinesSkipBlankAndCommentLinesAndKeepLineNumbers) {
   EXPECT_EQ(lines[3].text, "last");
   EXPECT_TRUE(dataLines("").empty());
   EXPECT_TRUE(dataLines("#\n\n").empty());
+  // A UTF-8 byte order mark before a header comment: still a comment (it was line 1's data).
+  const auto bom = dataLines("\xEF\xBB\xBF# timestamp filename\n1 a\n");
+  ASSERT_EQ(bom.size(), 1u);
+  EXPECT_EQ(bom[0].number, 2);
+  EXPECT_EQ(bom[0].text, "1 a");
 }
 
 TEST(TextFile, ReadsWholeFileOrNamesIt) {

@@ -41,7 +41,20 @@ void checkIniLines(const std::string& text, const std::string& path) {
     if (b == std::string::npos) continue;
     const std::string t = line.substr(b);
     const bool comment = t[0] == ';' || t[0] == '#' || t.rfind("//", 0) == 0;
-    const bool section = t[0] == '[' && t.find(']') != std::string::npos;
+    // MRPT joins a line ending in '\' to the next before it sees comments: the next line's key would
+    // be part of the comment, silently (a Windows path "D:\rec\" in a comment).
+    if (comment && continued)
+      throw InputError(path, "line " + std::to_string(number) + ": a comment ends in '\\', which joins line " +
+                                 std::to_string(number + 1) + " to it (MRPT would not read that line)");
+    // MRPT takes the name of "[kinfu] voxel_size = 0.004" and drops the rest of the line.
+    const std::size_t close = t.find(']');
+    if (t[0] == '[' && close != std::string::npos) {
+      const auto rest = t.find_first_not_of(" \t", close + 1);
+      if (rest != std::string::npos && t[rest] != ';' && t[rest] != '#')
+        throw InputError(path, "line " + std::to_string(number) + ": text after the section name ('" + shown(t.substr(rest)) +
+                                   "' would be dropped): put a key on a line of its own");
+    }
+    const bool section = t[0] == '[' && close != std::string::npos;
     const bool define = t.rfind("@define", 0) == 0 && t.size() > 7 && std::isspace(static_cast<unsigned char>(t[7]));
     const bool key = t[0] != '@' && t[0] != '=' && t.find('=') != std::string::npos;
     const bool text_only = std::none_of(line.begin(), line.end(), [](char c) { return c == '\0'; });

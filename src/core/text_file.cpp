@@ -20,7 +20,9 @@ std::string readTextFile(const std::string& path) {
 
 std::vector<TextLine> dataLines(const std::string& text) {
   std::vector<TextLine> lines;
-  std::istringstream in(text);
+  // A UTF-8 byte order mark (an editor's, e.g. Notepad's) is no part of the first line, as the config
+  // reader takes it; it made a header comment line 1's data.
+  std::istringstream in(text.rfind("\xEF\xBB\xBF", 0) == 0 ? text.substr(3) : text);
   std::string line;
   for (int n = 1; std::getline(in, line); ++n) {
     const auto first = line.find_first_not_of(" \t\r");
