@@ -129,6 +129,31 @@ TEST(OdometrySource, AccumulatesPoseAndEmitsVisualOdometryActions) {
   EXPECT_GT(a.poseChange.cov(0, 0), 0.0);
 }
 
+// Frames the odometry cannot match (a covered lens: grey, flat) move the pose on at constant velocity;
+// the next frame it matches is placed from the last one it matched, however many failed in between
+// (after 65 the reference's pose had been forgotten and the frame landed on the extrapolated pose).
+TEST(OdometrySource, AMatchAfterManyFailedFramesIsPlacedFromItsReference) {
+  const auto seq = room(false);
+  OdometrySource src(OdometryParams{}, seq.groundTruth(0));
+  src.process(seq.render(0));
+  Frame moved = seq.render(1);
+  src.process(moved);
+  ASSERT_EQ(src.failures(), 0u);
+  Frame covered = moved;
+  covered.rgb = cv::Mat(moved.rgb.size(), CV_8UC3, cv::Scalar(90, 90, 90));
+  covered.depth = cv::Mat(moved.depth.size(), CV_32F, cv::Scalar(1.8f));
+  for (int i = 0; i < 80; ++i) {
+    covered.timestamp += 1.0 / 30;
+    src.process(covered);
+  }
+  EXPECT_EQ(src.failures(), 80u);
+  EXPECT_GT((src.pose() - seq.groundTruth(1)).translation().norm(), 0.05);  // carried on while covered
+  moved.timestamp = covered.timestamp + 1.0 / 30;  // the same view again
+  src.process(moved);
+  EXPECT_EQ(src.failures(), 80u);
+  EXPECT_LT((src.pose() - seq.groundTruth(1)).translation().norm(), 0.005);
+}
+
 // A caller's observation whose range image is in a file: the file is read checked whole, as a rawlog's
 // is. One cut short is an InputError naming it (MRPT's load() took it as it came: wrong depths), and
 // the observation still names its file afterwards.

@@ -48,8 +48,12 @@ OdometryResult OdometrySource::process(const Frame& input) {
     has_velocity_ = true;
   }
   recent_poses_[count_] = pose_;
-  // References older than a few dozen frames are never used again.
-  while (!recent_poses_.empty() && recent_poses_.begin()->first + 64 < count_) recent_poses_.erase(recent_poses_.begin());
+  if (r.success || count_ == 0) last_matched_ = count_;
+  // References older than a few dozen frames are never used again, but for the last frame matched: the
+  // odometry keeps it as its reference through failed frames (a covered lens), however many. Without
+  // it, the frame matched after 65 of them landed where constant velocity had carried the pose.
+  for (auto it = recent_poses_.begin(); it != recent_poses_.end() && it->first + 64 < count_;)
+    it = it->first == last_matched_ ? std::next(it) : recent_poses_.erase(it);
   ++count_;
   return r;
 }
