@@ -1,8 +1,6 @@
 // vofusion-mesh: clean up any triangle mesh PLY with the [mesh] post-processing of vofusion.
 #include <cstdio>
-#include <functional>
 #include <iostream>
-#include <memory>
 #include <string>
 #include <vector>
 
@@ -34,29 +32,6 @@ const char* kUsage =
     "prints the mean and max distance from the result to another mesh (e.g. the raw one).\n"
     "--png renders the result off-screen, --scene writes an MRPT scene for SceneViewer3D; both show\n"
     "the camera path of --trajectory (TUM format, camera-to-world) when given.\n";
-
-// The outputs, each written to its temporary and all moved into place together once every one is
-// written: one that fails (an off-screen render without EGL, a full disk, a folder that is not there)
-// leaves the earlier files at every path as they were. Errors name the file asked for.
-class StagedFiles {
- public:
-  void write(const std::string& path, const std::function<void(const std::string&)>& write_to) {
-    auto file = std::make_unique<AtomicPath>(path);
-    try {
-      write_to(file->tmp());
-    } catch (const InputError& e) {
-      if (e.file() != file->tmp()) throw;
-      throw InputError(path, e.problem());
-    }
-    files_.push_back(std::move(file));
-  }
-  void commit() {
-    for (auto& f : files_) f->commit();
-  }
-
- private:
-  std::vector<std::unique_ptr<AtomicPath>> files_;
-};
 
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--config", "--report", "--png", "--scene", "--trajectory", "--full", "--distance-to"}, {"--dump-config", "--help"});
@@ -91,7 +66,7 @@ int body(int argc, char** argv) {
   if (mesh.faces.empty())
     printWarning(in + ": no face is left (fragments below [mesh] min_component_faces / min_component_area, " +
                  "degenerate or duplicate faces); " + out + " is empty");
-  StagedFiles outputs;
+  AtomicFileSet outputs;  // together: a scene that cannot be written leaves an earlier out.ply as it was
   outputs.write(out, [&](const std::string& tmp) { writeMesh(tmp, mesh, meshFormatOf(out)); });
   if (const auto f = cl.value("--full"))
     outputs.write(*f, [&](const std::string& tmp) { writeMesh(tmp, full, meshFormatOf(*f)); });

@@ -10,6 +10,7 @@
 
 #include "support.h"
 #include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/core/text_file.h"
 
 using namespace vofusion;
@@ -35,4 +36,30 @@ TEST(AtomicFile, RemovesStagingOfProcessesThatAreGone) {
   EXPECT_TRUE(fs::exists(live));
   EXPECT_TRUE(fs::exists(other));  // only the staging of the path being written
   EXPECT_EQ(readTextFile(dir + "/summary.json"), "{}\n");
+}
+
+// Several outputs move into place together: none is at its path before commit(), a writer that fails
+// leaves the earlier files as they were, and its error names the file asked for, not its temporary.
+TEST(AtomicFile, ASetOfFilesMovesIntoPlaceTogether) {
+  const std::string dir = test::tempDir("atomic_set");
+  writeFileAtomically(dir + "/a.txt", "earlier a");
+  {
+    AtomicFileSet set;
+    set.write(dir + "/a.txt", [](const std::string& tmp) { writeFileAtomically(tmp, "new a"); });
+    try {
+      set.write(dir + "/b.txt", [](const std::string& tmp) { throw InputError(tmp, "cannot write: disk full"); });
+      FAIL() << "no error";
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), dir + "/b.txt: cannot write: disk full");
+    }
+  }  // never committed
+  EXPECT_EQ(readTextFile(dir + "/a.txt"), "earlier a");
+  AtomicFileSet set;
+  set.write(dir + "/a.txt", [](const std::string& tmp) { writeFileAtomically(tmp, "new a"); });
+  set.write(dir + "/b.txt", [](const std::string& tmp) { writeFileAtomically(tmp, "new b"); });
+  EXPECT_EQ(readTextFile(dir + "/a.txt"), "earlier a");
+  set.commit();
+  EXPECT_EQ(readTextFile(dir + "/a.txt"), "new a");
+  EXPECT_EQ(readTextFile(dir + "/b.txt"), "new b");
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 2);
 }

@@ -75,6 +75,21 @@ void AtomicPath::commit() {
   committed_ = true;
 }
 
+void AtomicFileSet::write(const std::string& path, const std::function<void(const std::string& tmp)>& write_to) {
+  auto file = std::make_unique<AtomicPath>(path);
+  try {
+    write_to(file->tmp());
+  } catch (const InputError& e) {
+    if (e.file() != file->tmp()) throw;
+    throw InputError(path, e.problem());
+  }
+  files_.push_back(std::move(file));
+}
+
+void AtomicFileSet::commit() {
+  for (auto& f : files_) f->commit();
+}
+
 void writeFileAtomically(const std::string& path, const std::string& contents) {
   AtomicPath out(path);
   {

@@ -51,8 +51,8 @@ void checkIniLines(const std::string& text, const std::string& path) {
     if (t[0] == '[' && close != std::string::npos) {
       const auto rest = t.find_first_not_of(" \t", close + 1);
       if (rest != std::string::npos && t[rest] != ';' && t[rest] != '#')
-        throw InputError(path, "line " + std::to_string(number) + ": text after the section name ('" + shown(t.substr(rest)) +
-                                   "' would be dropped): put a key on a line of its own");
+        throw InputError(path, "line " + std::to_string(number) + ": text after the section name ('" +
+                                   shown(t.substr(rest)) + "' would be dropped): put a key on a line of its own");
     }
     const bool section = t[0] == '[' && close != std::string::npos;
     const bool define = t.rfind("@define", 0) == 0 && t.size() > 7 && std::isspace(static_cast<unsigned char>(t[7]));

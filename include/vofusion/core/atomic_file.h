@@ -3,7 +3,10 @@
 // If the writer is destroyed without commit() (an exception, Ctrl-C unwinding), the temporary is
 // removed and any earlier <path> is left untouched. A run killed by a signal leaves its temporary:
 // the next AtomicPath for the same <path> removes those whose process is gone.
+#include <functional>
+#include <memory>
 #include <string>
+#include <vector>
 
 namespace vofusion {
 
@@ -21,6 +24,19 @@ class AtomicPath {
  private:
   std::string final_, tmp_;
   bool committed_ = false;
+};
+
+// Several outputs at paths of their own, moved into place together: each is written to its temporary
+// (write), and commit() renames them all once every one was written. One that fails to write leaves
+// every earlier file at those paths as it was. A writer's InputError naming the temporary is rethrown
+// naming the file asked for (the temporary is gone by the time the error is read).
+class AtomicFileSet {
+ public:
+  void write(const std::string& path, const std::function<void(const std::string& tmp)>& write_to);
+  void commit();
+
+ private:
+  std::vector<std::unique_ptr<AtomicPath>> files_;
 };
 
 // Convenience for text outputs; throws InputError(path, strerror) if the write fails (disk full...).
