@@ -356,7 +356,8 @@ int run(const Args& args) {
   hooks.stop = &stopFlag();
   if (writer)
     hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) {
-      if (auto files = writer->write(f)) f.colour_file = files->colour, f.depth_file = files->depth;  // linked by poses.rawlog
+      // The files it wrote go with the frame: poses.rawlog links them.
+      if (auto files = writer->write(f)) f.colour_file = files->colour, f.depth_file = files->depth;
     };
   std::size_t total = source.live->size();
   if (plan.opts.max_frames > 0 && (total == 0 || total > plan.opts.max_frames)) total = plan.opts.max_frames;

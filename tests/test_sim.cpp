@@ -441,6 +441,19 @@ TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
   int frames = 0;
   for (; last->next(f); ++frames) EXPECT_EQ(cv::countNonZero(f.depth) == 0, f.index == 7) << f.index;
   EXPECT_EQ(frames, 8);
+  // One between two frames (0.01 to 0.05 s at 10 fps) covers none: refused by the sequence itself, so
+  // a test's SimOptions or a synthetic: input is held to it as the app is.
+  sim::SimOptions between;
+  between.frames = 8;
+  between.fps = 10;
+  between.blackout_start = 0.01;
+  between.blackout_seconds = 0.04;
+  try {
+    sim::SyntheticSequence seq(between);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "--blackout: 0.01:0.04 covers no frame (frames are 0.1 s apart)");
+  }
 }
 
 // --pace plays the scene's path faster: frame i at pace 2 is where frame 2i is at pace 1.

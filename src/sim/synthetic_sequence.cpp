@@ -490,12 +490,20 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   if (!(o.colour_offset_max >= 0 && o.colour_offset_max <= 0.05)) throw InputError("--colour-offset", "must be in [0, 0.05] s");
   if (!(o.depth_readout >= 0 && o.depth_readout <= 0.1)) throw InputError("--depth-readout", "must be in [0, 0.1] s");
   if (!(o.blackout_start >= 0 && o.blackout_seconds >= 0)) throw InputError("--blackout", "T:S must be two non-negative times in s");
-  // A cover from after the last frame (frame i is at i / fps) would change nothing: refused, not ignored.
+  // A cover that holds no frame (frame i is at i / fps) would change nothing: refused, not ignored,
+  // whether it starts after the last frame or falls between two.
   const double last_frame_time = (double(o.frames) - 1) / o.fps;
   if (o.blackout_seconds > 0 && o.blackout_start > last_frame_time) {
     char why[160];
     std::snprintf(why, sizeof why, "starts at %g s, after the last frame (at %g s: %zu frames at %g fps)",
                   o.blackout_start, last_frame_time, std::size_t(o.frames), o.fps);
+    throw InputError("--blackout", why);
+  }
+  const double first_covered = std::ceil(o.blackout_start * o.fps - 1e-9) / o.fps;  // the first frame at or after T
+  if (o.blackout_seconds > 0 && first_covered >= o.blackout_start + o.blackout_seconds) {
+    char why[160];
+    std::snprintf(why, sizeof why, "%g:%g covers no frame (frames are %g s apart)", o.blackout_start, o.blackout_seconds,
+                  1.0 / o.fps);
     throw InputError("--blackout", why);
   }
   impl_ = impl;
