@@ -75,6 +75,11 @@ TEST(Scene, UpAxisFollowsThePath) {
   EXPECT_NEAR(z, 1.0, 1e-9);
   sceneUpRotation(roomPath(3), nullptr, SceneOptions::Up::Auto).composePoint(0, 0, 1, x, y, z);
   EXPECT_NEAR(z, 1.0, 1e-9);
+  // A run's smoothed path: the first centre moved by 0.2 mm, its orientation as tracked.
+  Trajectory smoothed = odo;
+  smoothed.front().pose = CPose3D(-0.000067, 0.000174, -0.000123, 0, 0, 0);
+  sceneUpRotation(smoothed, nullptr, SceneOptions::Up::Auto).composePoint(0, -1, 0, x, y, z);
+  EXPECT_NEAR(z, 1.0, 1e-9) << "a path in the first camera's frame whose start the smoother moved";
   // With a mesh, the floor decides: a room whose up is the first camera's (0, -cos 40, -sin 40)
   // (a camera pitched 40 deg down at the floor) is put upright.
   TriangleMesh room = test::boxRoom(4, 3, 2.5, 6);

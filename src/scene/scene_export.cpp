@@ -23,6 +23,12 @@ namespace vofusion {
 
 using mrpt::poses::CPose3D;
 
+// A path in the first camera's optical frame starts with its orientation (a run's map is that frame).
+// 1e-4 rad: well above trajectory.txt's rounding, far below any mocap frame's chance alignment.
+static bool startsUnrotated(const CPose3D& first) {
+  return Eigen::AngleAxisd(Eigen::Matrix3d(first.getRotationMatrix().asEigen())).angle() < 1e-4;
+}
+
 // The normal of the largest surface facing within 60 deg of `up` (faces face the cameras, so a
 // floor's or table's normal points up): among a sample of face normals, the one with the most face
 // area within 10 deg of it, then refined by the area-weighted mean of all normals within 10 deg.
@@ -67,7 +73,9 @@ static Eigen::Vector3d dominantPlaneNormal(const TriangleMesh& mesh, const Eigen
 mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh* mesh, SceneOptions::Up up,
                                      const std::optional<Eigen::Vector3d>& up_vector) {
   bool camera_frame = up == SceneOptions::Up::MinusY;
-  if (up == SceneOptions::Up::Auto) camera_frame = !path.empty() && path.front().pose.asVectorVal().norm() < 1e-6;
+  // Judged by the first orientation alone: the path smoother moves every centre, the first included
+  // (by ~0.2 mm), and keeps the orientations as tracked.
+  if (up == SceneOptions::Up::Auto) camera_frame = !path.empty() && startsUnrotated(path.front().pose);
   if (!camera_frame && !up_vector) return CPose3D();
   Eigen::Vector3d u(0, -1, 0);
   if (up_vector && up_vector->norm() > 0) u = up_vector->normalized();

@@ -29,7 +29,7 @@ namespace vofusion {
 
 struct SceneOptions {
   enum class Up { Auto, PlusZ, MinusY };
-  // Auto: when the path starts at the identity (a run in the first camera's optical frame, y down),
+  // Auto: when the path starts unrotated (a run in the first camera's optical frame, y down),
   // the normal of the mesh's dominant roughly-horizontal surface (floor, table) found near the
   // camera's -y, or -y itself without a mesh; +z otherwise (TUM ground truth, mocap frame).
   Up up = Up::Auto;
