@@ -168,6 +168,24 @@ TEST(Reconstruction, ReleasingTheMapKeepsTrajectoryAndStatistics) {
   rec.releaseMap();  // twice is harmless
 }
 
+// Re-fusing reads the recording again. Frames it lacks now (damaged since the run) pass their poses
+// over: the frames after them used to be fused at the missing frames' poses, ten frames behind here.
+TEST(Reconstruction, ReintegrationPassesOverFramesTheRecordingNoLongerHas) {
+  const std::size_t frames = 24;
+  const sim::SyntheticSequence seq(test::quickSim("room", frames));
+  Reconstruction rec(test::quickRoomConfig(), TrackingMode::Joint);
+  for (std::size_t i = 0; i < frames; ++i) rec.process(seq.render(i));
+  std::size_t next = 0, last_progress = 0;
+  const std::size_t fused = rec.reintegrate(
+      [&](Frame& f) {
+        if (next == 5) next = 15;  // frames 5-14 gone
+        return next < frames ? (f = seq.render(next++), true) : false;
+      },
+      [&](std::size_t read) { last_progress = read; });
+  EXPECT_EQ(fused, frames - 10);
+  EXPECT_EQ(last_progress, frames) << "frame 23 was fused at frame 13's pose";
+}
+
 // Region by region the fused room comes out in as many pieces as the whole world cleaned at once:
 // no slivers left where a region's repair cut a kept surface at a seam (they were the specks along
 // the bundled room's wall tops in mesh.png).

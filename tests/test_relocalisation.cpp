@@ -48,6 +48,43 @@ TEST(Relocalisation, ACoveredCameraIsFoundAgainInTheSameMapAndTheGapIsReportedLo
   }
 }
 
+// A sensor whose first frames have no depth (warming up): they are lost, and the first frame with depth
+// starts the map. Counted tracked, the first blank frame used to become keyframe 0, and with no features
+// there every frame after the next loss stayed lost, searched for against it.
+TEST(Relocalisation, BlankFirstFramesAreLostAndTheFirstWithDepthStartsTheMap) {
+  sim::SimOptions o = test::quickSim("room", 60);
+  o.blackout_start = 0.0;  // frames 0 and 1
+  o.blackout_seconds = 0.05;
+  const sim::SyntheticSequence seq(o);
+  Reconstruction rec(test::quickRoomConfig(), TrackingMode::Joint);
+  std::vector<FrameReport> reports;
+  for (std::size_t i = 0; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
+  rec.finish();
+  EXPECT_FALSE(reports[0].tracked);
+  EXPECT_FALSE(reports[1].tracked);
+  EXPECT_EQ(rec.lostFrames(), 2u);
+  for (std::size_t i = 2; i < seq.size(); ++i) {
+    EXPECT_TRUE(reports[i].tracked) << i;
+    const mrpt::poses::CPose3D moved = rec.trackedTrajectory()[i].pose - rec.trackedTrajectory()[2].pose;
+    EXPECT_LT((moved.translation() - (seq.groundTruth(i) - seq.groundTruth(2)).translation()).norm(), 0.03) << i;
+  }
+}
+
+// A first frame whose readings all lie nearer than [kinfu] min_depth (a camera face down on a desk) is
+// lost too: it used to start an empty model, and mode kinfu tracked no frame against it to the end.
+TEST(Relocalisation, AFirstFrameWithNoReadingInRangeDoesNotStartTheMap) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 20));
+  Reconstruction rec(test::quickRoomConfig(), TrackingMode::KinFu);
+  Frame too_near = seq.render(0);
+  too_near.depth.setTo(0.1f);
+  std::vector<FrameReport> reports{rec.process(too_near)};
+  for (std::size_t i = 1; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
+  rec.finish();
+  EXPECT_FALSE(reports[0].tracked);
+  for (std::size_t i = 1; i < seq.size(); ++i) EXPECT_TRUE(reports[i].tracked) << i << ": " << reports[i].note;
+  EXPECT_EQ(rec.lostFrames(), 1u);
+}
+
 namespace {
 
 // The first second-long stretch from frame `from` on in which the camera turns at least 30 deg and

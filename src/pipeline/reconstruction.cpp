@@ -85,7 +85,13 @@ struct Reconstruction::Impl {
     times.merge(fusing_result.times);
   }
   ~Impl() {
-    if (fusing_pending) fusing.wait();
+    // Unwinding from another error, or never asked for the result: what fuse() threw is not rethrown
+    // here (it would end the process).
+    if (!fusing_pending) return;
+    try {
+      fusing.wait();
+    } catch (...) {
+    }
   }
   // The frame tracked against the map and fused (beside the next frame's odometry when overlap_fusion).
   FusionResult track(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry) {
@@ -174,7 +180,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
     f = lost;
   }
   r.times.merge(f.times);
-  r.tracked = f.tracked || m.frames == 0;
+  r.tracked = f.tracked;  // the first frame with depth starts the map (the tracker's); one without is lost
   r.fell_back = f.fell_back;
   r.predicted = f.predicted;
   r.note = f.reason;
@@ -253,7 +259,10 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   std::size_t read = 0, fused = 0;
   Frame frame;
   while (read < poses.size() && next(frame)) {
-    // A recording may hold frames the run never processed (dropped by the live queue): skipped.
+    // A recording may hold frames the run never processed (dropped by the live queue): skipped. It may
+    // lack frames the run processed (damaged since): their poses are passed over, not given to the next.
+    while (read < poses.size() && frame.timestamp > poses[read].timestamp + 1e-3) ++read;
+    if (read == poses.size()) break;
     if (frame.timestamp < poses[read].timestamp - 1e-3) continue;
     if (m.fused[read]) map.integrateAt(frame, poses[read].pose), ++fused;
     ++read;

@@ -203,20 +203,26 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   // as if the estimator had given nothing.
   if (prior && !fusion::isFinite(*prior)) prior = nullptr;
   // No reading at all (a covered lens, a sensor glitch): nothing to track, the frame is lost.
-  if (frame.depth.empty() || frame.depth.type() != CV_32FC1 || cv::countNonZero(frame.depth) == 0) {
+  const auto lostForNoDepth = [&] {
     res.rejection = Rejection::NoDepth;
     res.reason = toString(res.rejection);
     res.pose = toMrpt(s.history.pose());
     ++s.stats.frames;
     ++s.stats.lost;
     return res;
-  }
+  };
+  if (frame.depth.empty() || frame.depth.type() != CV_32FC1 || cv::countNonZero(frame.depth) == 0)
+    return lostForNoDepth();
   CameraIntrinsics cam = frame.camera, track_cam;
   cam.width = frame.depth.cols;
   cam.height = frame.depth.rows;
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<DepthLevel> levels = s.trackingLevels(frame, geometry, cam, track_cam);
   res.times.add("preprocess", secondsSince(t0));
+  const bool had_model = map.hasModel();
+  // The first frame starts the map only with readings in [min_depth, max_depth]: one without (a camera
+  // face down on a desk) would start an empty model that no later frame can track against.
+  if (!had_model && cv::countNonZero(levels[0].depth) == 0) return lostForNoDepth();
   map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
   // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
   std::vector<IntensityLevel> intensity;
@@ -225,7 +231,6 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
     intensity = intensityPyramid(frame.rgb, levels[0].depth.size(), static_cast<int>(levels.size()));
     res.times.add("intensity", secondsSince(t0));
   }
-  const bool had_model = map.hasModel();
   Eigen::Isometry3d new_pose = s.history.pose();
   if (!had_model) {
     res.tracked = true;  // the first frame defines the map
