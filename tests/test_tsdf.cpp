@@ -83,6 +83,24 @@ TsdfParams smallParams() {
 
 }  // namespace
 
+// A truncation band wider than two bricks (20 mm half-samples over 16 mm bricks): a wall lying in a
+// brick's last voxel needs the next brick, which samples trunc / 2 apart stepped over.
+TEST(Tsdf, AWideTruncationBandStepsOverNoBrick) {
+  TsdfParams p;
+  p.volume_voxels = 256;
+  p.voxel_size = 0.002f;  // bricks of 16 mm
+  p.truncation = 0.04f;
+  p.mark_step = 1;
+  const float wall = 0.6395f;  // in brick 39 (0.624-0.640 m), the zero crossing at brick 40's edge
+  TsdfVolume vol(p, Eigen::Vector3f(0.f, 0.f, wall));
+  const CameraIntrinsics c = smallCam();
+  const Eigen::Isometry3f T = lookAt(Eigen::Vector3f::Zero(), Eigen::Vector3f(0.f, 0.f, 1.f));
+  vol.integrate(renderDepth(c, T, nullptr, 0.f, &wall), cv::Mat(), c, T);
+  const TriangleMesh m = vol.extractMesh();
+  EXPECT_GT(m.faces.size(), 50000u) << "the wall's zero crossing needs both bricks";
+  for (const auto& v : m.vertices) ASSERT_NEAR(v.z(), wall, p.voxel_size);
+}
+
 TEST(Tsdf, SphereMeshWithinOneVoxelClosedAndOutwardOriented) {
   const TsdfParams p = smallParams();
   const Eigen::Vector3f& centre = kSphereCentre;

@@ -6,6 +6,7 @@
 
 #include <csignal>
 #include <cstring>
+#include <tuple>
 #include <fstream>
 #include <random>
 #include <set>
@@ -406,7 +407,8 @@ TEST(WorldModel, SpillStreamsAreZlibsBothWays) {
 
 // A released place is written again: best fit, the rest stays free, neighbours merge.
 TEST(WorldModel, SpillFileWritesReleasedPlacesAgain) {
-  SpillFile f(test::tempDir("spill_reuse"), "a test spill file");
+  const std::string dir = test::tempDir("spill_reuse");
+  SpillFile f(dir, "a test spill file");
   const auto bytes = [](std::size_t n, std::uint8_t v) { return std::vector<std::uint8_t>(n, v); };
   const SpillFile::Record a = *f.append(bytes(100, 1)), b = *f.append(bytes(50, 2)), c = *f.append(bytes(80, 3));
   const SpillFile::Record d = *f.append(bytes(10, 4));
@@ -428,6 +430,14 @@ TEST(WorldModel, SpillFileWritesReleasedPlacesAgain) {
   EXPECT_EQ(f.read(d), bytes(10, 4));
   const SpillFile::Record h = *f.append(bytes(11, 7));  // larger than any free place: at the end
   EXPECT_EQ(h.offset, 240u);
+  // A record the file does not hold (a disk that lost it) is an error naming where the file is.
+  try {
+    f.read(SpillFile::Record{1000, 10});
+    ADD_FAILURE() << "read past the end";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(dir + ": cannot read a test spill file: short file", 0), 0u)
+        << e.what();
+  }
 }
 
 // A spill file that cannot be made (or written) answers no place instead of throwing: the first
@@ -546,6 +556,22 @@ TEST(WorldModel, VolumeWithEverythingOnDiskKeepsItsMapAndSavesIt) {
   std::stringstream cut(bytes.substr(0, bytes.size() / 2));
   TsdfVolume broken(disk.tsdf, Eigen::Vector3f::Zero());
   EXPECT_THROW(broken.load(cut), std::runtime_error);
+  // Coordinates the checksums do not cover: the volume's origin (bytes 20-31) and the first brick's
+  // (bytes 40-51), each made one the world model's keys cannot hold. Taken, the brick was stored
+  // wrapped around (x = 2^20 + 5 read back as -2^20 + 5), the origin overflowed the volume's indices.
+  for (const auto& [offset, value, why] : {std::tuple{20, std::int32_t(2147483640), "origin out of range"},
+                                           std::tuple{40, std::int32_t((1 << 20) + 5), "coordinates out of range"}}) {
+    std::string flipped = bytes;
+    std::memcpy(&flipped[offset], &value, sizeof(value));
+    std::stringstream in(flipped);
+    TsdfVolume corrupt(disk.tsdf, Eigen::Vector3f::Zero());
+    try {
+      corrupt.load(in);
+      ADD_FAILURE() << why << ": loaded";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(WorldModel, SaveThenResumeGivesTheMeshOfOneRun) {

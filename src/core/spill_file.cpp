@@ -92,7 +92,7 @@ std::vector<std::uint8_t> SpillFile::read(Record r) const {
   while (done < bytes.size()) {
     const ssize_t n = ::pread(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(r.offset + done));
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw std::runtime_error("cannot read " + what_ + ": " + (n == 0 ? std::string("short file") : std::strerror(errno)));
+    if (n <= 0) throw std::runtime_error(folder_ + ": cannot read " + what_ + ": " + (n == 0 ? std::string("short file") : std::strerror(errno)));
     done += static_cast<std::size_t>(n);
   }
   return bytes;

@@ -129,6 +129,10 @@ void TsdfVolume::markTouchedBricks(const cv::Mat& depth, const CameraIntrinsics&
   // Sampled readings must lie closer than half a brick apart even at the far end of the range.
   const int step = std::max(1, std::min(params_.mark_step,
                                         static_cast<int>(0.5f * kBrickEdge * vs * std::min(fx, fy) / zmax)));
+  // Along each ray, samples of the band no further apart than half a brick, so that a band spanning
+  // several bricks steps over none of them (trunc / 2 apart, 5 samples, at the defaults).
+  const int band_steps = std::max(2, static_cast<int>(std::ceil(trunc / (0.5f * kBrickEdge * vs))));
+  const float band_step = trunc / band_steps;
   std::fill(marks_.begin(), marks_.end(), 0);
   parallelFor(0, (h + step - 1) / step, [&](int row_index) {
     const int y = row_index * step;
@@ -137,8 +141,8 @@ void TsdfVolume::markTouchedBricks(const cv::Mat& depth, const CameraIntrinsics&
       const float z = row[x];
       if (!(z >= zmin && z <= zmax)) continue;
       const Eigen::Vector3f ray((x - cx) / fx, (y - cy) / fy, 1.f);
-      for (int k = -2; k <= 2; ++k) {
-        const Eigen::Vector3f p = (R * (ray * (z + 0.5f * k * trunc)) + t) * inv_brick;
+      for (int k = -band_steps; k <= band_steps; ++k) {
+        const Eigen::Vector3f p = (R * (ray * (z + k * band_step)) + t) * inv_brick;
         const int s = slotOf(cvFloor(p.x()), cvFloor(p.y()), cvFloor(p.z()));  // = std::floor (tsdf_sampling.h)
         // Many rows mark the same brick: a relaxed atomic store (all write the same 1).
         if (s >= 0) __atomic_store_n(&marks_[s], std::uint8_t{1}, __ATOMIC_RELAXED);
@@ -335,6 +339,10 @@ void TsdfVolume::load(std::istream& is) {
                              ", truncation " + std::to_string(tr) + ": the [kinfu] settings differ");
   Eigen::Vector3i o;
   for (int i = 0; i < 3; ++i) o[i] = get<std::int32_t>(is, "header");
+  // Checked, as the zlib checksums cover only the voxels: a flipped byte here would place bricks
+  // elsewhere, or overflow the volume's indices.
+  if (!WorldModel::keyHolds(o) || !WorldModel::keyHolds(o + Eigen::Vector3i::Constant(n_)))
+    throw std::runtime_error("corrupt header (volume origin out of range)");
   const auto count = get<std::uint64_t>(is, "brick count");
   // Start empty at the saved origin.
   for (std::size_t s = 0; s < slots_.size(); ++s)
@@ -348,6 +356,7 @@ void TsdfVolume::load(std::istream& is) {
   for (std::uint64_t i = 0; i < count; ++i) {
     auto b = std::make_unique<Brick>();
     for (int k = 0; k < 3; ++k) b->coord[k] = get<std::int32_t>(is, "brick");
+    if (!WorldModel::keyHolds(b->coord)) throw std::runtime_error("corrupt brick record (coordinates out of range)");
     const auto len = get<std::uint32_t>(is, "brick");
     if (len == 0 || len > 4 * sizeof(Brick)) throw std::runtime_error("corrupt brick record");
     bytes.resize(len);
@@ -359,6 +368,7 @@ void TsdfVolume::load(std::istream& is) {
       if (slots_[s] >= 0) throw std::runtime_error("brick stored twice");
       setSlot(s, bricks_.add(*b));
     } else {
+      if (world_->contains(c)) throw std::runtime_error("brick stored twice");
       world_->put(std::move(b));
     }
   }

@@ -148,7 +148,7 @@ void WorldModel::spillDue(std::size_t& due) {
 void WorldModel::readRecord(SpillFile::Record r, Brick& out) const {
   const auto t0 = std::chrono::steady_clock::now();
   const std::vector<std::uint8_t> bytes = spill_.read(r);
-  if (!decompressBrick(bytes.data(), bytes.size(), out)) throw std::runtime_error("corrupt record in the world model's spill file");
+  if (!decompressBrick(bytes.data(), bytes.size(), out)) throw std::runtime_error(spill_.folder() + ": corrupt record in the world model's spill file");
   reloaded_.fetch_add(1, std::memory_order_relaxed);
   reload_nanoseconds_.fetch_add(
       std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count()),

@@ -40,8 +40,10 @@ class SpillFile {
   std::optional<Record> append(const std::vector<std::uint8_t>& bytes);
   // Why the file could not be created or written; empty while it could.
   std::string failure() const;
-  // Throws std::runtime_error when the record cannot be read whole.
+  // Throws std::runtime_error ("<folder>: cannot read <what>: ...") when the record cannot be read whole.
   std::vector<std::uint8_t> read(Record r) const;
+  // Where the file was made, for errors about what it holds (once a record was appended).
+  const std::string& folder() const { return folder_; }
   // r's place may be written again: only once nothing will read r (the world model releases a brick
   // when it takes it back, on the thread that appends).
   void release(Record r);

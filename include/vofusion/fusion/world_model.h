@@ -75,6 +75,11 @@ class WorldModel {
   bool contains(const Eigen::Vector3i& c) const;
   WorldModelStats stats() const;
   static std::uint64_t key(const Eigen::Vector3i& c);
+  // Brick coordinates the keys hold: [-kKeyReach, kKeyReach) on each axis (21 bits).
+  static constexpr int kKeyReach = 1 << 20;
+  static bool keyHolds(const Eigen::Vector3i& c) {
+    return (c.array() >= -kKeyReach).all() && (c.array() < kKeyReach).all();
+  }
 
  private:
   struct Cached {
