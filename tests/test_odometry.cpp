@@ -4,6 +4,7 @@
 #include <fstream>
 
 #include <mrpt/poses/CPose3DPDFGaussian.h>
+#include <opencv2/imgproc.hpp>
 
 #include "support.h"
 #include "vofusion/core/config.h"
@@ -152,6 +153,52 @@ TEST(OdometrySource, AMatchAfterManyFailedFramesIsPlacedFromItsReference) {
   src.process(moved);
   EXPECT_EQ(src.failures(), 80u);
   EXPECT_LT((src.pose() - seq.groundTruth(1)).translation().norm(), 0.005);
+}
+
+// The same through the odometry's other held frame: a frame that failed (a view matching nothing)
+// is the reference the next frames fall back on; after many covered frames, the same view again is
+// placed from that failed frame's pose, not from where constant velocity carried the pose meanwhile.
+TEST(OdometrySource, AMatchAgainstAnOldFailedFrameIsPlacedFromIt) {
+  const auto seq = room(false);
+  OdometrySource src(OdometryParams{}, seq.groundTruth(0));
+  src.process(seq.render(0));
+  Frame next = seq.render(1);
+  src.process(next);
+  ASSERT_EQ(src.failures(), 0u);
+  Frame strange = next;  // a texture of noise on a plane: keypoints, none of them the room's
+  strange.rgb = cv::Mat(next.rgb.size(), CV_8UC3);
+  cv::RNG rng(7);
+  rng.fill(strange.rgb, cv::RNG::UNIFORM, 0, 255);
+  cv::GaussianBlur(strange.rgb, strange.rgb, cv::Size(5, 5), 1.5);
+  strange.depth = cv::Mat(next.depth.size(), CV_32F, cv::Scalar(1.5f));
+  strange.timestamp += 1.0 / 30;
+  src.process(strange);
+  ASSERT_EQ(src.failures(), 1u);
+  const mrpt::poses::CPose3D strange_pose = src.pose();
+  Frame covered = next;
+  covered.rgb = cv::Mat(next.rgb.size(), CV_8UC3, cv::Scalar(90, 90, 90));
+  covered.depth = cv::Mat(next.depth.size(), CV_32F, cv::Scalar(1.8f));
+  covered.timestamp = strange.timestamp;
+  for (int i = 0; i < 80; ++i) {
+    covered.timestamp += 1.0 / 30;
+    src.process(covered);
+  }
+  ASSERT_EQ(src.failures(), 81u);
+  EXPECT_GT((src.pose() - strange_pose).translation().norm(), 0.05);  // carried on while covered
+  strange.timestamp = covered.timestamp + 1.0 / 30;  // the same view again
+  src.process(strange);
+  EXPECT_EQ(src.failures(), 81u) << "matched against the failed frame";
+  EXPECT_LT((src.pose() - strange_pose).translation().norm(), 0.005);
+}
+
+// A library caller's frame whose colour and depth differ in size is refused: BRAND reads the depth's
+// point map at the colour keypoints' pixels (past its end for a larger colour image).
+TEST(RgbdOdometry, ColourAndDepthOfDifferentSizesAreRefused) {
+  const auto seq = room(false);
+  Frame f = seq.render(0);
+  cv::resize(f.depth, f.depth, cv::Size(f.depth.cols / 2, f.depth.rows / 2), 0, 0, cv::INTER_NEAREST);
+  RgbdOdometry odo;
+  EXPECT_THROW(odo.process(f), std::invalid_argument);
 }
 
 // A caller's observation whose range image is in a file: the file is read checked whole, as a rawlog's

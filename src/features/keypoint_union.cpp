@@ -14,7 +14,7 @@ std::vector<cv::KeyPoint> mergeKeypoints(const std::vector<cv::KeyPoint>& a, con
   }
   // Grid hash with cells of `radius`: a neighbour lies in the 3x3 cells around a point.
   auto cell = [radius](float v) { return static_cast<long>(std::floor(v / radius)); };
-  auto key = [](long cx, long cy) { return (cx << 32) ^ (cy & 0xffffffffL); };
+  auto key = [](long cx, long cy) { return long((static_cast<unsigned long>(cx) << 32) ^ (cy & 0xffffffffL)); };
   std::unordered_multimap<long, cv::Point2f> grid;
   grid.reserve(a.size() * 2);
   for (const auto& k : a) grid.emplace(key(cell(k.pt.x), cell(k.pt.y)), k.pt);

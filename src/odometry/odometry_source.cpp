@@ -1,5 +1,7 @@
 #include "vofusion/odometry/odometry_source.h"
 
+#include <algorithm>
+
 #include "vofusion/io/external_files.h"
 #include "vofusion/io/rawlog.h"
 
@@ -48,12 +50,12 @@ OdometryResult OdometrySource::process(const Frame& input) {
     has_velocity_ = true;
   }
   recent_poses_[count_] = pose_;
-  if (r.success || count_ == 0) last_matched_ = count_;
-  // References older than a few dozen frames are never used again, but for the last frame matched: the
-  // odometry keeps it as its reference through failed frames (a covered lens), however many. Without
-  // it, the frame matched after 65 of them landed where constant velocity had carried the pose.
-  for (auto it = recent_poses_.begin(); it != recent_poses_.end() && it->first + 64 < count_;)
-    it = it->first == last_matched_ ? std::next(it) : recent_poses_.erase(it);
+  // The poses of the frames the odometry still holds, however old: it keeps its reference (and its
+  // last failed frame) through failed frames, a covered lens. A frame matched after many of them lands
+  // from its reference, not where constant velocity has carried the pose.
+  const std::vector<std::size_t> held = odometry_.heldFrames();
+  for (auto it = recent_poses_.begin(); it != recent_poses_.end();)
+    it = std::find(held.begin(), held.end(), it->first) != held.end() ? std::next(it) : recent_poses_.erase(it);
   ++count_;
   return r;
 }

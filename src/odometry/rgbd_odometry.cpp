@@ -9,6 +9,7 @@
 #include <future>
 #include <limits>
 #include <optional>
+#include <stdexcept>
 
 #include <Eigen/Dense>
 #include <opencv2/calib3d.hpp>
@@ -620,12 +621,26 @@ void RgbdOdometry::Impl::advance(FrameFeatures cur, const Motion& mo) {
   T_kf_last.setIdentity();
 }
 
+std::vector<std::size_t> RgbdOdometry::heldFrames() const {
+  const Impl& m = *impl_;
+  std::vector<std::size_t> held;
+  for (const auto* f : {&m.reference, &m.last, &m.failed})
+    if (*f) held.push_back((*f)->index);
+  for (const auto& [f, T] : m.older) held.push_back(f.index);
+  return held;
+}
+
 OdometryResult RgbdOdometry::process(const Frame& frame) {
   OdometryResult r;
   r.covariance.setIdentity();
   const OdometryParams& P = impl_->params;
   Impl& m = *impl_;
   if (!frame.valid()) return failed(r, "empty frame");
+  // Keypoints found in the colour image are looked up in the depth's maps, pixel for pixel.
+  if (frame.rgb.size() != frame.depth.size())
+    throw std::invalid_argument("RgbdOdometry: colour " + std::to_string(frame.rgb.cols) + "x" +
+                                std::to_string(frame.rgb.rows) + " and depth " + std::to_string(frame.depth.cols) +
+                                "x" + std::to_string(frame.depth.rows) + " differ in size");
   // Frame to frame, the frames before the previous one join the fit (references > 1).
   std::vector<Impl::OlderFrame> older;
   if (P.keyframe_min_inliers <= 0)

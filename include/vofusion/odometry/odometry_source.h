@@ -45,8 +45,8 @@ class OdometrySource {
   mrpt::math::CMatrixDouble66 covariance_;
   double timestamp_ = 0.0;
   bool has_increment_ = false, has_velocity_ = false;
-  std::size_t count_ = 0, failures_ = 0, last_matched_ = 0;
-  std::map<std::size_t, mrpt::poses::CPose3D> recent_poses_;  // frame number -> pose (references)
+  std::size_t count_ = 0, failures_ = 0;
+  std::map<std::size_t, mrpt::poses::CPose3D> recent_poses_;  // frame number -> pose (the odometry's held frames)
   StageTimes times_;
 };
 

@@ -117,6 +117,9 @@ class RgbdOdometry {
   // a failure the last frame whose motion was estimated (then, if that fails too, the failed frame);
   // the first frame (or the first after reset()) returns success=false with failure "first frame".
   OdometryResult process(const Frame& frame);
+  // The frames (Frame::index) a later result's reference_index may name: the reference, the last
+  // frame with a pose, the last failed frame and the older references. However old they are.
+  std::vector<std::size_t> heldFrames() const;
   void reset();
   // Checkpoints: what the next frame is matched against (the reference, the older frames, the last
   // failed frame, their velocities) and the colour-time votes. An odometry with the same parameters
