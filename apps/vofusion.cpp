@@ -100,7 +100,10 @@ Input openInput(const RunPlan& plan, bool warn) {
 // The configuration file with the command line's overrides; out-of-range values name the file.
 void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   plan.cfg = loadConfig(plan.config_path);
-  checkConfigKeys(plan.cfg, plan.config_path, vofusionConfigSections());
+  // A live run's --config (rawlog-grabber's sections beside ours) is checked in our sections, as
+  // vofusion-grab checked it: the run resumes from its checkpoint with the file it was started with.
+  if (isGrabberConfig(plan.cfg)) checkKnownSections(plan.cfg, plan.config_path, vofusionConfigSections());
+  else checkConfigKeys(plan.cfg, plan.config_path, vofusionConfigSections());
   auto& cfg = plan.cfg;
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
   // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.

@@ -105,6 +105,19 @@ TEST(ConfigRanges, OutOfRangeIsOneLineNamingSectionAndKey) {
   }
 }
 
+// No ICP iteration at the finest level left its statistics (inliers, overlap) at 0, and every ICP was
+// rejected as "too few ICP inliers (0 of 0)": mode kinfu lost every frame.
+TEST(ConfigRanges, ICPJudgedOnAFinestLevelNeedsAnIterationThere) {
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.write("kinfu", "icp_iterations_l0", 0);
+  try {
+    Reconstruction rec(cfg, TrackingMode::KinFu);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "[kinfu] icp_iterations_l0: must be in [1, 100], got 0");
+  }
+}
+
 // The range a key's table gives (and --dump-config shows) is the one checked: [output] refused
 // frustum_every = 0 and images below 64 px with a message of its own while its table said [0, ...]
 // and [16, ...].

@@ -166,6 +166,32 @@ TEST(VofusionApp, UnknownConfigKeyFailsInOneLineAndKeepsEarlierResults) {
   EXPECT_EQ(line, "earlier result");
 }
 
+// vofusion-grab's --config (rawlog-grabber's [global] and sensor sections beside ours) is the file a
+// live run resumes with: vofusion reads our sections of it and leaves the sensor's to MRPT's drivers.
+TEST(VofusionApp, ALiveRunsGrabberConfigIsRead) {
+  const std::string dir = test::tempDir("vofusion_app_grabcfg");
+  const std::string cfg = dir + "/live.ini";
+  std::ofstream(cfg) << "[global]\nrawlog_prefix = ./grab\n"
+                        "[vofusion-grab]\nrawlog-grabber-ignore = true\nqueue_capacity = 2\n"
+                        "[OPENNI2]\ndriver = COpenNI2Sensor\nwidth = 640\n"
+                        "[odometry]\nkeypoints = star\n"
+                        "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
+                        "[output]\nmesh = false\n";
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
+                          "/out 2>&1",
+                      &log),
+            0)
+      << log;
+  // Our sections are still checked key by key.
+  std::ofstream(cfg, std::ios::app) << "[odometry]\nkeypoint = star\n";
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
+                          "/out2 2>&1",
+                      &log),
+            2);
+  EXPECT_NE(log.find("live.ini: unknown key 'keypoint' in section [odometry]"), std::string::npos) << log;
+}
+
 // A run that writes fewer outputs than an earlier one in its folder (here no mesh) leaves the earlier
 // run's files as they were, and says which they are, so that they do not pass for this run's.
 TEST(VofusionApp, AnEarlierRunsOutputsLeftInTheFolderAreNamed) {

@@ -170,6 +170,20 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
   checkConfigKeys(ours, origin, known);
 }
 
+bool isGrabberConfig(const mrpt::config::CConfigFileBase& user) {
+  std::vector<std::string> sections;
+  user.getAllSections(sections);
+  for (const auto& s : sections) {
+    std::vector<std::string> keys;
+    user.getAllKeys(s, keys);
+    if (keys.empty()) continue;
+    if (s == "global") return true;
+    for (const auto& k : keys)
+      if (trimmed(k) == "driver") return true;
+  }
+  return false;
+}
+
 std::string dumpConfig(const std::vector<ConfigSection>& known) { return defaultsOf(known).getContent(); }
 
 }  // namespace vofusion

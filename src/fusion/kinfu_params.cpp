@@ -26,7 +26,7 @@ std::vector<ConfigKey> keys(KinFuParams& p) {
       {"min_depth", &p.preprocess.min_depth, "m, readings used for tracking", 0.0, 20.0},
       {"max_depth", &p.preprocess.max_depth, "m", 0.1, 20.0},
       {"max_normal_jump", &p.preprocess.max_normal_jump, "fraction of depth: larger neighbour jumps give no normal", 0.001, 10.0},
-      {"icp_iterations_l0", &p.icp.iterations[0], "ICP iterations at the finest tracking level", 0.0, 100.0},
+      {"icp_iterations_l0", &p.icp.iterations[0], "ICP iterations at the finest tracking level (its statistics judge the fit)", 1.0, 100.0},
       {"icp_iterations_l1", &p.icp.iterations[1], "ICP iterations at 1/2 of it", 0.0, 100.0},
       {"icp_iterations_l2", &p.icp.iterations[2], "ICP iterations at 1/4 of it", 0.0, 100.0},
       {"icp_max_distance", &p.icp.max_distance, "m, correspondence distance threshold", 0.001, 10.0},

@@ -19,7 +19,7 @@ std::vector<ConfigKey> outputKeys(OutputParams& p) {
       {"clean_mesh", &p.clean_mesh, "CGAL post-processing with the [mesh] parameters"},
       {"save_full_mesh", &p.save_full_mesh, "also mesh_full.ply (post-processed but not simplified)"},
       {"frustum_every", &p.frustum_every, "frames between camera frustums in scene.3Dscene", 1.0, 100000.0},
-      {"image_width", &p.image_width, "px, mesh.png and trajectory.png", 64.0, 8192.0},
+      {"image_width", &p.image_width, "px, mesh.png (trajectory.png has its own fixed panels)", 64.0, 8192.0},
       {"image_height", &p.image_height, "px", 64.0, 8192.0},
       {"rpe_delta", &p.rpe_delta, "s, pose-pair spacing of the relative pose error in summary.json", 0.01, 100.0},
   };

@@ -34,6 +34,10 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
 void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                         const std::vector<ConfigSection>& known);
 
+// True for a rawlog-grabber configuration such as vofusion-grab's --config: it has rawlog-grabber's
+// [global] section or a sensor section (one with a `driver` key).
+bool isGrabberConfig(const mrpt::config::CConfigFileBase& user);
+
 // The defaults of all given stages as INI text (for --dump-config and the documented share/ file).
 std::string dumpConfig(const std::vector<ConfigSection>& known);
 
