@@ -32,9 +32,13 @@ std::atomic<const char*> g_stopping{kStopping};
 // Only async-signal-safe work: lock-free atomics, clock_gettime(), write(), signal() and raise().
 void onStopSignal(int signal) {
   const std::int64_t now = monotonicNs();
+  // Its time before the flag: a second signal that sees the flag set sees the first one's time too.
+  if (!g_stop.load()) {
+    std::int64_t unset = 0;
+    g_first_ns.compare_exchange_strong(unset, now);
+  }
   if (!g_stop.exchange(true)) {  // the first stop request
     g_signal = signal;
-    g_first_ns = now;
     const char* said = g_stopping.load();
     std::size_t length = 0;
     while (said[length]) ++length;

@@ -57,6 +57,28 @@ struct Shared {
 
 bool externalStop(const LiveHooks& h) { return h.stop && h.stop->load(); }
 
+// In a catch block: what the exception in flight says.
+std::string currentExceptionText() {
+  try {
+    throw;
+  } catch (const std::exception& e) {
+    return e.what();
+  } catch (...) {
+    return "unknown exception";
+  }
+}
+
+// In a catch block: whether the exception in flight is a FrameDoneError.
+bool frameWasDone() {
+  try {
+    throw;
+  } catch (const FrameDoneError&) {
+    return true;
+  } catch (...) {
+    return false;
+  }
+}
+
 void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks, Shared& sh) {
   nameThisThread("vof-grab");
   StopReason reason = StopReason::EndOfStream;
@@ -74,9 +96,9 @@ void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks,
       if (hooks.on_grabbed) {
         try {
           hooks.on_grabbed(frame, raw);
-        } catch (const std::exception& e) {
+        } catch (...) {
           reason = StopReason::RecorderError;
-          error = e.what();
+          error = currentExceptionText();
           // This frame was played but will never reach the consumer.
           std::lock_guard<std::mutex> lk(sh.m);
           ++sh.stats.played;
@@ -97,6 +119,9 @@ void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks,
   } catch (const std::exception& e) {
     reason = StopReason::SourceError;
     error = e.what();
+  } catch (...) {  // not to end the process on this thread
+    reason = StopReason::SourceError;
+    error = "the source failed with an unknown exception";
   }
   std::lock_guard<std::mutex> lk(sh.m);
   if (sh.stop && reason == StopReason::EndOfStream) reason = StopReason::Interrupted;
@@ -118,6 +143,20 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
   const auto t0 = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   std::thread producer([&] { produce(source, opt, hooks, sh); });
+  // Whatever leaves this function (an exception from a hook) stops and joins the producer first: a
+  // joinable std::thread's destructor ends the process.
+  struct JoinOnExit {
+    Shared& sh;
+    std::thread& t;
+    ~JoinOnExit() {
+      if (!t.joinable()) return;
+      {
+        std::lock_guard<std::mutex> lk(sh.m);
+        sh.stop = true;
+      }
+      t.join();
+    }
+  } join_on_exit{sh, producer};
 
   auto last_tick = std::chrono::steady_clock::now();
   auto tick = [&](bool force) {
@@ -160,13 +199,13 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
     }
     try {
       consumer(frame);
-    } catch (const std::exception& e) {
+    } catch (...) {
       std::lock_guard<std::mutex> lk(sh.m);
       // Not finished: counted as dropped so processed stays honest; finished, then a later step failed:
       // processed, as the reconstruction holds it.
-      ++(dynamic_cast<const FrameDoneError*>(&e) ? sh.stats.processed : sh.stats.dropped);
+      ++(frameWasDone() ? sh.stats.processed : sh.stats.dropped);
       sh.stats.stop = StopReason::ConsumerError;
-      sh.stats.error = e.what();
+      sh.stats.error = currentExceptionText();
       sh.stop = true;
       continue;
     }

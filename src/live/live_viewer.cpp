@@ -12,6 +12,19 @@
 
 namespace vofusion {
 
+namespace {
+// The window's scene, locked for as long as this lives: an exception while drawing (out of memory)
+// leaves it unlocked, or the GUI thread's next paint would wait forever.
+struct SceneLock {
+  mrpt::gui::CDisplayWindow3D& win;
+  mrpt::opengl::COpenGLScene::Ptr& scene;
+  explicit SceneLock(mrpt::gui::CDisplayWindow3D& w) : win(w), scene(w.get3DSceneAndLock()) {}
+  ~SceneLock() { win.unlockAccess3DScene(); }
+  SceneLock(const SceneLock&) = delete;
+  SceneLock& operator=(const SceneLock&) = delete;
+};
+}  // namespace
+
 LiveViewer::LiveViewer(const std::string& title) {
   const char* display = std::getenv("DISPLAY");
   const char* wayland = std::getenv("WAYLAND_DISPLAY");
@@ -26,7 +39,8 @@ LiveViewer::LiveViewer(const std::string& title) {
   loops_->setColor(1.0f, 0.85f, 0.1f);
   loops_->setLineWidth(4.0f);
   {
-    auto& scene = win_->get3DSceneAndLock();
+    const SceneLock lock(*win_);
+    auto& scene = lock.scene;
     scene->insert(mrpt::opengl::CGridPlaneXY::Create(-3, 3, -3, 3, 0, 0.5f));
     scene->insert(path_);
     scene->insert(loops_);
@@ -34,7 +48,6 @@ LiveViewer::LiveViewer(const std::string& title) {
     // Inset at the top left: the current view.
     auto inset = scene->createViewport("view");
     inset->setViewportPosition(0.0, 0.6, 0.4, 0.4);
-    win_->unlockAccess3DScene();
   }
   win_->setCameraZoom(2.5f);
   win_->repaint();
@@ -62,9 +75,10 @@ void LiveViewer::status(const LiveStats& stats) {
   const auto now = std::chrono::steady_clock::now();
   if (now - last_draw_ < std::chrono::milliseconds(500)) return;
   last_draw_ = now;
-  win_->get3DSceneAndLock();
-  drawText(stats);
-  win_->unlockAccess3DScene();
+  {
+    const SceneLock lock(*win_);
+    drawText(stats);
+  }
   win_->repaint();
 }
 
@@ -73,7 +87,19 @@ void LiveViewer::show(const LiveView& view, const LiveStats& stats) {
   tracking_ = view.tracking;
   if (!view.loop_status.empty()) loop_status_ = view.loop_status;
   // The path grows every frame; the heavy part (image upload, repaint) at most ~10 Hz.
-  auto& scene = win_->get3DSceneAndLock();
+  const auto now = std::chrono::steady_clock::now();
+  const bool redraw = now - last_draw_ >= std::chrono::milliseconds(100);
+  {
+    const SceneLock lock(*win_);
+    updateScene(view, stats, lock.scene, redraw);
+  }
+  // Keep the camera in sight: the path lives wherever the map's world frame puts it.
+  if (view.pose) win_->setCameraPointingToPoint(view.pose->x(), view.pose->y(), view.pose->z());
+  if (redraw) win_->repaint();
+}
+
+void LiveViewer::updateScene(const LiveView& view, const LiveStats& stats, mrpt::opengl::COpenGLScene::Ptr& scene,
+                             bool redraw) {
   if (view.pose) {
     if (last_pose_)
       path_->appendLine(last_pose_->x(), last_pose_->y(), last_pose_->z(), view.pose->x(), view.pose->y(), view.pose->z());
@@ -81,17 +107,11 @@ void LiveViewer::show(const LiveView& view, const LiveStats& stats) {
     camera_->setPose(*view.pose);
   }
   for (const auto& [a, b] : view.new_loops) loops_->appendLine(a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
-  const auto now = std::chrono::steady_clock::now();
-  const bool redraw = now - last_draw_ >= std::chrono::milliseconds(100);
   if (redraw) {
-    last_draw_ = now;
+    last_draw_ = std::chrono::steady_clock::now();
     if (!view.image.empty()) scene->getViewport("view")->setImageView(mrpt::img::CImage(view.image, mrpt::img::DEEP_COPY));
     drawText(stats);
   }
-  win_->unlockAccess3DScene();
-  // Keep the camera in sight: the path lives wherever the map's world frame puts it.
-  if (view.pose) win_->setCameraPointingToPoint(view.pose->x(), view.pose->y(), view.pose->z());
-  if (redraw) win_->repaint();
 }
 
 }  // namespace vofusion

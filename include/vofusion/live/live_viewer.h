@@ -43,6 +43,8 @@ class LiveViewer {
 
  private:
   void drawText(const LiveStats& stats);
+  // show()'s changes to the scene, made while it is locked.
+  void updateScene(const LiveView& view, const LiveStats& stats, mrpt::opengl::COpenGLScene::Ptr& scene, bool redraw);
   mrpt::gui::CDisplayWindow3D::Ptr win_;
   mrpt::opengl::CSetOfLines::Ptr path_;
   mrpt::opengl::CSetOfLines::Ptr loops_;  // accepted loops, between the poses they join
