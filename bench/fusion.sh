@@ -17,9 +17,10 @@ tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
 
 echo "data: $data ($frames frames), $(nproc) cores, load average before: $(cut -d' ' -f1-3 /proc/loadavg)"
+failed=0
 for mode in paper kinfu odometry; do
   "$build/bin/vofusion" "$data" --out "$tmp/$mode" --mode "$mode" "${limit[@]}" "$@" >"$tmp/$mode.log" 2>&1 ||
-    { echo "$mode: vofusion failed: $(tail -1 "$tmp/$mode.log")"; continue; }
+    { echo "$mode: vofusion failed: $(tail -1 "$tmp/$mode.log")"; failed=1; continue; }
 done
 python3 - "$tmp" <<'PY'
 import json, os, sys
@@ -45,3 +46,4 @@ for mode in ["paper", "kinfu", "odometry"]:
           f"{s.get('icp_fallbacks_to_odometry', 0):8d} {s.get('lost_frames', 0):5d}")
 PY
 echo "load average after: $(cut -d' ' -f1-3 /proc/loadavg)"
+exit "$failed"

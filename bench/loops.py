@@ -136,7 +136,7 @@ def markdown(rows, command):
             mo = sum(r["ate_without"] for r in ok) / len(ok)
             mr = sum(r["ate_with"] / r["ate_without"] for r in ok) / len(ok)
             out.append("| %d | mean (lap end: worst) | %s | %s | %s (%s) | | | | %s | |" % (
-                frames, fmt(mo), fmt(mw), fmt(mw / mo, 2), fmt(mr, 2), fmt(max(r["lap_end_with_m"] for r in ok))))
+                frames, fmt(mo), fmt(mw), fmt(mw / mo, 2), fmt(mr, 2), fmt(max((r["lap_end_with_m"] for r in ok if r["lap_end_with_m"] is not None), default=None))))
     return "\n".join(out) + "\n"
 
 
@@ -179,6 +179,10 @@ def main(argv):
             f.write(text)
         os.replace(tmp, path)
     print(md)
+    failed = [r for r in rows if "error" in r]
+    if failed:  # the table lists them; the exit code tells a script
+        log("%d of %d runs failed" % (len(failed), len(rows)))
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -22,8 +22,12 @@ run() {  # name, then --set arguments
   local sets=()
   for s in "$@"; do sets+=(--set "$s"); done
   local out
-  out="$( { /usr/bin/time -f "CPU %U %S" "$bin" "$data" --out "$tmp/run" --no-rawlog --max-frames "$frames" \
-          "${sets[@]}" 2>&1 1>&3 | grep -E "^CPU|per-stage" ; } 3>&1 )"
+  if ! /usr/bin/time -f "CPU %U %S" -o "$tmp/time" "$bin" "$data" --out "$tmp/run" --no-rawlog --max-frames "$frames" \
+       "${sets[@]}" >"$tmp/stdout" 2>"$tmp/stderr"; then
+    echo "$name: rgbd-odometry failed: $(tail -1 "$tmp/stderr")" >&2
+    return 1
+  fi
+  out="$(cat "$tmp/stdout" "$tmp/time"; grep -E "per-stage" "$tmp/stderr" || true)"
   local ate rpe_t rpe_r fps failed cpu load
   ate=$(sed -n 's/^ATE rmse \([0-9.]*\) m.*/\1/p' <<<"$out")
   rpe_t=$(sed -n 's/^RPE(1s) rmse \([0-9.]*\) m  \([0-9.]*\) deg/\1/p' <<<"$out")
