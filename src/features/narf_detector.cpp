@@ -129,7 +129,9 @@ std::vector<cv::KeyPoint> detectNarf(const NarfPrepared& prep) {
     const int x = idx % d.cols, y = idx / d.cols;
     const float z = d.at<float>(y, x);
     if (!(z > 0.f)) continue;
-    // Back to full-resolution pixel centres.
+    // Back to full-resolution pixel centres: the block's centre. At the pixel of the block's reading
+    // (where BRAND would find the keypoint's own depth) shake and rpy came out worse:
+    // bench/results/2026-12-05-narf-keypoint-pixel.md.
     const float u = (x + 0.5f) * scale - 0.5f, v = (y + 0.5f) * scale - 0.5f;
     const float size_px = float(p.support_size * prep.camera.fx / z);
     out.emplace_back(u, v, size_px, -1.f, interest[idx], 0, 1 /*class: NARF*/);
