@@ -39,6 +39,20 @@ std::string errorOf(const std::string& folder, const SourceOptions& so = {}) {
 
 }  // namespace
 
+// --intrinsics for a camera larger than 640x480: its centre lies where the recording's size puts it,
+// which the source checks once it knows that size. Checked against 640x480 at parsing, a 1280x720
+// camera's centre was refused.
+TEST(CameraFiles, IntrinsicsOfALargerCameraParseAndAreCheckedAgainstItsSize) {
+  CameraIntrinsics c;
+  EXPECT_NO_THROW(c = CameraIntrinsics::parse("915,915,640.3,360.1"));
+  EXPECT_DOUBLE_EQ(c.cx, 640.3);
+  c.width = 1280, c.height = 720;
+  EXPECT_NO_THROW(c.validate("--intrinsics"));
+  c.width = 640, c.height = 480;
+  EXPECT_THROW(c.validate("--intrinsics"), InputError);
+  EXPECT_THROW(CameraIntrinsics::parse("915,915,-3,360.1"), InputError);  // negative: outside any image
+}
+
 TEST(CameraFiles, IntrinsicsTxtWithSizeAndDepthScale) {
   const std::string dir = oneFrameFolder(test::tempDir("cam_txt") + "/seq", 320, 240, 1500);
   std::ofstream(dir + "/intrinsics.txt") << "# from a RealSense\n300 301 160.5 119.5 0.1 -0.2 0 0 0.05\nsize 320 240\n"

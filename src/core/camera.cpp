@@ -1,6 +1,7 @@
 #include "vofusion/core/camera.h"
 
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <vector>
 
@@ -39,7 +40,11 @@ CameraIntrinsics CameraIntrinsics::parse(const std::string& spec, const std::str
   if (v.size() != 4)
     throw InputError(origin, "unknown intrinsics '" + spec + "' (expected fr1, fr2, fr3, ros or fx,fy,cx,cy)");
   CameraIntrinsics c = make(v[0], v[1], v[2], v[3]);
-  c.validate(origin);
+  // What the four numbers say alone. The image's size is the recording's, which the caller sets and
+  // validates against: checked here against 640x480, a 1280x720 camera's centre was refused.
+  CameraIntrinsics unsized = c;
+  unsized.width = unsized.height = std::numeric_limits<int>::max();
+  unsized.validate(origin);
   return c;
 }
 

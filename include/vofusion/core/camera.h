@@ -14,6 +14,7 @@ struct CameraIntrinsics {
   std::array<double, 5> dist{};      // k1 k2 p1 p2 k3 (informative: TUM depth is already registered)
 
   // "fr1", "fr2", "fr3", "ros" (fx=fy=525) or "fx,fy,cx,cy". Throws InputError(origin, ...) if unknown.
+  // The size stays 640x480: the caller sets the recording's and validates the centre against it.
   static CameraIntrinsics parse(const std::string& spec, const std::string& origin = "--intrinsics");
   // The TUM preset matching a folder name containing "freiburg1/2/3", else the ROS default.
   static CameraIntrinsics forTumFolder(const std::string& folder);
