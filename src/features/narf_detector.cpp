@@ -102,6 +102,8 @@ NarfPrepared prepareNarf(const cv::Mat& depth, const CameraIntrinsics& camera, c
   out.params = p;
   out.camera = camera;
   out.reduced_camera = f > 1 ? camera.scaled(1.0 / f) : camera;
+  out.reduced_camera.width = small.cols;  // whole blocks only: a partial last one is dropped, not rounded up
+  out.reduced_camera.height = small.rows;
   out.reduced = small.isContinuous() ? small : small.clone();
   if (p.implementation == "fast") {
     out.range.emplace(out.reduced, out.reduced_camera);

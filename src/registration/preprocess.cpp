@@ -221,6 +221,8 @@ std::vector<DepthLevel> preprocessDepth(const cv::Mat& depth, const CameraIntrin
   for (std::size_t l = 1; l < levels.size(); ++l) {
     levels[l].depth = downsampleDepth(levels[l - 1].depth, p.sigma_depth);
     levels[l].camera = levels[l - 1].camera.scaled(0.5);
+    levels[l].camera.width = levels[l].depth.cols;  // an odd row or column is dropped, not rounded up
+    levels[l].camera.height = levels[l].depth.rows;
   }
   for (auto& lv : levels) {
     lv.vertices = depthToVertices(lv.depth, lv.camera);
@@ -260,6 +262,8 @@ std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat
       for (int x = 0; x < vertices.cols; ++x)
         if (!(v[x][2] >= p.min_depth && v[x][2] <= p.max_depth)) v[x] = n[x] = cv::Vec3f(kNaN, kNaN, kNaN);
     }, 1, vertices.total() >= kParallelMinPixels);
+    c.width = clipped.cols;  // an odd row or column is dropped by each halving, not rounded up
+    c.height = clipped.rows;
     levels[l] = {clipped, vertices, normals, c};
   }
   return levels;

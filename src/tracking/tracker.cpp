@@ -63,8 +63,10 @@ std::vector<DepthLevel> Tracker::Impl::trackingLevels(const Frame& frame, const 
     pp.sigma_spatial *= 0.5f;
     pp.kernel = std::max(3, ((pp.kernel + 1) / 2) | 1);
     if (P.preprocess.kernel <= 1) pp.kernel = P.preprocess.kernel;
-    track_cam = cam.scaled(0.5);
-    return preprocessDepth(downsampleDepth(clipDepth(frame.depth, pp.min_depth, pp.max_depth), pp.sigma_depth), track_cam, pp);
+    std::vector<DepthLevel> levels =
+        preprocessDepth(downsampleDepth(clipDepth(frame.depth, pp.min_depth, pp.max_depth), pp.sigma_depth), cam.scaled(0.5), pp);
+    track_cam = levels[0].camera;  // the halved image's size: an odd row or column is dropped
+    return levels;
   }
   return preprocessDepth(frame.depth, cam, P.preprocess);
 }
