@@ -1,6 +1,7 @@
 // Checkpoints (vofusion --checkpoint-every, --resume <checkpoint>): a run saved between any two frames
 // and resumed in a fresh process ends exactly as if it had never stopped: every pose bit for bit,
 // the same mesh, the same loop closer; a damaged or foreign checkpoint is refused in one line.
+#include <sys/resource.h>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -138,6 +139,20 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
     if (share > 0.1) {
       EXPECT_NE(why.find("truncated or corrupt checkpoint"), std::string::npos) << why;
     }
+  }
+  // A length field made huge (the run's origin string, right after the magic): refused, not first
+  // zero-filled (4 GiB).
+  {
+    std::string huge = bytes;
+    const std::size_t at = std::string("VOFUSION-CHECKPOINT-1\n").size();
+    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-1\n"), 0);
+    huge.replace(at, 4, "\xff\xff\xff\xff");
+    std::ofstream(dir + "/huge", std::ios::binary) << huge;
+    rusage before{}, after{};
+    getrusage(RUSAGE_SELF, &before);
+    EXPECT_NE(refusal(dir + "/huge", "input room\n").find("truncated or corrupt checkpoint"), std::string::npos);
+    getrusage(RUSAGE_SELF, &after);
+    EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 1L << 20) << "KiB more at the peak";
   }
   std::ofstream(dir + "/map", std::ios::binary) << "VOFUSION-MAP";
   EXPECT_FALSE(RunSession::isCheckpoint(dir + "/map"));

@@ -5,11 +5,13 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "vofusion/pipeline/region_premesher.h"
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/pose_eigen.h"
@@ -157,6 +159,10 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
   is.seekg(sizeof(kCheckpointMagic) - 1);
   Checkpoint c;
   try {
+    // MRPT sizes (and zero-fills) strings and vectors by the length fields it reads: one corrupt field
+    // asked for 4 GiB before the read failed. No request of a real checkpoint's comes near 1 GiB (a
+    // run's peak is ~700 MiB in all).
+    const ScopedAllocationLimit limit(std::size_t(1) << 30, std::numeric_limits<std::size_t>::max());
     {
       auto a = state::archiveOf(is);
       std::string saved_origin;
