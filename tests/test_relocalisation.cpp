@@ -63,6 +63,11 @@ TEST(Relocalisation, BlankFirstFramesAreLostAndTheFirstWithDepthStartsTheMap) {
   EXPECT_FALSE(reports[0].tracked);
   EXPECT_FALSE(reports[1].tracked);
   EXPECT_EQ(rec.lostFrames(), 2u);
+  // The odometry starts there too (a blank frame was its reference, the next one failed against it).
+  EXPECT_TRUE(reports[2].odometry.started) << reports[2].odometry.failure;
+  EXPECT_TRUE(reports[3].odometry.success) << reports[3].odometry.failure;
+  EXPECT_EQ(reports[3].odometry.reference_index, 2u);
+  EXPECT_EQ(rec.odometryFailures(), 2u) << "the blank frames";
   for (std::size_t i = 2; i < seq.size(); ++i) {
     EXPECT_TRUE(reports[i].tracked) << i;
     const mrpt::poses::CPose3D moved = rec.trackedTrajectory()[i].pose - rec.trackedTrajectory()[2].pose;
@@ -81,6 +86,7 @@ TEST(Relocalisation, AFirstFrameWithNoReadingInRangeDoesNotStartTheMap) {
   for (std::size_t i = 1; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
   rec.finish();
   EXPECT_FALSE(reports[0].tracked);
+  EXPECT_EQ(reports[0].note, "no depth reading in [min_depth, max_depth]");
   for (std::size_t i = 1; i < seq.size(); ++i) EXPECT_TRUE(reports[i].tracked) << i << ": " << reports[i].note;
   EXPECT_EQ(rec.lostFrames(), 1u);
 }

@@ -39,7 +39,7 @@ OdometryResult OdometrySource::process(const Frame& input) {
     increment_ = pose_ - previous;
     covariance_ = r.covariance;
     has_increment_ = count_ > 0;
-  } else if (count_ > 0) {
+  } else if (count_ > 0 && !r.started) {
     // No motion is dropped: the frame moves on at the last increment (constant velocity); the next
     // frame is matched against the last good one and lands where the odometry says.
     ++failures_;

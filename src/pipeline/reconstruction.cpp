@@ -141,8 +141,8 @@ FrameReport Reconstruction::process(const Frame& frame) {
   if (m.odometry) {
     ScopedStageTimer t(r.times, "odometry");
     r.odometry = m.odometry->process(frame);
-    // The very first frame has no motion to estimate: not a failure.
-    if (!r.odometry.success && m.frames > 0) ++m.odo_failures;
+    // The frame the odometry starts from has no motion to estimate: not a failure.
+    if (!r.odometry.success && !r.odometry.started) ++m.odo_failures;
     if (r.odometry.success)
       m.colour_time = {true, r.odometry.colour_time_capture, r.odometry.colour_time_votes, r.odometry.colour_time_capture_votes};
   }
@@ -180,7 +180,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
     f = lost;
   }
   r.times.merge(f.times);
-  r.tracked = f.tracked;  // the first frame with depth starts the map (the tracker's); one without is lost
+  r.tracked = f.tracked;  // the first frame with readings in range starts the map; one before it is lost
   r.fell_back = f.fell_back;
   r.predicted = f.predicted;
   r.note = f.reason;

@@ -205,8 +205,8 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   // as if the estimator had given nothing.
   if (prior && !fusion::isFinite(*prior)) prior = nullptr;
   // No reading at all (a covered lens, a sensor glitch): nothing to track, the frame is lost.
-  const auto lostForNoDepth = [&] {
-    res.rejection = Rejection::NoDepth;
+  const auto lost = [&](Rejection why) {
+    res.rejection = why;
     res.reason = toString(res.rejection);
     res.pose = toMrpt(s.history.pose());
     ++s.stats.frames;
@@ -214,7 +214,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
     return res;
   };
   if (frame.depth.empty() || frame.depth.type() != CV_32FC1 || cv::countNonZero(frame.depth) == 0)
-    return lostForNoDepth();
+    return lost(Rejection::NoDepth);
   CameraIntrinsics cam = frame.camera, track_cam;
   cam.width = frame.depth.cols;
   cam.height = frame.depth.rows;
@@ -224,7 +224,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   const bool had_model = map.hasModel();
   // The first frame starts the map only with readings in [min_depth, max_depth]: one without (a camera
   // face down on a desk) would start an empty model that no later frame can track against.
-  if (!had_model && cv::countNonZero(levels[0].depth) == 0) return lostForNoDepth();
+  if (!had_model && cv::countNonZero(levels[0].depth) == 0) return lost(Rejection::NoReadingInRange);
   map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
   // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
   std::vector<IntensityLevel> intensity;

@@ -42,6 +42,7 @@ std::string toString(Rejection r) {
     case Rejection::NoPrior: return "no motion prior";
     case Rejection::PriorReferenceUnknown: return "prior's reference frame has no pose";
     case Rejection::NotRelocalised: return "lost, not relocalised";
+    case Rejection::NoReadingInRange: return "no depth reading in [min_depth, max_depth]";
   }
   return "?";
 }

@@ -80,6 +80,7 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
 
 struct OdometryResult {
   bool success = false;
+  bool started = false;                // the frame became the first reference: no motion, not a failure
   std::string failure;                 // why, when !success ("too few matches", "degenerate geometry", ...)
   mrpt::poses::CPose3D motion;         // current camera pose in the previous camera's frame (T_prev_curr)
   mrpt::math::CMatrixDouble66 covariance;  // of motion, (x y z yaw pitch roll), for CPose3DPDFGaussian
@@ -115,10 +116,11 @@ class RgbdOdometry {
   ~RgbdOdometry();
   // Motion since the reference frame (OdometryResult::reference_index): the previous frame, or after
   // a failure the last frame whose motion was estimated (then, if that fails too, the failed frame);
-  // the first frame (or the first after reset()) returns success=false with failure "first frame".
+  // the first frame with keypoints enough to match (or the first after reset()) returns success=false,
+  // started=true, failure "first frame"; one before it fails with "too few keypoints".
   OdometryResult process(const Frame& frame);
-  // The frames (Frame::index) a later result's reference_index may name: the reference, the last
-  // frame with a pose, the last failed frame and the older references. However old they are.
+  // The frames (Frame::index) a later result's reference_index may name (the reference, the last frame
+  // with a pose, the last failed frame), with the older references matched beside them. However old.
   std::vector<std::size_t> heldFrames() const;
   void reset();
   // Checkpoints: what the next frame is matched against (the reference, the older frames, the last

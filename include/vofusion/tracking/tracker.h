@@ -56,7 +56,7 @@ struct TrackerStats {
 
 class Tracker {
  public:
-  // initial_pose: camera-to-world of the first frame.
+  // initial_pose: camera-to-world of the frame that starts the map (the first with readings in range).
   Tracker(const TrackerParams& params, TrackingMode mode, const Eigen::Isometry3d& initial_pose);
   ~Tracker();
 

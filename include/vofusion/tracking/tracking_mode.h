@@ -30,7 +30,8 @@ enum class Rejection {
   NoPrior,                 // mode odometry: no motion prior for this frame
   PriorReferenceUnknown,   // mode odometry: the prior's reference frame has no pose here
   NotRelocalised,          // tracking was lost and no keyframe matched this frame yet
-};
+  NoReadingInRange,        // the first frame's readings all lie outside [min_depth, max_depth]
+};  // new reasons go last: checkpoints store them as numbers
 // The reason as summary.json counts it ("too few ICP inliers", ...); "" for None.
 std::string toString(Rejection r);
 
