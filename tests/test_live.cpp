@@ -113,7 +113,7 @@ TEST(LiveLoop, SensorErrorMidRunIsACleanStop) {
 }
 
 TEST(LiveLoop, ConsumerExceptionStopsWithoutLosingCount) {
-  FakeSource src(100, 1);
+  FakeSource src(1000, 1);  // long enough that a late consumer still stops it before its end
   const LiveStats s = runLive(src,
                               [](const Frame& f) {
                                 // From frame 10 on: frame 10 itself may be dropped when this thread is late.
@@ -122,8 +122,32 @@ TEST(LiveLoop, ConsumerExceptionStopsWithoutLosingCount) {
                               queueOf(2));
   EXPECT_EQ(s.stop, StopReason::ConsumerError);
   EXPECT_EQ(s.error, "boom");
-  EXPECT_LT(s.played, 100u);
+  EXPECT_LT(s.played, 1000u);
   EXPECT_EQ(s.processed + s.dropped, s.played);
+}
+
+// What no std::exception describes stops the run as well, on either thread, and a hook that throws
+// leaves runLive with its exception once the producer has stopped: a joinable std::thread's destructor
+// used to end the process.
+TEST(LiveLoop, AnyExceptionStopsTheRunAndAThrowingHookLeavesWithIt) {
+  {
+    FakeSource src(1000, 1);
+    const LiveStats s = runLive(src, [](const Frame& f) { if (f.index >= 3) throw 42; }, queueOf(2));
+    EXPECT_EQ(s.stop, StopReason::ConsumerError);
+    EXPECT_EQ(s.error, "unknown exception");
+  }
+  {
+    FakeSource src(1000, 1);
+    LiveHooks hooks;
+    hooks.on_grabbed = [](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) { if (f.index == 5) throw 7; };
+    const LiveStats s = runLive(src, [](const Frame&) {}, queueOf(2), hooks);
+    EXPECT_EQ(s.stop, StopReason::RecorderError);
+    EXPECT_EQ(s.error, "unknown exception");
+  }
+  FakeSource src(1000, 1);
+  LiveHooks hooks;
+  hooks.on_tick = [](const LiveStats&) { throw std::runtime_error("window gone"); };
+  EXPECT_THROW(runLive(src, [](const Frame&) {}, queueOf(2), hooks), std::runtime_error);
 }
 
 // A consumer that finished its frame and then failed (vofusion-grab's checkpoint on a full disk, its
