@@ -25,7 +25,8 @@ run() {  # name, then --set arguments
   if ! /usr/bin/time -f "CPU %U %S" -o "$tmp/time" "$bin" "$data" --out "$tmp/run" --no-rawlog --max-frames "$frames" \
        "${sets[@]}" >"$tmp/stdout" 2>"$tmp/stderr"; then
     echo "$name: rgbd-odometry failed: $(tail -1 "$tmp/stderr")" >&2
-    return 1
+    failed_runs=1
+    return 0
   fi
   out="$(cat "$tmp/stdout" "$tmp/time"; grep -E "per-stage" "$tmp/stderr" || true)"
   local ate rpe_t rpe_r fps failed cpu load
@@ -41,6 +42,7 @@ run() {  # name, then --set arguments
   printf "%-30s %s\n" "$name" "$(grep per-stage <<<"$out")" >>"$tmp/stages.txt"
 }
 
+failed_runs=0  # a failed run is named and the table goes on; the exit code says so at the end
 echo "data: $data ($frames frames), $(nproc) cores, load at start: $(cut -d' ' -f1-3 /proc/loadavg)"
 printf "| %-30s | %7s | %8s | %8s | %5s | %8s | %6s | %5s |\n" variant "ATE [m]" "RPE [m]" "RPE[deg]" fps \
   "cpu ms/f" failed load
@@ -66,3 +68,4 @@ if [ "${EXTRA:-0}" = 1 ]; then
 fi
 echo "# per-stage wall ms/frame of each run (narf runs beside the others unless sequential):"
 cat "$tmp/stages.txt"
+exit "$failed_runs"

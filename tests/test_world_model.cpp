@@ -6,7 +6,6 @@
 
 #include <csignal>
 #include <cstring>
-#include <tuple>
 #include <fstream>
 #include <random>
 #include <set>
@@ -15,6 +14,7 @@
 #include <array>
 #include <atomic>
 #include <thread>
+#include <tuple>
 
 #include <zlib.h>
 
