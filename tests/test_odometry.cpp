@@ -130,6 +130,16 @@ TEST(OdometrySource, AccumulatesPoseAndEmitsVisualOdometryActions) {
   EXPECT_GT(a.poseChange.cov(0, 0), 0.0);
 }
 
+namespace {
+// The frame as a covered lens gives it: grey, flat (nothing to match).
+Frame coveredLens(const Frame& f) {
+  Frame covered = f;
+  covered.rgb = cv::Mat(f.rgb.size(), CV_8UC3, cv::Scalar(90, 90, 90));
+  covered.depth = cv::Mat(f.depth.size(), CV_32F, cv::Scalar(1.8f));
+  return covered;
+}
+}  // namespace
+
 // Frames the odometry cannot match (a covered lens: grey, flat) move the pose on at constant velocity;
 // the next frame it matches is placed from the last one it matched, however many failed in between
 // (after 65 the reference's pose had been forgotten and the frame landed on the extrapolated pose).
@@ -140,9 +150,7 @@ TEST(OdometrySource, AMatchAfterManyFailedFramesIsPlacedFromItsReference) {
   Frame moved = seq.render(1);
   src.process(moved);
   ASSERT_EQ(src.failures(), 0u);
-  Frame covered = moved;
-  covered.rgb = cv::Mat(moved.rgb.size(), CV_8UC3, cv::Scalar(90, 90, 90));
-  covered.depth = cv::Mat(moved.depth.size(), CV_32F, cv::Scalar(1.8f));
+  Frame covered = coveredLens(moved);
   for (int i = 0; i < 80; ++i) {
     covered.timestamp += 1.0 / 30;
     src.process(covered);
@@ -175,9 +183,7 @@ TEST(OdometrySource, AMatchAgainstAnOldFailedFrameIsPlacedFromIt) {
   src.process(strange);
   ASSERT_EQ(src.failures(), 1u);
   const mrpt::poses::CPose3D strange_pose = src.pose();
-  Frame covered = next;
-  covered.rgb = cv::Mat(next.rgb.size(), CV_8UC3, cv::Scalar(90, 90, 90));
-  covered.depth = cv::Mat(next.depth.size(), CV_32F, cv::Scalar(1.8f));
+  Frame covered = coveredLens(next);
   covered.timestamp = strange.timestamp;
   for (int i = 0; i < 80; ++i) {
     covered.timestamp += 1.0 / 30;

@@ -137,15 +137,24 @@ static std::string unknownKeyMessage(const std::string& section, const std::stri
   return "unknown key '" + key + "' in section [" + section + "]";
 }
 
-void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
-                     const std::vector<ConfigSection>& known) {
-  const auto defaults = defaultsOf(known);
+// The sections that hold keys, with their keys (a section named but empty is nobody's concern).
+static std::vector<std::pair<std::string, std::vector<std::string>>> sectionsWithKeys(
+    const mrpt::config::CConfigFileBase& user) {
   std::vector<std::string> sections;
   user.getAllSections(sections);
+  std::vector<std::pair<std::string, std::vector<std::string>>> out;
   for (const auto& s : sections) {
     std::vector<std::string> keys;
     user.getAllKeys(s, keys);
-    if (keys.empty()) continue;
+    if (!keys.empty()) out.emplace_back(s, std::move(keys));
+  }
+  return out;
+}
+
+void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
+                     const std::vector<ConfigSection>& known) {
+  const auto defaults = defaultsOf(known);
+  for (const auto& [s, keys] : sectionsWithKeys(user)) {
     if (!defaults.sectionExists(s)) throw InputError(origin, "unknown section [" + s + "]");
     std::vector<std::string> valid;
     defaults.getAllKeys(s, valid);
@@ -171,12 +180,7 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
 }
 
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user) {
-  std::vector<std::string> sections;
-  user.getAllSections(sections);
-  for (const auto& s : sections) {
-    std::vector<std::string> keys;
-    user.getAllKeys(s, keys);
-    if (keys.empty()) continue;
+  for (const auto& [s, keys] : sectionsWithKeys(user)) {
     if (s == "global") return true;
     for (const auto& k : keys)
       if (trimmed(k) == "driver") return true;
