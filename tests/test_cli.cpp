@@ -72,8 +72,13 @@ TEST(CommandLine, ShortHelpAndUnknownOptions) {
   EXPECT_TRUE(parse({"-h"}).flag("--help"));
   EXPECT_NE(usageError({"-x"}).find("unknown option -x"), std::string::npos);
   EXPECT_NE(usageError({"--nope"}).find("unknown option --nope"), std::string::npos);
-  EXPECT_NE(usageError({"--flag=1"}).find("unknown option --flag"), std::string::npos);
+  EXPECT_NE(usageError({"--flag=1"}).find("option --flag takes no value"), std::string::npos);
   EXPECT_NE(usageError({"--out"}).find("--out needs a value"), std::string::npos);
+  // A forgotten value: the next option is not taken as it (an output folder named "--n").
+  EXPECT_NE(usageError({"in", "--out", "--n", "100"}).find("--out needs a value"), std::string::npos);
+  EXPECT_NE(usageError({"in", "--out", "--flag"}).find("--out needs a value"), std::string::npos);
+  EXPECT_EQ(parse({"--out=--n"}).value("--out", ""), "--n");  // given with '=', it is taken as said
+  EXPECT_EQ(parse({"--x", "-1"}).value("--x", ""), "-1");     // a negative number is a value
 }
 
 TEST(CommandLine, IntegerWithMinimum) {

@@ -19,6 +19,11 @@ std::string fmt(double x) {
 
 CommandLine::CommandLine(int argc, char** argv, std::set<std::string> value_options,
                          std::set<std::string> flag_options) {
+  // One of this program's options, with or without "=value".
+  const auto isOption = [&](const std::string& a) {
+    const std::string name = a.substr(0, a.find('='));
+    return value_options.count(name) || flag_options.count(name);
+  };
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     if (a == "-h" && flag_options.count("--help")) a = "--help";
@@ -30,11 +35,13 @@ CommandLine::CommandLine(int argc, char** argv, std::set<std::string> value_opti
       if (inline_value) name = a.substr(0, eq), val = a.substr(eq + 1);
       if (value_options.count(name)) {
         if (!inline_value) {
-          if (i + 1 >= argc) throw InputError("usage", "option " + name + " needs a value");
+          // "--out --max-frames 100" is a forgotten value, not an output folder named "--max-frames".
+          if (i + 1 >= argc || isOption(argv[i + 1])) throw InputError("usage", "option " + name + " needs a value");
           val = argv[++i];
         }
         values_.emplace_back(name, val);
-      } else if (flag_options.count(name) && !inline_value) {
+      } else if (flag_options.count(name)) {
+        if (inline_value) throw InputError("usage", "option " + name + " takes no value");
         flags_.insert(name);
       } else {
         throw InputError("usage", "unknown option " + name);
