@@ -63,3 +63,21 @@ TEST(AtomicFile, ASetOfFilesMovesIntoPlaceTogether) {
   EXPECT_EQ(readTextFile(dir + "/b.txt"), "new b");
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 2);
 }
+
+// commitDurably() puts the file in place as commit() does (its fsync()s, before and after the rename,
+// are what no test here can watch: they matter at a power cut). Nothing written: the same error.
+TEST(AtomicFile, ADurableCommitPutsTheFileInPlace) {
+  const std::string dir = test::tempDir("atomic_durable");
+  const std::string path = dir + "/checkpoint";
+  std::ofstream(path) << "earlier";
+  {
+    AtomicPath out(path);
+    std::ofstream(out.tmp()) << "this run's";
+    out.commitDurably();
+  }
+  std::ifstream in(path);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), "this run's");
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);  // no temporary left
+  AtomicPath nothing(dir + "/never");
+  EXPECT_THROW(nothing.commitDurably(), InputError);
+}

@@ -1,5 +1,6 @@
 #include "vofusion/core/atomic_file.h"
 
+#include <fcntl.h>
 #include <signal.h>
 #include <unistd.h>
 
@@ -73,6 +74,26 @@ void AtomicPath::commit() {
     if (ec) throw InputError(final_, "cannot write: " + ec.message());
   }
   committed_ = true;
+}
+
+namespace {
+// fsync() of a file or folder; throws InputError(what, ...) naming `what` on failure.
+void syncToDisk(const std::string& path, const std::string& what) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0 || ::fsync(fd) != 0) {
+    const int err = errno;
+    if (fd >= 0) ::close(fd);
+    throw InputError(what, std::string("cannot write: ") + std::strerror(err));
+  }
+  ::close(fd);
+}
+}  // namespace
+
+void AtomicPath::commitDurably() {
+  syncToDisk(tmp_, final_);
+  commit();
+  const fs::path p(final_);
+  syncToDisk(p.has_parent_path() ? p.parent_path().string() : ".", final_);  // the rename itself
 }
 
 void AtomicFileSet::write(const std::string& path, const std::function<void(const std::string& tmp)>& write_to) {

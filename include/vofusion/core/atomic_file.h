@@ -20,6 +20,10 @@ class AtomicPath {
   const std::string& tmp() const { return tmp_; }     // write here (a file or a directory)
   const std::string& path() const { return final_; }
   void commit();  // rename tmp -> final (replacing a file or directory); throws InputError on failure
+  // commit() of a file with its bytes on the disk first, and the rename after it: what a power cut
+  // must not take (a checkpoint). A rename alone may reach the disk before the data on XFS or btrfs,
+  // replacing the earlier file with an empty one.
+  void commitDurably();
 
  private:
   std::string final_, tmp_;
