@@ -1,6 +1,7 @@
 // core/text_file.h: whole-file reads and the data lines of '#'-commented text formats.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <string>
 
@@ -40,5 +41,14 @@ TEST(TextFile, ReadsWholeFileOrNamesIt) {
     FAIL();
   } catch (const InputError& e) {
     EXPECT_EQ(std::string(e.what()), dir + "/missing.txt: cannot open file");
+  }
+  // A file far larger than any list (a sparse 300 MiB here) is refused before it is read.
+  std::ofstream(dir + "/huge.txt") << "1 2 3\n";
+  std::filesystem::resize_file(dir + "/huge.txt", std::uintmax_t(300) << 20);
+  try {
+    readTextFile(dir + "/huge.txt");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), dir + "/huge.txt: is 300 MiB: too large for a text file here (256 MiB at most)");
   }
 }

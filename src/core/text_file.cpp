@@ -11,6 +11,11 @@ namespace vofusion {
 std::string readTextFile(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) throw InputError(path, "is a folder, expected a file");
+  // A week's ground truth at 100 Hz is ~50 MiB. A larger file is another kind (a rawlog given where a
+  // list goes), refused before it is read, copied and split (3-4x its size in memory).
+  constexpr std::uintmax_t kMaxBytes = std::uintmax_t(256) << 20;
+  if (const auto size = std::filesystem::file_size(path, ec); !ec && size > kMaxBytes)
+    throw InputError(path, "is " + std::to_string(size >> 20) + " MiB: too large for a text file here (256 MiB at most)");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");
   std::ostringstream ss;

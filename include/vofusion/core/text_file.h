@@ -6,7 +6,7 @@
 
 namespace vofusion {
 
-// The whole file; throws InputError(path, "cannot open file").
+// The whole file; throws InputError(path, ...) when it cannot be opened or is over 256 MiB.
 std::string readTextFile(const std::string& path);
 
 struct TextLine {
