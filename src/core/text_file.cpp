@@ -11,8 +11,8 @@ namespace vofusion {
 std::string readTextFile(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) throw InputError(path, "is a folder, expected a file");
-  // A week's ground truth at 100 Hz is ~50 MiB. A larger file is another kind (a rawlog given where a
-  // list goes), refused before it is read, copied and split (3-4x its size in memory).
+  // An hour's ground truth at 100 Hz is ~25 MiB (TUM's longest lists are under 5 MiB). A larger file is
+  // another kind (a rawlog given where a list goes), refused before it is read, copied and split.
   constexpr std::uintmax_t kMaxBytes = std::uintmax_t(256) << 20;
   if (const auto size = std::filesystem::file_size(path, ec); !ec && size > kMaxBytes)
     throw InputError(path, "is " + std::to_string(size >> 20) + " MiB: too large for a text file here (256 MiB at most)");
