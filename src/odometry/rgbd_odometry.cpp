@@ -647,29 +647,23 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
     for (const auto& [f, T] : m.older) older.push_back({&f, T});
   std::vector<CrossCheckedHammingMatcher> split;
   FrameFeatures cur = m.extract(frame, older, split, r);
+  // `motion` is relative to the last frame with a pose (the previous one unless that failed); before
+  // the start, to the frame itself.
+  const FrameFeatures* last = m.last ? &*m.last : m.reference ? &*m.reference : nullptr;
+  r.reference_index = last ? last->index : frame.index;
+  r.reference_timestamp = last ? last->timestamp : frame.timestamp;
   // A frame with almost nothing to match (textureless, no depth) cannot be anyone's reference: a
-  // sensor's blank first frames leave the start to the first frame with keypoints.
-  if (int(cur.keypoints.size()) < P.min_matches && !m.reference) {
-    r.reference_index = frame.index;
-    r.reference_timestamp = frame.timestamp;
-    return failed(r, "too few keypoints (textureless or no depth)");
-  }
+  // sensor's blank first frames leave the start to the first frame with keypoints, and later the last
+  // good frame is kept so that the next frame can bridge the gap.
+  if (int(cur.keypoints.size()) < P.min_matches) return failed(r, "too few keypoints (textureless or no depth)");
   if (!m.reference) {
     m.older.clear();
     m.reference = std::move(cur);
     m.last.reset();
     m.T_kf_last.setIdentity();
-    r.reference_index = frame.index;
-    r.reference_timestamp = frame.timestamp;
     r.started = true;
     return failed(r, "first frame");
   }
-  // `motion` is relative to the last frame with a pose (the previous one unless that failed).
-  const FrameFeatures& last = m.last ? *m.last : *m.reference;
-  r.reference_index = last.index;
-  r.reference_timestamp = last.timestamp;
-  // Nor after the start: the last good one is kept so that the next frame can bridge the gap.
-  if (int(cur.keypoints.size()) < P.min_matches) return failed(r, "too few keypoints (textureless or no depth)");
   const Impl::Motion mo = m.estimateMotion(cur, older, split, r);
   if (!mo.ok) {
     // The last good frame stays the reference (its pose is known): the next frame bridges the gap.
