@@ -93,8 +93,12 @@ TEST(Icp, RecoversKnownMotionInRoom) {
 TEST(Icp, BareWallIsDetectedAsDegenerate) {
   const ModelAndFrame m = modelAndNoisyFrame("bare_wall", 3);
   const IcpResult r = projectiveIcp(m.frame, m.vertices, m.normals, m.model_pose, m.model_pose, IcpParams{});
-  // A plane constrains 3 of 6 degrees of freedom: the normal matrix is (nearly) rank 3.
+  // A plane constrains 3 of 6 degrees of freedom: the normal matrix is (nearly) rank 3. The wall is
+  // seen and matched (a failed ICP also reads condition 0), and its 3 free directions are left alone.
+  ASSERT_TRUE(r.solved);
+  EXPECT_GT(r.inliers, 0.5 * r.valid_pixels);
   EXPECT_LT(r.condition, 1e-4);
+  EXPECT_EQ(r.degenerate_dims, 3);
 }
 
 // Mode joint: as degenerate_ratio passes the smallest eigenvalue's share, that direction goes from

@@ -106,7 +106,8 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   EXPECT_GT(before_frames, 0.0);
   EXPECT_LE(before_frames + summary["seconds"].get<double>(), wall + 0.02);
   ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
-  EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.05);
+  // The 12 frames move up to ~15 cm: a camera held still would score ~4 cm after the alignment.
+  EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.005);
   // Over 50 ms: about one pair per frame, their 95th percentile between the median and the largest.
   ASSERT_TRUE(summary.contains("rpe_50ms")) << summary.dump(2);
   const auto& frame_rpe = summary["rpe_50ms"]["trans_m"];
