@@ -290,6 +290,24 @@ TEST(Rawlog, AGroundTruthFileIsTheRawlogsOwnOrNone) {
   EXPECT_TRUE(RawlogSource(dir + "/g.rawlog", {}).groundTruth().empty());
 }
 
+// --max-frames N keeps the Nth frame's ground truth: the writer puts each frame's GROUND_TRUTH entry
+// after its scan, and the count used to stop right at the scan.
+TEST(Rawlog, MaxFramesKeepsTheLastFramesGroundTruth) {
+  const auto frames = simFrames(3);
+  const std::string dir = test::tempDir("rawlog_gt_max_frames");
+  writeRawlog(dir + "/g.rawlog", frames, RawlogWriterOptions{});
+  for (const std::size_t n : {1u, 2u}) {
+    SourceOptions o;
+    o.max_frames = n;
+    const RawlogSource src(dir + "/g.rawlog", o);
+    EXPECT_EQ(src.size(), n);
+    const auto gt = src.groundTruth();
+    ASSERT_GE(gt.size(), n) << "max_frames " << n;
+    EXPECT_NEAR(gt[n - 1].timestamp, frames[n - 1].timestamp, 1e-6);
+    EXPECT_LT((gt[n - 1].pose.asVectorVal() - frames[n - 1].groundTruth->asVectorVal()).norm(), 1e-5);
+  }
+}
+
 // A companion file beside the rawlog is read before the rawlog's GROUND_TRUTH entries, unless it gives
 // no pose (none, or damaged): then the rawlog's own ground truth is used, not dropped.
 TEST(Rawlog, ACompanionFileWithNoPoseGivesWayToTheEmbeddedGroundTruth) {

@@ -313,7 +313,15 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
   try {
     while (scan.next3D(&embedded_gt)) {
       ++count_;
-      if (opts.max_frames > 0 && count_ >= opts.max_frames) break;
+      if (opts.max_frames > 0 && count_ >= opts.max_frames) {
+        // The writer puts a frame's GROUND_TRUTH entry after its scan: read on to the next scan for the
+        // last frame's pose. Damage past the frames asked for is none of this run's business.
+        try {
+          scan.next3D(&embedded_gt);
+        } catch (const InputError&) {
+        }
+        break;
+      }
     }
   } catch (const InputError& e) {
     // A recording cut off (a crash while recording) or damaged from some entry on: its frames up to
