@@ -667,6 +667,19 @@ TEST(DamagedFrames, AFolderOrAFlippedByteCostsOneFrameInOneLine) {
     bytes[idat + 4 + 100] ^= 0x10;
     writeText(dst, bytes);
   });
+  // A whole JPEG whose frame header claims 40000x40000 pixels (within JPEG's limit, past OpenCV's):
+  // OpenCV refuses its size with an exception, not an empty image (it ended the run with OpenCV's
+  // assertion text).
+  const std::string huge = replaceImage(f, 16, false, [](const std::string& dst, const std::string& src) {
+    std::vector<std::uint8_t> jpeg;
+    ASSERT_TRUE(cv::imencode(".jpg", cv::imread(src), jpeg));
+    const std::string bytes(jpeg.begin(), jpeg.end());
+    const std::size_t sof = bytes.find("\xFF\xC0");
+    ASSERT_NE(sof, std::string::npos);
+    std::string patched = bytes;
+    for (const std::size_t k : {sof + 5, sof + 7}) patched[k] = '\x9C', patched[k + 1] = '\x40';  // height, width
+    writeText(dst, patched);
+  });
   const SkipRun r = runSkipping(f.dir, "damaged_folder_crc_out", kFrames);
   ASSERT_EQ(r.code, 0) << r.log;
   EXPECT_NE(r.log.find("warning: " + folder + ": depth image is not a file (a folder?) (frame 5 skipped)"), std::string::npos)
@@ -674,9 +687,10 @@ TEST(DamagedFrames, AFolderOrAFlippedByteCostsOneFrameInOneLine) {
   EXPECT_NE(r.log.find("warning: " + flipped + ": cannot decode colour image (damaged PNG: its IDAT chunk fails its CRC)"),
             std::string::npos)
       << r.log;
+  EXPECT_NE(r.log.find("warning: " + huge + ": cannot decode colour image ("), std::string::npos) << r.log;
   EXPECT_EQ(r.log.find("libpng"), std::string::npos) << r.log;
-  EXPECT_EQ(r.summary["frames_skipped"], 2);
-  EXPECT_EQ(r.poses, kFrames - 2);
+  EXPECT_EQ(r.summary["frames_skipped"], 3);
+  EXPECT_EQ(r.poses, kFrames - 3);
 }
 
 TEST(DamagedFrames, MoreThanOneInFiveStopsTheRun) {

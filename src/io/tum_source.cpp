@@ -92,6 +92,16 @@ std::vector<std::pair<double, Eigen::Vector3d>> readAccelerometer(const std::str
   return ups;
 }
 
+// cv::imread, with OpenCV's refusal of a header's size (past its pixel limit: an exception, not an
+// empty image) as the file's damage.
+cv::Mat readImage(const std::string& path, int flags, const char* what) {
+  try {
+    return cv::imread(path, flags);
+  } catch (const cv::Exception& e) {
+    throw InputError(path, std::string("cannot decode ") + what + " image (OpenCV: " + e.err + ")");
+  }
+}
+
 // An image file named by a list: missing, or a folder (a list line naming "rgb/"), is the frame's
 // damage in one line.
 void requireImageFile(const std::string& path, const char* what) {
@@ -110,7 +120,7 @@ cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, con
   if (raw.empty()) {
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode depth image (" + damage + ")");
-    raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+    raw = readImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "depth");
   }
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
   if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel" + unit_note);
@@ -132,7 +142,7 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   if (img.type() != CV_8UC3) {
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode colour image (" + damage + ")");
-    img = cv::imread(path, cv::IMREAD_UNCHANGED);
+    img = readImage(path, cv::IMREAD_UNCHANGED, "colour");
     // A depth map read as colour gave a grey picture of the depths, tracked as if it were colour.
     if (img.type() == CV_16UC1)
       throw InputError(path, "colour image is 16-bit single channel, as depth images are (a depth file in rgb.txt?)");
@@ -265,8 +275,11 @@ double medianRaw(const cv::Mat& raw) {
 std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths) {
   for (const std::string& path : paths) {
     if (path.empty() || !fs::is_regular_file(path) || !imageFileDamage(path).empty()) continue;
-    const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
-    if (!image.empty()) return image.size();
+    try {
+      const cv::Mat image = readImage(path, cv::IMREAD_COLOR, "colour");
+      if (!image.empty()) return image.size();
+    } catch (const InputError&) {  // the next one may give the size; this one is its own frame's damage
+    }
   }
   return std::nullopt;
 }
