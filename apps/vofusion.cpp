@@ -78,6 +78,10 @@ std::string runOrigin(const RunPlan& plan, const CommandLine& cl) {
   std::string o = RunSession::checkpointOrigin(plan.input, plan.mode, plan.cfg);
   for (const char* option : {"--intrinsics", "--depth-scale"})
     if (cl.value(option)) o += std::string(option) + " " + *cl.value(option) + "\n";
+  // A synthetic input's length shapes its world and path (the loop scene's laps): another length is
+  // another recording, though every frame's timestamp is the same.
+  if (plan.input.rfind("synthetic", 0) == 0 && !std::filesystem::exists(plan.input))
+    o += "--max-frames " + std::to_string(plan.src_opts.max_frames) + "\n";
   return o;
 }
 
@@ -163,6 +167,13 @@ struct FrameLoop {
   std::size_t checkpoints = 0;
   double checkpoint_seconds = 0.0;  // writing them
 };
+
+// Why ICP was refused most often: what a run that tracked no frame tells the user.
+std::string mostFrequentRejection(const Reconstruction& rec) {
+  const auto& why = rec.icpRejections();
+  const auto most = std::max_element(why.begin(), why.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
+  return most == why.end() ? "no reason recorded" : toString(most->first);
+}
 
 // --resume <checkpoint>: the run's state from it, and the frames it had processed read again for the
 // outputs (poses.rawlog, ground truth): the loop then goes on with the next frame.
@@ -252,6 +263,9 @@ int body(int argc, char** argv) {
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");
   if (loop.frames_with_depth == 0 && !loop.interrupted())
     throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
+  if (run.reconstruction().lostFrames() >= loop.done && !loop.interrupted())
+    throw InputError(source->name(), "no frame was tracked, all " + std::to_string(loop.done) + " lost (" +
+                                         mostFrequentRejection(run.reconstruction()) + ")");
   RunInfo info;
   info.input = source->name();
   info.config = plan.config_path;
@@ -276,8 +290,10 @@ int body(int argc, char** argv) {
   if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
   std::fprintf(stderr, "\n");
   std::error_code ec;
-  // The outputs are whole: a checkpoint of this run has nothing left to resume.
-  if (!loop.interrupted()) std::filesystem::remove(plan.checkpoint_path, ec);
+  // The outputs are whole: a checkpoint of this run has nothing left to resume. Another run's (another
+  // input or configuration written to the same folder) is left for its own --resume.
+  if (const auto c = RunSession::peek(plan.checkpoint_path); !loop.interrupted() && c && c->origin == plan.origin)
+    std::filesystem::remove(plan.checkpoint_path, ec);
   std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
   return loop.interrupted() ? 128 + loop.stop_signal : 0;  // as the shell reports a signal: 130, 143
 }

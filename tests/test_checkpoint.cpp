@@ -144,8 +144,8 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
   // zero-filled (4 GiB).
   {
     std::string huge = bytes;
-    const std::size_t at = std::string("VOFUSION-CHECKPOINT-1\n").size();
-    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-1\n"), 0);
+    const std::size_t at = std::string("VOFUSION-CHECKPOINT-2\n").size();
+    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-2\n"), 0);
     huge.replace(at, 4, "\xff\xff\xff\xff");
     std::ofstream(dir + "/huge", std::ios::binary) << huge;
     rusage before{}, after{};
@@ -154,6 +154,11 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
     getrusage(RUSAGE_SELF, &after);
     EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 1L << 20) << "KiB more at the peak";
   }
+  // One of an earlier layout (version 1 had no resumed map's name): said so, not misread as corrupt.
+  std::ofstream(dir + "/v1", std::ios::binary) << "VOFUSION-CHECKPOINT-1\n" << bytes.substr(22);
+  EXPECT_TRUE(RunSession::isCheckpoint(dir + "/v1"));
+  EXPECT_FALSE(RunSession::peek(dir + "/v1").has_value());
+  EXPECT_EQ(refusal(dir + "/v1", "input room\n"), "a checkpoint of an earlier vofusion, which this one cannot read: delete it to start over");
   std::ofstream(dir + "/map", std::ios::binary) << "VOFUSION-MAP";
   EXPECT_FALSE(RunSession::isCheckpoint(dir + "/map"));
   EXPECT_NE(refusal(dir + "/map", "input room\n").find("not a vofusion checkpoint"), std::string::npos);

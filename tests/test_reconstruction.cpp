@@ -195,6 +195,32 @@ TEST(Reconstruction, ReintegrationPassesOverFramesTheRecordingNoLongerHas) {
   EXPECT_EQ(last_progress, frames) << "frame 23 was fused at frame 13's pose";
 }
 
+// A run that went on from a saved map (--resume map) and closed a loop fuses its frames again into
+// that map: re-fusing into an empty one dropped every surface of the earlier sessions.
+TEST(Reconstruction, ReintegrationKeepsTheMapTheRunWentOnFrom) {
+  const std::size_t frames = 24, first_session = 20;
+  const sim::SyntheticSequence seq(test::quickSim("room", frames));
+  const std::string map_file = test::tempDir("reintegrate_resumed") + "/first.vfmap";
+  std::size_t saved_bricks = 0;
+  {
+    Reconstruction first(test::quickRoomConfig(), TrackingMode::Joint);
+    for (std::size_t i = 0; i < first_session; ++i) first.process(seq.render(i));
+    first.finish();
+    first.saveVolume(map_file);
+    const KinFuStats s = first.fusionStats();
+    saved_bricks = s.bricks_in_volume + s.bricks_in_world_model;
+  }
+  Reconstruction second(test::quickRoomConfig(), TrackingMode::Joint);
+  second.resumeVolume(map_file);
+  for (std::size_t i = first_session; i < frames; ++i) second.process(seq.render(i));
+  std::size_t next = first_session;
+  EXPECT_EQ(second.reintegrate([&](Frame& f) { return next < frames ? (f = seq.render(next++), true) : false; }),
+            frames - first_session);
+  const KinFuStats after = second.fusionStats();
+  EXPECT_GE(after.bricks_in_volume + after.bricks_in_world_model, saved_bricks);
+  EXPECT_GT(second.extractMesh().faces.size(), 1000u);
+}
+
 // A depth image of odd width or height: halved for tracking, its odd column and row are dropped, and
 // the tracking camera says so. It said one pixel more (rounded up), the ray cast's hint never matched
 // the frame's size, the model stayed empty, and mode kinfu lost every frame after the first.

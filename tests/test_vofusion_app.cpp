@@ -146,6 +146,45 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   EXPECT_EQ(path->getLineCount(), 11u);
 }
 
+// A checkpoint belongs to its run: a synthetic input of another length is another recording (its world
+// and path are shaped by the length, though every timestamp is the same), and a run that finishes
+// into the same folder deletes only a checkpoint of its own.
+TEST(VofusionApp, ACheckpointIsBoundToItsRunAndOutlivesAnotherRunsEnd) {
+  const std::string dir = test::tempDir("vofusion_app_other_checkpoint");
+  const std::string out = dir + "/out", checkpoint = out + "/checkpoint";
+  const std::string cfg = " --config " + validConfig(dir) + " --out " + out;
+  std::string log;
+  test::run("(" + test::app("vofusion") + " synthetic:room --max-frames 200 --checkpoint-every 1000" + cfg + " > " + dir +
+                "/log.txt 2>&1 & pid=$!; for i in $(seq 1 600); do grep -q ' [3-9]/200 frames\\| [1-9][0-9]/200 frames' " + dir +
+                "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -TERM $pid; wait $pid; echo rc=$?)",
+            &log);
+  ASSERT_NE(log.find("rc=143"), std::string::npos) << log;
+  ASSERT_TRUE(RunSession::peek(checkpoint).has_value()) << "written at the stop";
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 199 --resume " + checkpoint + cfg, &log), 2) << log;
+  EXPECT_NE(log.find("made by another run ('--max-frames 200' where this run has '--max-frames 199')"), std::string::npos) << log;
+  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:corridor --max-frames 3" + cfg, &log), 0) << log;
+  EXPECT_TRUE(RunSession::peek(checkpoint).has_value()) << "the stopped run's checkpoint was deleted by another run";
+}
+
+// Every frame lost (here no reading within [min_depth, max_depth]) is no reconstruction: one line, exit
+// 2, and an earlier run's outputs kept (it used to exit 0 with an ATE of identity poses).
+TEST(VofusionApp, ARunThatTracksNoFrameFailsInOneLine) {
+  const std::string dir = test::tempDir("vofusion_app_all_lost");
+  std::ofstream(dir + "/far.ini") << "[kinfu]\nmin_depth = 15\nmax_depth = 20\n";
+  fs::create_directories(dir + "/out");
+  std::ofstream(dir + "/out/trajectory.txt") << "EARLIER\n";
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 4 --config " + dir + "/far.ini --out " + dir + "/out",
+                      &log),
+            2);
+  EXPECT_NE(log.find("\nvofusion: error: synthetic:room: no frame was tracked, all 4 lost (no depth reading in [min_depth, "
+                     "max_depth])\n"),
+            std::string::npos)
+      << log;
+  std::ifstream kept(dir + "/out/trajectory.txt");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(kept), {}), "EARLIER\n");
+}
+
 TEST(VofusionApp, UnknownConfigKeyFailsInOneLineAndKeepsEarlierResults) {
   const std::string dir = test::tempDir("vofusion_app_badcfg");
   const std::string out = dir + "/out";

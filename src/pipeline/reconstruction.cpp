@@ -3,6 +3,7 @@
 #include "vofusion/core/state_archive.h"
 
 #include <chrono>
+#include <filesystem>
 #include <map>
 
 #include <tbb/task_group.h>
@@ -53,6 +54,7 @@ struct Reconstruction::Impl {
   Trajectory optimised;                     // after finish(), when loop closure ran: `smoothed` loop-closed
   Trajectory optimised_as_tracked;          // the same corrections on the poses as tracked: reintegrate() fuses there
   double max_correction = 0.0;              // m, largest move of a fused pose by the loops (finish())
+  std::string resumed_map;                  // resumeVolume()'s file: reintegrate() fuses into it again
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
   KinFuStats released_stats;                // fusionStats() when releaseMap() freed the map
@@ -256,6 +258,9 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   m.kinfu.reset();
   m.kinfu = std::make_unique<TrackedMap>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
   TrackedMap& map = *m.kinfu;
+  // A run that went on from a saved map fuses its frames into that map again, not into an empty one:
+  // the earlier sessions' surfaces are the map's too.
+  if (!m.resumed_map.empty()) map.resume(m.resumed_map);
   std::size_t read = 0, fused = 0;
   Frame frame;
   while (read < poses.size() && next(frame)) {
@@ -278,7 +283,10 @@ void Reconstruction::saveVolume(const std::string& path) const {
   impl_->waitFusion();
   impl_->map().save(path);
 }
-void Reconstruction::resumeVolume(const std::string& path) { impl_->map().resume(path); }
+void Reconstruction::resumeVolume(const std::string& path) {
+  impl_->map().resume(path);
+  impl_->resumed_map = std::filesystem::absolute(path).string();
+}
 void Reconstruction::saveState(std::ostream& os) const {
   Impl& m = *impl_;
   if (m.finished) throw std::logic_error("Reconstruction::saveState after finish()");
@@ -303,7 +311,7 @@ void Reconstruction::saveState(std::ostream& os) const {
       a << uint64_t(l.frame) << uint64_t(l.keyframe) << uint64_t(l.keyframe_frame) << int32_t(l.inliers) << l.icp_rms;
       state::write(a, l.pose);
     }
-    a << bool(m.odometry) << bool(m.loops);
+    a << bool(m.odometry) << bool(m.loops) << m.resumed_map;
   }
   if (m.odometry) m.odometry->saveState(os);
   m.map().saveState(os);
@@ -355,6 +363,7 @@ void Reconstruction::loadState(std::istream& is) {
     a >> odometry >> loops;
     if (odometry != bool(m.odometry) || loops != bool(m.loops))
       throw std::runtime_error(std::string("the checkpoint was made with loop closure ") + (loops ? "on" : "off"));
+    a >> m.resumed_map;
   }
   if (m.odometry) m.odometry->loadState(is);
   m.map().loadState(is);

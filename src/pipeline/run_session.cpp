@@ -24,7 +24,7 @@ namespace vofusion {
 
 namespace {
 
-constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-1\n";
+constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-2\n";  // 2: the resumed map's name
 
 // The first line where two checkpoint origins differ, as "'<saved>' where this run has '<now>'".
 std::string firstDifference(const std::string& saved, const std::string& now) {
@@ -130,22 +130,29 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
   out.commitDurably();  // a power cut leaves the earlier checkpoint or this one, never an empty file
 }
 
-bool RunSession::isCheckpoint(const std::string& path) {
+namespace {
+constexpr char kCheckpointKind[] = "VOFUSION-CHECKPOINT-";  // of any version
+
+// Whether the file starts with `magic` (its first sizeof - 1 bytes).
+template <std::size_t N>
+bool startsWith(const std::string& path, const char (&magic)[N]) {
   std::ifstream is(path, std::ios::binary);
-  char magic[sizeof(kCheckpointMagic) - 1];
-  return is.read(magic, sizeof(magic)) && std::memcmp(magic, kCheckpointMagic, sizeof(magic)) == 0;
+  char head[N - 1];
+  return is.read(head, sizeof(head)) && std::memcmp(head, magic, sizeof(head)) == 0;
 }
+}  // namespace
+
+bool RunSession::isCheckpoint(const std::string& path) { return startsWith(path, kCheckpointKind); }
 
 std::optional<RunSession::Checkpoint> RunSession::peek(const std::string& path) {
-  if (!isCheckpoint(path)) return std::nullopt;
+  if (!startsWith(path, kCheckpointMagic)) return std::nullopt;
   std::ifstream is(path, std::ios::binary);
   is.seekg(sizeof(kCheckpointMagic) - 1);
   try {
     auto a = state::archiveOf(is);
-    std::string origin;
     uint64_t frames = 0;
     Checkpoint c;
-    a >> origin >> frames >> c.seconds;
+    a >> c.origin >> frames >> c.seconds;
     c.frames = frames;
     return c;
   } catch (const std::exception&) {
@@ -155,6 +162,8 @@ std::optional<RunSession::Checkpoint> RunSession::peek(const std::string& path) 
 
 RunSession::Checkpoint RunSession::resume(const std::string& path, const std::string& origin) {
   if (!isCheckpoint(path)) throw InputError(path, "not a vofusion checkpoint (written by --checkpoint-every)");
+  if (!startsWith(path, kCheckpointMagic))
+    throw InputError(path, "a checkpoint of an earlier vofusion, which this one cannot read: delete it to start over");
   std::ifstream is(path, std::ios::binary);
   is.seekg(sizeof(kCheckpointMagic) - 1);
   Checkpoint c;

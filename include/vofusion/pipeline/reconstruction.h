@@ -95,7 +95,8 @@ class Reconstruction {
   bool reintegrated() const;
   // The map and the current pose to a file (TrackedMap::save), after the fusion in flight finished.
   void saveVolume(const std::string& path) const;
-  // Before the first frame: continue from a saved map and pose (TrackedMap::resume).
+  // Before the first frame: continue from a saved map and pose (TrackedMap::resume). reintegrate()
+  // reads the file again and fuses the frames into it (a checkpoint keeps its name).
   void resumeVolume(const std::string& path);
   // Checkpoints, between frames: every stage's state (odometry, tracker and map, loop closer) and the
   // run's poses and counts so far. A reconstruction made with the same configuration and mode that
