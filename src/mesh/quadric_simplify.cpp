@@ -1,5 +1,6 @@
 #include "vofusion/mesh/quadric_simplify.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include <meshoptimizer.h>
@@ -43,10 +44,13 @@ bool simplifyByQuadrics(TriangleMesh& mesh, double max_error, std::size_t target
   // The error is relative to the mesh's extent; the mesh's own vertices give it, not the copies.
   const float scale = meshopt_simplifyScale(xyz.data(), n, 3 * sizeof(float));
   if (!(scale > 0)) return true;  // every vertex at one point: nothing to collapse
+  // meshoptimizer asserts a target within the mesh's indices, and Debian's build keeps its asserts:
+  // a budget above the mesh's faces (a small region) aborted the process.
+  const std::size_t target_indices = std::min(3 * target_faces, indices.size());
   const auto collapse = [&](unsigned options) {
     std::vector<unsigned> kept(indices.size());
     kept.resize(meshopt_simplify(kept.data(), indices.data(), indices.size(), xyz.data(), xyz.size() / 3,
-                                 3 * sizeof(float), 3 * target_faces, float(max_error / scale), options, nullptr));
+                                 3 * sizeof(float), target_indices, float(max_error / scale), options, nullptr));
     return kept;
   };
   const std::size_t locked_used = lockedIn(indices, locked);
