@@ -13,6 +13,8 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <mrpt/config/CConfigFileMemory.h>
 
+#include <nlohmann/json.hpp>
+
 #include "support.h"
 #include "test_mesh_fixtures.h"
 #include "vofusion/mesh/mesh_clean.h"
@@ -337,6 +339,18 @@ TEST(MeshClean, AFaceBudgetLargerThanTheMeshIsNoAbort) {
   ASSERT_TRUE(r.success) << r.failure;
   EXPECT_EQ(m.faces.size(), 80u);  // a coarse sphere: every collapse moves it by more than 3 mm
   EXPECT_TRUE(closedAndOriented(m));
+}
+
+// A region left unsimplified while the rest succeeded shows in summary.json (it was written into
+// `failure`, which only a failed report writes: nowhere).
+TEST(MeshClean, AWarningOfASucceededReportIsWritten) {
+  MeshCleanReport r;
+  r.success = true;
+  r.warning = "1 region(s) left unsimplified: would move a seam vertex";
+  const nlohmann::json j = nlohmann::json::parse(r.toJson());
+  EXPECT_TRUE(j.at("success").get<bool>());
+  EXPECT_EQ(j.at("warning"), r.warning);
+  EXPECT_FALSE(j.contains("failure"));
 }
 
 TEST(MeshClean, SimplifiesToEdgeLength) {

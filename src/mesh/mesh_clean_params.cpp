@@ -69,6 +69,7 @@ std::string MeshCleanReport::toJson() const {
   std::ostringstream o;
   o << "{\"success\": " << (success ? "true" : "false");
   if (!success) o << ", \"failure\": " << jsonString(failure);
+  if (!warning.empty()) o << ", \"warning\": " << jsonString(warning);
   o << ", \"steps\": [";
   for (std::size_t i = 0; i < steps.size(); ++i) {
     const auto& s = steps[i];

@@ -13,6 +13,14 @@ using nlohmann::json;
 
 namespace vofusion {
 
+namespace {
+// What the post-processing left undone, in one line beside summary.json's mesh_clean.
+void sayWhatCleaningLeft(const MeshCleanReport& r) {
+  if (!r.success) printWarning("mesh post-processing failed (the mesh is written as it was before): " + r.failure);
+  if (!r.warning.empty()) printWarning("mesh post-processing: " + r.warning);
+}
+}  // namespace
+
 bool meshesByRegion(const OutputParams& p, const MeshCleanParams& mesh_params) {
   return p.write_mesh && p.clean_mesh && mesh_params.region_bricks > 0 && !p.save_full_mesh;
 }
@@ -54,6 +62,7 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
     s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
     if (p.save_raw_mesh) streamed_raw = std::to_string(r.raw_faces) + " faces, streamed region by region";
     s["mesh_clean"] = json::parse(r.report.toJson());
+    sayWhatCleaningLeft(r.report);
     if (r.report.simplification.ran) s["mesh_simplification"] = simplificationJson(r.report.simplification, r.raw_faces);
   } else {
     mesh = rec.extractMesh();
@@ -69,6 +78,7 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
     TriangleMesh full;
     const MeshCleanReport report = cleanMesh(mesh, mesh_params, p.save_full_mesh ? &full : nullptr);
     s["mesh_clean"] = json::parse(report.toJson());
+    sayWhatCleaningLeft(report);
     if (report.simplification.ran) s["mesh_simplification"] = simplificationJson(report.simplification, raw_faces);
     if (p.save_full_mesh) {
       writePly(out.path("mesh_full.ply"), full);

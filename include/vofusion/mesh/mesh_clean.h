@@ -68,6 +68,7 @@ struct MeshSimplification {
 struct MeshCleanReport {
   bool success = false;
   std::string failure;                 // why, when !success (the mesh is then left as it was given)
+  std::string warning;                 // a part left undone while the rest succeeded (regions unsimplified)
   std::vector<MeshCleanStep> steps;
   std::size_t duplicate_vertices_merged = 0;
   std::size_t degenerate_faces_removed = 0;  // combinatorial (repeated vertex) + geometric (zero area)
