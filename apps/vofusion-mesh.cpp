@@ -1,5 +1,7 @@
 // vofusion-mesh: clean up any triangle mesh PLY with the [mesh] post-processing of vofusion.
+#include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -33,6 +35,18 @@ const char* kUsage =
     "--png renders the result off-screen, --scene writes an MRPT scene for SceneViewer3D; both show\n"
     "the camera path of --trajectory (TUM format, camera-to-world) when given.\n";
 
+// Each output a file of its own, checked before the cleaning: one named twice would be written over.
+void requireDistinctOutputs(const CommandLine& cl, const std::string& out) {
+  std::vector<std::string> seen = {std::filesystem::weakly_canonical(out).string()};
+  for (const char* option : {"--full", "--report", "--png", "--scene"}) {
+    const auto path = cl.value(option);
+    if (!path) continue;
+    const std::string same = std::filesystem::weakly_canonical(*path).string();
+    if (std::find(seen.begin(), seen.end(), same) != seen.end()) throw InputError(*path, "named twice as an output");
+    seen.push_back(same);
+  }
+}
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--config", "--report", "--png", "--scene", "--trajectory", "--full", "--distance-to"}, {"--dump-config", "--help"});
   MeshCleanParams params;
@@ -42,6 +56,7 @@ int body(int argc, char** argv) {
   const std::string in = cl.positional()[0], out = cl.positional()[1];
   meshFormatOf(out);  // a bad extension fails now, not after the cleaning
   if (const auto full = cl.value("--full")) meshFormatOf(*full);
+  requireDistinctOutputs(cl, out);
 
   if (const auto config = cl.value("--config")) {
     const auto cfg = loadConfig(*config);

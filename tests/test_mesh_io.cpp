@@ -6,6 +6,7 @@
 
 #include "support.h"
 #include "test_mesh_fixtures.h"
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/mesh/mesh_io.h"
 
@@ -148,4 +149,21 @@ TEST(MeshIo, VofusionMeshWritesObjAndStlAndRejectsOtherExtensions) {
   EXPECT_NE(out.find(dir + "/out.xyz: unknown mesh format '.xyz'"), std::string::npos) << out;
   EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
   EXPECT_FALSE(std::filesystem::exists(dir + "/out.xyz"));
+
+  // One file named for two outputs: refused before any work, the earlier file as it was (the second
+  // output's temporary replaced the first's, and the full mesh was put in place as out.obj).
+  const std::string before = readBytes(dir + "/out.obj");
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.obj --full " + dir + "/./out.obj", &out), 2);
+  EXPECT_NE(out.find(dir + "/./out.obj: named twice as an output"), std::string::npos) << out;
+  EXPECT_EQ(readBytes(dir + "/out.obj"), before);
+}
+
+// The same refusal for any set of outputs moved into place together.
+TEST(MeshIo, AnOutputSetRefusesAFileNamedTwice) {
+  const std::string dir = test::tempDir("mesh_set_twice");
+  AtomicFileSet set;
+  set.write(dir + "/a.ply", [](const std::string& tmp) { std::ofstream(tmp) << "a"; });
+  EXPECT_THROW(set.write(dir + "/../mesh_set_twice/a.ply", [](const std::string& tmp) { std::ofstream(tmp) << "b"; }), InputError);
+  set.commit();
+  EXPECT_EQ(readBytes(dir + "/a.ply"), "a");
 }

@@ -97,6 +97,10 @@ void AtomicPath::commitDurably() {
 }
 
 void AtomicFileSet::write(const std::string& path, const std::function<void(const std::string& tmp)>& write_to) {
+  // A second AtomicPath for the same file would remove the first one's temporary and take its place.
+  const fs::path same = fs::weakly_canonical(path);
+  for (const auto& f : files_)
+    if (fs::weakly_canonical(f->path()) == same) throw InputError(path, "named twice as an output");
   auto file = std::make_unique<AtomicPath>(path);
   try {
     write_to(file->tmp());

@@ -32,7 +32,7 @@ class AtomicPath {
 
 // Several outputs at paths of their own, moved into place together: each is written to its temporary
 // (write), and commit() renames them all once every one was written. One that fails to write leaves
-// every earlier file at those paths as it was. A writer's InputError naming the temporary is rethrown
+// every earlier file at those paths as it was. A path written twice is refused (InputError). A writer's InputError naming the temporary is rethrown
 // naming the file asked for (the temporary is gone by the time the error is read).
 class AtomicFileSet {
  public:
