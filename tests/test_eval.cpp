@@ -90,6 +90,27 @@ TEST(Eval, ConstantDriftGivesKnownRpe) {
   EXPECT_NEAR(expect_t, 0.1, 0.02);  // sanity: about the 0.1 m/s speed drift
 }
 
+// A pose is never its own partner: over a gap (frames lost or skipped) or a delta shorter than half a
+// frame the nearest pose to t + delta is the pose itself, and the pair scored 0 m and 0 deg.
+TEST(Eval, RpeNeverPairsAPoseWithItself) {
+  const Trajectory gt = wavy();
+  Trajectory est;
+  for (std::size_t i = 0; i < gt.size(); ++i) {
+    if (i >= 100 && i < 104) continue;  // four frames missing: 133 ms without a pose
+    // A drift of 1 cm a frame in the world's z: every pair of poses a frame or more apart is off by 1 cm or more.
+    est.push_back({gt[i].timestamp, CPose3D(gt[i].pose.x(), gt[i].pose.y(), gt[i].pose.z() + 0.01 * double(i),
+                                            gt[i].pose.yaw(), gt[i].pose.pitch(), gt[i].pose.roll())});
+  }
+  const RpeResult r = computeRpe(gt, est, 0.05);
+  ASSERT_TRUE(r.success) << r.message;
+  for (std::size_t k = 0; k < r.trans_errors.size(); ++k)
+    EXPECT_GT(r.trans_errors[k], 0.009) << "the pair at " << r.times[k] << " s";
+  // Every pose but the one before the gap and the two whose partner is the last pose.
+  EXPECT_EQ(r.trans_errors.size(), est.size() - 3);
+  const RpeResult too_short = computeRpe(gt, est, 0.01);
+  EXPECT_FALSE(too_short.success) << too_short.trans.count << " pairs under half a frame apart";
+}
+
 TEST(Eval, NoiseOfKnownMagnitude) {
   // Every estimated position displaced by exactly 5 cm in alternating +-z: after the (rigid) alignment
   // the offsets cancel on average, so every error is 5 cm and RMSE = mean = 0.05.

@@ -119,7 +119,11 @@ RpeResult computeRpe(const Trajectory& gt, const Trajectory& est, double delta, 
   for (std::size_t i = 0; i < est.size(); ++i) {
     const std::size_t j = nearest(es, es[i] + delta);
     if (j == est.size() - 1) continue;  // as evaluate_rpe.py: the partner ran off the end
+    // Unlike evaluate_rpe.py, a pose is not its own partner (over a gap, or a delta under half a
+    // frame), nor are two poses on one ground-truth pose: such a pair measures no motion and scored 0.
+    if (j <= i) continue;
     const std::size_t g0 = nearest(gs, es[i]), g1 = nearest(gs, es[j]);
+    if (g1 == g0) continue;
     if (std::abs(gs[g0] - es[i]) > max_dt || std::abs(gs[g1] - es[j]) > max_dt) continue;
     const mrpt::poses::CPose3D est_rel = est[j].pose - est[i].pose;  // est_i^-1 est_j
     const mrpt::poses::CPose3D gt_rel = gt[g1].pose - gt[g0].pose;

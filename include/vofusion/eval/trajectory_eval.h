@@ -47,7 +47,9 @@ struct RpeResult {
 };
 // evaluate_rpe.py --fixed_delta --delta <delta> --delta_unit s: for each estimated pose i the pose j
 // nearest to t_i + delta (pairs whose j is the last pose are dropped); ground-truth poses nearest to
-// both stamps (within max_dt); error = (est_i^-1 est_j) (gt_i^-1 gt_j)^-1.
+// both stamps (within max_dt); error = (est_i^-1 est_j) (gt_i^-1 gt_j)^-1. Unlike the script, a pose
+// is never its own partner (over a gap in the poses): such a pair, and two poses on one ground-truth
+// pose, measure no motion and would score 0.
 RpeResult computeRpe(const Trajectory& gt, const Trajectory& est, double delta = 1.0, double max_dt = 0.02);
 
 // ---- Plots (PNG via OpenCV drawing, written atomically; throw InputError(png, ...) on failure)
