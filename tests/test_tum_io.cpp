@@ -119,6 +119,13 @@ TEST(Trajectory, InterpolatesMidway) {
   ASSERT_TRUE(interpolatePose(t, 0.5, 0.6, p));
   EXPECT_NEAR(p.yaw(), 0.1, 1e-9);
   EXPECT_FALSE(interpolatePose(t, 3.0, 0.5, p));
+  // Beyond the ends the end pose is held only within the benchmark's 0.02 s, whatever max_gap allows.
+  EXPECT_TRUE(interpolatePose(t, 1.015, 0.05, p));
+  EXPECT_NEAR(p.x(), 2.0, 1e-12);
+  EXPECT_FALSE(interpolatePose(t, 1.04, 0.05, p));
+  EXPECT_FALSE(interpolatePose(t, -0.04, 0.05, p));
+  EXPECT_TRUE(interpolatePose(t, -0.015, 0.05, p));
+  EXPECT_FALSE(interpolatePose(t, -0.015, 0.01, p));
 }
 
 TEST(TumFolder, ReadsSharedFirst300) {

@@ -61,13 +61,14 @@ bool interpolatePose(const Trajectory& traj, double t, double max_gap, mrpt::pos
   if (traj.empty()) return false;
   auto it = std::lower_bound(traj.begin(), traj.end(), t,
                              [](const StampedPose& p, double v) { return p.timestamp < v; });
+  const double held_within = std::min(max_gap, kHeldPoseWithin);
   if (it == traj.begin()) {
-    if (it->timestamp - t > max_gap) return false;
+    if (it->timestamp - t > held_within) return false;
     out = it->pose;
     return true;
   }
   if (it == traj.end()) {
-    if (t - traj.back().timestamp > max_gap) return false;
+    if (t - traj.back().timestamp > held_within) return false;
     out = traj.back().pose;
     return true;
   }
