@@ -308,6 +308,32 @@ TEST(Rawlog, MaxFramesKeepsTheLastFramesGroundTruth) {
   }
 }
 
+// A frame stamped at or before the one before it (a driver's clock stepping back, a repeated frame)
+// is damaged: skipped in one line, the others read. The evaluation, the motion model and re-fusing
+// count on frames going forward in time.
+TEST(Rawlog, AFrameNotAfterTheOneBeforeItIsDamaged) {
+  auto frames = simFrames(4);
+  frames[2].timestamp = frames[1].timestamp;  // repeated
+  const std::string dir = test::tempDir("rawlog_stamps_back");
+  writeRawlog(dir + "/s.rawlog", frames, RawlogWriterOptions{});
+  RawlogSource src(dir + "/s.rawlog", {});
+  Frame f;
+  ASSERT_TRUE(src.next(f));
+  ASSERT_TRUE(src.next(f));
+  try {
+    src.next(f);
+    FAIL() << "frame 2 read";
+  } catch (const DamagedFrame& e) {
+    EXPECT_EQ(e.file(), dir + "/s.rawlog");
+    EXPECT_NE(e.problem().find("frame 2 is stamped"), std::string::npos) << e.problem();
+  }
+  ASSERT_TRUE(src.next(f));
+  EXPECT_EQ(f.index, 3u);
+  EXPECT_FALSE(src.next(f));
+  src.rewind();  // from the start again: the first frame is no longer "before" anything
+  EXPECT_TRUE(src.next(f));
+}
+
 // A companion file beside the rawlog is read before the rawlog's GROUND_TRUTH entries, unless it gives
 // no pose (none, or damaged): then the rawlog's own ground truth is used, not dropped.
 TEST(Rawlog, ACompanionFileWithNoPoseGivesWayToTheEmbeddedGroundTruth) {
