@@ -3,6 +3,7 @@
 //               [--blackout T:S] [--overwrite]
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -122,6 +123,19 @@ bool writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
   return true;
 }
 
+// A TUM folder lists each colour image under its own capture time, and a reader pairs it with the
+// depth image nearest in time, within 0.02 s (the benchmark's associate.py): an offset of half a
+// frame or more pairs it with the next frame's depth, or the colour stamps leave their order.
+void requireColourOffsetsATumFolderPairs(const sim::SimOptions& o) {
+  const double limit = std::min(SourceOptions().max_time_diff, 0.5 / o.fps);
+  if (o.colour_offset_max < limit) return;
+  char why[200];
+  std::snprintf(why, sizeof why, "%g s at %g fps: a TUM folder's colour images pair with their depth only under %.4g s (half a "
+                "frame, at most 0.02 s); write a .rawlog or lower --colour-offset",
+                o.colour_offset_max, o.fps, limit);
+  throw InputError("--colour-offset", why);
+}
+
 bool writeRawlog(const sim::SyntheticSequence& seq, const std::string& path, bool overwrite) {
   RawlogWriterOptions options;
   options.replace = overwrite;
@@ -180,9 +194,11 @@ int body(int argc, char** argv) {
   const std::string out = cl.value("--out", "");
   if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");
 
+  const bool rawlog = fs::path(out).extension() == ".rawlog";
+  if (!rawlog && o.trajectory == "shake") requireColourOffsetsATumFolderPairs(o);
   const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
   installStopSignals(kStoppingWithNothingWritten);
-  const bool done = fs::path(out).extension() == ".rawlog" ? writeRawlog(seq, out, cl.flag("--overwrite")) : writeTum(seq, out);
+  const bool done = rawlog ? writeRawlog(seq, out, cl.flag("--overwrite")) : writeTum(seq, out);
   // A part of a sequence is no sequence: nothing is written (the writers remove their temporaries).
   return done ? 0 : stoppedWithNothingWritten("rgbd-simulate", "");
 }
