@@ -84,6 +84,20 @@ TEST(RigidMotion, PaperAlgorithmIsHurtByOutliersRobustIsNot) {
   EXPECT_LT(er, ep);
 }
 
+// The paper's fit reports its covariance over its inliers, as its options say: with the outliers in,
+// their residuals scaled the spread by ~30x (chi^2 / dof ~1000 times too large).
+TEST(RigidMotion, PaperCovarianceIsTheInliers) {
+  Points3 s, d;
+  makeCorrespondences(300, 0.002, 0.3, s, d, 3);
+  const RigidFit p = fitPaper(s, d, PaperFitOptions{});
+  ASSERT_TRUE(p.ok) << p.failure;
+  ASSERT_GE(p.inliers.size(), 150u);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(p.covariance);
+  EXPECT_GT(es.eigenvalues().minCoeff(), 0.0);
+  EXPECT_LT(std::sqrt(p.covariance(0, 0)), 0.005);
+  EXPECT_GT(std::sqrt(p.covariance(0, 0)), 1e-5);
+}
+
 TEST(RigidMotion, CollinearPointsAreDegenerate) {
   Points3 s, d;
   for (int i = 0; i < 30; ++i) s.emplace_back(0.1 * i, 0.05 * i, 2.0), d.push_back(knownMotion() * s.back());

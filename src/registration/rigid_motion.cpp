@@ -200,7 +200,9 @@ RigidFit fitPaper(const Points3& src, const Points3& dst, const PaperFitOptions&
   }
   fit.rms = fit.inliers.empty() ? best : std::sqrt(sum_in / fit.inliers.size());
   fit.rms_at_1m = fit.rms;  // Algorithm 1's inliers are within a fixed distance at any depth
-  refineGaussNewton(src, dst, {}, fit.T, 0, &fit.covariance);  // covariance only, T unchanged
+  // Covariance only (T unchanged), over the inliers: the outliers' residuals would scale it by their
+  // chi^2. With fewer than 3 inliers, over all as before.
+  refineGaussNewton(src, dst, fit.inliers.size() >= 3 ? fit.inliers : std::vector<int>{}, fit.T, 0, &fit.covariance);
   fit.ok = true;
   return fit;
 }
