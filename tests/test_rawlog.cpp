@@ -334,6 +334,28 @@ TEST(Rawlog, AFrameNotAfterTheOneBeforeItIsDamaged) {
   EXPECT_TRUE(src.next(f));
 }
 
+// A depth file that cannot be written is named where the user will look for it, <out>_Images/..., not
+// in the writer's temporary folder (gone by the time the message is read), as the colour file is.
+TEST(Rawlog, ADepthFileThatCannotBeWrittenIsNamedWhereItWouldBe) {
+  const auto frames = simFrames(1);
+  const std::string dir = test::tempDir("rawlog_depth_unwritable");
+  RawlogWriter w(dir + "/o.rawlog", {});
+  std::string images_tmp;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().rfind("o_Images.tmp-", 0) == 0) images_tmp = e.path().string();
+  ASSERT_FALSE(images_tmp.empty());
+  char stem[64];
+  std::snprintf(stem, sizeof stem, "KINECT_000000_%.6f_DEPTH.bin", frames[0].timestamp);
+  fs::create_directories(images_tmp + "/" + stem + "/in_the_way");  // a folder where the file goes
+  try {
+    w.write(frames[0]);
+    FAIL() << "written";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), dir + "/o_Images/" + stem);
+    EXPECT_NE(e.problem().find("cannot write range image"), std::string::npos) << e.problem();
+  }
+}
+
 // A companion file beside the rawlog is read before the rawlog's GROUND_TRUTH entries, unless it gives
 // no pose (none, or damaged): then the rawlog's own ground truth is used, not dropped.
 TEST(Rawlog, ACompanionFileWithNoPoseGivesWayToTheEmbeddedGroundTruth) {

@@ -124,7 +124,8 @@ bool reuseColourFile(const ColourFile& file, int width, int height, const std::s
   return true;
 }
 
-DepthFile writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& file_name, const std::string& dir) {
+DepthFile writeRangeImageExternally(CObservation3DRangeScan& obs, const std::string& file_name, const std::string& dir,
+                                    const std::string& shown) {
   const std::string path = (fs::path(dir) / file_name).string();
   if (obs.rangeImage_isExternallyStored()) throw std::logic_error(path + ": range image is already external");
   // What MRPT's CFileGZOutputStream + CArchive wrote (and its load() reads): a gzip file of rows and
@@ -138,7 +139,7 @@ DepthFile writeRangeImageExternally(CObservation3DRangeScan& obs, const std::str
   std::memcpy(raw.data(), dims, sizeof dims);
   if (ri.size() != 0) std::memcpy(raw.data() + sizeof dims, ri.data(), std::size_t(ri.size()) * 2);
   const std::vector<std::uint8_t> packed = gzipCompress(raw.data(), raw.size());
-  writeExternalFile(path, packed, path, "range image");
+  writeExternalFile(path, packed, shown.empty() ? path : shown, "range image");
   useExternalRangeImage(obs, file_name);
   return DepthFile{path, double(obs.rangeUnits), packed.size(), gzipTrailer(packed.data() + packed.size()), false};
 }

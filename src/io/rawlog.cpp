@@ -573,7 +573,7 @@ std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
       useExternalRangeImage(*obs, bin);
     } else {
       readings_beyond_range_ += setRangeImage(*obs, frame.depth);
-      depth = writeRangeImageExternally(*obs, bin, dir);
+      depth = writeRangeImageExternally(*obs, bin, dir, shown + bin);
     }
     impl_->images_used = true;
     // Only a recording's files keep their names: a result's folder is renamed by commit().

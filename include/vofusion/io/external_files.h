@@ -45,10 +45,11 @@ bool reuseColourFile(const ColourFile& file, int width, int height, const std::s
 // Writes obs.rangeImage to dir/file_name in MRPT's external format (gzip: rows, cols as uint32, then
 // the uint16 ranges, little-endian) and marks it externally stored under the relative file_name,
 // releasing the matrix. What rangeImage_convertToExternalStorage(file_name, dir) writes, without its
-// global. Returns the file written (not recorded). Throws InputError(dir/file_name, ...) when it cannot
-// be written.
+// global. Returns the file written (not recorded). Throws InputError(shown, ...) when it cannot be
+// written: `shown` names the file as the user will find it (dir/file_name when empty; a writer's
+// temporary folder is gone by the time the message is read).
 DepthFile writeRangeImageExternally(mrpt::obs::CObservation3DRangeScan& obs, const std::string& file_name,
-                               const std::string& dir);
+                                    const std::string& dir, const std::string& shown = "");
 // Writes `bytes` to `path`, or removes what it wrote and throws InputError(shown, "cannot write <what>:
 // <why>"): no half-written image is left. `shown` names the file as the user will find it.
 void writeExternalFile(const std::string& path, const std::vector<std::uint8_t>& bytes, const std::string& shown,
