@@ -53,6 +53,25 @@ TEST(Associate, EveryDepthFrameTakesItsNearestColourUnlessOneToOne) {
   EXPECT_EQ(unique[1].depth.file, "d3");
 }
 
+// Ties go as associate.py decides them (sorted by difference, then colour, then depth stamp): every
+// depth frame halfway between two colour frames pairs with the earlier one, and no pair is lost. An
+// unstable sort on the difference alone could pair colour k with depth k - 1 and leave frames out.
+TEST(Associate, TiesAreDecidedByTheStampsAsAssociatePyDoes) {
+  std::vector<TumEntry> rgb, depth;
+  for (int k = 0; k < 40; ++k) {
+    rgb.push_back({0.25 * k, "rgb" + std::to_string(k)});
+    depth.push_back({0.25 * k + 0.125, "depth" + std::to_string(k)});
+  }
+  for (const bool one_to_one : {true, false}) {
+    const auto pairs = associate(rgb, depth, 0.2, one_to_one);
+    ASSERT_EQ(pairs.size(), 40u) << one_to_one;
+    for (std::size_t k = 0; k < pairs.size(); ++k) {
+      EXPECT_EQ(pairs[k].rgb.file, "rgb" + std::to_string(k)) << one_to_one;
+      EXPECT_EQ(pairs[k].depth.file, "depth" + std::to_string(k)) << one_to_one;
+    }
+  }
+}
+
 TEST(TumFolder, FramesAreStampedAtTheirDepthCapture) {
   const std::string dir = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(dir);

@@ -1,6 +1,7 @@
 #include "vofusion/io/tum_source.h"
 
 #include <algorithm>
+#include <tuple>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -50,7 +51,9 @@ std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const st
     for (auto it = lo; it != depth.end() && it->timestamp <= rgb[i].timestamp + max_diff; ++it)
       cands.push_back({std::abs(it->timestamp - rgb[i].timestamp), i, std::size_t(it - depth.begin())});
   }
-  std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.dt < b.dt; });
+  // Ties by the stamps, as associate.py sorts (difference, colour stamp, depth stamp) tuples.
+  std::sort(cands.begin(), cands.end(),
+            [](const Cand& a, const Cand& b) { return std::tie(a.dt, a.i, a.j) < std::tie(b.dt, b.i, b.j); });
   if (!one_to_one) {
     // Best first, so the first candidate seen for a depth frame is its nearest colour frame.
     std::vector<long> nearest(depth.size(), -1);
