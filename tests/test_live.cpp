@@ -236,6 +236,50 @@ TEST(LiveReplay, PlaysAtTheRecordedRate) {
   EXPECT_LT(s.seconds, 0.8 * span);
 }
 
+namespace {
+// Frames at the given timestamps, blank.
+class StampedFrames : public FrameSource {
+ public:
+  explicit StampedFrames(std::vector<double> stamps) : stamps_(std::move(stamps)) {}
+  bool next(Frame& f) override {
+    if (i_ >= stamps_.size()) return false;
+    f = Frame();
+    f.index = i_;
+    f.timestamp = stamps_[i_++];
+    return true;
+  }
+  std::size_t size() const override { return stamps_.size(); }
+  void rewind() override { i_ = 0; }
+  std::string name() const override { return "stamps"; }
+
+ private:
+  std::vector<double> stamps_;
+  std::size_t i_ = 0;
+};
+}  // namespace
+
+// A recording whose clock jumps (an NTP step mid-recording: a day here) or steps back is played on as
+// if those frames were at most a second apart: the replay slept for the whole jump.
+TEST(LiveReplay, AClockJumpInTheRecordingIsNoWait) {
+  ReplaySource src(std::make_unique<StampedFrames>(std::vector<double>{0.0, 0.033, 86400.0, 86400.033, 86399.0, 86399.033}), 1.0);
+  std::atomic<bool> stop{false};
+  std::thread timeout([&] {  // a replay that waits for the jump is stopped, not waited for
+    for (int i = 0; i < 100 && !stop; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    stop = true;
+  });
+  Frame f;
+  mrpt::obs::CObservation3DRangeScan::Ptr raw;
+  const auto start = std::chrono::steady_clock::now();
+  int frames = 0;
+  while (src.grab(f, raw, stop)) ++frames;
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  stop = true;
+  timeout.join();
+  EXPECT_EQ(frames, 6);
+  EXPECT_GE(seconds, 1.0 + 3 * 0.033 - 0.01);  // the jump played as a second, the other gaps as recorded
+  EXPECT_LT(seconds, 4.0);
+}
+
 TEST(LiveReplay, TumThroughTheLivePathWithSlowConsumerAndRecording) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);

@@ -48,7 +48,8 @@ class ReplaySource : public LiveSource {
   std::unique_ptr<FrameSource> source_;
   double speed_;
   bool started_ = false;
-  double first_stamp_ = 0.0;
+  double first_stamp_ = 0.0, last_stamp_ = 0.0;
+  double cut_ = 0.0;  // s of recorded time not played: the part of clock jumps beyond kLongestGap
   std::chrono::steady_clock::time_point wall_start_;
 };
 
