@@ -7,6 +7,8 @@
 #include <vector>
 
 #include <mrpt/config/CConfigFileMemory.h>
+#include <mrpt/hwdrivers/CGenericSensor.h>
+#include <mrpt/obs/CObservationIMU.h>
 
 #include "support.h"
 #include "vofusion/io/frame_source.h"
@@ -14,6 +16,25 @@
 #include "vofusion/live/live_loop.h"
 #include "vofusion/live/live_source.h"
 #include "vofusion/sim/any_source.h"
+
+namespace vofusion_test {
+// A driver that keeps delivering observations, none of them a 3D scan (an IMU's section chosen as the
+// sensor, a camera without depth).
+class ImuOnlySensor : public mrpt::hwdrivers::CGenericSensor {
+  DEFINE_GENERIC_SENSOR(ImuOnlySensor)
+ public:
+  void doProcess() override {
+    auto o = mrpt::obs::CObservationIMU::Create();
+    o->timestamp = mrpt::Clock::now();
+    appendObservation(o);
+  }
+  void initialize() override { m_state = ssWorking; }
+
+ protected:
+  void loadConfig_sensorSpecific(const mrpt::config::CConfigFileBase&, const std::string&) override {}
+};
+}  // namespace vofusion_test
+IMPLEMENTS_GENERIC_SENSOR(ImuOnlySensor, vofusion_test)
 
 using namespace vofusion;
 namespace fs = std::filesystem;
@@ -278,6 +299,32 @@ TEST(LiveReplay, AClockJumpInTheRecordingIsNoWait) {
   EXPECT_EQ(frames, 6);
   EXPECT_GE(seconds, 1.0 + 3 * 0.033 - 0.01);  // the jump played as a second, the other gaps as recorded
   EXPECT_LT(seconds, 4.0);
+}
+
+// The sensor timeout holds while the driver delivers observations that are no RGB-D frame: the grab
+// used to wait for ever (vofusion-grab at "recording 0 frames" until Ctrl-C).
+TEST(SensorSource, ADriverGivingNoDepthFrameTimesOut) {
+  vofusion_test::ImuOnlySensor::doRegister();
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.write("imu", "driver", "ImuOnlySensor");
+  SensorSource src(cfg, "imu", 0.3, "grab.ini");
+  std::atomic<bool> stop{false};
+  std::thread timeout([&] {  // a grab that never times out is stopped, not waited for
+    for (int i = 0; i < 60 && !stop; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    stop = true;
+  });
+  Frame f;
+  mrpt::obs::CObservation3DRangeScan::Ptr raw;
+  std::string error;
+  try {
+    src.grab(f, raw, stop);
+  } catch (const SensorError& e) {
+    error = e.what();
+  }
+  const bool stopped = stop.exchange(true);
+  timeout.join();
+  EXPECT_FALSE(stopped) << "no timeout within 3 s";
+  EXPECT_NE(error.find("no frame for 0.3 s (sensor unplugged?)"), std::string::npos) << error;
 }
 
 TEST(LiveReplay, TumThroughTheLivePathWithSlowConsumerAndRecording) {

@@ -208,6 +208,14 @@ bool SensorSource::grab(Frame& frame, mrpt::obs::CObservation3DRangeScan::Ptr& r
       raw = obs;
       return true;
     }
+    // Timed on every pass, not only when the driver gives nothing: a driver giving only other
+    // observations (an IMU's section, a camera without depth) is no RGB-D frame either.
+    const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (waited > timeout_s_) {
+      char why[96];
+      std::snprintf(why, sizeof why, ": no frame for %g s (sensor unplugged?)", timeout_s_);
+      throw SensorError(name() + why);
+    }
     try {
       sensor_->doProcess();
     } catch (const std::exception& e) {
@@ -216,11 +224,7 @@ bool SensorSource::grab(Frame& frame, mrpt::obs::CObservation3DRangeScan::Ptr& r
     if (sensor_->getState() == mrpt::hwdrivers::CGenericSensor::ssError)
       throw SensorError(name() + ": the sensor reported an error (unplugged?)");
     sensor_->getObservations(pending_);
-    if (!pending_.empty()) continue;
-    const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (waited > timeout_s_)
-      throw SensorError(name() + ": no frame for " + std::to_string(int(timeout_s_)) + " s (sensor unplugged?)");
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    if (pending_.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   return false;
 }
