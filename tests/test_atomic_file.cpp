@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -14,6 +15,7 @@
 #include "vofusion/core/text_file.h"
 
 using namespace vofusion;
+namespace fs = std::filesystem;
 
 // A run killed by a signal leaves "<path>.tmp-<pid>" behind; the next writer of <path> removes it,
 // but not the staging of a process that still runs (another run writing there now).
@@ -62,6 +64,42 @@ TEST(AtomicFile, ASetOfFilesMovesIntoPlaceTogether) {
   EXPECT_EQ(readTextFile(dir + "/a.txt"), "new a");
   EXPECT_EQ(readTextFile(dir + "/b.txt"), "new b");
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 2);
+}
+
+// A folder replaced by commit() is removed by the destructor, after the outputs committed with it;
+// revert() before that puts it back (a rawlog that could not be renamed keeps its own images folder).
+TEST(AtomicFile, AReplacedFolderGoesWithTheWriterAndRevertPutsItBack) {
+  const std::string dir = test::tempDir("atomic_folder_revert");
+  const std::string images = dir + "/a_Images";
+  fs::create_directories(images);
+  writeFileAtomically(images + "/old.png", "earlier");
+  const auto names = [&] {
+    std::vector<std::string> n;
+    for (const auto& e : fs::directory_iterator(dir)) n.push_back(e.path().filename().string());
+    std::sort(n.begin(), n.end());
+    return n;
+  };
+  {
+    AtomicPath out(images);
+    fs::create_directories(out.tmp());
+    writeFileAtomically(out.tmp() + "/new.png", "this run's");
+    out.commit();
+    EXPECT_TRUE(fs::exists(images + "/new.png"));
+    EXPECT_FALSE(fs::exists(images + "/old.png"));
+    out.revert();
+    EXPECT_EQ(readTextFile(images + "/old.png"), "earlier");
+    EXPECT_FALSE(fs::exists(images + "/new.png"));
+  }
+  EXPECT_EQ(names(), std::vector<std::string>{"a_Images"}) << "the reverted folder removed";
+  {
+    AtomicPath out(images);
+    fs::create_directories(out.tmp());
+    writeFileAtomically(out.tmp() + "/new.png", "this run's");
+    out.commit();
+    EXPECT_EQ(names().size(), 2u) << "the earlier folder kept until the writer goes";
+  }
+  EXPECT_EQ(names(), std::vector<std::string>{"a_Images"});
+  EXPECT_EQ(readTextFile(images + "/new.png"), "this run's");
 }
 
 // commitDurably() puts the file in place as commit() does (its fsync()s, before and after the rename,

@@ -356,6 +356,31 @@ TEST(Rawlog, ADepthFileThatCannotBeWrittenIsNamedWhereItWouldBe) {
   }
 }
 
+// --overwrite whose rawlog cannot be put in place keeps the earlier recording whole: its images folder
+// was replaced first and the earlier rawlog then named images that were gone (every frame damaged).
+TEST(Rawlog, AnOverwriteThatFailsKeepsTheEarlierRecordingsImages) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_overwrite_fails");
+  writeRawlog(dir + "/a.rawlog", frames, RawlogWriterOptions{});
+  const auto listing = [&] {
+    std::vector<std::string> n;
+    for (const auto& e : fs::directory_iterator(dir + "/a_Images")) n.push_back(e.path().filename().string());
+    std::sort(n.begin(), n.end());
+    return n;
+  };
+  const auto before = listing();
+  RawlogWriterOptions o;
+  o.replace = true;
+  RawlogWriter w(dir + "/a.rawlog", o);
+  auto later = frames;
+  for (auto& f : later) f.timestamp += 100.0;  // other file names
+  for (const auto& f : later) w.write(f);
+  fs::remove(dir + "/a.rawlog");
+  fs::create_directories(dir + "/a.rawlog/in_the_way");  // the rename cannot replace it
+  EXPECT_THROW(w.commit(), InputError);
+  EXPECT_EQ(listing(), before);
+}
+
 // A companion file beside the rawlog is read before the rawlog's GROUND_TRUTH entries, unless it gives
 // no pose (none, or damaged): then the rawlog's own ground truth is used, not dropped.
 TEST(Rawlog, ACompanionFileWithNoPoseGivesWayToTheEmbeddedGroundTruth) {

@@ -48,7 +48,7 @@ AtomicPath::AtomicPath(std::string final_path)
 }
 
 AtomicPath::~AtomicPath() {
-  if (!committed_) {
+  if (!committed_ || replaced_) {  // this run's staging, or the folder it replaced (moved to tmp_)
     std::error_code ec;
     fs::remove_all(tmp_, ec);
   }
@@ -58,7 +58,9 @@ void AtomicPath::commit() {
   std::error_code ec;
   if (!fs::exists(tmp_, ec)) throw InputError(final_, "nothing was written");
   if (fs::is_directory(tmp_) && fs::exists(final_)) {
-    // rename() cannot replace a non-empty directory: move the old one aside first.
+    // rename() cannot replace a non-empty directory: the old one goes aside, the new one in, and the
+    // old one takes the staging name, removed by the destructor (or revert() puts it back). Removing
+    // a large folder takes seconds: done after the outputs committed with it are in place too.
     const std::string old = final_ + ".old-" + std::to_string(::getpid());
     fs::remove_all(old, ec);
     fs::rename(final_, old, ec);
@@ -68,12 +70,29 @@ void AtomicPath::commit() {
       fs::rename(old, final_);
       throw InputError(final_, "cannot write: " + ec.message());
     }
-    fs::remove_all(old, ec);
+    fs::rename(old, tmp_, ec);
+    replaced_ = !ec;
+    if (ec) fs::remove_all(old, ec);
   } else {
     fs::rename(tmp_, final_, ec);
     if (ec) throw InputError(final_, "cannot write: " + ec.message());
   }
   committed_ = true;
+}
+
+void AtomicPath::revert() {
+  if (!committed_) return;
+  std::error_code ec;
+  const std::string aside = final_ + ".new-" + std::to_string(::getpid());
+  if (replaced_) {  // the new one aside, the old one back, the new one to the staging name (removed)
+    fs::rename(final_, aside, ec);
+    if (!ec) fs::rename(tmp_, final_, ec);
+    if (!ec) fs::rename(aside, tmp_, ec);
+  } else {
+    fs::rename(final_, tmp_, ec);
+  }
+  if (ec) throw InputError(final_, "cannot put the earlier one back: " + ec.message());
+  committed_ = replaced_ = false;
 }
 
 namespace {

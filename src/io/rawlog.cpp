@@ -649,8 +649,15 @@ void RawlogWriter::commit() {
     gt.emplace(gt_path);
     writeTumTrajectory(gt->tmp(), *impl_->gt);
   }
+  // The images folder and the rawlog change together: the earlier folder is removed only once this
+  // rawlog is in place (the writer's destructor), and put back if the rawlog cannot be.
   if (opts_.external_images) impl_->images->commit();
-  impl_->rawlog->commit();
+  try {
+    impl_->rawlog->commit();
+  } catch (const InputError&) {
+    if (opts_.external_images) impl_->images->revert();
+    throw;
+  }
   if (gt) {
     gt->commit();
   } else {

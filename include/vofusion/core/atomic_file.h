@@ -20,14 +20,21 @@ class AtomicPath {
   const std::string& tmp() const { return tmp_; }     // write here (a file or a directory)
   const std::string& path() const { return final_; }
   void commit();  // rename tmp -> final (replacing a file or directory); throws InputError on failure
+                  // A directory replaced is removed by the destructor, so that the outputs committed
+                  // with it are in place before the seconds a large folder takes to remove.
   // commit() of a file with its bytes on the disk first, and the rename after it: what a power cut
   // must not take (a checkpoint). A rename alone may reach the disk before the data on XFS or btrfs,
   // replacing the earlier file with an empty one.
   void commitDurably();
+  // Undoes commit(), before the destructor, for outputs that change together: a directory it replaced
+  // is back at the path, and this one removed (nothing was there: nothing is). A file it replaced is
+  // not back (the rename replaced it): the path then holds nothing.
+  void revert();
 
  private:
   std::string final_, tmp_;
   bool committed_ = false;
+  bool replaced_ = false;  // commit() moved an earlier directory to tmp_
 };
 
 // Several outputs at paths of their own, moved into place together: each is written to its temporary
