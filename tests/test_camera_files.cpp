@@ -178,11 +178,13 @@ TEST(CameraFiles, GuessOnlyFor640x480AndAnnounced) {
   EXPECT_NE(log.find("warning: " + base + "/vga: no intrinsics.txt or camera.yaml and no --intrinsics: assuming fx = fy = 525"),
             std::string::npos)
       << log;
-  // Millimetres read as TUM's units: a fifth of the distance, announced.
+  // Millimetres read as TUM's units: a fifth of the distance, announced; at 0.28 m no reading is in
+  // range, and a run that tracks no frame fails in one line.
   oneFrameFolder(base + "/mm", 640, 480, 1400);
-  ASSERT_EQ(test::run(test::app("vofusion") + " " + base + "/mm --intrinsics ros --mode kinfu --out " + base + "/out2", &log), 0)
+  ASSERT_EQ(test::run(test::app("vofusion") + " " + base + "/mm --intrinsics ros --mode kinfu --out " + base + "/out2", &log), 2)
       << log;
   EXPECT_NE(log.find("median depth 0.28 m at 5000 depth units per metre: another unit?"), std::string::npos) << log;
+  EXPECT_NE(log.find("no frame was tracked, all 1 lost (no depth reading in [min_depth, max_depth])"), std::string::npos) << log;
 }
 
 // The check: a depth-in-mm copy of a shared TUM sequence (converted here, never stored in the
