@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
 #include "vofusion/core/errors.h"
@@ -190,11 +191,15 @@ int body(int argc, char** argv) {
   if (run.est.empty()) throw InputError(args.input, "no frames");
   if (run.frames_with_depth == 0 && !run.stopped_by)
     throw InputError(args.input, "no depth readings in any frame (all depth images are zero)");
-  writeTumTrajectory(traj_path, run.est);
+  // The trajectory goes in place after the rawlog, whose commit is what fails on a full disk: a run
+  // that fails leaves both earlier outputs as they were, never a new trajectory beside an old rawlog.
+  AtomicPath trajectory(traj_path);
+  writeTumTrajectory(trajectory.tmp(), run.est);
   if (writer) {
     if (!run.gt.empty()) writer->writeGroundTruth(run.gt);
     writer->commit();
   }
+  trajectory.commit();
   if (!source.skipped().empty()) std::fprintf(stderr, "%zu damaged frames skipped\n", source.skipped().size());
   printTimes(odo, run);
   printAccuracy(run.gt, run.est);

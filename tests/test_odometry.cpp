@@ -280,6 +280,18 @@ TEST(RgbdOdometryApp, CtrlCWritesWhatWasDone) {
   EXPECT_EQ(readTumTrajectory(out + "/odometry.groundtruth.txt").size(), t.size()) << "its ground truth, the same frames";
 }
 
+// A run whose rawlog cannot be committed leaves the earlier trajectory beside the earlier rawlog: the
+// new trajectory used to be in place first.
+TEST(RgbdOdometryApp, ARunThatFailsAtTheEndKeepsTheEarlierTrajectory) {
+  const std::string out = test::tempDir("rgbd-odometry_fails_at_end");
+  std::ofstream(out + "/trajectory.txt") << "EARLIER\n";
+  std::filesystem::create_directories(out + "/odometry.groundtruth.txt/in_the_way");  // its rename fails
+  std::string log;
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic:room --max-frames 3 --out " + out, &log), 2) << log;
+  std::ifstream kept(out + "/trajectory.txt");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(kept), {}), "EARLIER\n");
+}
+
 TEST(RgbdOdometryApp, BadInputAndConfigAreOneLineErrors) {
   std::string log;
   EXPECT_EQ(test::run(test::app("rgbd-odometry") + " /nonexistent --out " + test::tempDir("odo-bad"), &log), 2);
