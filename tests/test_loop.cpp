@@ -522,6 +522,41 @@ TEST(LoopVerifier, LookAlikePlacesAreNotJoined) {
   EXPECT_EQ(c.reason, "correction larger than the drift could be (look-alike place?)");
 }
 
+// Lost a few metres on, the camera is placed again by a keyframe the place index has not taken yet
+// (the last min_travel of path: neither among the newest keyframes nor indexed), not only by the
+// newest and the indexed ones: turned back to where it was 2 m before, it stayed lost.
+TEST(LoopCloser, RelocalisesAgainstAKeyframeTheIndexHasNotTakenYet) {
+  sim::SimOptions o;
+  o.scene = "room";
+  o.frames = 450;  // full resolution: enough keypoints to recognise a place
+  const sim::SyntheticSequence seq(o);
+  const LoopParams params;
+  LoopCloser closer(params);
+  RgbdOdometry odo{OdometryParams()};
+  std::vector<std::size_t> keyframe_frames;
+  // Keyframe `target` three older than the newest recent_keyframes.
+  const std::size_t target = 2, wanted = target + std::size_t(params.recent_keyframes) + 3;
+  const auto truth = [&](std::size_t i) { return toEigen(seq.groundTruth(i) - seq.groundTruth(0)); };
+  double path_since_target = 0;
+  constexpr std::size_t kStep = 3;  // every third frame: the loop closer takes keyframes by travel
+  for (std::size_t i = 0; i < seq.size() && keyframe_frames.size() < wanted; i += kStep) {
+    const Frame f = seq.render(i);
+    const OdometryResult r = odo.process(f);
+    if (closer.addFrame(f, truth(i), true, 0.001, r.features)) keyframe_frames.push_back(i);
+    if (i > 0 && keyframe_frames.size() > target) path_since_target += (truth(i).translation() - truth(i - kStep).translation()).norm();
+  }
+  ASSERT_EQ(keyframe_frames.size(), wanted);
+  ASSERT_LT(path_since_target, params.min_travel) << "keyframe " << target << " must not be indexed yet";
+  const std::size_t j = keyframe_frames[target];
+  RgbdOdometry fresh{OdometryParams()};
+  const Frame view = seq.render(j);
+  const auto found = closer.relocalise(view, fresh.process(view).features);
+  ASSERT_TRUE(found.has_value()) << "frame " << j << " (keyframe " << target << ") not placed";
+  EXPECT_EQ(found->keyframe, target);  // its own view: the most inliers
+  EXPECT_LT((found->pose.translation() - truth(j).translation()).norm(), 0.02);
+  closer.finish();
+}
+
 // The names of this process's threads, from /proc (what top -H and perf show).
 std::vector<std::string> threadNames() {
   std::vector<std::string> names;

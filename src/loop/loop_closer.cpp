@@ -340,9 +340,18 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
   if (n == 0) return std::nullopt;
   const Keyframe view = makeKeyframe(n, frame, Eigen::Isometry3d::Identity(), 0.0, features, m.params.keyframe_downsample);
   // The newest keyframes first (a short loss: the camera is near them; the index leaves them out),
-  // then the place index's candidates for older places.
+  // then those the index has not taken yet (the last min_travel of path: the start of a run, a return
+  // to where the camera was a few metres back), one per index_spacing as the index takes them, then
+  // the place index's candidates for older places.
   std::vector<std::size_t> candidates;
   for (std::size_t k = 0; k < std::min<std::size_t>(n, std::size_t(m.params.recent_keyframes)); ++k) candidates.push_back(n - 1 - k);
+  std::optional<Eigen::Isometry3d> last_taken;
+  for (std::size_t k = n - candidates.size(); k-- > m.indexed;) {
+    const Eigen::Isometry3d& pose = m.keyframes.at(k).tracked;
+    if (!m.spacedFrom(last_taken, pose)) continue;
+    candidates.push_back(k);
+    last_taken = pose;
+  }
   for (const PlaceCandidate& c : m.index.query(features->descriptors))
     if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
   std::optional<Relocalisation> best;
