@@ -23,7 +23,11 @@ std::vector<IntensityLevel> intensityPyramid(const cv::Mat& bgr, cv::Size size, 
 
 struct PhotometricParams {
   double sigma = 0.0;         // grey levels, noise of one residual at level 0 (coarser: 4x the weight per level)
-  double huber = 1.0;         // sigmas, Huber kernel's threshold on the whitened residual
+  double huber = 1.0;         // level-0 sigmas, Huber kernel's threshold on the residual at every level:
+                              // a coarse level's own noise is lower (sigma / 2^l), so its kernel is
+                              // 2^l times as tolerant. Whitening by each level's own sigma was measured
+                              // worse (shake seed 3 +6.9 mm, loop seed 3 +3.9 mm: bench/results/
+                              // 2026-12-05-photometric-huber-per-level.md).
   double min_gradient = 4.0;  // grey levels per pixel, reference pixels with a weaker gradient carry no residual
 };
 
