@@ -353,6 +353,24 @@ TEST(MeshClean, AWarningOfASucceededReportIsWritten) {
   EXPECT_FALSE(j.contains("failure"));
 }
 
+// Without the repair, a mesh the half-edge structure cannot hold (three faces on one edge) is a
+// failure that says so, and the mesh is left as given: its third face used to vanish, reported a success.
+TEST(MeshClean, WithoutRepairANonManifoldMeshIsAFailureNotALoss) {
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}};
+  m.faces = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}};  // edge 0-1 shared by three faces
+  MeshCleanParams p;
+  p.repair = false;
+  p.min_component_faces = 0;
+  p.min_component_area = 0;
+  p.max_hole_perimeter = 0;
+  p.max_simplify_error = 0;
+  const MeshCleanReport r = cleanMesh(m, p);
+  EXPECT_FALSE(r.success);
+  EXPECT_NE(r.failure.find("repair = true"), std::string::npos) << r.failure;
+  EXPECT_EQ(m.faces.size(), 3u);
+}
+
 TEST(MeshClean, SimplifiesToEdgeLength) {
   TriangleMesh m = icosphere(4);  // edges ~0.08 m
   MeshCleanParams p;

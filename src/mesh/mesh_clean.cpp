@@ -508,6 +508,10 @@ class Cleaner {
       const std::size_t before = pts.size();
       PMP::orient_polygon_soup(pts, polys);
       r_.non_manifold_vertices_split += pts.size() - before;
+    } else if (!PMP::is_polygon_soup_a_polygon_mesh(polys)) {
+      // The conversion's own check is compiled out in a release build, and it then drops the faces it
+      // cannot place (three on one edge, a face turned against its neighbours) and says nothing.
+      throw std::runtime_error("the mesh has non-manifold or inconsistently oriented faces: [mesh] repair = true mends them");
     }
     PMP::polygon_soup_to_polygon_mesh(pts, polys, m_);
     col_ = m_.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
