@@ -308,32 +308,6 @@ TEST(Rawlog, MaxFramesKeepsTheLastFramesGroundTruth) {
   }
 }
 
-// A frame stamped at or before the one before it (a driver's clock stepping back, a repeated frame)
-// is damaged: skipped in one line, the others read. The evaluation, the motion model and re-fusing
-// count on frames going forward in time.
-TEST(Rawlog, AFrameNotAfterTheOneBeforeItIsDamaged) {
-  auto frames = simFrames(4);
-  frames[2].timestamp = frames[1].timestamp;  // repeated
-  const std::string dir = test::tempDir("rawlog_stamps_back");
-  writeRawlog(dir + "/s.rawlog", frames, RawlogWriterOptions{});
-  RawlogSource src(dir + "/s.rawlog", {});
-  Frame f;
-  ASSERT_TRUE(src.next(f));
-  ASSERT_TRUE(src.next(f));
-  try {
-    src.next(f);
-    FAIL() << "frame 2 read";
-  } catch (const DamagedFrame& e) {
-    EXPECT_EQ(e.file(), dir + "/s.rawlog");
-    EXPECT_NE(e.problem().find("frame 2 is stamped"), std::string::npos) << e.problem();
-  }
-  ASSERT_TRUE(src.next(f));
-  EXPECT_EQ(f.index, 3u);
-  EXPECT_FALSE(src.next(f));
-  src.rewind();  // from the start again: the first frame is no longer "before" anything
-  EXPECT_TRUE(src.next(f));
-}
-
 // A depth file that cannot be written is named where the user will look for it, <out>_Images/..., not
 // in the writer's temporary folder (gone by the time the message is read), as the colour file is.
 TEST(Rawlog, ADepthFileThatCannotBeWrittenIsNamedWhereItWouldBe) {

@@ -13,7 +13,6 @@
 #include <cstring>
 #include <deque>
 #include <filesystem>
-#include <limits>
 #include <stdexcept>
 
 #include <mrpt/core/Clock.h>
@@ -346,7 +345,6 @@ RawlogSource::~RawlogSource() = default;
 void RawlogSource::rewind() {
   reader_ = std::make_unique<Reader>(path_);
   pos_ = 0;
-  last_timestamp_ = -std::numeric_limits<double>::infinity();
 }
 
 bool RawlogSource::next(Frame& frame) {
@@ -362,12 +360,6 @@ bool RawlogSource::next(Frame& frame) {
   std::optional<CameraIntrinsics> cam;
   if (opts_.intrinsics) cam = CameraIntrinsics::parse(*opts_.intrinsics);
   const std::size_t index = pos_++;
-  // Frames go forward in time (the tracker's motion model, the evaluation's pairing and re-fusing's
-  // walk through the poses count on it): one stamped at or before the last frame is damaged.
-  const double stamp = mrpt::Clock::toDouble(obs->timestamp);
-  if (!(stamp > last_timestamp_))
-    throw DamagedFrame(InputError(path_, "frame " + std::to_string(index) + " is stamped " + std::to_string(stamp) +
-                                             " s, not after the frame before it (" + std::to_string(last_timestamp_) + " s)"));
   try {
     const std::optional<DepthFile> range_file = loadExternalRangeImage(*obs);
     frame = frameFromObservation(*obs, path_, cam);
@@ -376,7 +368,6 @@ bool RawlogSource::next(Frame& frame) {
     throw DamagedFrame(e);  // this record's images; the next record is read as usual
   }
   frame.index = index;
-  last_timestamp_ = stamp;
   mrpt::poses::CPose3D gt;
   if (interpolatePose(gt_, frame.timestamp, 0.05, gt)) frame.groundTruth = gt;
   return true;

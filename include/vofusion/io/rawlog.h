@@ -57,7 +57,6 @@ class RawlogSource : public FrameSource {
   std::string cut_short_;  // why the frames end before the file does (RecordingCutShort)
   SourceOptions opts_;
   std::size_t count_ = 0, pos_ = 0;
-  double last_timestamp_ = 0.0;  // s, of the last frame returned (rewind() starts it at -inf)
   Trajectory gt_;
   std::unique_ptr<Reader> reader_;
 };
