@@ -82,16 +82,29 @@ void AtomicPath::commit() {
 
 void AtomicPath::revert() {
   if (!committed_) return;
-  std::error_code ec;
-  const std::string aside = final_ + ".new-" + std::to_string(::getpid());
+  std::error_code ec, undo;
   if (replaced_) {  // the new one aside, the old one back, the new one to the staging name (removed)
+    const std::string aside = final_ + ".tmp-new-" + std::to_string(::getpid());
     fs::rename(final_, aside, ec);
-    if (!ec) fs::rename(tmp_, final_, ec);
-    if (!ec) fs::rename(aside, tmp_, ec);
+    if (!ec) {
+      fs::rename(tmp_, final_, ec);
+      if (ec) fs::rename(aside, final_, undo);  // as committed again
+    }
+    if (!ec) {
+      std::error_code moved;
+      fs::rename(aside, tmp_, moved);
+      if (moved) fs::remove_all(aside, moved);
+    }
   } else {
     fs::rename(final_, tmp_, ec);
   }
-  if (ec) throw InputError(final_, "cannot put the earlier one back: " + ec.message());
+  if (ec) {
+    // Left as committed, and the earlier one where it is: the destructor no longer removes it.
+    const bool earlier_kept = replaced_;
+    replaced_ = false;
+    throw InputError(final_, "cannot put the earlier one back: " + ec.message() +
+                                 (earlier_kept ? " (it is at " + tmp_ + ")" : ""));
+  }
   committed_ = replaced_ = false;
 }
 
@@ -117,9 +130,14 @@ void AtomicPath::commitDurably() {
 
 void AtomicFileSet::write(const std::string& path, const std::function<void(const std::string& tmp)>& write_to) {
   // A second AtomicPath for the same file would remove the first one's temporary and take its place.
-  const fs::path same = fs::weakly_canonical(path);
+  const auto canonical = [](const std::string& p) {
+    std::error_code ec;
+    const fs::path c = fs::weakly_canonical(p, ec);
+    return ec ? fs::absolute(p).lexically_normal() : c;
+  };
+  const fs::path same = canonical(path);
   for (const auto& f : files_)
-    if (fs::weakly_canonical(f->path()) == same) throw InputError(path, "named twice as an output");
+    if (canonical(f->path()) == same) throw InputError(path, "named twice as an output");
   auto file = std::make_unique<AtomicPath>(path);
   try {
     write_to(file->tmp());

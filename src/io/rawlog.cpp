@@ -646,7 +646,13 @@ void RawlogWriter::commit() {
   try {
     impl_->rawlog->commit();
   } catch (const InputError&) {
-    if (opts_.external_images) impl_->images->revert();
+    if (opts_.external_images) {
+      try {
+        impl_->images->revert();
+      } catch (const InputError& e) {  // the rawlog's own error is the one to report
+        printWarning(e.what());
+      }
+    }
     throw;
   }
   if (gt) {
