@@ -219,6 +219,17 @@ TEST(Reconstruction, ReintegrationKeepsTheMapTheRunWentOnFrom) {
   const KinFuStats after = second.fusionStats();
   EXPECT_GE(after.bricks_in_volume + after.bricks_in_world_model, saved_bricks);
   EXPECT_GT(second.extractMesh().faces.size(), 1000u);
+
+  // A map saved over since (this run's --save-volume, then its checkpoint resumed) would hold the
+  // frames already: it is left out, with a warning, rather than fused into twice.
+  Reconstruction third(test::quickRoomConfig(), TrackingMode::Joint);
+  third.resumeVolume(map_file);
+  for (std::size_t i = first_session; i < frames; ++i) third.process(seq.render(i));
+  third.saveVolume(map_file);
+  next = first_session;
+  third.reintegrate([&](Frame& f) { return next < frames ? (f = seq.render(next++), true) : false; });
+  const KinFuStats alone = third.fusionStats();
+  EXPECT_LT(alone.bricks_in_volume + alone.bricks_in_world_model, saved_bricks) << "the changed map was read again";
 }
 
 // A depth image of odd width or height: halved for tracking, its odd column and row are dropped, and

@@ -1,5 +1,7 @@
 #include "vofusion/pipeline/reconstruction.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/core/pose_eigen.h"
+#include "vofusion/core/progress.h"  // printWarning
 #include "vofusion/core/state_archive.h"
 
 #include <chrono>
@@ -40,6 +42,18 @@ void checkReconstructionValues(const mrpt::config::CConfigFileBase& cfg) {
   loop::LoopParams().loadFromConfigFile(cfg, "loop");
 }
 
+namespace {
+// A saved map file as it is now: its size and modification time ("" when it cannot be read).
+std::string mapStamp(const std::string& path) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) return "";
+  const auto time = std::filesystem::last_write_time(path, ec);
+  if (ec) return "";
+  return std::to_string(size) + " bytes, written " + std::to_string(time.time_since_epoch().count());
+}
+}  // namespace
+
 struct Reconstruction::Impl {
   TrackingMode mode;
   OdometryParams odo_params;
@@ -54,7 +68,8 @@ struct Reconstruction::Impl {
   Trajectory optimised;                     // after finish(), when loop closure ran: `smoothed` loop-closed
   Trajectory optimised_as_tracked;          // the same corrections on the poses as tracked: reintegrate() fuses there
   double max_correction = 0.0;              // m, largest move of a fused pose by the loops (finish())
-  std::string resumed_map;                  // resumeVolume()'s file: reintegrate() fuses into it again
+  std::string resumed_map;                  // resumeVolume()'s file: reintegrate() fuses into it again,
+  std::string resumed_map_stamp;            // if it is still as it was read (mapStamp)
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
   KinFuStats released_stats;                // fusionStats() when releaseMap() freed the map
@@ -259,8 +274,19 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   m.kinfu = std::make_unique<TrackedMap>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
   TrackedMap& map = *m.kinfu;
   // A run that went on from a saved map fuses its frames into that map again, not into an empty one:
-  // the earlier sessions' surfaces are the map's too.
-  if (!m.resumed_map.empty()) map.resume(m.resumed_map);
+  // the earlier sessions' surfaces are the map's too. A map changed since (saved over by this run's
+  // --save-volume before a checkpoint was resumed) would hold these frames already: said, and left out.
+  if (!m.resumed_map.empty()) {
+    if (mapStamp(m.resumed_map) != m.resumed_map_stamp) {
+      printWarning(m.resumed_map + ": changed or gone since the run went on from it: the frames are fused again without it");
+    } else {
+      try {
+        map.resume(m.resumed_map);
+      } catch (const InputError& e) {
+        printWarning(std::string(e.what()) + ": the frames are fused again without it");
+      }
+    }
+  }
   std::size_t read = 0, fused = 0;
   Frame frame;
   while (read < poses.size() && next(frame)) {
@@ -286,6 +312,7 @@ void Reconstruction::saveVolume(const std::string& path) const {
 void Reconstruction::resumeVolume(const std::string& path) {
   impl_->map().resume(path);
   impl_->resumed_map = std::filesystem::absolute(path).string();
+  impl_->resumed_map_stamp = mapStamp(path);
 }
 void Reconstruction::saveState(std::ostream& os) const {
   Impl& m = *impl_;
@@ -311,7 +338,7 @@ void Reconstruction::saveState(std::ostream& os) const {
       a << uint64_t(l.frame) << uint64_t(l.keyframe) << uint64_t(l.keyframe_frame) << int32_t(l.inliers) << l.icp_rms;
       state::write(a, l.pose);
     }
-    a << bool(m.odometry) << bool(m.loops) << m.resumed_map;
+    a << bool(m.odometry) << bool(m.loops) << m.resumed_map << m.resumed_map_stamp;
   }
   if (m.odometry) m.odometry->saveState(os);
   m.map().saveState(os);
@@ -363,7 +390,7 @@ void Reconstruction::loadState(std::istream& is) {
     a >> odometry >> loops;
     if (odometry != bool(m.odometry) || loops != bool(m.loops))
       throw std::runtime_error(std::string("the checkpoint was made with loop closure ") + (loops ? "on" : "off"));
-    a >> m.resumed_map;
+    a >> m.resumed_map >> m.resumed_map_stamp;
   }
   if (m.odometry) m.odometry->loadState(is);
   m.map().loadState(is);
