@@ -4,6 +4,7 @@
 //            [--depth-scale S] [--no-loop-closure] [--strict]
 //            [--raw-mesh] [--dump-config] [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]
 // With no input, the bundled synthetic recording (rendered on first run) is used.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -290,10 +291,10 @@ int body(int argc, char** argv) {
   if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
   std::fprintf(stderr, "\n");
   std::error_code ec;
-  // The outputs are whole: a checkpoint of this run has nothing left to resume. Another run's (another
-  // input or configuration written to the same folder) is left for its own --resume.
-  if (const auto c = RunSession::peek(plan.checkpoint_path); !loop.interrupted() && c && c->origin == plan.origin)
-    std::filesystem::remove(plan.checkpoint_path, ec);
+  // The outputs are whole: a checkpoint this run wrote or went on from has nothing left to resume.
+  // Another run's in the same folder (another input, configuration or length) is left for its --resume.
+  const bool resumed_from_it = plan.resume && std::filesystem::equivalent(*plan.resume, plan.checkpoint_path, ec);
+  if (!loop.interrupted() && (loop.checkpoints > 0 || resumed_from_it)) std::filesystem::remove(plan.checkpoint_path, ec);
   std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
   return loop.interrupted() ? 128 + loop.stop_signal : 0;  // as the shell reports a signal: 130, 143
 }

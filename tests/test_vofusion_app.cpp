@@ -155,9 +155,12 @@ TEST(VofusionApp, ACheckpointIsBoundToItsRunAndOutlivesAnotherRunsEnd) {
   const std::string cfg = " --config " + validConfig(dir) + " --out " + out;
   std::string log;
   test::run("(" + test::app("vofusion") + " synthetic:room --max-frames 200 --checkpoint-every 1000" + cfg + " > " + dir +
-                "/log.txt 2>&1 & pid=$!; for i in $(seq 1 600); do grep -q ' [3-9]/200 frames\\| [1-9][0-9]/200 frames' " + dir +
-                "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -TERM $pid; wait $pid; echo rc=$?)",
+                "/log.txt 2>&1 & pid=$!; for i in $(seq 1 600); do grep -q ' [3-9]/200 frames\\| [1-9][0-9]/200 frames\\| 1[0-9][0-9]/200 frames' " +
+                dir + "/log.txt 2>/dev/null && echo interrupted-at-a-count && break; sleep 0.2; done; kill -TERM $pid; wait $pid; echo rc=$?)",
             &log);
+  // Progress shows every 2 s off a terminal: a machine that renders and tracks the 200 frames faster
+  // shows no count to stop at.
+  if (log.find("interrupted-at-a-count") == std::string::npos) GTEST_SKIP() << "the 200 frames were done before a count showed";
   ASSERT_NE(log.find("rc=143"), std::string::npos) << log;
   ASSERT_TRUE(RunSession::peek(checkpoint).has_value()) << "written at the stop";
   EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 199 --resume " + checkpoint + cfg, &log), 2) << log;
