@@ -192,9 +192,13 @@ int body(int argc, char** argv) {
   if (run.frames_with_depth == 0 && !run.stopped_by)
     throw InputError(args.input, "no depth readings in any frame (all depth images are zero)");
   // The trajectory goes in place after the rawlog, whose commit is what fails on a full disk: a run
-  // that fails leaves both earlier outputs as they were, never a new trajectory beside an old rawlog.
+  // that fails there leaves the earlier trajectory, never a new one beside an earlier rawlog.
   AtomicPath trajectory(traj_path);
-  writeTumTrajectory(trajectory.tmp(), run.est);
+  try {
+    writeTumTrajectory(trajectory.tmp(), run.est);
+  } catch (const InputError& e) {
+    throw InputError(traj_path, e.problem());  // the temporary is gone by the time this is read
+  }
   if (writer) {
     if (!run.gt.empty()) writer->writeGroundTruth(run.gt);
     writer->commit();

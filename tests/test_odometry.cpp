@@ -280,8 +280,8 @@ TEST(RgbdOdometryApp, CtrlCWritesWhatWasDone) {
   EXPECT_EQ(readTumTrajectory(out + "/odometry.groundtruth.txt").size(), t.size()) << "its ground truth, the same frames";
 }
 
-// A run whose rawlog cannot be committed leaves the earlier trajectory beside the earlier rawlog: the
-// new trajectory used to be in place first.
+// A run whose rawlog cannot be committed (here its ground truth's rename fails) leaves the earlier
+// trajectory: the new one used to be in place first.
 TEST(RgbdOdometryApp, ARunThatFailsAtTheEndKeepsTheEarlierTrajectory) {
   const std::string out = test::tempDir("rgbd-odometry_fails_at_end");
   std::ofstream(out + "/trajectory.txt") << "EARLIER\n";
