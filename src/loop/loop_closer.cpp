@@ -341,12 +341,13 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
   const Keyframe view = makeKeyframe(n, frame, Eigen::Isometry3d::Identity(), 0.0, features, m.params.keyframe_downsample);
   // The newest keyframes first (a short loss: the camera is near them; the index leaves them out),
   // then those the index has not taken yet (the last min_travel of path: the start of a run, a return
-  // to where the camera was a few metres back), one per index_spacing as the index takes them, then
-  // the place index's candidates for older places.
+  // to where the camera was a few metres back), newest first, one per index_spacing (or
+  // keyframe_rotation) and at most as many as the newest, then the place index's candidates.
   std::vector<std::size_t> candidates;
-  for (std::size_t k = 0; k < std::min<std::size_t>(n, std::size_t(m.params.recent_keyframes)); ++k) candidates.push_back(n - 1 - k);
+  const std::size_t recent = std::min<std::size_t>(n, std::size_t(m.params.recent_keyframes));
+  for (std::size_t k = 0; k < recent; ++k) candidates.push_back(n - 1 - k);
   std::optional<Eigen::Isometry3d> last_taken;
-  for (std::size_t k = n - candidates.size(); k-- > m.indexed;) {
+  for (std::size_t k = n - recent; k-- > m.indexed && candidates.size() < 2 * recent;) {
     const Eigen::Isometry3d& pose = m.keyframes.at(k).tracked;
     if (!m.spacedFrom(last_taken, pose)) continue;
     candidates.push_back(k);
