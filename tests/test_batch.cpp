@@ -323,6 +323,30 @@ TEST(Batch, ACtrlCToAJobStopsItsVofusion) {
   EXPECT_EQ(jobs, 4) << log;
 }
 
+// A Ctrl-C to the whole batch (its process group, as a terminal sends it) reaches each running vofusion
+// once and waits for it to write what it built: parallel's own sequence (TERM three times in 300 ms,
+// then KILL) ended it mid-write. The stand-in takes a second to write.
+TEST(Batch, ACtrlCToTheBatchLetsEachVofusionWriteWhatItBuilt) {
+  const std::string dir = test::tempDir("batch_ctrl_c");
+  fs::create_directories(dir + "/b/bin");
+  fs::create_directories(dir + "/rec");
+  {
+    std::ofstream f(dir + "/b/bin/vofusion");
+    f << "#!/bin/bash\nout=''; while [ $# -gt 0 ]; do [ \"$1\" = --out ] && out=$2; shift; done\n"
+         "trap 'sleep 1; touch \"$out/wrote\"; exit 143' TERM INT\nsleep 30 & wait\n";
+  }
+  fs::permissions(dir + "/b/bin/vofusion", fs::perms::owner_all);
+  std::ofstream(dir + "/ctrl-c") << "set -m\nbash " + test::sourceDir() + "/scripts/batch --out " + dir + "/out --build " + dir +
+                                        "/b " + dir + "/rec >/dev/null 2>&1 & p=$!\n"
+                                        "for i in $(seq 1 100); do [ -e " + dir + "/out/rec/vofusion.log ] && break; sleep 0.1; done\n"
+                                        "sleep 0.5; kill -INT -$p; wait $p; echo rc=$?\n";
+  std::string log;
+  test::run("bash " + dir + "/ctrl-c", &log);
+  EXPECT_NE(log.find("rc="), std::string::npos) << log;
+  EXPECT_TRUE(fs::exists(dir + "/out/rec/wrote")) << "the job's vofusion was killed before it wrote: " << log;
+  EXPECT_TRUE(fs::exists(dir + "/out/rec/exit_code")) << log;
+}
+
 // A --list line: blank lines and # comments skipped, a '#' inside a path kept (it cut /data/take#2 to
 // /data/take, a recording that was not there or, worse, another one).
 TEST(Batch, AListKeepsAHashInsideAPath) {
