@@ -163,6 +163,24 @@ TEST(CameraFiles, ADamagedGroundTruthCostsTheEvaluation) {
             "warning: " + dir + "/groundtruth.txt: holds no poses (read without ground truth: nothing is evaluated or converted from it)\n");
 }
 
+// The TUM camera is guessed from the folder's own name: a parent's name (a folder of runs called
+// freiburg1_runs) said fr1 for a freiburg3 recording, and a recording opened as "." got no guess.
+TEST(CameraFiles, TheFreiburgCameraIsTheFoldersOwn) {
+  EXPECT_DOUBLE_EQ(CameraIntrinsics::forTumFolder("/d/freiburg1_runs/rgbd_dataset_freiburg3_long_office").fx, 535.4);
+  EXPECT_DOUBLE_EQ(CameraIntrinsics::forTumFolder("/d/freiburg2_exports/my_realsense_take/").fx, 525.0);
+  EXPECT_DOUBLE_EQ(CameraIntrinsics::forTumFolder("/d/rgbd_dataset_freiburg1_xyz/").fx, 517.3);
+  EXPECT_FALSE(CameraIntrinsics::namesAFreiburgCamera("/d/freiburg1_runs/take"));
+  const std::string dir = test::tempDir("cam_own_name") + "/rgbd_dataset_freiburg1_t";
+  fs::create_directories(dir);
+  const fs::path before = fs::current_path();
+  fs::current_path(dir);
+  const double fx = CameraIntrinsics::forTumFolder(".").fx;
+  const bool named = CameraIntrinsics::namesAFreiburgCamera(".");
+  fs::current_path(before);
+  EXPECT_DOUBLE_EQ(fx, 517.3);
+  EXPECT_TRUE(named);
+}
+
 // Without a camera file, only a 640x480 recording gets a guess, and the guess is said; another size
 // is an error that says what to do.
 TEST(CameraFiles, GuessOnlyFor640x480AndAnnounced) {

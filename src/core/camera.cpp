@@ -1,6 +1,7 @@
 #include "vofusion/core/camera.h"
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <sstream>
 #include <vector>
@@ -48,11 +49,25 @@ CameraIntrinsics CameraIntrinsics::parse(const std::string& spec, const std::str
   return c;
 }
 
+namespace {
+// The folder's own name, whatever its parents are called and however it was written ("." or "x/").
+std::string ownName(const std::string& folder) {
+  std::filesystem::path p = std::filesystem::absolute(folder).lexically_normal();
+  if (p.filename().empty()) p = p.parent_path();
+  return p.filename().string();
+}
+}  // namespace
+
 CameraIntrinsics CameraIntrinsics::forTumFolder(const std::string& folder) {
+  const std::string name = ownName(folder);
   for (const char* fr : {"freiburg1", "freiburg2", "freiburg3"}) {
-    if (folder.find(fr) != std::string::npos) return parse(std::string("fr") + fr[8]);
+    if (name.find(fr) != std::string::npos) return parse(std::string("fr") + fr[8]);
   }
   return parse("ros");
+}
+
+bool CameraIntrinsics::namesAFreiburgCamera(const std::string& folder) {
+  return ownName(folder).find("freiburg") != std::string::npos;
 }
 
 CameraIntrinsics CameraIntrinsics::scaled(double s) const {

@@ -334,7 +334,7 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
                                    " images, this recording's are " + size);
   } else {
     camera_ = CameraIntrinsics::forTumFolder(folder);
-    const bool tum = folder.find("freiburg") != std::string::npos;
+    const bool tum = CameraIntrinsics::namesAFreiburgCamera(folder);
     if (width != 640 || height != 480)
       throw InputError(folder, "no intrinsics for its " + size + " images: give --intrinsics fx,fy,cx,cy or put an "
                                "intrinsics.txt ('fx fy cx cy') or camera.yaml beside rgb.txt");

@@ -16,8 +16,12 @@ struct CameraIntrinsics {
   // "fr1", "fr2", "fr3", "ros" (fx=fy=525) or "fx,fy,cx,cy". Throws InputError(origin, ...) if unknown.
   // The size stays 640x480: the caller sets the recording's and validates the centre against it.
   static CameraIntrinsics parse(const std::string& spec, const std::string& origin = "--intrinsics");
-  // The TUM preset matching a folder name containing "freiburg1/2/3", else the ROS default.
+  // The TUM preset matching the folder's own name containing "freiburg1/2/3", else the ROS default.
   static CameraIntrinsics forTumFolder(const std::string& folder);
+  // Whether the folder's own name (not a parent's: /data/freiburg1_runs/my_take is no TUM recording)
+  // names a TUM camera, as rgbd_dataset_freiburg3_long_office does. "." and a trailing '/' name the
+  // folder they stand for.
+  static bool namesAFreiburgCamera(const std::string& folder);
 
   // Scaled to another resolution (pyramids, reduced-resolution detectors).
   CameraIntrinsics scaled(double s) const;
