@@ -62,6 +62,16 @@ TEST(CommandLine, ValuesFlagsAndPositionals) {
   EXPECT_FALSE(cl.value("--set").has_value());
 }
 
+// "--" ends the options, as getopt's: what follows is positional, a path starting with '-' too. It was
+// itself taken as an input named "--".
+TEST(CommandLine, DoubleDashEndsTheOptions) {
+  EXPECT_EQ(parse({"--out", "o", "--", "-take.rawlog"}).positional(), (std::vector<std::string>{"-take.rawlog"}));
+  EXPECT_EQ(parse({"in", "--"}).positional(), (std::vector<std::string>{"in"}));
+  const auto cl = parse({"--", "--flag"});
+  EXPECT_FALSE(cl.flag("--flag"));
+  EXPECT_EQ(cl.positional(), (std::vector<std::string>{"--flag"}));
+}
+
 TEST(CommandLine, RepeatableOptionKeepsEveryOccurrenceInOrder) {
   const auto cl = parse({"--set", "a.b=1", "--set=c.d=2", "--set", "a.b=3"});
   EXPECT_EQ(cl.values("--set"), (std::vector<std::string>{"a.b=1", "c.d=2", "a.b=3"}));

@@ -24,8 +24,17 @@ CommandLine::CommandLine(int argc, char** argv, std::set<std::string> value_opti
     const std::string name = a.substr(0, a.find('='));
     return value_options.count(name) || flag_options.count(name);
   };
+  bool options_end = false;  // after "--" every argument is positional (a path starting with '-')
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
+    if (options_end) {
+      positional_.push_back(a);
+      continue;
+    }
+    if (a == "--") {
+      options_end = true;
+      continue;
+    }
     if (a == "-h" && flag_options.count("--help")) a = "--help";
     if (a.size() > 1 && a[0] == '-' && a[1] != '-') throw InputError("usage", "unknown option " + a);
     if (a.size() > 2 && a.rfind("--", 0) == 0) {
