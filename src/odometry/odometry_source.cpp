@@ -1,5 +1,7 @@
 #include "vofusion/odometry/odometry_source.h"
 
+#include <mrpt/poses/Lie/SE.h>
+
 #include <algorithm>
 
 #include "vofusion/io/external_files.h"
@@ -23,6 +25,16 @@ OdometryResult OdometrySource::process(const mrpt::obs::CObservation3DRangeScan&
   return process(frameFromObservation(checked, origin));
 }
 
+namespace {
+// `motion` spread evenly over `frames` frames: one frame's share, on the manifold.
+mrpt::poses::CPose3D motionPerFrame(const mrpt::poses::CPose3D& motion, std::size_t frames) {
+  if (frames <= 1) return motion;
+  auto twist = mrpt::poses::Lie::SE<3>::log(motion);
+  twist *= 1.0 / double(frames);
+  return mrpt::poses::Lie::SE<3>::exp(twist);
+}
+}  // namespace
+
 OdometryResult OdometrySource::process(const Frame& input) {
   Frame frame = input;  // shallow: images are shared
   frame.index = count_;
@@ -30,11 +42,13 @@ OdometryResult OdometrySource::process(const Frame& input) {
   times_.merge(r.times);
   timestamp_ = frame.timestamp;
   const mrpt::poses::CPose3D previous = pose_;
+  std::size_t frames_since_reference = 1;
   has_increment_ = false;
   if (r.success) {
     // The motion is relative to the odometry's reference, usually (not always) the previous frame.
     const auto ref = recent_poses_.find(r.reference_index);
     const mrpt::poses::CPose3D ref_pose = ref != recent_poses_.end() ? ref->second : previous;
+    if (ref != recent_poses_.end() && r.reference_index < count_) frames_since_reference = count_ - r.reference_index;
     pose_ = ref_pose + r.motion;
     increment_ = pose_ - previous;
     covariance_ = r.covariance;
@@ -45,8 +59,11 @@ OdometryResult OdometrySource::process(const Frame& input) {
     ++failures_;
     if (has_velocity_) pose_ = previous + velocity_;
   }
+  // The speed is one frame's motion: the motion from the reference spread over the frames since it. A
+  // match against an older reference (after failed frames) puts the pose back where it belongs; the
+  // difference to the last guessed pose is the guesses' drift, not a speed.
   if (r.success && count_ > 0) {
-    velocity_ = pose_ - previous;
+    velocity_ = motionPerFrame(r.motion, frames_since_reference);
     has_velocity_ = true;
   }
   recent_poses_[count_] = pose_;
