@@ -57,36 +57,39 @@ mrpt::obs::CObservation3DRangeScan::Ptr observe(const Rig& rig) {
   return obs;
 }
 
-// Share of the depth pixels (away from the cell edges, seen by the colour camera) whose colour is the
-// wall's there.
-double agreement(const Frame& f, const Rig& rig) {
+// What the frame's colour says of the wall, over the depth pixels away from the paint's cell edges:
+// `coloured` of `wall` were given a colour at all, `right` of those the wall's own there.
+struct WallColour {
+  int wall = 0, coloured = 0, right = 0;
+};
+WallColour wallColour(const Frame& f, const Rig& rig) {
   const CameraIntrinsics& d = rig.depth_cam;
-  int good = 0, n = 0;
-  for (int v = 0; v < f.rgb.rows; ++v)
-    for (int u = 0; u < f.rgb.cols; ++u) {
-      const double x = (u - d.cx) * kWall / d.fx, y = (v - d.cy) * kWall / d.fy;
-      const cv::Vec3b got = f.rgb.at<cv::Vec3b>(v, u);
-      if (nearEdge(x, y) || got == cv::Vec3b(0, 0, 0)) continue;
-      ++n;
-      const cv::Vec3b want = paint(x, y);
-      good += std::abs(got[0] - want[0]) + std::abs(got[1] - want[1]) + std::abs(got[2] - want[2]) < 30;
-    }
-  return n > 0 ? double(good) / n : 0.0;
-}
-
-// The share of the wall's pixels (away from the paint's edges) that were given a colour at all:
-// agreement() judges only those, so a reprojection leaving most of the image black would pass it.
-double coverage(const Frame& f, const Rig& rig) {
-  const CameraIntrinsics& d = rig.depth_cam;
-  int coloured = 0, n = 0;
+  WallColour c;
   for (int v = 0; v < f.rgb.rows; ++v)
     for (int u = 0; u < f.rgb.cols; ++u) {
       const double x = (u - d.cx) * kWall / d.fx, y = (v - d.cy) * kWall / d.fy;
       if (nearEdge(x, y)) continue;
-      ++n;
-      coloured += f.rgb.at<cv::Vec3b>(v, u) != cv::Vec3b(0, 0, 0);
+      ++c.wall;
+      const cv::Vec3b got = f.rgb.at<cv::Vec3b>(v, u);
+      if (got == cv::Vec3b(0, 0, 0)) continue;
+      ++c.coloured;
+      const cv::Vec3b want = paint(x, y);
+      c.right += std::abs(got[0] - want[0]) + std::abs(got[1] - want[1]) + std::abs(got[2] - want[2]) < 30;
     }
-  return n > 0 ? double(coloured) / n : 0.0;
+  return c;
+}
+
+// Share of the coloured wall pixels whose colour is the wall's there.
+double agreement(const Frame& f, const Rig& rig) {
+  const WallColour c = wallColour(f, rig);
+  return c.coloured > 0 ? double(c.right) / c.coloured : 0.0;
+}
+
+// Share of the wall's pixels given a colour at all: agreement() judges only those, so a reprojection
+// leaving most of the image black would pass it.
+double coverage(const Frame& f, const Rig& rig) {
+  const WallColour c = wallColour(f, rig);
+  return c.wall > 0 ? double(c.coloured) / c.wall : 0.0;
 }
 
 }  // namespace

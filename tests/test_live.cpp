@@ -278,6 +278,16 @@ class StampedFrames : public FrameSource {
 };
 }  // namespace
 
+// Plays the replay to its end (or the stop): frames delivered and the wall time it took.
+std::pair<int, double> playToTheEnd(ReplaySource& src, const std::atomic<bool>& stop) {
+  Frame f;
+  mrpt::obs::CObservation3DRangeScan::Ptr raw;
+  const auto start = std::chrono::steady_clock::now();
+  int frames = 0;
+  while (src.grab(f, raw, stop)) ++frames;
+  return {frames, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()};
+}
+
 // Frames that cost nothing to read play at the speed asked for: twice as fast takes half the recorded
 // span, and a replay that ignored the speed (the whole span) is caught. The play is scheduled against
 // the first frame's time, so lateness does not add up.
@@ -285,13 +295,8 @@ TEST(LiveReplay, PlaysAtTheSpeedAskedFor) {
   std::vector<double> stamps;
   for (int i = 0; i < 31; ++i) stamps.push_back(i / 30.0);
   ReplaySource src(std::make_unique<StampedFrames>(stamps), 2.0);
-  std::atomic<bool> stop{false};
-  Frame f;
-  mrpt::obs::CObservation3DRangeScan::Ptr raw;
-  const auto start = std::chrono::steady_clock::now();
-  int frames = 0;
-  while (src.grab(f, raw, stop)) ++frames;
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const std::atomic<bool> stop{false};
+  const auto [frames, seconds] = playToTheEnd(src, stop);
   EXPECT_EQ(frames, 31);
   EXPECT_GE(seconds, 0.5 - 0.01);
   EXPECT_LT(seconds, 0.8);
@@ -306,12 +311,7 @@ TEST(LiveReplay, AClockJumpInTheRecordingIsNoWait) {
     for (int i = 0; i < 100 && !stop; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
     stop = true;
   });
-  Frame f;
-  mrpt::obs::CObservation3DRangeScan::Ptr raw;
-  const auto start = std::chrono::steady_clock::now();
-  int frames = 0;
-  while (src.grab(f, raw, stop)) ++frames;
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const auto [frames, seconds] = playToTheEnd(src, stop);
   stop = true;
   timeout.join();
   EXPECT_EQ(frames, 6);
