@@ -118,6 +118,21 @@ TEST(ConfigRanges, ICPJudgedOnAFinestLevelNeedsAnIterationThere) {
   }
 }
 
+// A depth of 0 is no reading: a minimum of 0 fused every hole as a surface at the camera (occupied
+// blobs along the path, rays starting inside them). Refused.
+TEST(ConfigRanges, AMinimumDepthOfZeroIsRefused) {
+  for (const char* key : {"integrate_min_depth", "min_depth"}) {
+    mrpt::config::CConfigFileMemory cfg;
+    cfg.write("kinfu", key, 0);
+    try {
+      Reconstruction rec(cfg, TrackingMode::KinFu);
+      FAIL() << key << " = 0 accepted";
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), std::string("[kinfu] ") + key + ": must be in [0.001, 20], got 0");
+    }
+  }
+}
+
 // The range a key's table gives (and --dump-config shows) is the one checked: [output] refused
 // frustum_every = 0 and images below 64 px with a message of its own while its table said [0, ...]
 // and [16, ...].
