@@ -1,7 +1,5 @@
 // vofusion-mesh: clean up any triangle mesh PLY with the [mesh] post-processing of vofusion.
-#include <algorithm>
 #include <cstdio>
-#include <filesystem>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -37,18 +35,13 @@ const char* kUsage =
 
 // Each output a file of its own, checked before the cleaning: one named twice would be written over.
 void requireDistinctOutputs(const CommandLine& cl, const std::string& out) {
-  const auto canonical = [](const std::string& p) {
-    std::error_code ec;
-    const std::filesystem::path c = std::filesystem::weakly_canonical(p, ec);
-    return (ec ? std::filesystem::absolute(p).lexically_normal() : c).string();
-  };
-  std::vector<std::string> seen = {canonical(out)};
+  std::vector<std::string> seen = {out};
   for (const char* option : {"--full", "--report", "--png", "--scene"}) {
     const auto path = cl.value(option);
     if (!path) continue;
-    const std::string same = canonical(*path);
-    if (std::find(seen.begin(), seen.end(), same) != seen.end()) throw InputError(*path, "named twice as an output");
-    seen.push_back(same);
+    for (const std::string& earlier : seen)
+      if (samePath(earlier, *path)) throw InputError(*path, "named twice as an output");
+    seen.push_back(*path);
   }
 }
 

@@ -130,14 +130,8 @@ void AtomicPath::commitDurably() {
 
 void AtomicFileSet::write(const std::string& path, const std::function<void(const std::string& tmp)>& write_to) {
   // A second AtomicPath for the same file would remove the first one's temporary and take its place.
-  const auto canonical = [](const std::string& p) {
-    std::error_code ec;
-    const fs::path c = fs::weakly_canonical(p, ec);
-    return ec ? fs::absolute(p).lexically_normal() : c;
-  };
-  const fs::path same = canonical(path);
   for (const auto& f : files_)
-    if (canonical(f->path()) == same) throw InputError(path, "named twice as an output");
+    if (samePath(f->path(), path)) throw InputError(path, "named twice as an output");
   auto file = std::make_unique<AtomicPath>(path);
   try {
     write_to(file->tmp());
@@ -150,6 +144,15 @@ void AtomicFileSet::write(const std::string& path, const std::function<void(cons
 
 void AtomicFileSet::commit() {
   for (auto& f : files_) f->commit();
+}
+
+bool samePath(const std::string& a, const std::string& b) {
+  const auto canonical = [](const std::string& p) {
+    std::error_code ec;
+    const fs::path c = fs::weakly_canonical(p, ec);
+    return ec ? fs::absolute(p).lexically_normal() : c;
+  };
+  return canonical(a) == canonical(b);
 }
 
 void writeFileAtomically(const std::string& path, const std::string& contents) {

@@ -39,7 +39,8 @@ class AtomicPath {
 
 // Several outputs at paths of their own, moved into place together: each is written to its temporary
 // (write), and commit() renames them all once every one was written. One that fails to write leaves
-// every earlier file at those paths as it was. A path written twice is refused (InputError). A writer's InputError naming the temporary is rethrown
+// every earlier file at those paths as it was. A path written twice is refused (InputError). A
+// writer's InputError naming the temporary is rethrown
 // naming the file asked for (the temporary is gone by the time the error is read).
 class AtomicFileSet {
  public:
@@ -49,6 +50,9 @@ class AtomicFileSet {
  private:
   std::vector<std::unique_ptr<AtomicPath>> files_;
 };
+
+// Whether two paths name one file ("a/./b", "a/../a/b" and symlinks resolved as far as they exist).
+bool samePath(const std::string& a, const std::string& b);
 
 // Convenience for text outputs; throws InputError(path, strerror) if the write fails (disk full...).
 void writeFileAtomically(const std::string& path, const std::string& contents);
