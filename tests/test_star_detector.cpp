@@ -55,6 +55,29 @@ TEST(Star, FindsAnIsolatedBlobAtItsCentreWithItsScale) {
 
 // A blob centred between pixels: the response peak's parabola vertex finds it to a fraction of a pixel,
 // the integer extremum only to the nearest pixel.
+// Every value a key's range allows detects something: a trace^2/det limit of 4 or less calls every
+// point a line (trace^2 >= 4 det for any such matrix), and a largest size under 6 leaves only scales
+// that are tagged unlocalised or too small. Those ends let STAR find nothing, silently.
+TEST(Star, EveryValueInRangeDetectsSomething) {
+  const cv::Mat img = blobImage(640, 480, 7);
+  for (const char* key : {"max_size", "line_threshold_projected", "line_threshold_binarized"}) {
+    StarParams p;
+    mrpt::config::CConfigFileMemory cfg;
+    p.saveToConfigFile(cfg, "star");
+    // The smallest value the range takes: what a load of a value just under it refuses.
+    for (int v = 0; v <= 8; ++v) {
+      cfg.write("star", key, v);
+      StarParams q;
+      try {
+        q.loadFromConfigFile(cfg, "star");
+      } catch (const std::exception&) {
+        continue;  // refused: fine
+      }
+      EXPECT_FALSE(detectStar(img, q).empty()) << key << " = " << v << " is accepted and finds nothing";
+    }
+  }
+}
+
 TEST(Star, SubpixelPositionOfAnOffCentreBlob) {
   const cv::Point2f centre(120.35f, 110.7f);
   cv::Mat img(240, 240, CV_8U, cv::Scalar(60));

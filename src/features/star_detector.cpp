@@ -19,10 +19,10 @@ namespace {
 // Every key of the section, once: loading and saving both walk this list.
 std::vector<ConfigKey> starKeys(StarParams& p) {
   return {
-      {"max_size", &p.max_size, "largest filter size, pixels", 4.0, 128.0},
+      {"max_size", &p.max_size, "largest filter size, pixels (4: only unlocalised scales, nothing found)", 5.0, 128.0},
       {"response_threshold", &p.response_threshold, "minimum |response|, grey levels", 0.0, 100000.0},
-      {"line_threshold_projected", &p.line_threshold_projected, "Harris trace^2/det limit", 0.0, 1000.0},
-      {"line_threshold_binarized", &p.line_threshold_binarized, "same, on the scale map", 0.0, 1000.0},
+      {"line_threshold_projected", &p.line_threshold_projected, "Harris trace^2/det limit (<= 4: every point a line)", 5.0, 1000.0},
+      {"line_threshold_binarized", &p.line_threshold_binarized, "same, on the scale map", 5.0, 1000.0},
       {"suppress_nonmax_size", &p.suppress_nonmax_size, "non-max window, pixels", 1.0, 31.0},
       {"subpixel", &p.subpixel, "refine positions to the response peak"},
   };
