@@ -212,6 +212,32 @@ TEST(RgbdOdometry, ColourAndDepthOfDifferentSizesAreRefused) {
   EXPECT_THROW(odo.process(f), std::invalid_argument);
 }
 
+// A library caller's colour image of another pixel type (BGRA, 16 bits a channel) is read as the
+// loaders read it: the same keypoints and motion as its 8-bit BGR (it reached an assertion in STAR).
+TEST(RgbdOdometry, ColourOfAnotherPixelTypeIsReadAsEightBitBgr) {
+  const auto seq = room(false);
+  const Frame a = seq.render(0), b = seq.render(1);
+  RgbdOdometry bgr;
+  bgr.process(a);
+  const OdometryResult want = bgr.process(b);
+  ASSERT_TRUE(want.success);
+  for (const int code : {int(cv::COLOR_BGR2BGRA), -16}) {
+    const auto convert = [&](Frame f) {
+      if (code == -16) f.rgb.convertTo(f.rgb, CV_16UC3, 257.0);
+      else cv::cvtColor(f.rgb, f.rgb, code);
+      return f;
+    };
+    RgbdOdometry other;
+    ASSERT_NO_THROW(other.process(convert(a)));
+    const OdometryResult got = other.process(convert(b));
+    ASSERT_TRUE(got.success);
+    // BGRA: the same pixels; 16 bits scaled back to 8 may round a grey level here and there.
+    const bool same_pixels = code != -16;
+    EXPECT_NEAR(got.keypoints, want.keypoints, same_pixels ? 0 : 0.01 * want.keypoints) << code;
+    EXPECT_LT((got.motion.asVectorVal() - want.motion.asVectorVal()).norm(), same_pixels ? 1e-9 : 1e-3) << code;
+  }
+}
+
 // A caller's observation whose range image is in a file: the file is read checked whole, as a rawlog's
 // is. One cut short is an InputError naming it (MRPT's load() took it as it came: wrong depths), and
 // the observation still names its file afterwards.

@@ -17,6 +17,7 @@
 
 #include "vofusion/features/hamming_matcher.h"
 #include "vofusion/features/keypoint_union.h"
+#include "vofusion/io/png_decode.h"  // asBgr8
 #include "vofusion/odometry/colour_time_evidence.h"
 #include "vofusion/core/state_archive.h"
 #include "vofusion/core/thread_name.h"
@@ -253,8 +254,9 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
   cv::Mat gray;
   {
     ScopedStageTimer t(times, "grey");
-    if (frame.rgb.channels() == 3) cv::cvtColor(frame.rgb, gray, cv::COLOR_BGR2GRAY);
-    else gray = frame.rgb;
+    // A library caller's BGRA or 16-bit colour is read as the loaders read it (8-bit BGR).
+    if (frame.rgb.type() == CV_8UC1) gray = frame.rgb;
+    else cv::cvtColor(frame.rgb.type() == CV_8UC3 ? frame.rgb : asBgr8(frame.rgb), gray, cv::COLOR_BGR2GRAY);
   }
   if (keypoints != KeypointSet::Narf) {
     ScopedStageTimer t(times, "star");
