@@ -150,9 +150,10 @@ std::optional<RunSession::Checkpoint> RunSession::peek(const std::string& path) 
   is.seekg(sizeof(kCheckpointMagic) - 1);
   try {
     auto a = state::archiveOf(is);
+    std::string origin;
     uint64_t frames = 0;
     Checkpoint c;
-    a >> c.origin >> frames >> c.seconds;
+    a >> origin >> frames >> c.seconds;
     c.frames = frames;
     return c;
   } catch (const std::exception&) {

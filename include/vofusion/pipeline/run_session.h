@@ -47,7 +47,6 @@ class RunSession {
   struct Checkpoint {
     std::size_t frames = 0;  // frames processed before it
     double seconds = 0.0;    // the frame loop's wall time before it
-    std::string origin;      // the run it belongs to (checkpointOrigin and the app's options)
   };
   // Between frames: the run so far (every stage's state and each frame's report for the outputs) to
   // `path`, atomically: an earlier checkpoint there is replaced only by a whole new one.
