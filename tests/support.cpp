@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <sstream>
 
 #include <gtest/gtest.h>
@@ -63,6 +65,26 @@ int run(const std::string& cmd, std::string* output) {
   const int status = ::pclose(p);
   if (output) *output = out;
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+SignalledRun runSignalledMidway(const std::string& command, const std::string& log_path, int total_frames,
+                                const std::string& signal, int from, const std::string& watch_path) {
+  const std::string watch = watch_path.empty() ? log_path : watch_path;
+  const std::string total = std::to_string(total_frames);
+  // Counts are read as numbers (grep -o finds each, also in a line of \r-separated updates).
+  const std::string count_shows = "grep -o ' [0-9]*/" + total + " frames' '" + watch + "' 2>/dev/null | awk -F/ '$1 >= " +
+                                  std::to_string(from) + " && $1 < " + total + " {found = 1} END {exit !found}'";
+  std::string said;
+  run("(" + command + " > '" + log_path + "' 2>&1 & pid=$!; for i in $(seq 1 600); do " + count_shows +
+          " && echo signalled-at-a-count && break; sleep 0.2; done; kill -" + signal + " $pid; wait $pid; echo rc=$?)",
+      &said);
+  SignalledRun r;
+  r.signalled_at_a_count = said.find("signalled-at-a-count") != std::string::npos;
+  const auto rc = said.rfind("rc=");
+  if (rc != std::string::npos) r.exit_code = std::atoi(said.c_str() + rc + 3);
+  std::ifstream f(log_path);
+  r.log.assign(std::istreambuf_iterator<char>(f), {});
+  return r;
 }
 
 mrpt::config::CConfigFileMemory quickRoomConfig() {

@@ -35,6 +35,17 @@ std::string tempDir(const std::string& name);
 std::string app(const std::string& name);
 // Runs a shell command; returns its exit code and fills output (stdout+stderr).
 int run(const std::string& cmd, std::string* output = nullptr);
+// A command stopped by a signal in the middle of its work, as a user's Ctrl-C would: run in the
+// background with its stdout+stderr in `log_path`; `signal` (kill's name: INT, TERM) is sent once a
+// progress line in `watch_path` (the log itself when empty) shows "N/<total> frames" with
+// from <= N < total, or after two minutes without one.
+struct SignalledRun {
+  int exit_code = -1;               // the shell's: 128 + the signal's number for a run it stopped
+  bool signalled_at_a_count = false;  // false: no such count showed (a machine that finished first)
+  std::string log;                  // what the command wrote to log_path
+};
+SignalledRun runSignalledMidway(const std::string& command, const std::string& log_path, int total_frames,
+                                const std::string& signal, int from = 3, const std::string& watch_path = "");
 // The lines of a text, without their newlines.
 std::vector<std::string> lines(const std::string& text);
 

@@ -144,13 +144,10 @@ TEST(AppsIo, AStoppedConversionOrRenderingWritesNothingAndLeavesNoTemporary) {
       {app("rgbd-simulate") + " --frames 3000 --out " + dir + "/s", "TERM"},
   };
   for (const auto& [cmd, sig] : cases) {
-    // Signalled once its progress shows a frame rendered (or after 60 s).
-    run("(" + cmd + " > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 300); do grep -q ' [1-9][0-9]*/3000 frames' " +
-            dir + "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -" + sig + " $pid; wait $pid; echo rc=$? >> " + dir +
-            "/log.txt)");
-    std::ifstream f(dir + "/log.txt");
-    const std::string log(std::istreambuf_iterator<char>(f), {});
-    EXPECT_NE(log.find(sig == "INT" ? "rc=130" : "rc=143"), std::string::npos) << cmd << "\n" << log;
+    // Signalled once its progress shows a frame rendered (or after two minutes).
+    const auto stopped = test::runSignalledMidway(cmd, dir + "/log.txt", 3000, sig, 1);
+    const std::string& log = stopped.log;
+    EXPECT_EQ(stopped.exit_code, sig == "INT" ? 130 : 143) << cmd << "\n" << log;
     EXPECT_NE(log.find("rgbd-simulate: stopped (SIG" + sig + "): nothing written\n"), std::string::npos) << log;
     EXPECT_EQ(openFrameSource(dir + "/s.rawlog")->size(), 2u);
     EXPECT_EQ(TumFolderSource(dir + "/s", {}).size(), 2u);
@@ -159,17 +156,13 @@ TEST(AppsIo, AStoppedConversionOrRenderingWritesNothingAndLeavesNoTemporary) {
   }
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);  // the conversion's case needs the real recording (long enough to stop)
-  run("(" + app("tum2rawlog") + " " + tum + " " + dir + "/s.rawlog --overwrite > " + dir +
-      "/log.txt 2>&1 & pid=$!; for i in $(seq 1 300); do grep -q ' [1-9][0-9]*/300 frames' " + dir +
-      "/log.txt 2>/dev/null && touch " + dir + "/interrupted-at-a-count && break; sleep 0.2; done; "
-      "kill -INT $pid; wait $pid; echo rc=$? >> " + dir + "/log.txt)");
-  std::ifstream f(dir + "/log.txt");
-  const std::string log(std::istreambuf_iterator<char>(f), {});
+  const auto stopped = test::runSignalledMidway(app("tum2rawlog") + " " + tum + " " + dir + "/s.rawlog --overwrite",
+                                                dir + "/log.txt", 300, "INT", 1);
+  const std::string& log = stopped.log;
   // The first progress line shows at frame 1, and the signal goes within 0.2 s of it: only a run that
   // never showed one (all 300 converted at once) is no failure when it ends with 0.
-  if (!fs::exists(dir + "/interrupted-at-a-count"))
-    GTEST_SKIP() << "the 300 frames were converted before a progress line showed";
-  EXPECT_NE(log.find("rc=130"), std::string::npos) << log;
+  if (!stopped.signalled_at_a_count) GTEST_SKIP() << "the 300 frames were converted before a progress line showed";
+  EXPECT_EQ(stopped.exit_code, 130) << log;
   EXPECT_NE(log.find("tum2rawlog: stopped (SIGINT) after "), std::string::npos) << log;
   EXPECT_EQ(openFrameSource(dir + "/s.rawlog")->size(), 2u);
   for (const auto& e : fs::directory_iterator(dir))

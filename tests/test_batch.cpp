@@ -240,12 +240,8 @@ TEST(Batch, ATermToAJobLetsVofusionWriteWhatItBuiltAndTheJobRunAgainResumes) {
   const std::string job = test::sourceDir() + "/scripts/batch-job " + test::app("vofusion") + " " + out + " xyz 0 " +
                           test::tumFirst300() + " --config " + smallConfig(dir) + " --checkpoint-every 1000";
   // TERM to batch-job alone (not its process group) once vofusion's progress shows a few frames.
-  std::string log;
-  const std::string some_frames = "' [3-9]/300 frames\\| [1-9][0-9]/300 frames\\| [12][0-9][0-9]/300 frames'";
-  test::run("(" + job + " > " + dir + "/job.txt 2>&1 & pid=$!; for i in $(seq 1 600); do grep -q " + some_frames + " " +
-                out + "/xyz/vofusion.log 2>/dev/null && break; sleep 0.2; done; kill -TERM $pid; wait $pid; echo rc=$?)",
-            &log);
-  EXPECT_NE(log.find("rc=143"), std::string::npos) << log << slurp(out + "/xyz/vofusion.log");
+  const auto term = test::runSignalledMidway(job, dir + "/job.txt", 300, "TERM", 3, out + "/xyz/vofusion.log");
+  EXPECT_EQ(term.exit_code, 143) << term.log << slurp(out + "/xyz/vofusion.log");
   EXPECT_EQ(slurp(out + "/xyz/exit_code"), "143\n");
   EXPECT_EQ(slurp(dir + "/job.txt").rfind("STOPPED xyz (exit 143): vofusion: ", 0), 0u)
       << slurp(dir + "/job.txt");
@@ -260,6 +256,7 @@ TEST(Batch, ATermToAJobLetsVofusionWriteWhatItBuiltAndTheJobRunAgainResumes) {
   ASSERT_EQ(rows.size(), 1u) << table;
   EXPECT_EQ(rows[0][9], "interrupted (SIGTERM)") << table;
 
+  std::string log;
   ASSERT_EQ(test::run(job, &log), 0) << log << slurp(out + "/xyz/vofusion.log");
   EXPECT_NE(slurp(out + "/xyz/vofusion.log").find("--resume " + out + "/xyz/checkpoint"), std::string::npos);
   const auto resumed = nlohmann::json::parse(slurp(out + "/xyz/summary.json"));

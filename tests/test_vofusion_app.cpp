@@ -50,19 +50,13 @@ nlohmann::json readJson(const std::string& path) {
 int expectAnInterruptedRunsOutputs(const std::string& dir, const std::string& signal, int exit_code,
                                    const std::string& options = "") {
   SCOPED_TRACE("SIG" + signal);
-  const std::string some_frames = "' [3-9]/300 frames\\| [1-9][0-9]/300 frames\\| [12][0-9][0-9]/300 frames'";
-  const std::string cmd = "(" + test::app("vofusion") + " " + test::tumFirst300() + " --config " + validConfig(dir) +
-                          " --out " + dir + "/out " + options + " > " + dir + "/log.txt 2>&1 & pid=$!; "
-                          "for i in $(seq 1 600); do grep -q " + some_frames + " " + dir +
-                          "/log.txt 2>/dev/null && break; sleep 0.2; done; kill -" + signal + " $pid; wait $pid; echo rc=$?)";
-  std::string log;
-  test::run(cmd, &log);
-  EXPECT_NE(log.find("rc=" + std::to_string(exit_code)), std::string::npos) << log;
-  std::ifstream err(dir + "/log.txt");
-  const std::string said(std::istreambuf_iterator<char>(err), {});
-  EXPECT_NE(said.find("\nstopping after the frame in hand; what was done is written (Ctrl-C again to kill)\n"),
+  const auto stopped = test::runSignalledMidway(test::app("vofusion") + " " + test::tumFirst300() + " --config " +
+                                                    validConfig(dir) + " --out " + dir + "/out " + options,
+                                                dir + "/log.txt", 300, signal);
+  EXPECT_EQ(stopped.exit_code, exit_code) << stopped.log;
+  EXPECT_NE(stopped.log.find("\nstopping after the frame in hand; what was done is written (Ctrl-C again to kill)\n"),
             std::string::npos)
-      << said;
+      << stopped.log;
   const auto summary = readJson(dir + "/out/summary.json");
   EXPECT_TRUE(summary["interrupted"].get<bool>());
   EXPECT_EQ(summary.value("stop_signal", ""), "SIG" + signal);
@@ -153,15 +147,13 @@ TEST(VofusionApp, ACheckpointIsBoundToItsRunAndOutlivesAnotherRunsEnd) {
   const std::string dir = test::tempDir("vofusion_app_other_checkpoint");
   const std::string out = dir + "/out", checkpoint = out + "/checkpoint";
   const std::string cfg = " --config " + validConfig(dir) + " --out " + out;
-  std::string log;
-  test::run("(" + test::app("vofusion") + " synthetic:room --max-frames 200 --checkpoint-every 1000" + cfg + " > " + dir +
-                "/log.txt 2>&1 & pid=$!; for i in $(seq 1 600); do grep -q ' [3-9]/200 frames\\| [1-9][0-9]/200 frames\\| 1[0-9][0-9]/200 frames' " +
-                dir + "/log.txt 2>/dev/null && echo interrupted-at-a-count && break; sleep 0.2; done; kill -TERM $pid; wait $pid; echo rc=$?)",
-            &log);
+  const auto stopped = test::runSignalledMidway(
+      test::app("vofusion") + " synthetic:room --max-frames 200 --checkpoint-every 1000" + cfg, dir + "/log.txt", 200, "TERM");
   // Progress shows every 2 s off a terminal: a machine that renders and tracks the 200 frames faster
   // shows no count to stop at.
-  if (log.find("interrupted-at-a-count") == std::string::npos) GTEST_SKIP() << "the 200 frames were done before a count showed";
-  ASSERT_NE(log.find("rc=143"), std::string::npos) << log;
+  if (!stopped.signalled_at_a_count) GTEST_SKIP() << "the 200 frames were done before a count showed";
+  ASSERT_EQ(stopped.exit_code, 143) << stopped.log;
+  std::string log;
   ASSERT_TRUE(RunSession::peek(checkpoint).has_value()) << "written at the stop";
   EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 199 --resume " + checkpoint + cfg, &log), 2) << log;
   EXPECT_NE(log.find("made by another run ('--max-frames 200' where this run has '--max-frames 199')"), std::string::npos) << log;
