@@ -549,11 +549,49 @@ TEST(LoopCloser, RelocalisesAgainstAKeyframeTheIndexHasNotTakenYet) {
   ASSERT_LT(path_since_target, params.min_travel) << "keyframe " << target << " must not be indexed yet";
   const std::size_t j = keyframe_frames[target];
   RgbdOdometry fresh{OdometryParams()};
-  const Frame view = seq.render(j);
+  Frame view = seq.render(j);
+  view.timestamp = seq.render(keyframe_frames.back()).timestamp + 2.0;  // the walk back takes its time
   const auto found = closer.relocalise(view, fresh.process(view).features);
   ASSERT_TRUE(found.has_value()) << "frame " << j << " (keyframe " << target << ") not placed";
   EXPECT_EQ(found->keyframe, target);  // its own view: the most inliers
   EXPECT_LT((found->pose.translation() - truth(j).translation()).norm(), 0.02);
+  closer.finish();
+}
+
+// In the look-alike corridor the camera, 3 m (one period) past the first keyframe, sees what that
+// keyframe saw. Lost for 0.1 s it cannot be back there: the look-alike is refused, however many
+// inliers it has (it was taken, 3 m off). Lost for 10 s it may have been carried there, and is placed.
+TEST(LoopCloser, ALookAlikeOutOfReachIsRefusedAfterAShortLossAndTakenAfterALongOne) {
+  sim::SimOptions o = test::quickSim("lookalike", 300);
+  o.camera = CameraIntrinsics{};  // full resolution: enough matches to verify a place
+  const sim::SyntheticSequence seq(o);
+  LoopCloser closer{LoopParams()};
+  RgbdOdometry odo{OdometryParams()};
+  const auto truth = [&](std::size_t i) { return toEigen(seq.groundTruth(i) - seq.groundTruth(0)); };
+  std::size_t last = 0;
+  for (std::size_t i = 0; i < seq.size() && truth(last).translation().x() < 3.0; i += 3) {
+    const Frame f = seq.render(i);
+    closer.addFrame(f, truth(i), true, 0.001, odo.process(f).features);
+    last = i;
+  }
+  ASSERT_NEAR(truth(last).translation().x(), 3.0, 0.1);
+  Frame view = seq.render(0);  // what the camera sees one period on
+  view.index = last + 1;
+  const double last_seen = seq.render(last).timestamp;
+  RgbdOdometry fresh{OdometryParams()};
+  const auto features = fresh.process(view).features;
+
+  view.timestamp = last_seen + 0.1;
+  const auto soon = closer.relocalise(view, features);
+  if (soon) {
+    EXPECT_NE(soon->keyframe, 0u);
+    EXPECT_LT((soon->pose.translation() - truth(last).translation()).norm(), 1.0) << "placed at the look-alike";
+  }
+  view.timestamp = last_seen + 10.0;
+  const auto later = closer.relocalise(view, features);
+  ASSERT_TRUE(later.has_value()) << "the look-alike must verify, or the short loss tests nothing";
+  EXPECT_EQ(later->keyframe, 0u);  // its own view: the most inliers
+  EXPECT_LT(later->pose.translation().norm(), 0.05);
   closer.finish();
 }
 

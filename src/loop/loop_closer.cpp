@@ -355,14 +355,23 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
   }
   for (const PlaceCandidate& c : m.index.query(features->descriptors))
     if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
+  // Keyframes are made of well-tracked frames only: the newest is where the camera was last known.
+  const Keyframe& newest = m.keyframes.at(n - 1);
+  const double lost_seconds = std::max(0.0, frame.timestamp - newest.timestamp);
   std::optional<Relocalisation> best;
   PyramidCache pyramids(2);  // the view's, made once for all candidates
   for (const std::size_t id : candidates) {
     const Keyframe known = m.keyframes.load(id);
     if (!known.features) continue;
     const LoopCheck check = verifyRelocalisation(known, view, m.params, pyramids);
-    if (!check.accepted || (best && check.inliers <= best->inliers)) continue;
-    best = Relocalisation{frame.index, known.id, known.frame_index, check.inliers, check.icp_rms, known.tracked * check.T_old_new};
+    if (!check.accepted) continue;
+    const Eigen::Isometry3d placed = known.tracked * check.T_old_new;
+    // Both poses are the tracker's, which drifts along the path between the two keyframes.
+    const double reach = kMaxCameraSpeed * lost_seconds + m.params.max_drift_translation +
+                         m.params.max_drift_rate * std::abs(newest.path_length - known.path_length);
+    if ((placed.translation() - newest.tracked.translation()).norm() > reach) continue;
+    if (best && check.inliers <= best->inliers) continue;
+    best = Relocalisation{frame.index, known.id, known.frame_index, check.inliers, check.icp_rms, placed};
   }
   return best;
 }

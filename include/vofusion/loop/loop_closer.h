@@ -77,7 +77,8 @@ class LoopCloser {
   void loadState(std::istream& is);
   // Relocalisation, when the tracker has lost the camera: the frame matched against the keyframes (the
   // newest ones, those the place index has not taken yet one per index_spacing, then the index's
-  // candidates) and verified as a loop is, without the drift bound.
+  // candidates) and verified as a loop is, without the drift bound; a placement beyond the camera's
+  // reach since the newest keyframe (kMaxCameraSpeed) is refused, however many inliers it has.
   // Waits for the thread to take in the queued keyframes first. nullopt: no keyframe verified.
   std::optional<Relocalisation> relocalise(const Frame& frame, std::shared_ptr<const DescribedKeypoints> features);
   // Waits until every queued keyframe is processed and the graph optimised.
