@@ -106,13 +106,13 @@ RunStats runOdometry(FrameSource& source, OdometrySource& odo, RawlogWriter* wri
   Progress progress("odometry", source.size());
   Frame frame;
   while (true) {
-    if (stopRequested()) {  // read here: a signal after the last frame changes nothing
-      run.stopped_by = stopSignal();
-      break;
-    }
     {
       ScopedStageTimer t(run.io_times, "read");
-      if (!source.next(frame)) break;
+      if (!source.next(frame)) break;  // read first: a stop during the last frame is no interruption
+    }
+    if (stopRequested()) {
+      run.stopped_by = stopSignal();
+      break;
     }
     const auto t0 = std::chrono::steady_clock::now();
     if (cv::countNonZero(frame.depth > 0) > 0) ++run.frames_with_depth;

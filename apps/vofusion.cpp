@@ -212,11 +212,11 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   };
   Frame frame;
   while (true) {
-    if (stopRequested()) {  // read here: a signal after the last frame lets the outputs be written
+    if (!source.next(frame)) break;  // read first: a stop during the last frame is no interruption
+    if (stopRequested()) {
       loop.stop_signal = stopSignal();
       break;
     }
-    if (!source.next(frame)) break;
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
     run.process(frame);
     ++loop.done;

@@ -310,6 +310,27 @@ TEST(VofusionApp, ACheckpointThatCannotBeWrittenIsNamed) {
   EXPECT_EQ(lines.back().rfind("vofusion: error: " + out + "/checkpoint: cannot write the checkpoint", 0), 0u) << lines.back();
 }
 
+// A stop that comes while the last frame is in hand leaves nothing undone: the run ends as a finished
+// one (exit 0, not "interrupted", its loop-closed outputs, no checkpoint kept). It was called
+// interrupted, exited 143 and kept a checkpoint of the whole run.
+TEST(VofusionApp, AStopDuringTheLastFrameIsNoInterruption) {
+  const std::string dir = test::tempDir("vofusion_app_stop_at_the_end");
+  const std::string cfg = dir + "/path_only.ini", out = dir + "/out";
+  std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  std::string log;
+  // The checkpoint shows once frame 1 is done; frame 2 and its checkpoint take a few hundred ms.
+  test::run("(" + test::app("vofusion") + " synthetic:room --max-frames 2 --out " + out + " --config " + cfg +
+                " --checkpoint-every 0.000001 > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 3000); do [ -e " + out +
+                "/checkpoint ] && break; sleep 0.01; done; kill -TERM $pid; wait $pid; echo rc=$?)",
+            &log);
+  const auto summary = readJson(out + "/summary.json");
+  if (summary["frames"].get<int>() < 2) GTEST_SKIP() << "the stop came before frame 2 was read";
+  EXPECT_NE(log.find("rc=0"), std::string::npos) << log;
+  EXPECT_FALSE(summary["interrupted"].get<bool>());
+  EXPECT_FALSE(summary.contains("stop_signal"));
+  EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "a finished run leaves no checkpoint";
+}
+
 TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   VOFUSION_REQUIRE_DATA(test::tumFirst300());
   expectAnInterruptedRunsOutputs(test::tempDir("vofusion_app_sigint"), "INT", 130);
