@@ -37,8 +37,10 @@ void onStopSignal(int signal) {
     std::int64_t unset = 0;
     g_first_ns.compare_exchange_strong(unset, now);
   }
+  // The first request's signal before the flag: whoever sees the flag sees which signal it was.
+  int none = 0;
+  g_signal.compare_exchange_strong(none, signal);
   if (!g_stop.exchange(true)) {  // the first stop request
-    g_signal = signal;
     const char* said = g_stopping.load();
     std::size_t length = 0;
     while (said[length]) ++length;
