@@ -140,6 +140,18 @@ TEST(Eval, AssociationTolerance) {
   EXPECT_EQ(associateTrajectories(gt, late, 0.02).size(), 285u);  // 0.5 s = 15 frames of overlap lost
 }
 
+// A path drawn without ground truth lists no "ground truth" in its legend: the first entry's swatch
+// (legend at the plot box's corner, 90 + 8, 50 + 8) is the estimate's blue, not black.
+TEST(Eval, APathWithoutGroundTruthHasNoGroundTruthInItsLegend) {
+  const std::string dir = test::tempDir("eval_plot_no_gt");
+  plotTrajectoriesOverlay(dir + "/o.png", {}, {{"estimate", wavy()}}, "path");
+  const cv::Mat img = cv::imread(dir + "/o.png");
+  ASSERT_FALSE(img.empty());
+  const cv::Vec3b swatch = img.at<cv::Vec3b>(58 + 12, 98 + 20);
+  EXPECT_GT(int(swatch[0]), 150) << "blue channel";  // BGR
+  EXPECT_LT(int(swatch[2]), 150) << "red channel";
+}
+
 TEST(Eval, PlotsAreWritten) {
   const std::string dir = test::tempDir("eval_plots");
   const Trajectory gt = wavy();

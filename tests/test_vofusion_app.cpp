@@ -11,6 +11,7 @@
 #include <mrpt/opengl/CSetOfObjects.h>
 #include <mrpt/opengl/CSetOfTriangles.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "support.h"
 #include "vofusion/core/trajectory.h"
@@ -329,6 +330,23 @@ TEST(VofusionApp, AStopDuringTheLastFrameIsNoInterruption) {
   EXPECT_FALSE(summary["interrupted"].get<bool>());
   EXPECT_FALSE(summary.contains("stop_signal"));
   EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "a finished run leaves no checkpoint";
+}
+
+// Too few frames for an ATE (it needs 3 poses): the path is still drawn, and summary.json says why
+// there is no ATE. Neither was written.
+TEST(VofusionApp, ARunTooShortForAnAteStillDrawsItsPath) {
+  const std::string dir = test::tempDir("vofusion_app_no_ate");
+  std::string log;
+  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 2 --out " + dir + "/out --config " +
+                          validConfig(dir),
+                      &log),
+            0)
+      << log;
+  const auto summary = readJson(dir + "/out/summary.json");
+  EXPECT_FALSE(summary.contains("ate"));
+  EXPECT_NE(summary.value("ate_error", "").find("only 2 poses associated"), std::string::npos) << summary.dump();
+  EXPECT_FALSE(cv::imread(dir + "/out/trajectory.png").empty());
+  EXPECT_NE(log.find("trajectory.png"), std::string::npos) << log;
 }
 
 TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {

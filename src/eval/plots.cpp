@@ -135,7 +135,8 @@ cv::Mat renderTopView(const Trajectory& gt, const std::vector<std::pair<std::str
   if (error_vectors && ests.size() == 1 && ests[0].second.size() == gt.size())
     for (std::size_t i = 0; i < gt.size(); ++i) cv::line(plot, P(gt[i].pose), P(ests[0].second[i].pose), kRed, 1, cv::LINE_AA);
   for (std::size_t i = 1; i < gt.size(); ++i) cv::line(plot, P(gt[i - 1].pose), P(gt[i].pose), kBlack, 2, cv::LINE_AA);
-  std::vector<std::pair<std::string, cv::Scalar>> entries{{"ground truth", kBlack}};
+  std::vector<std::pair<std::string, cv::Scalar>> entries;
+  if (!gt.empty()) entries.push_back({"ground truth", kBlack});
   for (std::size_t k = 0; k < ests.size(); ++k) {
     const cv::Scalar c = ests.size() == 1 ? kBlue : kPalette[k % kPalette.size()];
     const Trajectory& e = ests[k].second;

@@ -95,11 +95,14 @@ Trajectory RunRecorder::Impl::writeTrajectories(const Reconstruction& rec, const
     s["loops"] = json::array();
   }
   const std::string title = "vofusion " + toString(rec.mode()) + ": " + recordingName(info.input);
+  // The camera's path alone, where no ATE aligns it with ground truth (none, or too little overlap).
+  const auto plotPathAlone = [&](const std::string& why) {
+    if (rec.trajectory().empty()) return;
+    plotTrajectoriesOverlay(out.path("trajectory.png"), {}, {{"estimate", rec.trajectory()}}, title);
+    out.wrote("trajectory.png", "camera path" + why);
+  };
   if (ground_truth.empty()) {
-    if (!rec.trajectory().empty()) {
-      plotTrajectoriesOverlay(out.path("trajectory.png"), {}, {{"estimate", rec.trajectory()}}, title);
-      out.wrote("trajectory.png", "camera path");
-    }
+    plotPathAlone("");
     return {};
   }
   const AteResult ate = computeAte(ground_truth, rec.trajectory());
@@ -120,7 +123,11 @@ Trajectory RunRecorder::Impl::writeTrajectories(const Reconstruction& rec, const
   };
   if (json j = frameRpe(rec.trajectory()); !j.is_null()) s["rpe_50ms"] = j;
   if (json j = frameRpe(rec.fusedTrajectory()); !j.is_null()) s["rpe_50ms_fused"] = j;
-  if (!ate.success) return {};
+  if (!ate.success) {
+    s["ate_error"] = ate.message;
+    plotPathAlone(" (no ATE: " + ate.message + ")");
+    return {};
+  }
   plotAteReport(out.path("trajectory.png"), ate, title);
   out.wrote("trajectory.png", "ATE RMSE " + std::to_string(ate.trans.rmse) + " m");
   // Ground truth drawn in the map's frame (the map is anchored at the first camera): the ATE's rigid
