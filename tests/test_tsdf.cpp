@@ -297,6 +297,26 @@ TEST(MarchingCubes, EmptyAndUnobservedGiveNoTriangles) {
   EXPECT_TRUE(marchingCubes({{Eigen::Vector3i(0, 0, 0), &b}}, 0.01f).empty());
 }
 
+// A crossing between a painted voxel and one that saw only free space (weight, but black: never
+// painted) takes the painted end's colour; it was blended toward black by the crossing's position.
+TEST(MarchingCubes, AnEndNeverPaintedLendsNoBlack) {
+  Brick b;
+  for (int z = 0; z < kBrickEdge; ++z)
+    for (int y = 0; y < kBrickEdge; ++y)
+      for (int x = 0; x < kBrickEdge; ++x) {
+        Voxel& v = b.voxels[Brick::index(x, y, z)];
+        v.weight = 5;
+        v.tsdf = x < 4 ? -8000 : 8000;  // a plane halfway between x = 3 and 4
+        if (x == 3) v.r = 200, v.g = 20, v.b = 10;  // the surface's side painted, free space not
+      }
+  const TriangleMesh mesh = marchingCubes({{Eigen::Vector3i(0, 0, 0), &b}}, 0.01f);
+  ASSERT_FALSE(mesh.empty());
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
+    ASSERT_NEAR(mesh.vertices[i].x(), 0.035f, 1e-5f);
+    EXPECT_EQ(mesh.colors[i], (std::array<std::uint8_t, 3>{200, 20, 10})) << "vertex " << i;
+  }
+}
+
 namespace {
 
 // Bricks holding the truncated SDF of a sphere (weight 1, colour by height), no camera involved.

@@ -194,7 +194,11 @@ void edgeVertices(const Grid& grid, const int* nb, const CornerStates& state, st
           const auto mix = [t](std::uint8_t u, std::uint8_t v) {
             return static_cast<std::uint8_t>(std::lround(u + t * (static_cast<float>(v) - u)));
           };
-          bv.colours.push_back({mix(a->r, b->r), mix(a->g, b->g), mix(a->b, b->b)});
+          // An end never painted (black: only free space seen there) has no colour to blend in.
+          const bool a_painted = (a->r | a->g | a->b) != 0, b_painted = (b->r | b->g | b->b) != 0;
+          const Voxel* ca = a_painted || !b_painted ? a : b;
+          const Voxel* cb = b_painted || !a_painted ? b : a;
+          bv.colours.push_back({mix(ca->r, cb->r), mix(ca->g, cb->g), mix(ca->b, cb->b)});
         }
       }
   bv.countBefore();

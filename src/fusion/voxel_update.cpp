@@ -39,9 +39,12 @@ int updateScalar(const Setup& s, const VoxelRowSamples& row, Voxel* vox) {
     vx.tsdf = static_cast<std::int16_t>(fnew + (fnew >= 0.f ? 0.5f : -0.5f));
     vx.weight = static_cast<std::uint8_t>(std::min(wold + 1, s.max_weight));
     if (s.colours && sdf < s.truncation) {
-      // Same running average, rounded; a multiply instead of three integer divisions per voxel.
+      // Same running average, rounded; a multiply instead of three integer divisions per voxel. The
+      // weight counts free-space updates too, which bring no colour: a voxel still black (never
+      // painted) takes its first colour whole, or it would start at c / (weight + 1), a dark fringe.
       const cv::Vec3b& c = s.colours[row.pixel[x]];
-      const float k = inv_count[wold], fw = static_cast<float>(wold);
+      const bool unpainted = (vx.r | vx.g | vx.b) == 0;
+      const float k = unpainted ? 1.f : inv_count[wold], fw = unpainted ? 0.f : static_cast<float>(wold);
       vx.r = static_cast<std::uint8_t>((vx.r * fw + c[2]) * k + 0.5f);
       vx.g = static_cast<std::uint8_t>((vx.g * fw + c[1]) * k + 0.5f);
       vx.b = static_cast<std::uint8_t>((vx.b * fw + c[0]) * k + 0.5f);
@@ -163,9 +166,13 @@ __attribute__((target("avx2"))) int updateAvx2(const Setup& s, const VoxelRowSam
     const __m256 c_r = _mm256_cvtepi32_ps(_mm256_srli_epi32(bgr, 24));
     __m128i paint16, paint8;
     narrow(paint, paint16, paint8);
-    field[2] = _mm_blendv_epi8(field[2], averageColour(field[2], c_r, fw, k), paint8);
-    field[3] = _mm_blendv_epi8(field[3], averageColour(field[3], c_g, fw, k), paint8);
-    field[4] = _mm_blendv_epi8(field[4], averageColour(field[4], c_b, fw, k), paint8);
+    // A voxel still black takes its first colour whole, as in the scalar loop.
+    const __m256i rgb = _mm256_cvtepu8_epi32(_mm_or_si128(_mm_or_si128(field[2], field[3]), field[4]));
+    const __m256 unpainted = _mm256_castsi256_ps(_mm256_cmpeq_epi32(rgb, _mm256_setzero_si256()));
+    const __m256 cfw = _mm256_blendv_ps(fw, _mm256_setzero_ps(), unpainted), ck = _mm256_blendv_ps(k, one, unpainted);
+    field[2] = _mm_blendv_epi8(field[2], averageColour(field[2], c_r, cfw, ck), paint8);
+    field[3] = _mm_blendv_epi8(field[3], averageColour(field[3], c_g, cfw, ck), paint8);
+    field[4] = _mm_blendv_epi8(field[4], averageColour(field[4], c_b, cfw, ck), paint8);
   }
   for (int c = 0; c < 3; ++c) {
     __m128i out = shuffle(field[0], kTables.place[0][c]);
