@@ -6,6 +6,7 @@
 #include <string>
 
 #include "support.h"
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/text_file.h"
 
@@ -50,5 +51,17 @@ TEST(TextFile, ReadsWholeFileOrNamesIt) {
     FAIL();
   } catch (const InputError& e) {
     EXPECT_EQ(std::string(e.what()), dir + "/huge.txt: is 300 MiB: too large for a text file here (256 MiB at most)");
+  }
+}
+
+// A stream with no size to check first (a device, a pipe) is read up to the cap and refused there: a
+// list given as /dev/zero grew without bound until the machine ran out of memory.
+TEST(TextFile, AnEndlessStreamIsRefusedAtTheCap) {
+  const ScopedAllocationLimit limit(std::size_t(1) << 30, std::size_t(2) << 30);  // without the cap: bad_alloc, not the machine
+  try {
+    readTextFile("/dev/zero");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "/dev/zero: goes on past 256 MiB: too large for a text file here");
   }
 }

@@ -1,5 +1,6 @@
 #include "vofusion/core/text_file.h"
 
+#include <array>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -18,9 +19,15 @@ std::string readTextFile(const std::string& path) {
     throw InputError(path, "is " + std::to_string(size >> 20) + " MiB: too large for a text file here (256 MiB at most)");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
+  // The read itself is capped too: a pipe or a device (/dev/zero) has no size to check first.
+  std::string text;
+  std::array<char, 1 << 16> buf;
+  while (f.read(buf.data(), buf.size()) || f.gcount() > 0) {
+    text.append(buf.data(), std::size_t(f.gcount()));
+    if (text.size() > kMaxBytes) throw InputError(path, "goes on past 256 MiB: too large for a text file here");
+  }
+  if (f.bad()) throw InputError(path, "cannot read file");
+  return text;
 }
 
 std::vector<TextLine> dataLines(const std::string& text) {
