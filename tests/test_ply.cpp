@@ -3,6 +3,7 @@
 #include <fstream>
 
 #include "support.h"
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/mesh/mesh_io.h"
 
@@ -160,6 +161,9 @@ TEST(Ply, MalformedFilesAreInputErrors) {
       {"novertex", "ply\nformat ascii 1.0\nend_header\n"},
       {"huge", "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
                "property float z\nend_header\n"},
+      // A second vertex element after the faces shrank the vertices under them.
+      {"twovertex", head.substr(0, head.size() - 11) + "element vertex 1\nproperty float x\nproperty float y\n"
+                        "property float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n0 0 0\n"},
   };
   for (const auto& [name, text] : cases) {
     const std::string p = dir + "/" + name + ".ply";
@@ -172,6 +176,25 @@ TEST(Ply, MalformedFilesAreInputErrors) {
   writeText(dir + "/empty_elements.ply", head.substr(0, head.size() - 11) + "element edge 1000000000000000000\nend_header\n" +
                                              "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
   EXPECT_EQ(readPly(dir + "/empty_elements.ply").faces.size(), 1u);
+}
+
+// A header's counts are held against the bytes each record needs at least, before they size a buffer:
+// 2 MB claiming 2 million vertices of 27 bytes (54 MB zero-filled) is refused as truncated at once.
+TEST(Ply, ACountTheBytesCannotHoldAllocatesNothing) {
+  const std::string dir = test::tempDir("ply_count_bomb");
+  const std::string p = dir + "/bomb.ply";
+  std::string text = "ply\nformat binary_little_endian 1.0\nelement vertex 2000000\nproperty float x\nproperty float y\n"
+                     "property float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\n"
+                     "property uchar green\nproperty uchar blue\nend_header\n";
+  text += std::string(2000000, '\0');
+  writeText(p, text);
+  const ScopedAllocationLimit limit(std::size_t(8) << 20, std::size_t(16) << 20);  // the file's 2 MB, twice, and more
+  try {
+    readPly(p);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("file is truncated (header announces 2000000 vertices)"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Ply, FailedWriteKeepsEarlierFile) {

@@ -83,6 +83,16 @@ class BodyReader {
     return 0;
   }
 
+  // Whether `count` records of `e` can fit in the bytes left: each takes at least its scalars' sizes (a
+  // list its count's) in binary, a character and a separator per value in ASCII. Checked before a
+  // count sizes a buffer: a damaged header must not allocate gigabytes before the read fails.
+  bool fits(const Element& e) const {
+    std::size_t least = 0;
+    for (const Property& p : e.props) least += fmt_ == Format::Ascii ? 2 : scalarSize(p.is_list ? p.count_type : p.type);
+    const std::size_t left = data_.size() - pos_ + (fmt_ == Format::Ascii ? 1 : 0);  // the last value needs no separator
+    return least == 0 || e.count <= left / least;
+  }
+
  private:
   double readAscii(const char* what) {
     while (pos_ < data_.size() && std::isspace(static_cast<unsigned char>(data_[pos_]))) ++pos_;
@@ -257,8 +267,9 @@ struct BodyParser {
 
   void readVertices(const Element& e) {
     const VertexLayout l = vertexLayout(path, e);
-    // Guard against absurd counts before reserving memory: each vertex needs >= 1 byte.
-    if (e.count > data.size())
+    // A second vertex element would resize the first's vertices under the faces already read.
+    if (have_vertices) throw InputError(path, "more than one vertex element");
+    if (!body.fits(e))
       throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " vertices)");
     mesh.vertices.resize(e.count);
     if (l.normals) mesh.normals.resize(e.count);
@@ -288,7 +299,7 @@ struct BodyParser {
     int il = indexOf(e, "vertex_indices");
     if (il < 0) il = indexOf(e, "vertex_index");
     if (il < 0 || !e.props[il].is_list) throw InputError(path, "face element lacks a vertex_indices list");
-    if (e.count > data.size())
+    if (!body.fits(e))
       throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " faces)");
     mesh.faces.reserve(e.count);
     std::vector<std::uint32_t> poly;
