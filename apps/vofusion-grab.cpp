@@ -222,6 +222,9 @@ struct LiveCheckpoints {
   void maybeWrite(const RunSession& run) {
     const auto now = std::chrono::steady_clock::now();
     if (every <= 0 || std::chrono::duration<double>(now - last).count() < every) return;
+    // The frames it covers were recorded before they came here: on the disk first (records and images),
+    // or after a power cut the checkpoint would name frames the recording lost.
+    syncFileSystemOf(path);
     run.saveCheckpoint(path, origin, std::chrono::duration<double>(now - start).count());
     last = std::chrono::steady_clock::now();
     seconds_writing += std::chrono::duration<double>(last - now).count();

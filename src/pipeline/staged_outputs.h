@@ -59,6 +59,8 @@ class StagedOutputs {
       std::filesystem::rename(path(name), final_path_(name), ec);
       if (ec) throw InputError(final_path_(name), "cannot write: " + ec.message());
     }
+    // Each file's bytes went to the disk with its own commit; the renames out of staging follow them.
+    if (!names_.empty()) syncFolderEntries(std::filesystem::path(final_path_(names_.front())).parent_path().string());
     if (log)
       for (const std::string& l : log_lines_) std::fputs(l.c_str(), log);
   }

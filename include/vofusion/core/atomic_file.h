@@ -1,5 +1,7 @@
 #pragma once
-// Outputs appear whole or not at all: write to "<path>.tmp-<pid>", then rename over <path>.
+// Outputs appear whole or not at all: write to "<path>.tmp-<pid>", then rename over <path>; commit()
+// puts the bytes on the disk before the rename and the rename after it (fsync), so that a power cut
+// leaves the earlier file or this one, never an empty one.
 // If the writer is destroyed without commit() (an exception, Ctrl-C unwinding), the temporary is
 // removed and any earlier <path> is left untouched. A run killed by a signal leaves its temporary:
 // the next AtomicPath for the same <path> removes those whose process is gone.
@@ -22,10 +24,6 @@ class AtomicPath {
   void commit();  // rename tmp -> final (replacing a file or directory); throws InputError on failure
                   // A directory replaced is removed by the destructor, so that the outputs committed
                   // with it are in place before the seconds a large folder takes to remove.
-  // commit() of a file with its bytes on the disk first, and the rename after it: what a power cut
-  // must not take (a checkpoint). A rename alone may reach the disk before the data on XFS or btrfs,
-  // replacing the earlier file with an empty one.
-  void commitDurably();
   // Undoes commit(), before the destructor, for outputs that change together: a directory it replaced
   // is back at the path, and this one removed (nothing was there: nothing is). A file it replaced is
   // not back (the rename replaced it): the path then holds nothing.
@@ -56,6 +54,12 @@ bool samePath(const std::string& a, const std::string& b);
 
 // Convenience for text outputs; throws InputError(path, strerror) if the write fails (disk full...).
 void writeFileAtomically(const std::string& path, const std::string& contents);
+// The folder's entries on the disk (fsync), or InputError(dir, ...): for files moved into it by
+// rename() outside an AtomicPath, their bytes synced before.
+void syncFolderEntries(const std::string& dir);
+// Everything written so far on the file system that holds `path`'s folder (syncfs), or InputError(path,
+// ...): files another thread writes, for an output that must not outlive them at a power cut.
+void syncFileSystemOf(const std::string& path);
 // Throws InputError(dir, ...) if dir cannot be created or written to.
 void ensureWritableDirectory(const std::string& dir);
 
