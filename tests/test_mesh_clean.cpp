@@ -6,6 +6,7 @@
 #include <iterator>
 
 #include <random>
+#include <set>
 
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
@@ -776,4 +777,80 @@ TEST(MeshClean, ReportJsonWritesNonFiniteFiguresAsNull) {
   r.success = true;
   r.area = std::nan("");
   EXPECT_NE(r.toJson().find("\"area\": null"), std::string::npos) << r.toJson();
+}
+
+namespace {
+
+// A flat sheet z = 0 over [x0, x1] x [0, 1] as a grid of `n` x `n` cells (columns at `xs` when given),
+// its vertices at x == seam_x flagged as a seam: one region of a plane meshed region by region.
+struct SheetRegion {
+  TriangleMesh mesh;
+  std::vector<std::uint8_t> seam;
+};
+SheetRegion sheetRegion(std::vector<float> xs, int n, float seam_x) {
+  SheetRegion r;
+  for (int j = 0; j <= n; ++j)
+    for (const float x : xs) {
+      r.mesh.vertices.emplace_back(x, float(j) / float(n), 0.f);
+      r.mesh.colors.push_back({100, 100, 100});
+      r.seam.push_back(x == seam_x);
+    }
+  const auto at = [&](std::size_t i, int j) { return std::uint32_t(std::size_t(j) * xs.size() + i); };
+  for (int j = 0; j < n; ++j)
+    for (std::size_t i = 0; i + 1 < xs.size(); ++i) {
+      r.mesh.faces.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      r.mesh.faces.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  return r;
+}
+std::vector<float> columns(float x0, float x1, int n) {
+  std::vector<float> xs;
+  for (int i = 0; i <= n; ++i) xs.push_back(i == n ? x1 : x0 + (x1 - x0) * float(i) / float(n));
+  return xs;
+}
+std::set<std::array<float, 3>> seamPoints(const SheetRegion& r) {
+  std::set<std::array<float, 3>> p;
+  for (std::size_t i = 0; i < r.seam.size(); ++i)
+    if (r.seam[i]) p.insert({r.mesh.vertices[i].x(), r.mesh.vertices[i].y(), r.mesh.vertices[i].z()});
+  return p;
+}
+
+}  // namespace
+
+// Two regions of one plane simplified by edge length (CGAL's collapse) keep every seam vertex where
+// it was, so they weld: Lindstrom-Turk placed collapsed seam vertices anywhere along the border, each
+// region its own way (an open crack along every seam).
+TEST(MeshClean, RegionsSimplifiedByEdgeLengthKeepTheirSeams) {
+  SheetRegion a = sheetRegion(columns(0.f, 1.f, 20), 20, 1.f), b = sheetRegion(columns(1.f, 2.f, 20), 20, 1.f);
+  const auto seam_before = seamPoints(a);
+  ASSERT_EQ(seam_before.size(), 21u);
+  ASSERT_EQ(seamPoints(b), seam_before);
+  MeshCleanParams p;
+  p.max_simplify_error = 0;
+  p.target_edge_length = 0.2;
+  p.min_component_faces = 0;
+  for (SheetRegion* r : {&a, &b}) {
+    const std::size_t faces = r->mesh.faces.size();
+    const MeshCleanReport report = simplifyRegion(r->mesh, r->seam, p);
+    ASSERT_TRUE(report.success) << report.failure;
+    EXPECT_LT(r->mesh.faces.size(), faces / 2) << "simplified";
+  }
+  EXPECT_EQ(seamPoints(a), seam_before);
+  EXPECT_EQ(seamPoints(b), seam_before);
+}
+
+// weld_distance merges nothing inside a region: a seam vertex merged onto an inner one 5 mm away left
+// the seam (its neighbour's copy without a partner). The welded mesh is welded with the distance.
+TEST(MeshClean, ARegionsSeamIsNotWeldedAwayByDistance) {
+  std::vector<float> xs = columns(0.f, 1.f, 40);
+  xs[39] = 0.995f;  // the last inner column 5 mm from the seam
+  SheetRegion a = sheetRegion(xs, 40, 1.f);
+  const auto seam_before = seamPoints(a);
+  MeshCleanParams p;
+  p.max_simplify_error = 0;
+  p.weld_distance = 0.01;
+  p.min_component_faces = 0;
+  const MeshCleanReport report = simplifyRegion(a.mesh, a.seam, p);
+  ASSERT_TRUE(report.success) << report.failure;
+  EXPECT_EQ(seamPoints(a), seam_before);
 }

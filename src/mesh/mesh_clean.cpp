@@ -307,6 +307,22 @@ struct BlendColoursOnCollapse : SMS::Edge_collapse_visitor_base<Mesh> {
   }
 };
 
+// A region's seam vertex stays where it is (the neighbouring region has it there too, and the two weld
+// by position): an edge with one fixed end collapses onto that end, one with both is not collapsed.
+template <class BasePlacement>
+struct KeepFixedPlacement {
+  BasePlacement base;
+  Mesh::Property_map<VD, bool> fixed;
+  template <typename Profile>
+  boost::optional<typename Profile::Point> operator()(const Profile& profile) const {
+    const bool f0 = fixed[profile.v0()], f1 = fixed[profile.v1()];
+    if (f0 && f1) return boost::none;
+    if (f0) return profile.p0();
+    if (f1) return profile.p1();
+    return base(profile);
+  }
+};
+
 class Cleaner {
  public:
   // What the input is: any soup, or regions repaired each on its own and welded at their seams.
@@ -628,12 +644,18 @@ class Cleaner {
     stop.min_sq_length = p_.target_edge_length * p_.target_edge_length;
     if (stop.target_edges == 0 && stop.min_sq_length == 0) return;
     // Shortest edges first, placed by Lindstrom-Turk, refusing collapses that flip normals. The
-    // surviving vertex of a collapse keeps its colour.
-    SMS::Bounded_normal_change_placement<SMS::LindstromTurk_placement<Mesh>> placement;
-    SMS::edge_collapse(m_, stop,
-                       CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
-                           .get_placement(placement)
-                           .visitor(BlendColoursOnCollapse(col_, fixed_)));
+    // surviving vertex of a collapse keeps its colour. A region's seam vertices stay put.
+    const auto collapse = [&](const auto& placement) {
+      SMS::edge_collapse(m_, stop,
+                         CGAL::parameters::get_cost(SMS::Edge_length_cost<Mesh>())
+                             .get_placement(placement)
+                             .visitor(BlendColoursOnCollapse(col_, fixed_)));
+    };
+    if (job_.seam)
+      collapse(SMS::Bounded_normal_change_placement<KeepFixedPlacement<SMS::LindstromTurk_placement<Mesh>>>(
+          KeepFixedPlacement<SMS::LindstromTurk_placement<Mesh>>{{}, fixed_}));
+    else
+      collapse(SMS::Bounded_normal_change_placement<SMS::LindstromTurk_placement<Mesh>>());
     m_.collect_garbage();
   }
 
@@ -779,6 +801,10 @@ MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& se
   if (seam.size() != mesh.vertices.size()) throw std::invalid_argument("simplifyRegion: one seam flag per vertex");
   MeshCleanParams p = params;
   p.recompute_normals = false;  // normals come after welding
+  // A region welds nothing by distance: a seam vertex merged onto a nearby inner one would leave its
+  // place, and the neighbouring region's copy without a partner (a crack). The welded mesh is welded
+  // once, with the distance asked for (cleanWeldedRegions).
+  p.weld_distance = 0;
   TriangleMesh work = mesh;
   std::vector<std::uint8_t> work_seam = seam;
   // Samples in proportion to the faces: spread over regions about as over the whole mesh.
