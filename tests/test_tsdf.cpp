@@ -540,6 +540,25 @@ TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
   EXPECT_EQ(a, b);
 }
 
+// target_faces is the whole mesh's budget, shared among the regions by their faces: region by region
+// it was each region's, so every region below it was not simplified at all (the sphere kept nearly
+// all its faces at half of them asked for).
+TEST(MarchingCubes, MeshByRegionKeepsTheWholeMeshsFaceBudget) {
+  const SphereBricks sphere(Eigen::Vector3f(-0.05f, 0.13f, 0.02f), 0.3f, 0.01f, 0.04f);
+  const TriangleMesh whole = marchingCubes(sphere.refs, 0.01f);
+  MeshCleanParams params;
+  params.max_simplify_error = 0.05;  // loose: the budget is what stops
+  params.target_faces = int(whole.faces.size() / 4);
+  const RegionMeshResult r = meshByRegion(
+      [&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); }, params,
+      "", {}, {});
+  ASSERT_TRUE(r.report.success) << r.report.failure;
+  ASSERT_GT(r.regions, 20u);
+  EXPECT_LE(r.mesh.faces.size(), std::size_t(1.15 * params.target_faces));
+  EXPECT_GE(r.mesh.faces.size(), std::size_t(0.8 * params.target_faces));
+  EXPECT_TRUE(r.report.closed);
+}
+
 // The regions are simplified a batch at a time on every core, and welded in region order: the mesh is
 // the one a single core gives, vertex for vertex.
 TEST(MarchingCubes, MeshByRegionOnEveryCoreGivesTheSingleCoreMesh) {

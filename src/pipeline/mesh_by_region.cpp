@@ -1,11 +1,13 @@
 #include "vofusion/pipeline/mesh_by_region.h"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <deque>
 #include <fstream>
 #include <algorithm>
+#include <cmath>
 #include <atomic>
 #include <exception>
 #include <functional>
@@ -307,14 +309,17 @@ class OrderedRegionSimplifier {
     for (auto& item : queue_) item->task.wait();  // no task outlives the region it reads
   }
 
-  // Starts simplifying r; meanwhile welds what is ready, and waits while `limit_` regions are unsimplified.
-  void add(fusion::RegionMesh r) {
+  // Starts simplifying r (to `target_faces`, its share of the mesh's budget); meanwhile welds what is
+  // ready, and waits while `limit_` regions are unsimplified.
+  void add(fusion::RegionMesh r, int target_faces) {
     queue_.push_back(std::make_unique<Item>());
     Item& item = *queue_.back();
     item.region = std::move(r);
-    item.task.run([&item, this] {
+    item.params = params_;
+    item.params.target_faces = target_faces;
+    item.task.run([&item] {
       try {
-        item.report = simplifyRegion(item.region.mesh, item.region.on_seam, params_);
+        item.report = simplifyRegion(item.region.mesh, item.region.on_seam, item.params);
       } catch (...) {
         item.error = std::current_exception();
       }
@@ -352,6 +357,7 @@ class OrderedRegionSimplifier {
  private:
   struct Item {
     fusion::RegionMesh region;
+    MeshCleanParams params;
     MeshCleanReport report;
     std::exception_ptr error;
     std::atomic<bool> done{false};
@@ -390,21 +396,36 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   RegionMerge merge(out.mesh, out.report.simplification);
   MeshCleanStep step{"regions"};
   const auto t0 = std::chrono::steady_clock::now();
-  // Pass 1 (marching cubes only): which fragments are too small, judged whole across seams.
+  // Pass 1 (marching cubes only): which fragments are too small, judged whole across seams, and each
+  // region's faces, which share a face budget (target_faces is the whole mesh's, not each region's).
   const MeshCleanParams region_params = regionSimplifyParams(params);
   std::unique_ptr<RawComponents> fragments;
-  if (params.min_component_faces > 0 || params.min_component_area > 0) {
+  if (params.min_component_faces > 0 || params.min_component_area > 0)
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
+  const bool budget = params.target_faces > 0;
+  std::vector<std::size_t> raw_faces_of;  // by region ordinal
+  std::size_t raw_faces_total = 0;
+  if (fragments || budget) {
     std::size_t region_count = 0;
     regions([&](fusion::RegionMesh& r) {
-      fragments->add(r);
+      if (fragments) fragments->add(r);
+      if (raw_faces_of.size() <= r.ordinal) raw_faces_of.resize(r.ordinal + 1, 0);
+      raw_faces_of[r.ordinal] = r.mesh.faces.size();
+      raw_faces_total += r.mesh.faces.size();
       told(1, r);
       region_count = r.regions;
     });
-    out.report.components_removed = fragments->judge();
+    if (fragments) out.report.components_removed = fragments->judge();
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
     if (progress && region_count) progress(2, 0, region_count);
   }
+  // A region's share of the budget, by its raw faces (at least 1: 0 would mean no budget). Locked
+  // seam vertices may keep a region above its share.
+  const auto shareOf = [&](const fusion::RegionMesh& r) {
+    if (!budget || raw_faces_total == 0 || r.ordinal >= raw_faces_of.size()) return params.target_faces;
+    const double share = std::ceil(double(params.target_faces) * double(raw_faces_of[r.ordinal]) / double(raw_faces_total));
+    return std::max(1, int(share));
+  };
   // Pass 2: the same regions again, each simplified on a task of its own as soon as it is made (CGAL
   // works on the region's own mesh) while the next regions are marched, and welded in region order,
   // so the mesh is the one a single core gives.
@@ -419,7 +440,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     out.raw_faces += r.mesh.faces.size();
     step.faces_before += r.mesh.faces.size();
     if (fragments) fragments->filter(r);
-    if (premeshed)
+    if (premeshed && !budget)  // a budget's shares are known only now (RunSession starts no premesher then)
       if (std::optional<PremeshedRegion> done = premeshed(r)) {
         r.mesh = std::move(done->mesh);
         r.on_seam = std::move(done->on_seam);
@@ -427,7 +448,8 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
         simplifier.addDone(std::move(r), std::move(done->report));
         return;
       }
-    simplifier.add(std::move(r));
+    const int share = shareOf(r);
+    simplifier.add(std::move(r), share);
   });
   simplifier.finish();
   TriangleMesh& merged = out.mesh;

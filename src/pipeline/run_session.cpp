@@ -81,7 +81,8 @@ FrameReport readReport(state::Archive& a) {
 RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode, const std::string& out_dir,
                        const OutputParams& out_params, const MeshCleanParams& mesh_params)
     : rec_(cfg, mode), recorder_(out_dir, out_params, mesh_params), write_mesh_(out_params.write_mesh) {
-  if (meshesByRegion(out_params, mesh_params)) {
+  // Not with a face budget: it is shared among the regions by their faces, known once all are meshed.
+  if (meshesByRegion(out_params, mesh_params) && mesh_params.target_faces == 0) {
     premesher_ = std::make_unique<RegionPremesher>(mesh_params);
     rec_.setShiftObserver([p = premesher_.get()](const fusion::TsdfVolume& volume,
                                                  const std::optional<Eigen::Vector3i>& old_origin) {
