@@ -144,8 +144,8 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
   // zero-filled (4 GiB).
   {
     std::string huge = bytes;
-    const std::size_t at = std::string("VOFUSION-CHECKPOINT-2\n").size();
-    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-2\n"), 0);
+    const std::size_t at = std::string("VOFUSION-CHECKPOINT-3\n").size();
+    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-3\n"), 0);
     huge.replace(at, 4, "\xff\xff\xff\xff");
     std::ofstream(dir + "/huge", std::ios::binary) << huge;
     rusage before{}, after{};
@@ -154,11 +154,23 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
     getrusage(RUSAGE_SELF, &after);
     EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 1L << 20) << "KiB more at the peak";
   }
-  // One of an earlier layout (version 1 had no resumed map's name): said so, not misread as corrupt.
-  std::ofstream(dir + "/v1", std::ios::binary) << "VOFUSION-CHECKPOINT-1\n" << bytes.substr(22);
-  EXPECT_TRUE(RunSession::isCheckpoint(dir + "/v1"));
-  EXPECT_FALSE(RunSession::peek(dir + "/v1").has_value());
-  EXPECT_EQ(refusal(dir + "/v1", "input room\n"), "a checkpoint of an earlier vofusion, which this one cannot read: delete it to start over");
+  // One byte flipped in the first frame's pose (a double's lowest byte, which no parse notices): the
+  // checksum refuses it. It was resumed from, the pose off by 2^-52.
+  {
+    std::string flipped = bytes;
+    const std::size_t pose = flipped.find(std::string("\0\0\0\0\0\0\xf0\x3f", 8));  // 1.0, the first pose's first entry
+    ASSERT_NE(pose, std::string::npos);
+    flipped[pose] ^= 1;
+    std::ofstream(dir + "/flipped", std::ios::binary) << flipped;
+    EXPECT_EQ(refusal(dir + "/flipped", "input room\n"), "truncated or corrupt checkpoint: its checksum does not match (a damaged byte)");
+  }
+  // Ones of earlier layouts (1 had no resumed map's name, 2 no checksum): said so, not misread as corrupt.
+  for (const char* version : {"1", "2"}) {
+    std::ofstream(dir + "/old", std::ios::binary) << "VOFUSION-CHECKPOINT-" << version << "\n" << bytes.substr(22);
+    EXPECT_TRUE(RunSession::isCheckpoint(dir + "/old"));
+    EXPECT_FALSE(RunSession::peek(dir + "/old").has_value());
+    EXPECT_EQ(refusal(dir + "/old", "input room\n"), "a checkpoint of an earlier vofusion, which this one cannot read: delete it to start over");
+  }
   std::ofstream(dir + "/map", std::ios::binary) << "VOFUSION-MAP";
   EXPECT_FALSE(RunSession::isCheckpoint(dir + "/map"));
   EXPECT_NE(refusal(dir + "/map", "input room\n").find("not a vofusion checkpoint"), std::string::npos);

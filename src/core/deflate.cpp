@@ -77,4 +77,8 @@ bool gzipUncompress(const std::uint8_t* data, std::size_t data_size, std::vector
          in == data_size && got == size;
 }
 
+std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc) {
+  return std::uint32_t(libdeflate_crc32(crc, data, size));
+}
+
 }  // namespace vofusion

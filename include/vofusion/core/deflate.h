@@ -35,6 +35,8 @@ inline std::uint64_t gzipTrailer(const std::uint8_t* trailer_end) {
 // short, damaged, not gzip, followed by more bytes, or longer than max_size (at most 4 GiB - 1: the
 // length field holds the size modulo 2^32).
 bool gzipUncompress(const std::uint8_t* data, std::size_t data_size, std::vector<std::uint8_t>& out, std::size_t max_size);
+// The CRC-32 (zlib's, gzip's) of `size` bytes at `data`, going on from `crc` (0 to start).
+std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc = 0);
 // All of these throw std::bad_alloc when libdeflate cannot allocate its state.
 
 }  // namespace vofusion
