@@ -254,6 +254,21 @@ TEST(Tsdf, RaysCastSideBySideGiveWhatEachGivesAlone) {
   }
 }
 
+// The world model's keys hold bricks within kKeyReach of the first camera on each axis: the volume
+// follows a camera that goes past them no further (said once). It moved on, and its bricks were stored
+// under the keys of bricks 2 kKeyReach away (another place's, silently replaced).
+TEST(Tsdf, TheVolumeFollowsNoFurtherThanTheWorldModelsKeysReach) {
+  const TsdfParams p = smallParams();
+  TsdfVolume vol(p, Eigen::Vector3f::Zero());
+  const float brick = kBrickEdge * p.voxel_size;
+  const Eigen::Vector3i last = Eigen::Vector3i::Constant(p.volume_voxels / kBrickEdge - 1);
+  for (const float x : {1.5f, -1.5f}) {
+    vol.shiftTo(Eigen::Vector3f(x * float(WorldModel::kKeyReach) * brick, 0, 0));
+    EXPECT_TRUE(WorldModel::keyHolds(vol.originBrick())) << vol.originBrick().transpose();
+    EXPECT_TRUE(WorldModel::keyHolds(vol.originBrick() + last)) << vol.originBrick().transpose();
+  }
+}
+
 TEST(Tsdf, ShiftMovesBricksToWorldModelAndBackWithoutLoss) {
   const TsdfParams p = smallParams();
   const Eigen::Vector3f centre(0, 0, 1.0f);

@@ -1,5 +1,7 @@
 #include "vofusion/fusion/tsdf_volume.h"
 
+#include "vofusion/core/progress.h"
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -211,7 +213,18 @@ bool TsdfVolume::sdfAt(const Eigen::Vector3f& p, float& sdf_m) const {
 void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
   const float brick = kBrickEdge * params_.voxel_size;
   Eigen::Vector3i o;
-  for (int i = 0; i < 3; ++i) o[i] = static_cast<int>(std::lround(point[i] / brick)) - n_ / 2;
+  // The world model's keys hold bricks within kKeyReach of the first camera (50 km at 6 mm voxels):
+  // past that the volume stops following, said once, rather than store bricks under another's key.
+  const double reach_lo = -WorldModel::kKeyReach, reach_hi = WorldModel::kKeyReach - n_;
+  for (int i = 0; i < 3; ++i) {
+    const double wanted = std::round(double(point[i]) / brick) - n_ / 2;
+    if (!(wanted >= reach_lo && wanted <= reach_hi) && !reach_warned_) {
+      printWarning("the camera left the map's reach (" + std::to_string(int(WorldModel::kKeyReach * double(brick) / 1000)) +
+                   " km from the first camera on each axis): the volume follows it no further");
+      reach_warned_ = true;
+    }
+    o[i] = static_cast<int>(std::clamp(std::isnan(wanted) ? double(origin_[i]) : wanted, reach_lo, reach_hi));
+  }
   if (o == origin_) return;
   const auto inside = [&](const Eigen::Vector3i& c) {
     return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all();

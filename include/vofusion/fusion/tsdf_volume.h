@@ -154,6 +154,7 @@ class TsdfVolume {
   TsdfParams params_;
   int n_;                        // bricks per edge
   Eigen::Vector3i origin_;       // world brick coordinate of the volume's first brick
+  bool reach_warned_ = false;    // the camera went past the world model's keys (said once)
   std::vector<std::int32_t> slots_;                  // n^3 brick ids, -1 = none
   std::vector<const Brick*> slot_brick_;             // n^3, the brick of each slot (nullptr = none)
   std::vector<int> cyclic_[3];                       // per axis: (brick - origin) -> slot offset
