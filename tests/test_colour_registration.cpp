@@ -118,6 +118,29 @@ TEST(ColourRegistration, OffsetColourCameraIsReprojectedIntoTheDepthCamera) {
   std::printf("colour agreement: re-projected %.4f, resized %.4f\n", registered, agreement(resized, rig));
 }
 
+// Where the colour camera's view ends, a depth pixel is black (no colour) or the colour seen there,
+// never a blend of the image's edge with black: a grey wall gave a dark rim along the view's border,
+// which fusion painted into the map.
+TEST(ColourRegistration, BeyondTheColourImageIsNoColourNotADarkerOne) {
+  const CameraIntrinsics depth_cam = CameraIntrinsics{}.scaled(0.5);
+  CameraIntrinsics colour_cam = CameraIntrinsics{};
+  colour_cam.fx = colour_cam.fy = 600;  // narrower: the depth image's border is beyond it
+  const cv::Mat colour(colour_cam.height, colour_cam.width, CV_8UC3, cv::Scalar(200, 200, 200));
+  const cv::Mat depth(depth_cam.height, depth_cam.width, CV_32F, cv::Scalar(2.0f));
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(-0.0237, 0.0113, 0);  // not on whole pixels
+  const cv::Mat out = colourInDepthCamera(colour, depth, depth_cam, colour_cam, T);
+  int black = 0, grey = 0, between = 0;
+  for (int v = 0; v < out.rows; ++v)
+    for (int u = 0; u < out.cols; ++u) {
+      const int b = out.at<cv::Vec3b>(v, u)[0];
+      (b == 0 ? black : b == 200 ? grey : between) += 1;
+    }
+  EXPECT_GT(black, 1000);
+  EXPECT_GT(grey, 50000);
+  EXPECT_EQ(between, 0);
+}
+
 TEST(ColourRegistration, RegisteredCamerasKeepTheirPixels) {
   Rig rig;
   rig.depth_cam = rig.colour_cam = CameraIntrinsics{}.scaled(0.5);

@@ -59,6 +59,7 @@ TEST(VoxelUpdate, Avx2AndScalarGiveTheSameBytes) {
   cv::RNG rng(5);
   std::vector<cv::Vec3b> colours(kPixels);
   for (auto& c : colours) c = cv::Vec3b(uchar(rng.uniform(0, 256)), uchar(rng.uniform(0, 256)), uchar(rng.uniform(0, 256)));
+  for (std::size_t i = 0; i < colours.size(); i += 7) colours[i] = cv::Vec3b(0, 0, 0);  // no colour
   int updated = 0;
   for (const int max_weight : {64, 255})
     for (const cv::Vec3b* palette : {static_cast<const cv::Vec3b*>(colours.data()), static_cast<const cv::Vec3b*>(nullptr)}) {
@@ -82,7 +83,7 @@ TEST(VoxelUpdate, Avx2AndScalarGiveTheSameBytes) {
 // out 18 after ten free-space updates, and at the weight's cap the byte average never caught up (a dark
 // fringe along every silhouette of the mesh).
 TEST(VoxelUpdate, FreeSpaceBeforeTheSurfaceDoesNotDarkenItsColour) {
-  const cv::Vec3b colours[2] = {cv::Vec3b(0, 0, 0), cv::Vec3b(10, 20, 200)};  // BGR; pixel 1 (pixel 0 is AVX2's exception)
+  const cv::Vec3b colours[3] = {cv::Vec3b(0, 0, 0), cv::Vec3b(10, 20, 200), cv::Vec3b(0, 0, 0)};  // BGR; pixel 1 (pixel 0 is AVX2's exception)
   for (const bool simd : {false, true}) {
     SCOPED_TRACE(simd ? "AVX2" : "scalar");
     const VoxelUpdater updater(kTrunc, 64, colours, simd);
@@ -103,6 +104,12 @@ TEST(VoxelUpdate, FreeSpaceBeforeTheSurfaceDoesNotDarkenItsColour) {
     }
     ASSERT_EQ(updater.updateRow(row, v), 8);  // painted once: now the running average
     EXPECT_EQ(int(v[0].r), 200);
+    // A black pixel is no colour (one the colour camera did not see): the depth is fused, the colour kept.
+    for (int x = 0; x < 8; ++x) row.pixel[x] = 2;
+    ASSERT_EQ(updater.updateRow(row, v), 8);
+    EXPECT_EQ(v[0].weight, 13);
+    EXPECT_EQ(int(v[0].r), 200);
+    EXPECT_EQ(int(v[0].g), 20);
   }
 }
 

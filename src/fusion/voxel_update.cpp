@@ -13,6 +13,8 @@ namespace {
 
 using Setup = VoxelUpdater::Setup;
 
+bool isNoColour(const cv::Vec3b& c) { return (c[0] | c[1] | c[2]) == 0; }
+
 // 1 / (weight + 1) for every weight a voxel can hold: the running average without a division.
 const std::array<float, 256>& inverseCounts() {
   static const std::array<float, 256> table = [] {
@@ -38,7 +40,8 @@ int updateScalar(const Setup& s, const VoxelRowSamples& row, Voxel* vox) {
     const float fnew = (vx.tsdf * static_cast<float>(wold) + f * kTsdfScale) * inv_count[wold];
     vx.tsdf = static_cast<std::int16_t>(fnew + (fnew >= 0.f ? 0.5f : -0.5f));
     vx.weight = static_cast<std::uint8_t>(std::min(wold + 1, s.max_weight));
-    if (s.colours && sdf < s.truncation) {
+    // Black (0, 0, 0) is no colour: a depth pixel the colour camera did not see (colour_registration.h).
+    if (s.colours && sdf < s.truncation && !isNoColour(s.colours[row.pixel[x]])) {
       // Same running average, rounded; a multiply instead of three integer divisions per voxel. The
       // weight counts free-space updates too, which bring no colour: a voxel still black (never
       // painted) takes its first colour whole, or it would start at c / (weight + 1), a dark fringe.
@@ -164,8 +167,11 @@ __attribute__((target("avx2"))) int updateAvx2(const Setup& s, const VoxelRowSam
     const __m256 c_b = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(bgr, 8), byte_mask));
     const __m256 c_g = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(bgr, 16), byte_mask));
     const __m256 c_r = _mm256_cvtepi32_ps(_mm256_srli_epi32(bgr, 24));
+    // Black (0, 0, 0) is no colour, as in the scalar loop: those lanes are not painted.
+    const __m256 coloured = _mm256_andnot_ps(
+        _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_srli_epi32(bgr, 8), _mm256_setzero_si256())), paint);
     __m128i paint16, paint8;
-    narrow(paint, paint16, paint8);
+    narrow(coloured, paint16, paint8);
     // A voxel still black takes its first colour whole, as in the scalar loop.
     const __m256i rgb = _mm256_cvtepu8_epi32(_mm_or_si128(_mm_or_si128(field[2], field[3]), field[4]));
     const __m256 unpainted = _mm256_castsi256_ps(_mm256_cmpeq_epi32(rgb, _mm256_setzero_si256()));

@@ -25,8 +25,11 @@ cv::Mat colourInDepthCamera(const cv::Mat& colour, const cv::Mat& depth, const C
       const double radial = 1 + k[0] * r2 + k[1] * r2 * r2 + k[4] * r2 * r2 * r2;
       const double xd = x * radial + 2 * k[2] * x * y + k[3] * (r2 + 2 * x * x);
       const double yd = y * radial + k[2] * (r2 + 2 * y * y) + 2 * k[3] * x * y;
-      mx[u] = float(c.fx * xd + c.cx);
-      my[u] = float(c.fy * yd + c.cy);
+      const double cu = c.fx * xd + c.cx, cv = c.fy * yd + c.cy;
+      // Outside the colour image: no colour (black), not a blend of its edge with the black border.
+      if (!(cu >= 0 && cu <= colour.cols - 1 && cv >= 0 && cv <= colour.rows - 1)) continue;
+      mx[u] = float(cu);
+      my[u] = float(cv);
     }
   });
   cv::Mat out;

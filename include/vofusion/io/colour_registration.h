@@ -3,7 +3,8 @@
 // CObservation3DRangeScan has relativePoseIntensityWRTDepth other than "coincide" or its own
 // cameraParamsIntensity): each depth reading is back-projected with the depth intrinsics, moved into
 // the colour camera, projected with the colour intrinsics (Brown distortion k1 k2 p1 p2 k3) and the
-// colour read there (bilinear). Pixels without a reading, or seen outside the colour image, are black.
+// colour read there (bilinear). Pixels without a reading, or seen outside the colour image, are black
+// (0, 0, 0: no colour, which fusion paints nothing with).
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
