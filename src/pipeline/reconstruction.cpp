@@ -95,10 +95,19 @@ struct Reconstruction::Impl {
     if (!kinfu) throw std::logic_error("Reconstruction: the map was released (releaseMap)");
     return *kinfu;
   }
+  // What fuse() threw: the map may be half fused, so every later use of it throws the same (a second
+  // wait on the task group returns normally: TBB forgets the exception once rethrown).
+  std::exception_ptr fusion_error;
   void waitFusion() {
+    if (fusion_error) std::rethrow_exception(fusion_error);
     if (!fusing_pending) return;
-    fusing.wait();  // rethrows what fuse() threw
     fusing_pending = false;
+    try {
+      if (fusing.wait() == tbb::canceled) throw std::runtime_error("the map's fusion was cancelled");
+    } catch (...) {
+      fusion_error = std::current_exception();
+      throw;
+    }
     times.merge(fusing_result.times);
   }
   ~Impl() {
