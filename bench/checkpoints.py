@@ -104,11 +104,13 @@ def main():
                 time.sleep(0.002)
 
     log("clean run, %d frames, a checkpoint after every frame" % total)
-    watcher = threading.Thread(target=watch)
+    watcher = threading.Thread(target=watch, daemon=True)
     watcher.start()
-    clean_s = run(vofusion(build, seq, clean, each))
-    done.set()
-    watcher.join()
+    try:  # a failed run (sys.exit), a missing program or Ctrl-C: the watcher stops too
+        clean_s = run(vofusion(build, seq, clean, each))
+    finally:
+        done.set()
+        watcher.join()
     rows = []
     for frames, copy in kept:
         log("resuming from frame %d" % frames)

@@ -35,7 +35,10 @@ run() {  # name, then --set arguments
   rpe_r=$(sed -n 's/^RPE(1s) rmse \([0-9.]*\) m  \([0-9.]*\) deg/\2/p' <<<"$out")
   fps=$(sed -n 's/.*odometry \([0-9.]*\) fps/\1/p' <<<"$out")
   failed=$(sed -n 's/.*failed \([0-9]*\) .*/\1/p' <<<"$out")
-  cpu=$(awk '/^CPU/ {printf "%.0f", 1000*($2+$3)/'"$frames"'}' <<<"$out")
+  # Per frame done (rgbd-odometry's "frames N" line): a shorter sequence than --max-frames has fewer.
+  local done_frames
+  done_frames=$(sed -n 's/^frames \([0-9]*\) .*/\1/p' <<<"$out")
+  cpu=$(awk '/^CPU/ {printf "%.0f", 1000*($2+$3)/'"${done_frames:-$frames}"'}' <<<"$out")
   load=$(cut -d' ' -f1 /proc/loadavg)
   printf "| %-30s | %7s | %8s | %8s | %5s | %8s | %6s | %5s |\n" "$name" "${ate:-?}" "${rpe_t:-?}" "${rpe_r:-?}" \
     "${fps:-?}" "${cpu:-?}" "${failed:-?}" "$load"

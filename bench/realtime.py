@@ -123,9 +123,9 @@ def fmt4(x):
 
 
 def median(values):
-    """The median (the upper one of an even count) of the values that are not None, or None."""
+    """The median (of an even count, the mean of the middle two) of the values that are not None, or None."""
     values = [v for v in values if v is not None]
-    return statistics.median_high(values) if values else None
+    return statistics.median(values) if values else None
 
 
 def round_ratio(pairs, key):

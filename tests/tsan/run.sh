@@ -20,7 +20,7 @@ export TSAN_OPTIONS="suppressions='$here/suppressions.txt' halt_on_error=0 exitc
 ninja -C "$build" vofusion vofusion-grab rgbd-simulate "${tests[@]}"
 g++ -O1 -shared -fPIC "$here/tbb_one_thread.cpp" -o "$build/libtbb_one_thread.so" -ltbb
 mkdir -p "$out"
-rm -f "$out"/*
+rm -f "$out"/test_*  # only this script's own reports (TSAN_OUT may be a folder of the user's)
 status=0
 for t in "${tests[@]}"; do
   echo "tsan: $t" >&2
