@@ -40,6 +40,15 @@ def last_line(path):
     return lines[-1] if lines else "empty log"
 
 
+def first_line(path):
+    """The log's first line, or "" (no log)."""
+    try:
+        with open(path, errors="replace") as f:
+            return f.readline()
+    except OSError:
+        return ""
+
+
 def row(folder, name, recording=None):
     r = {key: None for key, _ in COLUMNS}
     r["recording"] = name
@@ -63,9 +72,10 @@ def row(folder, name, recording=None):
             return r
     # 130, 143: stopped by SIGINT, SIGTERM, with what was built written (unless before the first frame)
     stopped_early = code in (130, 143) and "nothing written" in last_line(log_path)
-    # A batch's job (recording given) without an exit code never finished (killed): a summary.json
-    # there is an earlier run's. A folder of a plain vofusion run has none and is judged by its summary.
-    unfinished_job = code is None and recording is not None
+    # A batch's job (recording given, or a log batch-job began: a Slurm array collected without
+    # --jobs) without an exit code never finished (killed): a summary.json there is an earlier run's.
+    # A folder of a plain vofusion run has none and is judged by its summary.
+    unfinished_job = code is None and (recording is not None or first_line(log_path).startswith("batch-job: "))
     if s is not None and code in (None, 0, 130, 143) and not stopped_early and not unfinished_job:
         r["input"] = r["input"] or s.get("input")
         r["mode"] = s.get("mode")

@@ -371,6 +371,13 @@ TEST(Batch, AKilledJobIsNotTheEarlierRunsResult) {
       << log;
   ASSERT_EQ(test::run(collect, &log), 0) << log;
   EXPECT_EQ(nlohmann::json::parse(log)[0].at("status"), "ok") << log;
+  // Without the jobs list (a Slurm array, collected as its script says), a log that batch-job began
+  // tells a job: killed, it did not finish. It was "ok", with the earlier run's figures.
+  std::ofstream(dir + "/a/vofusion.log") << "batch-job: node7 unpinned vofusion /rec/a --out " << dir << "/a\n"
+                                         << "vofusion [joint] 3/10 frames\n";
+  ASSERT_EQ(test::run(collect, &log), 0) << log;
+  EXPECT_EQ(nlohmann::json::parse(log)[0].at("status"), "failed: the job did not finish (no exit code): vofusion [joint] 3/10 frames")
+      << log;
 }
 
 TEST(Batch, BadArgumentsFailInOneLine) {
