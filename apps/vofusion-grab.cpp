@@ -60,7 +60,8 @@ const char* kUsage =
     "                     [--replay TUM_DIR|FILE.rawlog [--depth-scale S]] [--max-frames N] [--queue N] [--speed X]\n"
     "                     [--mode joint|paper-handoff|kinfu|odometry] [--no-record] [--simulate-work-ms MS]\n"
     "                     [--checkpoint-every S] [--verbose] [--dump-config]\n"
-    "  Records the sensor of --config (default share/grab-openni2.ini) to DIR/grab.rawlog until\n"
+    "  Records the sensor of --config (default <source>/share/grab-openni2.ini; none with --replay) to\n"
+    "  DIR/grab.rawlog (DIR default ./grab) until\n"
     "  Ctrl-C, SIGTERM or --max-frames (0: no limit, as the config's max_frames = 0; a second\n"
     "  Ctrl-C or SIGTERM kills at once). --live also\n"
     "  reconstructs online (window unless --no-gui) and writes the same outputs as vofusion into DIR.\n"
@@ -115,6 +116,12 @@ Args parseArgs(int argc, char** argv) {
   if (cl.value("--speed")) a.speed = cl.number("--speed", 1.0);
   a.work_ms = int(cl.count("--simulate-work-ms", 0));
   if (a.speed && *a.speed < 0) throw InputError("--speed", "must not be negative");
+  // Options that would change nothing are refused, as rgbd-simulate does: the run they were meant for
+  // is not the one asked for.
+  if (cl.value("--mode") && !a.live) throw InputError("--mode", "needs --live (without it nothing is reconstructed)");
+  if (a.replay.empty())
+    for (const char* replay_only : {"--depth-scale", "--speed"})
+      if (cl.value(replay_only)) throw InputError(replay_only, "needs --replay (a sensor gives its own)");
   if (!a.replay.empty() && !a.sensor.empty())
     throw InputError("--sensor", "with --replay the frames come from the recording, not a sensor: give one of the two");
   a.checkpoint_every = a.live && a.record ? kDefaultCheckpointSeconds : 0.0;

@@ -114,6 +114,13 @@ TEST(GrabApp, UsageErrorsExitTwo) {
   // A sensor beside a replay was ignored.
   EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --sensor KINECT", &log), 2);
   EXPECT_EQ(log, "vofusion-grab: error: --sensor: with --replay the frames come from the recording, not a sensor: give one of the two\n");
+  // Options that would change nothing were taken and ignored (a --mode with --live forgotten only recorded).
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --mode kinfu", &log), 2);
+  EXPECT_EQ(log, "vofusion-grab: error: --mode: needs --live (without it nothing is reconstructed)\n");
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --speed 2 --no-gui", &log), 2);
+  EXPECT_EQ(log, "vofusion-grab: error: --speed: needs --replay (a sensor gives its own)\n");
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --depth-scale 1000", &log), 2);
+  EXPECT_EQ(log, "vofusion-grab: error: --depth-scale: needs --replay (a sensor gives its own)\n");
 }
 
 TEST(GrabApp, UnknownKeyInOwnSectionIsReported) {
