@@ -114,6 +114,7 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
   // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.
   plan.default_work = (std::filesystem::path(plan.out_dir) / ".tmp").string();
+  if (!cl.value("--work-dir")) checkBareValue(cfg, "kinfu", "work_dir");  // the file's, before ours replaces it
   if (cl.value("--work-dir")) cfg.write("kinfu", "work_dir", *cl.value("--work-dir"));
   else if (const std::string w = cfg.read_string("kinfu", "work_dir", "auto"); w.empty() || w == "auto")
     cfg.write("kinfu", "work_dir", plan.default_work);

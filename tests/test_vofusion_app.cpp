@@ -332,6 +332,23 @@ TEST(VofusionApp, AStopDuringTheLastFrameIsNoInterruption) {
   EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "a finished run leaves no checkpoint";
 }
 
+// A folder given on the command line may hold any character ("take #2"): only a config file's
+// [kinfu] work_dir is held to MRPT's reading (quotes and ' #' comments are refused there).
+TEST(VofusionApp, AnOutputFolderWithAHashIsNoConfigError) {
+  const std::string dir = test::tempDir("vofusion_app_hash_out");
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + validConfig(dir) + " --out '" +
+                          dir + "/take #2'",
+                      &log),
+            0)
+      << log;
+  std::ofstream(dir + "/quoted.ini") << "[kinfu]\nwork_dir = \"" << dir << "/spill\"\n";
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + dir + "/quoted.ini --out " + dir + "/o",
+                      &log),
+            2);
+  EXPECT_NE(log.find("[kinfu] work_dir: '\"" + dir + "/spill\"': MRPT's INI reader takes quotes"), std::string::npos) << log;
+}
+
 // Too few frames for an ATE (it needs 3 poses): the path is still drawn, and summary.json says why
 // there is no ATE. Neither was written.
 TEST(VofusionApp, ARunTooShortForAnAteStillDrawsItsPath) {

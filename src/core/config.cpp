@@ -255,17 +255,6 @@ double readNumber(const mrpt::config::CConfigFileBase& cfg, const std::string& s
   return *x;
 }
 
-// MRPT's INI reader keeps quotes, and a '#' or ';' after a value, as part of the value (only ' //'
-// starts a comment there): a folder named '"/tmp/x"  # scratch' would be made. Refused instead.
-static void checkFreeText(const std::string& section, const std::string& key, const std::string& v) {
-  const bool quoted = v.size() >= 2 && (v.front() == '"' || v.front() == '\'') && v.back() == v.front();
-  bool comment = false;
-  for (std::size_t i = 1; i < v.size(); ++i) comment |= (v[i] == '#' || v[i] == ';') && (v[i - 1] == ' ' || v[i - 1] == '\t');
-  if (quoted || comment)
-    throw InputError(keyName(section, key.c_str()), "'" + v + "': MRPT's INI reader takes " + (quoted ? "quotes" : "a '#' or ';' comment") +
-                                                " as part of the value; write it bare, with any comment after ' //'");
-}
-
 void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
   for (const ConfigKey& k : keys)
     std::visit(
@@ -280,7 +269,6 @@ void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& secti
           } else if constexpr (std::is_same_v<T, std::string>) {
             *v = cfg.read_string(section, k.name, *v);
             if (!k.choices.empty()) checkChoice(section, k.name, *v, k.choices);
-            else checkFreeText(section, k.name, *v);
           } else {
             // The range is checked on the value as typed, before it is narrowed to the key's type.
             const double x = readNumber(cfg, section, k.name, double(*v), std::is_same_v<T, int>);
@@ -308,6 +296,17 @@ void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, co
         },
         k.value);
   }
+}
+
+void checkBareValue(const mrpt::config::CConfigFileBase& file, const std::string& section, const std::string& key) {
+  const std::string v = file.read_string(section, key, "");
+  const bool quoted = v.size() >= 2 && (v.front() == '"' || v.front() == '\'') && v.back() == v.front();
+  bool comment = false;
+  for (std::size_t i = 1; i < v.size(); ++i) comment |= (v[i] == '#' || v[i] == ';') && (v[i - 1] == ' ' || v[i - 1] == '\t');
+  if (quoted || comment)
+    throw InputError(keyName(section, key.c_str()), "'" + v + "': MRPT's INI reader takes " +
+                                                        (quoted ? "quotes" : "a '#' or ';' comment") +
+                                                        " as part of the value; write it bare, with any comment after ' //'");
 }
 
 }  // namespace vofusion

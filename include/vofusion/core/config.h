@@ -37,6 +37,11 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
 // True for a rawlog-grabber configuration such as vofusion-grab's --config: it has rawlog-grabber's
 // [global] section or a sensor section (one with a `driver` key).
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user);
+// A free-text value as the config file gives it (a folder: [kinfu] work_dir): MRPT's INI reader keeps
+// quotes, and a '#' or ';' comment after a value, as part of the value (only ' //' starts a comment
+// there), so a folder named '"/tmp/x"  # scratch' would be made. InputError naming the key. Only for a
+// file's values: a folder given on the command line (--out "take #2") may hold any character.
+void checkBareValue(const mrpt::config::CConfigFileBase& file, const std::string& section, const std::string& key);
 
 // The defaults of all given stages as INI text (for --dump-config and the documented share/ file).
 std::string dumpConfig(const std::vector<ConfigSection>& known);
