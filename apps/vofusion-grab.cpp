@@ -177,6 +177,7 @@ GrabPlan planGrab(const Args& args) {
   plan.config = args.config;
   if (plan.config.empty() && args.replay.empty()) plan.config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
   plan.cfg = loadConfig(plan.config);
+  checkBareValue(plan.cfg, "kinfu", "work_dir");
   checkKnownSections(plan.cfg, plan.config, ownSections(LiveOptions()));
   loadNamingOrigin(plan.config, [&] {
     plan.opts.loadFromConfigFile(plan.cfg, kSection);
@@ -229,10 +230,17 @@ struct LiveCheckpoints {
   void maybeWrite(const RunSession& run) {
     const auto now = std::chrono::steady_clock::now();
     if (every <= 0 || std::chrono::duration<double>(now - last).count() < every) return;
-    // The frames it covers were recorded before they came here: on the disk first (records and images),
-    // or after a power cut the checkpoint would name frames the recording lost.
-    syncFileSystemOf(path);
-    run.saveCheckpoint(path, origin, std::chrono::duration<double>(now - start).count());
+    try {
+      // The frames it covers were recorded before they came here: on the disk first (records and
+      // images), or after a power cut the checkpoint would name frames the recording lost.
+      syncFileSystemOf(path);
+      run.saveCheckpoint(path, origin, std::chrono::duration<double>(now - start).count());
+    } catch (const InputError& e) {
+      // A checkpoint is a spare; the recording is what cannot be made again: it goes on without them.
+      printWarning(std::string(e.what()) + "; no more checkpoints this session, the recording goes on");
+      every = 0;
+      return;
+    }
     last = std::chrono::steady_clock::now();
     seconds_writing += std::chrono::duration<double>(last - now).count();
     ++written;
@@ -341,6 +349,9 @@ int run(const Args& args) {
   ensureWritableDirectory(args.out);
   std::string label = "KINECT";
   const GrabSource source = openGrabSource(args, plan, label);
+  // Before the recording is created: a Ctrl-C from here on lets the writer's end remove an empty one
+  // (it was left, and refused the next run into the folder).
+  installStopSignals();  // Ctrl-C or SIGTERM stops cleanly; a second one kills at once
   std::unique_ptr<RawlogWriter> writer;
   if (args.record) {
     RawlogWriterOptions wopts;
@@ -352,7 +363,6 @@ int run(const Args& args) {
   if (plan.mode) session = std::make_unique<RunSession>(plan.cfg, *plan.mode, args.out, plan.out_params, plan.mesh_params);
   std::unique_ptr<LiveViewer> viewer;
   if (args.live && args.gui) viewer = std::make_unique<LiveViewer>("vofusion-grab: " + source.live->name());
-  installStopSignals();  // Ctrl-C or SIGTERM stops cleanly; a second one kills at once
 
   LiveCheckpoints checkpoints;
   if (session) {

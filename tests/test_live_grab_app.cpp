@@ -415,3 +415,36 @@ TEST(GrabApp, AKilledLiveSessionIsFinishedOfflineFromItsCheckpoint) {
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.03);
   EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "the finished run deleted it";
 }
+
+// An empty recording file with no image beside it, as a kill before the first frame left it (the
+// stop handler came after the file was made), holds nothing: the next recording into the folder
+// replaces it. It was refused ("a recording is already there") until deleted by hand.
+TEST(GrabApp, AnEmptyRecordingLeftByAKillDoesNotBlockTheFolder) {
+  const std::string out = test::tempDir("grab_app_empty_left");
+  std::ofstream(out + "/grab.rawlog");
+  fs::create_directories(out + "/grab_Images");
+  std::string log;
+  ASSERT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --out " + out + " --max-frames 3", &log), 0) << log;
+  EXPECT_EQ(readSummary(out + "/grab-summary.txt").at("frames_recorded"), "3") << log;
+  EXPECT_EQ(openFrameSource(out + "/grab.rawlog")->size(), 3u);
+}
+
+// A checkpoint that cannot be written (here its name is a folder that is not empty) is said once and
+// checkpoints stop; the recording and the reconstruction go on. The session ended there ("processing
+// error"), its recording cut short.
+TEST(GrabApp, ACheckpointThatFailsLeavesTheSessionGoingOn) {
+  const std::string dir = test::tempDir("grab_app_checkpoint_fails");
+  const std::string cfg = dir + "/path_only.ini", out = dir + "/live";
+  std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  fs::create_directories(out + "/checkpoint/in_the_way");
+  std::string log;
+  ASSERT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --out " + out + " --config " + cfg +
+                          " --live --no-gui --max-frames 20 --checkpoint-every 0.05",
+                      &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("; no more checkpoints this session, the recording goes on"), std::string::npos) << log;
+  const auto kv = readSummary(out + "/grab-summary.txt");
+  EXPECT_EQ(kv.at("frames_recorded"), "20") << log;
+  EXPECT_EQ(kv.at("stop"), "max frames reached") << log;
+}

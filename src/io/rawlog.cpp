@@ -483,9 +483,20 @@ struct RawlogWriter::Impl {
     if (!gz.open(rawlog_file, 1, err)) throw InputError(path, "cannot write: " + err);
     arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<mrpt::io::CFileGZOutputStream>>(gz);
   }
+  // An empty recording file with no image beside it (what a kill before the first frame leaves) holds
+  // nothing: it goes, rather than refuse the folder to every later recording.
+  void removeEmptyRecording() const {
+    std::error_code ec;
+    const bool no_records = !fs::exists(rawlog_file, ec) || (fs::is_regular_file(rawlog_file, ec) && fs::file_size(rawlog_file, ec) == 0);
+    const bool no_images = !fs::exists(images_dir, ec) || (fs::is_directory(images_dir, ec) && fs::is_empty(images_dir, ec));
+    if (!no_records || !no_images) return;
+    fs::remove(rawlog_file, ec);
+    fs::remove(images_dir, ec);
+  }
   void openInPlace(const std::string& path) {
     rawlog_file = path;
     images_dir = imagesDirFor(path);
+    removeEmptyRecording();
     if (fs::exists(rawlog_file) || fs::exists(images_dir))
       throw InputError(path, "a recording is already there; recordings are never overwritten: choose another folder");
     records = std::make_unique<RecordFile>(rawlog_file);
