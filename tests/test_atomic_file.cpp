@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -137,4 +138,33 @@ TEST(AtomicFile, ACommitSyncsTheBytesThenTheRename) {
   }
   AtomicPath nothing(dir + "/never");
   EXPECT_THROW(nothing.commit(), InputError);
+}
+
+// A commit that throws changed nothing: a file whose bytes cannot be synced is not put in place (the
+// earlier one stays). Once renamed, the output is whole: a folder that cannot be synced after it is
+// said, not a failure (it threw with the new file already in place, and a rawlog's caller then put
+// the earlier images back beside it); one that cannot be synced at all (EINVAL: some FUSE and network
+// mounts) is no failure either.
+TEST(AtomicFile, ACommitThatThrowsChangedNothing) {
+  using test::SyncWatch;
+  const std::string dir = test::tempDir("atomic_sync_fails");
+  const std::string path = dir + "/out.txt", tmp = path + ".tmp-" + std::to_string(::getpid());
+  std::ofstream(path) << "earlier";
+  {
+    SyncWatch watch;
+    watch.fail("fsync", tmp, EIO);
+    AtomicPath out(path);
+    std::ofstream(out.tmp()) << "this run's";
+    EXPECT_THROW(out.commit(), InputError);
+  }
+  EXPECT_EQ(readTextFile(path), "earlier");
+  for (const int err : {EIO, EINVAL}) {
+    SyncWatch watch;
+    watch.fail("fsync", dir, err);
+    AtomicPath out(path);
+    std::ofstream(out.tmp()) << "this run's " << err;
+    EXPECT_NO_THROW(out.commit()) << err;
+    EXPECT_EQ(readTextFile(path), "this run's " + std::to_string(err));
+    EXPECT_EQ(watch.synced().back(), "fsync " + dir + " failed");
+  }
 }

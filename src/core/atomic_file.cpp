@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 
 namespace fs = std::filesystem;
 
@@ -39,17 +40,25 @@ void removeStaleStaging(const std::string& final_path) {
   for (const fs::path& s : stale) fs::remove_all(s, ec);
 }
 
-// Its bytes on the disk, or InputError(what, ...): fsync() of a file or of a folder's entries; with
-// `folder_files`, a folder's files too, by syncfs() first (one call, where an fsync() each would cost a
-// journal commit each).
-void syncToDisk(const std::string& path, const std::string& what, bool folder_files = true) {
+// Its bytes on the disk: fsync() of a file or of a folder's entries; with `folder_files`, a folder's
+// files too, by syncfs() first (one call, where an fsync() each would cost a journal commit each).
+// 0, or the errno of what failed. A file system that cannot sync a folder (some FUSE and network
+// mounts: EINVAL) has nothing more to give: that is no failure.
+int syncToDisk(const std::string& path, bool folder_files = true) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   struct stat st {};
   const bool ok = fd >= 0 && ::fstat(fd, &st) == 0 && (!folder_files || !S_ISDIR(st.st_mode) || ::syncfs(fd) == 0) &&
                   ::fsync(fd) == 0;
-  const int err = errno;
+  const int err = ok ? 0 : errno;
   if (fd >= 0) ::close(fd);
-  if (!ok) throw InputError(what, std::string("cannot write: ") + std::strerror(err));
+  return err == EINVAL || err == ENOTSUP || err == EOPNOTSUPP ? 0 : err;
+}
+
+// After a rename the output is in place, whole: a folder that does not sync is said, not a failure
+// (a throw from commit() means that nothing changed).
+void syncRenameOrSay(const std::string& folder, const std::string& what) {
+  if (const int err = syncToDisk(folder, false))
+    printWarning(what + ": written, but its folder could not be synced to the disk (" + std::strerror(err) + ")");
 }
 
 std::string parentOf(const std::string& path) {
@@ -78,7 +87,7 @@ void AtomicPath::commit() {
   if (!fs::exists(tmp_, ec)) throw InputError(final_, "nothing was written");
   // The bytes before the rename: ext4 forces a file's data out before a rename only where it replaces
   // one, XFS and btrfs never; after a power cut a new name could hold an empty file.
-  syncToDisk(tmp_, final_);
+  if (const int err = syncToDisk(tmp_)) throw InputError(final_, std::string("cannot write: ") + std::strerror(err));
   if (fs::is_directory(tmp_) && fs::exists(final_)) {
     // rename() cannot replace a non-empty directory: the old one goes aside, the new one in, and the
     // old one takes the staging name, removed by the destructor (or revert() puts it back). Removing
@@ -100,7 +109,7 @@ void AtomicPath::commit() {
     if (ec) throw InputError(final_, "cannot write: " + ec.message());
   }
   committed_ = true;
-  syncToDisk(parentOf(final_), final_, false);  // the rename itself
+  syncRenameOrSay(parentOf(final_), final_);  // the rename itself
 }
 
 void AtomicPath::revert() {
@@ -131,7 +140,7 @@ void AtomicPath::revert() {
   committed_ = replaced_ = false;
 }
 
-void syncFolderEntries(const std::string& dir) { syncToDisk(dir, dir, false); }
+void syncFolderEntries(const std::string& dir) { syncRenameOrSay(dir, dir); }
 
 void syncFileSystemOf(const std::string& path) {
   const int fd = ::open(parentOf(path).c_str(), O_RDONLY | O_CLOEXEC);

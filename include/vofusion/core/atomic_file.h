@@ -21,7 +21,8 @@ class AtomicPath {
 
   const std::string& tmp() const { return tmp_; }     // write here (a file or a directory)
   const std::string& path() const { return final_; }
-  void commit();  // rename tmp -> final (replacing a file or directory); throws InputError on failure
+  void commit();  // rename tmp -> final (replacing a file or directory); throws InputError on failure,
+                  // and then nothing changed (a folder that cannot be synced after the rename is said)
                   // A directory replaced is removed by the destructor, so that the outputs committed
                   // with it are in place before the seconds a large folder takes to remove.
   // Undoes commit(), before the destructor, for outputs that change together: a directory it replaced
@@ -54,8 +55,8 @@ bool samePath(const std::string& a, const std::string& b);
 
 // Convenience for text outputs; throws InputError(path, strerror) if the write fails (disk full...).
 void writeFileAtomically(const std::string& path, const std::string& contents);
-// The folder's entries on the disk (fsync), or InputError(dir, ...): for files moved into it by
-// rename() outside an AtomicPath, their bytes synced before.
+// The folder's entries on the disk (fsync; a failure is said, the files being in place): for files
+// moved into it by rename() outside an AtomicPath, their bytes synced before.
 void syncFolderEntries(const std::string& dir);
 // Everything written so far on the file system that holds `path`'s folder (syncfs), or InputError(path,
 // ...): files another thread writes, for an output that must not outlive them at a power cut.
