@@ -587,6 +587,11 @@ TEST(LoopCloser, ALookAlikeOutOfReachIsRefusedAfterAShortLossAndTakenAfterALongO
     EXPECT_NE(soon->keyframe, 0u);
     EXPECT_LT((soon->pose.translation() - truth(last).translation()).norm(), 1.0) << "placed at the look-alike";
   }
+  // Stamps that do not go forward (a clock stepped back) say nothing of the time lost: no bound.
+  view.timestamp = last_seen - 5.0;
+  const auto unstamped = closer.relocalise(view, features);
+  ASSERT_TRUE(unstamped.has_value());
+  EXPECT_EQ(unstamped->keyframe, 0u);
   view.timestamp = last_seen + 10.0;
   const auto later = closer.relocalise(view, features);
   ASSERT_TRUE(later.has_value()) << "the look-alike must verify, or the short loss tests nothing";

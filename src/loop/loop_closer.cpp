@@ -3,6 +3,7 @@
 
 #include <condition_variable>
 #include <algorithm>
+#include <cmath>
 #include <deque>
 #include <exception>
 #include <mutex>
@@ -357,7 +358,10 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
     if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
   // Keyframes are made of well-tracked frames only: the newest is where the camera was last known.
   const Keyframe& newest = m.keyframes.at(n - 1);
-  const double lost_seconds = std::max(0.0, frame.timestamp - newest.timestamp);
+  // Stamps that do not go forward (a clock stepped back, recordings joined, no stamps) say nothing
+  // of the time lost: no reach bound then.
+  const bool timed = std::isfinite(frame.timestamp) && frame.timestamp > newest.timestamp;
+  const double lost_seconds = timed ? frame.timestamp - newest.timestamp : 0.0;
   std::optional<Relocalisation> best;
   PyramidCache pyramids(2);  // the view's, made once for all candidates
   for (const std::size_t id : candidates) {
@@ -369,7 +373,7 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
     // Both poses are the tracker's, which drifts along the path between the two keyframes.
     const double reach = kMaxCameraSpeed * lost_seconds + m.params.max_drift_translation +
                          m.params.max_drift_rate * std::abs(newest.path_length - known.path_length);
-    if ((placed.translation() - newest.tracked.translation()).norm() > reach) continue;
+    if (timed && (placed.translation() - newest.tracked.translation()).norm() > reach) continue;
     if (best && check.inliers <= best->inliers) continue;
     best = Relocalisation{frame.index, known.id, known.frame_index, check.inliers, check.icp_rms, placed};
   }
