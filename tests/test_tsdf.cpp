@@ -266,7 +266,16 @@ TEST(Tsdf, TheVolumeFollowsNoFurtherThanTheWorldModelsKeysReach) {
     vol.shiftTo(Eigen::Vector3f(x * float(WorldModel::kKeyReach) * brick, 0, 0));
     EXPECT_TRUE(WorldModel::keyHolds(vol.originBrick())) << vol.originBrick().transpose();
     EXPECT_TRUE(WorldModel::keyHolds(vol.originBrick() + last)) << vol.originBrick().transpose();
+    // Saved there, it loads back (load() holds the origin to the same reach).
+    std::stringstream saved;
+    vol.save(saved);
+    TsdfVolume back(p, Eigen::Vector3f::Zero());
+    EXPECT_NO_THROW(back.load(saved));
+    EXPECT_EQ(back.originBrick(), vol.originBrick());
   }
+  const Eigen::Vector3i held = vol.originBrick();
+  vol.shiftTo(Eigen::Vector3f(std::nanf(""), 0, 0));  // no place: the volume stays
+  EXPECT_EQ(vol.originBrick(), held);
 }
 
 TEST(Tsdf, ShiftMovesBricksToWorldModelAndBackWithoutLoss) {

@@ -215,15 +215,22 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
   Eigen::Vector3i o;
   // The world model's keys hold bricks within kKeyReach of the first camera (50 km at 6 mm voxels):
   // past that the volume stops following, said once, rather than store bricks under another's key.
-  const double reach_lo = -WorldModel::kKeyReach, reach_hi = WorldModel::kKeyReach - n_;
+  // (as load() takes a volume's origin back: its far corner within the keys too).
+  const long reach_lo = -WorldModel::kKeyReach, reach_hi = WorldModel::kKeyReach - n_ - 1;
   for (int i = 0; i < 3; ++i) {
-    const double wanted = std::round(double(point[i]) / brick) - n_ / 2;
-    if (!(wanted >= reach_lo && wanted <= reach_hi) && !reach_warned_) {
+    const float q = point[i] / brick;
+    if (!std::isfinite(q)) {  // no place to follow: stay
+      o[i] = origin_[i];
+      continue;
+    }
+    // Rounded in float as always (an origin a brick off would change every later frame's fusion).
+    const long wanted = std::fabs(q) < 1e12f ? std::lround(q) - n_ / 2 : (q > 0 ? reach_hi + 1 : reach_lo - 1);
+    if ((wanted < reach_lo || wanted > reach_hi) && !reach_warned_) {
       printWarning("the camera left the map's reach (" + std::to_string(int(WorldModel::kKeyReach * double(brick) / 1000)) +
                    " km from the first camera on each axis): the volume follows it no further");
       reach_warned_ = true;
     }
-    o[i] = static_cast<int>(std::clamp(std::isnan(wanted) ? double(origin_[i]) : wanted, reach_lo, reach_hi));
+    o[i] = static_cast<int>(std::clamp(wanted, reach_lo, reach_hi));
   }
   if (o == origin_) return;
   const auto inside = [&](const Eigen::Vector3i& c) {
