@@ -228,7 +228,9 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     progress.update(loop.done, status);
   }
   const bool built = loop.interrupted() && loop.done > 0;
-  if (built && plan.checkpoint_every > 0) checkpoint();  // --resume goes on from here
+  // --resume goes on from here; also after a stop during the last frame, where the loop-closed
+  // re-fusion and the meshing still come (a batch system's kill may follow its SIGTERM).
+  if ((built || (stopRequested() && loop.done > 0)) && plan.checkpoint_every > 0) checkpoint();
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + progress.elapsedSeconds();
 }

@@ -11,8 +11,8 @@
 //
 //   installStopSignals();
 //   while (true) {
-//     if (stopRequested()) { stopped_by = stopSignal(); break; }  // read once, where the loop stops
-//     if (!source.next(frame)) break;
+//     if (!source.next(frame)) break;                             // first: a stop during the last
+//     if (stopRequested()) { stopped_by = stopSignal(); break; }  // frame is no interruption
 //     ...
 //   }
 //   return stopped_by ? 128 + stopped_by : 0;   // the shell's code for the signal: 130, 143
