@@ -142,6 +142,10 @@ void AtomicPath::revert() {
 
 void syncFolderEntries(const std::string& dir) { syncRenameOrSay(dir, dir); }
 
+void syncFileToDisk(const std::string& path) {
+  if (const int err = syncToDisk(path)) throw InputError(path, std::string("cannot write: ") + std::strerror(err));
+}
+
 void syncFileSystemOf(const std::string& path) {
   const int fd = ::open(parentOf(path).c_str(), O_RDONLY | O_CLOEXEC);
   const bool ok = fd >= 0 && ::syncfs(fd) == 0;

@@ -1,7 +1,6 @@
 #include "vofusion/pipeline/mesh_by_region.h"
 
 #include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <deque>
@@ -17,6 +16,7 @@
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
 
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
 
 #include "union_find.h"
@@ -69,7 +69,9 @@ class PlyStream {
       in.close();
       std::remove(side.c_str());
     }
-    if (!out.flush()) throw InputError(path_, "cannot write");
+    out.close();
+    if (!out) throw InputError(path_, "cannot write");
+    syncFileToDisk(path_);  // staged: its rename into the output folder follows its bytes to the disk
   }
 
  private:

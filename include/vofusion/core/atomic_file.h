@@ -55,6 +55,8 @@ bool samePath(const std::string& a, const std::string& b);
 
 // Convenience for text outputs; throws InputError(path, strerror) if the write fails (disk full...).
 void writeFileAtomically(const std::string& path, const std::string& contents);
+// A file written in place (not through an AtomicPath) on the disk (fsync), or InputError(path, ...).
+void syncFileToDisk(const std::string& path);
 // The folder's entries on the disk (fsync; a failure is said, the files being in place): for files
 // moved into it by rename() outside an AtomicPath, their bytes synced before.
 void syncFolderEntries(const std::string& dir);
