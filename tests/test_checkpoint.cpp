@@ -17,6 +17,7 @@
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
+#include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/loop/loop_closer.h"
 #include "vofusion/pipeline/reconstruction.h"
@@ -140,13 +141,17 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
       EXPECT_NE(why.find("truncated or corrupt checkpoint"), std::string::npos) << why;
     }
   }
-  // A length field made huge (the run's origin string, right after the magic): refused, not first
-  // zero-filled (4 GiB).
+  // A length field made huge (the run's origin string, right after the magic), under a checksum that
+  // matches (so that the reader's own guard is what is tested): refused, not first zero-filled (4 GiB).
   {
     std::string huge = bytes;
     const std::size_t at = std::string("VOFUSION-CHECKPOINT-3\n").size();
     ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-3\n"), 0);
     huge.replace(at, 4, "\xff\xff\xff\xff");
+    const std::size_t body = huge.size() - 20;  // the trailer: "CHECKSUM", CRC-32, length
+    ASSERT_EQ(huge.compare(body, 8, "CHECKSUM"), 0);
+    const std::uint32_t crc = crc32(huge.data(), body);
+    for (int i = 0; i < 4; ++i) huge[body + 8 + std::size_t(i)] = char((crc >> (8 * i)) & 0xff);
     std::ofstream(dir + "/huge", std::ios::binary) << huge;
     rusage before{}, after{};
     getrusage(RUSAGE_SELF, &before);
