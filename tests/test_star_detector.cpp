@@ -53,6 +53,14 @@ TEST(Star, FindsAnIsolatedBlobAtItsCentreWithItsScale) {
   EXPECT_GT(best.response, 30.f);  // bright centre
 }
 
+// A small image (160x120, a sensor's low mode) has its keypoints: the largest pattern taken is one
+// whose border leaves responses inside the image. None was found on a side of 138 px or less. Images
+// of 139 px and more take the same patterns as before.
+TEST(Star, SmallImagesStillDetect) {
+  EXPECT_FALSE(detectStar(blobImage(160, 120, 7)).empty());
+  EXPECT_FALSE(detectStar(blobImage(120, 100, 7)).empty());
+}
+
 // A blob centred between pixels: the response peak's parabola vertex finds it to a fraction of a pixel,
 // the integer extremum only to the nearest pixel.
 // Every value a key's range allows detects something: a trace^2/det limit of 4 or less calls every

@@ -118,9 +118,12 @@ void keepStronger(int n, const int* vin, const int* vout, float inv_inner, float
 // Per-pixel strongest response across scales and the (signed, see below) scale that gave it.
 int computeResponses(const cv::Mat& img, int max_size, cv::Mat& responses, cv::Mat& sizes) {
   const int rows = img.rows, cols = img.cols;
+  // The next pattern is taken while its border leaves a response inside the image (responses need
+  // rows and cols above twice the border). OpenCV's test (border < min(rows, cols)) took patterns
+  // whose border left none: an image of 138 px or less on a side gave no keypoint at all (160x120).
   int npatterns = 0;
   while (npatterns < kNumPairs - 1 && !(kSizes[kPairs[npatterns][0]] >= max_size ||
-                                        kSizes[kPairs[npatterns + 1][0]] + kSizes[kPairs[npatterns + 1][0]] / 2 >=
+                                        2 * (kSizes[kPairs[npatterns + 1][0]] + kSizes[kPairs[npatterns + 1][0]] / 2) >=
                                             std::min(rows, cols)))
     ++npatterns;
   npatterns += 1;  // the pattern that reaches max_size is included
