@@ -238,6 +238,20 @@ TEST(RgbdOdometry, ColourOfAnotherPixelTypeIsReadAsEightBitBgr) {
   }
 }
 
+// A 16-bit depth image (a sensor's raw units) is refused naming the type: it reached an OpenCV
+// assertion inside the keypoint detector.
+TEST(RgbdOdometry, DepthOtherThanFloatMetresIsRefusedClearly) {
+  Frame f = room(false).render(0);
+  f.depth.convertTo(f.depth, CV_16U, 5000.0);
+  RgbdOdometry odo;
+  try {
+    odo.process(f);
+    FAIL() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("depth must be CV_32FC1 metres"), std::string::npos) << e.what();
+  }
+}
+
 // A caller's observation whose range image is in a file: the file is read checked whole, as a rawlog's
 // is. One cut short is an InputError naming it (MRPT's load() took it as it came: wrong depths), and
 // the observation still names its file afterwards.

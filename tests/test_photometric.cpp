@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "vofusion/registration/photometric.h"
 #include "vofusion/registration/photometric_association.h"
@@ -80,6 +81,26 @@ Pair makePair() {
 }
 
 }  // namespace
+
+// BGRA and grey colour give the pyramid BGR gives (the term was dropped without a word), and a tiny
+// image as many levels as it can halve (the resize to an empty size threw).
+TEST(Photometric, PyramidOfAnyEightBitColourAndOfATinyImage) {
+  cv::Mat bgr(48, 64, CV_8UC3);
+  cv::randu(bgr, 0, 255);
+  const auto want = intensityPyramid(bgr, {64, 48}, 3);
+  ASSERT_EQ(want.size(), 3u);
+  cv::Mat bgra, grey;
+  cv::cvtColor(bgr, bgra, cv::COLOR_BGR2BGRA);
+  cv::cvtColor(bgr, grey, cv::COLOR_BGR2GRAY);
+  for (const cv::Mat& img : {bgra, grey}) {
+    const auto got = intensityPyramid(img, {64, 48}, 3);
+    ASSERT_EQ(got.size(), 3u) << img.channels();
+    EXPECT_EQ(cv::norm(got[0].grey, want[0].grey, cv::NORM_INF), 0.0) << img.channels();
+  }
+  std::vector<IntensityLevel> tiny;
+  ASSERT_NO_THROW(tiny = intensityPyramid(cv::Mat(3, 3, CV_8UC3, cv::Scalar::all(9)), {3, 3}, 3));
+  EXPECT_EQ(tiny.size(), 2u);  // 3x3, 1x1
+}
 
 TEST(Photometric, SumsAreTheCostsDerivative) {
   const Pair pair = makePair();

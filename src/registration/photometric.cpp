@@ -43,13 +43,18 @@ void addSums(Sums& t, const Sums& s) { t += s; }
 
 std::vector<IntensityLevel> intensityPyramid(const cv::Mat& bgr, cv::Size size, int levels) {
   std::vector<IntensityLevel> out;
-  if (bgr.empty() || bgr.type() != CV_8UC3 || levels < 1) return out;
+  // 8-bit BGR, BGRA (a camera's with alpha) or grey, as the odometry reads them: the term was dropped
+  // without a word for any but BGR.
+  const int type = bgr.type();
+  if (bgr.empty() || (type != CV_8UC3 && type != CV_8UC4 && type != CV_8UC1) || levels < 1) return out;
   cv::Mat grey8, grey;
-  cv::cvtColor(bgr, grey8, cv::COLOR_BGR2GRAY);
+  if (type == CV_8UC1) grey8 = bgr;
+  else cv::cvtColor(bgr, grey8, type == CV_8UC4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
   grey8.convertTo(grey, CV_32F);
   if (grey.size() != size) cv::resize(grey, grey, size, 0, 0, cv::INTER_AREA);
   out.push_back(withGradients(grey));
   for (int l = 1; l < levels; ++l) {
+    if (out.back().grey.cols < 2 || out.back().grey.rows < 2) break;  // no half of it (a tiny image)
     cv::Mat half;
     cv::resize(out.back().grey, half, cv::Size(out.back().grey.cols / 2, out.back().grey.rows / 2), 0, 0, cv::INTER_AREA);
     out.push_back(withGradients(half));
