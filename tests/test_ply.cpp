@@ -171,6 +171,14 @@ TEST(Ply, MalformedFilesAreInputErrors) {
     EXPECT_THROW(readPly(p), InputError) << name;
   }
   EXPECT_THROW(readPly(dir + "/missing.ply"), InputError);
+  // A device is no mesh: refused, not read without end (without the refusal: bad_alloc at the limit).
+  try {
+    const ScopedAllocationLimit limit(std::size_t(1) << 30, std::size_t(2) << 30);
+    readPly("/dev/zero");
+    ADD_FAILURE() << "/dev/zero read as a mesh";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "/dev/zero: is not a regular file, expected a PLY mesh");
+  }
   // An element without properties holds no bytes, however many it announces: read at once (a loop over
   // 10^18 of them did nothing for as long).
   writeText(dir + "/empty_elements.ply", head.substr(0, head.size() - 11) + "element edge 1000000000000000000\nend_header\n" +

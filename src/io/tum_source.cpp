@@ -215,11 +215,10 @@ cv::Mat yamlMatrix(const cv::FileNode& node, const std::string& path, const std:
 }  // namespace
 
 CameraFile readCameraYaml(const std::string& path) {
-  std::ifstream in(path);
-  std::ostringstream text;
-  if (!(in && text << in.rdbuf())) throw InputError(path, "cannot read");
+  // Capped as every text file (--intrinsics /dev/zero grew without bound).
+  std::string yaml = readTextFile(path);
+  if (yaml.empty()) throw InputError(path, "cannot read (empty)");
   // OpenCV reads YAML only after its "%YAML:1.0" line, which ROS's files do not have.
-  std::string yaml = text.str();
   if (yaml.rfind("%YAML", 0) != 0) yaml = "%YAML:1.0\n---\n" + yaml;
   cv::FileStorage fsr;
   try {

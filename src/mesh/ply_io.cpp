@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -115,6 +116,10 @@ class BodyReader {
 };
 
 std::string slurp(const std::string& path) {
+  // A mesh is a file: a device or a pipe (/dev/zero) would be read without end.
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec))
+    throw InputError(path, "is not a regular file, expected a PLY mesh");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");
   std::ostringstream ss;
