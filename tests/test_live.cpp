@@ -174,6 +174,31 @@ TEST(LiveLoop, AnyExceptionStopsTheRunAndAThrowingHookLeavesWithIt) {
   EXPECT_THROW(runLive(src, [](const Frame&) {}, queueOf(2), hooks), std::runtime_error);
 }
 
+// The first error is the one reported: the recorder failed (a full disk), then the frame in hand's
+// checkpoint did too; "processing error: checkpoint" hid the cause.
+TEST(LiveLoop, TheFirstErrorWins) {
+  FakeSource src(1000, 1);
+  std::atomic<bool> recorder_failed{false};
+  LiveHooks hooks;
+  hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) {
+    if (f.index == 5) {
+      recorder_failed = true;
+      throw std::runtime_error("grab.rawlog: disk full");
+    }
+  };
+  const LiveStats s = runLive(
+      src,
+      [&](const Frame& f) {
+        if (f.index != 0) return;
+        while (!recorder_failed) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the recorder's error is in
+        throw std::runtime_error("checkpoint: disk full");
+      },
+      queueOf(2), hooks);
+  EXPECT_EQ(s.stop, StopReason::RecorderError);
+  EXPECT_EQ(s.error, "grab.rawlog: disk full");
+}
+
 // A consumer that finished its frame and then failed (vofusion-grab's checkpoint on a full disk, its
 // window): the frame counts as processed, as the reconstruction holds it; the run stops.
 TEST(LiveLoop, AFailureAfterTheFrameCountsItProcessed) {

@@ -204,8 +204,10 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
       // Not finished: counted as dropped so processed stays honest; finished, then a later step failed:
       // processed, as the reconstruction holds it.
       ++(frameWasDone() ? sh.stats.processed : sh.stats.dropped);
-      sh.stats.stop = StopReason::ConsumerError;
-      sh.stats.error = currentExceptionText();
+      if (sh.stats.error.empty()) {  // the first error is the cause (a full disk: the recorder's, first)
+        sh.stats.stop = StopReason::ConsumerError;
+        sh.stats.error = currentExceptionText();
+      }
       sh.stop = true;
       continue;
     }
