@@ -1,6 +1,7 @@
 #include "record_file.h"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -14,6 +15,15 @@ namespace vofusion {
 RecordFile::RecordFile(const std::string& path) : path_(path), last_sync_(std::chrono::steady_clock::now()) {
   fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd_ < 0) throw InputError(path, std::string("cannot create: ") + std::strerror(errno));
+  ::flock(fd_, LOCK_EX | LOCK_NB);  // held while recording: another recorder leaves this file alone
+}
+
+bool RecordFile::heldByAnother(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  const bool held = ::flock(fd, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  ::close(fd);  // and with it the lock taken here, if it was free
+  return held;
 }
 
 RecordFile::~RecordFile() {
@@ -48,13 +58,18 @@ void RecordFile::endRecord() {
   if (now - last_sync_ > std::chrono::seconds(1)) sync();
 }
 
+namespace {
+// A file system that cannot sync (some FUSE and network mounts) has nothing more to give: no failure.
+bool syncFailed(int rc) { return rc != 0 && errno != EINVAL && errno != ENOTSUP && errno != EOPNOTSUPP; }
+}  // namespace
+
 void RecordFile::sync() {
-  if (::fdatasync(fd_) != 0) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
+  if (syncFailed(::fdatasync(fd_))) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
   last_sync_ = std::chrono::steady_clock::now();
 }
 
 void RecordFile::syncWithItsFolder() {
-  if (::syncfs(fd_) != 0) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
+  if (syncFailed(::syncfs(fd_))) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
   last_sync_ = std::chrono::steady_clock::now();
 }
 

@@ -30,6 +30,8 @@ class RecordFile : public mrpt::io::CStream {
   // left at its last whole record.
   void endRecord();
   void sync();  // to the disk now; throws InputError (an I/O error)
+  // Whether a recorder (RecordFile holds an flock on its file while it lives) is writing `path` now.
+  static bool heldByAnother(const std::string& path);
   // The file and everything written beside it (the images its records name, the folders' entries):
   // syncfs(), one call for all of them.
   void syncWithItsFolder();
