@@ -177,7 +177,7 @@ GrabPlan planGrab(const Args& args) {
   plan.config = args.config;
   if (plan.config.empty() && args.replay.empty()) plan.config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
   plan.cfg = loadConfig(plan.config);
-  checkBareValue(plan.cfg, "kinfu", "work_dir");
+  loadNamingOrigin(plan.config, [&] { checkBareValue(plan.cfg, "kinfu", "work_dir"); });
   checkKnownSections(plan.cfg, plan.config, ownSections(LiveOptions()));
   loadNamingOrigin(plan.config, [&] {
     plan.opts.loadFromConfigFile(plan.cfg, kSection);
@@ -226,10 +226,11 @@ struct LiveCheckpoints {
   std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now(), last = start;
   std::size_t written = 0;
   double seconds_writing = 0.0;
+  bool failed = false;  // one could not be written: no more are tried
 
   void maybeWrite(const RunSession& run) {
     const auto now = std::chrono::steady_clock::now();
-    if (every <= 0 || std::chrono::duration<double>(now - last).count() < every) return;
+    if (every <= 0 || failed || std::chrono::duration<double>(now - last).count() < every) return;
     try {
       // The frames it covers were recorded before they came here: on the disk first (records and
       // images), or after a power cut the checkpoint would name frames the recording lost.
@@ -237,8 +238,8 @@ struct LiveCheckpoints {
       run.saveCheckpoint(path, origin, std::chrono::duration<double>(now - start).count());
     } catch (const InputError& e) {
       // A checkpoint is a spare; the recording is what cannot be made again: it goes on without them.
-      printWarning(std::string(e.what()) + "; no more checkpoints this session, the recording goes on");
-      every = 0;
+      printWarning(std::string(e.what()) + "; no more checkpoints this session, which goes on without them");
+      failed = true;
       return;
     }
     last = std::chrono::steady_clock::now();

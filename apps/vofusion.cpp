@@ -114,7 +114,8 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
   // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.
   plan.default_work = (std::filesystem::path(plan.out_dir) / ".tmp").string();
-  if (!cl.value("--work-dir")) checkBareValue(cfg, "kinfu", "work_dir");  // the file's, before ours replaces it
+  if (!cl.value("--work-dir"))  // the file's, before ours replaces it
+    loadNamingOrigin(plan.config_path, [&] { checkBareValue(cfg, "kinfu", "work_dir"); });
   if (cl.value("--work-dir")) cfg.write("kinfu", "work_dir", *cl.value("--work-dir"));
   else if (const std::string w = cfg.read_string("kinfu", "work_dir", "auto"); w.empty() || w == "auto")
     cfg.write("kinfu", "work_dir", plan.default_work);
@@ -205,9 +206,11 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   progress.startAt(loop.done);
   const double before = loop.seconds;
   double last_checkpoint = 0.0;
+  std::size_t checkpointed_at = std::size_t(-1);  // frames done at the last checkpoint
   const auto checkpoint = [&] {
     const double start = progress.elapsedSeconds();
     run.saveCheckpoint(plan.checkpoint_path, plan.origin, before + start);
+    checkpointed_at = loop.done;
     last_checkpoint = progress.elapsedSeconds();
     loop.checkpoint_seconds += last_checkpoint - start;
     ++loop.checkpoints;
@@ -230,7 +233,8 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   const bool built = loop.interrupted() && loop.done > 0;
   // --resume goes on from here; also after a stop during the last frame, where the loop-closed
   // re-fusion and the meshing still come (a batch system's kill may follow its SIGTERM).
-  if ((built || (stopRequested() && loop.done > 0)) && plan.checkpoint_every > 0) checkpoint();
+  if ((built || (stopRequested() && loop.done > 0)) && plan.checkpoint_every > 0 && loop.done != checkpointed_at)
+    checkpoint();
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + progress.elapsedSeconds();
 }
