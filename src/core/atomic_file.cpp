@@ -149,9 +149,10 @@ void syncFileToDisk(const std::string& path) {
 void syncFileSystemOf(const std::string& path) {
   const int fd = ::open(parentOf(path).c_str(), O_RDONLY | O_CLOEXEC);
   const bool ok = fd >= 0 && ::syncfs(fd) == 0;
-  const int err = errno;
+  const int err = ok ? 0 : errno;
   if (fd >= 0) ::close(fd);
-  if (!ok) throw InputError(path, std::string("cannot write: ") + std::strerror(err));
+  if (!ok && err != EINVAL && err != ENOTSUP && err != EOPNOTSUPP)
+    throw InputError(path, std::string("cannot write: ") + std::strerror(err));
 }
 
 void AtomicFileSet::write(const std::string& path, const std::function<void(const std::string& tmp)>& write_to) {
