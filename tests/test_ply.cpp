@@ -177,8 +177,18 @@ TEST(Ply, MalformedFilesAreInputErrors) {
     readPly("/dev/zero");
     ADD_FAILURE() << "/dev/zero read as a mesh";
   } catch (const InputError& e) {
-    EXPECT_EQ(std::string(e.what()), "/dev/zero: is not a regular file, expected a PLY mesh");
+    EXPECT_EQ(std::string(e.what()), "/dev/zero: is not a regular file or a pipe, expected a PLY mesh");
   }
+  // A pipe is a mesh's too (vofusion-mesh <(zcat m.ply.gz)).
+  writePly(dir + "/t.ply", tetrahedron(false, false));
+  std::string out;
+  // The writer in the background with none of run()'s output (which would wait for it), as a shell's
+  // process substitution is.
+  ASSERT_EQ(test::run("mkfifo " + dir + "/pipe && ((exec >/dev/null 2>&1 </dev/null; cat " + dir + "/t.ply > " + dir + "/pipe) &) && echo made",
+                      &out),
+            0)
+      << out;
+  EXPECT_EQ(readPly(dir + "/pipe").faces.size(), 4u);
   // An element without properties holds no bytes, however many it announces: read at once (a loop over
   // 10^18 of them did nothing for as long).
   writeText(dir + "/empty_elements.ply", head.substr(0, head.size() - 11) + "element edge 1000000000000000000\nend_header\n" +

@@ -116,10 +116,24 @@ class BodyReader {
 };
 
 std::string slurp(const std::string& path) {
-  // A mesh is a file: a device or a pipe (/dev/zero) would be read without end.
+  // A mesh is a file or a pipe (<(zcat m.ply.gz)); a device (/dev/zero) would be read without end,
+  // and a pipe is read up to 4 GiB.
   std::error_code ec;
-  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec))
-    throw InputError(path, "is not a regular file, expected a PLY mesh");
+  const bool pipe = std::filesystem::is_fifo(path, ec);
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec) && !pipe)
+    throw InputError(path, "is not a regular file or a pipe, expected a PLY mesh");
+  if (pipe) {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw InputError(path, "cannot open file");
+    std::string data;
+    std::vector<char> buf(std::size_t(1) << 20);
+    while (f.read(buf.data(), std::streamsize(buf.size())) || f.gcount() > 0) {
+      data.append(buf.data(), std::size_t(f.gcount()));
+      if (data.size() > (std::size_t(4) << 30)) throw InputError(path, "goes on past 4 GiB: too large for a mesh here");
+    }
+    if (f.bad()) throw InputError(path, "read error");
+    return data;
+  }
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");
   std::ostringstream ss;
