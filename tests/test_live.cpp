@@ -191,7 +191,7 @@ TEST(LiveLoop, TheFirstErrorWins) {
       [&](const Frame& f) {
         if (f.index != 0) return;
         while (!recorder_failed) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-        std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the recorder's error is in
+        std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the recorder's error is in (TSAN: slow)
         throw std::runtime_error("checkpoint: disk full");
       },
       queueOf(2), hooks);

@@ -27,7 +27,7 @@ for t in "${tests[@]}"; do
   LD_PRELOAD="$build/libtbb_one_thread.so" TSAN_OPTIONS="$TSAN_OPTIONS log_path='$out/$t'" \
     timeout "${TIMEOUT:-1500}" "$build/bin/$t" >"$out/$t.out" 2>&1 || { echo "tsan: $t exited $? (see $out/$t.out)" >&2; status=1; }
 done
-reports=("$out"/*.[0-9]*)
+reports=("$out"/test_*.[0-9]*)
 if [ -e "${reports[0]}" ]; then
   echo "tsan: reports in ${reports[*]}" >&2
   exit 1
