@@ -89,6 +89,23 @@ TEST(Reconstruction, OverlappedFusionGivesTheSamePosesAndMeshAsSerial) {
 // A frame the odometry cannot match (here a grey colour image) loses no motion: in mode joint ICP
 // poses it; in mode odometry it moves on at constant velocity and the next frame is matched against
 // the last good one, so the path continues from the right place.
+// Frame::index must grow (the odometry names its reference by it, and the tracker finds that frame's
+// pose by it): frames a library caller left at index 0 are refused at the second, where they were all
+// "frame 0" and got wrong poses (in mode odometry, stuck near the start).
+TEST(Reconstruction, FramesLeftAtIndexZeroAreRefused) {
+  const sim::SyntheticSequence seq(smallRoom());
+  Reconstruction rec(test::quickRoomConfig(), TrackingMode::Odometry);
+  Frame first = seq.render(0), second = seq.render(1);
+  first.index = second.index = 0;
+  rec.process(first);
+  try {
+    rec.process(second);
+    FAIL() << "a second frame 0 was taken";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("frame index 0 after 0"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Reconstruction, AFrameWhoseOdometryFailsLosesNoMotion) {
   const sim::SyntheticSequence seq(smallRoom());
   const std::size_t blank = 6;

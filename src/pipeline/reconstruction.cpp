@@ -84,6 +84,7 @@ struct Reconstruction::Impl {
   bool searching = false;
   std::size_t predicted_run = 0;
   std::vector<loop::Relocalisation> relocalisations;
+  std::optional<std::size_t> last_index;  // of the frame processed last (this run's)
   // The fusion of the last frame (integrate + ray cast), running beside the next frame's odometry
   // and image loading when overlap_fusion is on; `fusing_frame` keeps its images alive and unchanged.
   tbb::task_group fusing;
@@ -160,6 +161,12 @@ Reconstruction::~Reconstruction() = default;
 
 FrameReport Reconstruction::process(const Frame& frame) {
   Impl& m = *impl_;
+  // The odometry names its reference by index, and the tracker finds that frame's pose by it: frames
+  // left at the default index 0 were all "frame 0" (a library caller's), and got wrong poses.
+  if (m.last_index && frame.index <= *m.last_index)
+    throw std::invalid_argument("Reconstruction: frame index " + std::to_string(frame.index) + " after " +
+                                std::to_string(*m.last_index) + " (Frame::index must grow: its position in the input)");
+  m.last_index = frame.index;
   const auto start = std::chrono::steady_clock::now();
   FrameReport r;
   r.index = frame.index;
