@@ -51,7 +51,7 @@ int syncToDisk(const std::string& path, bool folder_files = true) {
                   ::fsync(fd) == 0;
   const int err = ok ? 0 : errno;
   if (fd >= 0) ::close(fd);
-  return err == EINVAL || err == ENOTSUP || err == EOPNOTSUPP ? 0 : err;
+  return syncUnsupported(err) ? 0 : err;
 }
 
 // After a rename the output is in place, whole: a folder that does not sync is said, not a failure
@@ -140,6 +140,8 @@ void AtomicPath::revert() {
   committed_ = replaced_ = false;
 }
 
+bool syncUnsupported(int err) { return err == EINVAL || err == ENOTSUP || err == EOPNOTSUPP; }
+
 void syncFolderEntries(const std::string& dir) { syncRenameOrSay(dir, dir); }
 
 void syncFileToDisk(const std::string& path) {
@@ -151,7 +153,7 @@ void syncFileSystemOf(const std::string& path) {
   const bool ok = fd >= 0 && ::syncfs(fd) == 0;
   const int err = ok ? 0 : errno;
   if (fd >= 0) ::close(fd);
-  if (!ok && err != EINVAL && err != ENOTSUP && err != EOPNOTSUPP)
+  if (!ok && !syncUnsupported(err))
     throw InputError(path, std::string("cannot write: ") + std::strerror(err));
 }
 

@@ -20,14 +20,19 @@ std::string readTextFile(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");
   // The read itself is capped too: a pipe or a device (/dev/zero) has no size to check first.
-  std::string text;
+  return readCapped(f, path, kMaxBytes, "256 MiB", "a text file");
+}
+
+std::string readCapped(std::istream& stream, const std::string& path, std::size_t max_bytes, const std::string& what,
+                       const std::string& kind) {
+  std::string data;
   std::array<char, 1 << 16> buf;
-  while (f.read(buf.data(), buf.size()) || f.gcount() > 0) {
-    text.append(buf.data(), std::size_t(f.gcount()));
-    if (text.size() > kMaxBytes) throw InputError(path, "goes on past 256 MiB: too large for a text file here");
+  while (stream.read(buf.data(), buf.size()) || stream.gcount() > 0) {
+    data.append(buf.data(), std::size_t(stream.gcount()));
+    if (data.size() > max_bytes) throw InputError(path, "goes on past " + what + ": too large for " + kind + " here");
   }
-  if (f.bad()) throw InputError(path, "cannot read file");
-  return text;
+  if (stream.bad()) throw InputError(path, "cannot read file");
+  return data;
 }
 
 std::vector<TextLine> dataLines(const std::string& text) {

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
 
 namespace vofusion {
@@ -59,8 +60,7 @@ void RecordFile::endRecord() {
 }
 
 namespace {
-// A file system that cannot sync (some FUSE and network mounts) has nothing more to give: no failure.
-bool syncFailed(int rc) { return rc != 0 && errno != EINVAL && errno != ENOTSUP && errno != EOPNOTSUPP; }
+bool syncFailed(int rc) { return rc != 0 && !syncUnsupported(errno); }
 }  // namespace
 
 void RecordFile::sync() {

@@ -14,6 +14,7 @@
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
 #include "vofusion/mesh/mesh_io.h"
 
 namespace vofusion {
@@ -125,14 +126,7 @@ std::string slurp(const std::string& path) {
   if (pipe) {
     std::ifstream f(path, std::ios::binary);
     if (!f) throw InputError(path, "cannot open file");
-    std::string data;
-    std::vector<char> buf(std::size_t(1) << 20);
-    while (f.read(buf.data(), std::streamsize(buf.size())) || f.gcount() > 0) {
-      data.append(buf.data(), std::size_t(f.gcount()));
-      if (data.size() > (std::size_t(4) << 30)) throw InputError(path, "goes on past 4 GiB: too large for a mesh here");
-    }
-    if (f.bad()) throw InputError(path, "read error");
-    return data;
+    return readCapped(f, path, std::size_t(4) << 30, "4 GiB", "a mesh");
   }
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path, "cannot open file");

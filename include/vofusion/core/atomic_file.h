@@ -55,6 +55,9 @@ bool samePath(const std::string& a, const std::string& b);
 
 // Convenience for text outputs; throws InputError(path, strerror) if the write fails (disk full...).
 void writeFileAtomically(const std::string& path, const std::string& contents);
+// Whether a failed fsync/fdatasync/syncfs's errno means only that the file system cannot sync (some
+// FUSE and network mounts: EINVAL, ENOTSUP): it has nothing more to give, which is no failure.
+bool syncUnsupported(int err);
 // A file written in place (not through an AtomicPath) on the disk (fsync), or InputError(path, ...).
 void syncFileToDisk(const std::string& path);
 // The folder's entries on the disk (fsync; a failure is said, the files being in place): for files

@@ -1,6 +1,8 @@
 #pragma once
 // Small text inputs (TUM lists and trajectories, intrinsics.txt): whole-file reads and the data lines
 // of a '#'-commented format, with line numbers for error messages.
+#include <cstddef>
+#include <istream>
 #include <string>
 #include <vector>
 
@@ -8,6 +10,10 @@ namespace vofusion {
 
 // The whole file; throws InputError(path, ...) when it cannot be opened or is over 256 MiB.
 std::string readTextFile(const std::string& path);
+// Everything `stream` gives, read in 64 KiB pieces; InputError(path, "goes on past <what>: too large
+// for <kind> here") once it is longer than max_bytes (a pipe or a device has no size to check first).
+std::string readCapped(std::istream& stream, const std::string& path, std::size_t max_bytes, const std::string& what,
+                       const std::string& kind);
 
 struct TextLine {
   int number = 0;    // 1-based line number in the text
