@@ -22,6 +22,7 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+COMMITTED_RESULTS = os.path.join(ROOT, "bench", "results")  # the tables the README quotes
 
 # name -> (vofusion --mode, INI text of the variant). "odometry" alone uses the defaults
 # (union keypoints, robust motion); the variants select the keypoint set and the paper's Algorithm 1.
@@ -143,8 +144,18 @@ def write_results(res, args, command):
     return md
 
 
+def sequence_name(seq):
+    """The results' file name: the folder's name, and for 7-Scenes its scene's too (every scene names its
+    sequences seq-01, seq-02, ...: chess/seq-01 and fire/seq-01 would share one table)."""
+    folder = os.path.abspath(os.path.normpath(seq))
+    name = os.path.basename(folder)
+    if is_seven_scenes(folder):
+        name = os.path.basename(os.path.dirname(folder)) + "_" + name
+    return name
+
+
 def run_sequence(seq, args, command):
-    name = os.path.basename(os.path.normpath(seq))
+    name = sequence_name(seq)
     work = os.path.join(args.work, name)
     fig_dir = os.path.join(args.results, name)
     os.makedirs(work, exist_ok=True)
@@ -360,7 +371,9 @@ def main():
     ap.add_argument("--quick", action="store_true",
                     help="a fast check: %s, 100 frames of every sequence" % ",".join(QUICK_MODES))
     ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(ROOT, "build")))
-    ap.add_argument("--results", default=os.path.join(ROOT, "bench", "results"))
+    ap.add_argument("--results", default=None,
+                    help="where the tables go (default: bench/results for a full run; <work>/results for --quick, "
+                         "--max-frames or a --modes subset, which must not replace the committed tables)")
     ap.add_argument("--work", default=None, help="run outputs (default <build>/bench-runs)")
     ap.add_argument("--intrinsics", default=None, help="7-Scenes only: override the default 585/320/240")
     ap.add_argument("--nice", type=int, default=0, help="run vofusion under nice -n N")
@@ -379,6 +392,12 @@ def main():
         if not os.access(exe, os.X_OK):
             ap.error("%s is not built (ninja -C %s vofusion rgbd-eval)" % (exe, args.build))
     args.work = args.work or os.path.join(args.build, "bench-runs")
+    partial = args.max_frames or args.modes != DEFAULT_MODES or args.synthetic_frames != 300
+    if args.results is None:
+        args.results = os.path.join(args.work, "results") if partial else COMMITTED_RESULTS
+        if partial:
+            log("a partial run (--quick, --max-frames or a --modes subset): tables go to %s, "
+                "not bench/results (--results DIR to choose)" % args.results)
     seqs = args.sequences or sorted(d for d in glob.glob(os.path.join(ROOT, "..", "shared", "data", "tum", "*"))
                                     if os.path.isdir(d))
     if not args.sequences and not args.no_synthetic:
@@ -394,8 +413,11 @@ def main():
         res = run_sequence(seq, args, command)
         results.append(res)
         print(write_results(res, args, command))
-        # The summary after every sequence: an interrupted benchmark keeps what it measured.
+        # The summary after every sequence: an interrupted benchmark keeps what it measured. In bench/results
+        # only a run over the default sequences writes it: one over some would leave their rows alone there.
         summary = summary_markdown(results, args.modes, command)
+        if args.sequences and os.path.abspath(args.results) == COMMITTED_RESULTS:
+            continue
         for path, text in ((os.path.join(args.results, "summary.md"), summary),
                            (os.path.join(args.results, "summary.json"),
                             json.dumps({"command": command, "modes": args.modes, "sequences": [

@@ -404,3 +404,34 @@ TEST(Batch, BadArgumentsFailInOneLine) {
   EXPECT_NE(test::run("python3 " + test::sourceDir() + "/bench/collect.py " + dir, &log), 0);
   EXPECT_EQ(log, "collect: " + dir + ": no summary.json or vofusion.log under it\n");
 }
+
+// bench/run's tables: two 7-Scenes scenes' seq-01 are two tables, and a partial run (a --modes subset,
+// --max-frames, --quick) writes them beside its runs, never over the committed bench/results. Stub
+// vofusion / rgbd-eval binaries stand in: what is tested is where the script writes.
+TEST(Batch, BenchTablesNameTheSceneAndAPartialRunLeavesTheCommittedOnesAlone) {
+  const std::string dir = test::tempDir("bench_tables");
+  fs::create_directories(dir + "/build/bin");
+  {
+    std::ofstream(dir + "/build/bin/vofusion")
+        << "#!/bin/sh\nwhile [ $# -gt 0 ]; do [ \"$1\" = --out ] && out=$2; shift; done\n"
+           "mkdir -p \"$out\" && echo '{\"frames\": 1, \"fps\": 1}' > \"$out/summary.json\" && : > \"$out/trajectory.txt\"\n";
+    std::ofstream(dir + "/build/bin/rgbd-eval") << "#!/bin/sh\necho '{}'\n";
+  }
+  for (const char* exe : {"/build/bin/vofusion", "/build/bin/rgbd-eval"})
+    fs::permissions(dir + exe, fs::perms::owner_all, fs::perm_options::add);
+  for (const char* scene : {"chess", "fire"}) {
+    fs::create_directories(dir + "/" + scene + "/seq-01");
+    std::ofstream(dir + "/" + scene + "/seq-01/frame-000000.depth.png");
+  }
+  std::string log;
+  ASSERT_EQ(test::run("python3 " + test::sourceDir() + "/bench/bench.py " + dir + "/chess/seq-01 " + dir +
+                          "/fire/seq-01 --modes joint --build " + dir + "/build --work " + dir + "/work",
+                      &log),
+            0)
+      << log;
+  EXPECT_TRUE(fs::exists(dir + "/work/results/chess_seq-01.md")) << log;
+  EXPECT_TRUE(fs::exists(dir + "/work/results/fire_seq-01.md")) << log;
+  EXPECT_NE(log.find("tables go to " + dir + "/work/results"), std::string::npos) << log;
+  for (const char* name : {"seq-01.md", "chess_seq-01.md", "fire_seq-01.md"})
+    EXPECT_FALSE(fs::exists(test::sourceDir() + "/bench/results/" + name)) << name;
+}
