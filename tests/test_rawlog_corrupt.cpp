@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <new>
 #include <thread>
 #include <vector>
@@ -255,4 +256,29 @@ TEST(RawlogCorrupt, FourKFrameWithPointsStillReads) {
   EXPECT_EQ(f.depth.cols, w);
   EXPECT_EQ(f.depth.rows, h);
   EXPECT_FLOAT_EQ(f.depth.at<float>(h / 2, w / 2), 1.25f);
+}
+
+// A record whose depth units are no scale (NaN, 0, negative, infinite) costs that frame in one line: it
+// made every reading NaN or 0, a frame the tracker took for one with depth.
+TEST(RawlogCorrupt, DepthUnitsThatAreNoScaleCostTheirFrame) {
+  const std::string path = test::tempDir("rawlog_corrupt_units") + "/units.rawlog";
+  for (const float units : {std::numeric_limits<float>::quiet_NaN(), 0.f, -1e-3f, std::numeric_limits<float>::infinity()}) {
+    {
+      auto obs = observationFromFrame(smallFrame(64, 48));
+      obs->rangeUnits = units;
+      RawlogWriterOptions o;
+      o.external_images = false;
+      RawlogWriter writer(path, o);
+      writer.writeObservation(*obs);
+      writer.commit();
+    }
+    RawlogSource src(path, {});
+    Frame f;
+    try {
+      src.next(f);
+      ADD_FAILURE() << "units " << units << " read as a frame";
+    } catch (const DamagedFrame& e) {
+      EXPECT_NE(std::string(e.what()).find("depth units of"), std::string::npos) << e.what();
+    }
+  }
 }

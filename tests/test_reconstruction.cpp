@@ -172,6 +172,50 @@ TEST(Reconstruction, NonFiniteDepthReadingsCostOnlyThemselves) {
   }
 }
 
+// A frame whose every reading is NaN has no depth, as one of zeros: lost with the pose held, in every
+// mode (NaN counted as a reading: modes joint and odometry moved the frame on at constant velocity).
+TEST(Reconstruction, DepthOfNaNOnlyIsNoDepthAsZerosAre) {
+  const sim::SyntheticSequence seq(smallRoom());
+  const std::size_t blank_frame = 6;
+  for (const TrackingMode mode : {TrackingMode::Joint, TrackingMode::KinFu, TrackingMode::Odometry, TrackingMode::PaperHandoff}) {
+    std::vector<std::pair<std::size_t, std::size_t>> counts;  // lost, predicted
+    std::vector<Trajectory> paths;
+    for (const float blank : {0.f, std::numeric_limits<float>::quiet_NaN()}) {
+      Reconstruction rec(test::quickRoomConfig(), mode);
+      for (std::size_t i = 0; i < 10; ++i) {
+        Frame f = seq.render(i);
+        if (i == blank_frame) f.depth.setTo(blank);
+        rec.process(f);
+      }
+      rec.finish();
+      counts.emplace_back(rec.lostFrames(), rec.predictedFrames());
+      paths.push_back(rec.trajectory());
+    }
+    EXPECT_EQ(counts[0], std::make_pair(std::size_t(1), std::size_t(0))) << toString(mode);
+    EXPECT_EQ(counts[1], counts[0]) << toString(mode) << " (lost, predicted)";
+    ASSERT_EQ(paths[1].size(), paths[0].size()) << toString(mode);
+    for (std::size_t i = 0; i < paths[0].size(); ++i)
+      EXPECT_LT((paths[1][i].pose.translation() - paths[0][i].pose.translation()).norm(), 1e-6) << toString(mode) << " frame " << i;
+  }
+}
+
+// Frame::depth is metres as float: a 16-bit image (sensor units, no scale) is a caller's error in every
+// mode (mode kinfu took it for a frame without depth and lost every frame).
+TEST(Reconstruction, DepthInSensorUnitsIsRefusedInEveryMode) {
+  const sim::SyntheticSequence seq(smallRoom());
+  for (const TrackingMode mode : {TrackingMode::Joint, TrackingMode::KinFu, TrackingMode::Odometry, TrackingMode::PaperHandoff}) {
+    Reconstruction rec(test::quickRoomConfig(), mode);
+    Frame f = seq.render(0);
+    f.depth.convertTo(f.depth, CV_16U, 5000.0);
+    try {
+      rec.process(f);
+      ADD_FAILURE() << toString(mode) << ": 16-bit depth was taken";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("CV_32FC1 metres"), std::string::npos) << toString(mode) << ": " << e.what();
+    }
+  }
+}
+
 // Once meshed the map can go (RunRecorder does so before the whole-mesh repair and the pictures):
 // the trajectory and the fusion statistics stay, what needs the map says so instead of crashing.
 TEST(Reconstruction, ReleasingTheMapKeepsTrajectoryAndStatistics) {

@@ -184,6 +184,8 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     uint16_t* out = raw.ptr<uint16_t>(r);
     for (int c = 0; c < cols; ++c) out[c] = obs.rangeImage(r, c);
   }
+  if (!(obs.rangeUnits > 0.f) || !std::isfinite(obs.rangeUnits))
+    throw InputError(origin, "depth units of " + std::to_string(obs.rangeUnits) + " m (expected a positive number)");
   raw.convertTo(f.depth, CV_32F, exactUnits(obs.rangeUnits));
   if (!obs.range_is_depth) {
     // Ranges along the pixel ray -> depth along the optical axis.

@@ -1,6 +1,7 @@
 #include "vofusion/odometry/rgbd_odometry.h"
 
 #include "vofusion/core/config.h"
+#include "vofusion/core/depth_image.h"
 
 #include <algorithm>
 #include <chrono>
@@ -638,10 +639,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   const OdometryParams& P = impl_->params;
   Impl& m = *impl_;
   if (!frame.valid()) return failed(r, "empty frame");
-  // Metres as float, as every loader gives them: raw sensor units (16-bit) have no scale here.
-  if (frame.depth.type() != CV_32FC1)
-    throw std::invalid_argument("RgbdOdometry: depth must be CV_32FC1 metres (a 16-bit image is in sensor units: "
-                                "convert it with the sensor's depth scale)");
+  requireMetricDepth(frame.depth, "RgbdOdometry");
   // Keypoints found in the colour image are looked up in the depth's maps, pixel for pixel.
   if (frame.rgb.size() != frame.depth.size())
     throw std::invalid_argument("RgbdOdometry: colour " + std::to_string(frame.rgb.cols) + "x" +

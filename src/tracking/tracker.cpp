@@ -8,6 +8,7 @@
 
 #include "frame_check.h"
 #include "joint_policy.h"
+#include "vofusion/core/depth_image.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/state_archive.h"
 #include "vofusion/tracking/motion_history.h"
@@ -213,8 +214,8 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
     ++s.stats.lost;
     return res;
   };
-  if (frame.depth.empty() || frame.depth.type() != CV_32FC1 || cv::countNonZero(frame.depth) == 0)
-    return lost(Rejection::NoDepth);
+  requireMetricDepth(frame.depth, "Tracker");
+  if (!hasDepthReading(frame.depth)) return lost(Rejection::NoDepth);
   CameraIntrinsics cam = frame.camera, track_cam;
   cam.width = frame.depth.cols;
   cam.height = frame.depth.rows;
@@ -261,7 +262,8 @@ void Tracker::fused(bool shifted, const StageTimes& times) {
 bool Tracker::placeAt(const Frame& frame, const Eigen::Isometry3d& cam_to_world) {
   Impl& s = *impl_;
   ++s.stats.frames;
-  if (frame.depth.empty() || frame.depth.type() != CV_32FC1) return false;
+  requireMetricDepth(frame.depth, "Tracker");
+  if (frame.depth.empty()) return false;
   s.history.setPose(cam_to_world);
   ++s.stats.tracked;
   return true;
