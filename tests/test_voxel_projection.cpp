@@ -2,6 +2,7 @@
 // bit, and a voxel's sample is what the camera model says: its pixel, its depth, the reading there.
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include <gtest/gtest.h>
 
@@ -77,5 +78,33 @@ TEST(VoxelProjection, SampleIsTheReadingAtTheVoxelsPixel) {
     // Behind the camera: no sample.
     p.sampleRow(Eigen::Vector3f(0, 0, -0.5f), Eigen::Vector3f(0.001f, 0, 0), s);
     for (int x = 0; x < 8; ++x) EXPECT_EQ(s.pixel[x], -1);
+  }
+}
+
+// A NaN reading beside a voxel's pixel (a caller's missing reading) gives that voxel no NaN depth:
+// std::min / _mm256_min_ps drop a NaN that is not their first operand, so the neighbours "agreed" and
+// the blend took the NaN in, which the TSDF update read as free space up to the camera.
+TEST(VoxelProjection, ANaNNeighbourGivesNoNaNDepth) {
+  cv::RNG rng(7);
+  cv::Mat depth = testDepth(rng);
+  for (int v = 0; v < depth.rows; ++v)
+    for (int u = 0; u < depth.cols; ++u)
+      if (rng.uniform(0.0, 1.0) < 0.1) depth.at<float>(v, u) = std::numeric_limits<float>::quiet_NaN();
+  for (const bool simd : {true, false}) {
+    const VoxelProjector p(depth, camera(), 0.3f, 3.5f, 0.015f, simd);
+    int valid = 0;
+    for (int i = 0; i < 5000; ++i) {
+      const Eigen::Vector3f first(float(rng.uniform(-1.2, 1.2)), float(rng.uniform(-1.0, 1.0)), float(rng.uniform(0.5, 2.5)));
+      const Eigen::Vector3f step = Eigen::Vector3f(float(rng.uniform(-1.0, 1.0)), float(rng.uniform(-1.0, 1.0)),
+                                                   float(rng.uniform(-1.0, 1.0))) * 0.006f;
+      VoxelRowSamples s;
+      p.sampleRow(first, step, s);
+      for (int x = 0; x < 8; ++x) {
+        if (s.pixel[x] < 0) continue;
+        ++valid;
+        ASSERT_TRUE(std::isfinite(s.depth[x])) << (simd ? "AVX2" : "scalar") << " row " << i << " lane " << x;
+      }
+    }
+    EXPECT_GT(valid, 5000) << (simd ? "AVX2" : "scalar");
   }
 }

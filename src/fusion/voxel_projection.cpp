@@ -1,6 +1,7 @@
 #include "vofusion/fusion/voxel_projection.h"
 
 #include <algorithm>
+#include <cmath>
 #include <immintrin.h>
 
 #include "vofusion/core/cpu_features.h"
@@ -35,7 +36,9 @@ void sampleScalar(const Setup& s, const float* first, const float* step, VoxelRo
       const float hi = std::max(std::max(d00, d01), std::max(d10, d11));
       if (lo > 0.f && hi - lo < s.agree) {
         const float a = uf - u0, b = vf - v0;
-        d = (d00 * (1 - a) + d01 * a) * (1 - b) + (d10 * (1 - a) + d11 * a) * b;
+        const float blend = (d00 * (1 - a) + d01 * a) * (1 - b) + (d10 * (1 - a) + d11 * a) * b;
+        // A NaN neighbour passes lo and hi (std::min / max drop it) but not the blend.
+        if (!std::isnan(blend)) d = blend;
       }
     }
     out.depth[x] = d;
@@ -96,6 +99,7 @@ __attribute__((target("avx2"))) void sampleAvx2(const Setup& s, const float* fir
     const __m256 top = _mm256_add_ps(_mm256_mul_ps(d00, na), _mm256_mul_ps(d01, a));
     const __m256 bottom = _mm256_add_ps(_mm256_mul_ps(d10, na), _mm256_mul_ps(d11, a));
     const __m256 interp = _mm256_add_ps(_mm256_mul_ps(top, nb), _mm256_mul_ps(bottom, b));
+    bil = _mm256_and_ps(bil, _mm256_cmp_ps(interp, interp, _CMP_ORD_Q));
     d = _mm256_blendv_ps(d, interp, bil);
   }
   _mm256_storeu_ps(out.depth, d);
