@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <tuple>
 
 #include <sys/resource.h>
@@ -309,6 +310,23 @@ TEST(Rawlog, MaxFramesKeepsTheLastFramesGroundTruth) {
     EXPECT_NEAR(gt[n - 1].timestamp, frames[n - 1].timestamp, 1e-6);
     EXPECT_LT((gt[n - 1].pose.asVectorVal() - frames[n - 1].groundTruth->asVectorVal()).norm(), 1e-5);
   }
+}
+
+// A GROUND_TRUTH entry that is no pose (NaN or infinite: mocap lost the camera, written so by another
+// tool) is an unknown pose, as in a 7-Scenes folder: left out. It made every frame near it NaN and the
+// run's ATE null.
+TEST(Rawlog, AGroundTruthEntryThatIsNoPoseIsLeftOut) {
+  auto frames = simFrames(4);
+  frames[1].groundTruth = mrpt::poses::CPose3D(std::numeric_limits<double>::quiet_NaN(), 0, 0, 0, 0, 0);
+  frames[2].groundTruth = mrpt::poses::CPose3D(0, std::numeric_limits<double>::infinity(), 0, 0, 0, 0);
+  const std::string dir = test::tempDir("rawlog_gt_not_a_pose");
+  writeRawlog(dir + "/g.rawlog", frames, RawlogWriterOptions{});
+  RawlogSource src(dir + "/g.rawlog", {});
+  ASSERT_EQ(src.groundTruth().size(), 2u);
+  for (const StampedPose& p : src.groundTruth()) EXPECT_TRUE(p.pose.asVectorVal().asEigen().allFinite()) << p.timestamp;
+  Frame f;
+  while (src.next(f))
+    if (f.groundTruth) EXPECT_TRUE(f.groundTruth->asVectorVal().asEigen().allFinite()) << "frame " << f.index;
 }
 
 // A depth file that cannot be written is named where the user will look for it, <out>_Images/..., not

@@ -290,7 +290,9 @@ struct RawlogSource::Reader {
       if (auto s = std::dynamic_pointer_cast<CObservation3DRangeScan>(o)) {
         if (s->hasRangeImage) return s;
       } else if (gt && o->sensorLabel == kGroundTruthLabel) {
-        if (auto rp = std::dynamic_pointer_cast<mrpt::obs::CObservationRobotPose>(o))
+        // A pose that is no pose (NaN, infinite: mocap lost the camera) is unknown, as in 7-Scenes.
+        if (auto rp = std::dynamic_pointer_cast<mrpt::obs::CObservationRobotPose>(o);
+            rp && rp->pose.mean.asVectorVal().asEigen().allFinite())
           gt->push_back({mrpt::Clock::toDouble(rp->timestamp), rp->pose.mean});
       }
     }
