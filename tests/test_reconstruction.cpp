@@ -106,6 +106,24 @@ TEST(Reconstruction, FramesLeftAtIndexZeroAreRefused) {
   }
 }
 
+// A frame stamped NaN or infinite is refused: the motion model scaled by it put NaN in the pose (mode
+// joint, on a frame the odometry could not match), in the trajectory and in the run's ATE.
+TEST(Reconstruction, AFrameStampedWithNoNumberIsRefused) {
+  const sim::SyntheticSequence seq(smallRoom());
+  for (const double stamp : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    Reconstruction rec(test::quickRoomConfig(), TrackingMode::Joint);
+    rec.process(seq.render(0));
+    Frame f = seq.render(1);
+    f.timestamp = stamp;
+    try {
+      rec.process(f);
+      ADD_FAILURE() << "a frame stamped " << stamp << " was taken";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("frame 1 has a timestamp of"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(Reconstruction, AFrameWhoseOdometryFailsLosesNoMotion) {
   const sim::SyntheticSequence seq(smallRoom());
   const std::size_t blank = 6;

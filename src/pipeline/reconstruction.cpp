@@ -5,6 +5,7 @@
 #include "vofusion/core/state_archive.h"
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <map>
 
@@ -166,6 +167,11 @@ FrameReport Reconstruction::process(const Frame& frame) {
   if (m.last_index && frame.index <= *m.last_index)
     throw std::invalid_argument("Reconstruction: frame index " + std::to_string(frame.index) + " after " +
                                 std::to_string(*m.last_index) + " (Frame::index must grow: its position in the input)");
+  // Velocities, the colour-time correction and the trajectory are taken from the stamps: a NaN one
+  // would put NaN in the pose and every pose after it.
+  if (!std::isfinite(frame.timestamp))
+    throw std::invalid_argument("Reconstruction: frame " + std::to_string(frame.index) + " has a timestamp of " +
+                                std::to_string(frame.timestamp) + " (Frame::timestamp must be a number of seconds)");
   m.last_index = frame.index;
   const auto start = std::chrono::steady_clock::now();
   FrameReport r;
