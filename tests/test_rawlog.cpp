@@ -7,6 +7,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <chrono>
+#include <thread>
 #include <limits>
 #include <tuple>
 
@@ -548,6 +550,26 @@ TEST(Rawlog, ARecordingEndsWithItsImagesOnTheDisk) {
     for (const std::string& want : {"syncfs " + dir + "/conv_Images.tmp-" + pid, "fsync " + dir + "/conv.rawlog.tmp-" + pid})
       EXPECT_NE(std::find(synced.begin(), synced.end(), want), synced.end()) << want << ::testing::PrintToString(synced);
   }
+}
+
+// A frame whose record is in the file is recorded, even when the sync due after it fails (an I/O error):
+// the writer counted one frame fewer than the file held, and with none counted the recording was removed.
+TEST(Rawlog, AFrameWhoseSyncFailsIsStillCountedAndKept) {
+  const auto frames = simFrames(1);
+  const std::string dir = test::tempDir("rawlog_sync_fails");
+  const std::string path = std::filesystem::absolute(dir + "/rec.rawlog").string();
+  RawlogWriterOptions o;
+  o.in_place = true;
+  {
+    RawlogWriter w(path, o);
+    std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // the first sync is due at the first frame
+    test::SyncWatch watch;
+    watch.fail("fdatasync", path, EIO);
+    EXPECT_THROW(w.write(frames[0]), InputError);
+    EXPECT_EQ(w.framesWritten(), 1u);
+    EXPECT_EQ(RawlogSource(path, {}).size(), w.framesWritten());
+  }
+  EXPECT_TRUE(std::filesystem::exists(path)) << "a recording holding a whole frame was removed";
 }
 
 TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {

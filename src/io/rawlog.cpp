@@ -511,6 +511,9 @@ struct RawlogWriter::Impl {
   void endRecord() {
     if (records) records->endRecord();
   }
+  void syncIfDue() {
+    if (records) records->syncIfDue();
+  }
 };
 
 RawlogWriter::RawlogWriter(const std::string& path, const RawlogWriterOptions& opts) : path_(path), opts_(opts) {
@@ -554,6 +557,7 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
   if (opts_.format == RawlogWriterOptions::Format::Observations) {
     *impl_->arch << *copy;
     impl_->endRecord();
+    impl_->syncIfDue();
   } else {
     impl_->pending_obs.push_back(copy);
   }
@@ -617,6 +621,9 @@ std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
     throw InputError(path_, "write failed (disk full?)");
   }
   ++frames_;
+  // After the count: a frame in the file is a frame recorded (and kept by commit), even when its sync
+  // fails (it counted one frame too few, and a first frame's recording was removed).
+  impl_->syncIfDue();
   return files;
 }
 

@@ -55,8 +55,10 @@ void RecordFile::endRecord() {
   }
   written_ += record_.size();
   record_.clear();
-  const auto now = std::chrono::steady_clock::now();
-  if (now - last_sync_ > std::chrono::seconds(1)) sync();
+}
+
+void RecordFile::syncIfDue() {
+  if (std::chrono::steady_clock::now() - last_sync_ > std::chrono::seconds(1)) sync();
 }
 
 namespace {

@@ -30,6 +30,9 @@ class RecordFile : public mrpt::io::CStream {
   // left at its last whole record.
   void endRecord();
   void sync();  // to the disk now; throws InputError (an I/O error)
+  // sync() when the last was over a second ago. Apart from endRecord(): a record appended is in the
+  // file, counted by its writer, even when the sync after it fails.
+  void syncIfDue();
   // Whether a recorder (RecordFile holds an flock on its file while it lives) is writing `path` now.
   static bool heldByAnother(const std::string& path);
   // The file and everything written beside it (the images its records name, the folders' entries):
