@@ -17,6 +17,7 @@
 #include <mrpt/core/Clock.h>
 #include <mrpt/io/CFileGZOutputStream.h>
 #include <mrpt/obs/CObservationOdometry.h>
+#include <mrpt/obs/CObservationRobotPose.h>
 #include <mrpt/obs/CRawlog.h>
 #include <mrpt/serialization/CArchive.h>
 
@@ -257,6 +258,37 @@ TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {
   ASSERT_TRUE(mv);
   EXPECT_EQ(mv->estimationMethod, mrpt::obs::CActionRobotMovement3D::emVisualOdometry);
   EXPECT_LT((mv->poseChange.mean.asVectorVal() - delta.asVectorVal()).norm(), 1e-12);
+}
+
+// Observations that follow no frame (poses.rawlog's optimised poses, one per frame of the run) go out
+// in sensory frames of at most 4096: in one, a long run's passed what a reader allows one entry.
+TEST(Rawlog, ManyObservationsAfterTheFramesGoOutInBoundedEntries) {
+  const std::string dir = test::tempDir("rawlog_many_obs");
+  RawlogWriterOptions o;
+  o.format = RawlogWriterOptions::Format::ActionsSensoryFrames;
+  o.external_images = false;
+  const std::size_t n = 10000;
+  {
+    RawlogWriter w(dir + "/p.rawlog", o);
+    w.write(simFrames(1)[0]);
+    for (std::size_t i = 0; i < n; ++i) {
+      mrpt::obs::CObservationRobotPose pose;
+      pose.sensorLabel = "VOFUSION_POSE_OPTIMISED";
+      pose.timestamp = mrpt::Clock::fromDouble(1.0 + double(i) / 30);
+      w.writeObservation(pose);
+    }
+    w.commit();
+  }
+  mrpt::obs::CRawlog log;
+  ASSERT_TRUE(log.loadFromRawLogFile(dir + "/p.rawlog"));
+  std::size_t poses = 0;
+  for (std::size_t i = 0; i < log.size(); ++i) {
+    if (log.getType(i) != mrpt::obs::CRawlog::etSensoryFrame) continue;
+    const auto sf = log.getAsObservations(i);
+    EXPECT_LE(sf->size(), 4096u) << "entry " << i;
+    for (const auto& obs : *sf) poses += obs->sensorLabel == "VOFUSION_POSE_OPTIMISED";
+  }
+  EXPECT_EQ(poses, n);
 }
 
 TEST(Rawlog, GroundTruthCompanionFile) {

@@ -560,6 +560,19 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
     impl_->syncIfDue();
   } else {
     impl_->pending_obs.push_back(copy);
+    // Observations that follow no frame (a run's optimised poses, one per frame) go out in sensory
+    // frames of at most this many: all in one, four hours' poses passed the 256 MiB a reader allows an
+    // entry (kMaxEntryTotal).
+    constexpr std::size_t kMaxObservationsPerEntry = 4096;
+    if (impl_->pending_obs.size() >= kMaxObservationsPerEntry) {
+      mrpt::obs::CSensoryFrame sf;
+      for (const auto& o : impl_->pending_obs) sf.insert(o);
+      *impl_->arch << impl_->pending_actions << sf;
+      impl_->pending_actions.clear();
+      impl_->pending_obs.clear();
+      impl_->endRecord();
+      impl_->syncIfDue();
+    }
   }
 }
 
