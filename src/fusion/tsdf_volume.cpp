@@ -333,15 +333,16 @@ void TsdfVolume::save(std::ostream& os) const {
     os.write(reinterpret_cast<const char*>(z.data()), static_cast<std::streamsize>(z.size()));
   };
   // Compression is most of a save's time (a checkpoint stops the frame loop): the volume's bricks are
-  // compressed on every core, then written in order; the world model's are read one by one.
+  // compressed on every core, then written in order; the world model's go as stored (those on disk
+  // already compressed), one by one.
   std::vector<std::vector<std::uint8_t>> packed(vol.size());
   parallelFor(0, int(vol.size()), [&](int i) { packed[std::size_t(i)] = compressBrick(*vol[std::size_t(i)].brick); }, 16);
   for (std::size_t i = 0; i < vol.size(); ++i) write(vol[i].brick->coord, packed[i]);
   packed.clear();
-  Brick scratch;
+  std::vector<std::uint8_t> stored;
   for (const Eigen::Vector3i& c : world) {
-    world_->read(c, scratch);
-    write(scratch.coord, compressBrick(scratch));
+    if (!world_->readCompressed(c, stored)) throw std::logic_error("TsdfVolume::save: a brick left the world model while saving");
+    write(c, stored);
   }
   os.write("END\n", 4);
   if (!os) throw std::runtime_error("write failed (disk full?)");

@@ -203,6 +203,15 @@ bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
   return true;
 }
 
+bool WorldModel::readCompressed(const Eigen::Vector3i& c, std::vector<std::uint8_t>& out) const {
+  const std::shared_lock lock(mutex_);
+  const std::uint64_t k = key(c);
+  if (const auto it = ram_.find(k); it != ram_.end()) out = compressBrick(*it->second.brick);
+  else if (const auto record = disk_.find(k)) out = spill_.read(*record);  // spilled as compressBrick makes it
+  else return false;
+  return true;
+}
+
 template <class F>
 void WorldModel::forEachKey(F&& f) const {
   for (const auto& [k, e] : ram_) f(k);

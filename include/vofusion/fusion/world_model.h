@@ -70,6 +70,10 @@ class WorldModel {
   // Copies a stored brick without changing what is cached; false when there is none. Safe beside
   // other reads on other threads.
   bool read(const Eigen::Vector3i& c, Brick& out) const;
+  // A stored brick's voxels as compressBrick() gives them: a brick on disk is its record as stored, not
+  // decompressed and compressed again (what a save of a long run's map spent most of its time on).
+  // False when there is none.
+  bool readCompressed(const Eigen::Vector3i& c, std::vector<std::uint8_t>& out) const;
 
   std::size_t size() const;
   bool contains(const Eigen::Vector3i& c) const;
