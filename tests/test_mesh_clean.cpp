@@ -219,6 +219,35 @@ TEST(MeshClean, LargeOpeningsStayOpenSmallHolesClose) {
   EXPECT_NEAR(totalArea(m), ref_area, 0.01 * ref_area);
 }
 
+// A room scanned all round (closed once its small holes are filled) keeps its faces towards the room,
+// where the cameras were: marching cubes faces the free space it saw, and orienting the closed result
+// outward (CGAL decides at the highest vertex: the ceiling) turned the room inside out.
+TEST(MeshClean, AClosedRoomKeepsItsFacesTowardsTheRoom) {
+  const int n = 8;
+  TriangleMesh m = test::boxRoom(4, 3, 2.5, n);  // floor first, every face towards the inside
+  const auto floor_vertices = std::uint32_t((n + 1) * (n + 1)), base = std::uint32_t(m.vertices.size());
+  for (std::uint32_t i = 0; i < floor_vertices; ++i) {  // the ceiling: the floor lifted, facing down
+    m.vertices.push_back({m.vertices[i].x(), m.vertices[i].y(), 2.5f});
+    m.colors.push_back(m.colors[i]);
+  }
+  for (int f = 0; f < 2 * n * n; ++f) {
+    const auto t = m.faces[std::size_t(f)];
+    m.faces.push_back({t[0] + base, t[2] + base, t[1] + base});
+  }
+  const MeshCleanReport r = cleanMesh(m, MeshCleanParams{});
+  ASSERT_TRUE(r.success) << r.failure;
+  ASSERT_TRUE(r.closed);
+  double floor_up = 0, ceiling_up = 0;
+  for (const auto& f : m.faces) {
+    const Eigen::Vector3f a = m.vertices[f[0]], b = m.vertices[f[1]], c = m.vertices[f[2]];
+    const float nz = (b - a).cross(c - a).z(), z = (a.z() + b.z() + c.z()) / 3;
+    if (z < 0.01f) floor_up += nz;
+    if (z > 2.49f) ceiling_up += nz;
+  }
+  EXPECT_GT(floor_up, 0.0) << "the floor faces down: the room was turned inside out";
+  EXPECT_LT(ceiling_up, 0.0);
+}
+
 TEST(MeshClean, NonManifoldVertexIsSplit) {
   // Two tetrahedra touching at one vertex (a bow-tie vertex).
   TriangleMesh m;

@@ -34,7 +34,9 @@ struct MeshCleanParams : public mrpt::config::CLoadableOptions {
   int smooth_iterations = 0;           // iterations of PMP::smooth_shape (0: off)
   double smooth_time = 1e-4;           // s-like step of the mean-curvature flow per iteration
   int relax_iterations = 0;            // iterations of PMP::tangential_relaxation (0: off)
-  bool orient_closed_outward = true;   // if the result is closed, orient every component outward
+  // If the result is closed, orient every component outward: off, since marching cubes already faces
+  // the free space the cameras saw, which for a room scanned all round is its inside.
+  bool orient_closed_outward = false;
   bool recompute_normals = true;       // write fresh area-weighted vertex normals
   // vofusion only: marching cubes, repair and simplification one block of region_bricks^3 bricks at
   // a time (seams kept), the other steps on the welded result; 0: the whole world at once.
