@@ -248,6 +248,31 @@ TEST(MeshClean, AClosedRoomKeepsItsFacesTowardsTheRoom) {
   EXPECT_LT(ceiling_up, 0.0);
 }
 
+// A small piece on its own (kept: more faces than min_component_faces) has one border, its outline, which
+// is no hole: filling it laid a second sheet over the piece, facing the other way (a closed "pillow").
+TEST(MeshClean, ASmallPiecesOutlineIsNoHole) {
+  TriangleMesh m;
+  const int n = 10;  // a 5 x 5 cm square of 200 faces: perimeter 0.2 m, within max_hole_perimeter
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) m.vertices.push_back({0.005f * i, 0.005f * j, 1.f});
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const auto a = std::uint32_t(j * (n + 1) + i), b = a + 1, c = a + n + 1, d = c + 1;
+      m.faces.push_back({a, b, d});
+      m.faces.push_back({a, d, c});
+    }
+  const double area = totalArea(m);
+  MeshCleanParams p;
+  p.max_simplify_error = 0;
+  ASSERT_LT(0.2, p.max_hole_perimeter);
+  ASSERT_LT(std::size_t(p.min_component_faces), m.faces.size());
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_EQ(r.holes_filled, 0u);
+  EXPECT_FALSE(r.closed);
+  EXPECT_NEAR(totalArea(m), area, 1e-6);
+}
+
 TEST(MeshClean, NonManifoldVertexIsSplit) {
   // Two tetrahedra touching at one vertex (a bow-tie vertex).
   TriangleMesh m;

@@ -566,10 +566,28 @@ class Cleaner {
     r_.components_removed += drop.size();
   }
 
+  // Per connected component: its border cycles and its area; `component` maps each face to its own.
+  struct Pieces {
+    std::vector<std::size_t> borders;
+    std::vector<double> area;
+  };
+  Pieces piecesOf(const std::vector<HD>& cycles, Mesh::Property_map<FD, std::size_t> component) const {
+    Pieces p;
+    const std::size_t n = PMP::connected_components(m_, component);
+    p.borders.assign(n, 0);
+    p.area.assign(n, 0.0);
+    for (FD f : m_.faces()) p.area[component[f]] += PMP::face_area(f, m_);
+    for (HD start : cycles) ++p.borders[component[m_.face(m_.opposite(start))]];
+    return p;
+  }
+
   static constexpr std::size_t kFullSearchEdges = 200;
   void fillHoles() {
     std::vector<HD> cycles;
     PMP::extract_boundary_cycles(m_, std::back_inserter(cycles));
+    auto component = m_.add_property_map<FD, std::size_t>("f:cc_holes", 0).first;
+    const Pieces pieces = piecesOf(cycles, component);
+    std::vector<std::pair<HD, std::size_t>> holes;  // border cycle, edges
     for (HD start : cycles) {
       double perimeter = 0.0;
       std::size_t edges = 0;
@@ -583,6 +601,15 @@ class Cleaner {
         ++r_.holes_left;
         continue;
       }
+      // A piece whose only border could enclose all of it (the largest area a curve of that length
+      // encloses, a disc's) is bounded by it: an outline, not a hole. Filled, it became a second sheet
+      // over the piece, facing the other way.
+      const std::size_t c = component[m_.face(m_.opposite(start))];
+      if (pieces.borders[c] == 1 && pieces.area[c] <= perimeter * perimeter / (4.0 * M_PI)) continue;
+      holes.emplace_back(start, edges);
+    }
+    m_.remove_property_map(component);
+    for (const auto& [start, edges] : holes) {
       std::vector<FD> new_faces;
       std::vector<VD> new_vertices;
       // CGAL's full search of the patch, not the one restricted to the 3D Delaunay triangulation of the
