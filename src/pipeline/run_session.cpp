@@ -103,41 +103,52 @@ std::string firstDifference(const std::string& saved, const std::string& now) {
   }
 }
 
-// What poses.rawlog and the summary take from a frame's report.
-FrameReport outputsPart(const FrameReport& r) {
-  FrameReport s;
+using SavedReport = RunSession::SavedReport;
+
+// What poses.rawlog and the summary take from a frame's report, and back.
+SavedReport saved(const FrameReport& r) {
+  SavedReport s;
   s.index = r.index;
   s.timestamp = r.timestamp;
   s.tracked = r.tracked;
   s.fell_back = r.fell_back;
   s.predicted = r.predicted;
-  s.pose = r.pose;
-  s.odometry.success = r.odometry.success;
-  s.odometry.motion = r.odometry.motion;
-  s.odometry.covariance = r.odometry.covariance;
+  s.odometry_success = r.odometry.success;
+  s.pose = toEigen(r.pose);
+  s.motion = toEigen(r.odometry.motion);
+  s.covariance = r.odometry.covariance.asEigen();
   return s;
 }
 
-void writeReport(state::Archive& a, const FrameReport& r) {
-  a << uint64_t(r.index) << r.timestamp << r.tracked << r.fell_back << r.predicted << r.odometry.success;
-  state::write(a, toEigen(r.pose));
-  state::write(a, toEigen(r.odometry.motion));
-  for (int i = 0; i < 6; ++i)
-    for (int j = 0; j < 6; ++j) a << r.odometry.covariance(i, j);
+FrameReport reportOf(const SavedReport& s) {
+  FrameReport r;
+  r.index = s.index;
+  r.timestamp = s.timestamp;
+  r.tracked = s.tracked;
+  r.fell_back = s.fell_back;
+  r.predicted = s.predicted;
+  r.odometry.success = s.odometry_success;
+  r.pose = toMrpt(s.pose);
+  r.odometry.motion = toMrpt(s.motion);
+  r.odometry.covariance = s.covariance;
+  return r;
 }
 
-FrameReport readReport(state::Archive& a) {
-  FrameReport r;
-  uint64_t index = 0;
-  a >> index >> r.timestamp >> r.tracked >> r.fell_back >> r.predicted >> r.odometry.success;
-  r.index = index;
-  Eigen::Isometry3d T;
-  state::read(a, T);
-  r.pose = toMrpt(T);
-  state::read(a, T);
-  r.odometry.motion = toMrpt(T);
+void writeReport(state::Archive& a, const SavedReport& r) {
+  a << r.index << r.timestamp << r.tracked << r.fell_back << r.predicted << r.odometry_success;
+  state::write(a, r.pose);
+  state::write(a, r.motion);
   for (int i = 0; i < 6; ++i)
-    for (int j = 0; j < 6; ++j) a >> r.odometry.covariance(i, j);
+    for (int j = 0; j < 6; ++j) a << r.covariance(i, j);
+}
+
+SavedReport readReport(state::Archive& a) {
+  SavedReport r;
+  a >> r.index >> r.timestamp >> r.tracked >> r.fell_back >> r.predicted >> r.odometry_success;
+  state::read(a, r.pose);
+  state::read(a, r.motion);
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) a >> r.covariance(i, j);
   return r;
 }
 
@@ -164,7 +175,7 @@ FrameReport RunSession::process(const Frame& frame) {
   if (replaying()) throw std::logic_error("RunSession::process before the checkpoint's frames were replayed");
   const FrameReport report = rec_.process(frame);
   recorder_.add(frame, report);
-  reports_.push_back(outputsPart(report));
+  reports_.push_back(saved(report));
   return report;
 }
 
@@ -177,7 +188,7 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
     {
       auto a = state::archiveOf(os);
       a << origin << uint64_t(reports_.size()) << seconds;
-      for (const FrameReport& r : reports_) writeReport(a, r);
+      for (const SavedReport& r : reports_) writeReport(a, r);
     }
     rec_.saveState(os);
     auto a = state::archiveOf(os);
@@ -270,12 +281,12 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
 
 bool RunSession::replay(const Frame& frame) {
   if (!replaying()) throw std::logic_error("RunSession::replay past the checkpoint's frames");
-  const FrameReport& r = reports_[replayed_];
+  const SavedReport& r = reports_[replayed_];
   if (frame.timestamp < r.timestamp - 1e-6) return false;  // recorded, not processed (live drops)
   if (frame.timestamp > r.timestamp + 1e-6)
     throw InputError(resumed_from_, "the input has no frame at " + std::to_string(r.timestamp) + " s (frame " +
                                         std::to_string(replayed_) + " the checkpoint processed): resume with the same input");
-  recorder_.add(frame, r);
+  recorder_.add(frame, reportOf(r));
   ++replayed_;
   return true;
 }

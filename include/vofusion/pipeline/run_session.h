@@ -69,6 +69,17 @@ class RunSession {
   bool replay(const Frame& frame);
   bool replaying() const { return replayed_ < resumed_frames_; }
 
+  // A processed frame's report as the outputs need it (no images, matches or maps): a checkpoint keeps
+  // them, so that a resumed run writes poses.rawlog for every frame. 568 bytes, where a FrameReport
+  // takes 1152 (a live hour at 30 Hz: 61 against 124 MB).
+  struct SavedReport {
+    std::uint64_t index = 0;
+    double timestamp = 0.0;
+    bool tracked = false, fell_back = false, predicted = false, odometry_success = false;
+    Eigen::Isometry3d pose, motion;          // camera-to-world; the odometry's motion
+    Eigen::Matrix<double, 6, 6> covariance;  // of the motion
+  };
+
  private:
   void refuse(RunInfo& info, const Reopen& reopen);
 
@@ -78,9 +89,7 @@ class RunSession {
   Reconstruction rec_;
   RunRecorder recorder_;
   bool write_mesh_;  // the map is used at all after the frame loop
-  // Each processed frame's report as the outputs need it (no images, matches or maps): a checkpoint
-  // keeps them, so that a resumed run writes poses.rawlog for every frame.
-  std::vector<FrameReport> reports_;
+  std::vector<SavedReport> reports_;
   std::size_t resumed_frames_ = 0, replayed_ = 0;
   std::string resumed_from_;
 };
