@@ -97,6 +97,44 @@ TEST(Checkpoint, AReconstructionResumedAtAnyFrameEndsBitForBitAsAnUninterruptedO
   }
 }
 
+// A live recording whose clock stepped back by a second while the queue dropped two frames: the run's
+// frames are found again by their index (their place in the recording), not by their time. By time,
+// resuming threw "the input has no frame at ..." and re-fusing passed over every frame after the step.
+TEST(Checkpoint, AClockSteppedBackBetweenDroppedFramesLosesNoFrame) {
+  const std::size_t n = 24, dropped_from = 10, resume_at = 16;
+  const sim::SyntheticSequence seq(test::quickSim("room", n));
+  std::vector<Frame> recording;
+  for (std::size_t i = 0; i < n; ++i) {
+    Frame f = seq.render(i);
+    f.timestamp = 100.0 + double(i) / 30 - (i >= 12 ? 1.0 : 0.0);  // the clock steps back before frame 12
+    recording.push_back(f);
+  }
+  const auto processed = [&](std::size_t i) { return i != dropped_from && i != dropped_from + 1; };
+  const auto cfg = test::quickRoomConfig();
+  {
+    Reconstruction rec(cfg, TrackingMode::Joint);
+    for (std::size_t i = 0; i < n; ++i)
+      if (processed(i)) rec.process(test::deepCopy(recording[i]));
+    std::size_t read = 0;
+    const std::size_t fused = rec.reintegrate([&](Frame& f) { return read < n ? (f = test::deepCopy(recording[read++]), true) : false; });
+    ASSERT_EQ(rec.lostFrames() + rec.predictedFrames() + rec.fallbacks(), 0u);  // every processed frame was fused
+    EXPECT_EQ(fused, n - 2) << "frames fused again of the " << n - 2 << " processed";
+  }
+  const std::string dir = test::tempDir("checkpoint_clock_back");
+  {
+    RunSession run(cfg, TrackingMode::Joint, dir + "/out", OutputParams(), MeshCleanParams());
+    for (std::size_t i = 0; i < resume_at; ++i)
+      if (processed(i)) run.process(test::deepCopy(recording[i]));
+    run.saveCheckpoint(dir + "/checkpoint", "input room\n", 1.0);
+  }
+  RunSession again(cfg, TrackingMode::Joint, dir + "/again", OutputParams(), MeshCleanParams());
+  again.resume(dir + "/checkpoint", "input room\n");
+  std::size_t replayed = 0, i = 0;
+  for (; again.replaying(); ++i) replayed += again.replay(test::deepCopy(recording[i]));
+  EXPECT_EQ(i, resume_at);
+  EXPECT_EQ(replayed, resume_at - 2);
+}
+
 TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
   const sim::SyntheticSequence seq(test::quickSim("room", 6));
   const auto cfg = roomConfig();
@@ -145,8 +183,8 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
   // matches (so that the reader's own guard is what is tested): refused, not first zero-filled (4 GiB).
   {
     std::string huge = bytes;
-    const std::size_t at = std::string("VOFUSION-CHECKPOINT-3\n").size();
-    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-3\n"), 0);
+    const std::size_t at = std::string("VOFUSION-CHECKPOINT-4\n").size();
+    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-4\n"), 0);
     huge.replace(at, 4, "\xff\xff\xff\xff");
     const std::size_t body = huge.size() - 20;  // the trailer: "CHECKSUM", CRC-32, length
     ASSERT_EQ(huge.compare(body, 8, "CHECKSUM"), 0);
@@ -169,8 +207,8 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
     std::ofstream(dir + "/flipped", std::ios::binary) << flipped;
     EXPECT_EQ(refusal(dir + "/flipped", "input room\n"), "truncated or corrupt checkpoint: its checksum does not match (a damaged byte)");
   }
-  // Ones of earlier layouts (1 had no resumed map's name, 2 no checksum): said so, not misread as corrupt.
-  for (const char* version : {"1", "2"}) {
+  // Ones of earlier layouts (1 had no resumed map's name, 2 no checksum, 3 no frame indices): said so, not misread as corrupt.
+  for (const char* version : {"1", "2", "3"}) {
     std::ofstream(dir + "/old", std::ios::binary) << "VOFUSION-CHECKPOINT-" << version << "\n" << bytes.substr(22);
     EXPECT_TRUE(RunSession::isCheckpoint(dir + "/old"));
     EXPECT_FALSE(RunSession::peek(dir + "/old").has_value());

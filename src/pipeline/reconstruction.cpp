@@ -75,6 +75,7 @@ struct Reconstruction::Impl {
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
   KinFuStats released_stats;                // fusionStats() when releaseMap() freed the map
   std::vector<bool> fused;                  // per frame: fused into the map during tracking
+  std::vector<std::uint64_t> indices;       // per frame: its Frame::index (re-fusion finds it by that)
   StageTimes times;
   std::size_t frames = 0, fallbacks = 0, predicted = 0, lost = 0, odo_failures = 0;
   ColourTimeStats colour_time;
@@ -232,6 +233,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
   ++m.frames;
   m.trajectory.push_back({frame.timestamp, f.pose});
   m.fused.push_back(r.tracked && !r.predicted && (!r.fell_back || m.kinfu_params.integrate_on_fallback));
+  m.indices.push_back(frame.index);
   if (m.loops) {
     ScopedStageTimer t(r.times, "keyframes");
     m.loops->addFrame(frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, f.icp_rms, r.odometry.features);
@@ -314,9 +316,11 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   while (read < poses.size() && next(frame)) {
     // A recording may hold frames the run never processed (dropped by the live queue): skipped. It may
     // lack frames the run processed (damaged since): their poses are passed over, not given to the next.
-    while (read < poses.size() && frame.timestamp > poses[read].timestamp + 1e-3) ++read;
+    // By index, not by time: a live clock stepped back between dropped frames put every frame after
+    // the step behind a dropped one, and none of them was fused again.
+    while (read < poses.size() && frame.index > m.indices[read]) ++read;
     if (read == poses.size()) break;
-    if (frame.timestamp < poses[read].timestamp - 1e-3) continue;
+    if (frame.index < m.indices[read]) continue;
     if (m.fused[read]) map.integrateAt(frame, poses[read].pose), ++fused;
     ++read;
     if (progress) progress(read);
@@ -348,7 +352,7 @@ void Reconstruction::saveState(std::ostream& os) const {
       a << p.timestamp;
       state::write(a, toEigen(p.pose));
     }
-    a << m.fused;
+    a << m.fused << m.indices;
     for (std::size_t n : {m.frames, m.fallbacks, m.predicted, m.lost, m.odo_failures}) a << uint64_t(n);
     a << m.colour_time.known << m.colour_time.capture << int32_t(m.colour_time.compared) << int32_t(m.colour_time.capture_better);
     std::map<int32_t, uint64_t> rejections;
@@ -384,7 +388,9 @@ void Reconstruction::loadState(std::istream& is) {
       state::read(a, T);
       p.pose = toMrpt(T);
     }
-    a >> m.fused;
+    a >> m.fused >> m.indices;
+    if (m.fused.size() != m.trajectory.size() || m.indices.size() != m.trajectory.size())
+      throw std::runtime_error("checkpoint: per-frame lists of different lengths");
     for (std::size_t* c : {&m.frames, &m.fallbacks, &m.predicted, &m.lost, &m.odo_failures}) {
       a >> n;
       *c = n;

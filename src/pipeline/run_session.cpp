@@ -1,5 +1,6 @@
 #include "vofusion/pipeline/run_session.h"
 
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -27,7 +28,7 @@ namespace vofusion {
 
 namespace {
 
-constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-3\n";  // 2: the resumed map's name; 3: the checksum
+constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-4\n";  // 2: the resumed map's name; 3: the checksum; 4: frame indices
 
 // A checkpoint ends with kChecksumTag, the CRC-32 of every byte before the tag (4 bytes) and their count
 // (8), little-endian: a flipped byte in a pose or a descriptor is refused, not resumed from.
@@ -282,10 +283,12 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
 bool RunSession::replay(const Frame& frame) {
   if (!replaying()) throw std::logic_error("RunSession::replay past the checkpoint's frames");
   const SavedReport& r = reports_[replayed_];
-  if (frame.timestamp < r.timestamp - 1e-6) return false;  // recorded, not processed (live drops)
-  if (frame.timestamp > r.timestamp + 1e-6)
-    throw InputError(resumed_from_, "the input has no frame at " + std::to_string(r.timestamp) + " s (frame " +
-                                        std::to_string(replayed_) + " the checkpoint processed): resume with the same input");
+  // By index, as the run numbered its input (a live run: the recording's frames in order), not by time:
+  // a clock stepped back between dropped frames put the frames after the step behind a dropped one.
+  if (frame.index < r.index) return false;  // recorded, not processed (live drops)
+  if (frame.index > r.index || std::abs(frame.timestamp - r.timestamp) > 1e-6)
+    throw InputError(resumed_from_, "the input has no frame " + std::to_string(r.index) + " at " + std::to_string(r.timestamp) +
+                                        " s (frame " + std::to_string(replayed_) + " the checkpoint processed): resume with the same input");
   recorder_.add(frame, reportOf(r));
   ++replayed_;
   return true;

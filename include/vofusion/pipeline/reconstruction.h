@@ -87,9 +87,9 @@ class Reconstruction {
   double maxLoopCorrection() const;  // after finish(): largest distance the loops moved a fused pose, m
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
   // fresh volume at the corrected poses (the loops' corrections of the poses as tracked); frames not
-  // fused the first time are skipped again, and so are frames the run never processed (earlier than
-  // the next processed frame's timestamp). progress gets the number of frames read. Returns the number
-  // of frames fused.
+  // fused the first time are skipped again, and so are frames the run never processed (found by
+  // Frame::index: the input read again gives each frame its index of the run). progress gets the number
+  // of frames read. Returns the number of frames fused.
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
                           const std::function<void(std::size_t)>& progress = nullptr);
   bool reintegrated() const;
