@@ -451,6 +451,10 @@ TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
     for (std::size_t j = 0; j < k.features->points.size(); ++j) ASSERT_EQ(k.features->points[j], made[i].features->points[j]);
   }
   EXPECT_EQ(store.stats().reloaded, 2u);
+  // What a checkpoint writes of each: the bytes encodeKeyframeData makes, a spilled one's record as
+  // stored (not read back and decoded).
+  for (std::size_t i = 0; i < frames.size(); ++i) EXPECT_EQ(store.data(i), encodeKeyframeData(made[i])) << "keyframe " << i;
+  EXPECT_EQ(store.stats().reloaded, 2u);
   // A record cut short is an error, not a keyframe with garbage in it.
   std::vector<std::uint8_t> bytes = encodeKeyframeData(made[0]);
   bytes.resize(bytes.size() / 2);

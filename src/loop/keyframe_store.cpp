@@ -122,6 +122,11 @@ Keyframe KeyframeStore::load(std::size_t id) const {
   return k;
 }
 
+std::vector<std::uint8_t> KeyframeStore::data(std::size_t id) const {
+  if (id >= spilled_) return encodeKeyframeData(keyframes_.at(id));
+  return spill_.read(records_[id]);  // spilled as encodeKeyframeData made it
+}
+
 KeyframeStoreStats KeyframeStore::stats() const {
   KeyframeStoreStats s;
   s.keyframes = keyframes_.size();

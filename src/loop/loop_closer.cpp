@@ -291,11 +291,11 @@ void LoopCloser::saveState(std::ostream& os) const {
   a << std::vector<uint64_t>(m.keyframe_position.begin(), m.keyframe_position.end());
   a << uint64_t(m.keyframes.size());
   for (std::size_t id = 0; id < m.keyframes.size(); ++id) {
-    const Keyframe k = m.keyframes.load(id);
+    const Keyframe& k = m.keyframes.at(id);  // its depth and features: data(id), as stored
     a << uint64_t(k.id) << uint64_t(k.frame_index) << k.timestamp << k.path_length << k.after_poor_tracking;
     state::write(a, k.tracked);
     state::write(a, k.camera);
-    a << encodeKeyframeData(k);
+    a << m.keyframes.data(id);
   }
 }
 

@@ -39,6 +39,9 @@ class KeyframeStore {
   // The whole keyframe, read back from disk when spilled (not cached again: old keyframes are
   // visited once per loop candidate).
   Keyframe load(std::size_t id) const;
+  // Its depth and features as encodeKeyframeData() gives them: a spilled keyframe's record as stored,
+  // not read back, decoded and encoded again (a checkpoint does so for every keyframe of the run).
+  std::vector<std::uint8_t> data(std::size_t id) const;
   KeyframeStoreStats stats() const;
 
  private:
