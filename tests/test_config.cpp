@@ -65,6 +65,12 @@ TEST(Config, RetiredKeySaysItsValueIsFixedInCode) {
   EXPECT_EQ(refusal(dir + "/c.ini", "[kinfu]\nguess_margin = 0.8\n", "kinfu"),
             dir + "/c.ini: 'guess_margin' in section [kinfu] is no longer a key: its value is fixed in code "
                   "(docs/tracking.md gives the figures); remove the line");
+  // Retired on 2026-12-05: keys with no effect on a default run.
+  for (const auto& [section, key, doc] : {std::tuple{"kinfu", "integrate_filtered", "tracking"}, std::tuple{"kinfu", "mark_step", "tracking"},
+                                          std::tuple{"narf", "recursive_scale_reduction", "odometry"}})
+    EXPECT_EQ(refusal(dir + "/d.ini", std::string("[") + section + "]\n" + key + " = 1\n", section),
+              dir + "/d.ini: '" + key + "' in section [" + section + "] is no longer a key: its value is fixed in code (docs/" + doc +
+                  ".md gives the figures); remove the line");
   // The same name in another section is an ordinary unknown key.
   EXPECT_EQ(refusal(dir + "/b.ini", "[kinfu]\nmax_loop_chi2 = 22.5\n", "kinfu"),
             dir + "/b.ini: unknown key 'max_loop_chi2' in section [kinfu]");

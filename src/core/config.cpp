@@ -114,9 +114,11 @@ struct RetiredKey {
 };
 constexpr RetiredKey kRetiredKeys[] = {
     {"kinfu", "guess_margin", "docs/tracking.md"},
+    {"kinfu", "integrate_filtered", "docs/tracking.md"},
     {"kinfu", "joint_match_cauchy", "docs/tracking.md"},
     {"kinfu", "joint_photometric_huber", "docs/tracking.md"},
     {"kinfu", "joint_photometric_min_gradient", "docs/tracking.md"},
+    {"kinfu", "mark_step", "docs/tracking.md"},
     {"kinfu", "min_condition", "docs/tracking.md"},
     {"kinfu", "tracking_downsample", "docs/tracking.md"},
     {"loop", "loop_sigma_rotation", "docs/loop-closure.md"},
@@ -127,6 +129,7 @@ constexpr RetiredKey kRetiredKeys[] = {
     {"loop", "odometry_sigma_rate", "docs/loop-closure.md"},
     {"loop", "poor_tracking_sigma_scale", "docs/loop-closure.md"},
     {"loop", "strain_rms_ratio", "docs/loop-closure.md"},
+    {"narf", "recursive_scale_reduction", "docs/odometry.md"},
 };
 }  // namespace
 

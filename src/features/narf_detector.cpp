@@ -24,7 +24,6 @@ std::vector<ConfigKey> narfKeys(NarfParams& p) {
       {"max_points", &p.max_points, "strongest kept, 0 = all", 0.0, 100000.0},
       {"min_interest_value", &p.min_interest_value, "[0,1]", 0.0, 1.0},
       {"threads", &p.threads, "OpenMP threads of PCL's border extraction (implementation pcl)", 1.0, 64.0},
-      {"recursive_scale_reduction", &p.recursive_scale_reduction, "implementation pcl only; no effect in PCL 1.13 (sparse interest image)"},
       ConfigKey::oneOf("implementation", &p.implementation, "fast = PCL's steps on flat arrays; pcl = pcl::NarfKeypoint",
                        {"fast", "pcl"}),
   };
@@ -82,7 +81,7 @@ std::vector<int> pclInterestPoints(const cv::Mat& d, const CameraIntrinsics& cam
   np.support_size = float(p.support_size);
   np.min_interest_value = float(p.min_interest_value);
   np.max_no_of_threads = 1;
-  np.use_recursive_scale_reduction = p.recursive_scale_reduction;
+  np.use_recursive_scale_reduction = false;  // PCL 1.13 ignores it with the sparse interest image it uses
   np.max_no_of_interest_points = p.max_points > 0 ? p.max_points : -1;
   pcl::PointCloud<int> indices;
   narf.compute(indices);

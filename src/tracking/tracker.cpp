@@ -179,9 +179,10 @@ void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLev
   FrameToFuse f;
   // A constant-velocity guess is not fused: nothing measured where the camera was.
   f.integrate = !res.predicted && (!res.fell_back || params.integrate_on_fallback);
-  // The filtered depth only where tracking ran at the frame's own resolution.
-  const bool full_resolution = levels[0].depth.size() == frame.depth.size();
-  f.depth = params.integrate_filtered && full_resolution ? levels[0].depth : frame.depth;
+  // The raw depth: the tracking levels are a half-resolution copy at 640 px, or (with the odometry's
+  // geometry) the raw depth clipped, never a filtered one at the frame's size (the retired key
+  // integrate_filtered, docs/tracking.md).
+  f.depth = frame.depth;
   f.rgb = frame.rgb;
   f.hint = levels[0].depth;
   f.cam = cam;

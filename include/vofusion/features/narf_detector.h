@@ -23,8 +23,6 @@ struct NarfParams : public mrpt::config::CLoadableOptions {
   double min_interest_value = 0.45; // [0, 1]; PCL default
   int threads = 2;                  // implementation pcl: OpenMP threads of PCL's border extraction; the
                                     // interest search always runs on one (more makes the keypoints vary)
-  bool recursive_scale_reduction = false;  // PCL option, implementation pcl only: PCL 1.13 ignores it with
-                                           // the sparse interest image it uses (same keypoints on or off)
   std::string implementation = "fast";     // "fast": narf_fast.h, PCL's steps on flat arrays;
                                            // "pcl": pcl::NarfKeypoint itself (the reference)
 

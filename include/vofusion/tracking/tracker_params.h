@@ -24,7 +24,6 @@ struct TrackerParams {
   float max_jump_translation = 0.05f; // m, ICP pose vs the prior's prediction (modes joint, paper-handoff)
   float max_jump_rotation = 5.0f;     // degrees, same
   bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback
-  bool integrate_filtered = false;    // fuse the bilateral-filtered depth instead of the raw one
                                       // (when tracking at full resolution only)
   // Mode joint: one Gauss-Newton over the ICP residuals and the prior's point matches (its robust
   // kernels and the initial guess's margin are fixed in code: tracking/joint_policy.h).
