@@ -7,7 +7,8 @@ sequence folder) and each mode it runs build/bin/vofusion, measures wall time an
 process (wait4), reads summary.json (loop fps, per-stage ms/frame, fallbacks, lost frames), evaluates
 trajectory.txt against the ground truth with rgbd-eval (ATE, RPE over 1 s) and draws the appendix
 figure (top view with error vectors + translational error over time) with rgbd-eval --plot.
-Writes bench/results/<sequence>.md and .json and bench/results/<sequence>/<mode>.png.
+Writes bench/results/<sequence>.md and .json and bench/results/<sequence>/<mode>.png (a partial run:
+under <build>/bench-runs/results/ instead).
 """
 import argparse
 import datetime
@@ -134,7 +135,7 @@ def write_results(res, args, command):
     res["date"] = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     res["command"] = command
     res["host"] = {"cpus": os.cpu_count(), "load_avg_at_end": os.getloadavg()}
-    md = markdown(res, command)
+    md = markdown(res, command, args.results)
     base = os.path.join(args.results, res["sequence"])
     for path, text in ((base + ".md", md + "\n"), (base + ".json", json.dumps(res, indent=1) + "\n")):
         tmp = path + ".tmp-%d" % os.getpid()
@@ -271,7 +272,7 @@ def fmt(v, digits=4):
     return "-" if v is None else ("%.*f" % (digits, v))
 
 
-def markdown(res, command):
+def markdown(res, command, results_dir):
     modes = list(res["modes"])
     ok = [m for m in modes if res["modes"][m].get("exit_code") == 0]
     L = []
@@ -354,7 +355,7 @@ def markdown(res, command):
                  "error over time (right), per mode (PNG, not committed; regenerate with the command above):")
         L.append("")
         for m, f in figs:
-            L.append("- `%s`: `bench/results/%s`" % (m, f))
+            L.append("- `%s`: `%s`" % (m, os.path.relpath(os.path.join(results_dir, f), ROOT)))
         L.append("")
     return "\n".join(L)
 
@@ -392,11 +393,12 @@ def main():
         if not os.access(exe, os.X_OK):
             ap.error("%s is not built (ninja -C %s vofusion rgbd-eval)" % (exe, args.build))
     args.work = args.work or os.path.join(args.build, "bench-runs")
-    partial = args.max_frames or args.modes != DEFAULT_MODES or args.synthetic_frames != 300
+    partial = (args.max_frames or not set(DEFAULT_MODES) <= set(args.modes) or args.synthetic_frames != 300
+               or args.no_synthetic)
     if args.results is None:
         args.results = os.path.join(args.work, "results") if partial else COMMITTED_RESULTS
         if partial:
-            log("a partial run (--quick, --max-frames or a --modes subset): tables go to %s, "
+            log("a partial run (--quick, --max-frames, a --modes subset, --no-synthetic): tables go to %s, "
                 "not bench/results (--results DIR to choose)" % args.results)
     seqs = args.sequences or sorted(d for d in glob.glob(os.path.join(ROOT, "..", "shared", "data", "tum", "*"))
                                     if os.path.isdir(d))

@@ -1,6 +1,7 @@
 // Unknown keys and sections in user configs are errors, checked against the stages' own defaults.
 #include <filesystem>
 #include <fstream>
+#include <tuple>
 
 #include <mrpt/config/CConfigFileBase.h>
 #include <mrpt/config/CConfigFileMemory.h>
