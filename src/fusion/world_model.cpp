@@ -206,9 +206,18 @@ bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
 bool WorldModel::readCompressed(const Eigen::Vector3i& c, std::vector<std::uint8_t>& out) const {
   const std::shared_lock lock(mutex_);
   const std::uint64_t k = key(c);
-  if (const auto it = ram_.find(k); it != ram_.end()) out = compressBrick(*it->second.brick);
-  else if (const auto record = disk_.find(k)) out = spill_.read(*record);  // spilled as compressBrick makes it
-  else return false;
+  if (const auto it = ram_.find(k); it != ram_.end()) {
+    out = compressBrick(*it->second.brick);
+    return true;
+  }
+  const auto record = disk_.find(k);
+  if (!record) return false;
+  out = spill_.read(*record);  // spilled as compressBrick makes it
+  // Inflated once to check it (a fraction of compressing it again): a damaged record is said now, not
+  // sealed into a checkpoint that fails only when resumed.
+  Brick check;
+  if (!decompressBrick(out.data(), out.size(), check))
+    throw std::runtime_error(spill_.folder() + ": corrupt record in the world model's spill file");
   return true;
 }
 

@@ -72,7 +72,7 @@ class WorldModel {
   bool read(const Eigen::Vector3i& c, Brick& out) const;
   // A stored brick's voxels as compressBrick() gives them: a brick on disk is its record as stored, not
   // decompressed and compressed again (what a save of a long run's map spent most of its time on).
-  // False when there is none.
+  // False when there is none; throws std::runtime_error for a damaged record.
   bool readCompressed(const Eigen::Vector3i& c, std::vector<std::uint8_t>& out) const;
 
   std::size_t size() const;
