@@ -133,6 +133,9 @@ TEST(Checkpoint, AClockSteppedBackBetweenDroppedFramesLosesNoFrame) {
   for (; again.replaying(); ++i) replayed += again.replay(test::deepCopy(recording[i]));
   EXPECT_EQ(i, resume_at);
   EXPECT_EQ(replayed, resume_at - 2);
+  // The frames after the checkpoint go on from its last index, as within one run.
+  EXPECT_THROW(again.process(test::deepCopy(recording[resume_at - 1])), std::invalid_argument);
+  again.process(test::deepCopy(recording[resume_at]));
 }
 
 TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {

@@ -391,6 +391,8 @@ void Reconstruction::loadState(std::istream& is) {
     a >> m.fused >> m.indices;
     if (m.fused.size() != m.trajectory.size() || m.indices.size() != m.trajectory.size())
       throw std::runtime_error("checkpoint: per-frame lists of different lengths");
+    // The frames after the checkpoint's must go on from its last index, as within one run.
+    if (!m.indices.empty()) m.last_index = m.indices.back();
     for (std::size_t* c : {&m.frames, &m.fallbacks, &m.predicted, &m.lost, &m.odo_failures}) {
       a >> n;
       *c = n;
