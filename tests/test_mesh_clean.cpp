@@ -269,6 +269,7 @@ TEST(MeshClean, ASmallPiecesOutlineIsNoHole) {
   const MeshCleanReport r = cleanMesh(m, p);
   ASSERT_TRUE(r.success) << r.failure;
   EXPECT_EQ(r.holes_filled, 0u);
+  EXPECT_EQ(r.holes_left, 1u);
   EXPECT_FALSE(r.closed);
   EXPECT_NEAR(totalArea(m), area, 1e-6);
 }
@@ -677,7 +678,7 @@ TEST(MeshClean, ParamsRoundTripThroughIni) {
   a.smooth_iterations = 4;
   a.smooth_time = 2e-4;
   a.relax_iterations = 5;
-  a.orient_closed_outward = false;
+  a.orient_closed_outward = true;  // not the default: the round trip must carry it
   a.recompute_normals = false;
   mrpt::config::CConfigFileMemory ini;
   a.saveToConfigFile(ini, "mesh");

@@ -605,7 +605,10 @@ class Cleaner {
       // encloses, a disc's) is bounded by it: an outline, not a hole. Filled, it became a second sheet
       // over the piece, facing the other way.
       const std::size_t c = component[m_.face(m_.opposite(start))];
-      if (pieces.borders[c] == 1 && pieces.area[c] <= perimeter * perimeter / (4.0 * M_PI)) continue;
+      if (pieces.borders[c] == 1 && pieces.area[c] <= perimeter * perimeter / (4.0 * M_PI)) {
+        ++r_.holes_left;
+        continue;
+      }
       holes.emplace_back(start, edges);
     }
     m_.remove_property_map(component);

@@ -78,7 +78,7 @@ struct MeshCleanReport {
   std::size_t border_edges_stitched = 0;
   std::size_t non_manifold_vertices_split = 0;
   std::size_t components_removed = 0, components_kept = 0;
-  std::size_t holes_filled = 0, holes_left = 0;  // left: larger than the bounds (or filling failed)
+  std::size_t holes_filled = 0, holes_left = 0;  // left: larger than the bounds, a small piece's outline, or filling failed
   std::size_t holes_not_faired = 0;              // filled flat: fairing failed (hole_fairing on)
   std::size_t border_cycles_after = 0;           // remaining boundary loops (0: closed)
   bool closed = false;                 // watertight (no border edges)
