@@ -129,20 +129,10 @@ bool writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
 void requireColourOffsetsATumFolderPairs(const sim::SimOptions& o) {
   const double limit = std::min(SourceOptions().max_time_diff, 0.5 / o.fps);
   if (o.colour_offset_max < limit) return;
-  char why[200];
+  char why[256];
   std::snprintf(why, sizeof why, "%g s at %g fps: a TUM folder's colour images pair with their depth only under %.4g s (half a "
-                "frame, at most 0.02 s); lower --colour-offset",
+                "frame, at most 0.02 s); write a .rawlog (it keeps each colour image's time) or lower --colour-offset",
                 o.colour_offset_max, o.fps, limit);
-  throw InputError("--colour-offset", why);
-}
-
-// A rawlog's observation holds one time, the depth's: the colour images' own times (the shake's offsets)
-// would be lost, and read back as taken with the depth.
-void requireNoColourOffsetsInARawlog(const sim::SimOptions& o) {
-  if (o.trajectory != "shake" || o.colour_offset_max == 0) return;
-  char why[200];
-  std::snprintf(why, sizeof why, "up to %g s: a .rawlog holds one time per frame, the depth's, and the colour images' "
-                "offsets would be lost; write a TUM folder or give --colour-offset 0", o.colour_offset_max);
   throw InputError("--colour-offset", why);
 }
 
@@ -206,7 +196,6 @@ int body(int argc, char** argv) {
 
   const bool rawlog = fs::path(out).extension() == ".rawlog";
   if (!rawlog && o.trajectory == "shake") requireColourOffsetsATumFolderPairs(o);
-  if (rawlog) requireNoColourOffsetsInARawlog(o);
   const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
   installStopSignals(kStoppingWithNothingWritten);
   const bool done = rawlog ? writeRawlog(seq, out, cl.flag("--overwrite")) : writeTum(seq, out);

@@ -2,9 +2,6 @@
 //            [--format obs|sf] [--embed-images] [--range-units 2e-4|1e-3] [--strict] [--overwrite]
 // One CObservation3DRangeScan per associated colour/depth pair; images in "<out>_Images"; ground truth
 // as CObservationRobotPose "GROUND_TRUTH" per frame plus "<out>.groundtruth.txt" (the full TUM file).
-#include <algorithm>
-#include <cmath>
-#include <cstdio>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -71,9 +68,7 @@ int body(int argc, char** argv) {
   Progress progress("tum2rawlog", src.size());
   Frame f;
   std::size_t n = 0;
-  double largest_colour_offset = 0.0;  // s; a rawlog keeps none of them
   while (src.next(f)) {
-    largest_colour_offset = std::max(largest_colour_offset, std::abs(f.colour_offset));
     // A part of a conversion is no recording: nothing is written (`out` removes its temporaries).
     if (stopRequested()) return stoppedWithNothingWritten("tum2rawlog", " after " + std::to_string(n) + " frames");
     out.write(f);
@@ -81,12 +76,6 @@ int body(int argc, char** argv) {
   }
   if (stopRequested()) return stoppedWithNothingWritten("tum2rawlog", " after the last frame");
   out.commit();
-  if (largest_colour_offset > 1e-3) {
-    char ms[32];
-    std::snprintf(ms, sizeof ms, "%.1f ms", 1e3 * largest_colour_offset);
-    printWarning(pos[1] + ": each frame is stamped at its depth image; colour images were up to " + ms +
-                 " off it, and a rawlog keeps one time per frame: the odometry's colour-time correction has none to use");
-  }
   const std::size_t skipped = src.skipped().size();
   progress.finish("-> " + pos[1] + (skipped ? " (" + std::to_string(skipped) + " damaged frames skipped)" : ""));
   return 0;

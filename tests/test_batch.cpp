@@ -109,7 +109,7 @@ TEST(Batch, FourRecordingsTwoAtATimeGiveOneTable) {
   simulate(dir + "/rec/room", "--scene room");
   simulate(dir + "/rec/corridor", "--scene corridor");
   simulate(dir + "/rec/bare_wall", "--scene bare_wall");
-  simulate(dir + "/rec/shake.rawlog", "--scene room --trajectory shake --colour-offset 0");  // a rawlog has no colour times
+  simulate(dir + "/rec/shake.rawlog", "--scene room --trajectory shake");
   const std::string out = dir + "/out";
   std::string log;
   // TMPDIR: the jobs' CPU locks private to this test, so which CPUs they get is known.

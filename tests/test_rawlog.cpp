@@ -291,6 +291,25 @@ TEST(Rawlog, ManyObservationsAfterTheFramesGoOutInBoundedEntries) {
   EXPECT_EQ(poses, n);
 }
 
+// Each frame's colour offset (its colour image taken off the depth's time, TUM fr1: up to 20 ms) comes
+// back from a rawlog, in both formats: an observation holds one time, so a COLOUR_TIME comment stamped at
+// the colour image's time follows the scan. Without it the odometry's colour-time correction had nothing
+// to use (rpy_first100 from a rawlog: ATE 0.0177 against 0.0164 m from the folder).
+TEST(Rawlog, ColourOffsetsComeBack) {
+  auto frames = simFrames(4);
+  const double offsets[] = {0.0, 0.0172, -0.0081, 0.0};
+  for (std::size_t i = 0; i < frames.size(); ++i) frames[i].colour_offset = offsets[i];
+  const std::string dir = test::tempDir("rawlog_colour_offsets");
+  for (const auto format : {RawlogWriterOptions::Format::Observations, RawlogWriterOptions::Format::ActionsSensoryFrames}) {
+    RawlogWriterOptions o;
+    o.format = format;
+    const std::string path = writeRawlog(dir + "/f" + std::to_string(int(format)) + ".rawlog", frames, o);
+    RawlogSource src(path, {});
+    Frame f;
+    for (std::size_t i = 0; src.next(f); ++i) EXPECT_NEAR(f.colour_offset, offsets[i], 1e-6) << "frame " << i;
+  }
+}
+
 TEST(Rawlog, GroundTruthCompanionFile) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_gt");

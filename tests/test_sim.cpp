@@ -11,6 +11,7 @@
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/io/frame_source.h"
+#include "vofusion/io/rawlog.h"
 #include "vofusion/sim/synthetic_sequence.h"
 #include "vofusion/sim/any_source.h"
 
@@ -405,18 +406,26 @@ TEST(Sim, ColourOffsetAndExposureFlags) {
   EXPECT_EQ(log, "rgbd-simulate: error: --colour-offset: takes effect with --trajectory shake only\n");
   EXPECT_FALSE(std::filesystem::exists(dir + "2"));
   // A TUM folder pairs colour and depth by time: offsets of half a frame or more (the default 15 ms at
-  // 60 fps) would pair the next frame's depth, or put rgb.txt out of order.
+  // 60 fps) would pair the next frame's depth, or put rgb.txt out of order. A rawlog keeps them (COLOUR_TIME).
   EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "5 --trajectory shake --fps 60 --frames 3 --size 160x120 2>&1", &log), 2);
   EXPECT_EQ(log, "rgbd-simulate: error: --colour-offset: 0.015 s at 60 fps: a TUM folder's colour images pair with their depth "
-                 "only under 0.008333 s (half a frame, at most 0.02 s); lower --colour-offset\n");
+                 "only under 0.008333 s (half a frame, at most 0.02 s); write a .rawlog (it keeps each colour image's time) or "
+                 "lower --colour-offset\n");
   EXPECT_FALSE(std::filesystem::exists(dir + "5"));
-  // A rawlog holds one time per frame, the depth's: the offsets would be read back as none.
-  EXPECT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "5.rawlog --trajectory shake --frames 3 --size 160x120 2>&1", &log), 2);
-  EXPECT_EQ(log, "rgbd-simulate: error: --colour-offset: up to 0.015 s: a .rawlog holds one time per frame, the depth's, and the "
-                 "colour images' offsets would be lost; write a TUM folder or give --colour-offset 0\n");
-  EXPECT_FALSE(std::filesystem::exists(dir + "5.rawlog"));
-  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "7.rawlog --trajectory shake --frames 3 --size 160x120 "
-                          "--colour-offset 0", &log), 0) << log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "5.rawlog --trajectory shake --fps 60 --frames 3 --size 160x120",
+                      &log), 0) << log;
+  {
+    const sim::SyntheticSequence shaking([] {
+      sim::SimOptions s;
+      s.trajectory = "shake";
+      s.fps = 60;
+      s.frames = 3;
+      s.camera = s.camera.scaled(0.25);  // --size 160x120
+      return s;
+    }());
+    RawlogSource written(dir + "5.rawlog", {});
+    for (std::size_t i = 0; written.next(f); ++i) EXPECT_NEAR(f.colour_offset, shaking.render(i).colour_offset, 1e-6) << "frame " << i;
+  }
   ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "6 --trajectory shake --fps 60 --frames 12 --size 160x120 "
                           "--colour-offset 0.008", &log), 0) << log;
   auto paired = openFrameSource(dir + "6", so);

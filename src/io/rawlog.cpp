@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cstdint>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <cstring>
 #include <deque>
@@ -20,6 +21,7 @@
 #include <mrpt/io/CFileGZInputStream.h>
 #include <mrpt/io/CFileGZOutputStream.h>
 #include <mrpt/obs/CActionCollection.h>
+#include <mrpt/obs/CObservationComment.h>
 #include <mrpt/obs/CObservationRobotPose.h>
 #include <mrpt/obs/CSensoryFrame.h>
 #include <mrpt/serialization/CArchive.h>
@@ -38,6 +40,10 @@ namespace vofusion {
 
 namespace {
 constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
+// A frame whose colour image was taken off its depth's time (TUM fr1: up to 20 ms) is followed by a
+// CObservationComment stamped at the colour image's time, its text starting so (MRPT stores no label
+// for a comment): an observation holds one time.
+constexpr const char* kColourTimeText = "COLOUR_TIME: ";
 
 // What one rawlog entry may allocate while it is deserialised. MRPT sizes (and zero-fills) strings,
 // vectors, deques and matrices from the archive's length fields before reading the data, so without
@@ -235,6 +241,7 @@ struct RawlogSource::Reader {
   std::size_t objects = 0;
   uint64_t largest_entry = 0;  // bytes
   std::string path;
+  double last_scan_time = std::numeric_limits<double>::quiet_NaN();  // s, of the scan next3D gave last
 
   explicit Reader(const std::string& p) : path(p) {
     std::string err;
@@ -285,10 +292,19 @@ struct RawlogSource::Reader {
     return o;
   }
 
-  CObservation3DRangeScan::Ptr next3D(Trajectory* gt) {
+  // The next scan with a range image; on the way, ground-truth poses into gt and each scan's colour
+  // offset (its COLOUR_TIME comment, after it) into colour_offsets by the scan's time.
+  CObservation3DRangeScan::Ptr next3D(Trajectory* gt, std::map<double, double>* colour_offsets = nullptr) {
     while (auto o = nextObservation()) {
       if (auto s = std::dynamic_pointer_cast<CObservation3DRangeScan>(o)) {
-        if (s->hasRangeImage) return s;
+        if (!s->hasRangeImage) continue;
+        last_scan_time = mrpt::Clock::toDouble(s->timestamp);
+        return s;
+      }
+      if (const auto c = std::dynamic_pointer_cast<mrpt::obs::CObservationComment>(o);
+          c && colour_offsets && c->text.rfind(kColourTimeText, 0) == 0 && std::isfinite(last_scan_time)) {
+        const double offset = mrpt::Clock::toDouble(o->timestamp) - last_scan_time;
+        if (std::isfinite(offset) && std::abs(offset) < 1.0) (*colour_offsets)[last_scan_time] = offset;
       } else if (gt && o->sensorLabel == kGroundTruthLabel) {
         // A pose that is no pose (NaN, infinite: mocap lost the camera) is unknown, as in 7-Scenes.
         if (auto rp = std::dynamic_pointer_cast<mrpt::obs::CObservationRobotPose>(o);
@@ -315,13 +331,13 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
   Reader scan(path);
   Trajectory embedded_gt;
   try {
-    while (scan.next3D(&embedded_gt)) {
+    while (scan.next3D(&embedded_gt, &colour_offsets_)) {
       ++count_;
       if (opts.max_frames > 0 && count_ >= opts.max_frames) {
         // The writer puts a frame's GROUND_TRUTH entry after its scan: read on to the next scan for the
         // last frame's pose. Damage past the frames asked for is none of this run's business.
         try {
-          scan.next3D(&embedded_gt);
+          scan.next3D(&embedded_gt, &colour_offsets_);
         } catch (const InputError&) {
         }
         break;
@@ -372,6 +388,7 @@ bool RawlogSource::next(Frame& frame) {
     throw DamagedFrame(e);  // this record's images; the next record is read as usual
   }
   frame.index = index;
+  if (const auto it = colour_offsets_.find(frame.timestamp); it != colour_offsets_.end()) frame.colour_offset = it->second;
   mrpt::poses::CPose3D gt;
   if (interpolatePose(gt_, frame.timestamp, 0.05, gt)) frame.groundTruth = gt;
   return true;
@@ -608,6 +625,12 @@ std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
     }
   }
   std::vector<mrpt::obs::CObservation::Ptr> obs_list{obs};
+  if (frame.colour_offset != 0.0) {
+    auto colour_time = std::make_shared<mrpt::obs::CObservationComment>();
+    colour_time->timestamp = mrpt::Clock::fromDouble(frame.timestamp + frame.colour_offset);
+    colour_time->text = std::string(kColourTimeText) + "when the colour image of the range scan before it was taken";
+    obs_list.push_back(colour_time);
+  }
   if (frame.groundTruth && opts_.ground_truth_observations) {
     auto gt = std::make_shared<mrpt::obs::CObservationRobotPose>();
     gt->sensorLabel = kGroundTruthLabel;

@@ -14,6 +14,7 @@
 // (range_is_depth = true) in units of rangeUnits metres; depth and colour are registered, so
 // cameraParams == cameraParamsIntensity and relativePoseIntensityWRTDepth is MRPT's "cameras
 // coincide" pose (0,0,0,-90deg,0,-90deg). Everything goes to temporary names and appears on commit().
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -58,6 +59,7 @@ class RawlogSource : public FrameSource {
   SourceOptions opts_;
   std::size_t count_ = 0, pos_ = 0;
   Trajectory gt_;
+  std::map<double, double> colour_offsets_;  // scan time -> its colour image's offset, s (COLOUR_TIME)
   std::unique_ptr<Reader> reader_;
 };
 
