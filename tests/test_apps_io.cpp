@@ -222,21 +222,6 @@ TEST(AppsIo, Tum2RawlogMaxFramesIntrinsicsAndSfFormat) {
   EXPECT_DOUBLE_EQ(f.camera.fy, 261.0);
 }
 
-// A rawlog keeps one time per frame, the depth's: colour images taken off it (the shake's offsets, TUM
-// fr1's up to 20 ms) are said to lose theirs, once; images taken together are not.
-TEST(AppsIo, Tum2RawlogSaysColourOffsetsAreNotKept) {
-  const std::string dir = test::tempDir("apps_t2r_offsets");
-  std::string out;
-  ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/shake --trajectory shake --frames 6 --size 160x120", &out), 0) << out;
-  ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/smooth --frames 6 --size 160x120", &out), 0) << out;
-  ASSERT_EQ(run(app("tum2rawlog") + " " + dir + "/shake " + dir + "/shake.rawlog 2>&1", &out), 0) << out;
-  EXPECT_NE(out.find("warning: " + dir + "/shake.rawlog: each frame is stamped at its depth image; colour images were up to "),
-            std::string::npos) << out;
-  EXPECT_NE(out.find(" ms off it, and a rawlog keeps one time per frame"), std::string::npos) << out;
-  ASSERT_EQ(run(app("tum2rawlog") + " " + dir + "/smooth " + dir + "/smooth.rawlog 2>&1", &out), 0) << out;
-  EXPECT_EQ(out.find("colour images were"), std::string::npos) << out;
-}
-
 // A damaged frame costs that frame, as in vofusion: tum2rawlog skips it and says so; --strict stops.
 TEST(AppsIo, Tum2RawlogSkipsADamagedFrame) {
   const std::string dir = test::tempDir("apps_t2r_damaged");
