@@ -24,7 +24,7 @@ std::vector<ConfigKey> brandKeys(BrandParams& p) {
       {"normal_window", &p.normal_window, "pixels, half-size of normal boxes", 1.0, 32.0},
       {"max_depth_step", &p.max_depth_step, "m, no normals across larger jumps", 0.001, 10.0},
       {"use_intensity", &p.use_intensity, "intensity tests on/off"},
-      {"use_geometry", &p.use_geometry, "normal/convexity tests on/off"},
+      {"use_geometry", &p.use_geometry, "normal/convexity tests on/off; on, the odometry's point and normal maps are also the tracking levels (modes joint, paper-handoff, odometry)"},
       {"oriented", &p.oriented, "rotate to canonical orientation"},
   };
 }

@@ -32,7 +32,7 @@ std::vector<ConfigKey> meshCleanKeys(MeshCleanParams& p) {
       {"relax_iterations", &p.relax_iterations, "iterations of tangential relaxation (0: off)", 0.0, 1000.0},
       {"orient_closed_outward", &p.orient_closed_outward, "orient closed results with normals outward, for closed objects from elsewhere (a TSDF mesh faces the space its cameras saw: a closed room turned inside out)"},
       {"recompute_normals", &p.recompute_normals, "write fresh vertex normals (false: none written)"},
-      {"region_bricks", &p.region_bricks, "bricks per region edge, vofusion meshes and simplifies region by region (0: whole world)", 0.0, 4096.0},
+      {"region_bricks", &p.region_bricks, "bricks per region edge, vofusion meshes and simplifies region by region (0: whole world; so too with [output] clean_mesh off or save_full_mesh on)", 0.0, 4096.0},
   };
 }
 }  // namespace

@@ -19,8 +19,8 @@ std::vector<ConfigKey> odometryKeys(OdometryParams& p) {
       {"keyframe_min_inliers", &p.keyframe_min_inliers, "keep the keyframe while this many inliers, 0 = off", 0.0, 100000.0},
       {"undistort", &p.undistort, "undistort keypoints before 3D/homography"},
       {"depth_window", &p.depth_window, "pixels, half-size of the keypoint depth window", 0.0, 10.0},
-      ConfigKey::oneOf("depth_mode", &p.depth_mode, "of that window's valid readings", kDepthModes),
-      {"references", &p.references, "frames matched: the previous one and references-1 before it", 1.0, 8.0},
+      ConfigKey::oneOf("depth_mode", &p.depth_mode, "of that window's valid readings (depth_window > 0 only)", kDepthModes),
+      {"references", &p.references, "frames matched: the previous one and references-1 before it (keyframe_min_inliers = 0 only)", 1.0, 8.0},
       {"colour_time", &p.colour_time, "keypoints moved to the depth capture time"},
       ConfigKey::oneOf("colour_time_velocity", &p.colour_time_velocity,
                        "interval = the fitted interval's mean; capture = each frame's own (exact offsets); auto = capture once the recording's frames fit it better (sign test)",
@@ -33,7 +33,7 @@ std::vector<ConfigKey> matchingKeys(OdometryParams& p) {
       {"max_hamming", &p.max_hamming, "bits of 256, 256 = no limit", 0.0, 256.0},
       {"use_homography", &p.use_homography, "RANSAC homography filter"},
       {"homography_threshold", &p.homography_threshold, "pixels", 0.1, 100.0},
-      {"min_matches", &p.min_matches, "after the homography filter", 4.0, 100000.0},
+      {"min_matches", &p.min_matches, "after the homography filter; also the keypoints a frame needs", 4.0, 100000.0},
   };
 }
 
@@ -50,7 +50,7 @@ std::vector<ConfigKey> motionKeys(OdometryParams& p) {
       {"ransac_seed", &p.robust.seed, "robust: seed of the odometry's RANSAC draws; a run repeats exactly for a seed, and bench/run --rules --perturb N runs seeds 1..N to tell a change from chaos", 0.0, 999999.0},
       {"min_inliers", &p.min_inliers, "3D inliers needed", 3.0, 100000.0},
       {"min_extent", &p.min_extent, "m, inlier spread needed", 0.0, 10.0},
-      {"max_rms", &p.max_rms, "m at <= 1 m depth (grows with z^2 as the inlier threshold), inlier RMS accepted", 0.0001, 10.0},
+      {"max_rms", &p.max_rms, "m at <= 1 m depth (grows with z^2 as the inlier threshold; motion_method paper: plain, at any depth), inlier RMS accepted", 0.0001, 10.0},
   };
 }
 
