@@ -293,6 +293,24 @@ TEST(LoopPlaceIndex, FindsWhatFlannLshFinds) {
   EXPECT_EQ(index.descriptors(), 60u * 300u);
 }
 
+// Each keyframe with a loop is solved as it comes up to 1000 keyframes (every scene measured); beyond,
+// the loops of nodes / 500 keyframes at once: on an hour's walk (~12 000 keyframes) a solve per loop
+// cost 1.3 s of CPU each, more than the loop thread's core at a loop every few keyframes.
+TEST(LoopPoseGraph, LongGraphsAreSolvedInBatchesShortOnesAtEveryLoop) {
+  const auto solves = [](std::size_t from, std::size_t to) {  // one loop at every keyframe in [from, to)
+    std::size_t n = 0, unsolved = 0, solved_at = from;
+    for (std::size_t nodes = from + 1; nodes <= to; ++nodes) {
+      ++unsolved;
+      if (graphSolveDue(unsolved, nodes, solved_at)) ++n, unsolved = 0, solved_at = nodes;
+    }
+    return n;
+  };
+  EXPECT_EQ(solves(0, 999), 999u);
+  EXPECT_EQ(solves(2000, 2400), 100u);     // every 4th
+  EXPECT_EQ(solves(10000, 10400), 20u);    // every 20th
+  EXPECT_FALSE(graphSolveDue(0, 600, 10));  // no loop, no solve
+}
+
 TEST(LoopPoseGraph, TrueLoopSpreadsTheDrift) {
   const Circle c = circle(40, 3.0, 0.4);  // 16 deg of yaw drift around the loop
   PoseGraph g = graphOf(c);

@@ -38,6 +38,8 @@ struct LoopCloser::Impl {
   std::optional<Eigen::Isometry3d> last_indexed;  // pose of the newest keyframe in the index
   std::optional<Eigen::Isometry3d> last_queried;  // pose of the newest keyframe looked up in the index
   PoseGraph graph;
+  std::size_t loops_unsolved = 0;  // loop edges added since the graph was last solved
+  std::size_t solved_at = 0;       // the graph's nodes then
   // ICP pyramids of the last keyframes verified (~2.7 MB each at 320x240): a revisit's consecutive
   // keyframes meet the same older ones.
   PyramidCache pyramids{4};
@@ -188,18 +190,30 @@ struct LoopCloser::Impl {
                             check.icp_condition, check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp, check.T_old_new});
       }
     }
+    loops_unsolved += accepted.size();
     std::vector<std::size_t> removed;
     {
       ScopedStageTimer timer(t, "pose_graph");
-      if (!accepted.empty()) removed = graph.optimise(kMaxLoopChi2, kMaxChainChi2);
+      if (solveDue()) {
+        removed = graph.optimise(kMaxLoopChi2, kMaxChainChi2);
+        loops_unsolved = 0;
+        solved_at = graph.nodes();
+      }
     }
     publish(accepted, removed, rejected, t, vofusion::threadCpuSeconds() - cpu_start);
   }
 
-  // At the end of the run, with the thread idle and some loop removed: one optimisation over every
-  // loop found (loops removed when they came may fit the ones after them).
+  // The graph's poses are not used before the end, only its removals of false loops, which
+  // finalOptimisation makes again over every loop: on long runs loops are solved in batches
+  // (graphSolveDue).
+  bool solveDue() const { return graphSolveDue(loops_unsolved, graph.nodes(), solved_at); }
+
+  // At the end of the run, with the thread idle and some loop removed or not yet solved: one
+  // optimisation over every loop found (loops removed when they came may fit the ones after them).
   void finalOptimisation() {
     const std::vector<std::size_t> removed = graph.optimiseAll(kMaxLoopChi2, kMaxChainChi2);
+    loops_unsolved = 0;
+    solved_at = graph.nodes();
     std::lock_guard<std::mutex> lock(mu);
     for (LoopRecord& l : loops) l.active = true;
     rejections.erase("did not fit the graph after optimisation");
@@ -392,9 +406,9 @@ void LoopCloser::finish() {
     std::lock_guard<std::mutex> lock(impl_->mu);
     for (const LoopRecord& l : impl_->loops) any_removed |= !l.active;
   }
-  // With every loop in, the last optimisation already was over all of them. Otherwise: the thread
-  // waits for keyframes that no longer come, and the graph is the caller's now.
-  if (any_removed) impl_->finalOptimisation();
+  // With every loop in and solved, the last optimisation already was over all of them. Otherwise: the
+  // thread waits for keyframes that no longer come, and the graph is the caller's now.
+  if (any_removed || impl_->loops_unsolved > 0) impl_->finalOptimisation();
 }
 
 std::vector<LoopRecord> LoopCloser::loops() const {
