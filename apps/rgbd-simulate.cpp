@@ -39,7 +39,7 @@ const char* kUsage =
     "             30 m per 900 frames, 100 m = 3000 frames; memory must not grow with the path, bench/longrun)\n"
     "  --trajectory smooth (default: the scene's hand-held path) or shake: hand shake on top (turns up to\n"
     "             ~150 deg/s), motion-blurred colour taken up to 15 ms off the depth capture (a TUM\n"
-    "             folder keeps that offset in rgb.txt; a rawlog has no place for it)\n"
+    "             folder keeps that offset in rgb.txt, a rawlog in a COLOUR_TIME entry after each frame)\n"
     "  --frames   number of frames (default 300); --fps frame rate (default 30)\n"
     "  --pace X   the path played X times as fast (default 1, (0, 4]): at 2 the room turns up to ~37 deg/s\n"
     "  --no-noise exact depth instead of the Kinect v1 noise model; --seed S random seed (default 1)\n"

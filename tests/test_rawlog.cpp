@@ -306,7 +306,25 @@ TEST(Rawlog, ColourOffsetsComeBack) {
     const std::string path = writeRawlog(dir + "/f" + std::to_string(int(format)) + ".rawlog", frames, o);
     RawlogSource src(path, {});
     Frame f;
-    for (std::size_t i = 0; src.next(f); ++i) EXPECT_NEAR(f.colour_offset, offsets[i], 1e-6) << "frame " << i;
+    std::size_t read = 0;
+    for (; src.next(f); ++read) EXPECT_NEAR(f.colour_offset, offsets[read], 1e-6) << "frame " << read;
+    EXPECT_EQ(read, frames.size());
+    // Read on to the last frame's entry with --max-frames (it follows the scan).
+    SourceOptions two;
+    two.max_frames = 2;
+    RawlogSource first_two(path, two);
+    for (read = 0; first_two.next(f); ++read) EXPECT_NEAR(f.colour_offset, offsets[read], 1e-6) << "max-frames, frame " << read;
+    EXPECT_EQ(read, 2u);
+    // MRPT's own reader keeps every entry (RawLogViewer loads and saves through it): a comment it folded
+    // into the rawlog's one text, keeping the last only.
+    if (format == RawlogWriterOptions::Format::Observations) {
+      mrpt::obs::CRawlog log;
+      ASSERT_TRUE(log.loadFromRawLogFile(path));
+      std::size_t colour_times = 0;
+      for (std::size_t i = 0; i < log.size(); ++i)
+        if (log.getType(i) == mrpt::obs::CRawlog::etObservation) colour_times += log.getAsObservation(i)->sensorLabel == "COLOUR_TIME";
+      EXPECT_EQ(colour_times, 2u);
+    }
   }
 }
 

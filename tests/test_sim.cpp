@@ -424,7 +424,9 @@ TEST(Sim, ColourOffsetAndExposureFlags) {
       return s;
     }());
     RawlogSource written(dir + "5.rawlog", {});
-    for (std::size_t i = 0; written.next(f); ++i) EXPECT_NEAR(f.colour_offset, shaking.render(i).colour_offset, 1e-6) << "frame " << i;
+    std::size_t read = 0;
+    for (; written.next(f); ++read) EXPECT_NEAR(f.colour_offset, shaking.render(read).colour_offset, 1e-6) << "frame " << read;
+    EXPECT_EQ(read, 3u);
   }
   ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "6 --trajectory shake --fps 60 --frames 12 --size 160x120 "
                           "--colour-offset 0.008", &log), 0) << log;

@@ -22,6 +22,7 @@
 #include <mrpt/io/CFileGZOutputStream.h>
 #include <mrpt/obs/CActionCollection.h>
 #include <mrpt/obs/CObservationComment.h>
+#include <mrpt/obs/CObservationRawDAQ.h>
 #include <mrpt/obs/CObservationRobotPose.h>
 #include <mrpt/obs/CSensoryFrame.h>
 #include <mrpt/serialization/CArchive.h>
@@ -40,9 +41,12 @@ namespace vofusion {
 
 namespace {
 constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
-// A frame whose colour image was taken off its depth's time (TUM fr1: up to 20 ms) is followed by a
-// CObservationComment stamped at the colour image's time, its text starting so (MRPT stores no label
-// for a comment): an observation holds one time.
+// A frame whose colour image was taken off its depth's time (TUM fr1: up to 20 ms) is followed by an
+// observation so labelled, stamped at the colour image's time (an observation holds one time): an empty
+// CObservationRawDAQ, which MRPT's CRawlog keeps as it is (a CObservationComment it folds into the
+// rawlog's one comment, so RawLogViewer kept only the last). Comments so written, "COLOUR_TIME: ..."
+// (2026-12-05 only), are read too.
+constexpr const char* kColourTimeLabel = "COLOUR_TIME";
 constexpr const char* kColourTimeText = "COLOUR_TIME: ";
 
 // What one rawlog entry may allocate while it is deserialised. MRPT sizes (and zero-fills) strings,
@@ -242,6 +246,7 @@ struct RawlogSource::Reader {
   uint64_t largest_entry = 0;  // bytes
   std::string path;
   double last_scan_time = std::numeric_limits<double>::quiet_NaN();  // s, of the scan next3D gave last
+  std::size_t scans = 0;  // scans next3D gave
 
   explicit Reader(const std::string& p) : path(p) {
     std::string err;
@@ -293,18 +298,24 @@ struct RawlogSource::Reader {
   }
 
   // The next scan with a range image; on the way, ground-truth poses into gt and each scan's colour
-  // offset (its COLOUR_TIME comment, after it) into colour_offsets by the scan's time.
-  CObservation3DRangeScan::Ptr next3D(Trajectory* gt, std::map<double, double>* colour_offsets = nullptr) {
+  // offset (its COLOUR_TIME entry, after it) into colour_offsets at the scan's place among the scans.
+  CObservation3DRangeScan::Ptr next3D(Trajectory* gt, std::vector<double>* colour_offsets = nullptr) {
     while (auto o = nextObservation()) {
       if (auto s = std::dynamic_pointer_cast<CObservation3DRangeScan>(o)) {
         if (!s->hasRangeImage) continue;
         last_scan_time = mrpt::Clock::toDouble(s->timestamp);
+        ++scans;
         return s;
       }
-      if (const auto c = std::dynamic_pointer_cast<mrpt::obs::CObservationComment>(o);
-          c && colour_offsets && c->text.rfind(kColourTimeText, 0) == 0 && std::isfinite(last_scan_time)) {
+      const auto comment = std::dynamic_pointer_cast<mrpt::obs::CObservationComment>(o);
+      const bool colour_time = (o->sensorLabel == kColourTimeLabel && std::dynamic_pointer_cast<mrpt::obs::CObservationRawDAQ>(o)) ||
+                               (comment && comment->text.rfind(kColourTimeText, 0) == 0);
+      if (colour_time) {
         const double offset = mrpt::Clock::toDouble(o->timestamp) - last_scan_time;
-        if (std::isfinite(offset) && std::abs(offset) < 1.0) (*colour_offsets)[last_scan_time] = offset;
+        if (colour_offsets && scans > 0 && std::isfinite(offset) && std::abs(offset) < 1.0) {
+          if (colour_offsets->size() < scans) colour_offsets->resize(scans, 0.0);
+          (*colour_offsets)[scans - 1] = offset;
+        }
       } else if (gt && o->sensorLabel == kGroundTruthLabel) {
         // A pose that is no pose (NaN, infinite: mocap lost the camera) is unknown, as in 7-Scenes.
         if (auto rp = std::dynamic_pointer_cast<mrpt::obs::CObservationRobotPose>(o);
@@ -388,7 +399,7 @@ bool RawlogSource::next(Frame& frame) {
     throw DamagedFrame(e);  // this record's images; the next record is read as usual
   }
   frame.index = index;
-  if (const auto it = colour_offsets_.find(frame.timestamp); it != colour_offsets_.end()) frame.colour_offset = it->second;
+  if (index < colour_offsets_.size()) frame.colour_offset = colour_offsets_[index];
   mrpt::poses::CPose3D gt;
   if (interpolatePose(gt_, frame.timestamp, 0.05, gt)) frame.groundTruth = gt;
   return true;
@@ -625,10 +636,10 @@ std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
     }
   }
   std::vector<mrpt::obs::CObservation::Ptr> obs_list{obs};
-  if (frame.colour_offset != 0.0) {
-    auto colour_time = std::make_shared<mrpt::obs::CObservationComment>();
+  if (frame.colour_offset != 0.0 && std::abs(frame.colour_offset) < 1.0) {  // a reader takes offsets under 1 s
+    auto colour_time = std::make_shared<mrpt::obs::CObservationRawDAQ>();
+    colour_time->sensorLabel = kColourTimeLabel;
     colour_time->timestamp = mrpt::Clock::fromDouble(frame.timestamp + frame.colour_offset);
-    colour_time->text = std::string(kColourTimeText) + "when the colour image of the range scan before it was taken";
     obs_list.push_back(colour_time);
   }
   if (frame.groundTruth && opts_.ground_truth_observations) {

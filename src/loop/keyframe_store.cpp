@@ -125,7 +125,7 @@ Keyframe KeyframeStore::load(std::size_t id) const {
 std::vector<std::uint8_t> KeyframeStore::data(std::size_t id) const {
   if (id >= spilled_) return encodeKeyframeData(keyframes_.at(id));
   std::vector<std::uint8_t> bytes = spill_.read(records_[id]);  // spilled as encodeKeyframeData made it
-  Keyframe check;  // decoded once to check it (no compression): damage fails the checkpoint, not its resume
+  Keyframe check;  // decoded once to check it (not compressed again): damage fails the checkpoint, not its resume
   decodeKeyframeData(bytes, check);
   return bytes;
 }

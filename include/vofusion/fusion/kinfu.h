@@ -33,7 +33,7 @@ namespace vofusion {
 // one table loads and saves both (kinfu_params.cpp), every key in share/kinfu.ini.
 struct KinFuParams : public TrackerParams, public mrpt::config::CLoadableOptions {
   fusion::TsdfParams tsdf;            // volume_voxels, voxel_size, truncation, max_weight,
-                                      // integrate_min_depth/max_depth, mark_step
+                                      // integrate_min_depth/max_depth (mark_step: fixed, docs/tracking.md)
   float shift_threshold = 0.3f;       // m, distance focus point <-> volume centre that triggers a shift
   float focus_distance = 1.2f;        // m, the volume follows the point this far along the optical axis
   bool overlap_fusion = true;         // pipeline (Reconstruction): integrate + ray cast frame k on

@@ -10,11 +10,12 @@
 //   <name>.groundtruth.txt   TUM trajectory (camera-to-world, optical axes), when ground truth is known
 // Ground truth also goes into the rawlog as one mrpt::obs::CObservationRobotPose per frame
 // (sensorLabel "GROUND_TRUTH", same timestamp as the frame, pose = camera-to-world in the optical
-// convention of Frame::groundTruth). The range image is depth along the optical axis
+// convention of Frame::groundTruth). A frame whose colour image was taken off its depth's time
+// (Frame::colour_offset, TUM fr1: up to 20 ms) is followed by an empty mrpt::obs::CObservationRawDAQ
+// (sensorLabel "COLOUR_TIME") stamped at the colour image's time. The range image is depth along the optical axis
 // (range_is_depth = true) in units of rangeUnits metres; depth and colour are registered, so
 // cameraParams == cameraParamsIntensity and relativePoseIntensityWRTDepth is MRPT's "cameras
 // coincide" pose (0,0,0,-90deg,0,-90deg). Everything goes to temporary names and appears on commit().
-#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -59,7 +60,7 @@ class RawlogSource : public FrameSource {
   SourceOptions opts_;
   std::size_t count_ = 0, pos_ = 0;
   Trajectory gt_;
-  std::map<double, double> colour_offsets_;  // scan time -> its colour image's offset, s (COLOUR_TIME)
+  std::vector<double> colour_offsets_;  // per scan in the file: its colour image's offset, s (COLOUR_TIME)
   std::unique_ptr<Reader> reader_;
 };
 

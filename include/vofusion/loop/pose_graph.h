@@ -55,9 +55,10 @@ class PoseGraph {
 // Whether a graph of `nodes` keyframes, solved last at `solved_at` nodes, with `unsolved` loop edges
 // added since, is solved now. A solve costs the whole graph (bench/pose_graph_speed: 0.15 s of CPU at
 // 2000 keyframes, 0.57 s at 5000, 1.3 s at 10 000; one keyframe per 0.15 m): solved for each keyframe
-// with a loop, a revisit late in an hour's walk asked more than the loop thread's core. Up to
-// kSolveEachUpTo keyframes (every bench and test scene) each keyframe with a loop is solved as it comes;
-// beyond, the loops of nodes / kSolveEachUpTo keyframes at once, so the cost per keyframe stays near level.
+// with a loop, a revisit late in an hour's walk asked more than the loop thread's core. So the loops of
+// nodes / kSolveEachUpTo keyframes are solved at once: below 2 x kSolveEachUpTo keyframes (every bench
+// and test scene) that is each keyframe with a loop as it comes, beyond it the cost per keyframe stays
+// near level.
 constexpr std::size_t kSolveEachUpTo = 500;
 inline bool graphSolveDue(std::size_t unsolved, std::size_t nodes, std::size_t solved_at) {
   const std::size_t every = nodes / kSolveEachUpTo > 1 ? nodes / kSolveEachUpTo : 1;

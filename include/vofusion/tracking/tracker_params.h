@@ -20,11 +20,10 @@ struct TrackerParams {
 
   // Tracking failure (divergence, degeneracy) detection; the conditioning bound is fixed in code
   // (tracking::kMinCondition).
-  float min_inlier_ratio = 0.10f;     // inliers / valid pixels at the finest tracking level
+  float min_inlier_ratio = 0.10f;     // inliers / pixels that land on the model (mode joint) or valid pixels, finest level
   float max_jump_translation = 0.05f; // m, ICP pose vs the prior's prediction (modes joint, paper-handoff)
   float max_jump_rotation = 5.0f;     // degrees, same
   bool integrate_on_fallback = true;  // fuse frames whose pose came from the odometry fallback
-                                      // (when tracking at full resolution only)
   // Mode joint: one Gauss-Newton over the ICP residuals and the prior's point matches (its robust
   // kernels and the initial guess's margin are fixed in code: tracking/joint_policy.h).
   double joint_icp_sigma = 0.005;     // m, noise of one finest-level point-to-plane residual (smaller:
