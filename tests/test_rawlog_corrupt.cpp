@@ -45,6 +45,15 @@ Frame smallFrame(int w, int h) {
   return f;
 }
 
+// A rawlog at `path` holding obs alone, its images inside.
+void writeOneObservation(const std::string& path, const mrpt::obs::CObservation3DRangeScan& obs) {
+  RawlogWriterOptions o;
+  o.external_images = false;
+  RawlogWriter writer(path, o);
+  writer.writeObservation(obs);
+  writer.commit();
+}
+
 // One observation as MRPT writes it (class header, version, fields), uncompressed: MRPT reads plain
 // archives as well, and the bytes can be patched.
 std::string serialize(const mrpt::obs::CObservation3DRangeScan& obs) {
@@ -243,11 +252,7 @@ TEST(RawlogCorrupt, FourKFrameWithPointsStillReads) {
     auto obs = observationFromFrame(smallFrame(w, h));
     obs->hasPoints3D = true;
     obs->resizePoints3DVectors(std::size_t(w) * h);
-    RawlogWriterOptions o;
-    o.external_images = false;
-    RawlogWriter writer(path, o);
-    writer.writeObservation(*obs);
-    writer.commit();
+    writeOneObservation(path, *obs);
   }
   RawlogSource src(path, {});
   ASSERT_EQ(src.size(), 1u);
@@ -266,11 +271,7 @@ TEST(RawlogCorrupt, DepthUnitsThatAreNoScaleCostTheirFrame) {
     {
       auto obs = observationFromFrame(smallFrame(64, 48));
       obs->rangeUnits = units;
-      RawlogWriterOptions o;
-      o.external_images = false;
-      RawlogWriter writer(path, o);
-      writer.writeObservation(*obs);
-      writer.commit();
+      writeOneObservation(path, *obs);
     }
     RawlogSource src(path, {});
     Frame f;
