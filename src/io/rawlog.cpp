@@ -21,7 +21,6 @@
 #include <mrpt/io/CFileGZInputStream.h>
 #include <mrpt/io/CFileGZOutputStream.h>
 #include <mrpt/obs/CActionCollection.h>
-#include <mrpt/obs/CObservationComment.h>
 #include <mrpt/obs/CObservationRawDAQ.h>
 #include <mrpt/obs/CObservationRobotPose.h>
 #include <mrpt/obs/CSensoryFrame.h>
@@ -44,10 +43,8 @@ constexpr const char* kGroundTruthLabel = "GROUND_TRUTH";
 // A frame whose colour image was taken off its depth's time (TUM fr1: up to 20 ms) is followed by an
 // observation so labelled, stamped at the colour image's time (an observation holds one time): an empty
 // CObservationRawDAQ, which MRPT's CRawlog keeps as it is (a CObservationComment it folds into the
-// rawlog's one comment, so RawLogViewer kept only the last). Comments so written, "COLOUR_TIME: ..."
-// (2026-12-05 only), are read too.
+// rawlog's one comment, so RawLogViewer would keep only the last).
 constexpr const char* kColourTimeLabel = "COLOUR_TIME";
-constexpr const char* kColourTimeText = "COLOUR_TIME: ";
 
 // What one rawlog entry may allocate while it is deserialised. MRPT sizes (and zero-fills) strings,
 // vectors, deques and matrices from the archive's length fields before reading the data, so without
@@ -307,10 +304,7 @@ struct RawlogSource::Reader {
         ++scans;
         return s;
       }
-      const auto comment = std::dynamic_pointer_cast<mrpt::obs::CObservationComment>(o);
-      const bool colour_time = (o->sensorLabel == kColourTimeLabel && std::dynamic_pointer_cast<mrpt::obs::CObservationRawDAQ>(o)) ||
-                               (comment && comment->text.rfind(kColourTimeText, 0) == 0);
-      if (colour_time) {
+      if (o->sensorLabel == kColourTimeLabel && std::dynamic_pointer_cast<mrpt::obs::CObservationRawDAQ>(o)) {
         const double offset = mrpt::Clock::toDouble(o->timestamp) - last_scan_time;
         if (colour_offsets && scans > 0 && std::isfinite(offset) && std::abs(offset) < 1.0) {
           if (colour_offsets->size() < scans) colour_offsets->resize(scans, 0.0);
