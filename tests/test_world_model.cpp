@@ -235,6 +235,42 @@ TEST(WorldModel, SpilledBricksComeBackBitIdenticalAndTheCacheStaysWithinItsLimit
   EXPECT_EQ(wm.coordsInBox(Eigen::Vector3i(-10, -10, -10), 20).size(), 0u);
 }
 
+// A box query answers as a walk over every stored brick, in the same order, with bricks in RAM, among
+// the latest spilled and merged on disk, boxes cut by the keys' reach included. It looks the rows up
+// on disk instead of walking the whole map (a volume shift and every premeshed region ask it).
+TEST(WorldModel, BoxQueriesAnswerAsAWalkOverEveryBrick) {
+  std::mt19937 rng(11);
+  WorldModel wm(20 * sizeof(Brick), test::tempDir("world_model_box"));  // 20 in RAM, the rest on disk
+  std::vector<std::unique_ptr<Brick>> batch;
+  std::uniform_int_distribution<int> coord(-12, 12);
+  for (int i = 0; i < 6000; ++i) {  // more than the index's latest insertions hold: most get merged
+    const Eigen::Vector3i c(coord(rng), coord(rng), coord(rng));
+    auto b = std::make_unique<Brick>();
+    b->coord = c;
+    b->voxels[0].weight = 1;
+    wm.put(std::move(b));
+  }
+  wm.put(randomBrick(Eigen::Vector3i(-WorldModel::kKeyReach, 0, 0), rng));   // at the keys' ends
+  wm.put(randomBrick(Eigen::Vector3i(WorldModel::kKeyReach - 1, 0, 0), rng));
+  ASSERT_GT(wm.stats().spilled, 5000u);
+  const std::vector<Eigen::Vector3i> all = wm.coords();
+  const auto walk = [&](const Eigen::Vector3i& lo, int n) {
+    std::vector<Eigen::Vector3i> out;
+    for (const Eigen::Vector3i& c : all)
+      if (((c - lo).array() >= 0).all() && ((c - lo).array() < n).all()) out.push_back(c);
+    return out;
+  };
+  std::uniform_int_distribution<int> corner(-16, 10), size(0, 12);
+  for (int q = 0; q < 300; ++q) {
+    const Eigen::Vector3i lo(corner(rng), corner(rng), corner(rng));
+    const int n = size(rng);
+    ASSERT_EQ(wm.coordsInBox(lo, n), walk(lo, n)) << "box at " << lo.transpose() << ", " << n;
+  }
+  for (const Eigen::Vector3i lo : {Eigen::Vector3i(-WorldModel::kKeyReach - 2, -1, -1), Eigen::Vector3i(WorldModel::kKeyReach - 2, -1, -1)})
+    EXPECT_EQ(wm.coordsInBox(lo, 4), walk(lo, 4)) << lo.transpose();
+  EXPECT_EQ(wm.coordsInBox(Eigen::Vector3i(-100, -100, -100), 200), walk(Eigen::Vector3i(-100, -100, -100), 200));  // more rows than bricks
+}
+
 // A volume shift hands its bricks over at once (putAll / takeAll, the compression and decompression on
 // every core): the store ends each shift as handing them over one by one leaves it, down to the spill
 // file's size and free places (the same bricks spilled, in the same order, to the same places).

@@ -230,10 +230,32 @@ void WorldModel::forEachKey(F&& f) const {
 std::vector<Eigen::Vector3i> WorldModel::coordsInBox(const Eigen::Vector3i& lo, int n) const {
   const std::shared_lock lock(mutex_);
   std::vector<Eigen::Vector3i> out;
-  forEachKey([&](std::uint64_t k) {
+  const auto inBox = [&](std::uint64_t k) {
     const Eigen::Vector3i c = decode(k);
-    if (((c - lo).array() >= 0).all() && ((c - lo).array() < n).all()) out.push_back(c);
-  });
+    return ((c - lo).array() >= 0).all() && ((c - lo).array() < n).all();
+  };
+  const auto take = [&](std::uint64_t k) { out.push_back(decode(k)); };
+  for (const auto& [k, e] : ram_)
+    if (inBox(k)) take(k);
+  // On disk, one key range per row of the box (keys order bricks by z, then y, then x; the box cut to
+  // the keys' reach): a volume shift and each region the premesher takes ask this, and walking every
+  // brick of a long run's map (1-3 M) cost milliseconds each time. The same bricks in the same order as
+  // the walk, which stays for boxes with more rows than the map has bricks.
+  const Eigen::Vector3i first = lo.cwiseMax(Eigen::Vector3i::Constant(-kKeyReach)),
+                        last = (lo + Eigen::Vector3i::Constant(n - 1)).cwiseMin(Eigen::Vector3i::Constant(kKeyReach - 1));
+  if (n <= 0 || (first.array() > last.array()).any()) return out;
+  const std::size_t row_count = std::size_t(last.y() - first.y() + 1) * std::size_t(last.z() - first.z() + 1);
+  if (row_count > disk_.size()) {
+    disk_.forEachKey([&](std::uint64_t k) {
+      if (inBox(k)) take(k);
+    });
+    return out;
+  }
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> rows;
+  rows.reserve(row_count);
+  for (int z = first.z(); z <= last.z(); ++z)
+    for (int y = first.y(); y <= last.y(); ++y) rows.emplace_back(key({first.x(), y, z}), key({last.x(), y, z}));
+  disk_.forEachKeyIn(rows, inBox, take);
   return out;
 }
 
