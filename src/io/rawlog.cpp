@@ -529,6 +529,16 @@ struct RawlogWriter::Impl {
     records = std::make_unique<RecordFile>(rawlog_file);
     arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<RecordFile>>(*records);
   }
+  // Format ActionsSensoryFrames: the pending actions and `first`, then the pending observations, as
+  // one (CActionCollection, CSensoryFrame) pair; the pending ones are cleared. The caller ends the record.
+  void writePair(const std::vector<mrpt::obs::CObservation::Ptr>& first = {}) {
+    mrpt::obs::CSensoryFrame sf;
+    for (const auto& o : first) sf.insert(o);
+    for (const auto& o : pending_obs) sf.insert(o);
+    *arch << pending_actions << sf;
+    pending_actions.clear();
+    pending_obs.clear();
+  }
   // The record just serialised is complete (in place: appended to the file now).
   void endRecord() {
     if (records) records->endRecord();
@@ -587,11 +597,7 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
     // entry (kMaxEntryTotal).
     constexpr std::size_t kMaxObservationsPerEntry = 4096;
     if (impl_->pending_obs.size() >= kMaxObservationsPerEntry) {
-      mrpt::obs::CSensoryFrame sf;
-      for (const auto& o : impl_->pending_obs) sf.insert(o);
-      *impl_->arch << impl_->pending_actions << sf;
-      impl_->pending_actions.clear();
-      impl_->pending_obs.clear();
+      impl_->writePair();
       impl_->endRecord();
       impl_->syncIfDue();
     }
@@ -648,12 +654,7 @@ std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
     if (opts_.format == RawlogWriterOptions::Format::Observations) {
       for (const auto& o : obs_list) *impl_->arch << *o;
     } else {
-      mrpt::obs::CSensoryFrame sf;
-      for (const auto& o : obs_list) sf.insert(o);
-      for (const auto& o : impl_->pending_obs) sf.insert(o);
-      *impl_->arch << impl_->pending_actions << sf;
-      impl_->pending_actions.clear();
-      impl_->pending_obs.clear();
+      impl_->writePair(obs_list);
     }
     impl_->endRecord();  // images first, then the record that names them
   } catch (const InputError&) {
@@ -677,10 +678,7 @@ void RawlogWriter::commit() {
   }
   if (opts_.format == RawlogWriterOptions::Format::ActionsSensoryFrames &&
       (impl_->pending_actions.size() > 0 || !impl_->pending_obs.empty())) {
-    // Trailing actions/observations still need their pair.
-    mrpt::obs::CSensoryFrame sf;
-    for (const auto& o : impl_->pending_obs) sf.insert(o);
-    *impl_->arch << impl_->pending_actions << sf;
+    impl_->writePair();  // trailing actions/observations still need their pair
     impl_->endRecord();
   }
   if (impl_->records) {
