@@ -333,16 +333,20 @@ void TsdfVolume::save(std::ostream& os) const {
     os.write(reinterpret_cast<const char*>(z.data()), static_cast<std::streamsize>(z.size()));
   };
   // Compression is most of a save's time (a checkpoint stops the frame loop): the volume's bricks are
-  // compressed on every core, then written in order; the world model's go as stored (those on disk
-  // already compressed), one by one.
+  // compressed on every core, then written in order; the world model's too (those in its RAM cache
+  // compressed, those on disk read as stored and inflated to check), a bounded batch at a time.
   std::vector<std::vector<std::uint8_t>> packed(vol.size());
   parallelFor(0, int(vol.size()), [&](int i) { packed[std::size_t(i)] = compressBrick(*vol[std::size_t(i)].brick); }, 16);
   for (std::size_t i = 0; i < vol.size(); ++i) write(vol[i].brick->coord, packed[i]);
-  packed.clear();
-  std::vector<std::uint8_t> stored;
-  for (const Eigen::Vector3i& c : world) {
-    if (!world_->readCompressed(c, stored)) throw std::logic_error("TsdfVolume::save: a brick left the world model while saving");
-    write(c, stored);
+  constexpr std::size_t kBatch = 512;  // ~2 MiB of compressed bricks in flight
+  packed.assign(std::min(kBatch, world.size()), {});
+  for (std::size_t first = 0; first < world.size(); first += kBatch) {
+    const std::size_t n = std::min(kBatch, world.size() - first);
+    parallelForEvery(0, int(n), [&](int i) {
+      if (!world_->readCompressed(world[first + std::size_t(i)], packed[std::size_t(i)]))
+        throw std::logic_error("TsdfVolume::save: a brick left the world model while saving");
+    }, 16);
+    for (std::size_t i = 0; i < n; ++i) write(world[first + i], packed[i]);
   }
   os.write("END\n", 4);
   if (!os) throw std::runtime_error("write failed (disk full?)");
