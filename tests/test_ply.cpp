@@ -161,6 +161,15 @@ TEST(Ply, MalformedFilesAreInputErrors) {
       {"novertex", "ply\nformat ascii 1.0\nend_header\n"},
       {"huge", "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
                "property float z\nend_header\n"},
+      // end_header without its newline: the body began a byte past the file's end, so the bytes left
+      // wrapped round and the count's check passed (bad_alloc, or gigabytes zero-filled).
+      {"hugenonl", "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
+                   "property float z\nend_header"},
+      // A vertex's list count that no integer holds (cast undefined: its values were read as the next ones).
+      {"vertexlistcount", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                          "property list uchar float extra\nend_header\n0 0 0 inf\n"},
+      {"vertexlistneg", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                        "property list int float extra\nend_header\n0 0 0 -1\n"},
       // A second vertex element after the faces shrank the vertices under them.
       {"twovertex", head.substr(0, head.size() - 11) + "element vertex 1\nproperty float x\nproperty float y\n"
                         "property float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n0 0 0\n"},
@@ -168,6 +177,7 @@ TEST(Ply, MalformedFilesAreInputErrors) {
   for (const auto& [name, text] : cases) {
     const std::string p = dir + "/" + name + ".ply";
     writeText(p, text);
+    const ScopedAllocationLimit limit(std::size_t(1) << 30, std::size_t(2) << 30);  // no count sizes a buffer unchecked
     EXPECT_THROW(readPly(p), InputError) << name;
   }
   EXPECT_THROW(readPly(dir + "/missing.ply"), InputError);

@@ -220,7 +220,7 @@ Header readHeader(const std::string& path, const std::string& data) {
   }
   if (!ended) throw InputError(path, "PLY header has no end_header");
   if (!have_format) throw InputError(path, "PLY header has no format line");
-  h.body = pos;
+  h.body = std::min(pos, data.size());  // an end_header without its newline ends the file: the body is empty, not past it
   return h;
 }
 
@@ -292,7 +292,10 @@ struct BodyParser {
       for (std::size_t k = 0; k < e.props.size(); ++k) {
         const Property& p = e.props[k];
         if (p.is_list) {  // unusual on vertices, but skip it properly
-          const auto n = static_cast<long long>(body.read(p.count_type, "vertex list"));
+          const double nd = body.read(p.count_type, "vertex list");
+          if (!(nd >= 0 && nd <= 1e6) || nd != std::floor(nd))
+            throw InputError(path, "vertex " + std::to_string(i) + " has a bad list count");
+          const auto n = static_cast<long long>(nd);
           for (long long j = 0; j < n; ++j) body.read(p.type, "vertex list");
           v[k] = 0;
         } else {
