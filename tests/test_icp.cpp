@@ -101,6 +101,32 @@ TEST(Icp, BareWallIsDetectedAsDegenerate) {
   EXPECT_EQ(r.degenerate_dims, 3);
 }
 
+// icp_degenerate_ratio 0 is in range: a noise-free wall facing the camera has exactly zero eigenvalues
+// (its normals are exactly the optical axis), which that ratio once divided by: a NaN step, no ICP.
+TEST(Icp, AZeroDegenerateRatioStillLeavesAPlanesFreeDirectionsAlone) {
+  CameraIntrinsics cam;
+  cam.width = 160;
+  cam.height = 120;
+  cam.fx = cam.fy = 131.25;
+  cam.cx = 79.5;
+  cam.cy = 59.5;
+  const cv::Mat depth(cam.height, cam.width, CV_32FC1, cv::Scalar(2.0f));
+  const std::vector<DepthLevel> frame = preprocessDepth(depth, cam, PreprocessParams{});
+  std::vector<cv::Mat> mv, mn;
+  modelFromFrame(frame, Eigen::Isometry3d::Identity(), mv, mn);
+  Eigen::Isometry3d guess = Eigen::Isometry3d::Identity();
+  guess.translation() = Eigen::Vector3d(0.01, -0.01, 0.0);  // along the wall: nothing there to say otherwise
+  IcpParams ip;
+  ip.degenerate_ratio = 0.0;
+  const IcpResult r = projectiveIcp(frame, mv, mn, Eigen::Isometry3d::Identity(), guess, ip);
+  ASSERT_TRUE(r.solved);
+  ASSERT_TRUE(r.pose.matrix().allFinite());
+  EXPECT_NEAR(r.pose.translation().x(), 0.01, 1e-4);
+  EXPECT_NEAR(r.pose.translation().y(), -0.01, 1e-4);
+  EXPECT_NEAR(r.pose.translation().z(), 0.0, 1e-4);
+  EXPECT_EQ(r.degenerate_dims, 3);
+}
+
 // Mode joint: as degenerate_ratio passes the smallest eigenvalue's share, that direction goes from
 // ICP and the other terms to the weak anchor gradually. A hard cut made the pose jump there, and the
 // frames after it followed (rpy_first100's frames 50-99: 0.009 or 0.011 m ATE by one frame's cut).

@@ -349,7 +349,8 @@ bool icpIteration(const IcpLevel& L, IcpResult& res) {
     int degenerate = 0;
     for (int i = 0; i < 6; ++i) {
       const double e = es.eigenvalues()[i];
-      if (e >= L.params.degenerate_ratio * emax) xs += es.eigenvectors().col(i) * (es.eigenvectors().col(i).dot(b_icp) / e);
+      // Floored as the joint step's is: icp_degenerate_ratio 0 (in range) divided by a plane's zero eigenvalues.
+      if (e >= std::max(L.params.degenerate_ratio, 1e-9) * emax) xs += es.eigenvectors().col(i) * (es.eigenvectors().col(i).dot(b_icp) / e);
       else ++degenerate;
     }
     if (L.level == 0) res.degenerate_dims = degenerate;
