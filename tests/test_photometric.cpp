@@ -102,6 +102,19 @@ TEST(Photometric, PyramidOfAnyEightBitColourAndOfATinyImage) {
   EXPECT_EQ(tiny.size(), 2u);  // 3x3, 1x1
 }
 
+// An odd-sized level halves to the 2x2 means of its even part, as the depth pyramid does (camera
+// scaled by 0.5): INTER_AREA over the whole 5 columns averaged 2.5 columns a pixel.
+TEST(Photometric, AnOddLevelHalvesToTwoByTwoMeans) {
+  cv::Mat grey(5, 5, CV_8UC1);
+  for (int y = 0; y < 5; ++y)
+    for (int x = 0; x < 5; ++x) grey.at<std::uint8_t>(y, x) = std::uint8_t(10 * x);
+  const auto pyr = intensityPyramid(grey, {5, 5}, 2);
+  ASSERT_EQ(pyr.size(), 2u);
+  ASSERT_EQ(pyr[1].grey.size(), cv::Size(2, 2));
+  EXPECT_FLOAT_EQ(pyr[1].grey.at<float>(0, 0), 5.0f);   // columns 0 and 1
+  EXPECT_FLOAT_EQ(pyr[1].grey.at<float>(1, 1), 25.0f);  // columns 2 and 3
+}
+
 TEST(Photometric, SumsAreTheCostsDerivative) {
   const Pair pair = makePair();
   PhotometricParams params;

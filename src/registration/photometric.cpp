@@ -55,8 +55,12 @@ std::vector<IntensityLevel> intensityPyramid(const cv::Mat& bgr, cv::Size size, 
   out.push_back(withGradients(grey));
   for (int l = 1; l < levels; ++l) {
     if (out.back().grey.cols < 2 || out.back().grey.rows < 2) break;  // no half of it (a tiny image)
+    // An odd last row or column is dropped, as the depth pyramid drops it: INTER_AREA over it would
+    // stretch each 2x2 mean (53 rows to 26: a 2.04 scale, half a pixel off at the far edge).
+    const cv::Mat& last = out.back().grey;
+    const cv::Mat even = last(cv::Rect(0, 0, last.cols / 2 * 2, last.rows / 2 * 2));
     cv::Mat half;
-    cv::resize(out.back().grey, half, cv::Size(out.back().grey.cols / 2, out.back().grey.rows / 2), 0, 0, cv::INTER_AREA);
+    cv::resize(even, half, cv::Size(even.cols / 2, even.rows / 2), 0, 0, cv::INTER_AREA);
     out.push_back(withGradients(half));
   }
   return out;
