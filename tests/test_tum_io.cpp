@@ -2,6 +2,7 @@
 // TUM lists, association, trajectories and the TUM folder source.
 #include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 
 #include "support.h"
 #include "vofusion/core/errors.h"
@@ -87,6 +88,29 @@ TEST(TumFolder, FramesAreStampedAtTheirDepthCapture) {
   EXPECT_DOUBLE_EQ(f.timestamp, src.pairs()[5].depth.timestamp);
   // The colour image's own capture time travels along (the odometry's keypoint bearings come from it).
   EXPECT_DOUBLE_EQ(f.timestamp + f.colour_offset, src.pairs()[5].rgb.timestamp);
+}
+
+// A JPEG tagged with an EXIF orientation ("rotate 90", as phones write): the size probe reads it as the
+// frames are read, on the sensor's grid (it read it turned, 48x64, and every 64x48 frame was refused).
+TEST(TumFolder, TheImageSizeIsTheFramesWhateverAnExifOrientationSays) {
+  cv::Mat img(48, 64, CV_8UC3);
+  cv::randu(img, 0, 255);
+  std::vector<std::uint8_t> jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", img, jpeg));
+  // APP1 "Exif", big-endian TIFF, one IFD entry: Orientation (0x0112) SHORT 1 = 6.
+  const std::uint8_t exif[] = {0xFF, 0xE1, 0x00, 0x22, 'E', 'x', 'i', 'f', 0, 0, 'M', 'M', 0x00, 0x2A, 0, 0, 0, 8,
+                               0x00, 0x01, 0x01, 0x12, 0x00, 0x03, 0, 0, 0, 1, 0x00, 0x06, 0, 0, 0, 0, 0, 0};
+  jpeg.insert(jpeg.begin() + 2, std::begin(exif), std::end(exif));
+  const std::string path = test::tempDir("exif_orientation") + "/rotated.jpg";
+  {
+    std::ofstream out(path, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(jpeg.data()), std::streamsize(jpeg.size()));
+  }
+  ASSERT_EQ(cv::imread(path, cv::IMREAD_COLOR).size(), cv::Size(48, 64)) << "OpenCV no longer turns it: the test shows nothing";
+  const auto size = firstReadableImageSize({path});
+  ASSERT_TRUE(size.has_value());
+  EXPECT_EQ(*size, cv::Size(64, 48));
+  EXPECT_EQ(loadColour(path, 64, 48).size(), cv::Size(64, 48));
 }
 
 TEST(Trajectory, WriteReadRoundTrip) {

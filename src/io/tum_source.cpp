@@ -123,7 +123,8 @@ cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, con
   if (raw.empty()) {
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode depth image (" + damage + ")");
-    raw = readImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "depth");
+    // The sensor's pixel grid, whatever an EXIF orientation says: depth and colour pair pixel by pixel.
+    raw = readImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR | cv::IMREAD_IGNORE_ORIENTATION, "depth");
   }
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
   if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel" + unit_note);
@@ -278,7 +279,9 @@ std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& p
   for (const std::string& path : paths) {
     if (path.empty() || !fs::is_regular_file(path) || !imageFileDamage(path).empty()) continue;
     try {
-      const cv::Mat image = readImage(path, cv::IMREAD_COLOR, "colour");
+      // As loadColour reads it (IMREAD_UNCHANGED ignores an EXIF orientation): IMREAD_COLOR turned a
+      // JPEG tagged "rotate 90" to 480x640, and every 640x480 frame was then refused as the wrong size.
+      const cv::Mat image = readImage(path, cv::IMREAD_UNCHANGED, "colour");
       if (!image.empty()) return image.size();
     } catch (const InputError&) {  // the next one may give the size; this one is its own frame's damage
     }
