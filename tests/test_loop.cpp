@@ -1,6 +1,7 @@
 // Loop closure's parts on their own: keyframe selection, the LSH place index, the MRPT pose graph
 // (drift spread over a loop, a false loop removed instead of bending the map), and the loop
 // verification on rendered frames of the synthetic loop and look-alike scenes.
+#include <cstring>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -477,6 +478,14 @@ TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
   std::vector<std::uint8_t> bytes = encodeKeyframeData(made[0]);
   bytes.resize(bytes.size() / 2);
   Keyframe k;
+  EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
+  // So is a point count that differs from the descriptors' (matching read points past the end).
+  bytes = encodeKeyframeData(made[0]);
+  const std::size_t npoints = made[0].features->points.size();
+  ASSERT_GT(npoints, 0u);
+  const std::size_t at = bytes.size() - npoints * sizeof(Eigen::Vector3d) - sizeof(std::uint64_t);
+  const std::uint64_t fewer = npoints - 1;
+  std::memcpy(bytes.data() + at, &fewer, sizeof(fewer));
   EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
 }
 

@@ -82,7 +82,8 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
   f->descriptors.create(drows, dcols, dtype);
   std::memcpy(f->descriptors.data, r.take(f->descriptors.total()), f->descriptors.total());
   const auto npoints = r.get<std::uint64_t>();
-  if (npoints > bytes.size() / sizeof(Eigen::Vector3d)) throw std::runtime_error("corrupt points in the keyframes' spill file");
+  // A point for each descriptor: matching reads points[descriptor row] (zlib's check covers the depth only).
+  if (npoints != std::uint64_t(drows)) throw std::runtime_error("corrupt points in the keyframes' spill file");
   f->points.resize(npoints);
   // Three doubles each, no padding (Eigen::Vector3d is not vectorised): the bytes encode wrote.
   static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double));
