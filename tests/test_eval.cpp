@@ -138,6 +138,13 @@ TEST(Eval, AssociationTolerance) {
   EXPECT_FALSE(computeAte(sparse, shifted, 0.02).success);
   EXPECT_EQ(computeAte(sparse, shifted, 0.03).trans.count, sparse.size());
   EXPECT_EQ(associateTrajectories(gt, late, 0.02).size(), 285u);  // 0.5 s = 15 frames of overlap lost
+  // A gap of exactly max_dt is no pair, as associate.py's "< max_difference" has it (dyadic stamps:
+  // the difference is exact).
+  Trajectory one = {sparse.front()}, at_limit = one;
+  one.front().timestamp = 0.5;
+  at_limit.front().timestamp = 0.5 + 0.015625;
+  EXPECT_TRUE(associateTrajectories(one, at_limit, 0.015625).empty());
+  EXPECT_EQ(associateTrajectories(one, at_limit, 0.016).size(), 1u);
 }
 
 // A path drawn without ground truth lists no "ground truth" in its legend: the first entry's swatch

@@ -63,7 +63,8 @@ std::vector<std::pair<std::size_t, std::size_t>> associateTrajectories(const Tra
   for (std::size_t i = 0; i < gt.size(); ++i) {
     auto lo = std::lower_bound(es.begin(), es.end(), gt[i].timestamp - max_dt);
     for (auto it = lo; it != es.end() && *it <= gt[i].timestamp + max_dt; ++it)
-      cands.push_back({std::abs(*it - gt[i].timestamp), i, std::size_t(it - es.begin())});
+      // Closer than max_dt, as TUM's associate.py has it (abs(a - b) < max_difference).
+      if (const double dt = std::abs(*it - gt[i].timestamp); dt < max_dt) cands.push_back({dt, i, std::size_t(it - es.begin())});
   }
   std::stable_sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.dt < b.dt; });
   std::vector<char> used_g(gt.size(), 0), used_e(est.size(), 0);
