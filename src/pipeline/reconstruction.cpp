@@ -187,6 +187,10 @@ FrameReport Reconstruction::process(const Frame& frame) {
       m.colour_time = {true, r.odometry.colour_time_capture, r.odometry.colour_time_votes, r.odometry.colour_time_capture_votes};
   }
   m.waitFusion();
+  // The frames a later prior may name keep their poses, however old: the odometry matches against its
+  // last good frame after any number of failed ones (ICP tracked a covered lens on; past 32 frames the
+  // match that came back had no reference pose, and the frame was guessed).
+  if (m.odometry) m.kinfu->holdFrames(m.odometry->heldFrames());
   // Lost: the frame is tracked only once a keyframe places it (from there, as its prior: not from a
   // frame before the loss), verified against that keyframe as a loop is; until then it stays lost, its
   // pose held, never guessed (ICP from the held pose may converge anywhere once the camera has moved on).

@@ -38,7 +38,23 @@ void MotionHistory::remember(std::size_t index, double timestamp, const Eigen::I
   last_timestamp_ = timestamp;
   have_last_ = true;
   recent_.emplace_back(index, T);
-  if (recent_.size() > 32) recent_.pop_front();
+  forgetOld();
+}
+
+void MotionHistory::hold(std::vector<std::size_t> frames) {
+  if (frames.size() > kHeld) frames.resize(kHeld);
+  held_ = std::move(frames);
+  forgetOld();
+}
+
+// Those before the last kRecent, except the held frames.
+void MotionHistory::forgetOld() {
+  const std::size_t older = recent_.size() > kRecent ? recent_.size() - kRecent : 0;
+  auto it = recent_.begin();
+  for (std::size_t i = 0; i < older; ++i) {
+    const bool held = std::find(held_.begin(), held_.end(), it->first) != held_.end();
+    it = held ? std::next(it) : recent_.erase(it);
+  }
 }
 
 void MotionHistory::restart(const Eigen::Isometry3d& T) {
@@ -63,7 +79,7 @@ void MotionHistory::loadState(state::Archive& a) {
   state::read(a, pose_);
   uint64_t n = 0;
   a >> n;
-  if (n > 32) throw std::runtime_error("checkpoint: bad motion history");
+  if (n > kRecent + kHeld) throw std::runtime_error("checkpoint: bad motion history");
   recent_.clear();
   for (uint64_t k = 0; k < n; ++k) {
     uint64_t i = 0;

@@ -272,6 +272,8 @@ bool Tracker::placeAt(const Frame& frame, const Eigen::Isometry3d& cam_to_world)
 
 Eigen::Isometry3d Tracker::pose() const { return impl_->history.pose(); }
 
+void Tracker::holdFrames(std::vector<std::size_t> frames) { impl_->history.hold(std::move(frames)); }
+
 void Tracker::relocalise(const Eigen::Isometry3d& cam_to_world, bool as_prior) {
   impl_->history.restart(cam_to_world);
   impl_->placed.reset();

@@ -8,6 +8,7 @@
 //   TriangleMesh m = t.extractMesh();
 #include <iosfwd>
 #include <string>
+#include <vector>
 #include <utility>
 
 #include <mrpt/poses/CPose3D.h>
@@ -48,6 +49,8 @@ class TrackedMap {
   // Tracking found again elsewhere (relocalisation): Tracker::relocalise, and the model predicted from
   // there before the next frame is tracked.
   void relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior = false);
+  // Tracker::holdFrames. Not while a fuse() runs.
+  void holdFrames(std::vector<std::size_t> frames) { tracker_.holdFrames(std::move(frames)); }
   // The map and the camera pose to one file, atomically; a later run resumes from it with resume():
   // the next frame is tracked from the saved pose against the saved map, in its frame.
   void save(const std::string& path) const;

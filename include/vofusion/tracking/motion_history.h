@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <deque>
 #include <utility>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -20,8 +21,11 @@ class MotionHistory {
   explicit MotionHistory(const Eigen::Isometry3d& pose) : pose_(pose) {}
 
   const Eigen::Isometry3d& pose() const { return pose_; }
-  // Pose of a recent frame (the last 32), nullptr when it has none.
+  // Pose of a recent frame (the last kRecent, and those held), nullptr when it has none.
   const Eigen::Isometry3d* poseOf(std::size_t index) const;
+  // Frames whose poses stay past the last kRecent (at most kHeld of them): the odometry's references,
+  // which it keeps however old (a covered lens for a second or more), and a later prior names.
+  void hold(std::vector<std::size_t> frames);
   // The last pose moved on by the last motion, scaled to the time since the last tracked frame.
   Eigen::Isometry3d constantVelocity(double timestamp) const;
   // The camera's motion over `offset` seconds at the last motion's velocity (camera frame): where the
@@ -42,8 +46,11 @@ class MotionHistory {
   void loadState(state::Archive& a);
 
  private:
+  static constexpr std::size_t kRecent = 32, kHeld = 16;
+  void forgetOld();
   Eigen::Isometry3d pose_;  // camera-to-world of the last frame
-  std::deque<std::pair<std::size_t, Eigen::Isometry3d>> recent_;
+  std::deque<std::pair<std::size_t, Eigen::Isometry3d>> recent_;  // oldest first
+  std::vector<std::size_t> held_;
   Eigen::Isometry3d last_motion_ = Eigen::Isometry3d::Identity();  // over the last two tracked frames
   double last_motion_dt_ = 0.0, last_timestamp_ = 0.0;
   bool have_last_ = false;

@@ -9,6 +9,7 @@
 #include <iosfwd>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <mrpt/poses/CPose3D.h>
@@ -83,6 +84,9 @@ class Tracker {
   // fallback), as the odometry's motion is otherwise. The map is to predict its model from there
   // before the next frame (TrackedMap::relocalise, TrackedMap::resume).
   void relocalise(const Eigen::Isometry3d& cam_to_world, bool as_prior = false);
+  // Frames (Frame::index) a later prior may name however old (RgbdOdometry::heldFrames): their poses
+  // stay in the tracker's recent path past its last 32 frames.
+  void holdFrames(std::vector<std::size_t> frames);
   // Checkpoints: the camera's recent motion and the counts. Call between frames, once the map fused
   // the last one (fused(); it throws before); the map's own state follows in the same stream.
   void saveState(std::ostream& os) const;
