@@ -389,6 +389,49 @@ std::array<Key, 3> faceKey(const TriangleMesh& m, const std::array<std::uint32_t
 
 }  // namespace
 
+// A surface through voxels (their TSDF exactly 0: about 1 in 13 000 near a surface rounds there) gives
+// one vertex on each such voxel and no zero-area face: every edge from it to the other side put a vertex
+// on it, and faces between those copies had no area (a region's repair then refused its polygon soup).
+// Region by region too: the same faces, none repeating a vertex.
+TEST(MarchingCubes, ASurfaceThroughVoxelsGivesOneVertexThereAndNoFlatFaces) {
+  std::vector<std::unique_ptr<Brick>> storage;
+  std::vector<BrickRef> refs;
+  for (int k = 0; k < 8; ++k) {
+    auto b = std::make_unique<Brick>();
+    b->coord = {k & 1, (k >> 1) & 1, (k >> 2) & 1};
+    for (int z = 0; z < kBrickEdge; ++z)
+      for (int y = 0; y < kBrickEdge; ++y)
+        for (int x = 0; x < kBrickEdge; ++x) {
+          const Eigen::Vector3i g = b->coord * kBrickEdge + Eigen::Vector3i(x, y, z);
+          Voxel& v = b->voxels[Brick::index(x, y, z)];
+          v.tsdf = std::int16_t(std::clamp((g.sum() - 12) * 1500, -32767, 32767));  // 0 on x + y + z = 12
+          v.weight = 1;
+          v.r = v.g = v.b = 128;
+        }
+    refs.push_back({b->coord, b.get()});
+    storage.push_back(std::move(b));
+  }
+  const auto expectNoFlatFaces = [](const TriangleMesh& m, const std::string& what) {
+    for (const auto& f : m.faces) {
+      ASSERT_TRUE(f[0] != f[1] && f[1] != f[2] && f[0] != f[2]) << what;
+      const float area = (m.vertices[f[1]] - m.vertices[f[0]]).cross(m.vertices[f[2]] - m.vertices[f[0]]).norm();
+      EXPECT_GT(area, 1e-12f) << what;
+    }
+  };
+  const TriangleMesh whole = marchingCubes(refs, 0.01f);
+  ASSERT_GT(whole.faces.size(), 100u);
+  expectNoFlatFaces(whole, "whole");
+  std::set<Key> positions;
+  for (const auto& v : whole.vertices) EXPECT_TRUE(positions.insert(keyOf(v)).second) << v.transpose();
+  std::multiset<std::array<Key, 3>> whole_faces, region_faces;
+  for (const auto& f : whole.faces) whole_faces.insert(faceKey(whole, f));
+  marchingCubesByRegion(refs, 0.01f, 1, 1, [&](RegionMesh& r) {
+    expectNoFlatFaces(r.mesh, "region");
+    for (const auto& f : r.mesh.faces) region_faces.insert(faceKey(r.mesh, f));
+  });
+  EXPECT_EQ(region_faces, whole_faces);
+}
+
 // Every cell on its own, straight from PCL's tables (Bourke's edgeTable/triTable) and the bricks' voxels,
 // with none of marchingCubes' shared-vertex bookkeeping: its faces must be these, on the same vertices.
 // Some voxels unobserved and some bricks missing, so cells next to unobserved voxels and to absent

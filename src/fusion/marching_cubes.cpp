@@ -46,6 +46,9 @@ struct BrickVertices {
   std::vector<Eigen::Vector3f> points;  // in edge id order
   std::vector<std::array<std::uint8_t, 3>> colours;
   std::vector<std::uint8_t> seam;    // 1: also used by another region's cells (region meshing only)
+  // Crossings exactly on a voxel (an end's TSDF is 0): the vertex (index in points) and that voxel.
+  // Every edge from it to the other side has one there; extract() makes them one vertex.
+  std::vector<std::pair<std::uint32_t, Eigen::Vector3i>> on_voxel;
   std::uint32_t base = 0;            // global index of the first vertex
 
   void addEdge(int id) { edge_bits[id >> 6] |= std::uint64_t(1) << (id & 63); }
@@ -188,6 +191,12 @@ void edgeVertices(const Grid& grid, const int* nb, const CornerStates& state, st
           const float t = fa / (fa - fb);
           Eigen::Vector3f p((o.x() + x) * voxel_size, (o.y() + y) * voxel_size, (o.z() + z) * voxel_size);
           p[axis] += t * voxel_size;
+          if (t == 0.f || t == 1.f) {  // on a voxel: the same arithmetic from every edge (and region) there
+            Eigen::Vector3i g = o + Eigen::Vector3i(x, y, z);
+            if (t == 1.f) ++g[axis];
+            p = Eigen::Vector3f(g.x() * voxel_size, g.y() * voxel_size, g.z() * voxel_size);
+            bv.on_voxel.emplace_back(std::uint32_t(bv.points.size()), g);
+          }
           bv.addEdge(Brick::index(x, y, z) * 3 + axis);
           if (seam) bv.seam.push_back((*seam)(i, x, y, z, axis));
           bv.points.push_back(p);
@@ -254,6 +263,39 @@ void cellFaces(const int* nb, const CornerStates& state, const std::vector<Brick
       }
 }
 
+// The crossings on one voxel made one vertex (its seam flag any of theirs), and the faces that then
+// repeat a vertex dropped: a voxel whose TSDF rounds to exactly 0 (about 1 in 13 000 near a surface)
+// put a vertex on itself for every edge to the other side, and zero-area faces between them (which
+// made a region mesh fail its repair as a polygon soup).
+void mergeVoxelCrossings(const std::vector<BrickVertices>& verts, TriangleMesh& mesh, std::vector<std::uint8_t>* seam) {
+  struct Hash {
+    std::size_t operator()(const Eigen::Vector3i& g) const {
+      return std::hash<std::uint64_t>()((std::uint64_t(std::uint32_t(g.x())) * 0x9E3779B97F4A7C15ull) ^
+                                        (std::uint64_t(std::uint32_t(g.y())) << 21) ^ (std::uint64_t(std::uint32_t(g.z())) << 42));
+    }
+  };
+  std::unordered_map<Eigen::Vector3i, std::uint32_t, Hash> first;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> merged;  // (copy, the vertex it becomes)
+  for (const BrickVertices& bv : verts)
+    for (const auto& [local, g] : bv.on_voxel) {
+      const auto [it, fresh] = first.emplace(g, bv.base + local);
+      if (!fresh) merged.emplace_back(bv.base + local, it->second);
+    }
+  if (merged.empty()) return;
+  std::unordered_map<std::uint32_t, std::uint32_t> to;
+  for (const auto& [copy, kept] : merged) {
+    to[copy] = kept;
+    if (seam) (*seam)[kept] |= (*seam)[copy];
+  }
+  std::size_t n = 0;
+  for (auto f : mesh.faces) {
+    for (auto& v : f)
+      if (const auto it = to.find(v); it != to.end()) v = it->second;
+    if (f[0] != f[1] && f[1] != f[2] && f[0] != f[2]) mesh.faces[n++] = f;
+  }
+  mesh.faces.resize(n);
+}
+
 // Drop crossings no triangle uses (edges whose cells touch unobserved voxels).
 void dropUnusedVertices(TriangleMesh& mesh, std::vector<std::uint8_t>* seam) {
   std::vector<std::uint32_t> remap(mesh.vertices.size(), UINT32_MAX);
@@ -302,6 +344,7 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
   for (const auto& f : faces) nf += f.size();
   mesh.faces.reserve(nf);
   for (const auto& f : faces) mesh.faces.insert(mesh.faces.end(), f.begin(), f.end());
+  mergeVoxelCrossings(verts, mesh, seam);
   dropUnusedVertices(mesh, seam);
   computeNormals(mesh);
   return mesh;
