@@ -605,6 +605,14 @@ TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
   for (const auto& f : raw.faces) a.insert(faceKey(raw, f));
   for (const auto& f : whole.faces) b.insert(faceKey(whole, f));
   EXPECT_EQ(a, b);
+  // With the whole mesh's normals: a seam vertex's over the faces of every region using it (each
+  // region's own, over half its fan, shaded a line along every seam).
+  std::map<Key, Eigen::Vector3f> normal_at;
+  for (std::size_t v = 0; v < whole.vertices.size(); ++v) normal_at[keyOf(whole.vertices[v])] = whole.normals[v];
+  ASSERT_EQ(raw.normals.size(), raw.vertices.size());
+  std::size_t off = 0;
+  for (std::size_t v = 0; v < raw.vertices.size(); ++v) off += raw.normals[v].dot(normal_at.at(keyOf(raw.vertices[v]))) < 0.9999f;
+  EXPECT_EQ(off, 0u);
 }
 
 // target_faces is the whole mesh's budget, shared among the regions by their faces: region by region

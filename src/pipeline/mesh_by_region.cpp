@@ -47,6 +47,12 @@ class PlyStream {
         const std::int32_t g = std::int32_t(index[i]);
         f_.write(reinterpret_cast<const char*>(&g), 4);
       }
+      // A seam vertex's normal from the faces of every region using it (each region's own covers
+      // part of its fan): summed here, written over the first region's by finish().
+      if (!(r.on_seam[f[0]] || r.on_seam[f[1]] || r.on_seam[f[2]])) continue;
+      const Eigen::Vector3f n = (m.vertices[f[1]] - m.vertices[f[0]]).cross(m.vertices[f[2]] - m.vertices[f[0]]);
+      for (std::uint32_t i : f)
+        if (r.on_seam[i]) seam_normals_.try_emplace(index[i], Eigen::Vector3f::Zero()).first->second += n;
     }
     faces_ += m.faces.size();
   }
@@ -56,6 +62,7 @@ class PlyStream {
     v_.close();
     f_.close();
     if (!v_ || !f_) throw InputError(path_, "cannot write");  // a side file cut short (disk full)
+    writeSeamNormals();
     std::ofstream out(path_, std::ios::binary);
     out << "ply\nformat binary_little_endian 1.0\ncomment written by vofusion\nelement vertex " << vertices()
         << "\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
@@ -75,9 +82,26 @@ class PlyStream {
   }
 
  private:
+  static constexpr std::streamoff kVertexBytes = 27, kNormalAt = 12;  // x y z, nx ny nz, r g b
+  // Each seam vertex's normal over all its faces, as computeNormals makes it for the whole mesh.
+  void writeSeamNormals() {
+    if (seam_normals_.empty()) return;
+    std::fstream v(path_ + ".vertices", std::ios::binary | std::ios::in | std::ios::out);
+    for (const auto& [index, sum] : seam_normals_) {
+      const float len = sum.norm();
+      const Eigen::Vector3f n = len > 0.f ? Eigen::Vector3f(sum / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
+      v.seekp(std::streamoff(index) * kVertexBytes + kNormalAt);
+      v.write(reinterpret_cast<const char*>(n.data()), 12);
+    }
+    v.close();
+    if (!v) throw InputError(path_, "cannot write (its seam vertices' normals)");
+    seam_normals_.clear();
+  }
+
   std::string path_;
   std::ofstream v_, f_;
   fusion::SeamWelder welder_;
+  std::unordered_map<std::uint32_t, Eigen::Vector3f> seam_normals_;
   std::size_t faces_ = 0;
 };
 
