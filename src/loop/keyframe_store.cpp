@@ -78,12 +78,15 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
   if (r.get<std::uint8_t>() == 0) return;
   auto f = std::make_shared<DescribedKeypoints>();
   const auto drows = r.get<std::int32_t>(), dcols = r.get<std::int32_t>(), dtype = r.get<std::int32_t>();
-  if (drows < 0 || dcols < 0 || dtype != CV_8U) throw std::runtime_error("corrupt descriptors in the keyframes' spill file");
+  if (drows < 0 || dcols < 0 || dtype != CV_8U || std::uint64_t(drows) * std::uint64_t(dcols) > bytes.size())
+    throw std::runtime_error("corrupt descriptors in the keyframes' spill file");
   f->descriptors.create(drows, dcols, dtype);
   std::memcpy(f->descriptors.data, r.take(f->descriptors.total()), f->descriptors.total());
   const auto npoints = r.get<std::uint64_t>();
-  // A point for each descriptor: matching reads points[descriptor row] (zlib's check covers the depth only).
-  if (npoints != std::uint64_t(drows)) throw std::runtime_error("corrupt points in the keyframes' spill file");
+  // A point for each descriptor (matching reads points[descriptor row]; zlib's check covers the depth
+  // only), and no more than the record holds (before they size a buffer).
+  if (npoints != std::uint64_t(drows) || npoints > bytes.size() / sizeof(Eigen::Vector3d))
+    throw std::runtime_error("corrupt points in the keyframes' spill file");
   f->points.resize(npoints);
   // Three doubles each, no padding (Eigen::Vector3d is not vectorised): the bytes encode wrote.
   static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double));
