@@ -43,8 +43,7 @@ void MotionHistory::remember(std::size_t index, double timestamp, const Eigen::I
 
 void MotionHistory::hold(std::vector<std::size_t> frames) {
   if (frames.size() > kHeld) frames.resize(kHeld);
-  held_ = std::move(frames);
-  forgetOld();
+  held_ = std::move(frames);  // the next remember() forgets by it: this frame's prior may name a frame it no longer holds
 }
 
 // Those before the last kRecent, except the held frames.

@@ -23,8 +23,9 @@ class MotionHistory {
   const Eigen::Isometry3d& pose() const { return pose_; }
   // Pose of a recent frame (the last kRecent, and those held), nullptr when it has none.
   const Eigen::Isometry3d* poseOf(std::size_t index) const;
-  // Frames whose poses stay past the last kRecent (at most kHeld of them): the odometry's references,
-  // which it keeps however old (a covered lens for a second or more), and a later prior names.
+  // Frames whose poses stay past the last kRecent (at most kHeld of them) from the next remember() on:
+  // the odometry's references, which it keeps however old (a covered lens for a second or more), and
+  // a later prior names.
   void hold(std::vector<std::size_t> frames);
   // The last pose moved on by the last motion, scaled to the time since the last tracked frame.
   Eigen::Isometry3d constantVelocity(double timestamp) const;
