@@ -432,6 +432,41 @@ TEST(MarchingCubes, ASurfaceThroughVoxelsGivesOneVertexThereAndNoFlatFaces) {
   EXPECT_EQ(region_faces, whole_faces);
 }
 
+// A vertex on a voxel of a region's face is the seam's even when each region reaches it through an edge
+// of its own along the face's normal (a saddle: negative across the face, positive along it), which
+// neither flags: welded, the regions give the whole mesh's vertices (one more, unwelded, before).
+TEST(MarchingCubes, AVertexOnARegionsFaceVoxelIsWelded) {
+  std::vector<std::unique_ptr<Brick>> storage;
+  std::vector<Eigen::Vector3i> coords;
+  std::vector<BrickRef> refs;
+  for (int k = 0; k < 8; ++k) {
+    auto b = std::make_unique<Brick>();
+    b->coord = {k & 1, (k >> 1) & 1, (k >> 2) & 1};
+    for (int z = 0; z < kBrickEdge; ++z)
+      for (int y = 0; y < kBrickEdge; ++y)
+        for (int x = 0; x < kBrickEdge; ++x) {
+          const Eigen::Vector3i d = b->coord * kBrickEdge + Eigen::Vector3i(x, y, z) - Eigen::Vector3i(8, 4, 4);
+          Voxel& v = b->voxels[Brick::index(x, y, z)];
+          v.tsdf = std::int16_t(std::clamp((-d.x() * d.x() + d.y() * d.y() + d.z() * d.z()) * 1500, -32767, 32767));
+          v.weight = 1;
+          v.r = v.g = v.b = 128;
+        }
+    coords.push_back(b->coord);
+    refs.push_back({b->coord, b.get()});
+    storage.push_back(std::move(b));
+  }
+  const TriangleMesh whole = marchingCubes(refs, 0.01f);
+  ASSERT_GT(whole.faces.size(), 20u);
+  const auto fetch = [&](const Eigen::Vector3i& c, Brick&) -> const Brick* {
+    for (const BrickRef& r : refs)
+      if (r.coord == c) return r.brick;
+    return nullptr;
+  };
+  const TriangleMesh welded = marchingCubesStreamed(coords, fetch, 0.01f, 1, 1);
+  EXPECT_EQ(welded.vertices.size(), whole.vertices.size());
+  EXPECT_EQ(welded.faces.size(), whole.faces.size());
+}
+
 // Every cell on its own, straight from PCL's tables (Bourke's edgeTable/triTable) and the bricks' voxels,
 // with none of marchingCubes' shared-vertex bookkeeping: its faces must be these, on the same vertices.
 // Some voxels unobserved and some bricks missing, so cells next to unobserved voxels and to absent

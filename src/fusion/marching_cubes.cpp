@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <cstring>
 #include <map>
+#include <optional>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -267,17 +268,31 @@ void cellFaces(const int* nb, const CornerStates& state, const std::vector<Brick
 // repeat a vertex dropped: a voxel whose TSDF rounds to exactly 0 (about 1 in 13 000 near a surface)
 // put a vertex on itself for every edge to the other side, and zero-area faces between them (which
 // made a region mesh fail its repair as a polygon soup).
-void mergeVoxelCrossings(const std::vector<BrickVertices>& verts, TriangleMesh& mesh, std::vector<std::uint8_t>* seam) {
+// Region meshing (`region` set): such a vertex is on the seam when any of the 8 cells with a corner on
+// its voxel is another region's, which may use it through another edge (one it does not flag).
+void mergeVoxelCrossings(const std::vector<BrickVertices>& verts, TriangleMesh& mesh, std::vector<std::uint8_t>* seam,
+                         const std::optional<Eigen::Vector3i>& region, int region_bricks) {
   struct Hash {
     std::size_t operator()(const Eigen::Vector3i& g) const {
-      return std::hash<std::uint64_t>()((std::uint64_t(std::uint32_t(g.x())) * 0x9E3779B97F4A7C15ull) ^
-                                        (std::uint64_t(std::uint32_t(g.y())) << 21) ^ (std::uint64_t(std::uint32_t(g.z())) << 42));
+      return std::size_t((std::uint64_t(std::uint32_t(g.x())) * 0x9E3779B97F4A7C15ull) ^
+                         (std::uint64_t(std::uint32_t(g.y())) * 0xC2B2AE3D27D4EB4Full) ^
+                         (std::uint64_t(std::uint32_t(g.z())) * 0x165667B19E3779F9ull));
     }
+  };
+  const auto cellsOfAnotherRegion = [&](const Eigen::Vector3i& g) {
+    for (int k = 0; k < 8; ++k) {
+      const Eigen::Vector3i cell = g - Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+      static_assert(kBrickEdge == 8, "a cell's brick by shifting its voxel coordinates");
+      const Eigen::Vector3i brick(cell.x() >> 3, cell.y() >> 3, cell.z() >> 3);
+      if (regionOf(brick, region_bricks) != *region) return true;
+    }
+    return false;
   };
   std::unordered_map<Eigen::Vector3i, std::uint32_t, Hash> first;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> merged;  // (copy, the vertex it becomes)
   for (const BrickVertices& bv : verts)
     for (const auto& [local, g] : bv.on_voxel) {
+      if (seam && region && cellsOfAnotherRegion(g)) (*seam)[bv.base + local] = 1;
       const auto [it, fresh] = first.emplace(g, bv.base + local);
       if (!fresh) merged.emplace_back(bv.base + local, it->second);
     }
@@ -344,7 +359,9 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
   for (const auto& f : faces) nf += f.size();
   mesh.faces.reserve(nf);
   for (const auto& f : faces) mesh.faces.insert(mesh.faces.end(), f.begin(), f.end());
-  mergeVoxelCrossings(verts, mesh, seam);
+  std::optional<Eigen::Vector3i> region;  // the owned bricks' (one region when meshing by region)
+  if (seam && region_bricks > 0 && owned > 0) region = regionOf(bricks[0].coord, region_bricks);
+  mergeVoxelCrossings(verts, mesh, seam, region, region_bricks);
   dropUnusedVertices(mesh, seam);
   computeNormals(mesh);
   return mesh;
