@@ -86,8 +86,12 @@ class PlyStream {
   // Each seam vertex's normal over all its faces, as computeNormals makes it for the whole mesh.
   void writeSeamNormals() {
     if (seam_normals_.empty()) return;
+    // In file order: one pass forward over the side file, not a seek back and forth per vertex.
+    std::vector<std::pair<std::uint32_t, Eigen::Vector3f>> sums(seam_normals_.begin(), seam_normals_.end());
+    std::sort(sums.begin(), sums.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    seam_normals_.clear();
     std::fstream v(path_ + ".vertices", std::ios::binary | std::ios::in | std::ios::out);
-    for (const auto& [index, sum] : seam_normals_) {
+    for (const auto& [index, sum] : sums) {
       const float len = sum.norm();
       const Eigen::Vector3f n = len > 0.f ? Eigen::Vector3f(sum / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
       v.seekp(std::streamoff(index) * kVertexBytes + kNormalAt);
@@ -95,7 +99,6 @@ class PlyStream {
     }
     v.close();
     if (!v) throw InputError(path_, "cannot write (its seam vertices' normals)");
-    seam_normals_.clear();
   }
 
   std::string path_;
