@@ -69,8 +69,8 @@ bool readChunks(const std::uint8_t* p, std::size_t n, PngImage& img) {
       stream_ended = in_stream;
       if (isChunk(tag, "IEND"))
         return in_stream && img.width > 0 && img.height > 0 && img.width <= (1u << 15) && img.height <= (1u << 15);
-      // Transparency; an orientation OpenCV would apply (imread turns the image by eXIf); a critical
-      // chunk this decoder does not know (PLTE, ...).
+      // Transparency; an eXIf chunk (left to imread, which the readers ask to ignore its orientation:
+      // depth and colour pair on the sensor's grid); a critical chunk this decoder does not know (PLTE, ...).
       if (isChunk(tag, "tRNS") || isChunk(tag, "eXIf") || !(tag[0] & 0x20)) return false;
     }
     at += 12 + std::size_t(len);

@@ -6,7 +6,7 @@
 // The result is what cv::imread gives for such a file (IMREAD_ANYDEPTH | IMREAD_ANYCOLOR for depth:
 // CV_16UC1; IMREAD_COLOR for colour: CV_8UC3, BGR). Anything else gives an empty Mat, and the caller
 // decodes with cv::imread as before (and fails as before where it fails): another pixel type,
-// interlacing, a palette or transparency, an eXIf orientation (which imread applies), an unknown
+// interlacing, a palette or transparency, an eXIf chunk (the readers ask imread to ignore its orientation), an unknown
 // critical chunk, chunks out of libpng's order, a bad CRC, a damaged or short image stream.
 #include <cstddef>
 #include <cstdint>
