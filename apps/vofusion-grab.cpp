@@ -294,6 +294,8 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   info.config = plan.config;
   info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
   info.seconds = stats.seconds;
+  if (source.replayed)
+    if (const Trajectory* gt = source.replayed->recordedGroundTruth()) info.recorded_ground_truth = *gt;
   info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
                           {"queue_capacity", plan.opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
   if (checkpoints.every > 0)

@@ -281,6 +281,7 @@ int body(int argc, char** argv) {
   info.interrupted = loop.interrupted();
   if (loop.interrupted()) info.extra["stop_signal"] = signalName(loop.stop_signal);
   info.seconds = loop.seconds;
+  if (const Trajectory* gt = source->recordedGroundTruth()) info.recorded_ground_truth = *gt;
   if (std::isfinite(before_frames)) info.extra["seconds_before_frames"] = before_frames;
   if (plan.checkpoint_every > 0 || resumed_at)
     info.extra["checkpoints"] = {{"every_seconds", plan.checkpoint_every}, {"written", loop.checkpoints},

@@ -42,6 +42,10 @@ class FrameSource {
   virtual void rewind() = 0;
   // Human-readable origin, e.g. the folder or file.
   virtual std::string name() const = 0;
+  // The recording's ground truth as it lists it (TUM's groundtruth.txt, a rawlog's sidecar: at the
+  // motion-capture stamps), for evaluating a run as TUM's tools do; nullptr when it has none beside
+  // its frames' own (Frame::groundTruth: synthetic, 7-Scenes).
+  virtual const Trajectory* recordedGroundTruth() const { return nullptr; }
 };
 
 // A source whose frames can be read by index (a folder, a synthetic sequence): next() and rewind()

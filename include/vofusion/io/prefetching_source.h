@@ -21,6 +21,7 @@ class PrefetchingSource : public FrameSource {
   // what it read (a run stopped early; what the read ahead threw is dropped).
   void stop();
   std::string name() const override { return inner_->name(); }
+  const Trajectory* recordedGroundTruth() const override { return inner_->recordedGroundTruth(); }
 
  private:
   struct Read {

@@ -51,6 +51,7 @@ class RawlogSource : public FrameSource {
   void rewind() override;
   std::string name() const override { return path_; }
   const Trajectory& groundTruth() const { return gt_; }
+  const Trajectory* recordedGroundTruth() const override { return gt_.empty() ? nullptr : &gt_; }
   const std::string& imagesDirectory() const { return images_dir_; }
 
  private:

@@ -47,6 +47,7 @@ class SkippingSource : public FrameSource {
   std::size_t size() const override { return inner_->size(); }
   void rewind() override;
   std::string name() const override { return inner_->name(); }
+  const Trajectory* recordedGroundTruth() const override { return inner_->recordedGroundTruth(); }
 
   const std::vector<SkippedFrame>& skipped() const { return skipped_; }
   // Why the recording ended before its end (RecordingCutShort's problem); empty when it did not.

@@ -54,6 +54,7 @@ class TumFolderSource : public IndexedFrameSource {
   std::string name() const override { return folder_; }
 
   const Trajectory& groundTruth() const { return gt_; }
+  const Trajectory* recordedGroundTruth() const override { return gt_.empty() ? nullptr : &gt_; }
   const std::vector<TumAssociation>& pairs() const { return pairs_; }
   double depthScale() const { return depth_scale_; }
   const CameraIntrinsics& camera() const { return camera_; }

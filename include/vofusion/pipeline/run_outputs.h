@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "vofusion/core/config.h"
+#include "vofusion/core/trajectory.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/pipeline/reconstruction.h"
 
@@ -49,6 +50,10 @@ struct RunInfo {
   bool interrupted = false;    // stopped early (Ctrl-C, sensor lost): outputs hold what was built
   double seconds = 0.0;        // wall time of the frame loop
   nlohmann::json extra;        // caller-specific facts (e.g. live: played/dropped), merged into summary
+  // The recording's ground truth as it lists it (FrameSource::recordedGroundTruth): the ATE and RPE are
+  // taken against it, as TUM's evaluate_ate.py and rgbd-eval take them (the nearest stamp within
+  // 20 ms); empty: against the frames' own (Frame::groundTruth: exact for synthetic and 7-Scenes).
+  Trajectory recorded_ground_truth;
 };
 
 // Every section of a vofusion config, at its defaults: the reconstruction's, [mesh] and [output]
