@@ -78,9 +78,8 @@ bool madeByThisApp(const fs::path& dir) {
 bool writeTum(const sim::SyntheticSequence& seq, const std::string& dir) {
   if (fs::exists(dir) && (!fs::is_directory(dir) || (!fs::is_empty(dir) && !madeByThisApp(dir))))
     throw InputError(dir, "exists and is not a folder rgbd-simulate wrote; refusing to replace it");
-  const fs::path parent = fs::absolute(dir).parent_path();
-  ensureWritableDirectory(parent.string());
-  AtomicPath out(dir);
+  AtomicPath out(dir);  // "sim/" names sim, whose parent is the one to make
+  ensureWritableDirectory(fs::absolute(out.path()).parent_path().string());
   std::error_code made;
   fs::create_directories(fs::path(out.tmp()) / "rgb", made);
   if (!made) fs::create_directories(fs::path(out.tmp()) / "depth", made);

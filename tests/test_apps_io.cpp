@@ -47,6 +47,18 @@ void expectCleanFailure(const std::string& cmd, const std::string& needle, const
 }
 }  // namespace
 
+// --out sim/ (a shell's completion adds the slash) writes sim, as --out sim does, and again over it: the
+// folder was staged inside itself and its replacement failed once every frame was made.
+TEST(AppsIo, SimulateIntoAFolderNamedWithATrailingSlash) {
+  const std::string dir = test::tempDir("simulate_trailing_slash");
+  std::string out;
+  for (int pass = 0; pass < 2; ++pass) {
+    ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/sim/ --frames 2 --size 160x120", &out), 0) << out;
+    EXPECT_TRUE(fs::exists(dir + "/sim/rgb.txt")) << pass;
+    EXPECT_EQ(std::distance(fs::directory_iterator(dir), {}), 1) << pass;
+  }
+}
+
 TEST(AppsIo, SimulateTumMatchesSequence) {
   const std::string dir = test::tempDir("apps_sim_tum") + "/room";
   std::string out;

@@ -66,6 +66,18 @@ TEST(AtomicFile, ASetOfFilesMovesIntoPlaceTogether) {
   EXPECT_EQ(readTextFile(dir + "/a.txt"), "new a");
   EXPECT_EQ(readTextFile(dir + "/b.txt"), "new b");
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 2);
+  // A file whose bytes cannot be synced (EIO) fails the set before any file is replaced: the first was
+  // new and the second old.
+  {
+    test::SyncWatch watch;
+    watch.fail("fsync", dir + "/b.txt.tmp-" + std::to_string(::getpid()), EIO);
+    AtomicFileSet failing;
+    failing.write(dir + "/a.txt", [](const std::string& tmp) { writeFileAtomically(tmp, "newer a"); });
+    failing.write(dir + "/b.txt", [](const std::string& tmp) { writeFileAtomically(tmp, "newer b"); });
+    EXPECT_THROW(failing.commit(), InputError);
+  }
+  EXPECT_EQ(readTextFile(dir + "/a.txt"), "new a");
+  EXPECT_EQ(readTextFile(dir + "/b.txt"), "new b");
 }
 
 // A folder replaced by commit() is removed by the destructor, after the outputs committed with it;
@@ -102,6 +114,24 @@ TEST(AtomicFile, AReplacedFolderGoesWithTheWriterAndRevertPutsItBack) {
   }
   EXPECT_EQ(names(), std::vector<std::string>{"a_Images"});
   EXPECT_EQ(readTextFile(images + "/new.png"), "this run's");
+}
+
+// A folder named with a trailing slash (a shell's completion adds it) is staged beside it and replaced
+// as without one (staged inside it, the rename of the folder into itself failed at the end of the work).
+TEST(AtomicFile, AFolderNamedWithATrailingSlashIsReplaced) {
+  const std::string dir = test::tempDir("atomic_trailing_slash");
+  fs::create_directories(dir + "/out");
+  writeFileAtomically(dir + "/out/old.txt", "earlier");
+  {
+    AtomicPath out(dir + "/out//");
+    EXPECT_EQ(out.path(), dir + "/out");
+    fs::create_directories(out.tmp());
+    writeFileAtomically(out.tmp() + "/new.txt", "this run's");
+    ASSERT_NO_THROW(out.commit());
+  }
+  EXPECT_EQ(readTextFile(dir + "/out/new.txt"), "this run's");
+  EXPECT_FALSE(fs::exists(dir + "/out/old.txt"));
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), {}), 1);
 }
 
 // Every commit puts the bytes on the disk before the rename and the rename after it: fsync() of the

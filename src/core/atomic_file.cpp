@@ -66,10 +66,17 @@ std::string parentOf(const std::string& path) {
   return p.has_parent_path() ? p.parent_path().string() : ".";
 }
 
+// "out/" names the folder "out": its staging goes beside it, not into it (rgbd-simulate --out sim/ staged
+// in sim/.tmp-<pid>, and the commit's rename of sim/ into itself failed after every frame was made).
+std::string withoutTrailingSlashes(std::string path) {
+  while (path.size() > 1 && path.back() == '/') path.pop_back();
+  return path;
+}
+
 }  // namespace
 
 AtomicPath::AtomicPath(std::string final_path)
-    : final_(std::move(final_path)), tmp_(final_ + ".tmp-" + std::to_string(::getpid())) {
+    : final_(withoutTrailingSlashes(std::move(final_path))), tmp_(final_ + ".tmp-" + std::to_string(::getpid())) {
   std::error_code ec;
   fs::remove_all(tmp_, ec);  // a leftover of a crashed run with the same pid
   removeStaleStaging(final_);
@@ -82,12 +89,19 @@ AtomicPath::~AtomicPath() {
   }
 }
 
-void AtomicPath::commit() {
+void AtomicPath::prepare() {
+  if (prepared_) return;
   std::error_code ec;
   if (!fs::exists(tmp_, ec)) throw InputError(final_, "nothing was written");
   // The bytes before the rename: ext4 forces a file's data out before a rename only where it replaces
   // one, XFS and btrfs never; after a power cut a new name could hold an empty file.
   if (const int err = syncToDisk(tmp_)) throw InputError(final_, std::string("cannot write: ") + std::strerror(err));
+  prepared_ = true;
+}
+
+void AtomicPath::commit() {
+  prepare();
+  std::error_code ec;
   if (fs::is_directory(tmp_) && fs::exists(final_)) {
     // rename() cannot replace a non-empty directory: the old one goes aside, the new one in, and the
     // old one takes the staging name, removed by the destructor (or revert() puts it back). Removing
@@ -172,6 +186,9 @@ void AtomicFileSet::write(const std::string& path, const std::function<void(cons
 }
 
 void AtomicFileSet::commit() {
+  // Every file's bytes on the disk before any replaces its earlier one: a sync that fails (EIO, a full
+  // NFS disk) on the second file left the first one new and the second one old.
+  for (auto& f : files_) f->prepare();
   for (auto& f : files_) f->commit();
 }
 

@@ -21,6 +21,9 @@ class AtomicPath {
 
   const std::string& tmp() const { return tmp_; }     // write here (a file or a directory)
   const std::string& path() const { return final_; }
+  // The bytes written to tmp on the disk (what commit() does first); throws InputError on failure, and
+  // then nothing changed.
+  void prepare();
   void commit();  // rename tmp -> final (replacing a file or directory); throws InputError on failure,
                   // and then nothing changed (a folder that cannot be synced after the rename is said)
                   // A directory replaced is removed by the destructor, so that the outputs committed
@@ -32,6 +35,7 @@ class AtomicPath {
 
  private:
   std::string final_, tmp_;
+  bool prepared_ = false;
   bool committed_ = false;
   bool replaced_ = false;  // commit() moved an earlier directory to tmp_
 };
