@@ -169,6 +169,8 @@ TEST(Trajectory, InterpolatesMidway) {
   EXPECT_FALSE(interpolatePose(t, -0.04, 0.05, p));
   EXPECT_TRUE(interpolatePose(t, -0.015, 0.05, p));
   EXPECT_FALSE(interpolatePose(t, -0.015, 0.01, p));
+  // A stamp that is no number has no pose (it was given the first one).
+  EXPECT_FALSE(interpolatePose(t, std::nan(""), 0.6, p));
 }
 
 TEST(TumFolder, ReadsSharedFirst300) {

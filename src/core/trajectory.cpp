@@ -58,7 +58,7 @@ void writeTumTrajectory(const std::string& path, const Trajectory& traj) {
 }
 
 bool interpolatePose(const Trajectory& traj, double t, double max_gap, mrpt::poses::CPose3D& out) {
-  if (traj.empty()) return false;
+  if (traj.empty() || !std::isfinite(t)) return false;  // NaN passed every check below as the first pose
   auto it = std::lower_bound(traj.begin(), traj.end(), t,
                              [](const StampedPose& p, double v) { return p.timestamp < v; });
   const double held_within = std::min(max_gap, kHeldPoseWithin);

@@ -19,8 +19,10 @@ Trajectory parseTumTrajectory(const std::string& text, const std::string& origin
 // Written whole or not at all (temporary file + rename).
 void writeTumTrajectory(const std::string& path, const Trajectory& traj);
 
-// Pose at time t by linear/slerp interpolation between the two nearest samples; false if the
-// bracketing gap is larger than max_gap seconds. Outside [first, last] the end pose is held, and a held
+// Pose at time t by linear/slerp interpolation between the two nearest samples; false where the
+// bracketing gap is over 2 * max_gap and t more than max_gap from both its ends (a dropout of the
+// ground truth: near an end the interpolation is that end's pose within the motion of max_gap), and
+// for a t that is no number. Outside [first, last] the end pose is held, and a held
 // pose stands for t only within kHeldPoseWithin (the TUM benchmark's association tolerance): 0.05 s
 // beyond the end of a ground truth at 1 m/s put a 5 cm error into the frame's evaluation.
 constexpr double kHeldPoseWithin = 0.02;  // s
