@@ -168,6 +168,31 @@ TEST(OdometrySource, AMatchAfterManyFailedFramesIsPlacedFromItsReference) {
   EXPECT_LT((src.pose() - seq.groundTruth(1)).translation().norm(), 0.05);
 }
 
+// A rawlog's actions (rgbd-odometry's) add up to the path: a frame that failed writes none, and the
+// next match's action runs from where the last action left the pose (it ran from the failed frames'
+// guess, and their guessed motion was missing from the sum).
+TEST(OdometrySource, TheActionsAddUpToThePathAcrossFailedFrames) {
+  const auto seq = room(false);
+  OdometrySource src(OdometryParams{}, seq.groundTruth(0));
+  mrpt::poses::CPose3D summed = seq.groundTruth(0);
+  const auto step = [&](const Frame& f) {
+    src.process(f);
+    if (const auto a = src.action()) summed = summed + a->poseChange.mean;
+  };
+  step(seq.render(0));
+  step(seq.render(1));
+  Frame covered = coveredLens(seq.render(1));
+  for (int i = 0; i < 5; ++i) {
+    covered.timestamp += 1.0 / 30;
+    step(covered);
+  }
+  ASSERT_EQ(src.failures(), 5u);
+  Frame again = seq.render(2);
+  again.timestamp = covered.timestamp + 1.0 / 30;
+  step(again);
+  EXPECT_LT((summed.translation() - src.pose().translation()).norm(), 1e-9);
+}
+
 // The same through the odometry's other held frame: a frame that failed (a view matching nothing)
 // is the reference the next frames fall back on; after many covered frames, the same view again is
 // placed from that failed frame's pose, not from where constant velocity carried the pose meanwhile.
@@ -436,6 +461,27 @@ TEST(Odometry, OlderFramesJoinTheFit) {
 // and depths then describe different camera poses. colour_time moves the keypoints to the depth
 // capture with the velocity of a first fit and fits again: most of the error goes (measured 2.0 vs
 // 5.6 mm mean here, with turns up to 30 deg/s; the rest is the first fit's velocity error).
+// Stamps 2 ms apart with colour 15 ms off (a live source's jitter): the velocity of the interval carried
+// over seven of it moved the keypoints by seven times the motion. Past three intervals no correction is
+// made: the motion is the uncorrected fit's.
+TEST(Odometry, AColourOffsetFarBeyondTheIntervalIsNotCorrected) {
+  const auto seq = room(false);
+  Frame a = seq.render(0), b = seq.render(1);
+  b.timestamp = a.timestamp + 0.002;
+  b.colour_offset = 0.015;
+  mrpt::poses::CPose3D motion[2];
+  for (bool colour_time : {false, true}) {
+    OdometryParams p;
+    p.colour_time = colour_time;
+    RgbdOdometry odo(p);
+    odo.process(a);
+    const OdometryResult r = odo.process(b);
+    ASSERT_TRUE(r.success) << colour_time << ": " << r.failure;
+    motion[colour_time] = r.motion;
+  }
+  EXPECT_LT((motion[1] - motion[0]).translation().norm(), 1e-9);
+}
+
 TEST(Odometry, ColourCaptureOffsetIsCompensated) {
   sim::SimOptions o;
   o.scene = "room";

@@ -10,7 +10,7 @@
 namespace vofusion {
 
 OdometrySource::OdometrySource(const OdometryParams& params, const mrpt::poses::CPose3D& initial_pose)
-    : odometry_(params), pose_(initial_pose) {
+    : odometry_(params), pose_(initial_pose), pose_at_last_action_(initial_pose) {
   covariance_.setZero();
 }
 
@@ -50,9 +50,12 @@ OdometryResult OdometrySource::process(const Frame& input) {
     const mrpt::poses::CPose3D ref_pose = ref != recent_poses_.end() ? ref->second : previous;
     if (ref != recent_poses_.end() && r.reference_index < count_) frames_since_reference = count_ - r.reference_index;
     pose_ = ref_pose + r.motion;
-    increment_ = pose_ - previous;
+    // From the pose of the last action, not the last guess: frames that failed write no action, and the
+    // actions of a rawlog must add up to the path (they missed each failure's guessed motion).
+    increment_ = pose_ - pose_at_last_action_;
     covariance_ = r.covariance;
     has_increment_ = count_ > 0;
+    pose_at_last_action_ = pose_;
   } else if (count_ > 0 && !r.started) {
     // No motion is dropped: the frame moves on at the last increment (constant velocity); the next
     // frame is matched against the last good one and lands where the odometry says.

@@ -489,7 +489,13 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
     // ATE is 0.0129 / 0.0095 / 0.0084 m in mode odometry after 2 / 3 / 4); "interval" corrects once.
     const bool offsets = cur.colour_offset != 0.0 ||
                          std::any_of(corr.begin(), corr.end(), [](const Corr& c) { return c.frame->colour_offset != 0.0; });
-    const bool correct = P.colour_time && offsets && cur.timestamp > ref.timestamp;
+    // The velocity is the motion over the interval; carried over more than three of it (stamps 2 ms
+    // apart, colour 15 ms off) it moved keypoints by a guess: no correction then (the tracker's
+    // motionOver stops at three intervals too).
+    double largest_offset = std::abs(cur.colour_offset);
+    for (const Corr& c : corr) largest_offset = std::max(largest_offset, std::abs(c.frame->colour_offset));
+    const bool correct = P.colour_time && offsets && cur.timestamp > ref.timestamp &&
+                         largest_offset <= 3.0 * (cur.timestamp - ref.timestamp);
     const int passes = !correct ? 0 : mode == ColourTimeVelocity::Capture ? 3 : 1;
     fit = fitMotion(passes == 0);
     if (correct) uncorrected = fit;

@@ -41,6 +41,7 @@ class OdometrySource {
  private:
   RgbdOdometry odometry_;
   mrpt::poses::CPose3D pose_, increment_;
+  mrpt::poses::CPose3D pose_at_last_action_;  // where the actions so far add up to
   mrpt::poses::CPose3D velocity_;  // pose change over the last successful frame
   mrpt::math::CMatrixDouble66 covariance_;
   double timestamp_ = 0.0;
