@@ -367,6 +367,20 @@ TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
   EXPECT_LE(maxError(g, c), before + 1e-3);
 }
 
+// A loop edge of NaNs (a damaged pose) is the one removed: its chi2 lost every comparison, so the true
+// loop beside it was removed as the worst, and the drift stayed.
+TEST(LoopPoseGraph, ALoopOfNaNsIsRemovedNotTheTrueOne) {
+  const Circle c = circle(40, 3.0, 0.4);
+  PoseGraph g = graphOf(c);
+  const double before = maxError(g, c);
+  g.addEdge(loopEdge(0, 39, c.truth[0].inverse() * c.truth[39]));
+  Eigen::Isometry3d broken = Eigen::Isometry3d::Identity();
+  broken.translation().x() = std::nan("");
+  const std::size_t bad = g.addEdge(loopEdge(10, 30, broken));
+  EXPECT_EQ(g.optimise(kMaxLoopChi2, kMaxChainChi2), std::vector<std::size_t>{bad});
+  EXPECT_LT(maxError(g, c), 0.25 * before);
+}
+
 TEST(LoopPoseGraph, NewNodesFollowTheirOptimisedPredecessor) {
   const Circle c = circle(20, 2.0, 0.5);
   PoseGraph g = graphOf(c);

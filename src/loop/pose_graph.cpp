@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
 
 #include <Eigen/Cholesky>
 #include <ceres/ceres.h>
@@ -97,6 +99,7 @@ void PoseGraph::solve() {
   options.num_threads = 1;  // the loop thread's own; the frame loop has the other core
   ceres::Solver::Summary summary;
   ceres::Solve(options, &problem, &summary);
+  if (!summary.IsSolutionUsable()) return;  // a residual that is no number: the poses stay as they were
   for (std::size_t i = 0; i < nodes_.size(); ++i) {
     if (i == 0 || !problem.HasParameterBlock(t[i].data())) continue;
     nodes_[i].linear() = Eigen::Map<const Eigen::Quaterniond>(q[i].data()).normalized().toRotationMatrix();
@@ -123,15 +126,18 @@ std::vector<std::size_t> PoseGraph::optimise(double max_loop_chi2, double max_ch
     updateChi2();
     // A false loop shows either in its own residual or, when it is trusted more than the chain, in
     // the chain it bent: a tracker edge far beyond its noise. Either way the worst loop goes.
+    // A chi2 that is no number (an edge of NaNs) is the worst there is: it lost every comparison, and
+    // the true loop beside it went instead.
+    const auto badness = [](double chi2) { return std::isnan(chi2) ? std::numeric_limits<double>::infinity() : chi2; };
     double chain = 0.0;
     std::size_t worst = edges_.size();
     for (std::size_t i = 0; i < edges_.size(); ++i) {
       const GraphEdge& e = edges_[i];
       if (!e.active) continue;
-      if (!e.loop) chain = std::max(chain, e.chi2);
-      else if (worst == edges_.size() || e.chi2 > edges_[worst].chi2) worst = i;
+      if (!e.loop) chain = std::max(chain, badness(e.chi2));
+      else if (worst == edges_.size() || badness(e.chi2) > badness(edges_[worst].chi2)) worst = i;
     }
-    if (worst == edges_.size() || (edges_[worst].chi2 <= max_loop_chi2 && chain <= max_chain_chi2)) return removed;
+    if (worst == edges_.size() || (badness(edges_[worst].chi2) <= max_loop_chi2 && chain <= max_chain_chi2)) return removed;
     // A false loop bent the map: drop it and start again from the poses before this optimisation.
     edges_[worst].active = false;
     removed.push_back(worst);
