@@ -112,8 +112,9 @@ void AtomicPath::commit() {
     if (ec) throw InputError(final_, "cannot replace: " + ec.message());
     fs::rename(tmp_, final_, ec);
     if (ec) {
-      fs::rename(old, final_);
-      throw InputError(final_, "cannot write: " + ec.message());
+      std::error_code back;  // the earlier folder back in place; where it is when that fails too
+      fs::rename(old, final_, back);
+      throw InputError(final_, "cannot write: " + ec.message() + (back ? " (the earlier one is at " + old + ")" : ""));
     }
     fs::rename(old, tmp_, ec);
     replaced_ = !ec;
