@@ -10,6 +10,8 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <atomic>
+#include <future>
 #include <random>
 #include <thread>
 
@@ -567,30 +569,43 @@ TEST(LoopVerifier, LookAlikePlacesAreNotJoined) {
   EXPECT_EQ(c.reason, "correction larger than the drift could be (look-alike place?)");
 }
 
+namespace {
+// The room at full resolution (enough keypoints to recognise a place), every third frame handed to
+// `closer` (it takes keyframes by travel) until `wanted` frames became keyframes: their frames.
+std::vector<std::size_t> walkTheRoomUntil(const sim::SyntheticSequence& seq, LoopCloser& closer, std::size_t wanted) {
+  RgbdOdometry odo{OdometryParams()};
+  std::vector<std::size_t> keyframe_frames;
+  for (std::size_t i = 0; i < seq.size() && keyframe_frames.size() < wanted; i += 3) {
+    const Frame f = seq.render(i);
+    const OdometryResult r = odo.process(f);
+    if (closer.addFrame(f, toEigen(seq.groundTruth(i) - seq.groundTruth(0)), true, 0.001, r.features)) keyframe_frames.push_back(i);
+  }
+  return keyframe_frames;
+}
+
+sim::SyntheticSequence roomAtFullResolution() {
+  sim::SimOptions o;
+  o.scene = "room";
+  o.frames = 450;
+  return sim::SyntheticSequence(o);
+}
+}  // namespace
+
 // Lost a few metres on, the camera is placed again by a keyframe the place index has not taken yet
 // (the last min_travel of path: neither among the newest keyframes nor indexed), not only by the
 // newest and the indexed ones: turned back to where it was 2 m before, it stayed lost.
 TEST(LoopCloser, RelocalisesAgainstAKeyframeTheIndexHasNotTakenYet) {
-  sim::SimOptions o;
-  o.scene = "room";
-  o.frames = 450;  // full resolution: enough keypoints to recognise a place
-  const sim::SyntheticSequence seq(o);
+  const sim::SyntheticSequence seq = roomAtFullResolution();
   const LoopParams params;
   LoopCloser closer(params);
-  RgbdOdometry odo{OdometryParams()};
-  std::vector<std::size_t> keyframe_frames;
   // Keyframe `target` three older than the newest recent_keyframes.
   const std::size_t target = 2, wanted = target + std::size_t(params.recent_keyframes) + 3;
   const auto truth = [&](std::size_t i) { return toEigen(seq.groundTruth(i) - seq.groundTruth(0)); };
-  double path_since_target = 0;
-  constexpr std::size_t kStep = 3;  // every third frame: the loop closer takes keyframes by travel
-  for (std::size_t i = 0; i < seq.size() && keyframe_frames.size() < wanted; i += kStep) {
-    const Frame f = seq.render(i);
-    const OdometryResult r = odo.process(f);
-    if (closer.addFrame(f, truth(i), true, 0.001, r.features)) keyframe_frames.push_back(i);
-    if (i > 0 && keyframe_frames.size() > target) path_since_target += (truth(i).translation() - truth(i - kStep).translation()).norm();
-  }
+  const std::vector<std::size_t> keyframe_frames = walkTheRoomUntil(seq, closer, wanted);
   ASSERT_EQ(keyframe_frames.size(), wanted);
+  double path_since_target = 0;
+  for (std::size_t i = keyframe_frames[target] + 3; i <= keyframe_frames.back(); i += 3)
+    path_since_target += (truth(i).translation() - truth(i - 3).translation()).norm();
   ASSERT_LT(path_since_target, params.min_travel) << "keyframe " << target << " must not be indexed yet";
   const std::size_t j = keyframe_frames[target];
   RgbdOdometry fresh{OdometryParams()};
@@ -601,6 +616,52 @@ TEST(LoopCloser, RelocalisesAgainstAKeyframeTheIndexHasNotTakenYet) {
   EXPECT_EQ(found->keyframe, target);  // its own view: the most inliers
   EXPECT_LT((found->pose.translation() - truth(j).translation()).norm(), 0.02);
   closer.finish();
+}
+
+// The thread's verification and solve after its last keyframe (a solve takes seconds on a long run) do
+// not hold relocalise() up: the thread parked there by a hook, the camera is placed all the same, as
+// once the thread is done (relocalise waited for the thread to be idle, and a lost live camera's frame
+// loop with it).
+TEST(LoopCloser, RelocalisesWhileTheThreadStillVerifiesItsLastKeyframe) {
+  const sim::SyntheticSequence seq = roomAtFullResolution();
+  const LoopParams params;
+  LoopCloser closer(params);
+  const std::size_t target = 2, wanted = target + std::size_t(params.recent_keyframes) + 3;
+  std::promise<void> entered, released;
+  const std::shared_future<void> release = released.get_future().share();
+  std::atomic<bool> armed{true};
+  closer.setAfterIndexingHook([&](std::size_t id) {
+    if (id + 1 != wanted || !armed.exchange(false)) return;
+    entered.set_value();
+    release.wait();
+  });
+  const std::vector<std::size_t> keyframe_frames = walkTheRoomUntil(seq, closer, wanted);
+  ASSERT_EQ(keyframe_frames.size(), wanted);
+  ASSERT_EQ(entered.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  const std::size_t j = keyframe_frames[target];
+  RgbdOdometry fresh{OdometryParams()};
+  Frame view = seq.render(j);
+  view.timestamp = seq.render(keyframe_frames.back()).timestamp + 2.0;
+  const auto features = fresh.process(view).features;
+  auto placing = std::async(std::launch::async, [&] { return closer.relocalise(view, features); });
+  struct Release {  // before `placing` is waited for: a failed check must not leave the thread parked
+    std::promise<void>& p;
+    bool done = false;
+    void now() {
+      if (!done) p.set_value(), done = true;
+    }
+    ~Release() { now(); }
+  } unpark{released};
+  ASSERT_EQ(placing.wait_for(std::chrono::seconds(60)), std::future_status::ready) << "relocalise waited for the thread";
+  const auto found = placing.get();
+  unpark.now();
+  ASSERT_TRUE(found.has_value());
+  EXPECT_EQ(found->keyframe, target);
+  closer.finish();
+  const auto again = closer.relocalise(view, features);
+  ASSERT_TRUE(again.has_value());
+  EXPECT_EQ(again->keyframe, found->keyframe);
+  EXPECT_TRUE(again->pose.isApprox(found->pose, 0.0)) << "the same keyframes and index: the same placement";
 }
 
 // In the look-alike corridor the camera, 3 m (one period) past the first keyframe, sees what that

@@ -122,7 +122,7 @@ Keyframe KeyframeStore::load(std::size_t id) const {
   Keyframe k = keyframes_.at(id);
   if (id >= spilled_) return k;
   decodeKeyframeData(spill_.read(records_[id]), k);
-  ++reloaded_;
+  reloaded_.fetch_add(1, std::memory_order_relaxed);
   return k;
 }
 
@@ -139,7 +139,7 @@ KeyframeStoreStats KeyframeStore::stats() const {
   s.keyframes = keyframes_.size();
   s.in_ram = keyframes_.size() - spilled_;
   s.spilled = spilled_;
-  s.reloaded = reloaded_;
+  s.reloaded = reloaded_.load(std::memory_order_relaxed);
   s.spill_file_bytes = spill_.bytes();
   s.spill_error = spill_.failure();
   return s;

@@ -55,6 +55,9 @@ struct LoopCloser::Impl {
   std::deque<Keyframe> queue;
   std::size_t max_queued = 0, frame_loop_waits = 0;
   bool busy = false, stop = false;
+  // A keyframe taken but not yet stored and indexed: all relocalise() reads changes only then.
+  bool storing = false;
+  std::function<void(std::size_t)> after_indexing;  // tests only (setAfterIndexingHook)
   std::vector<LoopRecord> loops;
   std::vector<KeyframePose> poses;
   std::map<std::string, std::size_t> rejections;
@@ -87,7 +90,7 @@ struct LoopCloser::Impl {
         if (queue.empty()) return;
         k = std::move(queue.front());
         queue.pop_front();
-        busy = true;
+        busy = storing = true;
         taken.notify_all();
       }
       try {
@@ -98,7 +101,7 @@ struct LoopCloser::Impl {
         std::lock_guard<std::mutex> lock(mu);
         failure = std::current_exception();
         queue.clear();
-        busy = false;
+        busy = storing = false;
         idle.notify_all();
         taken.notify_all();
         return;
@@ -159,6 +162,12 @@ struct LoopCloser::Impl {
     keyframes.add(std::move(k));
     const Keyframe& cur = keyframes.back();
     indexEligible(cur);
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      storing = false;
+    }
+    idle.notify_all();
+    if (after_indexing) after_indexing(cur.id);
     std::vector<PlaceCandidate> candidates;
     {
       ScopedStageTimer timer(t, "place_recognition");
@@ -240,6 +249,14 @@ struct LoopCloser::Impl {
   void waitIdle() {
     std::unique_lock<std::mutex> lock(mu);
     idle.wait(lock, [&] { return queue.empty() && !busy; });
+    if (failure) std::rethrow_exception(failure);
+  }
+  // Until every queued keyframe is stored and indexed (its verification and the graph's solve may go
+  // on): the keyframes and the index are then still until the next keyframe, which only the caller's
+  // thread hands over.
+  void waitStored() {
+    std::unique_lock<std::mutex> lock(mu);
+    idle.wait(lock, [&] { return failure || (queue.empty() && !storing); });
     if (failure) std::rethrow_exception(failure);
   }
 
@@ -345,12 +362,19 @@ void LoopCloser::loadState(std::istream& is) {
   }
 }
 
+void LoopCloser::setAfterIndexingHook(std::function<void(std::size_t)> hook) {
+  std::lock_guard<std::mutex> lock(impl_->mu);  // read by the thread after a keyframe's hand-over under mu
+  impl_->after_indexing = std::move(hook);
+}
+
 std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::shared_ptr<const DescribedKeypoints> features) {
   Impl& m = *impl_;
   if (!features || features->points.empty() || frame.depth.empty()) return std::nullopt;
-  // Idle, the thread waits for the next keyframe, which only this (the frame loop's) thread gives it:
-  // until then its keyframes and index are this thread's to read.
-  m.waitIdle();
+  // Once the queued keyframes are stored and indexed, the thread changes neither until the next
+  // keyframe, which only this (the frame loop's) thread gives it: they are this thread's to read beside
+  // the thread's verification and solve (on a long run a solve takes seconds, which waiting for it
+  // stalled a lost live camera's frame loop for).
+  m.waitStored();
   const std::size_t n = m.keyframes.size();
   if (n == 0) return std::nullopt;
   const Keyframe view = makeKeyframe(n, frame, Eigen::Isometry3d::Identity(), 0.0, features, m.params.keyframe_downsample);
@@ -405,6 +429,7 @@ void LoopCloser::finish() {
   {
     std::lock_guard<std::mutex> lock(impl_->mu);
     for (const LoopRecord& l : impl_->loops) any_removed |= !l.active;
+    impl_->store = impl_->keyframes.stats();  // with relocalise()'s reloads since the last keyframe
   }
   // With every loop in and solved, the last optimisation already was over all of them. Otherwise: the
   // thread waits for keyframes that no longer come, and the graph is the caller's now.

@@ -4,6 +4,7 @@
 // its features and depth (~0.2 MB) only for the newest ones within `cache_bytes`; older ones go
 // zlib-compressed to a SpillFile (while it can be written: then all stay in RAM) and are read back
 // when a loop candidate is verified against them.
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -51,7 +52,7 @@ class KeyframeStore {
   std::vector<SpillFile::Record> records_;  // per keyframe, its place in spill_ (id < spilled_)
   std::size_t spilled_ = 0;                 // keyframes [0, spilled_) are on disk
   std::size_t ram_bytes_ = 0;
-  mutable std::size_t reloaded_ = 0;
+  mutable std::atomic<std::size_t> reloaded_{0};  // load() runs on the loop thread and in relocalise()
 };
 
 }  // namespace vofusion::loop

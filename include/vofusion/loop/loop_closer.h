@@ -10,6 +10,7 @@
 //   Trajectory optimised = lc.correct(tracked);   // every pose follows its keyframe
 #include <cstddef>
 #include <iosfwd>
+#include <functional>
 #include <map>
 #include <optional>
 #include <memory>
@@ -79,8 +80,12 @@ class LoopCloser {
   // newest ones, those the place index has not taken yet one per index_spacing, then the index's
   // candidates) and verified as a loop is, without the drift bound; a placement beyond the camera's
   // reach since the newest keyframe (kMaxCameraSpeed) is refused, however many inliers it has.
-  // Waits for the thread to take in the queued keyframes first. nullopt: no keyframe verified.
+  // Waits for the thread to store and index the queued keyframes first, not for their verification or
+  // the graph's solve (seconds on a long run). nullopt: no keyframe verified.
   std::optional<Relocalisation> relocalise(const Frame& frame, std::shared_ptr<const DescribedKeypoints> features);
+  // Tests only, before the first addFrame: called on the thread with each keyframe's id once it is
+  // stored and indexed, before its verification and the graph's solve.
+  void setAfterIndexingHook(std::function<void(std::size_t)> hook);
   // Waits until every queued keyframe is processed and the graph optimised.
   void finish();
 
