@@ -209,9 +209,17 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
                 scene_opts);
     out.wrote("scene.3Dscene", "open with SceneViewer3D");
     if (png.valid()) {
-      png.get();  // rethrows what the render threw
-      out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height) +
-                                (beside ? ", rendered beside the scene" : ""));
+      // A picture that cannot be rendered (no OpenGL device on a headless machine) costs the picture:
+      // the run's every output was lost with it.
+      try {
+        png.get();  // rethrows what the render threw
+        out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height) +
+                                  (beside ? ", rendered beside the scene" : ""));
+      } catch (const InputError& e) {
+        const InputError named = out.named(e);
+        printWarning(named.what());
+        s["mesh_png_error"] = named.what();
+      }
     }
 
     s["peak_memory_mib"] = peakMemoryMiB();
