@@ -199,15 +199,19 @@ int body(int argc, char** argv) {
   } catch (const InputError& e) {
     throw InputError(traj_path, e.problem());  // the temporary is gone by the time this is read
   }
+  // The recording's own ground truth beside the rawlog where it lists one (a later run evaluates against
+  // it as TUM's tools do), else the frames'.
+  const Trajectory* recorded = source.recordedGroundTruth();
+  trajectory.prepare();  // its bytes on the disk before the rawlog replaces an earlier one
   if (writer) {
-    if (!run.gt.empty()) writer->writeGroundTruth(run.gt);
+    if (recorded) writer->writeGroundTruth(*recorded);
+    else if (!run.gt.empty()) writer->writeGroundTruth(run.gt);
     writer->commit();
   }
   trajectory.commit();
   if (!source.skipped().empty()) std::fprintf(stderr, "%zu damaged frames skipped\n", source.skipped().size());
   printTimes(odo, run);
   // As TUM's tools evaluate it: against the recording's ground truth at its own stamps, where it lists one.
-  const Trajectory* recorded = source.recordedGroundTruth();
   printAccuracy(recorded ? *recorded : run.gt, run.est);
   return run.stopped_by ? 128 + run.stopped_by : 0;  // the shell's code for the signal: 130, 143
 }

@@ -318,7 +318,13 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
                RunSession* session, const Args& args, const LiveCheckpoints& checkpoints) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   try {
-    if (writer) writer->commit();
+    if (writer) {
+      // A replay's own ground truth beside the recording, as tum2rawlog writes it: a run on grab.rawlog
+      // (a crashed session finished offline) evaluates as this one does.
+      if (source.replayed)
+        if (const Trajectory* gt = source.replayed->recordedGroundTruth()) writer->writeGroundTruth(*gt);
+      writer->commit();
+    }
     // The grab's own counts before the reconstruction's outputs, which may fail after a failed run.
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
                         summaryText(stats, source.live->name(), recorded, plan.opts.queue_capacity, source.skipped()));

@@ -182,7 +182,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
   try {
     json s = runSummary(rec, info);
-    if (m.rawlog) m.rawlog->finish(rec, m.ground_truth);
+    if (m.rawlog) m.rawlog->finish(rec, info.recorded_ground_truth.empty() ? m.ground_truth : info.recorded_ground_truth);
     const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
 
     returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel

@@ -42,9 +42,10 @@ class FrameSource {
   virtual void rewind() = 0;
   // Human-readable origin, e.g. the folder or file.
   virtual std::string name() const = 0;
-  // The recording's ground truth as it lists it (TUM's groundtruth.txt, a rawlog's sidecar: at the
-  // motion-capture stamps), for evaluating a run as TUM's tools do; nullptr when it has none beside
-  // its frames' own (Frame::groundTruth: synthetic, 7-Scenes).
+  // The recording's ground truth as it lists it (TUM's groundtruth.txt at the motion-capture stamps; a
+  // rawlog's sidecar as tum2rawlog, rgbd-odometry or vofusion wrote it, else the poses its frames
+  // carry), for evaluating a run as TUM's tools do; nullptr when it has none beside its frames' own
+  // (Frame::groundTruth: synthetic, 7-Scenes).
   virtual const Trajectory* recordedGroundTruth() const { return nullptr; }
 };
 
