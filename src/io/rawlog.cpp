@@ -702,6 +702,11 @@ void RawlogWriter::commit() {
     gt.emplace(gt_path);
     writeTumTrajectory(gt->tmp(), *impl_->gt);
   }
+  // Every part's bytes on the disk before any replaces an earlier one (a ground truth that could not be
+  // synced once the rawlog was in place left the new rawlog beside the earlier run's ground truth).
+  if (gt) gt->prepare();
+  impl_->rawlog->prepare();
+  if (opts_.external_images) impl_->images->prepare();
   // The images folder and the rawlog change together: the earlier folder is removed only once this
   // rawlog is in place (the writer's destructor), and put back if the rawlog cannot be.
   if (opts_.external_images) impl_->images->commit();
