@@ -69,6 +69,7 @@ std::string parentOf(const std::string& path) {
 // "out/" names the folder "out": its staging goes beside it, not into it (rgbd-simulate --out sim/ staged
 // in sim/.tmp-<pid>, and the commit's rename of sim/ into itself failed after every frame was made).
 std::string withoutTrailingSlashes(std::string path) {
+  if (path.size() > 1 && (path.back() == '/' || path.back() == '.')) path = fs::path(path).lexically_normal().string();  // "sim/."
   while (path.size() > 1 && path.back() == '/') path.pop_back();
   return path;
 }
