@@ -21,6 +21,7 @@
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/thread_name.h"
 #include "vofusion/loop/keyframe.h"
 #include "vofusion/loop/loop_closer.h"
@@ -503,6 +504,14 @@ TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
   const std::uint64_t fewer = npoints - 1;
   std::memcpy(bytes.data() + at, &fewer, sizeof(fewer));
   EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
+  // And a depth size its compressed bytes cannot hold, before it asks for the memory.
+  bytes = encodeKeyframeData(made[0]);
+  const std::int32_t huge = 1 << 30;
+  std::memcpy(bytes.data(), &huge, sizeof(huge));
+  {
+    const ScopedAllocationLimit limit(std::size_t(256) << 20, std::size_t(1) << 30);
+    EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
+  }
 }
 
 // A spill file that cannot be written (a file size limit, as a full disk) keeps every later keyframe in

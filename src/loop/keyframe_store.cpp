@@ -70,7 +70,9 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
   const auto rows = r.get<std::int32_t>(), cols = r.get<std::int32_t>();
   const auto zlen = r.get<std::uint64_t>();
   const std::uint8_t* z = r.take(zlen);
-  if (rows < 0 || cols < 0) throw std::runtime_error("corrupt record in the keyframes' spill file");
+  // zlib inflates at most ~1032 bytes a byte: a size beyond that is damage, before it sizes a buffer.
+  if (rows < 0 || cols < 0 || std::uint64_t(rows) * std::uint64_t(cols) * 2 > zlen * 1032 + 1024)
+    throw std::runtime_error("corrupt record in the keyframes' spill file");
   k.depth.create(rows, cols, CV_16U);
   if (!zlibUncompress(z, zlen, k.depth.data, k.depth.total() * k.depth.elemSize()))
     throw std::runtime_error("corrupt depth in the keyframes' spill file");
