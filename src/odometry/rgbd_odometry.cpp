@@ -491,7 +491,7 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
                          std::any_of(corr.begin(), corr.end(), [](const Corr& c) { return c.frame->colour_offset != 0.0; });
     // The velocity is the motion over the interval; carried over more than three of it (stamps 2 ms
     // apart, colour 15 ms off) it moved keypoints by a guess: no correction then (the tracker's
-    // motionOver stops at three intervals too).
+    // motionOver clamps there instead: it has no uncorrected estimate to keep).
     double largest_offset = std::abs(cur.colour_offset);
     for (const Corr& c : corr) largest_offset = std::max(largest_offset, std::abs(c.frame->colour_offset));
     const bool correct = P.colour_time && offsets && cur.timestamp > ref.timestamp &&

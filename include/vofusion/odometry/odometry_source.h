@@ -28,7 +28,9 @@ class OdometrySource {
   // Camera-to-world of the last frame processed. A frame whose motion failed moves on by the last
   // increment (constant velocity), flagged by hasIncrement() == false.
   const mrpt::poses::CPose3D& pose() const { return pose_; }
-  // Pose change from the previous frame to the last one (camera-to-camera); valid if hasIncrement().
+  // Pose change to the last frame (camera-to-camera) from the last frame with an increment: the previous
+  // one, or the one before the failed frames between (which have none); valid if hasIncrement(). The
+  // increments add up to pose(); their covariance is the match's, not the failed frames' guesses.
   const mrpt::poses::CPose3D& increment() const { return increment_; }
   bool hasIncrement() const { return has_increment_; }
   // The increment as an MRPT action with the odometry's covariance; nullopt if !hasIncrement().
