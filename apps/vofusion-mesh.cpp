@@ -74,8 +74,11 @@ int body(int argc, char** argv) {
   const std::size_t v0 = mesh.vertices.size(), f0 = mesh.faces.size();
   TriangleMesh full;
   const MeshCleanReport report = cleanMesh(mesh, params, cl.value("--full") ? &full : nullptr);
-  if (const auto rp = cl.value("--report")) writeFileAtomically(*rp, report.toJson() + "\n");  // also when it failed
-  if (!report.success) throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
+  const auto rp = cl.value("--report");
+  if (!report.success) {
+    if (rp) writeFileAtomically(*rp, report.toJson() + "\n");  // why it failed, where nothing else is written
+    throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
+  }
   if (mesh.faces.empty())
     printWarning(in + ": no face is left (fragments below [mesh] min_component_faces / min_component_area, " +
                  "degenerate or duplicate faces); " + out + " is empty");
@@ -87,6 +90,9 @@ int body(int argc, char** argv) {
     outputs.write(*png, [&](const std::string& tmp) { renderMeshPng(tmp, mesh, traj.empty() ? nullptr : &traj); });
   if (const auto scene = cl.value("--scene"))
     outputs.write(*scene, [&](const std::string& tmp) { exportScene(tmp, mesh, traj, nullptr, CameraIntrinsics{}); });
+  // With the outputs it describes: a scene that could not be written left a report of success beside
+  // the earlier out.ply.
+  if (rp) outputs.write(*rp, [&](const std::string& tmp) { writeFileAtomically(tmp, report.toJson() + "\n"); });
   outputs.commit();
   double seconds = 0;
   for (const auto& s : report.steps) seconds += s.seconds;

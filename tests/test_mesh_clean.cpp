@@ -799,14 +799,17 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
             0u) << out;
   // The outputs go into place together: one that cannot be written (a scene in a folder that is not
   // there) leaves the mesh already at out.ply as it was, and the error names the file asked for.
+  // The report goes with them (it said success beside the earlier out.ply).
+  std::ofstream(dir + "/r.json") << "an earlier report\n";
   const std::string before = fileText(dir + "/out.ply");
-  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.ply --scene " + dir +
-                          "/no_such_folder/s.3Dscene",
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/out.ply --report " + dir +
+                          "/r.json --scene " + dir + "/no_such_folder/s.3Dscene",
                       &out),
             2)
       << out;
   EXPECT_EQ(out.rfind("vofusion-mesh: error: " + dir + "/no_such_folder/s.3Dscene: ", 0), 0u) << out;
   EXPECT_EQ(fileText(dir + "/out.ply"), before);
+  EXPECT_EQ(fileText(dir + "/r.json"), "an earlier report\n");
   for (const auto& e : std::filesystem::directory_iterator(dir))
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << "left behind: " << e.path();
 }
