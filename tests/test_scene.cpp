@@ -142,6 +142,20 @@ TEST(Scene, SavedSceneLoadsBackWithMeshPathsFrustumsAndGrid) {
   ASSERT_TRUE(grid);
 }
 
+// A path in a survey frame (a million metres across) gets a grid of at most a thousand cells a side,
+// not four million lines.
+TEST(Scene, TheGroundGridStaysSmallUnderAHugeExtent) {
+  Trajectory far;
+  for (int i = 0; i < 3; ++i) far.push_back({double(i), mrpt::poses::CPose3D(-1e6 + 1e6 * i, 2e5 * i, 0, 0, 0, 0)});
+  const auto scene = buildScene(TriangleMesh{}, far, nullptr, CameraIntrinsics{});
+  const auto grid = std::dynamic_pointer_cast<mrpt::opengl::CGridPlaneXY>(scene->getByName("grid"));
+  ASSERT_TRUE(grid);
+  float x0, x1, y0, y1;
+  grid->getPlaneLimits(x0, x1, y0, y1);
+  EXPECT_LE((x1 - x0) / grid->getGridFrequency(), 1002.f);
+  EXPECT_LE((y1 - y0) / grid->getGridFrequency(), 1002.f);
+}
+
 TEST(Scene, CullsTheSideFacingAwayFromTheCameras) {
   TriangleMesh mesh = test::boxRoom(4, 3, 2.5, 6);  // faces point inwards, where the cameras are
   const auto cull = [](const TriangleMesh& m, const Trajectory& t) {

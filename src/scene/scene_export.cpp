@@ -249,11 +249,14 @@ Extent displayExtent(const CPose3D& up, const TriangleMesh& mesh, const Trajecto
   return {lo, hi};
 }
 
-// A ground grid under everything, one cell margin around it.
+// A ground grid under everything, one cell margin around it; at most kMaxGridCells a side, its spacing
+// ten times wider where the extent needs it (a path in a survey frame, 1e6 m: 4 million lines).
+constexpr double kMaxGridCells = 1000;
 mrpt::opengl::CGridPlaneXY::Ptr groundGrid(const Extent& e, const SceneOptions& opt) {
   const Eigen::Vector3d& lo = e.lo;
   const Eigen::Vector3d& hi = e.hi;
-  const double s = opt.grid_spacing > 0 ? opt.grid_spacing : 0.5;
+  double s = opt.grid_spacing > 0 ? opt.grid_spacing : 0.5;
+  while ((hi - lo).head<2>().maxCoeff() / s > kMaxGridCells) s *= 10;
   const auto down = [s](double v) { return std::floor(v / s) * s - s; };
   const auto upr = [s](double v) { return std::ceil(v / s) * s + s; };
   auto grid = mrpt::opengl::CGridPlaneXY::Create(float(down(lo.x())), float(upr(hi.x())), float(down(lo.y())),
