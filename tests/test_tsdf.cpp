@@ -1,5 +1,6 @@
 // TSDF integration, ray casting, volume shifting and marching cubes on analytic scenes.
 #include <algorithm>
+#include <functional>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -393,24 +394,35 @@ std::array<Key, 3> faceKey(const TriangleMesh& m, const std::array<std::uint32_t
 // one vertex on each such voxel and no zero-area face: every edge from it to the other side put a vertex
 // on it, and faces between those copies had no area (a region's repair then refused its polygon soup).
 // Region by region too: the same faces, none repeating a vertex.
-TEST(MarchingCubes, ASurfaceThroughVoxelsGivesOneVertexThereAndNoFlatFaces) {
+namespace {
+// 2x2x2 bricks (16 voxels a side) whose voxel g holds tsdf(g) (TSDF units, clamped), weight 1, grey.
+struct FieldBricks {
   std::vector<std::unique_ptr<Brick>> storage;
   std::vector<BrickRef> refs;
-  for (int k = 0; k < 8; ++k) {
-    auto b = std::make_unique<Brick>();
-    b->coord = {k & 1, (k >> 1) & 1, (k >> 2) & 1};
-    for (int z = 0; z < kBrickEdge; ++z)
-      for (int y = 0; y < kBrickEdge; ++y)
-        for (int x = 0; x < kBrickEdge; ++x) {
-          const Eigen::Vector3i g = b->coord * kBrickEdge + Eigen::Vector3i(x, y, z);
-          Voxel& v = b->voxels[Brick::index(x, y, z)];
-          v.tsdf = std::int16_t(std::clamp((g.sum() - 12) * 1500, -32767, 32767));  // 0 on x + y + z = 12
-          v.weight = 1;
-          v.r = v.g = v.b = 128;
-        }
-    refs.push_back({b->coord, b.get()});
-    storage.push_back(std::move(b));
+  std::vector<Eigen::Vector3i> coords;
+  explicit FieldBricks(const std::function<int(const Eigen::Vector3i&)>& tsdf) {
+    for (int k = 0; k < 8; ++k) {
+      auto b = std::make_unique<Brick>();
+      b->coord = {k & 1, (k >> 1) & 1, (k >> 2) & 1};
+      for (int z = 0; z < kBrickEdge; ++z)
+        for (int y = 0; y < kBrickEdge; ++y)
+          for (int x = 0; x < kBrickEdge; ++x) {
+            Voxel& v = b->voxels[Brick::index(x, y, z)];
+            v.tsdf = std::int16_t(std::clamp(tsdf(b->coord * kBrickEdge + Eigen::Vector3i(x, y, z)), -32767, 32767));
+            v.weight = 1;
+            v.r = v.g = v.b = 128;
+          }
+      coords.push_back(b->coord);
+      refs.push_back({b->coord, b.get()});
+      storage.push_back(std::move(b));
+    }
   }
+};
+}  // namespace
+
+TEST(MarchingCubes, ASurfaceThroughVoxelsGivesOneVertexThereAndNoFlatFaces) {
+  const FieldBricks field([](const Eigen::Vector3i& g) { return (g.sum() - 12) * 1500; });  // 0 on x + y + z = 12
+  const std::vector<BrickRef>& refs = field.refs;
   const auto expectNoFlatFaces = [](const TriangleMesh& m, const std::string& what) {
     for (const auto& f : m.faces) {
       ASSERT_TRUE(f[0] != f[1] && f[1] != f[2] && f[0] != f[2]) << what;
@@ -436,25 +448,12 @@ TEST(MarchingCubes, ASurfaceThroughVoxelsGivesOneVertexThereAndNoFlatFaces) {
 // of its own along the face's normal (a saddle: negative across the face, positive along it), which
 // neither flags: welded, the regions give the whole mesh's vertices (one more, unwelded, before).
 TEST(MarchingCubes, AVertexOnARegionsFaceVoxelIsWelded) {
-  std::vector<std::unique_ptr<Brick>> storage;
-  std::vector<Eigen::Vector3i> coords;
-  std::vector<BrickRef> refs;
-  for (int k = 0; k < 8; ++k) {
-    auto b = std::make_unique<Brick>();
-    b->coord = {k & 1, (k >> 1) & 1, (k >> 2) & 1};
-    for (int z = 0; z < kBrickEdge; ++z)
-      for (int y = 0; y < kBrickEdge; ++y)
-        for (int x = 0; x < kBrickEdge; ++x) {
-          const Eigen::Vector3i d = b->coord * kBrickEdge + Eigen::Vector3i(x, y, z) - Eigen::Vector3i(8, 4, 4);
-          Voxel& v = b->voxels[Brick::index(x, y, z)];
-          v.tsdf = std::int16_t(std::clamp((-d.x() * d.x() + d.y() * d.y() + d.z() * d.z()) * 1500, -32767, 32767));
-          v.weight = 1;
-          v.r = v.g = v.b = 128;
-        }
-    coords.push_back(b->coord);
-    refs.push_back({b->coord, b.get()});
-    storage.push_back(std::move(b));
-  }
+  const FieldBricks field([](const Eigen::Vector3i& g) {
+    const Eigen::Vector3i d = g - Eigen::Vector3i(8, 4, 4);
+    return (-d.x() * d.x() + d.y() * d.y() + d.z() * d.z()) * 1500;
+  });
+  const std::vector<BrickRef>& refs = field.refs;
+  const std::vector<Eigen::Vector3i>& coords = field.coords;
   const TriangleMesh whole = marchingCubes(refs, 0.01f);
   ASSERT_GT(whole.faces.size(), 20u);
   const auto fetch = [&](const Eigen::Vector3i& c, Brick&) -> const Brick* {
