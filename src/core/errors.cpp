@@ -6,14 +6,19 @@ std::string oneLineMessage(const std::exception& e) {
   std::string s = e.what();
   const auto m = s.find("Message:");
   if (m != std::string::npos) {
+    // MRPT's message up to its location or call stack, its lines joined: an assertion's values follow
+    // it on lines of their own ("ASSERT_LT_(p.deviceIndexToUse,numDevices) failed with
+    // p.deviceIndexToUse=0 numDevices=0").
     s = s.substr(m + 8);
-    const auto end = s.find('\n');
-    if (end != std::string::npos) s = s.substr(0, end);
+    for (const char* end : {"\nLocation:", "\nCall stack", "\n\n"}) s = s.substr(0, s.find(end));
   }
-  for (char& c : s)
-    if (c == '\n' || c == '\r') c = ' ';
-  const auto a = s.find_first_not_of(' '), b = s.find_last_not_of(' ');
-  return a == std::string::npos ? "unknown error" : s.substr(a, b - a + 1);
+  std::string out;
+  for (char c : s) {
+    if (c == '\n' || c == '\r' || c == '\t') c = ' ';
+    if (c != ' ' || (!out.empty() && out.back() != ' ')) out += c;
+  }
+  while (!out.empty() && out.back() == ' ') out.pop_back();
+  return out.empty() ? "unknown error" : out;
 }
 
 }  // namespace vofusion

@@ -8,6 +8,7 @@
 #include "run_summary.h"
 #include "staged_outputs.h"
 #include "vofusion/core/atomic_file.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/core/heap.h"
 #include "vofusion/core/progress.h"  // printWarning
 #include "vofusion/core/pose_eigen.h"
@@ -215,8 +216,9 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
         png.get();  // rethrows what the render threw
         out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height) +
                                   (beside ? ", rendered beside the scene" : ""));
-      } catch (const InputError& e) {
-        const InputError named = out.named(e);
+      } catch (const std::exception& e) {  // InputError, or OpenCV's encoder, or memory
+        const auto* input = dynamic_cast<const InputError*>(&e);
+        const InputError named = out.named(input ? *input : InputError(out.path("mesh.png"), oneLineMessage(e)));
         printWarning(named.what());
         s["mesh_png_error"] = named.what();
       }

@@ -128,21 +128,6 @@ void aimCamera(mrpt::opengl::COpenGLScene& scene, const Bounds& b, const Eigen::
   scene.getViewport()->setViewportClipDistances(float(std::max(0.05, 0.1 * distance)), float(distance + 20 * radius));
 }
 
-// An MRPT exception's message on one line: its "Message:" part, without the banner, location and call
-// stack around it ("ASSERT_LT_(p.deviceIndexToUse,numDevices) failed with p.deviceIndexToUse=0
-// numDevices=0" where no EGL device is found); another's first line.
-std::string oneLineMessage(const std::string& what) {
-  const std::size_t at = what.find("Message:");
-  if (at == std::string::npos) return what.substr(0, what.find('\n'));
-  std::string text = what.substr(at + 8, what.find("Location:", at) - (at + 8));
-  std::replace(text.begin(), text.end(), '\n', ' ');
-  std::string out;
-  for (const char c : text)
-    if (c != ' ' || (!out.empty() && out.back() != ' ')) out += c;
-  while (!out.empty() && out.back() == ' ') out.pop_back();
-  return out;
-}
-
 // Renders the scene off-screen through its viewport's camera and writes it to `png`.
 void writeRenderedPng(const std::string& png, mrpt::opengl::COpenGLScene& scene, int width, int height) {
   const auto& cam = scene.getViewport()->getCamera();
@@ -152,7 +137,7 @@ void writeRenderedPng(const std::string& png, mrpt::opengl::COpenGLScene& scene,
     fbo.setCamera(scene, cam);
     fbo.render_RGB(scene, img);
   } catch (const std::exception& e) {
-    throw InputError(png, "off-screen rendering failed (no OpenGL device?): " + oneLineMessage(e.what()));
+    throw InputError(png, "off-screen rendering failed (no OpenGL device?): " + oneLineMessage(e));
   }
   cv::Mat m = img.asCvMat<cv::Mat>(mrpt::img::SHALLOW_COPY);
   std::vector<uchar> bytes;
