@@ -126,15 +126,16 @@ std::vector<std::size_t> PoseGraph::optimise(double max_loop_chi2, double max_ch
     updateChi2();
     // A false loop shows either in its own residual or, when it is trusted more than the chain, in
     // the chain it bent: a tracker edge far beyond its noise. Either way the worst loop goes.
-    // A chi2 that is no number (an edge of NaNs) is the worst there is: it lost every comparison, and
-    // the true loop beside it went instead.
+    // A loop's chi2 that is no number (an edge of NaNs) is the worst there is: it lost every comparison,
+    // and the true loop beside it went instead. (A chain edge's is left out of `chain`, as before: it
+    // would remove every loop.)
     const auto badness = [](double chi2) { return std::isnan(chi2) ? std::numeric_limits<double>::infinity() : chi2; };
     double chain = 0.0;
     std::size_t worst = edges_.size();
     for (std::size_t i = 0; i < edges_.size(); ++i) {
       const GraphEdge& e = edges_[i];
       if (!e.active) continue;
-      if (!e.loop) chain = std::max(chain, badness(e.chi2));
+      if (!e.loop) chain = std::max(chain, e.chi2);  // NaN: left out
       else if (worst == edges_.size() || badness(e.chi2) > badness(edges_[worst].chi2)) worst = i;
     }
     if (worst == edges_.size() || (badness(edges_[worst].chi2) <= max_loop_chi2 && chain <= max_chain_chi2)) return removed;
