@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <atomic>
+#include <functional>
 #include <future>
 #include <random>
 #include <thread>
@@ -634,16 +635,25 @@ TEST(LoopCloser, RelocalisesAgainstAKeyframeTheIndexHasNotTakenYet) {
 TEST(LoopCloser, RelocalisesWhileTheThreadStillVerifiesItsLastKeyframe) {
   const sim::SyntheticSequence seq = roomAtFullResolution();
   const LoopParams params;
-  LoopCloser closer(params);
   const std::size_t target = 2, wanted = target + std::size_t(params.recent_keyframes) + 3;
+  // Before the loop closer, so that they outlive its thread; the thread unparked before any return.
   std::promise<void> entered, released;
   const std::shared_future<void> release = released.get_future().share();
-  std::atomic<bool> armed{true};
+  std::atomic<bool> armed{true}, unparked{false};
+  const auto unpark = [&] {
+    if (!unparked.exchange(true)) released.set_value();
+  };
+  struct Unpark {  // on the way out, whatever failed
+    std::function<void()> now;
+    ~Unpark() { now(); }
+  };
+  LoopCloser closer(params);
   closer.setAfterIndexingHook([&](std::size_t id) {
     if (id + 1 != wanted || !armed.exchange(false)) return;
     entered.set_value();
     release.wait();
   });
+  const Unpark before_the_closer_goes{unpark};  // its destructor joins the thread
   const std::vector<std::size_t> keyframe_frames = walkTheRoomUntil(seq, closer, wanted);
   ASSERT_EQ(keyframe_frames.size(), wanted);
   ASSERT_EQ(entered.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
@@ -653,17 +663,10 @@ TEST(LoopCloser, RelocalisesWhileTheThreadStillVerifiesItsLastKeyframe) {
   view.timestamp = seq.render(keyframe_frames.back()).timestamp + 2.0;
   const auto features = fresh.process(view).features;
   auto placing = std::async(std::launch::async, [&] { return closer.relocalise(view, features); });
-  struct Release {  // before `placing` is waited for: a failed check must not leave the thread parked
-    std::promise<void>& p;
-    bool done = false;
-    void now() {
-      if (!done) p.set_value(), done = true;
-    }
-    ~Release() { now(); }
-  } unpark{released};
+  const Unpark before_placing_goes{unpark};  // its destructor waits for relocalise, which may wait for the thread
   ASSERT_EQ(placing.wait_for(std::chrono::seconds(60)), std::future_status::ready) << "relocalise waited for the thread";
   const auto found = placing.get();
-  unpark.now();
+  unpark();
   ASSERT_TRUE(found.has_value());
   EXPECT_EQ(found->keyframe, target);
   closer.finish();

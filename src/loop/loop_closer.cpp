@@ -162,12 +162,14 @@ struct LoopCloser::Impl {
     keyframes.add(std::move(k));
     const Keyframe& cur = keyframes.back();
     indexEligible(cur);
+    std::function<void(std::size_t)> hook;
     {
       std::lock_guard<std::mutex> lock(mu);
       storing = false;
+      hook = after_indexing;
     }
     idle.notify_all();
-    if (after_indexing) after_indexing(cur.id);
+    if (hook) hook(cur.id);
     std::vector<PlaceCandidate> candidates;
     {
       ScopedStageTimer timer(t, "place_recognition");
