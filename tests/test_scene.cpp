@@ -154,6 +154,17 @@ TEST(Scene, TheGroundGridStaysSmallUnderAHugeExtent) {
   grid->getPlaneLimits(x0, x1, y0, y1);
   EXPECT_LE((x1 - x0) / grid->getGridFrequency(), 1002.f);
   EXPECT_LE((y1 - y0) / grid->getGridFrequency(), 1002.f);
+  // A few metres of path 9e6 m out (a survey frame's easting): a float there moves in steps of 1 m, so a
+  // 0.5 m grid step never moved MRPT's line loop.
+  Trajectory north;
+  for (int i = 0; i < 3; ++i) north.push_back({double(i), mrpt::poses::CPose3D(9e6 + 3.0 * i, 0, 0, 0, 0, 0)});
+  const auto northern = std::dynamic_pointer_cast<mrpt::opengl::CGridPlaneXY>(
+      buildScene(TriangleMesh{}, north, nullptr, CameraIntrinsics{})->getByName("grid"));
+  ASSERT_TRUE(northern);
+  northern->getPlaneLimits(x0, x1, y0, y1);
+  ASSERT_GT(std::max(std::abs(x0), std::abs(y0)), 8e6f) << "the grid is not where the test means it";
+  EXPECT_GT(x0 + northern->getGridFrequency(), x0) << "a step that does not move the line loop";
+  EXPECT_GE(northern->getGridFrequency(), 4 * (std::nextafter(9e6f, INFINITY) - 9e6f));
 }
 
 TEST(Scene, CullsTheSideFacingAwayFromTheCameras) {

@@ -257,6 +257,10 @@ mrpt::opengl::CGridPlaneXY::Ptr groundGrid(const Extent& e, const SceneOptions& 
   const Eigen::Vector3d& hi = e.hi;
   double s = opt.grid_spacing > 0 ? opt.grid_spacing : 0.5;
   while ((hi - lo).head<2>().maxCoeff() / s > kMaxGridCells) s *= 10;
+  // MRPT steps along the lines in float: far from the origin (a survey frame, 9e6 m) a step under the
+  // float's resolution there never moved, and the grid's lines filled the memory.
+  const float far = float(std::max(lo.head<2>().cwiseAbs().maxCoeff(), hi.head<2>().cwiseAbs().maxCoeff()));
+  while (std::isfinite(far) && std::nextafter(far, INFINITY) - far > 0.25f * float(s)) s *= 10;
   const auto down = [s](double v) { return std::floor(v / s) * s - s; };
   const auto upr = [s](double v) { return std::ceil(v / s) * s + s; };
   auto grid = mrpt::opengl::CGridPlaneXY::Create(float(down(lo.x())), float(upr(hi.x())), float(down(lo.y())),
