@@ -54,6 +54,12 @@ struct RunRecorder::Impl {
   bool have_camera = false;
 
   std::string file(const std::string& name) const { return (fs::path(dir) / name).string(); }
+  // The ground truth a run is evaluated against and its rawlog carries: the recording's own, as the
+  // benchmark's tools take it (the frames' interpolated one gave xyz_first300 0.011902 m where
+  // evaluate_ate.py and rgbd-eval say 0.011927), else the frames'.
+  const Trajectory& truth(const RunInfo& info) const {
+    return info.recorded_ground_truth.empty() ? ground_truth : info.recorded_ground_truth;
+  }
 
   // trajectory*.txt, trajectory.png, the ATE/RPE and loop entries of s; returns the ground truth in
   // the map's frame (empty without one).
@@ -102,9 +108,7 @@ Trajectory RunRecorder::Impl::writeTrajectories(const Reconstruction& rec, const
     plotTrajectoriesOverlay(out.path("trajectory.png"), {}, {{"estimate", rec.trajectory()}}, title);
     out.wrote("trajectory.png", "camera path" + why);
   };
-  // Evaluated as the benchmark's tools do, against the recording's ground truth at its own stamps (the
-  // frames' interpolated one gave xyz_first300 0.011902 m where evaluate_ate.py and rgbd-eval say 0.011927).
-  const Trajectory& truth = info.recorded_ground_truth.empty() ? ground_truth : info.recorded_ground_truth;
+  const Trajectory& truth = this->truth(info);
   if (truth.empty()) {
     plotPathAlone("");
     return {};
@@ -183,7 +187,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
   try {
     json s = runSummary(rec, info);
-    if (m.rawlog) m.rawlog->finish(rec, info.recorded_ground_truth.empty() ? m.ground_truth : info.recorded_ground_truth);
+    if (m.rawlog) m.rawlog->finish(rec, m.truth(info));
     const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
 
     returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
