@@ -159,6 +159,19 @@ TEST(Eval, APathWithoutGroundTruthHasNoGroundTruthInItsLegend) {
   EXPECT_LT(int(swatch[2]), 150) << "red channel";
 }
 
+// A path of one pose (a run that tracked one frame) shows as a dot where it starts: its plot was empty.
+TEST(Eval, APathOfOnePoseShows) {
+  const std::string dir = test::tempDir("eval_plot_one_pose");
+  const Trajectory one = {wavy().front()};
+  plotTrajectoriesOverlay(dir + "/o.png", {}, {{"estimate", one}}, "path");
+  const cv::Mat img = cv::imread(dir + "/o.png");
+  ASSERT_FALSE(img.empty());
+  const cv::Mat plot = img(cv::Rect(90, 120, 580, 510));  // the plot box below the legend
+  cv::Mat blue;
+  cv::inRange(plot, cv::Scalar(150, 0, 0), cv::Scalar(255, 120, 120), blue);
+  EXPECT_GT(cv::countNonZero(blue), 10);
+}
+
 TEST(Eval, PlotsAreWritten) {
   const std::string dir = test::tempDir("eval_plots");
   const Trajectory gt = wavy();

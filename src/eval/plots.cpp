@@ -141,6 +141,7 @@ cv::Mat renderTopView(const Trajectory& gt, const std::vector<std::pair<std::str
     const cv::Scalar c = ests.size() == 1 ? kBlue : kPalette[k % kPalette.size()];
     const Trajectory& e = ests[k].second;
     for (std::size_t i = 1; i < e.size(); ++i) cv::line(plot, P(e[i - 1].pose), P(e[i].pose), c, 2, cv::LINE_AA);
+    if (!e.empty()) cv::circle(plot, P(e.front().pose), 4, c, cv::FILLED, cv::LINE_AA);  // where it starts (a path of one pose: all of it)
     entries.push_back({ests[k].first, c});
   }
   if (error_vectors && ests.size() == 1) entries.push_back({"difference", kRed});
