@@ -318,13 +318,7 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
                RunSession* session, const Args& args, const LiveCheckpoints& checkpoints) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   try {
-    if (writer) {
-      // A replay's own ground truth beside the recording, as tum2rawlog writes it: a run on grab.rawlog
-      // (a crashed session finished offline) evaluates as this one does.
-      if (source.replayed)
-        if (const Trajectory* gt = source.replayed->recordedGroundTruth()) writer->writeGroundTruth(*gt);
-      writer->commit();
-    }
+    if (writer) writer->commit();
     // The grab's own counts before the reconstruction's outputs, which may fail after a failed run.
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
                         summaryText(stats, source.live->name(), recorded, plan.opts.queue_capacity, source.skipped()));
@@ -367,6 +361,10 @@ int run(const Args& args) {
     wopts.sensor_label = label;
     wopts.in_place = true;  // a recording: valid to its last frame whatever stops the program
     writer = std::make_unique<RawlogWriter>((fs::path(args.out) / "grab.rawlog").string(), wopts);
+    // A replay's own ground truth beside the recording from its first frame, as tum2rawlog writes it: a
+    // run on grab.rawlog (a killed session finished offline) evaluates as this one does.
+    if (source.replayed)
+      if (const Trajectory* gt = source.replayed->recordedGroundTruth()) writer->writeGroundTruth(*gt);
   }
   std::unique_ptr<RunSession> session;  // the same outputs as vofusion, for what was reconstructed
   if (plan.mode) session = std::make_unique<RunSession>(plan.cfg, *plan.mode, args.out, plan.out_params, plan.mesh_params);

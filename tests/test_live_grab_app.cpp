@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "support.h"
+#include "vofusion/core/trajectory.h"
 #include <nlohmann/json.hpp>
 #include "vofusion/pipeline/run_session.h"
 #include "vofusion/io/frame_source.h"
@@ -237,6 +238,9 @@ TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
               &log);
     ASSERT_TRUE(fs::exists(out + "/grab.rawlog")) << log;
     EXPECT_FALSE(fs::exists(out + "/grab_Images.tmp-")) << "no temporary name";
+    // The replay's own ground truth beside it from its first frame (it came with commit(), never reached).
+    ASSERT_TRUE(fs::exists(out + "/grab.groundtruth.txt"));
+    EXPECT_EQ(readTumTrajectory(out + "/grab.groundtruth.txt").size(), readTumTrajectory(tum + "/groundtruth.txt").size());
     // Every frame decodes, depth and colour.
     auto back = openFrameSource(out + "/grab.rawlog");
     std::size_t frames = 0;

@@ -498,6 +498,7 @@ struct RawlogWriter::Impl {
   mrpt::obs::CActionCollection pending_actions;
   std::vector<mrpt::obs::CObservation::Ptr> pending_obs;
   std::optional<Trajectory> gt;
+  bool gt_written = false;  // in place: beside the recording since its first frame
   bool images_used = false;
 
   void openAtomic(const std::string& path) {
@@ -576,6 +577,7 @@ RawlogWriter::~RawlogWriter() {
   std::error_code ec;
   fs::remove(impl_->rawlog_file, ec);
   fs::remove_all(impl_->images_dir, ec);  // this writer made it (openInPlace refuses one already there); no record names its files
+  if (impl_->gt_written) fs::remove(groundTruthPathFor(path_), ec);
 }
 
 void RawlogWriter::writeAction(const mrpt::obs::CAction& action) {
@@ -607,6 +609,12 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
 void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
 
 std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
+  // A recording in place has its ground truth beside it from its first frame on: a run killed before
+  // commit() (SIGKILL, a power cut) is finished offline from the recording, and evaluated against it.
+  if (impl_->records && frames_ == 0 && impl_->gt && !impl_->gt_written) {
+    writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
+    impl_->gt_written = true;
+  }
   auto obs = opts_.external_images
                  ? observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label)
                  : observationWithPixels(frame, opts_.range_units, opts_.sensor_label, readings_beyond_range_);
@@ -685,7 +693,7 @@ void RawlogWriter::commit() {
     // No frame, no recording: the destructor removes the empty file and folder, so that they do not
     // block the next run's recording in this folder (a sensor that failed on its first frame).
     if (frames_ == 0) return;
-    if (impl_->gt) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
+    if (impl_->gt && !impl_->gt_written) writeTumTrajectory(groundTruthPathFor(path_), *impl_->gt);
     impl_->records->syncWithItsFolder();  // the images too: a record naming an empty file is a lost frame
     committed_ = true;
     return;

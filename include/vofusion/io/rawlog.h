@@ -130,7 +130,8 @@ class RawlogWriter {
   void writeAction(const mrpt::obs::CAction& action);
   // Any other observation: observations format: written now; action/SF format: joins the next frame's SF.
   void writeObservation(const mrpt::obs::CObservation& obs);
-  // Companion "<name>.groundtruth.txt" (TUM format), written on commit().
+  // Companion "<name>.groundtruth.txt" (TUM format), written on commit(); a recording in place's with
+  // its first frame (given before it), so that a recording killed before commit() has it too.
   void writeGroundTruth(const Trajectory& gt);
   // Flushes, closes and renames everything into place.
   void commit();
