@@ -531,6 +531,16 @@ TEST(FaultsOutput, OutputFolderNotCreatable) {
                      base + "/file", "cannot|not a directory");
 }
 
+// A folder where an output file goes (out/summary.json/ made by hand) fails the run before any output
+// moves: trajectory.txt and the rest were in place, new, beside the earlier run's summary.
+TEST(FaultsOutput, AFolderWhereAnOutputGoesChangesNothing) {
+  const std::string out = outWithEarlierResult("faults_folder_in_the_way");
+  fs::create_directories(out + "/summary.json/x");
+  expectCleanFailure(quote(test::app("vofusion")) + " synthetic:room --max-frames 3 --out " + quote(out) + " --config " +
+                         quote(fastVofusionConfig()),
+                     out + "/summary.json", "is a folder");
+}
+
 // The disk fills while outputs are written: a file size limit (ulimit -f, SIGXFSZ ignored so writes
 // fail with EFBIG as on a full disk) lets the small files through but not the images/rawlog.
 TEST(FaultsOutput, DiskFullFileSizeLimit) {
