@@ -78,6 +78,18 @@ TEST(AtomicFile, ASetOfFilesMovesIntoPlaceTogether) {
   }
   EXPECT_EQ(readTextFile(dir + "/a.txt"), "new a");
   EXPECT_EQ(readTextFile(dir + "/b.txt"), "new b");
+  // So does a folder where a file goes (the rename fails: the first file was in place, new).
+  fs::create_directories(dir + "/c.txt/x");
+  AtomicFileSet blocked;
+  blocked.write(dir + "/a.txt", [](const std::string& tmp) { writeFileAtomically(tmp, "newest a"); });
+  blocked.write(dir + "/c.txt", [](const std::string& tmp) { writeFileAtomically(tmp, "c"); });
+  try {
+    blocked.commit();
+    ADD_FAILURE() << "a file put over a folder";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), dir + "/c.txt: is a folder: cannot write the file there");
+  }
+  EXPECT_EQ(readTextFile(dir + "/a.txt"), "new a");
 }
 
 // A folder replaced by commit() is removed by the destructor, after the outputs committed with it;

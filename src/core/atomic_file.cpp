@@ -94,6 +94,8 @@ void AtomicPath::prepare() {
   if (prepared_) return;
   std::error_code ec;
   if (!fs::exists(tmp_, ec)) throw InputError(final_, "nothing was written");
+  // A file cannot replace a folder (rename: EISDIR): said before any file of a set moves.
+  if (!fs::is_directory(tmp_, ec) && fs::is_directory(final_, ec)) throw InputError(final_, "is a folder: cannot write the file there");
   // The bytes before the rename: ext4 forces a file's data out before a rename only where it replaces
   // one, XFS and btrfs never; after a power cut a new name could hold an empty file.
   if (const int err = syncToDisk(tmp_)) throw InputError(final_, std::string("cannot write: ") + std::strerror(err));
