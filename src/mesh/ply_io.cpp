@@ -278,6 +278,16 @@ struct BodyParser {
   TriangleMesh mesh;
   bool have_vertices = false;
 
+  // A list's count, read (`what` for a truncation's message): a whole number up to a million, or the
+  // file's error naming record `i` of `kind`. Written so that NaN (an ASCII "nan", a float list) fails
+  // too; a fraction, inf, a negative are no count.
+  std::size_t listCount(const Property& p, const char* what, const char* kind, std::size_t i, const char* count_of) {
+    const double nd = body.read(p.count_type, what);
+    if (!(nd >= 0 && nd <= 1e6) || nd != std::floor(nd))
+      throw InputError(path, std::string(kind) + " " + std::to_string(i) + " has a bad " + count_of + " count");
+    return static_cast<std::size_t>(nd);
+  }
+
   void readVertices(const Element& e) {
     const VertexLayout l = vertexLayout(path, e);
     // A second vertex element would resize the first's vertices under the faces already read.
@@ -292,11 +302,8 @@ struct BodyParser {
       for (std::size_t k = 0; k < e.props.size(); ++k) {
         const Property& p = e.props[k];
         if (p.is_list) {  // unusual on vertices, but skip it properly
-          const double nd = body.read(p.count_type, "vertex list");
-          if (!(nd >= 0 && nd <= 1e6) || nd != std::floor(nd))
-            throw InputError(path, "vertex " + std::to_string(i) + " has a bad list count");
-          const auto n = static_cast<long long>(nd);
-          for (long long j = 0; j < n; ++j) body.read(p.type, "vertex list");
+          const std::size_t n = listCount(p, "vertex list", "vertex", i, "list");
+          for (std::size_t j = 0; j < n; ++j) body.read(p.type, "vertex list");
           v[k] = 0;
         } else {
           v[k] = body.read(p.type, "vertices");
@@ -323,11 +330,7 @@ struct BodyParser {
       for (std::size_t k = 0; k < e.props.size(); ++k) {
         const Property& p = e.props[k];
         if (!p.is_list) { body.read(p.type, "faces"); continue; }
-        const double nd = body.read(p.count_type, "faces");
-        // Written so that NaN (an ASCII "nan", a float list) fails too; a fraction is no count.
-        if (!(nd >= 0 && nd <= 1e6) || nd != std::floor(nd))
-          throw InputError(path, "face " + std::to_string(i) + " has a bad vertex count");
-        const auto n = static_cast<std::size_t>(nd);
+        const std::size_t n = listCount(p, "faces", "face", i, "vertex");
         poly.clear();
         for (std::size_t j = 0; j < n; ++j) {
           const double idx = body.read(p.type, "faces");
@@ -358,10 +361,8 @@ struct BodyParser {
     for (std::size_t i = 0; i < e.count; ++i)
       for (const Property& p : e.props) {
         if (!p.is_list) { body.read(p.type, e.name.c_str()); continue; }
-        const double nd = body.read(p.count_type, e.name.c_str());
-        if (!(nd >= 0 && nd <= 1e6)) throw InputError(path, e.name + " " + std::to_string(i) + " has a bad list count");
-        const auto n = static_cast<long long>(nd);
-        for (long long j = 0; j < n; ++j) body.read(p.type, e.name.c_str());
+        const std::size_t n = listCount(p, e.name.c_str(), e.name.c_str(), i, "list");
+        for (std::size_t j = 0; j < n; ++j) body.read(p.type, e.name.c_str());
       }
   }
 };
