@@ -197,6 +197,8 @@ struct GrabSource {
   std::unique_ptr<LiveSource> live;
   const SkippingSource* replayed = nullptr;  // a replay's frames (owned by `live`), with the damaged ones it skipped
   std::size_t skipped() const { return replayed ? replayed->skipped().size() : 0; }
+  // A replay's own ground truth (FrameSource::recordedGroundTruth), nullptr for a sensor.
+  const Trajectory* recordedGroundTruth() const { return replayed ? replayed->recordedGroundTruth() : nullptr; }
 };
 
 // A replay, or the sensor (fails here, in one line, when none can be opened); `label` gets the
@@ -294,8 +296,7 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   info.config = plan.config;
   info.interrupted = stats.stop == StopReason::Interrupted || !stats.ok();
   info.seconds = stats.seconds;
-  if (source.replayed)
-    if (const Trajectory* gt = source.replayed->recordedGroundTruth()) info.recorded_ground_truth = *gt;
+  if (const Trajectory* gt = source.recordedGroundTruth()) info.recorded_ground_truth = *gt;
   info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
                           {"queue_capacity", plan.opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
   if (checkpoints.every > 0)
@@ -363,8 +364,7 @@ int run(const Args& args) {
     writer = std::make_unique<RawlogWriter>((fs::path(args.out) / "grab.rawlog").string(), wopts);
     // A replay's own ground truth beside the recording from its first frame, as tum2rawlog writes it: a
     // run on grab.rawlog (a killed session finished offline) evaluates as this one does.
-    if (source.replayed)
-      if (const Trajectory* gt = source.replayed->recordedGroundTruth()) writer->writeGroundTruth(*gt);
+    if (const Trajectory* gt = source.recordedGroundTruth()) writer->writeGroundTruth(*gt);
   }
   std::unique_ptr<RunSession> session;  // the same outputs as vofusion, for what was reconstructed
   if (plan.mode) session = std::make_unique<RunSession>(plan.cfg, *plan.mode, args.out, plan.out_params, plan.mesh_params);

@@ -94,8 +94,7 @@ void AtomicPath::prepare() {
   if (prepared_) return;
   std::error_code ec;
   if (!fs::exists(tmp_, ec)) throw InputError(final_, "nothing was written");
-  // A file cannot replace a folder (rename: EISDIR): said before any file of a set moves.
-  if (!fs::is_directory(tmp_, ec) && fs::is_directory(final_, ec)) throw InputError(final_, "is a folder: cannot write the file there");
+  if (!fs::is_directory(tmp_, ec)) refuseFolderWhereAFileGoes(final_);
   // The bytes before the rename: ext4 forces a file's data out before a rename only where it replaces
   // one, XFS and btrfs never; after a power cut a new name could hold an empty file.
   if (const int err = syncToDisk(tmp_)) throw InputError(final_, std::string("cannot write: ") + std::strerror(err));
@@ -194,6 +193,11 @@ void AtomicFileSet::commit() {
   // NFS disk) on the second file left the first one new and the second one old.
   for (auto& f : files_) f->prepare();
   for (auto& f : files_) f->commit();
+}
+
+void refuseFolderWhereAFileGoes(const std::string& path) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw InputError(path, "is a folder: cannot write the file there");
 }
 
 bool samePath(const std::string& a, const std::string& b) {

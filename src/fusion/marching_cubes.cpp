@@ -289,19 +289,17 @@ void mergeVoxelCrossings(const std::vector<BrickVertices>& verts, TriangleMesh& 
     return false;
   };
   std::unordered_map<Eigen::Vector3i, std::uint32_t, Hash> first;
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> merged;  // (copy, the vertex it becomes)
+  std::unordered_map<std::uint32_t, std::uint32_t> to;  // a copy -> the vertex it becomes
   for (const BrickVertices& bv : verts)
     for (const auto& [local, g] : bv.on_voxel) {
-      if (seam && region && cellsOfAnotherRegion(g)) (*seam)[bv.base + local] = 1;
-      const auto [it, fresh] = first.emplace(g, bv.base + local);
-      if (!fresh) merged.emplace_back(bv.base + local, it->second);
+      const std::uint32_t v = bv.base + local;
+      if (seam && region && cellsOfAnotherRegion(g)) (*seam)[v] = 1;
+      const auto [it, fresh] = first.emplace(g, v);
+      if (fresh) continue;
+      to[v] = it->second;
+      if (seam) (*seam)[it->second] |= (*seam)[v];
     }
-  if (merged.empty()) return;
-  std::unordered_map<std::uint32_t, std::uint32_t> to;
-  for (const auto& [copy, kept] : merged) {
-    to[copy] = kept;
-    if (seam) (*seam)[kept] |= (*seam)[copy];
-  }
+  if (to.empty()) return;
   std::size_t n = 0;
   for (auto f : mesh.faces) {
     for (auto& v : f)

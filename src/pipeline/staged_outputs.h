@@ -54,13 +54,8 @@ class StagedOutputs {
     return left;
   }
   void commit(std::FILE* log) {
-    // A folder where a file goes cannot be replaced by it: found before any file moves (the files
-    // before it were in place, new, beside the earlier run's rest).
-    for (const std::string& name : names_) {
-      std::error_code ec;
-      if (std::filesystem::is_directory(final_path_(name), ec))
-        throw InputError(final_path_(name), "is a folder: cannot write the file there");
-    }
+    // Before any file moves (the files before it were in place, new, beside the earlier run's rest).
+    for (const std::string& name : names_) refuseFolderWhereAFileGoes(final_path_(name));
     for (const std::string& name : names_) {
       std::error_code ec;
       std::filesystem::rename(path(name), final_path_(name), ec);

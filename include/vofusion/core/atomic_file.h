@@ -54,6 +54,10 @@ class AtomicFileSet {
   std::vector<std::unique_ptr<AtomicPath>> files_;
 };
 
+// Throws InputError(path, ...) when a folder is where the file `path` is to go (a rename cannot put a
+// file over it): checked before any of a set of outputs moves.
+void refuseFolderWhereAFileGoes(const std::string& path);
+
 // Whether two paths name one file ("a/./b", "a/../a/b" and symlinks resolved as far as they exist).
 bool samePath(const std::string& a, const std::string& b);
 
