@@ -15,6 +15,7 @@ Writes bench/results/checkpoints.md.
 import filecmp
 import json
 import os
+import re
 import shutil
 import signal
 import struct
@@ -24,7 +25,23 @@ import threading
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-MAGIC = b"VOFUSION-CHECKPOINT-1\n"
+KIND = b"VOFUSION-CHECKPOINT-"
+
+
+def checkpoint_magic():
+    """The header the source writes (run_session.cpp's kCheckpointMagic): a copy here went stale at version 2."""
+    src = os.path.join(os.path.dirname(HERE), "src", "pipeline", "run_session.cpp")
+    m = re.search(r'kCheckpointMagic\[\] = "(VOFUSION-CHECKPOINT-[0-9]+)\\n"', open(src).read())
+    if not m:
+        sys.exit("bench checkpoints: no kCheckpointMagic in " + src)
+    return m.group(1).encode() + b"\n"
+
+
+MAGIC = checkpoint_magic()
+
+
+class OtherVersion(Exception):
+    """A checkpoint whose header this script does not read."""
 
 
 def log(msg):
@@ -37,6 +54,9 @@ def checkpoint_frames(path):
         with open(path, "rb") as f:
             head = f.read(len(MAGIC) + 4)
             if len(head) < len(MAGIC) + 4 or not head.startswith(MAGIC):
+                if head.startswith(KIND) and b"\n" in head and not head.startswith(MAGIC):
+                    raise OtherVersion("%s: %s, not %s (a build older than the source?)"
+                                       % (path, head[:head.index(b"\n")].decode(), MAGIC.decode().strip()))
                 return None
             (n,) = struct.unpack("<I", head[len(MAGIC):])
             f.seek(len(MAGIC) + 4 + n)
@@ -84,13 +104,18 @@ def main():
     clean = os.path.join(work, "clean")
     targets = [total // 2, total * 9 // 10, total * 99 // 100]
     kept = []
+    failed = []
     done = threading.Event()
 
     def watch():
         path = os.path.join(clean, "checkpoint")
         for target in targets:
             while not done.is_set():
-                n = checkpoint_frames(path)
+                try:
+                    n = checkpoint_frames(path)
+                except OtherVersion as e:
+                    failed.append(str(e))
+                    return
                 if n is not None and n >= target:
                     copy = os.path.join(work, "at%d" % target)
                     try:
@@ -111,6 +136,10 @@ def main():
     finally:
         done.set()
         watcher.join()
+    if failed:
+        sys.exit("bench checkpoints: " + failed[0])
+    if len(kept) < len(targets):
+        sys.exit("bench checkpoints: the clean run left %d of the %d checkpoints to copy" % (len(kept), len(targets)))
     rows = []
     for frames, copy in kept:
         log("resuming from frame %d" % frames)
@@ -126,6 +155,8 @@ def main():
     p.send_signal(signal.SIGKILL)
     p.wait()
     at = checkpoint_frames(os.path.join(killed, "checkpoint"))
+    if at is None:
+        sys.exit("bench checkpoints: the killed run left no checkpoint (it ended before a third of the frames?)")
     secs = run(vofusion(build, seq, killed, each + ["--resume", os.path.join(killed, "checkpoint")]))
     rows.append(("killed (-9), its last checkpoint at frame %d" % at, secs, same_outputs(clean, killed)))
 
