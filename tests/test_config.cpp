@@ -57,6 +57,36 @@ TEST(Config, UnknownKeyNamesFileSectionAndKey) {
   EXPECT_NE(refusal(dir + "/b.ini", "[kinfoo]\nvoxel = 0.01\n", "kinfu"), "");
 }
 
+// Parameters that save a section beside their own, as [odometry] saves [star], [narf] and [motion].
+struct NestedParams : DemoParams {
+  int iterations = 500;
+  void loadFromConfigFile(const mrpt::config::CConfigFileBase& c, const std::string& s) override {
+    DemoParams::loadFromConfigFile(c, s);
+    iterations = c.read_int("motion", "iterations", iterations);
+  }
+  void saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const override {
+    DemoParams::saveToConfigFile(c, s);
+    c.write("motion", "iterations", iterations);
+  }
+};
+
+// A grabber's config is checked in our sections only, and those are all the sections our stages read:
+// a typo in one a stage reads beside its own (vofusion-grab's [motion]) is refused like one in its own.
+TEST(Config, KnownSectionsAreEverySectionTheStagesRead) {
+  const std::string dir = test::tempDir("config_known_sections");
+  const std::string path = dir + "/grab.ini";
+  NestedParams p;
+  std::ofstream(path) << "[OPENNI2]\ndriver = COpenNI2Sensor\nanything = 1\n[kinfu]\nvoxel = 0.01\n[motion]\niterations = 9\n";
+  EXPECT_NO_THROW(checkKnownSections(loadConfig(path), path, {{"kinfu", &p}}));
+  std::ofstream(path, std::ios::app) << "[motion]\niteratons = 9\n";
+  try {
+    checkKnownSections(loadConfig(path), path, {{"kinfu", &p}});
+    ADD_FAILURE() << "a typo in [motion] passed";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), path + ": unknown key 'iteratons' in section [motion]");
+  }
+}
+
 // An old config's retired key is refused, but says why and where the figures are.
 TEST(Config, RetiredKeySaysItsValueIsFixedInCode) {
   const std::string dir = test::tempDir("config_retired");

@@ -274,6 +274,28 @@ TEST(VofusionApp, ALiveRunsGrabberConfigIsRead) {
   EXPECT_NE(log.find("live.ini: unknown key 'keypoint' in section [odometry]"), std::string::npos) << log;
 }
 
+// A --replay --live run's --config needs no sensor section: its [vofusion-grab] section (vofusion-grab's
+// own keys) is read by vofusion as part of the file the run resumes with, and still checked for typos.
+TEST(VofusionApp, AReplayedLiveRunsConfigIsRead) {
+  const std::string dir = test::tempDir("vofusion_app_replaycfg");
+  const std::string cfg = dir + "/replay.ini";
+  std::ofstream(cfg) << "[vofusion-grab]\nqueue_capacity = 4\n"
+                        "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
+                        "[output]\nmesh = false\n";
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
+                          "/out 2>&1",
+                      &log),
+            0)
+      << log;
+  std::ofstream(cfg, std::ios::app) << "[vofusion-grab]\nqueue_capacty = 4\n";
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
+                          "/out2 2>&1",
+                      &log),
+            2);
+  EXPECT_NE(log.find("replay.ini: unknown key 'queue_capacty' in section [vofusion-grab]"), std::string::npos) << log;
+}
+
 // A run that writes fewer outputs than an earlier one in its folder (here no mesh) leaves the earlier
 // run's files as they were, and says which they are, so that they do not pass for this run's.
 TEST(VofusionApp, AnEarlierRunsOutputsLeftInTheFolderAreNamed) {

@@ -173,8 +173,12 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
 
 void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                         const std::vector<ConfigSection>& known) {
+  // Every section the stages read, the ones a section's parameters save beside their own included
+  // ([odometry] writes [star], [narf], [brand], [matching] and [motion]).
+  std::vector<std::string> sections;
+  defaultsOf(known).getAllSections(sections);
   mrpt::config::CConfigFileMemory ours;
-  for (const auto& [section, params] : known) {
+  for (const auto& section : sections) {
     std::vector<std::string> keys;
     user.getAllKeys(section, keys);
     for (const auto& k : keys)
