@@ -115,7 +115,8 @@ Args parseArgs(int argc, char** argv) {
   if (cl.value("--queue")) a.queue = cl.count("--queue", 0);
   if (cl.value("--speed")) a.speed = cl.number("--speed", 1.0);
   a.work_ms = int(cl.count("--simulate-work-ms", 0));
-  if (a.speed && *a.speed < 0) throw InputError("--speed", "must not be negative");
+  if (a.speed && !LiveOptions::replaySpeedInRange(*a.speed))
+    throw InputError("--speed", "must be 0 (as fast as frames load) or in [0.001, 1000] x the recorded rate");
   // Options that would change nothing are refused, as rgbd-simulate does: the run they were meant for
   // is not the one asked for.
   if (cl.value("--mode") && !a.live) throw InputError("--mode", "needs --live (without it nothing is reconstructed)");
@@ -130,7 +131,8 @@ Args parseArgs(int argc, char** argv) {
       throw InputError("--checkpoint-every", "needs --live and the recording (a checkpoint is resumed from grab.rawlog)");
     a.checkpoint_every = cl.number("--checkpoint-every", 0.0, -1e-9, 1e6);
   }
-  if (a.queue && *a.queue < 1) throw InputError("--queue", "must be at least 1");
+  if (a.queue && !(*a.queue >= 1 && *a.queue <= LiveOptions::kMostQueued))
+    throw InputError("--queue", "must be in [1, 1000] frames (each waiting frame holds ~2 MB)");
   if (!a.live && !a.record) throw InputError("--no-record", "without --live there is nothing left to do");
   return a;
 }
@@ -324,13 +326,15 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
                         summaryText(stats, source.live->name(), recorded, plan.opts.queue_capacity, source.skipped()));
     if (session) finishLive(*session, stats, plan, source, args.out, recorded, checkpoints);
-  } catch (const std::exception&) {
+  } catch (const std::exception& e) {
     if (stats.ok()) throw;
-    // What stopped the run (a full disk) stops the outputs after it too: that first cause is the one
-    // line; the recording, written frame by frame, holds every frame before it.
-    std::fprintf(stderr, "vofusion-grab: stopped: %s (the recording holds the %zu frames before)\n", stats.error.c_str(),
-                 recorded);
-    return 2;
+    // What stopped the run (a full disk) may stop the outputs after it too, or they fail on their own
+    // (a folder where trajectory.txt goes): one line with the first cause, then what was not written.
+    const std::string kept =
+        writer ? "the recording holds the " + std::to_string(recorded) + " frames before" : "nothing was recorded (--no-record)";
+    std::fprintf(stderr, "vofusion-grab: stopped: %s (%s; the outputs after it were not written: %s)\n", stats.error.c_str(),
+                 kept.c_str(), oneLineMessage(e).c_str());
+    return 1;  // as a run stopped by a failure whose outputs were written
   }
   const std::string skipped = source.skipped() ? ", " + std::to_string(source.skipped()) + " skipped as damaged" : "";
   std::fprintf(stderr, "vofusion-grab: %zu played%s, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,

@@ -11,6 +11,7 @@
 #include <mrpt/obs/CObservationIMU.h>
 
 #include "support.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/live/live_loop.h"
@@ -256,6 +257,12 @@ TEST(LiveOptions, SaveWritesEveryKeyItLoads) {
   EXPECT_EQ(b.max_frames, 42u);
   m.write("g", "queue_capacity", 0);
   EXPECT_THROW(b.loadFromConfigFile(m, "g"), std::exception);
+  // A speed so slow that a frame's wait overflows the clock's nanoseconds (1e-12: 3e19 ns) is refused.
+  m.write("g", "queue_capacity", 2);
+  m.write("g", "replay_speed", 1e-12);
+  EXPECT_THROW(b.loadFromConfigFile(m, "g"), InputError);
+  m.write("g", "replay_speed", 0.001);
+  EXPECT_NO_THROW(b.loadFromConfigFile(m, "g"));
 }
 
 TEST(LiveReplay, PlaysAtTheRecordedRate) {

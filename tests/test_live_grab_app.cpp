@@ -120,6 +120,11 @@ TEST(GrabApp, UsageErrorsExitTwo) {
   EXPECT_EQ(log, "vofusion-grab: error: --mode: needs --live (without it nothing is reconstructed)\n");
   EXPECT_EQ(test::run(test::app("vofusion-grab") + " --speed 2 --no-gui", &log), 2);
   EXPECT_EQ(log, "vofusion-grab: error: --speed: needs --replay (a sensor gives its own)\n");
+  // A speed whose waits overflow the clock (every frame then played at once) and a queue without bound.
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --speed 1e-12 --no-gui", &log), 2);
+  EXPECT_EQ(log, "vofusion-grab: error: --speed: must be 0 (as fast as frames load) or in [0.001, 1000] x the recorded rate\n");
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --queue 100000 --no-gui", &log), 2);
+  EXPECT_EQ(log, "vofusion-grab: error: --queue: must be in [1, 1000] frames (each waiting frame holds ~2 MB)\n");
   EXPECT_EQ(test::run(test::app("vofusion-grab") + " --depth-scale 1000", &log), 2);
   EXPECT_EQ(log, "vofusion-grab: error: --depth-scale: needs --replay (a sensor gives its own)\n");
 }
@@ -300,6 +305,33 @@ TEST(GrabApp, ReplaySkipsADamagedFrame) {
   ASSERT_EQ(summary.at("skipped_frames").size(), 1u);
   EXPECT_EQ(summary["skipped_frames"][0].at("frame"), 7);
   EXPECT_EQ(summary["skipped_frames"][0].at("file"), depth[7].string());
+}
+
+// A live run stopped by a failure (here a replay more than a fifth damaged) whose outputs then fail on
+// their own (a folder where trajectory.txt goes) says both in its stop line: the outputs are not
+// silently missing behind the first cause.
+TEST(GrabApp, OutputsThatFailAfterAFailedRunAreNamed) {
+  const std::string dir = test::tempDir("grab_app_failed_twice");
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 30 --size 320x240"), 0);
+  std::vector<fs::path> depth;
+  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
+  std::sort(depth.begin(), depth.end());
+  ASSERT_EQ(depth.size(), 30u);
+  for (std::size_t i = 20; i < 27; ++i) fs::remove(depth[i]);
+  fs::create_directories(dir + "/out/trajectory.txt");
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay " + dir + "/rec --out " + dir + "/out --live --no-gui --config " +
+                          dir + "/nomesh.ini 2>&1",
+                      &log),
+            1)
+      << log;
+  const std::size_t at = log.find("vofusion-grab: stopped: ");
+  ASSERT_NE(at, std::string::npos) << log;
+  const std::string line = log.substr(at, log.find('\n', at) - at);
+  EXPECT_NE(line.find("more than one in five"), std::string::npos) << line;
+  EXPECT_NE(line.find("; the outputs after it were not written: "), std::string::npos) << line;
+  EXPECT_NE(line.find("trajectory.txt"), std::string::npos) << line;
 }
 
 // An earlier recording in the output folder is never overwritten: the grab refuses in one line.

@@ -16,13 +16,13 @@ void LiveOptions::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, c
   sensor_timeout = readNumber(cfg, s, "sensor_timeout", sensor_timeout);
   replay_speed = readNumber(cfg, s, "replay_speed", replay_speed);
   const double most = readNumber(cfg, s, "max_frames", double(max_frames), true);
-  if (!(queue >= 1 && queue <= 1000)) throw InputError("[" + s + "] queue_capacity", "must be in [1, 1000] frames");
+  if (!(queue >= 1 && queue <= kMostQueued)) throw InputError("[" + s + "] queue_capacity", "must be in [1, 1000] frames");
   if (!(most >= 0 && most <= 1e15)) throw InputError("[" + s + "] max_frames", "must be in [0, 1e15] frames (0 = all)");
   queue_capacity = std::size_t(queue);
   max_frames = std::size_t(most);
   if (!(sensor_timeout > 0 && sensor_timeout <= 3600)) throw InputError("[" + s + "] sensor_timeout", "must be in (0, 3600] s");
-  if (!(replay_speed >= 0 && replay_speed <= 1000))
-    throw InputError("[" + s + "] replay_speed", "must be in [0, 1000] (0 = as fast as possible)");
+  if (!replaySpeedInRange(replay_speed))
+    throw InputError("[" + s + "] replay_speed", "must be 0 (as fast as possible) or in [0.001, 1000]");
 }
 
 void LiveOptions::saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& s) const {
