@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <filesystem>
+#include <tuple>
 #include <Eigen/Dense>
 // The synthetic sequence: exact geometry, Kinect noise statistics, determinism, smooth trajectories.
 #include <cmath>
@@ -484,6 +485,40 @@ TEST(Sim, BlackoutCoversTheCameraWhileThePathGoesOn) {
   } catch (const InputError& e) {
     EXPECT_EQ(std::string(e.what()), "--blackout: 0.01:0.04 covers no frame (frames are 0.1 s apart)");
   }
+}
+
+// The cover's end is T + S exactly, whatever the decimal sum rounds to: 0.1 + 0.2 is 0.30000000000000004,
+// above frame 3's 3 / 10.0, and covered frame 3 too (3 frames for a 0.2 s cover at 10 fps).
+TEST(Sim, ABlackoutCoversItsLengthWhateverTheDecimalSum) {
+  for (const auto& [start, seconds, first, end] : {std::tuple{0.1, 0.2, 1, 3}, std::tuple{0.2, 0.3, 2, 5},
+                                                   std::tuple{1.1, 0.2, 11, 13}, std::tuple{0.3, 0.3, 3, 6}}) {
+    SimOptions o = test::quickSim("room", 20);
+    o.fps = 10;
+    o.blackout_start = start;
+    o.blackout_seconds = seconds;
+    const SyntheticSequence seq(o);
+    for (int i = 0; i < 20; ++i)
+      EXPECT_EQ(cv::countNonZero(seq.render(i).depth) == 0, i >= first && i < end) << start << ":" << seconds << " frame " << i;
+  }
+}
+
+// A scene sized by the time walked is built for the time the path covers at its pace: at pace 4 the
+// corridor's camera walked through its end wall at frame 225 of 300 and saw nothing after.
+TEST(Sim, APacedPathStaysInItsScene) {
+  for (const char* scene : {"corridor", "lookalike", "loop"}) {
+    SimOptions o = test::quickSim(scene, 300);
+    o.pace = 4;
+    const SyntheticSequence brisk(o);
+    for (std::size_t i = 0; i < 300; i += 23) {
+      const Frame f = brisk.render(i);
+      EXPECT_GT(cv::countNonZero(f.depth), int(f.depth.total() / 2)) << scene << " frame " << i;
+    }
+  }
+  // The loop is walked once round and 15 % further at any pace: its end is near where a lap began.
+  SimOptions o = test::quickSim("loop", 300);
+  o.pace = 4;
+  const SyntheticSequence loop(o);
+  EXPECT_LT(loop.groundTruth(299).distanceTo(loop.groundTruth(0)), 5.0);
 }
 
 // --pace plays the scene's path faster: frame i at pace 2 is where frame 2i is at pace 1.

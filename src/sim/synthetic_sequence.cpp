@@ -158,6 +158,9 @@ struct SyntheticSequence::Impl {
   // Scene "loop": the camera walks a rounded rectangle (half sizes a x b, corner radius r) `laps`
   // times over the sequence, facing along it.
   double ring_a = 0.0, ring_b = 0.0, ring_r = 0.0, laps = 0.0, duration = 1.0;
+  // --blackout: frames [blackout_first, blackout_end) covered, decided once by index (a sum of decimal
+  // times compared with i / fps covered 0.1:0.2 at 10 fps three frames, 0.2:0.3 two).
+  std::size_t blackout_first = 0, blackout_end = 0;
 
   // Position on the ring at arc length s (wrapped), and the heading (rad) of the path there.
   std::pair<Eigen::Vector2d, double> ringAt(double s) const {
@@ -483,7 +486,9 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   if (!(o.pace > 0 && o.pace <= 4)) throw InputError("--pace", "must be in (0, 4]");
   if (!(o.max_range > kKinectMinRange)) throw InputError("--max-range", "must exceed 0.4 m");
   const std::uint32_t s = o.seed;
-  const double duration = std::max(1.0, double(o.frames) / o.fps);
+  // The path covers frames / fps seconds at pace 1, `pace` times that faster: a scene sized by the time
+  // walked (corridor, lookalike, longwalk, loop) is built for it, or the camera walked out of it.
+  const double duration = std::max(1.0, double(o.frames) / o.fps) * o.pace;
   impl->buildWorld(o.scene, s, duration);
   impl->buildTrajectory(o.trajectory, s);
   if (!(o.exposure >= 0 && o.exposure <= 0.1)) throw InputError("--exposure", "must be in [0, 0.1] s");
@@ -499,8 +504,15 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
                   o.blackout_start, last_frame_time, std::size_t(o.frames), o.fps);
     throw InputError("--blackout", why);
   }
-  const double first_covered = std::ceil(o.blackout_start * o.fps - 1e-9) / o.fps;  // the first frame at or after T
-  if (o.blackout_seconds > 0 && first_covered >= o.blackout_start + o.blackout_seconds) {
+  // The first frame at or after T, and the first at or after T + S (each time rounded to a frame within 1e-9).
+  const auto firstFrameFrom = [&](double t) {
+    return std::size_t(std::clamp(std::ceil(t * o.fps - 1e-9), 0.0, double(o.frames)));  // past the last: frames
+  };
+  if (o.blackout_seconds > 0) {
+    impl->blackout_first = firstFrameFrom(o.blackout_start);
+    impl->blackout_end = firstFrameFrom(o.blackout_start + o.blackout_seconds);
+  }
+  if (o.blackout_seconds > 0 && impl->blackout_first >= impl->blackout_end) {
     char why[160];
     std::snprintf(why, sizeof why, "%g:%g covers no frame (frames are %g s apart)", o.blackout_start, o.blackout_seconds,
                   1.0 / o.fps);
@@ -646,7 +658,7 @@ Frame SyntheticSequence::render(std::size_t i) const {
   f.camera = c;
   const mrpt::poses::CPose3D pose = m.pose(f.timestamp);
   f.groundTruth = pose;
-  if (f.timestamp >= o.blackout_start && f.timestamp < o.blackout_start + o.blackout_seconds) {
+  if (i >= m.blackout_first && i < m.blackout_end) {
     f.rgb = cv::Mat::zeros(c.height, c.width, CV_8UC3);  // covered: the sensor sees nothing, the path goes on
     f.depth = cv::Mat::zeros(c.height, c.width, CV_32FC1);
     return f;
