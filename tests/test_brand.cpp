@@ -143,3 +143,14 @@ TEST(KeypointUnion, DropsNearDuplicatesOnly) {
   EXPECT_EQ(u[2].pt, cv::Point2f(104, 50));
   EXPECT_EQ(mergeKeypoints(a, b, 0.f).size(), 5u);
 }
+
+// The point and normal maps are read at the image's pixels: maps of another size (a depth at half the
+// colour's resolution) are refused, where a keypoint at (600, 440) read row 440 of a 240-row map.
+TEST(Brand, MapsOfAnotherSizeThanTheImageAreRefused) {
+  const cv::Mat grey = texture(640, 480, 7);
+  const cv::Mat pts = depthToPointMap(cv::Mat(240, 320, CV_32F, cv::Scalar(1.5f)), camera().scaled(0.5));
+  const cv::Mat nrm = computeNormalMap(pts, 3, 0.05f);
+  std::vector<cv::KeyPoint> kps{cv::KeyPoint(600, 440, 10)};
+  cv::Mat d;
+  EXPECT_THROW(BrandExtractor().compute(grey, pts, nrm, kps, d), cv::Exception);
+}

@@ -106,3 +106,13 @@ TEST(HammingMatcher, EmptyReferenceGivesNoMatches) {
   m.add(randomDescriptors(10, 32, rng, 256), cv::Mat());
   EXPECT_TRUE(m.crossChecked().empty());
 }
+
+// The reference is put in the build's layout at the first call and kept: a reference of another size
+// later is refused, where its rows were read past the words kept from the first.
+TEST(HammingMatcher, AReferenceOfAnotherSizeIsRefused) {
+  cv::RNG rng(4);
+  const cv::Mat cur = randomDescriptors(20, 32, rng, 256);
+  CrossCheckedHammingMatcher m;
+  m.add(cur.rowRange(0, 10), randomDescriptors(5, 32, rng, 256));
+  EXPECT_THROW(m.add(cur, randomDescriptors(40, 32, rng, 256)), cv::Exception);
+}

@@ -84,6 +84,7 @@ void BrandExtractor::compute(const cv::Mat& gray, const cv::Mat& points, const c
 void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, const cv::Mat& normals,
                                      std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors) const {
   CV_Assert(img.type() == CV_8UC1 && points.type() == CV_32FC3 && normals.type() == CV_32FC3);
+  CV_Assert(points.size() == img.size() && normals.size() == img.size());  // read at the image's pixels
   const int rows = img.rows, cols = img.cols;
   const float cos_thr = float(std::cos(params_.normal_angle * M_PI / 180.0));
   std::vector<cv::KeyPoint> kept(keypoints.size());

@@ -176,11 +176,13 @@ bool CrossCheckedHammingMatcher::available(Build build) {
 void CrossCheckedHammingMatcher::add(const cv::Mat& cur, const cv::Mat& ref) {
   if (cur.rows <= rows_ || ref.empty()) return;
   CV_Assert(cur.type() == CV_8UC1 && ref.type() == CV_8UC1 && cur.cols == ref.cols);
+  CV_Assert(ref_words_.empty() || ref.size() == ref_size_);
   const int words = (cur.cols + 7) / 8, n = cur.rows - rows_;
   const bool eight_rows = build_ == Build::Avx512 || build_ == Build::Avx2;
   const int stride = (ref.rows + 7) / 8 * 8;
   // The reference is the same at every call: put in the build's layout once.
   if (ref_words_.empty()) {
+    ref_size_ = ref.size();
     ref_words_ = asWords(ref, 0, words);
     if (eight_rows) ref_words_ = transposed(ref_words_, ref.rows, words, stride);
   }

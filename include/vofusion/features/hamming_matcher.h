@@ -21,7 +21,8 @@ class CrossCheckedHammingMatcher {
   explicit CrossCheckedHammingMatcher(Build build = Build::Fastest);
   static bool available(Build build);
   // Matches the rows of `cur` not seen yet (cur grows between calls; the first rows must stay the
-  // same) against `ref`, which must be the same at every call. CV_8U descriptors, any width.
+  // same) against `ref`, which must be the same at every call (a reference of another size throws
+  // cv::Exception: the words kept from the first would be read past). CV_8U descriptors, any width.
   void add(const cv::Mat& cur, const cv::Mat& ref);
   // queryIdx = row of cur, trainIdx = row of ref; each the other's nearest, in cur's row order.
   std::vector<cv::DMatch> crossChecked() const;
@@ -31,6 +32,7 @@ class CrossCheckedHammingMatcher {
   std::vector<cv::DMatch> forward_;   // per current row: nearest reference row
   std::vector<cv::DMatch> backward_;  // per reference row: nearest current row so far
   std::vector<std::uint64_t> ref_words_;  // the reference as 64-bit words, in the layout build_ reads
+  cv::Size ref_size_;                     // of the reference ref_words_ holds
   int rows_ = 0;
   Build build_;
 };
