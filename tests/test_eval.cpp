@@ -128,6 +128,28 @@ TEST(Eval, NoiseOfKnownMagnitude) {
   EXPECT_NEAR(ate.trans.std, 0.0, 1e-3);
 }
 
+// Neither trajectory needs its stamps in order (a rawlog's come as recorded): swapped neighbours lost
+// a pair (the search for gt's stamp among the estimate's stopped at the later one) and RPE paired wrongly.
+TEST(Eval, StampsOutOfOrderAreMatchedAsSorted) {
+  const Trajectory gt = wavy();
+  Trajectory est = gt;
+  for (auto& p : est) p.pose = CPose3D(p.pose.x() + 0.01 * std::sin(7 * p.timestamp), p.pose.y(), p.pose.z(), p.pose.yaw(),
+                                       p.pose.pitch(), p.pose.roll());
+  Trajectory shuffled = est, gt_shuffled = gt;
+  for (std::size_t i = 10; i + 1 < shuffled.size(); i += 37) std::swap(shuffled[i], shuffled[i + 1]);
+  for (std::size_t i = 5; i + 1 < gt_shuffled.size(); i += 41) std::swap(gt_shuffled[i], gt_shuffled[i + 1]);
+  const auto pairs = associateTrajectories(gt_shuffled, shuffled);
+  ASSERT_EQ(pairs.size(), gt.size());
+  for (const auto& [g, e] : pairs) EXPECT_EQ(gt_shuffled[g].timestamp, shuffled[e].timestamp);
+  const AteResult sorted_ate = computeAte(gt, est), ate = computeAte(gt_shuffled, shuffled);
+  ASSERT_TRUE(ate.success);
+  EXPECT_NEAR(ate.trans.rmse, sorted_ate.trans.rmse, 1e-12);
+  const RpeResult sorted_rpe = computeRpe(gt, est, 0.05), rpe = computeRpe(gt_shuffled, shuffled, 0.05);
+  ASSERT_TRUE(rpe.success);
+  EXPECT_EQ(rpe.trans.count, sorted_rpe.trans.count);
+  EXPECT_NEAR(rpe.trans.rmse, sorted_rpe.trans.rmse, 1e-12);
+}
+
 TEST(Eval, AssociationTolerance) {
   const Trajectory gt = wavy();
   const Trajectory late = wavy(0.5);  // 0.5 s off: only overlapping stamps 1/30 s grid -> none within 0.02

@@ -34,6 +34,22 @@ std::vector<double> stampsOf(const Trajectory& t) {
   for (const auto& p : t) s.push_back(p.timestamp);
   return s;
 }
+
+// The indices of t in time order (equal stamps in index order). A trajectory is not always written
+// sorted (a rawlog's stamps come as recorded), and the searches below need its stamps sorted.
+std::vector<std::size_t> timeOrder(const Trajectory& t) {
+  std::vector<std::size_t> order(t.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return t[a].timestamp < t[b].timestamp; });
+  return order;
+}
+
+Trajectory sortedByTime(const Trajectory& t) {
+  Trajectory s;
+  s.reserve(t.size());
+  for (const std::size_t i : timeOrder(t)) s.push_back(t[i]);
+  return s;
+}
 }  // namespace
 
 ErrorStats computeStats(const std::vector<double>& e) {
@@ -59,12 +75,16 @@ std::vector<std::pair<std::size_t, std::size_t>> associateTrajectories(const Tra
                                                                        double max_dt) {
   struct Cand { double dt; std::size_t i, j; };
   std::vector<Cand> cands;
-  const std::vector<double> es = stampsOf(est);
-  for (std::size_t i = 0; i < gt.size(); ++i) {
+  const std::vector<std::size_t> est_order = timeOrder(est);
+  std::vector<double> es;
+  es.reserve(est.size());
+  for (const std::size_t j : est_order) es.push_back(est[j].timestamp);
+  // Both in time order, so that ties in dt are taken in (gt stamp, est stamp) order, as associate.py's sort.
+  for (const std::size_t i : timeOrder(gt)) {
     auto lo = std::lower_bound(es.begin(), es.end(), gt[i].timestamp - max_dt);
     for (auto it = lo; it != es.end() && *it <= gt[i].timestamp + max_dt; ++it)
       // Closer than max_dt, as TUM's associate.py has it (abs(a - b) < max_difference).
-      if (const double dt = std::abs(*it - gt[i].timestamp); dt < max_dt) cands.push_back({dt, i, std::size_t(it - es.begin())});
+      if (const double dt = std::abs(*it - gt[i].timestamp); dt < max_dt) cands.push_back({dt, i, est_order[std::size_t(it - es.begin())]});
   }
   std::stable_sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.dt < b.dt; });
   std::vector<char> used_g(gt.size(), 0), used_e(est.size(), 0);
@@ -109,7 +129,8 @@ AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt)
   return r;
 }
 
-RpeResult computeRpe(const Trajectory& gt, const Trajectory& est, double delta, double max_dt) {
+RpeResult computeRpe(const Trajectory& gt_as_given, const Trajectory& est_as_given, double delta, double max_dt) {
+  const Trajectory gt = sortedByTime(gt_as_given), est = sortedByTime(est_as_given);
   RpeResult r;
   r.delta = delta;
   if (est.size() < 2 || gt.empty()) {
