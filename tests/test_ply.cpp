@@ -225,6 +225,24 @@ TEST(Ply, ACountTheBytesCannotHoldAllocatesNothing) {
   }
 }
 
+// The same for faces: a face's list holds its count and at least 3 indices, so 2 MB cannot hold 2 M
+// faces of a uchar count and int indices (reserving them took 24 MB: only the count's byte was counted).
+TEST(Ply, AFaceCountTheBytesCannotHoldAllocatesNothing) {
+  const std::string dir = test::tempDir("ply_face_count_bomb");
+  const std::string p = dir + "/bomb.ply";
+  std::string text = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                     "property float z\nelement face 2000000\nproperty list uchar int vertex_indices\nend_header\n";
+  text += std::string(3 * 12, '\0') + std::string(2000000, '\0');
+  writeText(p, text);
+  const ScopedAllocationLimit limit(std::size_t(8) << 20, std::size_t(16) << 20);
+  try {
+    readPly(p);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("file is truncated (header announces 2000000 faces)"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Ply, FailedWriteKeepsEarlierFile) {
   const std::string dir = test::tempDir("ply_atomic");
   writePly(dir + "/t.ply", tetrahedron(false, false));

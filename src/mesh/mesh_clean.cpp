@@ -809,6 +809,9 @@ MeshCleanReport clean(TriangleMesh& mesh, const MeshCleanParams& params, Triangl
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
+    // The mesh written is the one that came (mesh.ply "as it was before"): so is the one before
+    // simplification (mesh_full.ply was written empty).
+    if (unsimplified) *unsimplified = mesh;
     return report;
   }
   if (unsimplified) *unsimplified = std::move(before);

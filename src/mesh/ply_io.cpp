@@ -88,9 +88,12 @@ class BodyReader {
   // Whether `count` records of `e` can fit in the bytes left: each takes at least its scalars' sizes (a
   // list its count's) in binary, a character and a separator per value in ASCII. Checked before a
   // count sizes a buffer: a damaged header must not allocate gigabytes before the read fails.
-  bool fits(const Element& e) const {
+  // `polygon`: the index of a list that holds at least 3 values (a face's vertex indices; a face
+  // reserves 12 bytes where its count alone took 1).
+  bool fits(const Element& e, int polygon = -1) const {
     std::size_t least = 0;
     for (const Property& p : e.props) least += fmt_ == Format::Ascii ? 2 : scalarSize(p.is_list ? p.count_type : p.type);
+    if (polygon >= 0) least += 3 * (fmt_ == Format::Ascii ? 2 : scalarSize(e.props[std::size_t(polygon)].type));
     const std::size_t left = data_.size() - pos_ + (fmt_ == Format::Ascii ? 1 : 0);  // the last value needs no separator
     return least == 0 || e.count <= left / least;
   }
@@ -322,7 +325,7 @@ struct BodyParser {
     int il = indexOf(e, "vertex_indices");
     if (il < 0) il = indexOf(e, "vertex_index");
     if (il < 0 || !e.props[il].is_list) throw InputError(path, "face element lacks a vertex_indices list");
-    if (!body.fits(e))
+    if (!body.fits(e, il))
       throw InputError(path, "file is truncated (header announces " + std::to_string(e.count) + " faces)");
     mesh.faces.reserve(e.count);
     std::vector<std::uint32_t> poly;
