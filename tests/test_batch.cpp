@@ -324,6 +324,7 @@ TEST(Batch, ACtrlCToAJobStopsItsVofusion) {
 // once and waits for it to write what it built: parallel's own sequence (TERM three times in 300 ms,
 // then KILL) ended it mid-write. The stand-in takes a second to write.
 TEST(Batch, ACtrlCToTheBatchLetsEachVofusionWriteWhatItBuilt) {
+  REQUIRE_PARALLEL();
   const std::string dir = test::tempDir("batch_ctrl_c");
   fs::create_directories(dir + "/b/bin");
   fs::create_directories(dir + "/rec");
@@ -339,9 +340,14 @@ TEST(Batch, ACtrlCToTheBatchLetsEachVofusionWriteWhatItBuilt) {
                                         "sleep 0.5; kill -INT -$p; wait $p; echo rc=$?\n";
   std::string log;
   test::run("bash " + dir + "/ctrl-c", &log);
-  EXPECT_NE(log.find("rc="), std::string::npos) << log;
+  const std::size_t rc = log.find("rc=");
+  ASSERT_NE(rc, std::string::npos) << log;
+  EXPECT_NE(std::stoi(log.substr(rc + 3)), 0) << "a stopped batch is no success: " << log;
   EXPECT_TRUE(fs::exists(dir + "/out/rec/wrote")) << "the job's vofusion was killed before it wrote: " << log;
-  EXPECT_TRUE(fs::exists(dir + "/out/rec/exit_code")) << log;
+  std::ifstream code(dir + "/out/rec/exit_code");
+  std::string job_rc;
+  code >> job_rc;
+  EXPECT_EQ(job_rc, "143") << "the job's own exit code, after it wrote: " << log;
 }
 
 // A --list line: blank lines and # comments skipped, a '#' inside a path kept (it cut /data/take#2 to

@@ -538,7 +538,7 @@ TEST(FaultsOutput, AFolderWhereAnOutputGoesChangesNothing) {
   fs::create_directories(out + "/summary.json/x");
   expectCleanFailure(quote(test::app("vofusion")) + " synthetic:room --max-frames 3 --out " + quote(out) + " --config " +
                          quote(fastVofusionConfig()),
-                     out + "/summary.json", "is a folder");
+                     out + "/summary.json", "is a folder", out);
 }
 
 // The disk fills while outputs are written: a file size limit (ulimit -f, SIGXFSZ ignored so writes
