@@ -55,7 +55,7 @@ int body(int argc, char** argv) {
   if (gt.empty()) throw InputError(pos[0], "contains no poses");
   if (est.empty()) throw InputError(pos[1], "contains no poses");
   const AteResult ate = computeAte(gt, est, max_dt);
-  if (!ate.success) throw InputError(pos[1], ate.message);
+  if (!ate.success) throw InputError(gt.size() < 3 ? pos[0] : pos[1], ate.message);  // the one too short, else the estimate
   const RpeResult rpe = computeRpe(gt, est, delta, max_dt);
 
   if (json) {

@@ -150,6 +150,20 @@ TEST(Eval, StampsOutOfOrderAreMatchedAsSorted) {
   EXPECT_NEAR(rpe.trans.rmse, sorted_rpe.trans.rmse, 1e-12);
 }
 
+// Too few poses to align: the message says which trajectory is short, and rgbd-eval names that file.
+TEST(Eval, TooFewPosesNamesTheShortTrajectory) {
+  const Trajectory est = wavy();
+  const Trajectory gt(est.begin(), est.begin() + 2);
+  EXPECT_EQ(computeAte(gt, est).message, "only 2 poses associated within 0.02 s (need 3; the ground truth has 2)");
+  EXPECT_EQ(computeAte(est, gt, 1e-7).message, "only 2 poses associated within 1e-07 s (need 3; the estimate has 2)");
+  const std::string dir = test::tempDir("eval_short_gt");
+  writeTumTrajectory(dir + "/gt.txt", gt);
+  writeTumTrajectory(dir + "/est.txt", est);
+  std::string log;
+  EXPECT_EQ(test::run(test::app("rgbd-eval") + " " + dir + "/gt.txt " + dir + "/est.txt 2>&1", &log), 2);
+  EXPECT_EQ(log.rfind("rgbd-eval: error: " + dir + "/gt.txt: only 2 poses", 0), 0u) << log;
+}
+
 TEST(Eval, AssociationTolerance) {
   const Trajectory gt = wavy();
   const Trajectory late = wavy(0.5);  // 0.5 s off: only overlapping stamps 1/30 s grid -> none within 0.02

@@ -142,6 +142,10 @@ TEST(Trajectory, ALineThatIsNoPoseNamesTheLine) {
   EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 2\n"), "t.txt: line 3: quaternion is not unit length");
   EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 1 x\n"), "t.txt: line 3: unexpected extra field 'x'");
   EXPECT_EQ(error(ok + "2.0 9e6 0 0 0 0 0 1\n"), "");
+  EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 1\n0.5 0 0 0 0 0 0 1\n"),
+            "t.txt: line 4: timestamps are not strictly increasing (0.500000 after 2.000000)");
+  // Comma-separated, as TUM's associate.py and evaluate_rpe.py read it.
+  EXPECT_EQ(parseTumTrajectory("1.0,0,0,0,0,0,0,1\n2.0, 1,0,0, 0,0,0,1\n", "t.txt").size(), 2u);
   // A folder given for a trajectory says so (it read as a file without poses).
   const std::string dir = test::tempDir("traj_folder");
   EXPECT_THROW(

@@ -18,12 +18,17 @@ namespace vofusion {
 
 Trajectory parseTumTrajectory(const std::string& text, const std::string& origin) {
   Trajectory traj;
-  for (const auto& [n, line] : dataLines(text)) {
+  std::vector<std::size_t> line_of;  // each pose's line, for the order's message
+  for (const auto& [n, text_line] : dataLines(text)) {
+    std::string line = text_line;
+    std::replace(line.begin(), line.end(), ',', ' ');  // TUM's tools read comma-separated files too
     std::istringstream ls(line);
     double v[8];
     for (double& x : v)
-      if (!(ls >> x) || !std::isfinite(x))
+      if (!(ls >> x))
         throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp tx ty tz qx qy qz qw'");
+      else if (!std::isfinite(x))
+        throw InputError(origin, "line " + std::to_string(n) + ": field " + std::to_string(&x - v + 1) + " is not a finite number");
     std::string extra;
     if (ls >> extra) throw InputError(origin, "line " + std::to_string(n) + ": unexpected extra field '" + extra + "'");
     // A camera's path spans metres to kilometres. Beyond this, a value is no position (1e300 made
@@ -36,10 +41,12 @@ Trajectory parseTumTrajectory(const std::string& text, const std::string& origin
       throw InputError(origin, "line " + std::to_string(n) + ": quaternion is not unit length");
     mrpt::math::CQuaternionDouble q(v[7] / qn, v[4] / qn, v[5] / qn, v[6] / qn);  // (w, x, y, z)
     traj.push_back({v[0], mrpt::poses::CPose3D(mrpt::poses::CPose3DQuat(v[1], v[2], v[3], q))});
+    line_of.push_back(n);
   }
   for (std::size_t i = 1; i < traj.size(); ++i)
     if (traj[i].timestamp <= traj[i - 1].timestamp)
-      throw InputError(origin, "timestamps are not strictly increasing (" + std::to_string(traj[i].timestamp) + ")");
+      throw InputError(origin, "line " + std::to_string(line_of[i]) + ": timestamps are not strictly increasing (" +
+                                   std::to_string(traj[i].timestamp) + " after " + std::to_string(traj[i - 1].timestamp) + ")");
   return traj;
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
@@ -102,8 +103,12 @@ AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt)
   AteResult r;
   const auto pairs = associateTrajectories(gt, est, max_dt);
   if (pairs.size() < 3) {
-    r.message = "only " + std::to_string(pairs.size()) + " poses associated within " + std::to_string(max_dt) +
-                " s (need 3; do the timestamps match?)";
+    char within[32];
+    std::snprintf(within, sizeof within, "%g", max_dt);  // 1e-7, not 0.000000
+    r.message = "only " + std::to_string(pairs.size()) + " poses associated within " + within + " s (need 3; ";
+    if (gt.size() < 3) r.message += "the ground truth has " + std::to_string(gt.size()) + ")";
+    else if (est.size() < 3) r.message += "the estimate has " + std::to_string(est.size()) + ")";
+    else r.message += "do the timestamps match?)";
     return r;
   }
   Eigen::Matrix3Xd src(3, pairs.size()), dst(3, pairs.size());
