@@ -118,7 +118,7 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   plan.cfg = loadConfig(plan.config_path);
   // A live run's --config (rawlog-grabber's sections beside ours) is checked in our sections, as
   // vofusion-grab checked it: the run resumes from its checkpoint with the file it was started with.
-  if (isGrabberConfig(plan.cfg)) checkKnownSections(plan.cfg, plan.config_path, vofusionConfigSections());
+  if (isGrabberConfig(plan.cfg)) checkKnownSections(plan.cfg, plan.config_path, withGrabSection());
   else checkConfigKeys(plan.cfg, plan.config_path, withGrabSection());
   auto& cfg = plan.cfg;
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
@@ -133,6 +133,7 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
     plan.out_params.loadFromConfigFile(cfg, "output");
     plan.mesh_params.loadFromConfigFile(cfg, "mesh");
     checkReconstructionValues(cfg);
+    LiveOptions().loadFromConfigFile(cfg, "vofusion-grab");  // unused here, its values checked as vofusion-grab does
   });
   if (cl.flag("--raw-mesh")) plan.out_params.save_raw_mesh = true;
 }

@@ -193,10 +193,8 @@ TEST(MeshClean, AFailureLeavesTheMeshAsItCame) {
   EXPECT_EQ(m.normals, in.normals);
   m.faces.push_back({0, 1, std::uint32_t(m.vertices.size() + 7)});
   const TriangleMesh bad = m;
-  TriangleMesh full;
-  const MeshCleanReport early = cleanMesh(m, testParams(), &full);
+  const MeshCleanReport early = cleanMesh(m, testParams());
   EXPECT_FALSE(early.success);
-  EXPECT_EQ(full.faces, bad.faces) << "the mesh before simplification is the mesh as it came";
   EXPECT_NE(early.failure.find("references vertex"), std::string::npos) << early.failure;
   EXPECT_EQ(m.faces, bad.faces);
   EXPECT_EQ(m.vertices, bad.vertices);

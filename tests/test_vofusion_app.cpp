@@ -118,6 +118,24 @@ TEST(VofusionApp, APictureThatCannotBeRenderedCostsThePictureOnly) {
   EXPECT_NE(log.find("warning: " + said), std::string::npos) << log;
 }
 
+// Post-processing that fails (here [mesh] repair = false on marching cubes' non-manifold crossings)
+// writes the mesh as it came: mesh.ply, and mesh_full.ply beside it (it was written empty).
+TEST(VofusionApp, AFailedPostProcessingWritesTheFullMeshAsItCame) {
+  const std::string dir = test::tempDir("vofusion_app_clean_failed");
+  std::ofstream(dir + "/c.ini") << "[output]\nsave_full_mesh = true\nwrite_rawlog = false\n[mesh]\nrepair = false\n"
+                                   "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n";
+  std::string log;
+  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + dir + "/c.ini --out " + dir + "/out",
+                      &log),
+            0)
+      << log;
+  ASSERT_NE(log.find("mesh post-processing failed"), std::string::npos) << "the scene no longer makes it fail: " << log;
+  const TriangleMesh mesh = readPly(dir + "/out/mesh.ply"), full = readPly(dir + "/out/mesh_full.ply");
+  EXPECT_GT(mesh.faces.size(), 1000u);
+  EXPECT_EQ(full.faces, mesh.faces);
+  EXPECT_EQ(full.vertices, mesh.vertices);
+}
+
 TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   const std::string dir = test::tempDir("vofusion_app_synth");
   const std::string out = dir + "/out";
@@ -294,6 +312,13 @@ TEST(VofusionApp, AReplayedLiveRunsConfigIsRead) {
                       &log),
             2);
   EXPECT_NE(log.find("replay.ini: unknown key 'queue_capacty' in section [vofusion-grab]"), std::string::npos) << log;
+  // Its values too, as vofusion-grab checks them.
+  std::ofstream(cfg) << "[vofusion-grab]\nqueue_capacity = 0\n[output]\nmesh = false\n";
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
+                          "/out3 2>&1",
+                      &log),
+            2);
+  EXPECT_NE(log.find("replay.ini: [vofusion-grab] queue_capacity"), std::string::npos) << log;
 }
 
 // A run that writes fewer outputs than an earlier one in its folder (here no mesh) leaves the earlier

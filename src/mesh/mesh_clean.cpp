@@ -809,10 +809,7 @@ MeshCleanReport clean(TriangleMesh& mesh, const MeshCleanParams& params, Triangl
   } catch (const std::exception& e) {
     report.success = false;
     report.failure = e.what();
-    // The mesh written is the one that came (mesh.ply "as it was before"): so is the one before
-    // simplification (mesh_full.ply was written empty).
-    if (unsimplified) *unsimplified = mesh;
-    return report;
+    return report;  // `unsimplified` untouched: the mesh as it came is `mesh` itself
   }
   if (unsimplified) *unsimplified = std::move(before);
   report.success = true;

@@ -81,8 +81,11 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
     sayWhatCleaningLeft(report);
     if (report.simplification.ran) s["mesh_simplification"] = simplificationJson(report.simplification, raw_faces);
     if (p.save_full_mesh) {
-      writePly(out.path("mesh_full.ply"), full);
-      out.wrote("mesh_full.ply", std::to_string(full.faces.size()) + " faces");
+      // Post-processing failed: the mesh before simplification is the mesh as it came, as mesh.ply is
+      // (`full` is left empty, and was written so).
+      const TriangleMesh& before = report.success ? full : mesh;
+      writePly(out.path("mesh_full.ply"), before);
+      out.wrote("mesh_full.ply", std::to_string(before.faces.size()) + " faces" + (report.success ? "" : ", not post-processed"));
     }
   }
   s["mesh"] = meshJson(mesh);
