@@ -42,7 +42,7 @@ const char* kUsage =
     "             folder keeps that offset in rgb.txt, a rawlog in a COLOUR_TIME entry after each frame)\n"
     "  --frames   number of frames (default 300); --fps frame rate (default 30)\n"
     "  --pace X   the path played X times as fast (default 1, (0, 4]): at 2 the room turns up to ~37 deg/s;\n"
-    "             a scene sized by the distance walked (corridor, loop, ...) is the one for X times the frames\n"
+    "             a corridor (corridor, lookalike, longwalk) is built for the path's time at that pace\n"
     "  --no-noise exact depth instead of the Kinect v1 noise model; --seed S random seed (default 1)\n"
     "  --plain    every surface one plain colour, no texture: only shading shows the geometry (white walls)\n"
     "  --size     image size (default 640x480; intrinsics scaled from fx=fy=525)\n"

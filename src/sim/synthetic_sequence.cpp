@@ -324,7 +324,7 @@ struct SyntheticSequence::Impl {
   }
 
   // Scene set-up, one per --scene value: geometry and the hand-held path (waves) through it.
-  void buildWorld(const std::string& scene, std::uint32_t s, double duration);
+  void buildWorld(const std::string& scene, std::uint32_t s, double duration, double walked);
   void buildRoom(std::uint32_t s);
   void buildCorridor(std::uint32_t s, double duration);
   void buildBareWall(std::uint32_t s);
@@ -348,14 +348,17 @@ static Wave wave(double c0, double rate, double a0, double f0, double a1, double
   return w;
 }
 
-void SyntheticSequence::Impl::buildWorld(const std::string& scene, std::uint32_t s, double duration) {
+void SyntheticSequence::Impl::buildWorld(const std::string& scene, std::uint32_t s, double duration, double walked) {
   // Velocity bounds (sum of amp*freq per axis) keep speed <= ~0.45 m/s and turn rate <= ~30 deg/s.
+  // `walked`: the path's time at its pace. The corridors are built for it (their speed capped: at a
+  // pace the corridor cannot hold, the walk is slower than pace x); the loop's ring is closed, so it is
+  // built for the recording's time and a pace walks it more times (1.15 laps at pace 1).
   if (scene == "room") buildRoom(s);
-  else if (scene == "corridor") buildCorridor(s, duration);
+  else if (scene == "corridor") buildCorridor(s, walked);
   else if (scene == "bare_wall") buildBareWall(s);
   else if (scene == "loop") buildLoop(s, duration);
-  else if (scene == "lookalike") buildLookalike(s, duration);
-  else if (scene == "longwalk") buildLongwalk(s, duration);
+  else if (scene == "lookalike") buildLookalike(s, walked);
+  else if (scene == "longwalk") buildLongwalk(s, walked);
   else
     throw InputError("--scene",
                      "unknown scene '" + scene + "' (expected room, corridor, bare_wall, loop, lookalike or longwalk)");
@@ -486,31 +489,33 @@ SyntheticSequence::SyntheticSequence(const SimOptions& o) {
   if (!(o.pace > 0 && o.pace <= 4)) throw InputError("--pace", "must be in (0, 4]");
   if (!(o.max_range > kKinectMinRange)) throw InputError("--max-range", "must exceed 0.4 m");
   const std::uint32_t s = o.seed;
-  // The path covers frames / fps seconds at pace 1, `pace` times that faster: a scene sized by the time
-  // walked (corridor, lookalike, longwalk, loop) is built for it, or the camera walked out of it.
-  const double duration = std::max(1.0, double(o.frames) / o.fps) * o.pace;
-  impl->buildWorld(o.scene, s, duration);
+  // The path covers frames / fps seconds at pace 1, `pace` times that faster: a corridor sized by the
+  // time walked (corridor, lookalike, longwalk) is built for the time the path covers, or the camera
+  // walked out through its end wall.
+  const double duration = std::max(1.0, double(o.frames) / o.fps);
+  impl->buildWorld(o.scene, s, duration, duration * o.pace);
   impl->buildTrajectory(o.trajectory, s);
   if (!(o.exposure >= 0 && o.exposure <= 0.1)) throw InputError("--exposure", "must be in [0, 0.1] s");
   if (!(o.colour_offset_max >= 0 && o.colour_offset_max <= 0.05)) throw InputError("--colour-offset", "must be in [0, 0.05] s");
   if (!(o.depth_readout >= 0 && o.depth_readout <= 0.1)) throw InputError("--depth-readout", "must be in [0, 0.1] s");
   if (!(o.blackout_start >= 0 && o.blackout_seconds >= 0)) throw InputError("--blackout", "T:S must be two non-negative times in s");
-  // A cover that holds no frame (frame i is at i / fps) would change nothing: refused, not ignored,
-  // whether it starts after the last frame or falls between two.
-  const double last_frame_time = (double(o.frames) - 1) / o.fps;
-  if (o.blackout_seconds > 0 && o.blackout_start > last_frame_time) {
-    char why[160];
-    std::snprintf(why, sizeof why, "starts at %g s, after the last frame (at %g s: %zu frames at %g fps)",
-                  o.blackout_start, last_frame_time, std::size_t(o.frames), o.fps);
-    throw InputError("--blackout", why);
-  }
-  // The first frame at or after T, and the first at or after T + S (each time rounded to a frame within 1e-9).
+  // The first frame at or after T, and the first at or after T + S (each time rounded to a frame within
+  // 1e-9): the frames covered, decided once, by one rule.
   const auto firstFrameFrom = [&](double t) {
     return std::size_t(std::clamp(std::ceil(t * o.fps - 1e-9), 0.0, double(o.frames)));  // past the last: frames
   };
   if (o.blackout_seconds > 0) {
     impl->blackout_first = firstFrameFrom(o.blackout_start);
     impl->blackout_end = firstFrameFrom(o.blackout_start + o.blackout_seconds);
+  }
+  // A cover that holds no frame (frame i is at i / fps) would change nothing: refused, not ignored,
+  // whether it starts after the last frame or falls between two.
+  const double last_frame_time = (double(o.frames) - 1) / o.fps;
+  if (o.blackout_seconds > 0 && impl->blackout_first >= o.frames) {
+    char why[160];
+    std::snprintf(why, sizeof why, "starts at %g s, after the last frame (at %g s: %zu frames at %g fps)",
+                  o.blackout_start, last_frame_time, std::size_t(o.frames), o.fps);
+    throw InputError("--blackout", why);
   }
   if (o.blackout_seconds > 0 && impl->blackout_first >= impl->blackout_end) {
     char why[160];

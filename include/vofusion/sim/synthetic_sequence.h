@@ -59,7 +59,7 @@ struct SimOptions {
   double fps = 30.0;            // Hz; timestamps start at 0
   double pace = 1.0;            // the scene's path (shake included) played this many times as fast: at 2 the
                                 // room turns up to ~37 deg/s and moves up to ~0.9 m/s (a brisk sweep); a
-                                // scene sized by the time walked is built for pace x frames / fps seconds
+                                // corridor sized by the time walked is built for pace x frames / fps seconds
   CameraIntrinsics camera;      // default 640x480, fx=fy=525
   bool noise = true;            // Kinect-like depth: disparity quantisation, noise growing with range, holes
   bool textured = true;         // false: every surface one plain colour (only shading shows the geometry)
