@@ -140,7 +140,10 @@ TEST(Eval, StampsOutOfOrderAreMatchedAsSorted) {
   for (std::size_t i = 5; i + 1 < gt_shuffled.size(); i += 41) std::swap(gt_shuffled[i], gt_shuffled[i + 1]);
   const auto pairs = associateTrajectories(gt_shuffled, shuffled);
   ASSERT_EQ(pairs.size(), gt.size());
-  for (const auto& [g, e] : pairs) EXPECT_EQ(gt_shuffled[g].timestamp, shuffled[e].timestamp);
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    EXPECT_EQ(gt_shuffled[pairs[k].first].timestamp, shuffled[pairs[k].second].timestamp);
+    if (k) EXPECT_LT(gt_shuffled[pairs[k - 1].first].timestamp, gt_shuffled[pairs[k].first].timestamp) << "in time order";
+  }
   const AteResult sorted_ate = computeAte(gt, est), ate = computeAte(gt_shuffled, shuffled);
   ASSERT_TRUE(ate.success);
   EXPECT_NEAR(ate.trans.rmse, sorted_ate.trans.rmse, 1e-12);

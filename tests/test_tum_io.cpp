@@ -144,6 +144,9 @@ TEST(Trajectory, ALineThatIsNoPoseNamesTheLine) {
   EXPECT_EQ(error(ok + "2.0 9e6 0 0 0 0 0 1\n"), "");
   EXPECT_EQ(error(ok + "2.0 0 0 0 0 0 0 1\n0.5 0 0 0 0 0 0 1\n"),
             "t.txt: line 4: timestamps are not strictly increasing (0.500000 after 2.000000)");
+  EXPECT_EQ(error(ok + "2.0 nan 0 0 0 0 0 1\n"), "t.txt: line 3: field 2 ('nan') is not a finite number");
+  EXPECT_EQ(error(ok + "2.0 0 0 1e999 0 0 0 1\n"), "t.txt: line 3: field 4 ('1e999') is not a finite number");
+  EXPECT_EQ(error(ok + "2.0 0 0 0x 0 0 0 1\n"), "t.txt: line 3: expected 'timestamp tx ty tz qx qy qz qw'");
   // Comma-separated, as TUM's associate.py and evaluate_rpe.py read it.
   EXPECT_EQ(parseTumTrajectory("1.0,0,0,0,0,0,0,1\n2.0, 1,0,0, 0,0,0,1\n", "t.txt").size(), 2u);
   // A folder given for a trajectory says so (it read as a file without poses).

@@ -1,8 +1,10 @@
 #include "vofusion/core/trajectory.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <sstream>
 
 #include <Eigen/Dense>
@@ -24,11 +26,21 @@ Trajectory parseTumTrajectory(const std::string& text, const std::string& origin
     std::replace(line.begin(), line.end(), ',', ' ');  // TUM's tools read comma-separated files too
     std::istringstream ls(line);
     double v[8];
-    for (double& x : v)
-      if (!(ls >> x))
+    for (double& x : v) {
+      // from_chars, not >>: it reads nan and inf, which are then named (>> failed on them as on a missing
+      // field), and it reads no locale's decimal comma.
+      std::string field;
+      if (!(ls >> field))
         throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp tx ty tz qx qy qz qw'");
-      else if (!std::isfinite(x))
-        throw InputError(origin, "line " + std::to_string(n) + ": field " + std::to_string(&x - v + 1) + " is not a finite number");
+      const char* first = field.c_str() + (field[0] == '+' && field.size() > 1);
+      const auto [end, ec] = std::from_chars(first, field.c_str() + field.size(), x);
+      if (ec == std::errc::result_out_of_range) x = std::strtod(first, nullptr);  // 1e999: inf, 1e-999: 0
+      else if (ec != std::errc() || end != field.c_str() + field.size())
+        throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp tx ty tz qx qy qz qw'");
+      if (!std::isfinite(x))
+        throw InputError(origin, "line " + std::to_string(n) + ": field " + std::to_string(&x - v + 1) + " ('" + field +
+                                     "') is not a finite number");
+    }
     std::string extra;
     if (ls >> extra) throw InputError(origin, "line " + std::to_string(n) + ": unexpected extra field '" + extra + "'");
     // A camera's path spans metres to kilometres. Beyond this, a value is no position (1e300 made

@@ -95,7 +95,10 @@ std::vector<std::pair<std::size_t, std::size_t>> associateTrajectories(const Tra
     used_g[c.i] = used_e[c.j] = 1;
     out.emplace_back(c.i, c.j);
   }
-  std::sort(out.begin(), out.end());
+  // In ground-truth time order, as associate.py's matches (the plots join the pairs in this order).
+  std::sort(out.begin(), out.end(), [&](const auto& a, const auto& b) {
+    return std::pair(gt[a.first].timestamp, a.first) < std::pair(gt[b.first].timestamp, b.first);
+  });
   return out;
 }
 

@@ -20,7 +20,7 @@ struct ErrorStats {
 ErrorStats computeStats(const std::vector<double>& errors);
 
 // Greedy nearest-timestamp matching as associate.py: pairs within max_dt, each stamp used once,
-// in ground-truth index order. Returns (gt index, est index). Neither needs its stamps sorted.
+// in ground-truth time order. Returns (gt index, est index). Neither needs its stamps sorted.
 std::vector<std::pair<std::size_t, std::size_t>> associateTrajectories(const Trajectory& gt, const Trajectory& est,
                                                                        double max_dt = 0.02);
 
