@@ -329,10 +329,10 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
   } catch (const std::exception& e) {
     if (stats.ok()) throw;
     // What stopped the run (a full disk) may stop the outputs after it too, or they fail on their own
-    // (a folder where trajectory.txt goes): one line with the first cause, then what was not written.
+    // (a folder where trajectory.txt goes): one line with the first cause, then the second.
     const std::string kept =
-        writer ? "the recording holds the " + std::to_string(recorded) + " frames before" : "nothing was recorded (--no-record)";
-    std::fprintf(stderr, "vofusion-grab: stopped: %s (%s; the outputs after it were not written: %s)\n", stats.error.c_str(),
+        writer ? std::to_string(recorded) + " frames recorded before it" : "nothing recorded (--no-record)";
+    std::fprintf(stderr, "vofusion-grab: stopped: %s (%s; writing the outputs then failed too: %s)\n", stats.error.c_str(),
                  kept.c_str(), oneLineMessage(e).c_str());
     return 1;  // as a run stopped by a failure whose outputs were written
   }

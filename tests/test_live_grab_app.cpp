@@ -332,7 +332,7 @@ TEST(GrabApp, OutputsThatFailAfterAFailedRunAreNamed) {
   ASSERT_NE(at, std::string::npos) << log;
   const std::string line = log.substr(at, log.find('\n', at) - at);
   EXPECT_NE(line.find("more than one in five"), std::string::npos) << line;
-  EXPECT_NE(line.find("; the outputs after it were not written: "), std::string::npos) << line;
+  EXPECT_NE(line.find(" frames recorded before it; writing the outputs then failed too: "), std::string::npos) << line;
   EXPECT_NE(line.find("trajectory.txt"), std::string::npos) << line;
 }
 
@@ -370,7 +370,7 @@ TEST(GrabApp, AFullDiskStopsTheRecordingAndKeepsWhatWasWritten) {
   // After the banner: when the space the failed image had taken (it is removed) lets the recording
   // close, the run's line with the frames recorded and the stop's line; else the one error line.
   const bool closed = log.find("; " + std::to_string(n) + " recorded to ") != std::string::npos;
-  EXPECT_TRUE(closed || log.find("holds the " + std::to_string(n) + " frames before") != std::string::npos) << log;
+  EXPECT_TRUE(closed || log.find(std::to_string(n) + " frames recorded before it") != std::string::npos) << log;
   EXPECT_EQ(countLines(log), closed ? 3u : 2u) << log;
 }
 

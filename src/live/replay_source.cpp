@@ -39,8 +39,11 @@ bool ReplaySource::grab(Frame& frame, mrpt::obs::CObservation3DRangeScan::Ptr& r
   last_stamp_ = frame.timestamp;
   if (speed_ <= 0) return true;
   // Wait until the frame's recorded time has come, in short slices so a stop is seen quickly.
+  // Held below a wait the clock's nanoseconds overflow at (2^63 ns, 292 years): a library caller's
+  // speed of 1e-12 (the options refuse it) played every frame at once.
+  const double wait = std::min((frame.timestamp - first_stamp_ - cut_) / speed_, 1e9);
   const auto due = wall_start_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                     std::chrono::duration<double>((frame.timestamp - first_stamp_ - cut_) / speed_));
+                                     std::chrono::duration<double>(wait));
   while (!stop) {
     const auto now = std::chrono::steady_clock::now();
     if (now >= due) break;

@@ -26,7 +26,8 @@ struct LiveOptions : public mrpt::config::CLoadableOptions {
   std::size_t max_frames = 0;      // frames to play, 0 = until the source ends or Ctrl-C
 
   // The ranges the config and vofusion-grab's --queue / --speed are held to: a queue holds ~2 MB a
-  // frame (1000: 2 GB), a replay slower than 1/1000 of its rate waits past a day for a 30 Hz frame.
+  // frame (1000: 2 GB); at 1/1000 of its rate a replay waits 33 s for each 30 Hz frame (1e-12 overflowed
+  // the wait's nanoseconds).
   static constexpr std::size_t kMostQueued = 1000;
   static constexpr double kSlowestReplay = 1e-3, kFastestReplay = 1000;
   static bool replaySpeedInRange(double x) { return x == 0 || (x >= kSlowestReplay && x <= kFastestReplay); }
