@@ -145,7 +145,7 @@ struct RgbdOdometry::Impl {
 
   // Extraction in two steps, so the STAR part can be matched while NARF still runs on its thread:
   // begin() detects STAR, builds the normals and describes the STAR keypoints; finish() waits for
-  // NARF and appends its keypoints (those not within union_radius of a STAR one).
+  // NARF and appends its keypoints (those not within union_radius of a STAR one kept).
   struct Extraction {
     std::future<std::pair<std::vector<cv::KeyPoint>, double>> narf_job;
     std::vector<cv::KeyPoint> star;

@@ -28,8 +28,9 @@ mrpt::config::CConfigFileMemory loadConfig(const std::string& path);
 void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                      const std::vector<ConfigSection>& known);
 
-// checkConfigKeys over the sections of `known` alone: a file that also holds other programs' sections
-// (a vofusion-grab config's sensor sections, read by MRPT's drivers) is checked in ours. The key
+// checkConfigKeys over our sections alone (those of `known` and those their parameters read beside
+// their own, as [odometry]'s [star] or [motion]): a file that also holds other programs' sections (a
+// vofusion-grab config's sensor sections, read by MRPT's drivers) is checked in ours. The key
 // rawlog-grabber-ignore, which rawlog-grabber reads in every section, is accepted in ours.
 void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                         const std::vector<ConfigSection>& known);
