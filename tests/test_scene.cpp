@@ -1,6 +1,7 @@
 // MRPT 3D scene export (.3Dscene round trip) and the off-screen mesh rendering.
 #include <set>
 #include <Eigen/Dense>
+#include <climits>
 #include <cmath>
 #include <filesystem>
 
@@ -176,9 +177,47 @@ TEST(Scene, CullsTheSideFacingAwayFromTheCameras) {
     return child<mrpt::opengl::CSetOfTriangles>(world, "mesh")->cullFaces();
   };
   EXPECT_EQ(cull(mesh, roomPath(20)), mrpt::opengl::TCullFace::BACK);
-  for (auto& f : mesh.faces) std::swap(f[1], f[2]);
-  EXPECT_EQ(cull(mesh, roomPath(20)), mrpt::opengl::TCullFace::FRONT);
   EXPECT_EQ(cull(mesh, Trajectory{}), mrpt::opengl::TCullFace::NONE);
+  // Wound away from the cameras (another tool's PLY): turned to face them, lit on the side shown (MRPT's
+  // shader lights the side a normal points to; culling the front left the floor dark).
+  for (auto& f : mesh.faces) std::swap(f[1], f[2]);
+  EXPECT_EQ(cull(mesh, roomPath(20)), mrpt::opengl::TCullFace::BACK);
+  auto world = std::dynamic_pointer_cast<mrpt::opengl::CSetOfObjects>(
+      buildScene(mesh, roomPath(20), nullptr, CameraIntrinsics{})->getByName("world"));
+  const auto tris = child<mrpt::opengl::CSetOfTriangles>(world, "mesh");
+  ASSERT_EQ(tris->getTrianglesCount(), mesh.faces.size());
+  std::size_t floor = 0;
+  for (std::size_t i = 0; i < tris->getTrianglesCount(); ++i) {
+    mrpt::opengl::TTriangle t;
+    tris->getTriangle(i, t);
+    if (std::max({t.z(0), t.z(1), t.z(2)}) > 1e-6f) continue;
+    ++floor;
+    const mrpt::math::TVector3Df e1 = t.vertex(1) - t.vertex(0), e2 = t.vertex(2) - t.vertex(0);
+    EXPECT_GT(e1.x * e2.y - e1.y * e2.x, 0.f) << "floor face " << i << " wound to face down";
+    for (int k = 0; k < 3; ++k) EXPECT_GT(t.vertices[k].normal.z, 0.f) << "floor face " << i;  // up, to the cameras
+  }
+  EXPECT_GT(floor, 10u);
+}
+
+// A mesh of more faces than one MRPT object's GL buffer holds (its size an int of bytes: 19.9 M faces)
+// is drawn as several objects, every face in one of them.
+TEST(Scene, AMeshOfManyFacesIsDrawnAsSeveralObjects) {
+  EXPECT_LE(SceneOptions{}.triangles_per_object * sizeof(mrpt::opengl::TTriangle), std::size_t(INT_MAX));
+  const TriangleMesh mesh = test::boxRoom(4, 3, 2.5, 6);  // 360 faces
+  SceneOptions opt;
+  opt.triangles_per_object = 100;
+  auto world = std::dynamic_pointer_cast<mrpt::opengl::CSetOfObjects>(
+      buildScene(mesh, roomPath(20), nullptr, CameraIntrinsics{}, opt)->getByName("world"));
+  std::size_t faces = 0;
+  for (const char* name : {"mesh", "mesh.1", "mesh.2", "mesh.3"}) {
+    const auto part = child<mrpt::opengl::CSetOfTriangles>(world, name);
+    ASSERT_TRUE(part) << name;
+    EXPECT_LE(part->getTrianglesCount(), 100u) << name;
+    EXPECT_EQ(part->cullFaces(), mrpt::opengl::TCullFace::BACK) << name;
+    faces += part->getTrianglesCount();
+  }
+  EXPECT_EQ(faces, mesh.faces.size());
+  EXPECT_FALSE(world->getByName("mesh.4"));
 }
 
 // mesh.png looks in from above: the ceiling is left out (seen from above only its culled back side

@@ -115,29 +115,32 @@ static mrpt::opengl::CSetOfLines::Ptr pathLines(const Trajectory& t, const std::
   return lines;
 }
 
-static mrpt::opengl::CSetOfTriangles::Ptr meshTriangles(const TriangleMesh& mesh) {
-  std::vector<mrpt::opengl::TTriangle> tris(mesh.faces.size());
+// The mesh as MRPT triangles, faces [begin, end); `flip`: each face wound the other way, its normals
+// reversed (MRPT's shader lights the side a normal points to only).
+static mrpt::opengl::CSetOfTriangles::Ptr meshTriangles(const TriangleMesh& mesh, std::size_t begin, std::size_t end,
+                                                        bool flip) {
+  std::vector<mrpt::opengl::TTriangle> tris(end - begin);
   const bool colours = mesh.colors.size() == mesh.vertices.size();
   const bool normals = mesh.normals.size() == mesh.vertices.size();
-  parallelFor(0, int(mesh.faces.size()), [&](int f) {
+  const int order[3] = {0, flip ? 2 : 1, flip ? 1 : 2};
+  const float sign = flip ? -1.f : 1.f;
+  parallelFor(0, int(tris.size()), [&](int f) {
     auto& t = tris[f];
+    const auto& face = mesh.faces[begin + std::size_t(f)];
     for (int k = 0; k < 3; ++k) {
-      const std::uint32_t i = mesh.faces[f][k];
+      const std::uint32_t i = face[order[k]];
       const auto& p = mesh.vertices[i];
       t.vertex(k) = mrpt::math::TPoint3Df(p.x(), p.y(), p.z());
       t.vertices[k].setColor(colours ? mrpt::img::TColor(mesh.colors[i][0], mesh.colors[i][1], mesh.colors[i][2])
                                      : mrpt::img::TColor(170, 170, 170));
-    }
-    if (normals)
-      for (int k = 0; k < 3; ++k) {
-        const auto& n = mesh.normals[mesh.faces[f][k]];
-        t.vertices[k].normal = mrpt::math::TVector3Df(n.x(), n.y(), n.z());
+      if (normals) {
+        const auto& n = mesh.normals[i];
+        t.vertices[k].normal = mrpt::math::TVector3Df(sign * n.x(), sign * n.y(), sign * n.z());
       }
-    else
-      t.computeNormals();
+    }
+    if (!normals) t.computeNormals();
   }, 1024);
   auto obj = mrpt::opengl::CSetOfTriangles::Create();
-  obj->setName("mesh");
   obj->insertTriangles(tris.begin(), tris.end());
   return obj;
 }
@@ -176,12 +179,18 @@ namespace {
 // The mesh, its hidden side culled when asked, lit softly when its colours carry the shading.
 void insertMesh(mrpt::opengl::COpenGLScene& scene, mrpt::opengl::CSetOfObjects& world, const TriangleMesh& mesh,
                 const Trajectory& path_est, const SceneOptions& opt) {
-  auto tris = meshTriangles(mesh);
-  if (opt.cull_hidden_side) {
-    const int side = frontFacesCameras(mesh, path_est);
-    if (side != 0) tris->cullFaces(side > 0 ? mrpt::opengl::TCullFace::BACK : mrpt::opengl::TCullFace::FRONT);
+  // A mesh wound away from the cameras is turned to face them (culling its front left the side shown
+  // unlit), then its back is culled.
+  const int side = opt.cull_hidden_side ? frontFacesCameras(mesh, path_est) : 0;
+  // MRPT sizes an object's GL buffer in an int of bytes: a mesh of more faces than one holds is drawn
+  // as several objects, "mesh", "mesh.1", ...
+  const std::size_t per_object = std::max<std::size_t>(1, opt.triangles_per_object);
+  for (std::size_t begin = 0, part = 0; begin < mesh.faces.size(); begin += per_object, ++part) {
+    auto tris = meshTriangles(mesh, begin, std::min(mesh.faces.size(), begin + per_object), side < 0);
+    tris->setName(part == 0 ? "mesh" : "mesh." + std::to_string(part));
+    if (side != 0) tris->cullFaces(mrpt::opengl::TCullFace::BACK);
+    world.insert(tris);
   }
-  world.insert(tris);
   if (!mesh.colors.empty()) {
     // The colours already carry the scene's shading: light softly so they read true.
     auto& light = scene.getViewport()->lightParameters();

@@ -38,8 +38,12 @@ struct SceneOptions {
   int frustum_every_k = 30;          // frames; 0: no frustums
   double frustum_depth = 0.15;       // m, distance of the frustum's far plane
   // With a path given: draw only the side of the surface that faces the cameras (decided by an
-  // area-weighted vote of the faces), so a room scanned from inside can be seen into from outside.
+  // area-weighted vote of the faces; a mesh wound away from them is turned to face them), so a room
+  // scanned from inside can be seen into from outside.
   bool cull_hidden_side = true;
+  // Faces per MRPT object: one sizes its GL buffer in an int of bytes (108 a face), which 19.9 M faces
+  // overflow; more faces are drawn as several objects ("mesh", "mesh.1", ...).
+  std::size_t triangles_per_object = 16'000'000;
   bool grid = true;
   double grid_spacing = 0.5;         // m
   // Loop closure: keyframe poses (camera-to-world) and the pairs of poses each accepted loop joins.
