@@ -12,6 +12,7 @@
    seconds, checkpoints written, seconds spent writing them, the last checkpoint's size.
 Writes bench/results/checkpoints.md.
 """
+import argparse
 import filecmp
 import json
 import os
@@ -89,12 +90,15 @@ def summary(d):
 
 
 def main():
-    args = sys.argv[1:]
-    opt = lambda name, default: args[args.index(name) + 1] if name in args else default
     root = os.path.dirname(HERE)
-    seq = opt("--sequence", os.path.join(root, "..", "shared", "data", "tum", "rgbd_dataset_freiburg1_xyz_first300"))
-    build = os.path.abspath(opt("--build", os.path.join(root, "build")))
-    every = opt("--every", "5")
+    # argparse: an unknown or misspelt option (--sequence=DIR, --evry) is an error, not the default run.
+    ap = argparse.ArgumentParser(prog="bench/run --checkpoints", allow_abbrev=False)
+    ap.add_argument("--checkpoints", action="store_true")
+    ap.add_argument("--sequence", default=os.path.join(root, "..", "shared", "data", "tum", "rgbd_dataset_freiburg1_xyz_first300"))
+    ap.add_argument("--build", default=os.path.join(root, "build"))
+    ap.add_argument("--every", default="5", help="s between checkpoints in the cost comparison")
+    a = ap.parse_args(sys.argv[1:])
+    seq, build, every = a.sequence, os.path.abspath(a.build), a.every
     work = os.path.join(build, "bench-checkpoints")
     shutil.rmtree(work, ignore_errors=True)
     os.makedirs(work)

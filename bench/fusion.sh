@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Benchmark of the KinectFusion stage (issue 4) through the whole app on TUM fr1_xyz (first 300 frames):
-# per mode ATE/RPE, whole-process fps, per-stage ms/frame, peak memory and mesh size, from each run's
-# summary.json. The machine's load average is printed: stage times are wall clock, so a loaded machine
+# per mode ATE/RPE, frame-loop fps (summary.json's: frames over the frame loop's seconds), per-stage
+# ms/frame, peak memory and mesh size, from each run's summary.json. The machine's load average is printed: stage times are wall clock, so a loaded machine
 # inflates them.
 #   bench/fusion.sh [build_dir] [data_dir] [max_frames (0: every frame)] [extra vofusion args...]
 set -euo pipefail

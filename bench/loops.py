@@ -13,6 +13,7 @@ relative to the earlier one, against the truth's (m). Writes bench/results/loops
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -80,6 +81,9 @@ def render(build, root, seed, frames):
 
 
 def run_one(build, rawlog, out, config):
+    # This run's outputs only: an earlier run's trajectory_tracked.txt (written only with loop closure on)
+    # was read as this run's path without loop closure.
+    shutil.rmtree(out, ignore_errors=True)
     cmd = [os.path.join(build, "bin", "vofusion"), rawlog, "--out", out, "--config", config]
     t0 = time.monotonic()
     with open(out + ".log", "w") as logf:
@@ -97,7 +101,8 @@ def run_one(build, rawlog, out, config):
         "loops_accepted": len(loops),
         "loops_kept": sum(1 for l in loops if l.get("active")),
         "max_loop_error_m": max([l.get("error_vs_ground_truth_m", 0) for l in loops], default=None),
-        "lap_end_without_m": lap_end_error(gt, os.path.join(out, "trajectory_tracked.txt")),
+        "lap_end_without_m": lap_end_error(gt, os.path.join(out, "trajectory_tracked.txt"))
+        if os.path.exists(os.path.join(out, "trajectory_tracked.txt")) else None,  # loop closure off: none
         "lap_end_with_m": lap_end_error(gt, os.path.join(out, "trajectory.txt")),
         "loop_thread_ms_per_frame": lc.get("thread_ms_per_frame"),
         "loop_thread_cpu_ms_per_frame": lc.get("thread_cpu_ms_per_frame"),

@@ -18,6 +18,7 @@ in alternating order, and each figure is the median of its rounds (this machine'
 The earlier build (default 618a78c, the build issue 31 was filed on) is checked out with `git worktree`
 and built (apps only) under <build>/bench-baseline/, once. Writes bench/results/realtime.md.
 """
+import argparse
 import gzip
 import json
 import os
@@ -49,7 +50,12 @@ def run_timed(cmd, log_path):
 
 def baseline_build(rev, build):
     base = os.path.join(build, "bench-baseline")
-    src, out = os.path.join(base, "src-" + rev), os.path.join(base, "build-" + rev)
+    # Named by the commit, not the name given: HEAD~1 or a branch names another commit after new ones.
+    p = subprocess.run(["git", "-C", ROOT, "rev-parse", "--verify", rev + "^{commit}"], capture_output=True, text=True)
+    if p.returncode != 0:
+        sys.exit("bench realtime: --baseline %s: not a commit of this repository" % rev)
+    commit = p.stdout.strip()
+    src, out = os.path.join(base, "src-" + commit), os.path.join(base, "build-" + commit)
     bins = [os.path.join(out, "bin", a) for a in ("vofusion", "vofusion-grab")]
     if all(os.path.exists(b) for b in bins):
         return os.path.join(out, "bin")
@@ -148,16 +154,19 @@ def medians(runs):
 
 
 def main():
-    args = sys.argv[1:]
-    opt = lambda name, default: args[args.index(name) + 1] if name in args else default
-    build = os.path.abspath(opt("--build", os.path.join(ROOT, "build")))
-    rev = opt("--baseline", "618a78c")
-    rounds = int(opt("--rounds", "3"))
+    # argparse: an unknown or misspelt option (--round 5, --baseline=REV) is an error, not the default run.
+    tum = os.path.join(ROOT, "..", "shared", "data", "tum")
+    ap = argparse.ArgumentParser(prog="bench/run --realtime", allow_abbrev=False)
+    ap.add_argument("--realtime", action="store_true")
+    ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--baseline", default="618a78c", help="the revision to compare with (built once, by its commit)")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--sequences", default=",".join(os.path.join(tum, d) for d in (
+        "rgbd_dataset_freiburg1_xyz_first300", "rgbd_dataset_freiburg1_rpy_first100")))
+    a = ap.parse_args(sys.argv[1:])
+    build, rev, rounds, seqs = os.path.abspath(a.build), a.baseline, a.rounds, a.sequences.split(",")
     if rounds < 1:
         sys.exit("--rounds: at least 1")
-    tum = os.path.join(ROOT, "..", "shared", "data", "tum")
-    seqs = opt("--sequences", ",".join(os.path.join(tum, d) for d in
-                                        ("rgbd_dataset_freiburg1_xyz_first300", "rgbd_dataset_freiburg1_rpy_first100"))).split(",")
     builds = [(rev, baseline_build(rev, build)), ("this build", os.path.join(build, "bin"))]
     work = os.path.join(build, "bench-realtime")
     os.makedirs(work, exist_ok=True)
