@@ -11,7 +11,6 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/io/external_files.h"
-#include "vofusion/io/frame_source.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/odometry/odometry_source.h"
 #include "vofusion/odometry/rgbd_odometry.h"
@@ -62,48 +61,6 @@ TEST(Odometry, RecoversSyntheticMotionWithin2mmAnd02deg) {
       EXPECT_GT(r.narf_keypoints, 0);
     }
   }
-}
-
-// The union (the paper's): the STAR keypoints kept (described, with a depth), then every NARF one kept
-// that is farther than union_radius from all of them. A STAR keypoint dropped for want of depth (a blob
-// on a depth hole) hid the NARF ones beside it, which sit on depth borders, where such holes are.
-TEST(Odometry, TheUnionIsTheKeptStarKeypointsAndTheNarfOnesApartFromThem) {
-  const std::string tum = test::tumFirst300();
-  VOFUSION_REQUIRE_DATA(tum);
-  auto source = openFrameSource(tum, SourceOptions());
-  const auto keptPixels = [&](const Frame& f, const std::string& set) {
-    OdometryParams p;
-    p.keypoints = set;
-    const OdometryResult r = RgbdOdometry(p).process(f);
-    const CameraIntrinsics& c = f.camera;
-    std::vector<cv::Point2f> px;
-    if (r.features)
-      for (const Eigen::Vector3d& q : r.features->points)
-        px.emplace_back(float(c.fx * q.x() / q.z() + c.cx), float(c.fy * q.y() / q.z() + c.cy));
-    return px;
-  };
-  const double radius = OdometryParams().union_radius;
-  std::size_t hidden = 0;
-  Frame f;
-  for (std::size_t i = 0; source->next(f) && i <= 165; ++i) {
-    if (i < 129 || i % 3) continue;  // frames 135, 138, 159 and 162 each had a NARF keypoint hidden
-    const auto star = keptPixels(f, "star"), narf = keptPixels(f, "narf"), both = keptPixels(f, "union");
-    // NARF keypoints farther than the radius from every kept STAR one; a pixel's round trip through
-    // the undistorted ray moves it a little, so those near the radius may go either way.
-    std::size_t apart = 0, borderline = 0;
-    for (const cv::Point2f& n : narf) {
-      double nearest = 1e9;
-      for (const cv::Point2f& s : star) nearest = std::min(nearest, double(cv::norm(n - s)));
-      apart += nearest > radius + 0.25;
-      borderline += std::abs(nearest - radius) <= 0.25;
-    }
-    ASSERT_GT(star.size(), 100u) << i;
-    ASSERT_GT(narf.size(), 30u) << i;
-    EXPECT_GE(both.size(), star.size() + apart) << "frame " << i;
-    EXPECT_LE(both.size(), star.size() + apart + borderline) << "frame " << i;
-    hidden += star.size() + apart - std::min(both.size(), star.size() + apart);
-  }
-  std::printf("NARF keypoints hidden by dropped STAR keypoints: %zu\n", hidden);
 }
 
 TEST(Odometry, NoisyDepthStillCloseAndCovarianceSensible) {

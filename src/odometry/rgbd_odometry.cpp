@@ -295,12 +295,9 @@ void RgbdOdometry::Impl::finish(const Frame& frame, Extraction& ex, FrameFeature
   }
   f.narf = int(narf.size());
   ScopedStageTimer t(times, "brand");
-  // The union: the STAR keypoints kept (described, with a depth), then the NARF ones that are not
-  // duplicates of them. A STAR keypoint BRAND or the depth dropped (a blob on a depth hole) hid the
-  // NARF ones within union_radius, which sit on depth borders, where such holes are.
-  const std::size_t star_kept = f.keypoints.size();
-  std::vector<cv::KeyPoint> merged = mergeKeypoints(f.keypoints, narf, float(params.union_radius));
-  describe(frame, ex, std::vector<cv::KeyPoint>(merged.begin() + std::ptrdiff_t(star_kept), merged.end()), f);
+  // The union: STAR keypoints first, then the NARF ones that are not duplicates of them.
+  std::vector<cv::KeyPoint> merged = mergeKeypoints(ex.star, narf, float(params.union_radius));
+  describe(frame, ex, std::vector<cv::KeyPoint>(merged.begin() + std::ptrdiff_t(ex.star.size()), merged.end()), f);
 }
 
 void RgbdOdometry::Impl::describe(const Frame& frame, const Extraction& ex, std::vector<cv::KeyPoint> kps,
