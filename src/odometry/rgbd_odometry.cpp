@@ -145,7 +145,7 @@ struct RgbdOdometry::Impl {
 
   // Extraction in two steps, so the STAR part can be matched while NARF still runs on its thread:
   // begin() detects STAR, builds the normals and describes the STAR keypoints; finish() waits for
-  // NARF and appends its keypoints (those not within union_radius of a STAR one kept).
+  // NARF and appends its keypoints (those not within union_radius of a STAR one detected).
   struct Extraction {
     std::future<std::pair<std::vector<cv::KeyPoint>, double>> narf_job;
     std::vector<cv::KeyPoint> star;
@@ -295,7 +295,10 @@ void RgbdOdometry::Impl::finish(const Frame& frame, Extraction& ex, FrameFeature
   }
   f.narf = int(narf.size());
   ScopedStageTimer t(times, "brand");
-  // The union: STAR keypoints first, then the NARF ones that are not duplicates of them.
+  // The union: STAR keypoints first, then the NARF ones that are not duplicates of them, against every
+  // STAR keypoint detected, kept or not. Against the kept ones only (a NARF keypoint beside a STAR blob
+  // that BRAND or the depth dropped then stays) was measured twice and does not carry over (rpy -0.4 mm,
+  // its halves -0.6 / 0 mm, the loop scene's seed 5 +2.5 mm): bench/results/2026-12-05-narf-keypoint-pixel.md.
   std::vector<cv::KeyPoint> merged = mergeKeypoints(ex.star, narf, float(params.union_radius));
   describe(frame, ex, std::vector<cv::KeyPoint>(merged.begin() + std::ptrdiff_t(ex.star.size()), merged.end()), f);
 }
