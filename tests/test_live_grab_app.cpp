@@ -272,14 +272,22 @@ TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
   }
 }
 
+// A TUM folder of `frames` synthetic 320x240 frames at `folder`: its depth images, in frame order (none
+// when rgbd-simulate failed).
+static std::vector<fs::path> simulatedRecording(const std::string& folder, int frames) {
+  std::vector<fs::path> depth;
+  if (test::run(test::app("rgbd-simulate") + " --out " + folder + " --frames " + std::to_string(frames) + " --size 320x240") != 0)
+    return depth;
+  for (const auto& e : fs::directory_iterator(folder + "/depth")) depth.push_back(e.path());
+  std::sort(depth.begin(), depth.end());
+  return depth;
+}
+
 // Replaying a damaged recording: the damaged frame is skipped with one warning, the rest recorded, and
 // the count is in grab-summary.txt, the last line and, live, summary.json (as vofusion's).
 TEST(GrabApp, ReplaySkipsADamagedFrame) {
   const std::string dir = test::tempDir("grab_app_damaged");
-  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 20 --size 320x240"), 0);
-  std::vector<fs::path> depth;
-  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
-  std::sort(depth.begin(), depth.end());
+  const std::vector<fs::path> depth = simulatedRecording(dir + "/rec", 20);
   ASSERT_EQ(depth.size(), 20u);
   fs::remove(depth[7]);
   std::string log;
@@ -314,10 +322,7 @@ TEST(GrabApp, ReplaySkipsADamagedFrame) {
 // silently missing behind the first cause.
 TEST(GrabApp, OutputsThatFailAfterAFailedRunAreNamed) {
   const std::string dir = test::tempDir("grab_app_failed_twice");
-  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 30 --size 320x240"), 0);
-  std::vector<fs::path> depth;
-  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
-  std::sort(depth.begin(), depth.end());
+  const std::vector<fs::path> depth = simulatedRecording(dir + "/rec", 30);
   ASSERT_EQ(depth.size(), 30u);
   for (std::size_t i = 20; i < 27; ++i) fs::remove(depth[i]);
   fs::create_directories(dir + "/out/trajectory.txt");

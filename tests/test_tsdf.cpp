@@ -7,6 +7,7 @@
 #include <memory>
 #include <random>
 #include <set>
+#include <sstream>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -312,6 +313,65 @@ TEST(Tsdf, ShiftMovesBricksToWorldModelAndBackWithoutLoss) {
   EXPECT_EQ(vol.bricksInVolume(), bricks);
   ASSERT_TRUE(vol.sdfAt(centre + Eigen::Vector3f(r, 0, 0), sdf));
   EXPECT_LT(std::fabs(sdf), p.voxel_size);
+}
+
+// A saved map that cannot be read whole (here cut in half, or a brick's bytes flipped) leaves the map as
+// it was: the bricks read before the damage replaced it (a re-fusion that said it went on without the
+// saved map kept part of it).
+TEST(Tsdf, ALoadThatFailsLeavesTheMapAsItWas) {
+  const TsdfParams p = smallParams();
+  const Eigen::Vector3f centre(0, 0, 1.0f);
+  const float r = 0.3f;
+  TsdfVolume saved(p, centre);
+  const CameraIntrinsics c = smallCam();
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(k * 1.5f), std::sin(k * 1.5f), 0.2f), centre);
+    saved.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
+  }
+  saved.shiftTo(centre + Eigen::Vector3f(0.3f + p.volume_voxels * p.voxel_size / 2, 0, 0));  // bricks in both
+  ASSERT_GT(saved.bricksInVolume(), 0u);
+  ASSERT_GT(saved.bricksInWorldModel(), 0u);
+  std::stringstream whole;
+  saved.save(whole);
+  const std::string bytes = whole.str();
+
+  TsdfVolume vol(p, Eigen::Vector3f(2.f, 0, 1.f));  // a map of its own: a plane
+  const float wall = 1.2f;
+  const Eigen::Isometry3f T = lookAt(Eigen::Vector3f(2.f, 0, 0), Eigen::Vector3f(2.f, 0, 1.f));
+  vol.integrate(renderDepth(c, T, nullptr, 0.f, &wall), cv::Mat(), c, T);
+  const TriangleMesh before = vol.extractMesh();
+  const Eigen::Vector3i origin = vol.originBrick();
+  ASSERT_GT(before.faces.size(), 100u);
+  std::string flipped = bytes;
+  flipped[bytes.size() - 100] ^= 0x5a;  // inside the last brick's compressed voxels
+  for (const std::string& damaged : {bytes.substr(0, bytes.size() / 2), flipped}) {
+    std::stringstream in(damaged);
+    EXPECT_THROW(vol.load(in), std::runtime_error);
+    EXPECT_EQ(vol.originBrick(), origin);
+    const TriangleMesh after = vol.extractMesh();
+    EXPECT_EQ(after.faces.size(), before.faces.size());
+    EXPECT_EQ(after.vertices, before.vertices);
+  }
+  std::stringstream in(bytes);  // and a whole one loads
+  vol.load(in);
+  EXPECT_EQ(vol.bricksInVolume(), saved.bricksInVolume());
+  EXPECT_EQ(vol.bricksInWorldModel(), saved.bricksInWorldModel());
+}
+
+// A truncation band wider than a reading's depth (0.5 m at a wall 0.35 m away) marks no brick behind
+// the camera: the ray's samples mirrored through it allocated bricks that nothing updates.
+TEST(Tsdf, ABandWiderThanTheDepthAllocatesNothingBehindTheCamera) {
+  TsdfParams p;
+  p.volume_voxels = 128;
+  p.voxel_size = 0.05f;  // bricks of 0.4 m
+  p.truncation = 0.5f;
+  const float wall = 0.35f;
+  TsdfVolume vol(p, Eigen::Vector3f(0.f, 0.f, 0.4f));
+  const CameraIntrinsics c = smallCam();
+  const Eigen::Isometry3f T = lookAt(Eigen::Vector3f::Zero(), Eigen::Vector3f(0.f, 0.f, 1.f));
+  vol.integrate(renderDepth(c, T, nullptr, 0.f, &wall), cv::Mat(), c, T);
+  ASSERT_GT(vol.bricksInVolume(), 0u);
+  for (const BrickRef& b : vol.volumeBricks()) EXPECT_GE(b.coord.z(), 0) << "a brick behind the camera";
 }
 
 TEST(MarchingCubes, EmptyAndUnobservedGiveNoTriangles) {

@@ -266,6 +266,14 @@ TEST(VofusionApp, UnknownConfigKeyFailsInOneLineAndKeepsEarlierResults) {
   EXPECT_EQ(line, "earlier result");
 }
 
+// vofusion on three frames of the synthetic room with the config `cfg`, into `out`: its exit code, its
+// output in `log`.
+namespace {
+int runThreeFrames(const std::string& cfg, const std::string& out, std::string& log) {
+  return test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + out + " 2>&1", &log);
+}
+}  // namespace
+
 // vofusion-grab's --config (rawlog-grabber's [global] and sensor sections beside ours) is the file a
 // live run resumes with: vofusion reads our sections of it and leaves the sensor's to MRPT's drivers.
 TEST(VofusionApp, ALiveRunsGrabberConfigIsRead) {
@@ -278,17 +286,10 @@ TEST(VofusionApp, ALiveRunsGrabberConfigIsRead) {
                         "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
                         "[output]\nmesh = false\n";
   std::string log;
-  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
-                          "/out 2>&1",
-                      &log),
-            0)
-      << log;
+  EXPECT_EQ(runThreeFrames(cfg, dir + "/out", log), 0) << log;
   // Our sections are still checked key by key.
   std::ofstream(cfg, std::ios::app) << "[odometry]\nkeypoint = star\n";
-  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
-                          "/out2 2>&1",
-                      &log),
-            2);
+  EXPECT_EQ(runThreeFrames(cfg, dir + "/out2", log), 2) << log;
   EXPECT_NE(log.find("live.ini: unknown key 'keypoint' in section [odometry]"), std::string::npos) << log;
 }
 
@@ -301,23 +302,13 @@ TEST(VofusionApp, AReplayedLiveRunsConfigIsRead) {
                         "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n"
                         "[output]\nmesh = false\n";
   std::string log;
-  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
-                          "/out 2>&1",
-                      &log),
-            0)
-      << log;
+  EXPECT_EQ(runThreeFrames(cfg, dir + "/out", log), 0) << log;
   std::ofstream(cfg, std::ios::app) << "[vofusion-grab]\nqueue_capacty = 4\n";
-  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
-                          "/out2 2>&1",
-                      &log),
-            2);
+  EXPECT_EQ(runThreeFrames(cfg, dir + "/out2", log), 2) << log;
   EXPECT_NE(log.find("replay.ini: unknown key 'queue_capacty' in section [vofusion-grab]"), std::string::npos) << log;
   // Its values too, as vofusion-grab checks them.
   std::ofstream(cfg) << "[vofusion-grab]\nqueue_capacity = 0\n[output]\nmesh = false\n";
-  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + cfg + " --out " + dir +
-                          "/out3 2>&1",
-                      &log),
-            2);
+  EXPECT_EQ(runThreeFrames(cfg, dir + "/out3", log), 2) << log;
   EXPECT_NE(log.find("replay.ini: [vofusion-grab] queue_capacity"), std::string::npos) << log;
 }
 

@@ -9,7 +9,9 @@
 #include <istream>
 #include <ostream>
 #include <stdexcept>
+#include <unordered_set>
 #include <utility>
+#include <vector>
 
 #include "vofusion/core/parallel.h"
 #include "vofusion/fusion/marching_cubes.h"
@@ -144,6 +146,9 @@ void TsdfVolume::markTouchedBricks(const cv::Mat& depth, const CameraIntrinsics&
       if (!(z >= zmin && z <= zmax)) continue;
       const Eigen::Vector3f ray((x - cx) / fx, (y - cy) / fy, 1.f);
       for (int k = -band_steps; k <= band_steps; ++k) {
+        // Not behind the camera (a band wider than the reading's depth): no voxel there is updated by
+        // this frame, and the ray mirrored through the camera allocated bricks nobody fills.
+        if (z + k * band_step <= 0.f) continue;
         const Eigen::Vector3f p = (R * (ray * (z + k * band_step)) + t) * inv_brick;
         const int s = slotOf(cvFloor(p.x()), cvFloor(p.y()), cvFloor(p.z()));  // = std::floor (tsdf_sampling.h)
         // Many rows mark the same brick: a relaxed atomic store (all write the same 1).
@@ -369,14 +374,15 @@ void TsdfVolume::load(std::istream& is) {
   if (!WorldModel::keyHolds(o) || !WorldModel::keyHolds(o + Eigen::Vector3i::Constant(n_)))
     throw std::runtime_error("corrupt header (volume origin out of range)");
   const auto count = get<std::uint64_t>(is, "brick count");
-  // Start empty at the saved origin.
-  for (std::size_t s = 0; s < slots_.size(); ++s)
-    if (slots_[s] >= 0) setSlot(static_cast<int>(s), -1);
-  bricks_.clear();
-  world_ = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
-                                        params_.work_dir);
-  origin_ = o;
-  updateCyclicTables();
+  // The whole file is read before the map changes: a bad one leaves the map as it was (a re-fusion
+  // that could not take a saved map, and said it fused the frames again without it, kept the part read
+  // before the damage). Bricks beyond the volume go to a world model of their own (spilled as it fills);
+  // those in it, at most the volume's, wait here.
+  auto world = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
+                                            params_.work_dir);
+  const auto inVolume = [&](const Eigen::Vector3i& c) { return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all(); };
+  std::vector<std::unique_ptr<Brick>> in_volume;
+  std::unordered_set<std::uint64_t> in_volume_keys;
   std::vector<std::uint8_t> bytes;
   for (std::uint64_t i = 0; i < count; ++i) {
     auto b = std::make_unique<Brick>();
@@ -388,17 +394,27 @@ void TsdfVolume::load(std::istream& is) {
     if (!is.read(reinterpret_cast<char*>(bytes.data()), len)) throw std::runtime_error("truncated (brick data)");
     if (!decompressBrick(bytes.data(), len, *b)) throw std::runtime_error("corrupt brick data");
     const Eigen::Vector3i c = b->coord;
-    const int s = slotOf(c.x(), c.y(), c.z());
-    if (s >= 0) {
-      if (slots_[s] >= 0) throw std::runtime_error("brick stored twice");
-      setSlot(s, bricks_.add(*b));
+    if (inVolume(c)) {
+      if (!in_volume_keys.insert(WorldModel::key(c)).second) throw std::runtime_error("brick stored twice");
+      in_volume.push_back(std::move(b));
     } else {
-      if (world_->contains(c)) throw std::runtime_error("brick stored twice");
-      world_->put(std::move(b));
+      if (world->contains(c)) throw std::runtime_error("brick stored twice");
+      world->put(std::move(b));
     }
   }
   char end[4];
   if (!is.read(end, 4) || std::memcmp(end, "END\n", 4) != 0) throw std::runtime_error("truncated (no end marker)");
+  // Read whole: the map becomes the file's, at the saved origin.
+  for (std::size_t s = 0; s < slots_.size(); ++s)
+    if (slots_[s] >= 0) setSlot(static_cast<int>(s), -1);
+  bricks_.clear();
+  world_ = std::move(world);
+  origin_ = o;
+  updateCyclicTables();
+  for (auto& b : in_volume) {
+    setSlot(slotOf(b->coord.x(), b->coord.y(), b->coord.z()), bricks_.add(*b));
+    b.reset();  // one brick at a time back to the heap, as the arena takes them
+  }
 }
 
 }  // namespace vofusion::fusion
