@@ -236,6 +236,20 @@ TEST(Rawlog, RangeImageFilesOfARawlogInputAreCopiedAtTheirUnits) {
   expectSameFrames(frames, mm_src, 5e-4 + 1e-6);
 }
 
+// Depth is written at the units the observation says, as MRPT's readers take them (units times the
+// stored value): only the float's own error from 1/n is snapped to 1/n (2e-4 = 1/5000; 0.0019, 0.1 % off
+// 1/526, was written at 1/526 m a unit, read 0.1 % short).
+TEST(Rawlog, DepthIsWrittenAtTheUnitsItsObservationSays) {
+  Frame f = simFrames(1).front();
+  f.depth.setTo(5.0f);
+  for (const double units : {2e-4, 1e-3, 0.0019, 0.0015}) {
+    const auto obs = observationFromFrame(f, units);
+    const double as_mrpt_reads = double(obs->rangeImage(0, 0)) * double(obs->rangeUnits);
+    EXPECT_NEAR(as_mrpt_reads, 5.0, 0.5 * units + 1e-6) << units;
+    EXPECT_NEAR(frameFromObservation(*obs, "x").depth.at<float>(0, 0), 5.0f, 0.5 * units + 1e-6) << units;
+  }
+}
+
 TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {
   const auto frames = simFrames(3);
   const std::string dir = test::tempDir("rawlog_sf");
@@ -639,6 +653,40 @@ TEST(Rawlog, AFrameWhoseSyncFailsIsStillCountedAndKept) {
     EXPECT_EQ(RawlogSource(path, {}).size(), w.framesWritten());
   }
   EXPECT_TRUE(std::filesystem::exists(path)) << "a recording holding a whole frame was removed";
+}
+
+// A recording in place never takes a ground truth it did not write: one left beside no recording (an
+// earlier replay's, its recording deleted) is refused, naming it; one left by a recording killed before
+// its first record goes with that empty recording.
+TEST(Rawlog, InPlaceRecordingTakesNoGroundTruthLeftBesideNoRecording) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_stale_gt");
+  RawlogWriterOptions o;
+  o.in_place = true;
+  const std::string gt = RawlogWriter::groundTruthPathFor(dir + "/grab.rawlog");
+  writeTumTrajectory(gt, {{0.0, mrpt::poses::CPose3D()}, {1.0, mrpt::poses::CPose3D(1, 0, 0, 0, 0, 0)}});
+  try {
+    RawlogWriter w(dir + "/grab.rawlog", o);
+    ADD_FAILURE() << "recorded beside another recording's ground truth";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), gt);
+  }
+  EXPECT_TRUE(fs::exists(gt)) << "nothing written is removed";
+  // A killed recording's leftovers: its empty rawlog and folder, and the ground truth its first frame wrote.
+  std::ofstream(dir + "/grab.rawlog").close();
+  fs::create_directory(dir + "/grab_Images");
+  {
+    RawlogWriter w(dir + "/grab.rawlog", o);
+    w.write(frames[0]);
+    w.write(frames[1]);
+    w.commit();
+  }
+  EXPECT_FALSE(fs::exists(gt)) << "the killed recording's ground truth went with it";
+  const RawlogSource back(dir + "/grab.rawlog", {});
+  ASSERT_NE(back.recordedGroundTruth(), nullptr);  // the frames' own, in the rawlog's entries
+  const Trajectory& truth = *back.recordedGroundTruth();
+  ASSERT_EQ(truth.size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) EXPECT_LT(truth[i].pose.distanceTo(*frames[i].groundTruth), 1e-4) << i;
 }
 
 TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {

@@ -92,11 +92,13 @@ class CountingStream : public mrpt::io::CStream {
 };
 
 // "<scale> metres per unit" made exact for the usual decimal units (1e-3, 2e-4 = 1/5000): the float
-// stored in the rawlog is not exactly 2e-4, but TUM depth read back must equal the TUM loader's.
+// stored in the rawlog is not exactly 2e-4, but TUM depth read back must equal the TUM loader's. Only a
+// float's own error (~6e-8) away from 1/n: 0.0019 taken as 1/526 quantised depth at 1/526 m under
+// rangeUnits 0.0019, which MRPT's readers (RawLogViewer, rawlog-edit) read 0.1 % short.
 double exactUnits(float units) {
   const double inv = 1.0 / double(units);
   const double r = std::round(inv);
-  return (r >= 1 && std::abs(inv - r) < 1e-3 * r) ? 1.0 / r : double(units);
+  return (r >= 1 && std::abs(inv - r) < 1e-6 * r) ? 1.0 / r : double(units);
 }
 
 std::string stripRawlogExtension(const std::string& path) {
@@ -520,6 +522,7 @@ struct RawlogWriter::Impl {
     if (!no_records || !no_images || RecordFile::heldByAnother(rawlog_file)) return;
     fs::remove(rawlog_file, ec);
     fs::remove(images_dir, ec);
+    fs::remove(RawlogWriter::groundTruthPathFor(rawlog_file), ec);  // written with the first frame, before its record
   }
   void openInPlace(const std::string& path) {
     rawlog_file = path;
@@ -527,6 +530,11 @@ struct RawlogWriter::Impl {
     removeEmptyRecording();
     if (fs::exists(rawlog_file) || fs::exists(images_dir))
       throw InputError(path, "a recording is already there; recordings are never overwritten: choose another folder");
+    // A ground truth beside no recording is an earlier one's: read as this recording's, it would
+    // evaluate this run against another path.
+    if (const std::string gt = RawlogWriter::groundTruthPathFor(path); fs::exists(gt))
+      throw InputError(gt, "a ground truth without its recording is there (an earlier recording's?): move it away or "
+                           "choose another folder");
     records = std::make_unique<RecordFile>(rawlog_file);
     arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<RecordFile>>(*records);
   }
