@@ -264,6 +264,20 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
   padded.insert(padded.end(), 300, std::uint8_t(0));
   EXPECT_EQ(imageFileDamage(write("padded.jpg", padded)), "");
   EXPECT_EQ(imageFileDamage(write("cut.jpg", std::vector<std::uint8_t>(jpeg.begin(), jpeg.end() - 100))), "truncated JPEG");
+  // A camera's JPEG holds an EXIF thumbnail (a JPEG with its own end marker) in an APP1 segment before
+  // the image: cut inside the image, it is truncated all the same (the thumbnail's marker passed it).
+  std::vector<std::uint8_t> thumb;
+  ASSERT_TRUE(cv::imencode(".jpg", img(cv::Rect(0, 0, 16, 12)), thumb));
+  std::vector<std::uint8_t> app1{'E', 'x', 'i', 'f', 0, 0};
+  app1.insert(app1.end(), thumb.begin(), thumb.end());
+  const std::size_t len = app1.size() + 2;
+  std::vector<std::uint8_t> camera{0xFF, 0xD8, 0xFF, 0xE1, std::uint8_t(len >> 8), std::uint8_t(len & 0xFF)};
+  camera.insert(camera.end(), app1.begin(), app1.end());
+  camera.insert(camera.end(), jpeg.begin() + 2, jpeg.end());  // the image's segments after its SOI
+  EXPECT_EQ(imageFileDamage(write("camera.jpg", camera)), "");
+  EXPECT_FALSE(cv::imread(dir + "/camera.jpg").empty());
+  EXPECT_EQ(imageFileDamage(write("camera_cut.jpg", std::vector<std::uint8_t>(camera.begin(), camera.end() - 100))),
+            "truncated JPEG");
   EXPECT_EQ(imageFileDamage(write("text.png", {'n', 'o', 't'})), "");  // neither: OpenCV decides
   EXPECT_EQ(imageFileDamage(dir), "");                                 // a folder is no file to read
   std::vector<std::uint8_t> bytes{1, 2, 3};

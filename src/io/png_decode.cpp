@@ -200,15 +200,43 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
          be32(h + 16) == std::uint32_t(width) && be32(h + 20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
 }
 
+namespace {
+// Where a JPEG's entropy-coded data starts: its segments walked from SOI to SOS (each a marker and a
+// big-endian length); 2 when they cannot be walked. The header segments may hold an end marker of
+// their own (an EXIF thumbnail's), which says nothing of the image's.
+std::size_t jpegScanStart(const std::uint8_t* p, std::size_t n) {
+  std::size_t at = 2;
+  while (at + 4 <= n) {
+    if (p[at] != 0xFF) return 2;
+    const std::uint8_t marker = p[at + 1];
+    if (marker == 0xFF) {  // fill byte
+      ++at;
+      continue;
+    }
+    if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD8)) {  // TEM, RSTn, SOI: no length
+      at += 2;
+      continue;
+    }
+    const std::size_t len = (std::size_t(p[at + 2]) << 8) | p[at + 3];
+    if (len < 2 || at + 2 + len > n) return 2;
+    at += 2 + len;
+    if (marker == 0xDA) return at;  // SOS: the scan's data follows its header
+  }
+  return 2;
+}
+}  // namespace
+
 // A PNG's chunks walked to IEND, each critical one's CRC checked (libpng stops at a bad one with its
-// own "libpng error" line; an ancillary chunk with a bad CRC it only drops); a JPEG's end marker.
+// own "libpng error" line; an ancillary chunk with a bad CRC it only drops); a JPEG's end marker after
+// its scan starts.
 std::string imageFileDamage(const std::string& path) {
   thread_local std::vector<std::uint8_t> bytes;
   if (!readWholeFile(path, bytes)) return {};
   const std::uint8_t* p = bytes.data();
   const std::size_t n = bytes.size();
   if (n >= 2 && p[0] == 0xFF && p[1] == 0xD8) {  // JPEG: an end-of-image marker, the last one searched
-    for (std::size_t i = n - 1; i >= 3; --i)        // from the end (a writer may append data after it)
+    const std::size_t scan = jpegScanStart(p, n);  // from the end (a writer may append data after it)
+    for (std::size_t i = n - 1; i > scan && i >= 3; --i)
       if (p[i - 1] == 0xFF && p[i] == 0xD9) return {};
     return "truncated JPEG";
   }
