@@ -715,6 +715,23 @@ TEST(LoopCloser, ALookAlikeOutOfReachIsRefusedAfterAShortLossAndTakenAfterALongO
   ASSERT_TRUE(later.has_value()) << "the look-alike must verify, or the short loss tests nothing";
   EXPECT_EQ(later->keyframe, 0u);  // its own view: the most inliers
   EXPECT_LT(later->pose.translation().norm(), 0.05);
+
+  // The loss is timed from the last well-tracked frame, not the newest keyframe: a camera that stood
+  // still, tracked, for 20 s made no keyframe, and those seconds widened the reach to 60 m (the
+  // look-alike 3 m off was taken after a loss of 0.1 s).
+  Frame still = seq.render(last);
+  for (int s = 1; s <= 20; ++s) {
+    still.index = last + 1 + std::size_t(s);
+    still.timestamp = last_seen + s;
+    EXPECT_FALSE(closer.addFrame(still, truth(last), true, 0.001, nullptr)) << "a keyframe standing still";
+  }
+  view.index = still.index + 1;
+  view.timestamp = last_seen + 20.1;
+  const auto after_standing = closer.relocalise(view, features);
+  if (after_standing) {
+    EXPECT_NE(after_standing->keyframe, 0u);
+    EXPECT_LT((after_standing->pose.translation() - truth(last).translation()).norm(), 1.0) << "placed at the look-alike";
+  }
   closer.finish();
 }
 

@@ -161,6 +161,13 @@ TEST(LoopScenes, KeyframeQueueIsBounded) {
   EXPECT_GT(waits, 0u) << "the thread kept up: the bound was not exercised";
   EXPECT_EQ(closer.keyframes().size(), handed);
   EXPECT_GT(closer.threadCpuSeconds(), 0.0);  // summary.json's thread_cpu_ms_per_frame
+  // A checkpoint keeps the run's queue statistics (a resumed run's summary counted only its own frames).
+  std::stringstream saved;
+  closer.saveState(saved);
+  loop::LoopCloser resumed(params);
+  resumed.loadState(saved);
+  EXPECT_EQ(resumed.queueStats(), closer.queueStats());
+  resumed.finish();
 }
 
 // A strained frame (its ICP residual over kStrainRmsRatio x the recent median) becomes a keyframe by

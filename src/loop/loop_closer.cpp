@@ -27,6 +27,13 @@ struct LoopCloser::Impl {
   KeyframeSelector selector;
   ResidualMonitor residuals;
   std::size_t strained_frames = 0;
+  // The last well-tracked frame: where and when the camera was last known, for relocalise()'s reach
+  // (the newest keyframe may be far older: a camera standing still makes none). Frame loop only.
+  struct LastKnown {
+    bool valid = false;
+    double timestamp = 0.0, path_length = 0.0;
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  } last_known;
   std::vector<std::size_t> frame_keyframe;  // per frame added: its keyframe (the last one at or before it)
   std::vector<std::size_t> keyframe_position;  // per keyframe: its frame's position among the frames added
   std::size_t keyframes_made = 0;
@@ -298,6 +305,7 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
   const bool strained = m.residuals.strained(icp_rms);
   m.strained_frames += strained;
   const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty(), strained);
+  if (well_tracked && !frame.depth.empty()) m.last_known = {true, frame.timestamp, m.selector.pathLength(), tracked};
   if (key) {
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);
@@ -315,11 +323,18 @@ void LoopCloser::saveState(std::ostream& os) const {
   m.waitIdle();  // the thread's store is the caller's to read until the next addFrame
   auto a = state::archiveOf(os);
   // "v2": the keyframe selector keeps whether strained frames came since the last keyframe (b9be6fb);
-  // a checkpoint of an earlier build is refused by name instead of read out of step.
-  state::tag(a, "loop v2");
+  // "v3": the last well-tracked frame and the queue's statistics. A checkpoint of an earlier build is
+  // refused by name instead of read out of step.
+  state::tag(a, "loop v3");
   m.selector.saveState(a);
   m.residuals.saveState(a);
   a << uint64_t(m.strained_frames) << uint64_t(m.keyframes_made);
+  a << m.last_known.valid << m.last_known.timestamp << m.last_known.path_length;
+  state::write(a, m.last_known.pose);
+  {
+    std::lock_guard<std::mutex> lock(m.mu);
+    a << uint64_t(m.max_queued) << uint64_t(m.frame_loop_waits);
+  }
   a << std::vector<uint64_t>(m.frame_keyframe.begin(), m.frame_keyframe.end());
   a << std::vector<uint64_t>(m.keyframe_position.begin(), m.keyframe_position.end());
   a << uint64_t(m.keyframes.size());
@@ -335,11 +350,14 @@ void LoopCloser::saveState(std::ostream& os) const {
 void LoopCloser::loadState(std::istream& is) {
   Impl& m = *impl_;
   auto a = state::archiveOf(is);
-  state::expectTag(a, "loop v2");
+  state::expectTag(a, "loop v3");
   m.selector.loadState(a);
   m.residuals.loadState(a);
-  uint64_t strained = 0, made = 0, count = 0;
+  uint64_t strained = 0, made = 0, count = 0, max_queued = 0, waits = 0;
   a >> strained >> made;
+  a >> m.last_known.valid >> m.last_known.timestamp >> m.last_known.path_length;
+  state::read(a, m.last_known.pose);
+  a >> max_queued >> waits;
   m.strained_frames = strained;
   m.keyframes_made = made;
   std::vector<uint64_t> frame_keyframe, keyframe_position;
@@ -362,6 +380,9 @@ void LoopCloser::loadState(std::istream& is) {
     decodeKeyframeData(bytes, k);
     m.enqueue(std::move(k), false);
   }
+  std::lock_guard<std::mutex> lock(m.mu);  // the run's, not the replay's (which does not count them)
+  m.max_queued = max_queued;
+  m.frame_loop_waits = waits;
 }
 
 void LoopCloser::setAfterIndexingHook(std::function<void(std::size_t)> hook) {
@@ -396,12 +417,15 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
   }
   for (const PlaceCandidate& c : m.index.query(features->descriptors))
     if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
-  // Keyframes are made of well-tracked frames only: the newest is where the camera was last known.
+  // Where and when the camera was last known: the last well-tracked frame (the newest keyframe may be
+  // much older: a camera standing still, tracked, makes none, and its seconds there widened the reach).
   const Keyframe& newest = m.keyframes.at(n - 1);
+  const Impl::LastKnown last = m.last_known.valid ? m.last_known
+                                                  : Impl::LastKnown{true, newest.timestamp, newest.path_length, newest.tracked};
   // Stamps that do not go forward (a clock stepped back, recordings joined, no stamps) say nothing
   // of the time lost: no reach bound then.
-  const bool timed = std::isfinite(frame.timestamp) && frame.timestamp > newest.timestamp;
-  const double lost_seconds = timed ? frame.timestamp - newest.timestamp : 0.0;
+  const bool timed = std::isfinite(frame.timestamp) && frame.timestamp > last.timestamp;
+  const double lost_seconds = timed ? frame.timestamp - last.timestamp : 0.0;
   std::optional<Relocalisation> best;
   PyramidCache pyramids(2);  // the view's, made once for all candidates
   for (const std::size_t id : candidates) {
@@ -412,8 +436,8 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
     const Eigen::Isometry3d placed = known.tracked * check.T_old_new;
     // Both poses are the tracker's, which drifts along the path between the two keyframes.
     const double reach = kMaxCameraSpeed * lost_seconds + m.params.max_drift_translation +
-                         m.params.max_drift_rate * std::abs(newest.path_length - known.path_length);
-    if (timed && (placed.translation() - newest.tracked.translation()).norm() > reach) continue;
+                         m.params.max_drift_rate * std::abs(last.path_length - known.path_length);
+    if (timed && (placed.translation() - last.pose.translation()).norm() > reach) continue;
     if (best && check.inliers <= best->inliers) continue;
     best = Relocalisation{frame.index, known.id, known.frame_index, check.inliers, check.icp_rms, placed};
   }
