@@ -83,6 +83,15 @@ TsdfParams smallParams() {
   return p;
 }
 
+// A sphere of radius r at centre fused from four cameras around it, 1.5 rad apart.
+void fuseSphereFromFourSides(TsdfVolume& vol, const Eigen::Vector3f& centre, float r) {
+  const CameraIntrinsics c = smallCam();
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(k * 1.5f), std::sin(k * 1.5f), 0.2f), centre);
+    vol.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
+  }
+}
+
 }  // namespace
 
 // A truncation band wider than two bricks (20 mm half-samples over 16 mm bricks): a wall lying in a
@@ -285,11 +294,7 @@ TEST(Tsdf, ShiftMovesBricksToWorldModelAndBackWithoutLoss) {
   const Eigen::Vector3f centre(0, 0, 1.0f);
   const float r = 0.3f;
   TsdfVolume vol(p, centre);
-  const CameraIntrinsics c = smallCam();
-  for (int k = 0; k < 4; ++k) {
-    const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(k * 1.5f), std::sin(k * 1.5f), 0.2f), centre);
-    vol.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
-  }
+  fuseSphereFromFourSides(vol, centre, r);
   const TriangleMesh before = vol.extractMesh();
   const std::size_t bricks = vol.bricksInVolume();
   ASSERT_GT(bricks, 0u);
@@ -323,11 +328,8 @@ TEST(Tsdf, ALoadThatFailsLeavesTheMapAsItWas) {
   const Eigen::Vector3f centre(0, 0, 1.0f);
   const float r = 0.3f;
   TsdfVolume saved(p, centre);
+  fuseSphereFromFourSides(saved, centre, r);
   const CameraIntrinsics c = smallCam();
-  for (int k = 0; k < 4; ++k) {
-    const Eigen::Isometry3f T = lookAt(centre + Eigen::Vector3f(std::cos(k * 1.5f), std::sin(k * 1.5f), 0.2f), centre);
-    saved.integrate(renderDepth(c, T, &centre, r, nullptr), cv::Mat(), c, T);
-  }
   saved.shiftTo(centre + Eigen::Vector3f(0.3f + p.volume_voxels * p.voxel_size / 2, 0, 0));  // bricks in both
   ASSERT_GT(saved.bricksInVolume(), 0u);
   ASSERT_GT(saved.bricksInWorldModel(), 0u);
