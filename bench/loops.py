@@ -148,7 +148,7 @@ def markdown(rows, command):
 def main(argv):
     import argparse
     here = os.path.dirname(os.path.abspath(__file__))
-    ap = argparse.ArgumentParser(prog="bench/run --loops")
+    ap = argparse.ArgumentParser(prog="bench/run --loops", allow_abbrev=False)
     ap.add_argument("--loops", action="store_true")
     ap.add_argument("--seeds", default="1,2,3,4,5")
     ap.add_argument("--lengths", default="300,900")

@@ -61,7 +61,7 @@ def baseline_build(rev, build):
         return os.path.join(out, "bin")
     os.makedirs(base, exist_ok=True)
     if not os.path.exists(src):
-        subprocess.run(["git", "-C", ROOT, "worktree", "add", "-f", "--detach", src, rev], check=True)
+        subprocess.run(["git", "-C", ROOT, "worktree", "add", "-f", "--detach", src, commit], check=True)
     log("building %s (apps only) in %s" % (rev, out))
     subprocess.run(["cmake", "-S", src, "-B", out, "-G", "Ninja", "-DCMAKE_BUILD_TYPE=Release", "-DVOFUSION_BUILD_TESTS=OFF"],
                    check=True, stdout=subprocess.DEVNULL)

@@ -212,7 +212,7 @@ def markdown(rows, rpe, seeds, this_name, base_name, command):
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(prog="bench/run --rules")
+    ap = argparse.ArgumentParser(prog="bench/run --rules", allow_abbrev=False)
     ap.add_argument("--rules", action="store_true")
     ap.add_argument("--baseline", required=True, help="the other build's directory (holding bin/vofusion)")
     ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(ROOT, "build")))

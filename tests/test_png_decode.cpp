@@ -278,6 +278,9 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
   EXPECT_FALSE(cv::imread(dir + "/camera.jpg").empty());
   EXPECT_EQ(imageFileDamage(write("camera_cut.jpg", std::vector<std::uint8_t>(camera.begin(), camera.end() - 100))),
             "truncated JPEG");
+  // Cut in its header, after the thumbnail (in the tables before the scan): truncated too.
+  EXPECT_EQ(imageFileDamage(write("camera_head.jpg", std::vector<std::uint8_t>(camera.begin(), camera.begin() + 6 + app1.size() + 40))),
+            "truncated JPEG");
   EXPECT_EQ(imageFileDamage(write("text.png", {'n', 'o', 't'})), "");  // neither: OpenCV decides
   EXPECT_EQ(imageFileDamage(dir), "");                                 // a folder is no file to read
   std::vector<std::uint8_t> bytes{1, 2, 3};

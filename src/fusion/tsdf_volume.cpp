@@ -377,27 +377,31 @@ void TsdfVolume::load(std::istream& is) {
   // The whole file is read before the map changes: a bad one leaves the map as it was (a re-fusion
   // that could not take a saved map, and said it fused the frames again without it, kept the part read
   // before the damage). Bricks beyond the volume go to a world model of their own (spilled as it fills);
-  // those in it, at most the volume's, wait here.
+  // those in it wait compressed (checked whole), and are decompressed into the volume's arena once the
+  // file is read: staged whole, they sat on glibc's heap, which keeps freed memory for the frame loop.
   auto world = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
                                             params_.work_dir);
   const auto inVolume = [&](const Eigen::Vector3i& c) { return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all(); };
-  std::vector<std::unique_ptr<Brick>> in_volume;
+  std::vector<std::pair<Eigen::Vector3i, std::vector<std::uint8_t>>> in_volume;
   std::unordered_set<std::uint64_t> in_volume_keys;
   std::vector<std::uint8_t> bytes;
+  auto scratch = std::make_unique<Brick>();
   for (std::uint64_t i = 0; i < count; ++i) {
-    auto b = std::make_unique<Brick>();
-    for (int k = 0; k < 3; ++k) b->coord[k] = get<std::int32_t>(is, "brick");
-    if (!WorldModel::keyHolds(b->coord)) throw std::runtime_error("corrupt brick record (coordinates out of range)");
+    Eigen::Vector3i c;
+    for (int k = 0; k < 3; ++k) c[k] = get<std::int32_t>(is, "brick");
+    if (!WorldModel::keyHolds(c)) throw std::runtime_error("corrupt brick record (coordinates out of range)");
     const auto len = get<std::uint32_t>(is, "brick");
     if (len == 0 || len > 4 * sizeof(Brick)) throw std::runtime_error("corrupt brick record");
     bytes.resize(len);
     if (!is.read(reinterpret_cast<char*>(bytes.data()), len)) throw std::runtime_error("truncated (brick data)");
-    if (!decompressBrick(bytes.data(), len, *b)) throw std::runtime_error("corrupt brick data");
-    const Eigen::Vector3i c = b->coord;
     if (inVolume(c)) {
+      if (!decompressBrick(bytes.data(), len, *scratch)) throw std::runtime_error("corrupt brick data");
       if (!in_volume_keys.insert(WorldModel::key(c)).second) throw std::runtime_error("brick stored twice");
-      in_volume.push_back(std::move(b));
+      in_volume.emplace_back(c, bytes);
     } else {
+      auto b = std::make_unique<Brick>();
+      if (!decompressBrick(bytes.data(), len, *b)) throw std::runtime_error("corrupt brick data");
+      b->coord = c;
       if (world->contains(c)) throw std::runtime_error("brick stored twice");
       world->put(std::move(b));
     }
@@ -411,9 +415,11 @@ void TsdfVolume::load(std::istream& is) {
   world_ = std::move(world);
   origin_ = o;
   updateCyclicTables();
-  for (auto& b : in_volume) {
-    setSlot(slotOf(b->coord.x(), b->coord.y(), b->coord.z()), bricks_.add(*b));
-    b.reset();  // one brick at a time back to the heap, as the arena takes them
+  for (auto& [c, packed] : in_volume) {
+    decompressBrick(packed.data(), packed.size(), *scratch);  // checked above
+    scratch->coord = c;
+    setSlot(slotOf(c.x(), c.y(), c.z()), bricks_.add(*scratch));
+    std::vector<std::uint8_t>().swap(packed);
   }
 }
 

@@ -202,27 +202,30 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
 
 namespace {
 // Where a JPEG's entropy-coded data starts: its segments walked from SOI to SOS (each a marker and a
-// big-endian length); 2 when they cannot be walked. The header segments may hold an end marker of
-// their own (an EXIF thumbnail's), which says nothing of the image's.
+// big-endian length); n when the file ends before it (cut in its header); 2 when the segments cannot
+// be walked (or end at an EOI before any scan). The header segments may hold an end marker of their own
+// (an EXIF thumbnail's), which says nothing of the image's.
 std::size_t jpegScanStart(const std::uint8_t* p, std::size_t n) {
   std::size_t at = 2;
-  while (at + 4 <= n) {
+  while (true) {
+    if (at + 4 > n) return n;
     if (p[at] != 0xFF) return 2;
     const std::uint8_t marker = p[at + 1];
     if (marker == 0xFF) {  // fill byte
       ++at;
       continue;
     }
+    if (marker == 0xD9) return 2;  // EOI before any scan: tables only
     if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD8)) {  // TEM, RSTn, SOI: no length
       at += 2;
       continue;
     }
     const std::size_t len = (std::size_t(p[at + 2]) << 8) | p[at + 3];
-    if (len < 2 || at + 2 + len > n) return 2;
+    if (len < 2) return 2;
+    if (at + 2 + len > n) return n;  // cut inside a header segment
     at += 2 + len;
     if (marker == 0xDA) return at;  // SOS: the scan's data follows its header
   }
-  return 2;
 }
 }  // namespace
 

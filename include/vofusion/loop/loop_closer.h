@@ -79,7 +79,7 @@ class LoopCloser {
   // Relocalisation, when the tracker has lost the camera: the frame matched against the keyframes (the
   // newest ones, those the place index has not taken yet one per index_spacing, then the index's
   // candidates) and verified as a loop is, without the drift bound; a placement beyond the camera's
-  // reach since the newest keyframe (kMaxCameraSpeed) is refused, however many inliers it has.
+  // reach since the last well-tracked frame (kMaxCameraSpeed) is refused, however many inliers it has.
   // Waits for the thread to store and index the queued keyframes first, not for their verification or
   // the graph's solve (seconds on a long run). nullopt: no keyframe verified.
   std::optional<Relocalisation> relocalise(const Frame& frame, std::shared_ptr<const DescribedKeypoints> features);

@@ -14,8 +14,8 @@ namespace vofusion::loop {
 inline constexpr double kOdometrySigmaRate = 0.02;
 inline constexpr double kOdometrySigmaFloor = 0.002;
 // A hand-held camera's top speed (m/s; a camera carried at a run): a relocalisation may place the
-// camera no farther from the newest keyframe than this x the time since it, plus the drift the loop
-// check allows between the two keyframes. A look-alike place metres away is refused after a short loss
+// camera no farther from the last well-tracked frame than this x the time since it, plus the drift the
+// loop check allows along the path between it and the keyframe. A look-alike place metres away is refused after a short loss
 // and found after a long one (the camera may have been carried there). A physical bound, not a key.
 inline constexpr double kMaxCameraSpeed = 3.0;
 // A loop edge's noise: its ICP's residual RMS (m; as an angle over the keyframe's mean depth), at

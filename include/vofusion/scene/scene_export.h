@@ -3,7 +3,8 @@
 //
 // The scene is shown z-up: everything sits in one CSetOfObjects named "world" whose pose rotates the
 // reconstruction's frame so that its "up" direction becomes +z. Children of "world", by name:
-//   "mesh"          CSetOfTriangles, per-vertex colours (grey if the mesh has none)
+//   "mesh"          CSetOfTriangles, per-vertex colours (grey if the mesh has none); past
+//                   SceneOptions::triangles_per_object faces, more of them: "mesh.1", "mesh.2", ...
 //   "path"          CSetOfLines, the estimated camera centres joined in order (blue)
 //   "ground_truth"  CSetOfLines, the ground-truth camera centres (green), when given
 //   "frustums"      CSetOfObjects of CFrustum, one every k frames of the estimated path
