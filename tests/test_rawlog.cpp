@@ -131,6 +131,30 @@ TEST(Rawlog, RoundTripObservationsExternalImages) {
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
 }
 
+// A rawlog of several cameras (a rig; Robot@Home records four) is read as the first camera's: the
+// others' scans, read as its frames, were views from cameras facing elsewhere tracked as one path.
+TEST(Rawlog, ARawlogOfSeveralCamerasIsReadAsTheFirstOnes) {
+  const auto frames = simFrames(4);
+  const std::string dir = test::tempDir("rawlog_two_cameras");
+  auto other = simFrames(4);
+  {
+    RawlogWriterOptions o;
+    o.external_images = false;
+    RawlogWriter w(dir + "/two.rawlog", o);
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      w.write(frames[i]);
+      cv::flip(other[i].depth, other[i].depth, 1);  // another view
+      w.writeObservation(*observationFromFrame(other[i], 2e-4, "OTHER"));
+    }
+    w.commit();
+  }
+  RawlogSource src(dir + "/two.rawlog", {});
+  EXPECT_EQ(src.size(), frames.size());
+  expectSameFrames(frames, src, 1e-4 + 1e-6);
+  src.rewind();
+  expectSameFrames(frames, src, 1e-4 + 1e-6);
+}
+
 namespace {
 std::string fileBytes(const std::string& path) {
   std::ifstream f(path, std::ios::binary);

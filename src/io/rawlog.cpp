@@ -14,6 +14,8 @@
 #include <cstring>
 #include <deque>
 #include <filesystem>
+#include <map>
+#include <optional>
 #include <stdexcept>
 
 #include <mrpt/core/Clock.h>
@@ -246,6 +248,10 @@ struct RawlogSource::Reader {
   std::string path;
   double last_scan_time = std::numeric_limits<double>::quiet_NaN();  // s, of the scan next3D gave last
   std::size_t scans = 0;  // scans next3D gave
+  // The camera read: the first scan's label unless set. Scans of other cameras, read as this one's,
+  // were frames from cameras facing elsewhere tracked as one path.
+  std::optional<std::string> camera;
+  std::map<std::string, std::size_t> other_cameras;  // scans left out, by label
 
   explicit Reader(const std::string& p) : path(p) {
     std::string err;
@@ -302,6 +308,11 @@ struct RawlogSource::Reader {
     while (auto o = nextObservation()) {
       if (auto s = std::dynamic_pointer_cast<CObservation3DRangeScan>(o)) {
         if (!s->hasRangeImage) continue;
+        if (!camera) camera = s->sensorLabel;
+        if (s->sensorLabel != *camera) {
+          ++other_cameras[s->sensorLabel];
+          continue;
+        }
         last_scan_time = mrpt::Clock::toDouble(s->timestamp);
         ++scans;
         return s;
@@ -359,6 +370,14 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
   if (count_ == 0)
     throw InputError(path, "contains no CObservation3DRangeScan with a range image (" +
                                std::to_string(scan.objects) + " entries read)");
+  camera_ = scan.camera.value_or("");
+  if (!scan.other_cameras.empty()) {
+    std::string others;
+    for (const auto& [label, n] : scan.other_cameras)
+      others += (others.empty() ? "" : ", ") + ("'" + label + "': " + std::to_string(n));
+    printWarning(path + ": scans of other cameras left out (" + others + "); the frames are those of '" + camera_ +
+                 "', the first camera in the file");
+  }
   std::sort(embedded_gt.begin(), embedded_gt.end(),
             [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
   const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
@@ -371,6 +390,7 @@ RawlogSource::~RawlogSource() = default;
 
 void RawlogSource::rewind() {
   reader_ = std::make_unique<Reader>(path_);
+  reader_->camera = camera_;
   pos_ = 0;
 }
 

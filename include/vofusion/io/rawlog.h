@@ -33,12 +33,14 @@
 
 namespace vofusion {
 
-// Reads every CObservation3DRangeScan of a rawlog in either format (standalone observations or inside
+// Reads the CObservation3DRangeScans of a rawlog in either format (standalone observations or inside
 // sensory frames), with embedded or external ("<name>_Images") images and range images in any
 // rangeUnits. Colour: the intensity image as BGR (grey images are expanded; a missing one becomes
 // mid-grey). Intrinsics: cameraParams (depth camera), unless SourceOptions::intrinsics overrides.
 // Ground truth: "<name>.groundtruth.txt" if it gives poses, else CObservationRobotPose "GROUND_TRUTH"
 // entries (a companion file that is empty or damaged gives way to them; said when damaged).
+// One camera: the first scan's sensorLabel; scans of other cameras (a rig's, Robot@Home's four) are
+// left out, said once with their labels and counts.
 // A truncated or corrupt file throws InputError ("<file>: ... at entry N"); while an entry is
 // deserialised, MRPT may allocate at most 64 MiB per buffer and 256 MiB in all (ScopedAllocationLimit),
 // so corrupt length fields cannot make it allocate gigabytes first.
@@ -58,6 +60,7 @@ class RawlogSource : public FrameSource {
   struct Reader;
   std::string path_, images_dir_;
   std::string cut_short_;  // why the frames end before the file does (RecordingCutShort)
+  std::string camera_;     // the sensorLabel of the scans read (the first scan's)
   SourceOptions opts_;
   std::size_t count_ = 0, pos_ = 0;
   Trajectory gt_;
