@@ -83,6 +83,13 @@ TEST(SkippingSource, ARecordingCutShortEndsAtItsLastWholeFrame) {
   EXPECT_EQ(src.cutShort(), "truncated rawlog (ends inside entry 9)");
   ASSERT_EQ(lines.size(), 1u);
   EXPECT_EQ(lines[0], "rec.rawlog: truncated rawlog (ends inside entry 9) (the 6 frames before it are read)");
+  // The frames read, a skipped one not among them.
+  lines.clear();
+  SkippingSource with_skip(std::make_unique<Damaged>(6, std::set<std::size_t>{2}, true), false,
+                           [&](const std::string& l) { lines.push_back(l); });
+  EXPECT_EQ(indicesRead(with_skip).size(), 5u);
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_EQ(lines[1], "rec.rawlog: truncated rawlog (ends inside entry 9) (the 5 frames before it are read, 1 skipped as damaged)");
   SkippingSource strict(std::make_unique<Damaged>(6, std::set<std::size_t>{}, true), true);
   Frame f;
   for (int i = 0; i < 6; ++i) ASSERT_TRUE(strict.next(f));

@@ -71,7 +71,9 @@ bool SkippingSource::next(Frame& frame) {
       if (strict_) throw InputError(e.file(), e.problem());
       releaseHeld();
       cut_short_ = e.problem();
-      if (warn_) warn_(std::string(e.what()) + " (the " + std::to_string(met_) + " frames before it are read)");
+      // The frames read, not met: a skipped one is no frame read (it said 100 with 3 of them skipped).
+      const std::string skipped = skipped_.empty() ? "" : ", " + std::to_string(skipped_.size()) + " skipped as damaged";
+      if (warn_) warn_(std::string(e.what()) + " (the " + std::to_string(read_) + " frames before it are read" + skipped + ")");
       break;
     }
   }
