@@ -118,8 +118,9 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   plan.cfg = loadConfig(plan.config_path);
   // A live run's --config (rawlog-grabber's sections beside ours) is checked in our sections, as
   // vofusion-grab checked it: the run resumes from its checkpoint with the file it was started with.
-  if (isGrabberConfig(plan.cfg)) checkKnownSections(plan.cfg, plan.config_path, withGrabSection());
-  else checkConfigKeys(plan.cfg, plan.config_path, withGrabSection());
+  const std::vector<ConfigSection> ours = withGrabSection();
+  if (isGrabberConfig(plan.cfg)) checkKnownSections(plan.cfg, plan.config_path, ours);
+  else checkConfigKeys(plan.cfg, plan.config_path, ours);
   auto& cfg = plan.cfg;
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
   // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.

@@ -29,8 +29,8 @@ struct LoopCloser::Impl {
   std::size_t strained_frames = 0;
   // The last well-tracked frame: where and when the camera was last known, for relocalise()'s reach
   // (the newest keyframe may be far older: a camera standing still makes none). Frame loop only.
+  // Set with every keyframe too (keyframes are made of well-tracked frames), so always set once one is.
   struct LastKnown {
-    bool valid = false;
     double timestamp = 0.0, path_length = 0.0;
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   } last_known;
@@ -305,7 +305,7 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
   const bool strained = m.residuals.strained(icp_rms);
   m.strained_frames += strained;
   const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty(), strained);
-  if (well_tracked && !frame.depth.empty()) m.last_known = {true, frame.timestamp, m.selector.pathLength(), tracked};
+  if (well_tracked && !frame.depth.empty()) m.last_known = {frame.timestamp, m.selector.pathLength(), tracked};
   if (key) {
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);
@@ -329,7 +329,7 @@ void LoopCloser::saveState(std::ostream& os) const {
   m.selector.saveState(a);
   m.residuals.saveState(a);
   a << uint64_t(m.strained_frames) << uint64_t(m.keyframes_made);
-  a << m.last_known.valid << m.last_known.timestamp << m.last_known.path_length;
+  a << m.last_known.timestamp << m.last_known.path_length;
   state::write(a, m.last_known.pose);
   {
     std::lock_guard<std::mutex> lock(m.mu);
@@ -355,7 +355,7 @@ void LoopCloser::loadState(std::istream& is) {
   m.residuals.loadState(a);
   uint64_t strained = 0, made = 0, count = 0, max_queued = 0, waits = 0;
   a >> strained >> made;
-  a >> m.last_known.valid >> m.last_known.timestamp >> m.last_known.path_length;
+  a >> m.last_known.timestamp >> m.last_known.path_length;
   state::read(a, m.last_known.pose);
   a >> max_queued >> waits;
   m.strained_frames = strained;
@@ -419,9 +419,7 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
     if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
   // Where and when the camera was last known: the last well-tracked frame (the newest keyframe may be
   // much older: a camera standing still, tracked, makes none, and its seconds there widened the reach).
-  const Keyframe& newest = m.keyframes.at(n - 1);
-  const Impl::LastKnown last = m.last_known.valid ? m.last_known
-                                                  : Impl::LastKnown{true, newest.timestamp, newest.path_length, newest.tracked};
+  const Impl::LastKnown& last = m.last_known;  // set: a keyframe exists
   // Stamps that do not go forward (a clock stepped back, recordings joined, no stamps) say nothing
   // of the time lost: no reach bound then.
   const bool timed = std::isfinite(frame.timestamp) && frame.timestamp > last.timestamp;
