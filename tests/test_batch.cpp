@@ -441,3 +441,23 @@ TEST(Batch, BenchTablesNameTheSceneAndAPartialRunLeavesTheCommittedOnesAlone) {
   for (const char* name : {"seq-01.md", "chess_seq-01.md", "fire_seq-01.md"})
     EXPECT_FALSE(fs::exists(test::sourceDir() + "/bench/results/" + name)) << name;
 }
+
+// OMP_NUM_THREADS=1 (many clusters export it) is what GNU nproc answers when it is set: the batch took
+// it for the machine's CPUs and ran its recordings one at a time. A stub vofusion stands in.
+TEST(Batch, OmpNumThreadsDoesNotShrinkTheBatch) {
+  REQUIRE_PARALLEL();
+  const unsigned cpus = std::thread::hardware_concurrency();
+  if (cpus < 2) GTEST_SKIP() << "one CPU: the batch runs one job at a time anyway";
+  const std::string dir = test::tempDir("batch_omp");
+  fs::create_directories(dir + "/build/bin");
+  std::ofstream(dir + "/build/bin/vofusion")
+      << "#!/bin/sh\nwhile [ $# -gt 0 ]; do [ \"$1\" = --out ] && out=$2; shift; done\n"
+         "mkdir -p \"$out\" && echo '{\"frames\": 1, \"fps\": 1}' > \"$out/summary.json\"\n";
+  fs::permissions(dir + "/build/bin/vofusion", fs::perms::owner_all, fs::perm_options::add);
+  std::string log;
+  test::run("TMPDIR=" + dir + " OMP_NUM_THREADS=1 OMP_THREAD_LIMIT=1 " + batch() + " --out " + dir + "/o --build " +
+                dir + "/build synthetic:room synthetic:corridor",
+            &log);
+  EXPECT_NE(log.find("batch: 2 recordings, " + std::to_string(cpus) + " at a time, 1 CPU(s) each"), std::string::npos)
+      << log;
+}
