@@ -230,11 +230,11 @@ struct LiveCheckpoints {
   std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now(), last = start;
   std::size_t written = 0;
   double seconds_writing = 0.0;
-  bool failed = false;  // one could not be written: no more are tried
+  std::string error;  // why one could not be written: no more are tried
 
   void maybeWrite(const RunSession& run) {
     const auto now = std::chrono::steady_clock::now();
-    if (every <= 0 || failed || std::chrono::duration<double>(now - last).count() < every) return;
+    if (every <= 0 || !error.empty() || std::chrono::duration<double>(now - last).count() < every) return;
     try {
       // The frames it covers were recorded before they came here: on the disk first (records and
       // images), or after a power cut the checkpoint would name frames the recording lost.
@@ -242,8 +242,8 @@ struct LiveCheckpoints {
       run.saveCheckpoint(path, origin, std::chrono::duration<double>(now - start).count());
     } catch (const InputError& e) {
       // A checkpoint is a spare; the recording is what cannot be made again: it goes on without them.
-      printWarning(std::string(e.what()) + "; no more checkpoints this session, which goes on without them");
-      failed = true;
+      error = e.what();
+      printWarning(error + "; no more checkpoints this session, which goes on without them");
       return;
     }
     last = std::chrono::steady_clock::now();
@@ -304,6 +304,7 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   if (checkpoints.every > 0)
     info.extra["checkpoints"] = {{"every_seconds", checkpoints.every}, {"written", checkpoints.written},
                                  {"seconds_writing", checkpoints.seconds_writing}};
+  if (!checkpoints.error.empty()) info.extra["checkpoints"]["error"] = checkpoints.error;
   if (source.replayed) reportSkipped(*source.replayed, info);
   RunSession::Reopen reopen;
   if (recorded > 0)

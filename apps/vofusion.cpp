@@ -182,6 +182,7 @@ struct FrameLoop {
   double seconds = 0.0;  // of the frame loop, a resumed checkpoint's included
   std::size_t checkpoints = 0;
   double checkpoint_seconds = 0.0;  // writing them
+  std::string checkpoint_error;     // why one could not be written (no more were tried)
 };
 
 // Why ICP was refused most often: what a run that tracked no frame tells the user.
@@ -220,8 +221,17 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   double last_checkpoint = 0.0;
   std::size_t checkpointed_at = std::size_t(-1);  // frames done at the last checkpoint
   const auto checkpoint = [&] {
+    if (!loop.checkpoint_error.empty()) return;
     const double start = progress.elapsedSeconds();
-    run.saveCheckpoint(plan.checkpoint_path, plan.origin, before + start);
+    try {
+      run.saveCheckpoint(plan.checkpoint_path, plan.origin, before + start);
+    } catch (const InputError& e) {
+      // A checkpoint is a spare (the earlier one stays whole): a full disk costs the checkpoints, not
+      // the run, nor what a stop writes.
+      loop.checkpoint_error = e.what();
+      printWarning(loop.checkpoint_error + "; no more checkpoints this run, which goes on without them");
+      return;
+    }
     checkpointed_at = loop.done;
     last_checkpoint = progress.elapsedSeconds();
     loop.checkpoint_seconds += last_checkpoint - start;
@@ -298,6 +308,7 @@ int body(int argc, char** argv) {
   if (plan.checkpoint_every > 0 || resumed_at)
     info.extra["checkpoints"] = {{"every_seconds", plan.checkpoint_every}, {"written", loop.checkpoints},
                                  {"seconds_writing", loop.checkpoint_seconds}, {"resumed_at_frame", resumed_at}};
+  if (!loop.checkpoint_error.empty()) info.extra["checkpoints"]["error"] = loop.checkpoint_error;
   source->stop();  // the read ahead of a stopped run is done before its skipped frames are counted
   reportSkipped(*input.frames, info);
   source.reset();
