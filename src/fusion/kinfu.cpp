@@ -97,6 +97,7 @@ KinFu::KinFu(const KinFuParams& params, const Eigen::Isometry3d& initial_pose, P
 KinFu::~KinFu() = default;
 
 bool KinFu::hasModel() const { return impl_->have_model; }
+std::pair<float, float> KinFu::fusedDepthRange() const { return {impl_->params.tsdf.min_depth, impl_->params.tsdf.max_depth}; }
 
 void KinFu::predictAgain(const Eigen::Isometry3d& pose) {
   if (!impl_->have_model) return;

@@ -63,6 +63,7 @@ class KinFu final : public ModelSource {
 
   // ModelSource: a frame was fused (or a map resumed): there is a model to track against.
   bool hasModel() const override;
+  std::pair<float, float> fusedDepthRange() const override;
   const ModelPrediction& model() const override;
   // The camera was placed anew at `pose` (relocalisation): the volume moves there and the model is ray
   // cast again (unhinted) before the next frame is tracked.

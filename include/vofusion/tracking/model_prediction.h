@@ -2,6 +2,7 @@
 // What tracking reads from the map and hands back to it. The map sits above tracking (a frame flows
 // io -> odometry -> tracking -> fusion): fusion's KinFu implements ModelSource and fuses FrameToFuse,
 // and tracking never includes it.
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -44,6 +45,8 @@ class ModelSource {
   // After a map was resumed or the camera placed anew: the model ray cast (unhinted) from `pose` at the
   // tracking resolution `track_cam`, once; otherwise nothing.
   virtual void predictIfStale(const Eigen::Isometry3d& pose, const CameraIntrinsics& track_cam, StageTimes& times) = 0;
+  // The depths it fuses, m (min, max): a first frame with no reading there would start an empty model.
+  virtual std::pair<float, float> fusedDepthRange() const = 0;
 
  protected:
   ~ModelSource() = default;
