@@ -152,6 +152,18 @@ void checkMapPath(const std::string& path) {
   ensureWritableDirectory(parent.empty() ? "." : parent.string());
 }
 
+// A run that checkpoints into a folder holding a checkpoint it does not go on from would replace it at
+// its first checkpoint and delete its own at the end: an earlier run's, which --resume could still
+// finish, would be lost.
+void refuseToReplaceACheckpoint(const RunPlan& plan) {
+  std::error_code ec;
+  if (plan.checkpoint_every <= 0 || !std::filesystem::exists(std::filesystem::symlink_status(plan.checkpoint_path, ec)))
+    return;
+  if (plan.resume && std::filesystem::equivalent(*plan.resume, plan.checkpoint_path, ec)) return;
+  throw InputError(plan.checkpoint_path, "an earlier run's checkpoint, which --checkpoint-every would replace: go on from it "
+                                         "with --resume " + plan.checkpoint_path + ", or delete it to start over");
+}
+
 RunPlan planRun(const CommandLine& cl) {
   if (cl.positional().size() > 1) throw InputError("usage", "more than one input given");
   const auto out_dir = cl.value("--out");
@@ -171,6 +183,7 @@ RunPlan planRun(const CommandLine& cl) {
   if (plan.save_volume) checkMapPath(*plan.save_volume);
   plan.checkpoint_every = cl.number("--checkpoint-every", 0.0, -1e-9, 1e6);
   plan.checkpoint_path = (std::filesystem::path(plan.out_dir) / "checkpoint").string();
+  refuseToReplaceACheckpoint(plan);
   plan.origin = runOrigin(plan, cl);
   return plan;
 }

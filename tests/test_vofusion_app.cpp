@@ -25,6 +25,11 @@ namespace fs = std::filesystem;
 
 namespace {
 
+std::string fileBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
 // A smaller volume keeps the test quick; everything else is the shipped default.
 std::string smallConfig(const std::string& dir) {
   const std::string path = dir + "/small.ini";
@@ -224,6 +229,21 @@ TEST(VofusionApp, ACheckpointIsBoundToItsRunAndOutlivesAnotherRunsEnd) {
   EXPECT_NE(log.find("made by another run ('--max-frames 200' where this run has '--max-frames 199')"), std::string::npos) << log;
   ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:corridor --max-frames 3" + cfg, &log), 0) << log;
   EXPECT_TRUE(RunSession::peek(checkpoint).has_value()) << "the stopped run's checkpoint was deleted by another run";
+  // One that checkpoints too would replace it, then delete its own: refused before the first frame.
+  const std::string before = fileBytes(checkpoint);
+  EXPECT_EQ(test::run("{ " + test::app("vofusion") + " synthetic:corridor --max-frames 3 --checkpoint-every 0.000001" + cfg +
+                          " 2>&1 >/dev/null; }",
+                      &log),
+            2);
+  EXPECT_EQ(log, "vofusion: error: " + checkpoint + ": an earlier run's checkpoint, which --checkpoint-every would replace: go on "
+                 "from it with --resume " + checkpoint + ", or delete it to start over\n");
+  EXPECT_TRUE(fileBytes(checkpoint) == before) << "the stopped run's checkpoint was replaced";
+  // Going on from it is what it is there for.
+  EXPECT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 200 --checkpoint-every 1000 --resume " + checkpoint + cfg,
+                      &log),
+            0)
+      << log;
+  EXPECT_FALSE(fs::exists(checkpoint)) << "a finished run leaves no checkpoint of its own";
 }
 
 // Every frame lost (here no reading within [min_depth, max_depth]) is no reconstruction: one line, exit
