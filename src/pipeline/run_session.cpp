@@ -154,6 +154,20 @@ SavedReport readReport(state::Archive& a) {
   return r;
 }
 
+// The bytes one report takes in a checkpoint (all of fixed size).
+std::size_t savedReportBytes() {
+  std::ostringstream os;
+  auto a = state::archiveOf(os);
+  writeReport(a, SavedReport());
+  return os.str().size();
+}
+
+std::uintmax_t fileBytes(const std::string& path) {
+  std::error_code ec;
+  const std::uintmax_t n = std::filesystem::file_size(path, ec);
+  return ec ? 0 : n;
+}
+
 }  // namespace
 
 RunSession::RunSession(const mrpt::config::CConfigFileBase& cfg, TrackingMode mode, const std::string& out_dir,
@@ -252,19 +266,27 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
   try {
     // MRPT sizes (and zero-fills) strings and vectors by the length fields it reads: one corrupt field
     // asked for 4 GiB before the read failed. No request of a real checkpoint's comes near 1 GiB (a
-    // run's peak is ~700 MiB in all).
-    const ScopedAllocationLimit limit(std::size_t(1) << 30, std::numeric_limits<std::size_t>::max());
+    // run's peak is ~700 MiB in all), but for the reports' vector, reserved outside the limit.
+    constexpr std::size_t kMaxRequest = std::size_t(1) << 30, kNoTotal = std::numeric_limits<std::size_t>::max();
+    uint64_t frames = 0;
     {
+      const ScopedAllocationLimit limit(kMaxRequest, kNoTotal);
       auto a = state::archiveOf(is);
       std::string saved_origin;
-      uint64_t frames = 0;
       a >> saved_origin;
       if (saved_origin != origin)
         throw InputError(path, "made by another run (" + firstDifference(saved_origin, origin) +
                                    "): resume with the same input, --config, --mode and options, or delete it to start over");
       a >> frames >> c.seconds;
-      c.frames = frames;
-      reports_.clear();
+    }
+    c.frames = frames;
+    // Reserved at once, as many as the file can hold whatever its count says: grown by doubling, the
+    // vector asked for room for twice the reports past 2^20 frames (a 10-hour live session), over 1 GiB.
+    reports_.clear();
+    reports_.reserve(std::min<uint64_t>(frames, fileBytes(path) / savedReportBytes()));
+    const ScopedAllocationLimit limit(kMaxRequest, kNoTotal);
+    {
+      auto a = state::archiveOf(is);
       for (uint64_t i = 0; i < frames; ++i) reports_.push_back(readReport(a));
     }
     rec_.loadState(is);
