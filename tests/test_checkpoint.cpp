@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include <mrpt/config/CConfigFileMemory.h>
+#include <nlohmann/json.hpp>
 
 #include "support.h"
 #include "vofusion/core/deflate.h"
@@ -22,6 +23,7 @@
 #include "vofusion/loop/loop_closer.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_session.h"
+#include "vofusion/pipeline/run_outputs.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
 using namespace vofusion;
@@ -323,4 +325,72 @@ TEST(Checkpoint, RunsResumedFromTheirLastCheckpointWriteTheCleanRunsOutputs) {
   std::string log;
   ASSERT_EQ(test::run(vofusionCommand(killed, "--resume " + killed + "/checkpoint"), &log), 0) << log;
   expectSameOutputs(clean, killed);
+}
+
+namespace {
+
+// The synthetic room as a recording that fails to read from frame `fails_at` on (0: never).
+class FailingRoom : public FrameSource {
+ public:
+  FailingRoom(const sim::SyntheticSequence& seq, std::size_t fails_at) : seq_(seq), fails_at_(fails_at) {}
+  bool next(Frame& frame) override {
+    if (next_ == seq_.size()) return false;
+    if (fails_at_ && next_ >= fails_at_)
+      throw InputError("/media/disk/room/depth/" + std::to_string(next_) + ".png", "input/output error");
+    frame = seq_.render(next_++);
+    return true;
+  }
+  std::size_t size() const override { return seq_.size(); }
+  void rewind() override { next_ = 0; }
+  std::string name() const override { return "/media/disk/room"; }
+
+ private:
+  const sim::SyntheticSequence& seq_;
+  std::size_t fails_at_, next_ = 0;
+};
+
+// A run of the room whose loops re-fuse the map: loops within its short path, and any correction.
+std::unique_ptr<RunSession> roomRunToRefuse(const sim::SyntheticSequence& seq, const std::string& out_dir) {
+  mrpt::config::CConfigFileMemory cfg = test::quickRoomConfig();
+  cfg.write("loop", "keyframe_translation", 0.05);
+  cfg.write("loop", "recent_keyframes", 2);
+  cfg.write("loop", "min_travel", 0.1);
+  cfg.write("loop", "index_spacing", 0.0);
+  cfg.write("loop", "reintegrate_min_correction", 0.0);
+  OutputParams out;
+  out.write_rawlog = false;
+  auto run = std::make_unique<RunSession>(cfg, TrackingMode::Joint, out_dir, out, MeshCleanParams());
+  for (std::size_t i = 0; i < seq.size(); ++i) run->process(seq.render(i));
+  run->reconstruction().finish();
+  return run;
+}
+
+}  // namespace
+
+// A recording that cannot be read again for re-fusion (moved or unmounted since it was tracked) costs
+// the re-fusion, not the run: the outputs are written, the mesh of the map fused at the tracked poses
+// (or of the frames fused again before a read failed), and summary.json says why. The exception left
+// RunSession::finish and every output was lost.
+TEST(RunSessionEnd, ARecordingThatCannotBeReadAgainCostsTheRefusionOnly) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 90));
+  const std::string dir = test::tempDir("run_session_no_reopen");
+  RunInfo info;
+  info.input = "room";
+  {
+    const auto run = roomRunToRefuse(seq, dir + "/gone");
+    ASSERT_TRUE(run->reconstruction().mapNeedsReintegration()) << "no loop to re-fuse for";
+    const nlohmann::json summary =
+        run->finish(info, []() -> std::unique_ptr<FrameSource> { throw InputError("/media/disk/room", "no such folder"); });
+    EXPECT_EQ(summary["loop_closure_reintegration"]["error"], "/media/disk/room: no such folder") << summary.dump();
+    EXPECT_FALSE(summary["loop_closure"]["map_reintegrated"].get<bool>());
+    for (const char* file : {"trajectory.txt", "mesh.ply", "summary.json"}) EXPECT_TRUE(fs::exists(dir + "/gone/" + file)) << file;
+  }
+  {
+    const auto run = roomRunToRefuse(seq, dir + "/midway");
+    const nlohmann::json summary = run->finish(info, [&] { return std::make_unique<FailingRoom>(seq, 40); });
+    EXPECT_EQ(summary["loop_closure_reintegration"]["error"], "/media/disk/room/depth/40.png: input/output error") << summary.dump();
+    EXPECT_TRUE(summary["loop_closure"]["map_reintegrated"].get<bool>());
+    EXPECT_GT(summary["mesh"]["faces"].get<std::size_t>(), 0u) << "the frames fused again before the failure";
+    for (const char* file : {"trajectory.txt", "mesh.ply", "summary.json"}) EXPECT_TRUE(fs::exists(dir + "/midway/" + file)) << file;
+  }
 }

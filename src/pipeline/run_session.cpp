@@ -343,14 +343,34 @@ std::string RunSession::checkpointOrigin(const std::string& input, TrackingMode 
 void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
   // No recording to read again (vofusion interrupted, vofusion-grab without one): the app says why.
   if (!rec_.mapNeedsReintegration() || !reopen) return;
+  // A recording that cannot be opened again (moved, unmounted since) costs the re-fusion: the map fused
+  // at the tracked poses is meshed, the trajectories are the loop-closed ones all the same.
+  std::unique_ptr<FrameSource> again;
+  try {
+    again = reopen();
+  } catch (const std::exception& e) {
+    const std::string why = oneLineMessage(e);
+    printWarning(why + "; the map is not fused again at the loop-closed poses (its mesh is the tracked poses')");
+    info.extra["loop_closure_reintegration"] = {{"error", why}};
+    return;
+  }
   if (premesher_) premesher_->discard();  // made from the map fused at the tracked poses: none is expected to match
-  auto again = reopen();
   Progress progress(info.app + " [re-fusing at the loop-closed poses]", rec_.framesProcessed());
-  const std::size_t fused =
-      rec_.reintegrate([&](Frame& f) { return again->next(f); }, [&](std::size_t n) { progress.update(n); });
+  std::size_t read = 0;
+  nlohmann::json& about = info.extra["loop_closure_reintegration"];
+  about["from"] = std::filesystem::path(again->name()).filename().string();
+  try {
+    about["frames_fused"] =
+        rec_.reintegrate([&](Frame& f) { return again->next(f); }, [&](std::size_t n) { progress.update(read = n); });
+  } catch (const std::exception& e) {
+    // Midway (an I/O error, a frame damaged since under --strict): the map holds the frames re-fused
+    // before it, which is what is left (the tracked map is gone by then).
+    about["error"] = oneLineMessage(e);
+    printWarning(about["error"].get<std::string>() + "; re-fusing stopped after " + std::to_string(read) + " of " +
+                 std::to_string(rec_.framesProcessed()) + " frames: the mesh holds those");
+  }
   progress.finish();
-  info.extra["loop_closure_reintegration"] = {
-      {"frames_fused", fused}, {"seconds", progress.elapsedSeconds()}, {"from", std::filesystem::path(again->name()).filename().string()}};
+  about["seconds"] = progress.elapsedSeconds();
 }
 
 nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume) {
