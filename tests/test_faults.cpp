@@ -555,6 +555,18 @@ TEST(FaultsOutput, DiskFullFileSizeLimit) {
     EXPECT_EQ(o.error_lines[0].find(".staging"), std::string::npos) << o.error_lines[0];
     EXPECT_EQ(o.error_lines[0].find(".tmp-"), std::string::npos) << o.error_lines[0];
   }
+  {
+    // vofusion's poses.rawlog: the image its writer thread could not write, named once (it was
+    // "poses.rawlog: <image>: cannot write image").
+    const std::string out = outWithEarlierResult("faults_fsize_poses");
+    const std::string cfg = test::tempDir("faults_fsize_poses_cfg") + "/rawlog.ini";
+    writeText(cfg, "[output]\nmesh = false\n");
+    const std::string cmd = trackCmd(test::app("vofusion"), f.dir, out, "--config " + quote(cfg));
+    expectCleanFailure(cmd, out + "/poses_Images/", "cannot write image", out, "trap \"\" XFSZ; ulimit -f 20; ");
+    const Outcome o = runSplit(cmd, "trap \"\" XFSZ; ulimit -f 20; ");
+    ASSERT_EQ(o.error_lines.size(), 1u) << o.stderr_text;
+    EXPECT_EQ(o.error_lines[0].find("poses.rawlog"), std::string::npos) << o.error_lines[0];
+  }
   const std::string out = test::tempDir("faults_fsize_rawlog");
   writeText(out + "/x.rawlog", kEarlier);
   expectCleanFailure(quote(test::app("tum2rawlog")) + " " + quote(f.dir) + " " + quote(out + "/x.rawlog") + " --overwrite",

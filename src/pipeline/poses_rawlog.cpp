@@ -8,8 +8,7 @@
 namespace vofusion {
 
 void PosesRawlog::finish(const Reconstruction& rec, const Trajectory& ground_truth) {
-  const std::string err = stop();
-  if (!err.empty()) throw InputError(writer_.path(), err);
+  if (const std::optional<InputError> err = stop()) throw *err;
   if (!ground_truth.empty()) writer_.writeGroundTruth(ground_truth);
   // Loop closure: the written path (smoothed, loop-closed: trajectory.txt) follows the frames as
   // "VOFUSION_POSE_OPTIMISED" (the tracked ones went in with each frame as "VOFUSION_POSE"), one per

@@ -4,6 +4,7 @@
 #include <condition_variable>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <utility>
@@ -11,6 +12,7 @@
 #include <mrpt/core/Clock.h>
 #include <mrpt/obs/CObservationRobotPose.h>
 
+#include "vofusion/core/errors.h"
 #include "vofusion/core/frame.h"
 #include "vofusion/core/thread_name.h"
 #include "vofusion/core/trajectory.h"
@@ -28,13 +30,13 @@ class PosesRawlog {
   void push(const Frame& f, const FrameReport& r) {
     std::unique_lock<std::mutex> lock(mu_);
     // Bounded: the offline loop waits rather than piling frames up in memory.
-    space_.wait(lock, [&] { return queue_.size() < 8 || !error_.empty(); });
-    if (!error_.empty()) return;
+    space_.wait(lock, [&] { return queue_.size() < 8 || error_; });
+    if (error_) return;
     queue_.push_back({f, r});
     ready_.notify_one();
   }
   // Waits for the queue to drain; returns the writer's error, if any.
-  std::string stop() {
+  std::optional<InputError> stop() {
     {
       std::lock_guard<std::mutex> lock(mu_);
       done_ = true;
@@ -70,7 +72,10 @@ class PosesRawlog {
         write(item.first, item.second);
       } catch (const std::exception& e) {
         std::lock_guard<std::mutex> lock(mu_);
-        error_ = e.what();
+        // One line naming the file: an InputError names the one it could not write (the rawlog or an
+        // image beside it), anything else (MRPT's serialisation) is the rawlog's.
+        const auto* named = dynamic_cast<const InputError*>(&e);
+        error_ = named ? InputError(named->file(), named->problem()) : InputError(writer_.path(), oneLineMessage(e));
         queue_.clear();
         space_.notify_all();
         return;
@@ -93,7 +98,7 @@ class PosesRawlog {
   std::condition_variable ready_, space_;
   std::deque<std::pair<Frame, FrameReport>> queue_;
   bool done_ = false;
-  std::string error_;
+  std::optional<InputError> error_;
   std::thread thread_;
 };
 
