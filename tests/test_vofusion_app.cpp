@@ -124,7 +124,9 @@ TEST(VofusionApp, APictureThatCannotBeRenderedCostsThePictureOnly) {
 }
 
 // Post-processing that fails (here [mesh] repair = false on marching cubes' non-manifold crossings)
-// writes the mesh as it came: mesh.ply, and mesh_full.ply beside it (it was written empty).
+// writes the mesh as it came: mesh.ply, and mesh_full.ply beside it (it was written empty); so does
+// none (clean_mesh = false), where mesh_full.ply was not written at all. Region by region, mesh.ply
+// keeps its normals.
 TEST(VofusionApp, AFailedPostProcessingWritesTheFullMeshAsItCame) {
   const std::string dir = test::tempDir("vofusion_app_clean_failed");
   std::ofstream(dir + "/c.ini") << "[output]\nsave_full_mesh = true\nwrite_rawlog = false\n[mesh]\nrepair = false\n"
@@ -139,6 +141,29 @@ TEST(VofusionApp, AFailedPostProcessingWritesTheFullMeshAsItCame) {
   EXPECT_GT(mesh.faces.size(), 1000u);
   EXPECT_EQ(full.faces, mesh.faces);
   EXPECT_EQ(full.vertices, mesh.vertices);
+  // So does no post-processing at all ([output] clean_mesh = false): mesh_full.ply was not written.
+  std::ofstream(dir + "/raw.ini") << "[output]\nsave_full_mesh = true\nclean_mesh = false\nwrite_rawlog = false\n"
+                                     "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n";
+  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + dir + "/raw.ini --out " + dir + "/raw",
+                      &log),
+            0)
+      << log;
+  const TriangleMesh raw = readPly(dir + "/raw/mesh.ply"), raw_full = readPly(dir + "/raw/mesh_full.ply");
+  EXPECT_GT(raw.faces.size(), 1000u);
+  EXPECT_EQ(raw_full.faces, raw.faces);
+  // Meshed region by region (no mesh_full.ply asked for), the welded mesh as it came keeps normals:
+  // the regions' were left behind at the welding, and mesh.ply had none.
+  std::ofstream(dir + "/regions.ini") << "[output]\nwrite_rawlog = false\n[mesh]\nrepair = false\n"
+                                         "[kinfu]\nvolume_voxels = 256\nvoxel_size = 0.012\ntruncation = 0.05\n";
+  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config " + dir + "/regions.ini --out " + dir +
+                          "/regions",
+                      &log),
+            0)
+      << log;
+  ASSERT_NE(log.find("mesh post-processing failed"), std::string::npos) << log;
+  const TriangleMesh regions = readPly(dir + "/regions/mesh.ply");
+  EXPECT_GT(regions.faces.size(), 1000u);
+  EXPECT_EQ(regions.normals.size(), regions.vertices.size());
 }
 
 TEST(VofusionApp, SyntheticRunWritesEveryOutput) {

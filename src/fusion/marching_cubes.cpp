@@ -102,18 +102,6 @@ inline bool usable(const Voxel* v, int min_weight) {
 }
 
 
-// Area-weighted vertex normals, oriented like the faces.
-void computeNormals(TriangleMesh& mesh) {
-  mesh.normals.assign(mesh.vertices.size(), Eigen::Vector3f::Zero());
-  for (const auto& f : mesh.faces) {
-    const Eigen::Vector3f n = (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]);
-    for (int k = 0; k < 3; ++k) mesh.normals[f[k]] += n;
-  }
-  for (auto& n : mesh.normals) {
-    const float len = n.norm();
-    n = len > 0.f ? Eigen::Vector3f(n / len) : Eigen::Vector3f(0.f, 0.f, 1.f);
-  }
-}
 
 // Whether the crossing on the edge at voxel (x,y,z) of brick i along `axis` is one another region's
 // cells also use: cells using that edge lie at the voxel minus 0 or 1 along each other axis, another
@@ -361,7 +349,7 @@ TriangleMesh extract(const std::vector<BrickRef>& bricks, std::size_t owned, flo
   if (seam && region_bricks > 0 && owned > 0) region = regionOf(bricks[0].coord, region_bricks);
   mergeVoxelCrossings(verts, mesh, seam, region, region_bricks);
   dropUnusedVertices(mesh, seam);
-  computeNormals(mesh);
+  computeVertexNormals(mesh);
   return mesh;
 }
 
@@ -445,7 +433,7 @@ TriangleMesh marchingCubesStreamed(const std::vector<Eigen::Vector3i>& coords, c
     });
     for (const auto& f : part.faces) mesh.faces.push_back({to_mesh[f[0]], to_mesh[f[1]], to_mesh[f[2]]});
   });
-  computeNormals(mesh);
+  computeVertexNormals(mesh);
   return mesh;
 }
 

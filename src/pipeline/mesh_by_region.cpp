@@ -255,6 +255,8 @@ void cleanWelded(RegionMeshResult& out, const MeshCleanParams& params, double me
   const std::size_t removed = out.report.components_removed;
   if (!out.mesh.empty()) out.report = cleanWeldedRegions(out.mesh, rest);
   else out.report.success = true;
+  // Failed: the welded mesh as it came, whose regions' normals were left behind at the welding.
+  if (!out.report.success && params.recompute_normals) computeVertexNormals(out.mesh);
   out.report.simplification = regional;
   out.report.components_removed += removed;
   out.report.steps.insert(out.report.steps.begin(), step);

@@ -73,20 +73,22 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
     writePly(out.path("mesh_raw.ply"), mesh);
     out.wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");
   }
+  TriangleMesh full;  // post-processed, not simplified
+  bool full_made = false;
   if (!by_region && p.clean_mesh && !mesh.empty()) {
     const std::size_t raw_faces = mesh.faces.size();
-    TriangleMesh full;
     const MeshCleanReport report = cleanMesh(mesh, mesh_params, p.save_full_mesh ? &full : nullptr);
     s["mesh_clean"] = json::parse(report.toJson());
     sayWhatCleaningLeft(report);
     if (report.simplification.ran) s["mesh_simplification"] = simplificationJson(report.simplification, raw_faces);
-    if (p.save_full_mesh) {
-      // Post-processing failed: the mesh before simplification is the mesh as it came, as mesh.ply is
-      // (`full` is left empty, and was written so).
-      const TriangleMesh& before = report.success ? full : mesh;
-      writePly(out.path("mesh_full.ply"), before);
-      out.wrote("mesh_full.ply", std::to_string(before.faces.size()) + " faces" + (report.success ? "" : ", not post-processed"));
-    }
+    full_made = report.success;
+  }
+  if (p.save_full_mesh) {
+    // Not post-processed (clean_mesh off, nothing meshed, or post-processing failed): the mesh as it
+    // came, as mesh.ply is (it was written empty, or not at all).
+    const TriangleMesh& before = full_made ? full : mesh;
+    writePly(out.path("mesh_full.ply"), before);
+    out.wrote("mesh_full.ply", std::to_string(before.faces.size()) + " faces" + (full_made ? "" : ", not post-processed"));
   }
   s["mesh"] = meshJson(mesh);
   writePly(out.path("mesh.ply"), mesh);

@@ -18,4 +18,7 @@ struct TriangleMesh {
   bool empty() const { return faces.empty(); }
 };
 
+// Area-weighted vertex normals, oriented like the faces (+z for a vertex of no face's area).
+void computeVertexNormals(TriangleMesh& mesh);
+
 }  // namespace vofusion
