@@ -26,7 +26,7 @@ std::vector<ConfigKey> meshCleanKeys(MeshCleanParams& p) {
       {"hole_fairing", &p.hole_fairing, "fair (smooth) hole patches; false: flat refined patch"},
       {"max_simplify_error", &p.max_simplify_error, "m, quadric simplification up to this error, an RMS distance to the merged faces (0: off)", 0.0, 1.0},
       {"target_faces", &p.target_faces, "faces of the whole mesh, edge-collapse simplification target, shared among regions by their faces (0: off)", 0.0, 1000000000.0},
-      {"target_edge_length", &p.target_edge_length, "m, simplify until no shorter edge is left (0: off)", 0.0, 10.0},
+      {"target_edge_length", &p.target_edge_length, "m, simplify until no shorter edge is left (0: off; only with max_simplify_error = 0)", 0.0, 10.0},
       {"smooth_iterations", &p.smooth_iterations, "iterations of curvature-flow shape smoothing (0: off)", 0.0, 1000.0},
       {"smooth_time", &p.smooth_time, "time step of the curvature flow per iteration", 0.0, 1.0},
       {"relax_iterations", &p.relax_iterations, "iterations of tangential relaxation (0: off)", 0.0, 1000.0},

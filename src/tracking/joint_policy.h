@@ -51,8 +51,9 @@ fusion::PhotometricTerms photometricTerms(const TrackerParams& P, const ModelPre
                                           const std::vector<fusion::IntensityLevel>& current,
                                           const std::vector<fusion::DepthLevel>& levels);
 
-// Smallest / largest eigenvalue of the (depth-scaled) ICP system below which mode kinfu rejects the
-// whole ICP (weaker directions keep the prediction by icp_degenerate_ratio); in mode joint it only caps
+// Smallest / largest eigenvalue of the (depth-scaled) ICP system below which modes kinfu and
+// paper-handoff reject the whole ICP (weaker directions keep the prediction by icp_degenerate_ratio;
+// paper-handoff then takes the odometry's pose, as the paper hands over); in mode joint it only caps
 // that ratio when there is neither a seed nor a prior. Fixed, not a key: 5e-7 and 2e-6 left every run
 // of mode joint the same (16 inputs, 2026-11-28, docs/tracking.md), and every run of mode kinfu but a
 // loop scene it loses anyway (2.86 m off, 19 mm more at 2e-6).

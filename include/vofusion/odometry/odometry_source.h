@@ -25,8 +25,9 @@ class OdometrySource {
   // external range image is read checked whole (io/external_files.h), the observation left as it is.
   OdometryResult process(const mrpt::obs::CObservation3DRangeScan& obs);
 
-  // Camera-to-world of the last frame processed. A frame whose motion failed moves on by the last
-  // increment (constant velocity), flagged by hasIncrement() == false.
+  // Camera-to-world of the last frame processed. A frame whose motion failed moves on by one frame's
+  // share of the last match's motion (constant velocity: a match that spanned k frames gives 1/k of
+  // it), flagged by hasIncrement() == false.
   const mrpt::poses::CPose3D& pose() const { return pose_; }
   // Pose change to the last frame (camera-to-camera) from the last frame with an increment: the previous
   // one, or the one before the failed frames between (which have none); valid if hasIncrement(). The

@@ -1,8 +1,9 @@
 #pragma once
 // The photometric term of joint tracking (as Kintinuous' and ElasticFusion's RGB-D tracking): each
 // textured pixel of the frame the model was last ray cast for keeps its intensity when its model
-// point is projected into the current frame. Texture then holds the directions the geometry leaves
-// weak, in the same Gauss-Newton as the point-to-plane residuals.
+// point is projected into the current frame, in the same Gauss-Newton as the point-to-plane
+// residuals. Like every joint term it acts in the directions the geometry constrains (JointTerms in
+// projective_icp.h: the weak ones go to the prior's pose), where it sharpens ICP's estimate.
 #include <vector>
 
 #include <Eigen/Geometry>

@@ -42,7 +42,8 @@ class MotionHistory {
   void setPose(const Eigen::Isometry3d& T) { pose_ = T; }
   // A new start at T (a resumed map): no recent frames, no motion.
   void restart(const Eigen::Isometry3d& T);
-  // Checkpoints: all of it.
+  // Checkpoints: all of it but the held frames, which the caller hands over again before each frame
+  // (Reconstruction::process calls holdFrames before tracking).
   void saveState(state::Archive& a) const;
   void loadState(state::Archive& a);
 
