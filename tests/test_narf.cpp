@@ -53,6 +53,25 @@ TEST(Narf, DownsampleKeepsNearestReading) {
   EXPECT_FLOAT_EQ(s.at<float>(1, 1), 3.f);
 }
 
+// A keypoint at its block's centre, as detectNarf places it, reads its block's own nearest reading: the
+// one the reduced depth took, for every factor. An even factor's centre falls between pixels, and the
+// window about the rounded centre took a row and a column of the next block (here a nearer surface's
+// 1 m beside a 2 m block).
+TEST(Narf, AKeypointReadsItsOwnBlocksReading) {
+  for (int f = 2; f <= 8; ++f) {
+    cv::Mat d(4 * f, 4 * f, CV_32F, cv::Scalar(2.f));
+    d.col(f).setTo(1.f);              // the first column of block (1, *)
+    d.row(f).setTo(1.5f);             // the first row of block (*, 1)
+    d.at<float>(f - 1, f - 1) = 1.8f;  // block (0, 0)'s last pixel
+    const cv::Mat reduced = downsampleDepth(d, f);
+    for (int by = 0; by < 4; ++by)
+      for (int bx = 0; bx < 4; ++bx) {
+        const cv::Point2f centre((bx + 0.5f) * f - 0.5f, (by + 0.5f) * f - 0.5f);
+        EXPECT_EQ(narfBlockDepth(d, centre, f), reduced.at<float>(by, bx)) << "factor " << f << ", block " << bx << ", " << by;
+      }
+  }
+}
+
 TEST(Narf, KeypointsSitOnTheBoxNotOnTheFlatWall) {
   CameraIntrinsics cam;
   cam = cam.scaled(0.5);  // 320x240 keeps the test quick

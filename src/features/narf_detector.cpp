@@ -144,4 +144,18 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
   return detectNarf(prepareNarf(depth, camera, p));
 }
 
+float narfBlockDepth(const cv::Mat& depth, cv::Point2f centre, int factor) {
+  // The block's first pixel is (factor - 1) / 2 before its centre: for an even factor the centre falls
+  // between pixels, and a window about the rounded centre took a row and a column of the next block
+  // (across a depth border, a nearer surface's reading).
+  const int x0 = cvRound(centre.x - 0.5f * float(factor - 1)), y0 = cvRound(centre.y - 0.5f * float(factor - 1));
+  float nearest = 0.f;
+  for (int y = std::max(0, y0); y < std::min(depth.rows, y0 + factor); ++y) {
+    const float* d = depth.ptr<float>(y);
+    for (int x = std::max(0, x0); x < std::min(depth.cols, x0 + factor); ++x)
+      if (d[x] > 0.f && (nearest == 0.f || d[x] < nearest)) nearest = d[x];
+  }
+  return nearest;
+}
+
 }  // namespace vofusion

@@ -333,7 +333,7 @@ float RgbdOdometry::Impl::depthOf(const cv::Mat& depth, const cv::KeyPoint& k, c
   if (x < 0 || y < 0 || x >= depth.cols || y >= depth.rows) return 0.f;
   // A NARF keypoint stands for a block of the reduced depth image whose value is the block's nearest
   // reading (it sits on foreground borders): take that reading, not the centre pixel's.
-  if (k.class_id == 1 && params.narf.downsample > 1) return keypointDepth(depth, x, y, params.narf.downsample / 2, true);
+  if (k.class_id == 1 && params.narf.downsample > 1) return narfBlockDepth(depth, at, params.narf.downsample);
   return keypointDepth(depth, x, y, params.depth_window, nearest_depth);
 }
 

@@ -53,4 +53,9 @@ std::vector<cv::KeyPoint> detectNarf(const NarfPrepared& prepared);
 // (not an average: averaging across an occlusion boundary invents surfaces).
 cv::Mat downsampleDepth(const cv::Mat& depth, int factor);
 
+// The reading a NARF keypoint at `centre` stands for (detectNarf places it at its block's centre, in
+// full-resolution pixels; the centre may have moved since, by the image motion): the nearest one in the
+// factor x factor pixels about it, as downsampleDepth took it; 0 if none. factor in [1, 21].
+float narfBlockDepth(const cv::Mat& depth, cv::Point2f centre, int factor);
+
 }  // namespace vofusion
