@@ -912,3 +912,21 @@ TEST(MeshClean, ARegionsSeamIsNotWeldedAwayByDistance) {
   ASSERT_TRUE(report.success) << report.failure;
   EXPECT_EQ(seamPoints(a), seam_before);
 }
+
+// A face naming a vertex past the end is refused before meshoptimizer reads it (unchecked: Debian's
+// build has its asserts off), the mesh untouched. A region went to the quadric collapse before the
+// repair's own check.
+TEST(MeshClean, TheQuadricCollapseRefusesAFacePastItsVertices) {
+  TriangleMesh m = icosphere(2);
+  m.faces[5][1] = std::uint32_t(m.vertices.size());
+  const TriangleMesh before = m;
+  std::vector<std::uint8_t> locked;
+  try {
+    simplifyByQuadrics(m, 0.01, 0, locked);
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), "a face references vertex " + std::to_string(before.vertices.size()) + " of " +
+                                         std::to_string(before.vertices.size()));
+  }
+  EXPECT_EQ(m.faces, before.faces);
+}

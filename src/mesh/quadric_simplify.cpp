@@ -37,6 +37,10 @@ bool simplifyByQuadrics(TriangleMesh& mesh, double max_error, std::size_t target
   const std::size_t n = mesh.vertices.size();
   if (mesh.faces.empty() || n == 0) return true;
   if (!locked.empty() && locked.size() != n) throw std::invalid_argument("simplifyByQuadrics: one lock flag per vertex");
+  // meshoptimizer reads each face's vertices unchecked (its asserts are off in Debian's build).
+  for (const auto& f : mesh.faces)
+    for (const std::uint32_t v : f)
+      if (v >= n) throw std::invalid_argument("a face references vertex " + std::to_string(v) + " of " + std::to_string(n));
   const std::vector<float> xyz = positionsLocking(mesh, locked);
   std::vector<unsigned> indices;
   indices.reserve(3 * mesh.faces.size());

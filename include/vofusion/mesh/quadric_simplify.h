@@ -14,7 +14,8 @@ namespace vofusion {
 // keeps one of its two vertices where it was: positions, colours and normals are the input's.
 // Vertices flagged in `locked` (one flag per vertex, or empty) are neither moved nor removed; other
 // border vertices move only along their border. The result's vertices are compacted and `locked`
-// follows them. Returns false, with `mesh` and `locked` untouched, when a locked vertex would be lost.
+// follows them. Returns false, with `mesh` and `locked` untouched, when a locked vertex would be lost;
+// throws std::invalid_argument for a face naming a vertex past the end (mesh untouched).
 bool simplifyByQuadrics(TriangleMesh& mesh, double max_error, std::size_t target_faces, std::vector<std::uint8_t>& locked);
 
 }  // namespace vofusion
