@@ -121,6 +121,18 @@ TEST(LoopKeyframes, MadeByMotionAndAfterRecovery) {
   EXPECT_NEAR(s.pathLength(), 0.14, 1e-9);
 }
 
+// A pose that is not a number is a frame not well tracked: it made the path NaN (no keyframe joined the
+// place index again) and became a keyframe whose NaN spread down the pose graph's chain.
+TEST(LoopKeyframes, APoseThatIsNotANumberIsNoKeyframeAndNoPath) {
+  LoopParams P;
+  P.keyframe_translation = 0.1;
+  KeyframeSelector s(P);
+  EXPECT_TRUE(s.next(pose(0, 0, 0, 0), true));
+  EXPECT_FALSE(s.next(pose(std::nan(""), 0, 0, 0), true));
+  EXPECT_TRUE(s.next(pose(0.05, 0, 0, 0), true)) << "the first good frame after it";
+  EXPECT_NEAR(s.pathLength(), 0.05, 1e-9);
+}
+
 // Strained frames (tracked, residual standing out) become keyframes by motion as any other, so a loop can
 // observe the drift where it comes out; the edge that spans them is the weak kind.
 TEST(LoopKeyframes, StrainedFramesAreKeyframesWithAWeakEdge) {

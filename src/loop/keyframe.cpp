@@ -44,6 +44,12 @@ cv::Mat Keyframe::depthMetres() const {
 }
 
 bool KeyframeSelector::next(const Eigen::Isometry3d& pose, bool well_tracked, bool strained) {
+  // A pose that is not a number (a library caller's) is no place: added to the path it made the path
+  // NaN, no keyframe ever joined the place index again, and its keyframe's NaN spread down the chain.
+  if (!pose.matrix().allFinite()) {
+    recovering_ = have_keyframe_;
+    return false;
+  }
   if (have_pose_) path_ += (pose.translation() - last_pose_.translation()).norm();
   last_pose_ = pose;
   have_pose_ = true;

@@ -305,7 +305,8 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
   const bool strained = m.residuals.strained(icp_rms);
   m.strained_frames += strained;
   const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty(), strained);
-  if (well_tracked && !frame.depth.empty()) m.last_known = {frame.timestamp, m.selector.pathLength(), tracked};
+  if (well_tracked && !frame.depth.empty() && tracked.matrix().allFinite())
+    m.last_known = {frame.timestamp, m.selector.pathLength(), tracked};
   if (key) {
     Keyframe k = makeKeyframe(m.keyframes_made, frame, tracked, m.selector.pathLength(), std::move(features),
                               m.params.keyframe_downsample);

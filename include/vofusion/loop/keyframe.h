@@ -43,7 +43,8 @@ class KeyframeSelector {
  public:
   explicit KeyframeSelector(const LoopParams& params) : params_(params) {}
   // Every frame in order; true when this one should become a keyframe. Frames not well tracked
-  // (lost, predicted, fallback) never do; the first well-tracked frame after them always does.
+  // (lost, predicted, fallback, a pose that is not finite) never do; the first well-tracked frame after
+  // them always does.
   // Strained frames (tracked, but with an ICP residual that stands out) do by motion as any other: they
   // are where a revisit's drift comes out, and a loop from one of them observes it there. Their edge
   // to the previous keyframe is weak, as one across frames not well tracked.
