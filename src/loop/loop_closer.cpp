@@ -129,7 +129,9 @@ struct LoopCloser::Impl {
       const Eigen::Isometry3d& pose = keyframes.at(id).tracked;
       if (!spacedFrom(last_indexed, pose)) continue;
       const Keyframe k = keyframes.load(id);
-      if (!k.features) continue;
+      // One without descriptors (a blank wall) is no place: it must not take the spacing from the
+      // textured keyframes after it.
+      if (!k.features || k.features->descriptors.empty()) continue;
       index.add(k.id, k.features->descriptors);
       last_indexed = pose;
     }
@@ -180,7 +182,7 @@ struct LoopCloser::Impl {
     std::vector<PlaceCandidate> candidates;
     {
       ScopedStageTimer timer(t, "place_recognition");
-      if (cur.features && spacedFrom(last_queried, cur.tracked)) {
+      if (cur.features && !cur.features->descriptors.empty() && spacedFrom(last_queried, cur.tracked)) {
         candidates = index.query(cur.features->descriptors);
         last_queried = cur.tracked;
       }
