@@ -13,6 +13,7 @@
 #include <atomic>
 #include <functional>
 #include <future>
+#include <sstream>
 #include <random>
 #include <thread>
 
@@ -686,6 +687,47 @@ TEST(LoopCloser, RelocalisesWhileTheThreadStillVerifiesItsLastKeyframe) {
   ASSERT_TRUE(again.has_value());
   EXPECT_EQ(again->keyframe, found->keyframe);
   EXPECT_TRUE(again->pose.isApprox(found->pose, 0.0)) << "the same keyframes and index: the same placement";
+}
+
+// A checkpoint reads the stored keyframes only: it does not wait for the thread's verification and solve
+// (a live run's checkpoint stalled its frame loop for them), and the same closer's state comes out once
+// the thread is done.
+TEST(LoopCloser, SavesItsStateWhileTheThreadStillVerifiesItsLastKeyframe) {
+  const sim::SyntheticSequence seq = roomAtFullResolution();
+  const LoopParams params;
+  const std::size_t wanted = std::size_t(params.recent_keyframes) + 5;
+  std::promise<void> entered, released;
+  const std::shared_future<void> release = released.get_future().share();
+  std::atomic<bool> armed{true}, unparked{false};
+  const auto unpark = [&] {
+    if (!unparked.exchange(true)) released.set_value();
+  };
+  struct Unpark {
+    std::function<void()> now;
+    ~Unpark() { now(); }
+  };
+  LoopCloser closer(params);
+  closer.setAfterIndexingHook([&](std::size_t id) {
+    if (id + 1 != wanted || !armed.exchange(false)) return;
+    entered.set_value();
+    release.wait();
+  });
+  const Unpark before_the_closer_goes{unpark};
+  ASSERT_EQ(walkTheRoomUntil(seq, closer, wanted).size(), wanted);
+  ASSERT_EQ(entered.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  auto saving = std::async(std::launch::async, [&] {
+    std::ostringstream os;
+    closer.saveState(os);
+    return os.str();
+  });
+  const Unpark before_saving_goes{unpark};
+  ASSERT_EQ(saving.wait_for(std::chrono::seconds(60)), std::future_status::ready) << "saveState waited for the thread";
+  const std::string parked = saving.get();
+  unpark();
+  closer.finish();
+  std::ostringstream idle;
+  closer.saveState(idle);
+  EXPECT_TRUE(parked == idle.str()) << "the same state as once the thread is done";
 }
 
 // In the look-alike corridor the camera, 3 m (one period) past the first keyframe, sees what that

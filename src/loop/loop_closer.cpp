@@ -323,7 +323,9 @@ bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, 
 
 void LoopCloser::saveState(std::ostream& os) const {
   Impl& m = *impl_;
-  m.waitIdle();  // the thread's store is the caller's to read until the next addFrame
+  // Only stored keyframes are read, still until the next addFrame: not the thread's verification or
+  // solve, which a resumed run makes again (a live run's checkpoint waited for them, its frames dropped).
+  m.waitStored();
   auto a = state::archiveOf(os);
   // "v2": the keyframe selector keeps whether strained frames came since the last keyframe (b9be6fb);
   // "v3": the last well-tracked frame and the queue's statistics. A checkpoint of an earlier build is
