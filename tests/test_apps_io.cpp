@@ -59,6 +59,22 @@ TEST(AppsIo, SimulateIntoAFolderNamedWithATrailingSlash) {
   }
 }
 
+// Into the folder it runs in (or one holding it): refused before the first frame, in one line. It was
+// staged inside and its rename refused (EBUSY) after every frame was made.
+TEST(AppsIo, SimulateIntoTheFolderItRunsInIsRefusedAtOnce) {
+  const std::string dir = test::tempDir("simulate_into_dot");
+  for (const char* out : {".", "./"}) {
+    std::string log;
+    EXPECT_EQ(run("{ cd " + dir + " && " + app("rgbd-simulate") + " --out " + out + " --frames 2 --size 160x120 2>&1 >/dev/null; }", &log),
+              2)
+        << out;
+    EXPECT_EQ(log, "rgbd-simulate: error: .: is the folder this command runs in, or holds it: it cannot be replaced (name the "
+                   "folder from outside it)\n")
+        << out;
+    EXPECT_EQ(std::distance(fs::directory_iterator(dir), {}), 0) << "nothing left in it: " << out;
+  }
+}
+
 TEST(AppsIo, SimulateTumMatchesSequence) {
   const std::string dir = test::tempDir("apps_sim_tum") + "/room";
   std::string out;

@@ -1,5 +1,6 @@
 #include "vofusion/core/atomic_file.h"
 
+#include <algorithm>
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <signal.h>
@@ -74,10 +75,23 @@ std::string withoutTrailingSlashes(std::string path) {
   return path;
 }
 
+// The folder the process runs in is `path` or lies inside it ("--out ." or ".."): staged beside it and
+// renamed over it, the rename fails (EBUSY for "."), after all the work.
+void refuseTheWorkingFolder(const std::string& path) {
+  std::error_code here_ec, path_ec;
+  const fs::path here = fs::current_path(here_ec), target = fs::weakly_canonical(path, path_ec);
+  if (here_ec || path_ec || target.empty()) return;
+  const auto [t, h] = std::mismatch(target.begin(), target.end(), here.begin(), here.end());
+  if (t == target.end())
+    throw InputError(path, "is the folder this command runs in, or holds it: it cannot be replaced (name the folder "
+                           "from outside it)");
+}
+
 }  // namespace
 
 AtomicPath::AtomicPath(std::string final_path)
     : final_(withoutTrailingSlashes(std::move(final_path))), tmp_(final_ + ".tmp-" + std::to_string(::getpid())) {
+  refuseTheWorkingFolder(final_);
   std::error_code ec;
   fs::remove_all(tmp_, ec);  // a leftover of a crashed run with the same pid
   removeStaleStaging(final_);

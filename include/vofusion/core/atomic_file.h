@@ -14,6 +14,8 @@ namespace vofusion {
 
 class AtomicPath {
  public:
+  // Throws InputError for a path that is the folder the process runs in, or holds it ("." or ".."):
+  // that folder cannot be replaced by a rename (nor should a shell be left in the removed one).
   explicit AtomicPath(std::string final_path);
   ~AtomicPath();
   AtomicPath(const AtomicPath&) = delete;
