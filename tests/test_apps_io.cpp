@@ -75,6 +75,22 @@ TEST(AppsIo, SimulateIntoTheFolderItRunsInIsRefusedAtOnce) {
   }
 }
 
+// A ground truth already beside the rawlog to write is an earlier recording's too: refused without
+// --overwrite, as the rawlog and its images are (it was replaced silently).
+TEST(AppsIo, SimulateKeepsAGroundTruthBesideTheRawlogWithoutOverwrite) {
+  const std::string dir = test::tempDir("simulate_keeps_gt");
+  std::ofstream(dir + "/x.groundtruth.txt") << "1 0 0 0 0 0 0 1\n";
+  std::string log;
+  EXPECT_EQ(run("{ " + app("rgbd-simulate") + " --out " + dir + "/x.rawlog --frames 2 --size 160x120 2>&1 >/dev/null; }", &log), 2);
+  EXPECT_EQ(log, "rgbd-simulate: error: " + dir + "/x.groundtruth.txt: already exists; not replaced (--overwrite replaces it)\n");
+  std::ifstream kept(dir + "/x.groundtruth.txt");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(kept), {}), "1 0 0 0 0 0 0 1\n");
+  EXPECT_FALSE(fs::exists(dir + "/x.rawlog"));
+  ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/x.rawlog --frames 2 --size 160x120 --overwrite", &log), 0) << log;
+  std::ifstream replaced(dir + "/x.groundtruth.txt");
+  EXPECT_NE(std::string(std::istreambuf_iterator<char>(replaced), {}), "1 0 0 0 0 0 0 1\n");
+}
+
 TEST(AppsIo, SimulateTumMatchesSequence) {
   const std::string dir = test::tempDir("apps_sim_tum") + "/room";
   std::string out;

@@ -581,8 +581,10 @@ RawlogWriter::RawlogWriter(const std::string& path, const RawlogWriterOptions& o
   const fs::path parent = fs::absolute(path).parent_path();
   ensureWritableDirectory(parent.string());
   if (fs::is_directory(path)) throw InputError(path, "output path is a folder, expected a .rawlog file name");
-  if (!opts.in_place && !opts.replace && (fs::exists(path) || fs::exists(imagesDirFor(path))))
-    throw InputError(fs::exists(path) ? path : imagesDirFor(path), "already exists; not replaced (--overwrite replaces it)");
+  // The ground truth beside it is the recording's too: commit replaces it (or removes it, writing none).
+  if (!opts.in_place && !opts.replace)
+    for (const std::string& part : {path, imagesDirFor(path), groundTruthPathFor(path)})
+      if (fs::exists(part)) throw InputError(part, "already exists; not replaced (--overwrite replaces it)");
   impl_ = std::make_unique<Impl>();
   if (opts.in_place) impl_->openInPlace(path);
   else impl_->openAtomic(path);
