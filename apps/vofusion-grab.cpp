@@ -270,7 +270,7 @@ struct LiveConsumer {
       checkpoints.maybeWrite(*run);
       if (viewer) show(frame, r);
     } catch (const std::exception& e) {
-      throw FrameDoneError(e.what());  // the frame is in the reconstruction (and summary.json): processed
+      throw FrameDoneError(oneLineMessage(e));  // the frame is in the reconstruction (and summary.json): processed
     }
   }
 

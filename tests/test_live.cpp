@@ -151,6 +151,19 @@ TEST(LiveLoop, ConsumerExceptionStopsWithoutLosingCount) {
   EXPECT_EQ(s.processed + s.dropped, s.played);
 }
 
+// An error is one line (grab-summary.txt's "error:" field; OpenCV's and MRPT's messages span several)
+// and never empty: an exception with an empty message left the run "ok" (exit 0) though it stopped it.
+TEST(LiveLoop, AnErrorIsOneLineAndNeverEmpty) {
+  for (const auto& [thrown, said] : std::vector<std::pair<std::string, std::string>>{{"OpenCV(4.6.0) x.cpp:1: error:\n> bad\n", "OpenCV(4.6.0) x.cpp:1: error: > bad"},
+                                                                                    {"", "unknown error"}}) {
+    FakeSource src(100, 1);
+    const LiveStats s = runLive(src, [&](const Frame&) { throw std::runtime_error(thrown); }, queueOf(2));
+    EXPECT_EQ(s.stop, StopReason::ConsumerError);
+    EXPECT_EQ(s.error, said);
+    EXPECT_FALSE(s.ok());
+  }
+}
+
 // What no std::exception describes stops the run as well, on either thread, and a hook that throws
 // leaves runLive with its exception once the producer has stopped: a joinable std::thread's destructor
 // used to end the process.

@@ -57,12 +57,14 @@ struct Shared {
 
 bool externalStop(const LiveHooks& h) { return h.stop && h.stop->load(); }
 
-// In a catch block: what the exception in flight says.
+// In a catch block: what the exception in flight says, on one line (LiveStats::error is one line of
+// grab-summary.txt; OpenCV's and MRPT's messages span several) and never empty (an empty error is a run
+// that went fine).
 std::string currentExceptionText() {
   try {
     throw;
   } catch (const std::exception& e) {
-    return e.what();
+    return oneLineMessage(e);
   } catch (...) {
     return "unknown exception";
   }
@@ -118,7 +120,7 @@ void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks,
     }
   } catch (const std::exception& e) {
     reason = StopReason::SourceError;
-    error = e.what();
+    error = oneLineMessage(e);
   } catch (...) {  // not to end the process on this thread
     reason = StopReason::SourceError;
     error = "the source failed with an unknown exception";
