@@ -277,7 +277,9 @@ struct LiveConsumer {
   void show(const Frame& frame, const FrameReport& r) {
     const Reconstruction& rec = run->reconstruction();
     LiveView view;
-    view.image = rec.renderView(frame.camera);
+    // Only for a redraw (~10 Hz): a ray cast of the map per frame, and its wait for the frame's fusion
+    // (which would otherwise overlap the next frame's odometry), cost every frame at 30 Hz.
+    if (viewer->wantsImage()) view.image = rec.renderView(frame.camera);
     view.pose = r.pose;
     view.tracking = r.tracked ? (r.fell_back ? "tracking (odometry fallback)" : "tracking")
                               : "LOST" + (r.note.empty() ? std::string() : ": " + r.note);

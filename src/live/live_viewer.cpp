@@ -13,6 +13,8 @@
 namespace vofusion {
 
 namespace {
+constexpr std::chrono::milliseconds kRedrawEvery{100};  // the image and repaint at most ~10 Hz
+
 // The window's scene, locked for as long as this lives: an exception while drawing (out of memory)
 // leaves it unlocked, or the GUI thread's next paint would wait forever.
 struct SceneLock {
@@ -82,13 +84,15 @@ void LiveViewer::status(const LiveStats& stats) {
   win_->repaint();
 }
 
+bool LiveViewer::wantsImage() const { return std::chrono::steady_clock::now() - last_draw_ >= kRedrawEvery; }
+
 void LiveViewer::show(const LiveView& view, const LiveStats& stats) {
   if (!isOpen()) return;
   tracking_ = view.tracking;
   if (!view.loop_status.empty()) loop_status_ = view.loop_status;
   // The path grows every frame; the heavy part (image upload, repaint) at most ~10 Hz.
   const auto now = std::chrono::steady_clock::now();
-  const bool redraw = now - last_draw_ >= std::chrono::milliseconds(100);
+  const bool redraw = now - last_draw_ >= kRedrawEvery;
   {
     const SceneLock lock(*win_);
     updateScene(view, stats, lock.scene, redraw);

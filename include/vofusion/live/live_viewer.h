@@ -36,6 +36,9 @@ class LiveViewer {
   ~LiveViewer();
   // After each processed frame (the calling thread of runLive).
   void show(const LiveView& view, const LiveStats& stats);
+  // Whether the next show() draws its image (at most ~10 Hz): the caller renders one only then (a ray
+  // cast of the map, which also waits for the frame's fusion).
+  bool wantsImage() const;
   // Status only (between frames).
   void status(const LiveStats& stats);
   // False once the user closed the window (the app then stops the run).
