@@ -323,8 +323,17 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
 int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& source, RawlogWriter* writer,
                RunSession* session, const Args& args, const LiveCheckpoints& checkpoints) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
+  // A recording whose last sync failed (EIO) is in place, if maybe not whole on the disk: the
+  // reconstruction's outputs are still written, then the failure is said (it lost them all).
+  std::string recording_error;
+  if (writer) {
+    try {
+      writer->commit();
+    } catch (const InputError& e) {
+      recording_error = oneLineMessage(e);
+    }
+  }
   try {
-    if (writer) writer->commit();
     // The grab's own counts before the reconstruction's outputs, which may fail after a failed run.
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),
                         summaryText(stats, source.live->name(), recorded, plan.opts.queue_capacity, source.skipped()));
@@ -342,6 +351,11 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
   const std::string skipped = source.skipped() ? ", " + std::to_string(source.skipped()) + " skipped as damaged" : "";
   std::fprintf(stderr, "vofusion-grab: %zu played%s, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,
                skipped.c_str(), stats.processed, stats.dropped, recorded, args.out.c_str());
+  if (!recording_error.empty()) {
+    std::fprintf(stderr, "vofusion-grab: the recording may not be whole on the disk: %s (the other outputs were written)\n",
+                 recording_error.c_str());
+    return 1;
+  }
   if (!stats.ok()) {
     std::fprintf(stderr, "vofusion-grab: stopped: %s (everything recorded so far was written)\n", stats.error.c_str());
     return 1;
