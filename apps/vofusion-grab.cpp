@@ -351,15 +351,12 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
   const std::string skipped = source.skipped() ? ", " + std::to_string(source.skipped()) + " skipped as damaged" : "";
   std::fprintf(stderr, "vofusion-grab: %zu played%s, %zu processed, %zu dropped; %zu recorded to %s\n", stats.played,
                skipped.c_str(), stats.processed, stats.dropped, recorded, args.out.c_str());
-  if (!recording_error.empty()) {
+  if (!stats.ok())
+    std::fprintf(stderr, "vofusion-grab: stopped: %s (everything recorded so far was written)\n", stats.error.c_str());
+  if (!recording_error.empty())
     std::fprintf(stderr, "vofusion-grab: the recording may not be whole on the disk: %s (the other outputs were written)\n",
                  recording_error.c_str());
-    return 1;
-  }
-  if (!stats.ok()) {
-    std::fprintf(stderr, "vofusion-grab: stopped: %s (everything recorded so far was written)\n", stats.error.c_str());
-    return 1;
-  }
+  if (!stats.ok() || !recording_error.empty()) return 1;
   std::error_code ec;
   if (checkpoints.written > 0) fs::remove(checkpoints.path, ec);  // the outputs are whole: nothing to resume
   return 0;
