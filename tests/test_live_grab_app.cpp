@@ -174,6 +174,23 @@ TEST(GrabApp, AFailureBeforeTheFirstFrameLeavesNoRecording) {
   EXPECT_TRUE(std::filesystem::exists(out + "/grab.rawlog")) << log;
 }
 
+// A display that names no X server: MRPT gives no window (after its start-up timeout, ~5 s), and the
+// first frame took that for the user closing it: a run "interrupted" after one frame, exit 0. Now the
+// same one line as without a display, and no recording left.
+TEST(GrabApp, ADisplayThatCannotBeOpenedIsAnErrorBeforeTheFirstFrame) {
+  const std::string out = test::tempDir("grab_app_bad_display") + "/out";
+  std::string log;
+  EXPECT_EQ(test::run("env -u WAYLAND_DISPLAY DISPLAY=:97 " + test::app("vofusion-grab") + " --replay synthetic --out " + out +
+                          " --live --max-frames 3",
+                      &log),
+            2)
+      << log;
+  EXPECT_NE(log.find("vofusion-grab: error: --live: cannot open the live window on the display (DISPLAY=:97): add --no-gui"),
+            std::string::npos)
+      << log;
+  EXPECT_FALSE(std::filesystem::exists(out + "/grab.rawlog")) << log;
+}
+
 // A run that stops before its first frame is recorded (here every frame damaged; a sensor that fails at
 // once is the same) leaves no empty recording: the next run in the folder records.
 TEST(GrabApp, ARunThatRecordsNoFrameLeavesNoRecording) {

@@ -33,6 +33,11 @@ LiveViewer::LiveViewer(const std::string& title) {
   if ((!display || !*display) && (!wayland || !*wayland))
     throw InputError("--live", "no display for the live window (DISPLAY is not set): add --no-gui");
   win_ = mrpt::gui::CDisplayWindow3D::Create(title, 1024, 768);
+  // A display that cannot be opened (DISPLAY names no X server): MRPT only prints so and gives no
+  // window, and the first frame took that for the user closing it (a run "interrupted" after one frame).
+  if (!win_->isOpen())
+    throw InputError("--live", std::string("cannot open the live window on the display (DISPLAY=") + (display ? display : "") +
+                                   "): add --no-gui");
   path_ = mrpt::opengl::CSetOfLines::Create();
   path_->setColor(0.9f, 0.2f, 0.2f);
   path_->setLineWidth(2.0f);
