@@ -99,7 +99,9 @@ bool TsdfVolume::marchStep(Marcher& m) const {
       if (fm > 0.f) za = zm, fa = fm;
       else zb = zm, fb = fm;
     }
-    m.zs = za + (zb - za) * fa / (fa - fb);
+    // A sample exactly on the surface (f = 0 counts as in front) leaves fa = fb = 0: the hit is there
+    // (0/0 made it NaN, and the pixel was lost).
+    m.zs = fa - fb > 0.f ? za + (zb - za) * fa / (fa - fb) : za;
     return m.end(March::Hit);
   }
   m.prev_f = f;
