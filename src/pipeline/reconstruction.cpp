@@ -297,10 +297,7 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   const KinFuStats tracking = m.kinfu->stats();
   // The tracking run's map goes before the new one is made: two volumes with their world models at
   // once were the run's peak (loop scene: 820 MiB while re-fusing, 369 MiB while tracking).
-  // If reading fails midway, the partly re-fused map is the one left (never none): it is the re-fused
-  // map from here on, whatever comes.
-  m.tracking_stats = tracking;
-  m.reintegrated = true;
+  // If reading fails midway, the partly re-fused map is the one left (never none).
   m.kinfu.reset();
   m.kinfu = std::make_unique<TrackedMap>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
   TrackedMap& map = *m.kinfu;
@@ -332,6 +329,8 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
     ++read;
     if (progress) progress(read);
   }
+  m.tracking_stats = tracking;
+  m.reintegrated = true;
   return fused;
 }
 

@@ -357,16 +357,23 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
   if (premesher_) premesher_->discard();  // made from the map fused at the tracked poses: none is expected to match
   Progress progress(info.app + " [re-fusing at the loop-closed poses]", rec_.framesProcessed());
   std::size_t read = 0;
+  std::string failure;  // the recording's, read midway: only the reader's (the map's own go up as they are)
+  const auto next = [&](Frame& f) {
+    try {
+      return again->next(f);
+    } catch (const std::exception& e) {
+      failure = oneLineMessage(e);
+      return false;
+    }
+  };
   nlohmann::json& about = info.extra["loop_closure_reintegration"];
   about["from"] = std::filesystem::path(again->name()).filename().string();
-  try {
-    about["frames_fused"] =
-        rec_.reintegrate([&](Frame& f) { return again->next(f); }, [&](std::size_t n) { progress.update(read = n); });
-  } catch (const std::exception& e) {
-    // Midway (an I/O error, a frame damaged since under --strict): the map holds the frames re-fused
-    // before it, which is what is left (the tracked map is gone by then).
-    about["error"] = oneLineMessage(e);
-    printWarning(about["error"].get<std::string>() + "; re-fusing stopped after " + std::to_string(read) + " of " +
+  about["frames_fused"] = rec_.reintegrate(next, [&](std::size_t n) { progress.update(read = n); });
+  if (!failure.empty()) {
+    // An I/O error, a frame damaged since under --strict: the map holds the frames re-fused before it,
+    // which is what is left (the tracked map is gone by then).
+    about["error"] = failure;
+    printWarning(failure + "; re-fusing stopped after " + std::to_string(read) + " of " +
                  std::to_string(rec_.framesProcessed()) + " frames: the mesh holds those");
   }
   progress.finish();
