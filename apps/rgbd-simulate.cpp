@@ -59,10 +59,10 @@ CameraIntrinsics cameraForSize(const std::string& size) {
   char tail = 0;
   if (std::sscanf(size.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w <= 0 || h <= 0 || std::int64_t(w) * 3 != std::int64_t(h) * 4)
     throw InputError("--size", "expected WxH with a 4:3 aspect, e.g. 320x240, got '" + size + "'");
-  // At least 16 px wide, as ever; at most 4096 (6.4 times the Kinect's 640): a frame's buffers grow with
-  // its area, and 64000x48000 passed, to fail in an allocation of ~50 GB a frame.
-  if (w < 16 || w > 4096)
-    throw InputError("--size", "width " + std::to_string(w) + " is outside [16, 4096] px, got '" + size + "'");
+  // At least 16 px a side, as ever (24x18 the smallest); at most 4096 wide (6.4 times the Kinect's 640):
+  // a frame's buffers grow with its area, and 64000x48000 passed, to fail allocating ~50 GB a frame.
+  if (h < 16 || w > 4096)
+    throw InputError("--size", "width " + std::to_string(w) + " is outside [24, 4096] px, got '" + size + "'");
   return sim::SimOptions().camera.scaled(w / 640.0);
 }
 

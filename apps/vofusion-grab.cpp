@@ -313,7 +313,7 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
     reopen = [out] { return openFrameSource((fs::path(out) / "grab.rawlog").string(), SourceOptions{}); };
   run.finish(info, reopen);
   const Reconstruction& rec = run.reconstruction();
-  if (plan.out_params.write_mesh && rec.mapNeedsReintegration() && !rec.reintegrated())
+  if (plan.out_params.write_mesh && rec.mapNeedsReintegration() && !rec.reintegrated() && recorded == 0)
     std::fprintf(stderr, "vofusion-grab: loops corrected the trajectory; the mesh keeps the tracked poses "
                          "(record with the reconstruction to have it fused again at the corrected ones)\n");
 }
@@ -339,6 +339,7 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
                         summaryText(stats, source.live->name(), recorded, plan.opts.queue_capacity, source.skipped()));
     if (session) finishLive(*session, stats, plan, source, args.out, recorded, checkpoints);
   } catch (const std::exception& e) {
+    if (!recording_error.empty()) std::fprintf(stderr, "vofusion-grab: the recording may not be whole on the disk: %s\n", recording_error.c_str());
     if (stats.ok()) throw;
     // What stopped the run (a full disk) may stop the outputs after it too, or they fail on their own
     // (a folder where trajectory.txt goes): one line with the first cause, then the second.

@@ -442,7 +442,7 @@ TEST(AppsIoBadInput, RawlogInputs) {
   expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x.rawlog --scene moon", "unknown scene 'moon'", outdir);
   expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --frames 0", "--frames", outdir);
   // A size too large to render (it failed in the rendering's allocation) or not a number's.
-  expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --size 64000x48000", "--size: width 64000 is outside [16, 4096]",
+  expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --size 64000x48000", "--size: width 64000 is outside [24, 4096]",
                      outdir);
   expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --size 1000000000x750000000", "--size", outdir);
   expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --seed 4294967297", "--seed expects a whole number below 2^32",

@@ -1,5 +1,7 @@
 // scripts/batch for real on this machine: synthetic recordings through GNU parallel, two at a time,
 // one table at the end; a failed recording leaves the others alone and --resume reruns only it.
+#include <sched.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -446,7 +448,9 @@ TEST(Batch, BenchTablesNameTheSceneAndAPartialRunLeavesTheCommittedOnesAlone) {
 // it for the machine's CPUs and ran its recordings one at a time. A stub vofusion stands in.
 TEST(Batch, OmpNumThreadsDoesNotShrinkTheBatch) {
   REQUIRE_PARALLEL();
-  const unsigned cpus = std::thread::hardware_concurrency();
+  cpu_set_t allowed;  // the CPUs this process may use (a cpuset, taskset), as nproc counts them
+  ASSERT_EQ(sched_getaffinity(0, sizeof allowed, &allowed), 0);
+  const int cpus = CPU_COUNT(&allowed);
   if (cpus < 2) GTEST_SKIP() << "one CPU: the batch runs one job at a time anyway";
   const std::string dir = test::tempDir("batch_omp");
   fs::create_directories(dir + "/build/bin");
