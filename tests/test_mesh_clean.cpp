@@ -913,9 +913,9 @@ TEST(MeshClean, ARegionsSeamIsNotWeldedAwayByDistance) {
   EXPECT_EQ(seamPoints(a), seam_before);
 }
 
-// A face naming a vertex past the end is refused before meshoptimizer reads it (unchecked: Debian's
-// build has its asserts off), the mesh untouched. A region went to the quadric collapse before the
-// repair's own check.
+// A face naming a vertex past the end is refused before meshoptimizer reads it (it asserts, and Debian's
+// build keeps its asserts: the process aborted), the mesh untouched. A region went to the quadric
+// collapse before the repair's own check.
 TEST(MeshClean, TheQuadricCollapseRefusesAFacePastItsVertices) {
   TriangleMesh m = icosphere(2);
   m.faces[5][1] = std::uint32_t(m.vertices.size());

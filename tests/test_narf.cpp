@@ -55,8 +55,8 @@ TEST(Narf, DownsampleKeepsNearestReading) {
 
 // A keypoint at its block's centre, as detectNarf places it, reads its block's own nearest reading: the
 // one the reduced depth took, for every factor. An even factor's centre falls between pixels, and the
-// window about the rounded centre took a row and a column of the next block (here a nearer surface's
-// 1 m beside a 2 m block).
+// window about the rounded centre took a row and a column of a neighbouring block (here a nearer
+// surface's 1 m or 1.5 m beside a 2 m block, or block (0, 0)'s 1.8 m).
 TEST(Narf, AKeypointReadsItsOwnBlocksReading) {
   for (int f = 2; f <= 8; ++f) {
     cv::Mat d(4 * f, 4 * f, CV_32F, cv::Scalar(2.f));

@@ -91,9 +91,9 @@ TEST(Relocalisation, AFirstFrameWithNoReadingInRangeDoesNotStartTheMap) {
   EXPECT_EQ(rec.lostFrames(), 1u);
 }
 
-// Nor does one whose readings all lie beyond the fused range ([kinfu] integrate_max_depth, 3.5 m) though
-// within the tracking range (max_depth, 4 m): it fused nothing yet started the map, and mode kinfu lost
-// every frame after it ("ICP system not solvable": a ray cast of an empty volume).
+// In mode kinfu, nor does one whose readings all lie beyond the fused range ([kinfu] integrate_max_depth,
+// 3.5 m) though within the tracking range (max_depth, 4 m): it fused nothing yet started the map, and
+// every frame after it was lost ("ICP system not solvable": a ray cast of an empty volume).
 TEST(Relocalisation, AFirstFrameWithReadingsOnlyBeyondTheFusedRangeDoesNotStartTheMap) {
   const sim::SyntheticSequence seq(test::quickSim("room", 20));
   Reconstruction rec(test::quickRoomConfig(), TrackingMode::KinFu);
@@ -103,7 +103,7 @@ TEST(Relocalisation, AFirstFrameWithReadingsOnlyBeyondTheFusedRangeDoesNotStartT
   for (std::size_t i = 1; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
   rec.finish();
   EXPECT_FALSE(reports[0].tracked);
-  EXPECT_EQ(reports[0].note, "no depth reading in [min_depth, max_depth]");
+  EXPECT_EQ(reports[0].note, "no depth reading in [integrate_min_depth, integrate_max_depth] to start the map");
   for (std::size_t i = 1; i < seq.size(); ++i) EXPECT_TRUE(reports[i].tracked) << i << ": " << reports[i].note;
   EXPECT_EQ(rec.lostFrames(), 1u);
 }

@@ -146,8 +146,9 @@ std::vector<cv::KeyPoint> detectNarf(const cv::Mat& depth, const CameraIntrinsic
 
 float narfBlockDepth(const cv::Mat& depth, cv::Point2f centre, int factor) {
   // The block's first pixel is (factor - 1) / 2 before its centre: for an even factor the centre falls
-  // between pixels, and a window about the rounded centre took a row and a column of the next block
-  // (across a depth border, a nearer surface's reading).
+  // between pixels, and the window about the rounded centre (half to even) took a row and a column of a
+  // neighbouring block: the next one's for 4 and 8, the previous one's for 2 and 6 (across a depth
+  // border, a nearer surface's reading).
   const int x0 = cvRound(centre.x - 0.5f * float(factor - 1)), y0 = cvRound(centre.y - 0.5f * float(factor - 1));
   float nearest = 0.f;
   for (int y = std::max(0, y0); y < std::min(depth.rows, y0 + factor); ++y) {

@@ -88,7 +88,7 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   }
   if (f < 0.f) {
     if (!m.prev_ok) return m.end(m.first && m.need_free_start ? March::Untrusted : March::Miss);  // back face
-    // Regula falsi on the bracket [prev_z (f > 0), z (f < 0)]. One step: over a bracket this
+    // Regula falsi on the bracket [prev_z (f >= 0), z (f < 0)]. One step: over a bracket this
     // short the field is nearly linear (3 steps cost 6 % more CPU in mode kinfu, same ATE on fr1_xyz).
     float za = m.prev_z, fa = m.prev_f, zb = m.z, fb = f;
     constexpr int kRefineSteps = 1;

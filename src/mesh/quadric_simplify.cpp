@@ -35,9 +35,10 @@ std::size_t lockedIn(const std::vector<unsigned>& indices, const std::vector<std
 
 bool simplifyByQuadrics(TriangleMesh& mesh, double max_error, std::size_t target_faces, std::vector<std::uint8_t>& locked) {
   const std::size_t n = mesh.vertices.size();
-  if (mesh.faces.empty() || n == 0) return true;
+  if (mesh.faces.empty()) return true;
   if (!locked.empty() && locked.size() != n) throw std::invalid_argument("simplifyByQuadrics: one lock flag per vertex");
-  // meshoptimizer reads each face's vertices unchecked (its asserts are off in Debian's build).
+  // meshoptimizer asserts on a face naming a vertex past the end (Debian's build keeps its asserts): the
+  // process aborted.
   for (const auto& f : mesh.faces)
     for (const std::uint32_t v : f)
       if (v >= n) throw std::invalid_argument("a face references vertex " + std::to_string(v) + " of " + std::to_string(n));

@@ -57,7 +57,8 @@ OdometryResult OdometrySource::process(const Frame& input) {
     has_increment_ = count_ > 0;
     pose_at_last_action_ = pose_;
   } else if (count_ > 0 && !r.started) {
-    // No motion is dropped: the frame moves on at the last increment (constant velocity); the next
+    // No motion is dropped: the frame moves on by one frame's share of the last match's motion (constant
+    // velocity); the next
     // frame is matched against the last good one and lands where the odometry says.
     ++failures_;
     if (has_velocity_) pose_ = previous + velocity_;

@@ -83,7 +83,7 @@ class PlyStream {
 
  private:
   static constexpr std::streamoff kVertexBytes = 27, kNormalAt = 12;  // x y z, nx ny nz, r g b
-  // Each seam vertex's normal over all its faces, as computeNormals makes it for the whole mesh.
+  // Each seam vertex's normal over all its faces, as computeVertexNormals makes it for the whole mesh.
   void writeSeamNormals() {
     if (seam_normals_.empty()) return;
     // In file order: one pass forward over the side file, not a seek back and forth per vertex.

@@ -232,10 +232,14 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   const std::vector<DepthLevel> levels = s.trackingLevels(frame, geometry, cam, track_cam);
   res.times.add("preprocess", secondsSince(t0));
   const bool had_model = map.hasModel();
-  // The first frame starts the map only with readings in [min_depth, max_depth] that the map fuses: one
-  // without (a camera face down on a desk, or facing a wall between the fused range's end, 3.5 m, and
-  // the tracking range's, 4 m) would start an empty model that no later frame can track against.
-  if (!had_model && !hasReadingIn(levels[0].depth, map.fusedDepthRange())) return lost(Rejection::NoReadingInRange);
+  // The first frame starts the map only with readings in [min_depth, max_depth]: one without (a camera
+  // face down on a desk) would start an empty model that no later frame can track against. In mode
+  // kinfu, which has no odometry to go on from until the map holds a surface, they must be fused too (a
+  // wall between integrate_max_depth, 3.5 m, and max_depth, 4 m, started an empty map, and every frame
+  // after it was lost); the other modes' fallbacks build the map from such a start.
+  if (!had_model && cv::countNonZero(levels[0].depth) == 0) return lost(Rejection::NoReadingInRange);
+  if (!had_model && s.mode == TrackingMode::KinFu && !hasReadingIn(levels[0].depth, map.fusedDepthRange()))
+    return lost(Rejection::NoReadingFused);
   map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
   // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
   std::vector<IntensityLevel> intensity;

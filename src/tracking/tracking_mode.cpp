@@ -43,6 +43,7 @@ std::string toString(Rejection r) {
     case Rejection::PriorReferenceUnknown: return "prior's reference frame has no pose";
     case Rejection::NotRelocalised: return "lost, not relocalised";
     case Rejection::NoReadingInRange: return "no depth reading in [min_depth, max_depth]";
+    case Rejection::NoReadingFused: return "no depth reading in [integrate_min_depth, integrate_max_depth] to start the map";
   }
   return "?";
 }

@@ -31,6 +31,7 @@ enum class Rejection {
   PriorReferenceUnknown,   // mode odometry: the prior's reference frame has no pose here
   NotRelocalised,          // tracking was lost and no keyframe matched this frame yet
   NoReadingInRange,        // the first frame's readings all lie outside [min_depth, max_depth]
+  NoReadingFused,          // mode kinfu: none of the first frame's readings is fused (integrate_*_depth)
 };  // new reasons go last: checkpoints store them as numbers
 // The reason as summary.json counts it ("too few ICP inliers", ...); "" for None.
 std::string toString(Rejection r);
