@@ -36,7 +36,8 @@ LiveViewer::LiveViewer(const std::string& title) {
   // A display that cannot be opened (DISPLAY names no X server): MRPT only prints so and gives no
   // window, and the first frame took that for the user closing it (a run "interrupted" after one frame).
   if (!win_->isOpen())
-    throw InputError("--live", std::string("cannot open the live window on the display (DISPLAY=") + (display ? display : "") +
+    throw InputError("--live", std::string("cannot open the live window on the display (") +
+                                   (display && *display ? std::string("DISPLAY=") + display : "WAYLAND_DISPLAY=" + std::string(wayland)) +
                                    "): add --no-gui");
   path_ = mrpt::opengl::CSetOfLines::Create();
   path_->setColor(0.9f, 0.2f, 0.2f);
