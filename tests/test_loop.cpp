@@ -606,6 +606,37 @@ std::vector<std::size_t> walkTheRoomUntil(const sim::SyntheticSequence& seq, Loo
   return keyframe_frames;
 }
 
+// Parks the loop thread in its after-indexing hook once keyframe `at` (1-based) is stored and indexed,
+// until release(). Made before the LoopCloser, so that it outlives the thread; a releaseOnExit() guard
+// made after it (and after any task that waits for the thread) frees the thread on the way out,
+// whatever failed, before the closer's destructor joins it.
+class ParkedLoopThread {
+ public:
+  explicit ParkedLoopThread(std::size_t at) : at_(at), release_(released_.get_future().share()) {}
+  void install(LoopCloser& closer) {
+    closer.setAfterIndexingHook([this](std::size_t id) {
+      if (id + 1 != at_ || !armed_.exchange(false)) return;
+      entered_.set_value();
+      release_.wait();
+    });
+  }
+  bool parked() { return entered_.get_future().wait_for(std::chrono::seconds(60)) == std::future_status::ready; }
+  void release() {
+    if (!done_.exchange(true)) released_.set_value();
+  }
+  struct Guard {
+    ParkedLoopThread& p;
+    ~Guard() { p.release(); }
+  };
+  Guard releaseOnExit() { return Guard{*this}; }
+
+ private:
+  std::size_t at_;
+  std::promise<void> entered_, released_;
+  std::shared_future<void> release_;
+  std::atomic<bool> armed_{true}, done_{false};
+};
+
 sim::SyntheticSequence roomAtFullResolution() {
   sim::SimOptions o;
   o.scene = "room";
@@ -649,37 +680,23 @@ TEST(LoopCloser, RelocalisesWhileTheThreadStillVerifiesItsLastKeyframe) {
   const sim::SyntheticSequence seq = roomAtFullResolution();
   const LoopParams params;
   const std::size_t target = 2, wanted = target + std::size_t(params.recent_keyframes) + 3;
-  // Before the loop closer, so that they outlive its thread; the thread unparked before any return.
-  std::promise<void> entered, released;
-  const std::shared_future<void> release = released.get_future().share();
-  std::atomic<bool> armed{true}, unparked{false};
-  const auto unpark = [&] {
-    if (!unparked.exchange(true)) released.set_value();
-  };
-  struct Unpark {  // on the way out, whatever failed
-    std::function<void()> now;
-    ~Unpark() { now(); }
-  };
+  ParkedLoopThread park(wanted);
   LoopCloser closer(params);
-  closer.setAfterIndexingHook([&](std::size_t id) {
-    if (id + 1 != wanted || !armed.exchange(false)) return;
-    entered.set_value();
-    release.wait();
-  });
-  const Unpark before_the_closer_goes{unpark};  // its destructor joins the thread
+  park.install(closer);
+  const auto before_the_closer_goes = park.releaseOnExit();  // its destructor joins the thread
   const std::vector<std::size_t> keyframe_frames = walkTheRoomUntil(seq, closer, wanted);
   ASSERT_EQ(keyframe_frames.size(), wanted);
-  ASSERT_EQ(entered.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  ASSERT_TRUE(park.parked());
   const std::size_t j = keyframe_frames[target];
   RgbdOdometry fresh{OdometryParams()};
   Frame view = seq.render(j);
   view.timestamp = seq.render(keyframe_frames.back()).timestamp + 2.0;
   const auto features = fresh.process(view).features;
   auto placing = std::async(std::launch::async, [&] { return closer.relocalise(view, features); });
-  const Unpark before_placing_goes{unpark};  // its destructor waits for relocalise, which may wait for the thread
+  const auto before_placing_goes = park.releaseOnExit();  // its destructor waits for relocalise, which may wait for the thread
   ASSERT_EQ(placing.wait_for(std::chrono::seconds(60)), std::future_status::ready) << "relocalise waited for the thread";
   const auto found = placing.get();
-  unpark();
+  park.release();
   ASSERT_TRUE(found.has_value());
   EXPECT_EQ(found->keyframe, target);
   closer.finish();
@@ -696,34 +713,21 @@ TEST(LoopCloser, SavesItsStateWhileTheThreadStillVerifiesItsLastKeyframe) {
   const sim::SyntheticSequence seq = roomAtFullResolution();
   const LoopParams params;
   const std::size_t wanted = std::size_t(params.recent_keyframes) + 5;
-  std::promise<void> entered, released;
-  const std::shared_future<void> release = released.get_future().share();
-  std::atomic<bool> armed{true}, unparked{false};
-  const auto unpark = [&] {
-    if (!unparked.exchange(true)) released.set_value();
-  };
-  struct Unpark {
-    std::function<void()> now;
-    ~Unpark() { now(); }
-  };
+  ParkedLoopThread park(wanted);
   LoopCloser closer(params);
-  closer.setAfterIndexingHook([&](std::size_t id) {
-    if (id + 1 != wanted || !armed.exchange(false)) return;
-    entered.set_value();
-    release.wait();
-  });
-  const Unpark before_the_closer_goes{unpark};
+  park.install(closer);
+  const auto before_the_closer_goes = park.releaseOnExit();
   ASSERT_EQ(walkTheRoomUntil(seq, closer, wanted).size(), wanted);
-  ASSERT_EQ(entered.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  ASSERT_TRUE(park.parked());
   auto saving = std::async(std::launch::async, [&] {
     std::ostringstream os;
     closer.saveState(os);
     return os.str();
   });
-  const Unpark before_saving_goes{unpark};
+  const auto before_saving_goes = park.releaseOnExit();
   ASSERT_EQ(saving.wait_for(std::chrono::seconds(60)), std::future_status::ready) << "saveState waited for the thread";
   const std::string parked = saving.get();
-  unpark();
+  park.release();
   closer.finish();
   std::ostringstream idle;
   closer.saveState(idle);

@@ -75,37 +75,37 @@ TEST(Relocalisation, BlankFirstFramesAreLostAndTheFirstWithDepthStartsTheMap) {
   }
 }
 
-// A first frame whose readings all lie nearer than [kinfu] min_depth (a camera face down on a desk) is
-// lost too: it used to start an empty model, and mode kinfu tracked no frame against it to the end.
-TEST(Relocalisation, AFirstFrameWithNoReadingInRangeDoesNotStartTheMap) {
+namespace {
+
+// Mode kinfu on the quick room, its first frame's every reading at `depth` m: that frame must be lost
+// with `why`, and every frame after it tracked (an empty map started by it lost them all).
+void expectAFirstFrameAtThatDepthIsLost(float depth, const std::string& why) {
   const sim::SyntheticSequence seq(test::quickSim("room", 20));
   Reconstruction rec(test::quickRoomConfig(), TrackingMode::KinFu);
-  Frame too_near = seq.render(0);
-  too_near.depth.setTo(0.1f);
-  std::vector<FrameReport> reports{rec.process(too_near)};
+  Frame first = seq.render(0);
+  first.depth.setTo(depth);
+  std::vector<FrameReport> reports{rec.process(first)};
   for (std::size_t i = 1; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
   rec.finish();
   EXPECT_FALSE(reports[0].tracked);
-  EXPECT_EQ(reports[0].note, "no depth reading in [min_depth, max_depth]");
+  EXPECT_EQ(reports[0].note, why);
   for (std::size_t i = 1; i < seq.size(); ++i) EXPECT_TRUE(reports[i].tracked) << i << ": " << reports[i].note;
   EXPECT_EQ(rec.lostFrames(), 1u);
+}
+
+}  // namespace
+
+// A first frame whose readings all lie nearer than [kinfu] min_depth (a camera face down on a desk) is
+// lost too: it used to start an empty model, and mode kinfu tracked no frame against it to the end.
+TEST(Relocalisation, AFirstFrameWithNoReadingInRangeDoesNotStartTheMap) {
+  expectAFirstFrameAtThatDepthIsLost(0.1f, "no depth reading in [min_depth, max_depth]");
 }
 
 // In mode kinfu, nor does one whose readings all lie beyond the fused range ([kinfu] integrate_max_depth,
 // 3.5 m) though within the tracking range (max_depth, 4 m): it fused nothing yet started the map, and
 // every frame after it was lost ("ICP system not solvable": a ray cast of an empty volume).
 TEST(Relocalisation, AFirstFrameWithReadingsOnlyBeyondTheFusedRangeDoesNotStartTheMap) {
-  const sim::SyntheticSequence seq(test::quickSim("room", 20));
-  Reconstruction rec(test::quickRoomConfig(), TrackingMode::KinFu);
-  Frame too_far = seq.render(0);
-  too_far.depth.setTo(3.8f);
-  std::vector<FrameReport> reports{rec.process(too_far)};
-  for (std::size_t i = 1; i < seq.size(); ++i) reports.push_back(rec.process(seq.render(i)));
-  rec.finish();
-  EXPECT_FALSE(reports[0].tracked);
-  EXPECT_EQ(reports[0].note, "no depth reading in [integrate_min_depth, integrate_max_depth] to start the map");
-  for (std::size_t i = 1; i < seq.size(); ++i) EXPECT_TRUE(reports[i].tracked) << i << ": " << reports[i].note;
-  EXPECT_EQ(rec.lostFrames(), 1u);
+  expectAFirstFrameAtThatDepthIsLost(3.8f, "no depth reading in [integrate_min_depth, integrate_max_depth] to start the map");
 }
 
 namespace {
