@@ -76,7 +76,8 @@ SignalledRun runSignalledMidway(const std::string& command, const std::string& l
                                   std::to_string(from) + " && $1 < " + total + " {found = 1} END {exit !found}'";
   std::string said;
   run("(" + command + " > '" + log_path + "' 2>&1 & pid=$!; for i in $(seq 1 600); do " + count_shows +
-          " && echo signalled-at-a-count && break; sleep 0.2; done; kill -" + signal + " $pid; wait $pid; echo rc=$?)",
+          " && echo signalled-at-a-count && break; kill -0 $pid 2>/dev/null || break; sleep 0.2; done; kill -" + signal +
+          " $pid 2>/dev/null; wait $pid; echo rc=$?)",
       &said);
   SignalledRun r;
   r.signalled_at_a_count = said.find("signalled-at-a-count") != std::string::npos;

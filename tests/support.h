@@ -38,10 +38,12 @@ int run(const std::string& cmd, std::string* output = nullptr);
 // A command stopped by a signal in the middle of its work, as a user's Ctrl-C would: run in the
 // background with its stdout+stderr in `log_path`; `signal` (kill's name: INT, TERM) is sent once a
 // progress line in `watch_path` (the log itself when empty) shows "N/<total> frames" with
-// from <= N < total, or after two minutes without one.
+// from <= N < total, or once it has ended, or after two minutes without one.
 struct SignalledRun {
   int exit_code = -1;               // the shell's: 128 + the signal's number for a run it stopped
-  bool signalled_at_a_count = false;  // false: no such count showed (a machine that finished first)
+  // false: no such count showed: a machine that finished first (exit 0), or a command that failed
+  // before one (the caller's test then fails: ASSERT_EQ(exit_code, 0) before it skips)
+  bool signalled_at_a_count = false;
   std::string log;                  // what the command wrote to log_path
 };
 SignalledRun runSignalledMidway(const std::string& command, const std::string& log_path, int total_frames,

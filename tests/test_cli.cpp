@@ -197,6 +197,7 @@ TEST(Warnings, EachLineOncePerProcess) {
   printWarning("Warnings.EachLineOncePerProcess: second");
   printWarning("Warnings.EachLineOncePerProcess: first");
   const std::string log = testing::internal::GetCapturedStderr();
+  EXPECT_NE(log.find("warning: Warnings.EachLineOncePerProcess: first"), std::string::npos) << log;
   EXPECT_EQ(log.find("first"), log.rfind("first")) << log;
   EXPECT_NE(log.find("warning: Warnings.EachLineOncePerProcess: second"), std::string::npos) << log;
 }

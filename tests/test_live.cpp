@@ -200,15 +200,18 @@ TEST(LiveLoop, TheFirstErrorWins) {
       throw std::runtime_error("grab.rawlog: disk full");
     }
   };
+  std::atomic<bool> consumer_threw{false};
   const LiveStats s = runLive(
       src,
-      [&](const Frame& f) {
-        if (f.index != 0) return;
+      [&](const Frame&) {  // the first frame it sees (frame 0 may have been dropped: a late thread)
+        if (consumer_threw) return;
         while (!recorder_failed) std::this_thread::sleep_for(std::chrono::milliseconds(1));
         std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the recorder's error is in (TSAN: slow)
+        consumer_threw = true;
         throw std::runtime_error("checkpoint: disk full");
       },
       queueOf(2), hooks);
+  ASSERT_TRUE(consumer_threw) << "the second error never came: nothing to win against";
   EXPECT_EQ(s.stop, StopReason::RecorderError);
   EXPECT_EQ(s.error, "grab.rawlog: disk full");
 }

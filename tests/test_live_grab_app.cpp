@@ -405,6 +405,9 @@ TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {
                                out + " --checkpoint-every 0.1",
                            &log);
   ASSERT_EQ(rc, 0) << log;
+  // Checkpoints were written, and deleted at the end: a session that ended normally has nothing to resume.
+  std::ifstream summary_file(out + "/summary.json");
+  EXPECT_GT(nlohmann::json::parse(summary_file)["checkpoints"]["written"].get<int>(), 0) << log;
   EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "a session that ended normally has nothing to resume";
   for (const char* f : {"grab.rawlog", "trajectory.txt", "mesh.ply", "scene.3Dscene", "summary.json", "poses.rawlog"})
     EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f << "\n" << log;
