@@ -676,7 +676,7 @@ TEST(DamagedFrames, EachCostsOneFrameAndThePathStaysAsGood) {
 // damaged, so the check comes before OpenCV's decoder; a folder once ended the run in bad_alloc).
 TEST(DamagedFrames, AFolderOrAFlippedByteCostsOneFrameInOneLine) {
   REQUIRE_TUM();
-  constexpr std::size_t kFrames = 20;
+  constexpr std::size_t kFrames = 25;
   TumFixture f = makeTum("damaged_folder_crc", kFrames);
   const std::string folder = f.dir + "/depth_folder";
   fs::create_directories(folder);
@@ -702,8 +702,15 @@ TEST(DamagedFrames, AFolderOrAFlippedByteCostsOneFrameInOneLine) {
     for (const std::size_t k : {sof + 5, sof + 7}) patched[k] = '\x9C', patched[k + 1] = '\x40';  // height, width
     writeText(dst, patched);
   });
+  // A file far larger than any image (a sparse 1 TiB one) is damage too: it was read whole, and the
+  // failed allocation (std::bad_alloc) ended the run.
+  const std::string oversized = replaceImage(f, 9, false, [](const std::string& dst, const std::string&) {
+    std::ofstream(dst).close();
+    fs::resize_file(dst, std::uintmax_t(1) << 40);
+  });
   const SkipRun r = runSkipping(f.dir, "damaged_folder_crc_out", kFrames);
   ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_NE(r.log.find("warning: " + oversized + ": "), std::string::npos) << r.log;
   EXPECT_NE(r.log.find("warning: " + folder + ": depth image is not a file (a folder?) (frame 5 skipped)"), std::string::npos)
       << r.log;
   EXPECT_NE(r.log.find("warning: " + flipped + ": cannot decode colour image (damaged PNG: its IDAT chunk fails its CRC)"),
@@ -711,8 +718,8 @@ TEST(DamagedFrames, AFolderOrAFlippedByteCostsOneFrameInOneLine) {
       << r.log;
   EXPECT_NE(r.log.find("warning: " + huge + ": cannot decode colour image ("), std::string::npos) << r.log;
   EXPECT_EQ(r.log.find("libpng"), std::string::npos) << r.log;
-  EXPECT_EQ(r.summary["frames_skipped"], 3);
-  EXPECT_EQ(r.poses, kFrames - 3);
+  EXPECT_EQ(r.summary["frames_skipped"], 4);
+  EXPECT_EQ(r.poses, kFrames - 4);
 }
 
 TEST(DamagedFrames, MoreThanOneInFiveStopsTheRun) {

@@ -179,7 +179,10 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
   struct stat st {};
   const bool regular = fstat(fileno(f), &st) == 0 && S_ISREG(st.st_mode);
   const long size = regular && std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
-  bool read = size >= 0 && std::fseek(f, 0, SEEK_SET) == 0;
+  // Read whole at the size it reports: one far beyond any image (a 16-bit 4096x3072 frame is 25 MB
+  // uncompressed) is damage, not a gigabyte allocation whose failure ended the run (std::bad_alloc).
+  constexpr long kMaxImageFileBytes = 256L << 20;
+  bool read = size >= 0 && size <= kMaxImageFileBytes && std::fseek(f, 0, SEEK_SET) == 0;
   if (read) {
     bytes.resize(std::size_t(size));
     read = std::fread(bytes.data(), 1, bytes.size(), f) == bytes.size();

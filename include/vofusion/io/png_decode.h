@@ -21,7 +21,8 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size);
 // The same for a file (empty also when it cannot be read).
 cv::Mat readPlainPng(const std::string& path);
 
-// The file's bytes into `bytes` (its storage reused); false when it cannot be read or is no regular file.
+// The file's bytes into `bytes` (its storage reused); false when it cannot be read, is no regular file or
+// is larger than any image (256 MiB).
 bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes);
 // Whether `bytes` is a PNG whose header says 8-bit RGB of width x height (nothing decoded): the
 // rawlog writer then copies a recording's colour PNG instead of encoding its pixels again.
