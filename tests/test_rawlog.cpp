@@ -129,6 +129,11 @@ TEST(Rawlog, RoundTripObservationsExternalImages) {
   // Nothing temporary left behind.
   for (const auto& e : fs::directory_iterator(dir))
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+  // Its images in a folder "Images" beside it, as MRPT's CRawlog also finds them (RawLogViewer opens
+  // such a recording): every frame was "missing or corrupt".
+  fs::rename(dir + "/seq_Images", dir + "/Images");
+  RawlogSource beside(path, {});
+  expectSameFrames(frames, beside, 1e-4 + 1e-6);
 }
 
 // A rawlog of several cameras (a rig; Robot@Home records four) is read as the first camera's: the

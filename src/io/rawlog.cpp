@@ -339,9 +339,12 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
   if (fs::is_directory(path)) throw InputError(path, "is a folder, expected a .rawlog file");
   images_dir_ = RawlogWriter::imagesDirFor(path);
   if (!fs::is_directory(images_dir_)) {
-    // MRPT also accepts "_images" / "_IMAGES".
+    // MRPT also accepts "_images" / "_IMAGES", and a folder "Images" beside the rawlog
+    // (CRawlog::detectImagesDirectory), which RawLogViewer opens.
     for (const char* alt : {"_images", "_IMAGES"})
       if (fs::is_directory(stripRawlogExtension(path) + alt)) images_dir_ = stripRawlogExtension(path) + alt;
+    const std::string beside = (fs::path(path).parent_path() / "Images").string();
+    if (!fs::is_directory(images_dir_) && fs::is_directory(beside)) images_dir_ = beside;
   }
   if (opts.intrinsics) CameraIntrinsics::parse(*opts.intrinsics);  // fail early on a bad preset
 
