@@ -170,6 +170,8 @@ TEST(CameraFiles, TheFreiburgCameraIsTheFoldersOwn) {
   EXPECT_DOUBLE_EQ(CameraIntrinsics::forTumFolder("/d/freiburg2_exports/my_realsense_take/").fx, 525.0);
   EXPECT_DOUBLE_EQ(CameraIntrinsics::forTumFolder("/d/rgbd_dataset_freiburg1_xyz/").fx, 517.3);
   EXPECT_FALSE(CameraIntrinsics::namesAFreiburgCamera("/d/freiburg1_runs/take"));
+  // "freiburg" without 1, 2 or 3 names no camera forTumFolder knows: its guess of the ROS default is said.
+  EXPECT_FALSE(CameraIntrinsics::namesAFreiburgCamera("/d/my_freiburg_take"));
   const std::string dir = test::tempDir("cam_own_name") + "/rgbd_dataset_freiburg1_t";
   fs::create_directories(dir);
   const fs::path before = fs::current_path();

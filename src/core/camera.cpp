@@ -67,7 +67,11 @@ CameraIntrinsics CameraIntrinsics::forTumFolder(const std::string& folder) {
 }
 
 bool CameraIntrinsics::namesAFreiburgCamera(const std::string& folder) {
-  return ownName(folder).find("freiburg") != std::string::npos;
+  // The cameras forTumFolder knows: "freiburg" alone (my_freiburg_take) names none of them.
+  const std::string name = ownName(folder);
+  for (const char* fr : {"freiburg1", "freiburg2", "freiburg3"})
+    if (name.find(fr) != std::string::npos) return true;
+  return false;
 }
 
 CameraIntrinsics CameraIntrinsics::scaled(double s) const {

@@ -26,8 +26,9 @@ const std::regex kDepthName(R"(frame-(\d{1,9})\.depth\.png)");  // 7-Scenes: 6 d
 
 // Colour image beside a frame stem: PNG first, then JPEG (both occur in 7-Scenes mirrors).
 std::string colourFor(const std::string& stem) {
+  std::error_code ec;  // one that cannot be stat'ed (a symlink loop) is that frame's damage, found when it is read
   for (const char* ext : {".color.png", ".color.jpg"})
-    if (fs::exists(stem + ext)) return stem + ext;
+    if (fs::exists(stem + ext, ec)) return stem + ext;
   return {};
 }
 

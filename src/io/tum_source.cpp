@@ -277,7 +277,8 @@ double medianRaw(const cv::Mat& raw) {
 
 std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths) {
   for (const std::string& path : paths) {
-    if (path.empty() || !fs::is_regular_file(path) || !imageFileDamage(path).empty()) continue;
+    std::error_code ec;  // a file that cannot be stat'ed (a symlink loop) is its own frame's damage, not the run's
+    if (path.empty() || !fs::is_regular_file(path, ec) || !imageFileDamage(path).empty()) continue;
     try {
       // As loadColour reads it (IMREAD_UNCHANGED ignores an EXIF orientation): IMREAD_COLOR turned a
       // JPEG tagged "rotate 90" to 480x640, and every 640x480 frame was then refused as the wrong size.

@@ -19,7 +19,7 @@ struct CameraIntrinsics {
   // The TUM preset matching the folder's own name containing "freiburg1/2/3", else the ROS default.
   static CameraIntrinsics forTumFolder(const std::string& folder);
   // Whether the folder's own name (not a parent's: /data/freiburg1_runs/my_take is no TUM recording)
-  // names a TUM camera, as rgbd_dataset_freiburg3_long_office does. "." and a trailing '/' name the
+  // names a TUM camera (freiburg1, 2 or 3), as rgbd_dataset_freiburg3_long_office does. "." and a trailing '/' name the
   // folder they stand for.
   static bool namesAFreiburgCamera(const std::string& folder);
 
