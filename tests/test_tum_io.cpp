@@ -40,6 +40,14 @@ TEST(Associate, NearestWithinToleranceEachUsedOnce) {
   EXPECT_EQ(a[1].depth.file, "db");
 }
 
+// Stamps exactly max_diff apart are no pair, as associate.py (abs(a - b) < max_difference) and the
+// evaluation's association have it; binary fractions, so the difference is exact.
+TEST(Associate, StampsExactlyTheToleranceApartAreNoPair) {
+  const std::vector<TumEntry> rgb{{0.5, "c"}}, depth{{0.515625, "d"}};
+  for (const bool one_to_one : {true, false}) EXPECT_TRUE(associate(rgb, depth, 0.015625, one_to_one).empty()) << one_to_one;
+  EXPECT_EQ(associate(rgb, depth, 0.0156251).size(), 1u);
+}
+
 TEST(Associate, EveryDepthFrameTakesItsNearestColourUnlessOneToOne) {
   std::vector<TumEntry> rgb{{1.000, "a"}, {1.060, "c"}};
   std::vector<TumEntry> depth{{1.010, "d1"}, {1.018, "d2"}, {1.065, "d3"}};

@@ -42,14 +42,16 @@ std::vector<TumEntry> readTumList(const std::string& path) { return parseTumList
 
 std::vector<TumAssociation> associate(const std::vector<TumEntry>& rgb, const std::vector<TumEntry>& depth,
                                       double max_diff, bool one_to_one) {
-  // Candidate pairs within max_diff, best first; each stamp used once (as associate.py does).
+  // Candidate pairs less than max_diff apart, best first; each stamp used once (as associate.py does:
+  // abs(a - b) < max_difference, as the evaluation's association).
   struct Cand { double dt; std::size_t i, j; };
   std::vector<Cand> cands;
   for (std::size_t i = 0; i < rgb.size(); ++i) {
     auto lo = std::lower_bound(depth.begin(), depth.end(), rgb[i].timestamp - max_diff,
                                [](const TumEntry& e, double t) { return e.timestamp < t; });
     for (auto it = lo; it != depth.end() && it->timestamp <= rgb[i].timestamp + max_diff; ++it)
-      cands.push_back({std::abs(it->timestamp - rgb[i].timestamp), i, std::size_t(it - depth.begin())});
+      if (const double dt = std::abs(it->timestamp - rgb[i].timestamp); dt < max_diff)
+        cands.push_back({dt, i, std::size_t(it - depth.begin())});
   }
   // Ties by the stamps, as associate.py sorts (difference, colour stamp, depth stamp) tuples.
   std::sort(cands.begin(), cands.end(),
