@@ -75,9 +75,12 @@ SignalledRun runSignalledMidway(const std::string& command, const std::string& l
   const std::string count_shows = "grep -o ' [0-9]*/" + total + " frames' '" + watch + "' 2>/dev/null | awk -F/ '$1 >= " +
                                   std::to_string(from) + " && $1 < " + total + " {found = 1} END {exit !found}'";
   std::string said;
-  run("(" + command + " > '" + log_path + "' 2>&1 & pid=$!; for i in $(seq 1 600); do " + count_shows +
-          " && echo signalled-at-a-count && break; kill -0 $pid 2>/dev/null || break; sleep 0.2; done; kill -" + signal +
-          " $pid 2>/dev/null; wait $pid; echo rc=$?)",
+  // Signalled only while it runs: one that has ended (its last count shown, or a failure) is not
+  // signalled, nor is its pid, which another process may have taken by then.
+  run("(" + command + " > '" + log_path + "' 2>&1 & pid=$!; ended= counted=; for i in $(seq 1 600); do kill -0 $pid " +
+          "2>/dev/null || { ended=1; break; }; " + count_shows + " && { counted=1; break; }; sleep 0.2; done; " +
+          "[ -n \"$ended\" ] || { kill -" + signal + " $pid 2>/dev/null && [ -n \"$counted\" ] && echo signalled-at-a-count; }; " +
+          "wait $pid; echo rc=$?)",
       &said);
   SignalledRun r;
   r.signalled_at_a_count = said.find("signalled-at-a-count") != std::string::npos;

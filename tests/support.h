@@ -41,8 +41,9 @@ int run(const std::string& cmd, std::string* output = nullptr);
 // from <= N < total, or once it has ended, or after two minutes without one.
 struct SignalledRun {
   int exit_code = -1;               // the shell's: 128 + the signal's number for a run it stopped
-  // false: no such count showed: a machine that finished first (exit 0), or a command that failed
-  // before one (the caller's test then fails: ASSERT_EQ(exit_code, 0) before it skips)
+  // false: not signalled at a count: a machine that finished first (exit 0), or a command that failed
+  // or showed no count in two minutes (then stopped; the caller's test fails: ASSERT_EQ(exit_code, 0)
+  // before it skips). A command that has ended is never signalled (its pid may be another's by then).
   bool signalled_at_a_count = false;
   std::string log;                  // what the command wrote to log_path
 };

@@ -192,10 +192,12 @@ TEST(LiveLoop, AnyExceptionStopsTheRunAndAThrowingHookLeavesWithIt) {
 // checkpoint did too; "processing error: checkpoint" hid the cause.
 TEST(LiveLoop, TheFirstErrorWins) {
   FakeSource src(1000, 1);
-  std::atomic<bool> recorder_failed{false};
+  std::atomic<bool> recorder_failed{false}, consumer_holding{false};
   LiveHooks hooks;
   hooks.on_grabbed = [&](Frame& f, const mrpt::obs::CObservation3DRangeScan::Ptr&) {
-    if (f.index == 5) {
+    // Once the consumer holds a frame (on a busy machine it may start late: the recorder's error then
+    // stopped the run before it took any).
+    if (f.index >= 5 && consumer_holding && !recorder_failed) {
       recorder_failed = true;
       throw std::runtime_error("grab.rawlog: disk full");
     }
@@ -205,7 +207,8 @@ TEST(LiveLoop, TheFirstErrorWins) {
       src,
       [&](const Frame&) {  // the first frame it sees (frame 0 may have been dropped: a late thread)
         if (consumer_threw) return;
-        while (!recorder_failed) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        consumer_holding = true;
+        for (int ms = 0; !recorder_failed && ms < 20000; ++ms) std::this_thread::sleep_for(std::chrono::milliseconds(1));
         std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the recorder's error is in (TSAN: slow)
         consumer_threw = true;
         throw std::runtime_error("checkpoint: disk full");

@@ -172,6 +172,10 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
   return out;
 }
 
+// Far beyond any image (a 16-bit 4096x3072 frame is 25 MB uncompressed): read whole at the size it
+// reports, such a file was a gigabyte allocation whose failure (std::bad_alloc) ended the run.
+constexpr long kMaxImageFileBytes = 256L << 20;
+
 bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
@@ -179,9 +183,6 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
   struct stat st {};
   const bool regular = fstat(fileno(f), &st) == 0 && S_ISREG(st.st_mode);
   const long size = regular && std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
-  // Read whole at the size it reports: one far beyond any image (a 16-bit 4096x3072 frame is 25 MB
-  // uncompressed) is damage, not a gigabyte allocation whose failure ended the run (std::bad_alloc).
-  constexpr long kMaxImageFileBytes = 256L << 20;
   bool read = size >= 0 && size <= kMaxImageFileBytes && std::fseek(f, 0, SEEK_SET) == 0;
   if (read) {
     bytes.resize(std::size_t(size));
@@ -236,6 +237,9 @@ std::size_t jpegScanStart(const std::uint8_t* p, std::size_t n) {
 // own "libpng error" line; an ancillary chunk with a bad CRC it only drops); a JPEG's end marker after
 // its scan starts.
 std::string imageFileDamage(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode) && st.st_size > kMaxImageFileBytes)
+    return std::to_string(st.st_size) + " bytes, larger than any image";
   thread_local std::vector<std::uint8_t> bytes;
   if (!readWholeFile(path, bytes)) return {};
   const std::uint8_t* p = bytes.data();

@@ -32,7 +32,8 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
 // BGR image comes back as it is (its pixels shared).
 cv::Mat asBgr8(cv::Mat image);
 // What is wrong with an image file: a PNG cut short ("truncated PNG") or with a chunk whose CRC fails
-// ("damaged PNG: its IDAT chunk fails its CRC"), a JPEG cut short ("truncated JPEG"); empty for a whole
+// ("damaged PNG: its IDAT chunk fails its CRC"), a JPEG cut short ("truncated JPEG"), a file larger than
+// any image ("... bytes, larger than any image": over 256 MiB); empty for a whole
 // one, or a file of another kind. Checked before cv::imread: libpng prints its own line to stderr for
 // such a PNG, and libjpeg fills a cut JPEG's missing rows with grey and returns it.
 std::string imageFileDamage(const std::string& path);
