@@ -56,23 +56,23 @@ std::string ownName(const std::string& folder) {
   if (p.filename().empty()) p = p.parent_path();
   return p.filename().string();
 }
+
+// The TUM preset its own name names ("fr1" for ...freiburg1...), empty for none: "freiburg" alone
+// (my_freiburg_take) names no camera.
+std::string freiburgPresetOf(const std::string& folder) {
+  const std::string name = ownName(folder);
+  for (const char* fr : {"freiburg1", "freiburg2", "freiburg3"})
+    if (name.find(fr) != std::string::npos) return std::string("fr") + fr[8];
+  return {};
+}
 }  // namespace
 
 CameraIntrinsics CameraIntrinsics::forTumFolder(const std::string& folder) {
-  const std::string name = ownName(folder);
-  for (const char* fr : {"freiburg1", "freiburg2", "freiburg3"}) {
-    if (name.find(fr) != std::string::npos) return parse(std::string("fr") + fr[8]);
-  }
-  return parse("ros");
+  const std::string preset = freiburgPresetOf(folder);
+  return parse(preset.empty() ? "ros" : preset);
 }
 
-bool CameraIntrinsics::namesAFreiburgCamera(const std::string& folder) {
-  // The cameras forTumFolder knows: "freiburg" alone (my_freiburg_take) names none of them.
-  const std::string name = ownName(folder);
-  for (const char* fr : {"freiburg1", "freiburg2", "freiburg3"})
-    if (name.find(fr) != std::string::npos) return true;
-  return false;
-}
+bool CameraIntrinsics::namesAFreiburgCamera(const std::string& folder) { return !freiburgPresetOf(folder).empty(); }
 
 CameraIntrinsics CameraIntrinsics::scaled(double s) const {
   CameraIntrinsics c = *this;

@@ -1,8 +1,18 @@
 #include "vofusion/core/triangle_mesh.h"
 
+#include <stdexcept>
+#include <string>
+
 #include <Eigen/Geometry>
 
 namespace vofusion {
+
+void checkFaceIndices(const TriangleMesh& mesh) {
+  for (const auto& f : mesh.faces)
+    for (const std::uint32_t v : f)
+      if (v >= mesh.vertices.size())
+        throw std::invalid_argument("a face references vertex " + std::to_string(v) + " of " + std::to_string(mesh.vertices.size()));
+}
 
 void computeVertexNormals(TriangleMesh& mesh) {
   mesh.normals.assign(mesh.vertices.size(), Eigen::Vector3f::Zero());

@@ -220,11 +220,8 @@ Soup soupOf(const Mesh& m) {
 Soup soupOf(const TriangleMesh& m) {
   Soup s;
   for (const auto& v : m.vertices) s.points.emplace_back(v.x(), v.y(), v.z());
-  for (const auto& f : m.faces) {
-    for (std::uint32_t i : f)
-      if (i >= m.vertices.size()) throw std::invalid_argument("a face references vertex " + std::to_string(i));
-    s.triangles.push_back({f[0], f[1], f[2]});
-  }
+  checkFaceIndices(m);
+  for (const auto& f : m.faces) s.triangles.push_back({f[0], f[1], f[2]});
   return s;
 }
 
@@ -342,10 +339,7 @@ class Cleaner {
 
   void run(TriangleMesh& in) {
     has_colours_ = !in.colors.empty() && in.colors.size() == in.vertices.size();
-    for (const auto& f : in.faces)
-      for (std::uint32_t i : f)
-        if (i >= in.vertices.size()) throw std::invalid_argument("a face references vertex " + std::to_string(i) + " of " +
-                                                                 std::to_string(in.vertices.size()));
+    checkFaceIndices(in);
     step("repair", [&] { buildRepaired(in); });
     if (p_.min_component_faces > 0 || p_.min_component_area > 0) step("components", [&] { removeSmallComponents(); });
     // A region's holes may run into its neighbours: they are filled once the regions are welded.

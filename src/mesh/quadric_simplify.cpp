@@ -39,9 +39,7 @@ bool simplifyByQuadrics(TriangleMesh& mesh, double max_error, std::size_t target
   if (!locked.empty() && locked.size() != n) throw std::invalid_argument("simplifyByQuadrics: one lock flag per vertex");
   // meshoptimizer asserts on a face naming a vertex past the end (Debian's build keeps its asserts): the
   // process aborted.
-  for (const auto& f : mesh.faces)
-    for (const std::uint32_t v : f)
-      if (v >= n) throw std::invalid_argument("a face references vertex " + std::to_string(v) + " of " + std::to_string(n));
+  checkFaceIndices(mesh);
   const std::vector<float> xyz = positionsLocking(mesh, locked);
   std::vector<unsigned> indices;
   indices.reserve(3 * mesh.faces.size());

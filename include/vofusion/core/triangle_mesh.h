@@ -18,6 +18,9 @@ struct TriangleMesh {
   bool empty() const { return faces.empty(); }
 };
 
+// Throws std::invalid_argument("a face references vertex V of N") for a face naming a vertex past the end.
+void checkFaceIndices(const TriangleMesh& mesh);
+
 // Area-weighted vertex normals, oriented like the faces (+z for a vertex of no face's area).
 void computeVertexNormals(TriangleMesh& mesh);
 
