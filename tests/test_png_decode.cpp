@@ -14,6 +14,8 @@
 #include "support.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/io/png_encode.h"
+#include "vofusion/io/tum_source.h"
+#include "vofusion/core/errors.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;
@@ -285,4 +287,47 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
   EXPECT_EQ(imageFileDamage(dir), "");                                 // a folder is no file to read
   std::vector<std::uint8_t> bytes{1, 2, 3};
   EXPECT_FALSE(readWholeFile(dir, bytes));
+}
+
+// A PNG's header states its size: a frame of another size is refused by it before decoding. A crafted
+// 30000x30000 depth PNG of a few hundred bytes was decoded by OpenCV into a 1.8 GB image first.
+TEST(PngDecode, AnImageOfAnotherSizeIsRefusedByItsHeader) {
+  const std::string dir = test::tempDir("png_header_size");
+  const auto write = [&](const std::string& name, const std::vector<std::uint8_t>& bytes) {
+    const std::string path = dir + "/" + name;
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    std::fwrite(bytes.data(), 1, bytes.size(), f);
+    std::fclose(f);
+    return path;
+  };
+  std::vector<std::uint8_t> png = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, ihdr;
+  put32(ihdr, 30000);
+  put32(ihdr, 30000);
+  ihdr.insert(ihdr.end(), {16, 0, 0, 0, 0});
+  chunk(png, "IHDR", ihdr);
+  const std::vector<std::uint8_t> zeros(60001, 0);  // one row, filter 0
+  std::vector<std::uint8_t> z(compressBound(uLong(zeros.size())));
+  uLongf zlen = z.size();
+  ASSERT_EQ(compress2(z.data(), &zlen, zeros.data(), uLong(zeros.size()), 9), Z_OK);
+  z.resize(zlen);
+  chunk(png, "IDAT", z);
+  chunk(png, "IEND", {});
+  const std::string huge = write("huge.png", png);
+  EXPECT_EQ(pngHeaderSize(huge), cv::Size(30000, 30000));
+  for (const bool colour : {false, true})
+    try {
+      colour ? loadColour(huge, 64, 48) : loadRawDepthPng(huge, 64, 48);
+      ADD_FAILURE() << "a 30000x30000 image was taken for 64x48";
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), huge + (colour ? ": colour" : ": depth") + " image is 30000x30000, expected 64x48");
+    }
+  // A whole image of another size: the same line as after decoding.
+  std::vector<std::uint8_t> small;
+  ASSERT_TRUE(cv::imencode(".png", depthImage(32, 24), small));
+  const std::string other = write("other.png", small);
+  EXPECT_EQ(pngHeaderSize(other), cv::Size(32, 24));
+  EXPECT_THROW(loadRawDepthPng(other, 64, 48), InputError);
+  EXPECT_EQ(loadRawDepthPng(other, 32, 24).size(), cv::Size(32, 24));
+  EXPECT_TRUE(pngHeaderSize(write("text.png", {'n', 'o', 't'})).empty());
+  EXPECT_TRUE(pngHeaderSize(dir + "/missing.png").empty());
 }

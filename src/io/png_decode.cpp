@@ -2,9 +2,11 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <vector>
 
 #include <libdeflate.h>  // its CRC-32
@@ -202,6 +204,18 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
   const std::uint8_t* h = bytes.data();
   return bytes.size() >= 29 && std::memcmp(h, kSignature, 8) == 0 && isChunk(h + 12, "IHDR") &&
          be32(h + 16) == std::uint32_t(width) && be32(h + 20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
+}
+
+cv::Size pngHeaderSize(const std::string& path) {
+  std::uint8_t h[24];
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return {};
+  const bool read = std::fread(h, 1, sizeof h, f) == sizeof h;
+  std::fclose(f);
+  if (!read || std::memcmp(h, kSignature, 8) != 0 || !isChunk(h + 12, "IHDR")) return {};
+  const std::uint32_t w = be32(h + 16), ht = be32(h + 20);
+  constexpr std::uint32_t kIntMax = std::uint32_t(std::numeric_limits<int>::max());
+  return {int(std::min(w, kIntMax)), int(std::min(ht, kIntMax))};
 }
 
 namespace {

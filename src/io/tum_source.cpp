@@ -115,10 +115,23 @@ void requireImageFile(const std::string& path, const char* what) {
   if (!fs::exists(st)) throw InputError(path, std::string(what) + " image is missing");
   if (!fs::is_regular_file(st)) throw InputError(path, std::string(what) + " image is not a file (a folder?)");
 }
+
+std::string sizeMismatch(const char* what, cv::Size got, int expect_w, int expect_h) {
+  return std::string(what) + " image is " + std::to_string(got.width) + "x" + std::to_string(got.height) +
+         ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h);
+}
+
+// A PNG whose header states another size is refused before it is decoded (pngHeaderSize).
+void requireHeaderSize(const std::string& path, const char* what, int expect_w, int expect_h) {
+  const cv::Size header = pngHeaderSize(path);
+  if (!header.empty() && header != cv::Size(expect_w, expect_h))
+    throw InputError(path, sizeMismatch(what, header, expect_w, expect_h));
+}
 }  // namespace
 
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note) {
   requireImageFile(path, "depth");
+  requireHeaderSize(path, "depth", expect_w, expect_h);
   // A 16-bit grey PNG in about half OpenCV's time; only a whole file decodes (IEND, CRCs), so the
   // truncation check is needed (and the file opened again) only for what OpenCV gets.
   cv::Mat raw = readPlainPng(path);
@@ -131,8 +144,7 @@ cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, con
   if (raw.empty()) throw InputError(path, "cannot decode depth image (corrupt or truncated PNG?)");
   if (raw.type() != CV_16UC1) throw InputError(path, "depth image must be 16-bit single channel" + unit_note);
   if (raw.cols != expect_w || raw.rows != expect_h)
-    throw InputError(path, "depth image is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
-                               ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h));
+    throw InputError(path, sizeMismatch("depth", raw.size(), expect_w, expect_h));
   return raw;
 }
 
@@ -144,6 +156,7 @@ cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double
 
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   requireImageFile(path, "colour");
+  requireHeaderSize(path, "colour", expect_w, expect_h);
   cv::Mat img = readPlainPng(path);  // an 8-bit RGB PNG, as loadRawDepthPng does
   if (img.type() != CV_8UC3) {
     if (const std::string damage = imageFileDamage(path); !damage.empty())
@@ -156,8 +169,7 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   }
   if (img.empty()) throw InputError(path, "cannot decode colour image (corrupt or truncated?)");
   if (img.cols != expect_w || img.rows != expect_h)
-    throw InputError(path, "colour image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
-                               ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h));
+    throw InputError(path, sizeMismatch("colour", img.size(), expect_w, expect_h));
   return img;
 }
 

@@ -27,6 +27,11 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes);
 // Whether `bytes` is a PNG whose header says 8-bit RGB of width x height (nothing decoded): the
 // rawlog writer then copies a recording's colour PNG instead of encoding its pixels again.
 bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
+// The width and height a PNG file's header states (its first 24 bytes; nothing decoded, no CRC
+// checked); an empty size for a file that is no PNG or cannot be read. The readers refuse an image
+// of the wrong size by it before its pixels are allocated: a crafted 2 MB PNG says 30000x30000, and
+// both decoders allocated its 1.8 GB to find out.
+cv::Size pngHeaderSize(const std::string& path);
 // A colour image of 1 to 4 channels (8- or 16-bit, or float in [0, 1]) as 8-bit BGR: what the
 // frames carry whatever the file held (grey, grey and alpha, BGRA, 16 bits a channel). An 8-bit
 // BGR image comes back as it is (its pixels shared).
