@@ -497,6 +497,21 @@ TEST(VofusionApp, AnOutputFolderWithAHashIsNoConfigError) {
   EXPECT_NE(log.find("[kinfu] work_dir: '\"" + dir + "/spill\"': MRPT's INI reader takes quotes"), std::string::npos) << log;
 }
 
+// A name that is no UTF-8 (a Latin-1 folder, a damaged byte in a list) is written with U+FFFD in its
+// place: summary.json's writer threw on it after the last frame, and the run wrote nothing.
+TEST(VofusionApp, ANameThatIsNoUtf8IsWrittenReplaced) {
+  const std::string dir = test::tempDir("vofusion_app_latin1");
+  const std::string config = dir + "/caf\xe9.ini";  // "café" in Latin-1
+  fs::copy_file(validConfig(dir), config);
+  std::string log;
+  ASSERT_EQ(test::run(test::app("vofusion") + " synthetic:room --max-frames 3 --config '" + config + "' --out " + dir + "/out",
+                      &log),
+            0)
+      << log;
+  const auto summary = readJson(dir + "/out/summary.json");
+  EXPECT_NE(summary.dump().find("caf\xef\xbf\xbd.ini"), std::string::npos) << summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 // Too few frames for an ATE (it needs 3 poses): the path is still drawn, and summary.json says why
 // there is no ATE. Neither was written.
 TEST(VofusionApp, ARunTooShortForAnAteStillDrawsItsPath) {

@@ -230,7 +230,8 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
 
     s["peak_memory_mib"] = peakMemoryMiB();
     s["heap_huge_pages"] = heapAsksForHugePages();  // the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
-    writeFileAtomically(out.path("summary.json"), s.dump(2) + "\n");
+    // A name that is no UTF-8 (a Latin-1 folder) is written with U+FFFD: strict, the writer threw and the run lost every output.
+    writeFileAtomically(out.path("summary.json"), s.dump(2, ' ', false, json::error_handler_t::replace) + "\n");
     out.wrote("summary.json", "run statistics");
     if (m.rawlog) {
       m.rawlog->writer().commit();
