@@ -539,6 +539,18 @@ TEST(FaultsOutput, AFolderWhereAnOutputGoesChangesNothing) {
   expectCleanFailure(quote(test::app("vofusion")) + " synthetic:room --max-frames 3 --out " + quote(out) + " --config " +
                          quote(fastVofusionConfig()),
                      out + "/summary.json", "is a folder", out);
+  // With poses.rawlog (the default): an earlier run's rawlog and ground truth stay as they were.
+  const std::string with_rawlog = outWithEarlierResult("faults_folder_in_the_way_rawlog");
+  fs::create_directories(with_rawlog + "/summary.json/x");
+  writeText(with_rawlog + "/poses.rawlog", kEarlier);
+  writeText(with_rawlog + "/poses.groundtruth.txt", kEarlier);
+  const std::string cfg = test::tempDir("faults_folder_in_the_way_cfg") + "/rawlog.ini";
+  writeText(cfg, "[output]\nclean_mesh = false\n");
+  expectCleanFailure(quote(test::app("vofusion")) + " synthetic:room --max-frames 3 --out " + quote(with_rawlog) +
+                         " --config " + quote(cfg),
+                     with_rawlog + "/summary.json", "is a folder", with_rawlog);
+  EXPECT_EQ(readAll(with_rawlog + "/poses.rawlog"), kEarlier);
+  EXPECT_EQ(readAll(with_rawlog + "/poses.groundtruth.txt"), kEarlier);
 }
 
 // The disk fills while outputs are written: a file size limit (ulimit -f, SIGXFSZ ignored so writes

@@ -233,6 +233,9 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     // A name that is no UTF-8 (a Latin-1 folder) is written with U+FFFD: strict, the writer threw and the run lost every output.
     writeFileAtomically(out.path("summary.json"), s.dump(2, ' ', false, json::error_handler_t::replace) + "\n");
     out.wrote("summary.json", "run statistics");
+    // The rawlog replaces an earlier run's only once the staged files have their places: a folder where
+    // summary.json goes left the new rawlog beside the earlier run's other outputs.
+    out.checkPlaces();
     if (m.rawlog) {
       m.rawlog->writer().commit();
       out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);

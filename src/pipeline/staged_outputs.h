@@ -53,9 +53,13 @@ class StagedOutputs {
     }
     return left;
   }
-  void commit(std::FILE* log) {
-    // Before any file moves (the files before it were in place, new, beside the earlier run's rest).
+  // Refuses a folder where a staged file goes: called before any file moves (the files before it were
+  // in place, new, beside the earlier run's rest), and by the caller before it puts a file of its own.
+  void checkPlaces() const {
     for (const std::string& name : names_) refuseFolderWhereAFileGoes(final_path_(name));
+  }
+  void commit(std::FILE* log) {
+    checkPlaces();
     for (const std::string& name : names_) {
       std::error_code ec;
       std::filesystem::rename(path(name), final_path_(name), ec);
