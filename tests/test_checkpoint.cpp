@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "support.h"
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/loop/loop_closer.h"
@@ -138,6 +139,32 @@ TEST(Checkpoint, AClockSteppedBackBetweenDroppedFramesLosesNoFrame) {
   // The frames after the checkpoint go on from its last index, as within one run.
   EXPECT_THROW(again.process(test::deepCopy(recording[resume_at - 1])), std::invalid_argument);
   again.process(test::deepCopy(recording[resume_at]));
+}
+
+// Memory that runs out while a checkpoint is written costs that checkpoint: the error names it, the
+// earlier one stays whole and the run goes on (std::bad_alloc went past the app's catch, and ended it).
+TEST(Checkpoint, MemoryRunningOutCostsTheCheckpointOnly) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 6));
+  const std::string dir = test::tempDir("checkpoint_no_memory");
+  const std::string path = dir + "/checkpoint";
+  RunSession run(roomConfig(), TrackingMode::Joint, dir + "/out", OutputParams(), MeshCleanParams());
+  for (std::size_t i = 0; i < 4; ++i) run.process(seq.render(i));
+  run.saveCheckpoint(path, "input room\n", 1.5);
+  run.process(seq.render(4));
+  try {
+    const ScopedAllocationLimit limit(std::size_t(64) << 10, std::size_t(256) << 10);
+    run.saveCheckpoint(path, "input room\n", 2.0);
+    ADD_FAILURE() << "a checkpoint was written within 256 KiB";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), path);
+    EXPECT_EQ(e.problem(), "cannot write the checkpoint: out of memory");
+  }
+  const auto peek = RunSession::peek(path);
+  ASSERT_TRUE(peek.has_value());
+  EXPECT_EQ(peek->frames, 4u);
+  run.process(seq.render(5));
+  run.saveCheckpoint(path, "input room\n", 2.5);
+  EXPECT_EQ(RunSession::peek(path)->frames, 6u);
 }
 
 TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {

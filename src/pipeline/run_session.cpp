@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <new>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -216,10 +217,11 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
     throw;
   } catch (const std::exception& e) {
     // A write that failed under a part of the state (the map's "write failed (disk full?)", MRPT's
-    // archive) is said of the checkpoint, the file the user asked for; anything else (the loop
-    // closer's thread failing) is not the checkpoint's and goes on as it is.
-    if (os.good()) throw;
-    throw InputError(path, "cannot write the checkpoint: " + oneLineMessage(e));
+    // archive) or memory that ran out for the copies it is written from is said of the checkpoint,
+    // the file the user asked for; anything else (the loop closer's thread failing) is not the
+    // checkpoint's and goes on as it is.
+    if (os.good() && !dynamic_cast<const std::bad_alloc*>(&e)) throw;
+    throw InputError(path, "cannot write the checkpoint: " + (os.good() ? std::string("out of memory") : oneLineMessage(e)));
   }
   out.commit();  // a power cut leaves the earlier checkpoint or this one, never an empty file
 }
