@@ -4,6 +4,7 @@
 #include <limits>
 
 #include <mrpt/config/CConfigFileMemory.h>
+#include <opencv2/imgproc.hpp>
 
 #include "support.h"
 #include "vofusion/pipeline/mesh_by_region.h"
@@ -226,6 +227,35 @@ TEST(Reconstruction, NonFiniteDepthReadingsCostOnlyThemselves) {
       for (const std::size_t i : {damaged_frame, path.size() - 1})
         EXPECT_LT((path[i].pose.translation() - clean[i].pose.translation()).norm(), 0.01) << toString(mode) << " frame " << i;
     }
+  }
+}
+
+// Frame::rgb is 8-bit BGR; a library caller's colour of another pixel type (16 bits a channel, BGRA) is
+// read as the odometry reads it, by every stage: the photometric term dropped it without a word, and the
+// map's colour read its bytes as 8-bit BGR. Here 16 bits are the 8-bit values times 256, so the run is
+// the 8-bit run's, pose for pose and colour for colour.
+TEST(Reconstruction, ColourOfAnotherPixelTypeIsTrackedAndFusedAsEightBitBgr) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 6));
+  const auto run = [&](int type) {
+    Reconstruction rec(test::quickRoomConfig(), TrackingMode::Joint);
+    for (std::size_t i = 0; i < seq.size(); ++i) {
+      Frame f = seq.render(i);
+      if (type == CV_16UC3) f.rgb.convertTo(f.rgb, CV_16UC3, 256.0);
+      if (type == CV_8UC4) cv::cvtColor(f.rgb, f.rgb, cv::COLOR_BGR2BGRA);
+      f.colour_file.reset();
+      rec.process(f);
+    }
+    rec.finish();
+    return std::pair(rec.trajectory(), rec.extractMesh());
+  };
+  const auto [path, mesh] = run(CV_8UC3);
+  ASSERT_GT(mesh.faces.size(), 1000u);
+  for (const int type : {CV_16UC3, CV_8UC4}) {
+    const auto [other_path, other_mesh] = run(type);
+    ASSERT_EQ(other_path.size(), path.size()) << type;
+    for (std::size_t i = 0; i < path.size(); ++i)
+      EXPECT_EQ(other_path[i].pose.asVectorVal(), path[i].pose.asVectorVal()) << type << " frame " << i;
+    EXPECT_EQ(other_mesh.colors, mesh.colors) << type;
   }
 }
 

@@ -3,6 +3,7 @@
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/progress.h"  // printWarning
 #include "vofusion/core/state_archive.h"
+#include "vofusion/io/png_decode.h"  // asBgr8
 
 #include <chrono>
 #include <cmath>
@@ -162,6 +163,15 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
 Reconstruction::~Reconstruction() = default;
 
 FrameReport Reconstruction::process(const Frame& frame) {
+  // Frame::rgb is 8-bit BGR. A library caller's colour of another pixel type (16 bits a channel, BGRA)
+  // is read as the loaders read it, once for every stage: the photometric term dropped it without a
+  // word, and the map's colour read its bytes as 8-bit BGR.
+  if (!frame.rgb.empty() && frame.rgb.type() != CV_8UC3) {
+    Frame bgr8 = frame;
+    bgr8.rgb = asBgr8(frame.rgb);
+    bgr8.colour_file.reset();  // not these pixels' file
+    return process(bgr8);
+  }
   Impl& m = *impl_;
   // The odometry names its reference by index, and the tracker finds that frame's pose by it: frames
   // left at the default index 0 were all "frame 0" (a library caller's), and got wrong poses.
