@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "support.h"
+#include "vofusion/core/allocation_limit.h"
 #include "test_mesh_fixtures.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/mesh_io.h"
@@ -911,6 +912,24 @@ TEST(MeshClean, ARegionsSeamIsNotWeldedAwayByDistance) {
   const MeshCleanReport report = simplifyRegion(a.mesh, a.seam, p);
   ASSERT_TRUE(report.success) << report.failure;
   EXPECT_EQ(seamPoints(a), seam_before);
+}
+
+// Memory that runs out for a region's copy costs that region (kept as marching cubes made it, the
+// failure reported), as a CGAL failure does: the copy was made outside the catch, and failed the mesh.
+TEST(MeshClean, ARegionThatCannotBeCopiedIsKeptAsItCame) {
+  SheetRegion a = sheetRegion(columns(0.f, 1.f, 40), 40, 1.f);
+  const TriangleMesh before = a.mesh;
+  MeshCleanParams p;
+  p.min_component_faces = 0;
+  MeshCleanReport report;
+  {
+    const ScopedAllocationLimit limit(std::size_t(8) << 10, std::size_t(64) << 10);  // less than its 20 KB of vertices
+    ASSERT_NO_THROW(report = simplifyRegion(a.mesh, a.seam, p));
+  }
+  EXPECT_FALSE(report.success);
+  EXPECT_FALSE(report.failure.empty());
+  EXPECT_EQ(a.mesh.vertices, before.vertices);
+  EXPECT_EQ(a.mesh.faces, before.faces);
 }
 
 // A face naming a vertex past the end is refused before meshoptimizer reads it (it asserts, and Debian's

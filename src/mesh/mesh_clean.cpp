@@ -829,8 +829,8 @@ MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& se
   // place, and the neighbouring region's copy without a partner (a crack). The welded mesh is welded
   // once, with the distance asked for (cleanWeldedRegions).
   p.weld_distance = 0;
-  TriangleMesh work = mesh;
-  std::vector<std::uint8_t> work_seam = seam;
+  TriangleMesh work;
+  std::vector<std::uint8_t> work_seam;
   // Samples in proportion to the faces: spread over regions about as over the whole mesh.
   const std::size_t samples = std::max<std::size_t>(100, mesh.faces.size() / 8);
   const auto t0 = std::chrono::steady_clock::now();
@@ -838,6 +838,10 @@ MeshCleanReport simplifyRegion(TriangleMesh& mesh, std::vector<std::uint8_t>& se
   // after it has a tenth of the faces (rpy_first100: repair 5.3 s of CPU before, docs/mesh.md).
   const bool quadrics = p.max_simplify_error > 0;
   try {
+    // Copied in here: memory that runs out for a large region's copy costs that region (kept as it
+    // came), as a CGAL failure does; it failed the whole mesh.
+    work = mesh;
+    work_seam = seam;
     if (quadrics) {
       if (!simplifyByQuadrics(work, p.max_simplify_error, std::size_t(p.target_faces), work_seam))
         throw std::runtime_error("simplification would move a seam vertex");
