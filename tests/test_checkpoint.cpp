@@ -359,9 +359,12 @@ namespace {
 // The synthetic room as a recording that fails to read from frame `fails_at` on (0: never).
 class FailingRoom : public FrameSource {
  public:
-  FailingRoom(const sim::SyntheticSequence& seq, std::size_t fails_at) : seq_(seq), fails_at_(fails_at) {}
+  // silent: from `fails_at` on the recording ends without an error, as a skipping reader's cut short.
+  FailingRoom(const sim::SyntheticSequence& seq, std::size_t fails_at, bool silent = false)
+      : seq_(seq), fails_at_(fails_at), silent_(silent) {}
   bool next(Frame& frame) override {
     if (next_ == seq_.size()) return false;
+    if (fails_at_ && next_ >= fails_at_ && silent_) return false;
     if (fails_at_ && next_ >= fails_at_)
       throw InputError("/media/disk/room/depth/" + std::to_string(next_) + ".png", "input/output error");
     frame = seq_.render(next_++);
@@ -374,6 +377,7 @@ class FailingRoom : public FrameSource {
  private:
   const sim::SyntheticSequence& seq_;
   std::size_t fails_at_, next_ = 0;
+  bool silent_;
 };
 
 // A run of the room whose loops re-fuse the map: loops within its short path, and any correction.
@@ -419,5 +423,17 @@ TEST(RunSessionEnd, ARecordingThatCannotBeReadAgainCostsTheRefusionOnly) {
     EXPECT_TRUE(summary["loop_closure"]["map_reintegrated"].get<bool>());
     EXPECT_GT(summary["mesh"]["faces"].get<std::size_t>(), 0u) << "the frames fused again before the failure";
     for (const char* file : {"trajectory.txt", "mesh.ply", "summary.json"}) EXPECT_TRUE(fs::exists(dir + "/midway/" + file)) << file;
+  }
+  {
+    // Cut short since, with no error (a skipping reader's end): the frames not fused again are counted.
+    // They were left out of the map without a word.
+    const auto run = roomRunToRefuse(seq, dir + "/cut");
+    const std::size_t fused = run->reconstruction().framesFused();
+    ASSERT_GT(fused, 40u);
+    const nlohmann::json summary = run->finish(info, [&] { return std::make_unique<FailingRoom>(seq, 40, true); });
+    const nlohmann::json& about = summary["loop_closure_reintegration"];
+    EXPECT_FALSE(about.contains("error")) << summary.dump();
+    EXPECT_EQ(about.value("frames_fused", 0u), 40u) << summary.dump();
+    EXPECT_EQ(about.value("frames_missing", 0u), fused - 40) << summary.dump();
   }
 }

@@ -5,6 +5,7 @@
 #include "vofusion/core/state_archive.h"
 #include "vofusion/io/png_decode.h"  // asBgr8
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -464,6 +465,9 @@ const StageTimes& Reconstruction::totalTimes() const {
   return impl_->times;
 }
 std::size_t Reconstruction::framesProcessed() const { return impl_->frames; }
+std::size_t Reconstruction::framesFused() const {
+  return std::size_t(std::count(impl_->fused.begin(), impl_->fused.end(), true));
+}
 std::size_t Reconstruction::fallbacks() const { return impl_->fallbacks; }
 std::size_t Reconstruction::predictedFrames() const { return impl_->predicted; }
 const std::map<Rejection, std::size_t>& Reconstruction::icpRejections() const { return impl_->rejections; }

@@ -370,13 +370,22 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
   };
   nlohmann::json& about = info.extra["loop_closure_reintegration"];
   about["from"] = std::filesystem::path(again->name()).filename().string();
-  about["frames_fused"] = rec_.reintegrate(next, [&](std::size_t n) { progress.update(read = n); });
+  const std::size_t fused = rec_.reintegrate(next, [&](std::size_t n) { progress.update(read = n); });
+  about["frames_fused"] = fused;
+  // Frames the reader no longer gives (damaged or removed since, skipped without --strict; a recording
+  // cut short since) are left out of the map without an error: counted, and said.
+  const std::size_t missing = rec_.framesFused() - std::min(fused, rec_.framesFused());
+  if (missing > 0) about["frames_missing"] = missing;
   if (!failure.empty()) {
     // An I/O error, a frame damaged since under --strict: the map holds the frames re-fused before it,
     // which is what is left (the tracked map is gone by then).
     about["error"] = failure;
     printWarning(failure + "; re-fusing stopped after " + std::to_string(read) + " of " +
                  std::to_string(rec_.framesProcessed()) + " frames: the mesh holds those");
+  } else if (missing > 0) {
+    printWarning(again->name() + ": " + std::to_string(missing) + " of the " + std::to_string(rec_.framesFused()) +
+                 " frames fused while tracking were not there when it was read again (damaged, removed or cut "
+                 "short since): the mesh lacks them");
   }
   progress.finish();
   about["seconds"] = progress.elapsedSeconds();

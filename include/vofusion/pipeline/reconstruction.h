@@ -114,6 +114,7 @@ class Reconstruction {
   bool mapReleased() const;
   const StageTimes& totalTimes() const;  // accumulated over all frames, plus "total"
   std::size_t framesProcessed() const;
+  std::size_t framesFused() const;       // frames fused into the map while tracking (reintegrate() fuses them again)
   std::size_t fallbacks() const;         // frames whose pose came from the odometry fallback
   std::size_t predictedFrames() const;   // frames whose pose came from the constant-velocity prediction
   const std::map<Rejection, std::size_t>& icpRejections() const;  // why ICP was rejected, how often
