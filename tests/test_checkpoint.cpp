@@ -398,6 +398,28 @@ std::unique_ptr<RunSession> roomRunToRefuse(const sim::SyntheticSequence& seq, c
 
 }  // namespace
 
+// An output folder that became unwritable during the run (here a file in its place) fails the end in
+// one line naming it: std::filesystem's error named the staging folder inside it.
+TEST(RunSessionEnd, AnOutputFolderGoneSinceTheStartIsNamed) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 3));
+  const std::string dir = test::tempDir("run_session_out_gone");
+  OutputParams out;
+  out.write_rawlog = false;
+  RunSession run(test::quickRoomConfig(), TrackingMode::Joint, dir + "/out", out, MeshCleanParams());
+  for (std::size_t i = 0; i < seq.size(); ++i) run.process(seq.render(i));
+  fs::remove_all(dir + "/out");
+  std::ofstream(dir + "/out") << "a file where the output folder was";
+  RunInfo info;
+  info.input = "room";
+  try {
+    run.finish(info, nullptr);
+    ADD_FAILURE() << "outputs written into a file";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), dir + "/out");
+    EXPECT_EQ(e.problem().rfind("cannot write: ", 0), 0u) << e.what();
+  }
+}
+
 // A recording that cannot be read again for re-fusion (moved or unmounted since it was tracked) costs
 // the re-fusion, not the run: the outputs are written, the mesh of the map fused at the tracked poses
 // (or of the frames fused again before a read failed), and summary.json says why. The exception left

@@ -20,7 +20,11 @@ class StagedOutputs {
  public:
   explicit StagedOutputs(std::function<std::string(const std::string&)> final_path)
       : final_path_(std::move(final_path)), staging_(final_path_(".staging")), last_(std::chrono::steady_clock::now()) {
-    std::filesystem::create_directories(staging_.tmp());
+    // The output folder, gone or unwritable since the run began (a full disk): named as the user knows
+    // it, in one line (std::filesystem's error named the staging folder, with its own wording).
+    std::error_code ec;
+    std::filesystem::create_directories(staging_.tmp(), ec);
+    if (ec) throw InputError(std::filesystem::path(final_path_(".staging")).parent_path().string(), "cannot write: " + ec.message());
   }
   std::string path(const std::string& name) const { return (std::filesystem::path(staging_.tmp()) / name).string(); }
   // An error a writer threw naming its staged copy, naming the file as the user will find it (the
