@@ -1,6 +1,7 @@
 // core/atomic_file.h: outputs appear whole or not at all, and staging a killed run left behind
 // does not stay.
 #include <gtest/gtest.h>
+#include <sys/inotify.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -9,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "support.h"
 #include "sync_watch.h"
@@ -126,6 +128,38 @@ TEST(AtomicFile, AReplacedFolderGoesWithTheWriterAndRevertPutsItBack) {
   }
   EXPECT_EQ(names(), std::vector<std::string>{"a_Images"});
   EXPECT_EQ(readTextFile(images + "/new.png"), "this run's");
+}
+
+// A folder replaced, and put back, is swapped with its staging in one step: no other name is ever
+// made beside it. Three renames (the old one aside to "<path>.old-<pid>") left a moment with nothing at
+// the path; killed there, the next run removed the new folder as a dead run's staging.
+TEST(AtomicFile, AFolderIsReplacedAndPutBackInOneStep) {
+  const std::string dir = test::tempDir("atomic_folder_swap");
+  const std::string images = dir + "/a_Images";
+  fs::create_directories(images);
+  writeFileAtomically(images + "/old.png", "earlier");
+  const int fd = ::inotify_init1(IN_NONBLOCK | IN_CLOEXEC);
+  ASSERT_GE(fd, 0);
+  ASSERT_GE(::inotify_add_watch(fd, dir.c_str(), IN_CREATE | IN_MOVED_FROM | IN_MOVED_TO | IN_DELETE), 0);
+  std::string staging;
+  {
+    AtomicPath out(images);
+    staging = fs::path(out.tmp()).filename().string();
+    fs::create_directories(out.tmp());
+    writeFileAtomically(out.tmp() + "/new.png", "this run's");
+    out.commit();
+    EXPECT_EQ(readTextFile(images + "/new.png"), "this run's");
+    out.revert();
+    EXPECT_EQ(readTextFile(images + "/old.png"), "earlier");
+  }
+  std::vector<std::string> named;
+  alignas(inotify_event) char buf[8192];
+  for (ssize_t n; (n = ::read(fd, buf, sizeof buf)) > 0;)
+    for (char* p = buf; p < buf + n; p += sizeof(inotify_event) + reinterpret_cast<inotify_event*>(p)->len)
+      if (const auto* e = reinterpret_cast<inotify_event*>(p); e->len > 0) named.push_back(e->name);
+  ::close(fd);
+  ASSERT_FALSE(named.empty()) << "no event seen";
+  for (const std::string& n : named) EXPECT_TRUE(n == "a_Images" || n == staging) << n;
 }
 
 // A folder named with a trailing slash (a shell's completion adds it) is staged beside it and replaced

@@ -119,9 +119,18 @@ void AtomicPath::commit() {
   prepare();
   std::error_code ec;
   if (fs::is_directory(tmp_) && fs::exists(final_)) {
-    // rename() cannot replace a non-empty directory: the old one goes aside, the new one in, and the
-    // old one takes the staging name, removed by the destructor (or revert() puts it back). Removing
-    // a large folder takes seconds: done after the outputs committed with it are in place too.
+    // rename() cannot replace a non-empty directory: the two are swapped in one step, the old one
+    // taking the staging name, removed by the destructor (or revert() swaps them back). Removing a
+    // large folder takes seconds: done after the outputs committed with it are in place too. Three
+    // renames left a moment with nothing at the path: killed there, the next run removed the new
+    // folder as a dead run's staging, and the old one stayed aside for good.
+    if (::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, final_.c_str(), RENAME_EXCHANGE) == 0) {
+      replaced_ = true;
+      committed_ = true;
+      syncRenameOrSay(parentOf(final_), final_);
+      return;
+    }
+    // A file system without the exchange (EINVAL: some network and FUSE mounts): the old one aside.
     const std::string old = final_ + ".old-" + std::to_string(::getpid());
     fs::remove_all(old, ec);
     fs::rename(final_, old, ec);
@@ -146,7 +155,9 @@ void AtomicPath::commit() {
 void AtomicPath::revert() {
   if (!committed_) return;
   std::error_code ec, undo;
-  if (replaced_) {  // the new one aside, the old one back, the new one to the staging name (removed)
+  if (replaced_ && ::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, final_.c_str(), RENAME_EXCHANGE) == 0) {
+    // swapped back: the old one at the path, the new one at the staging name (removed)
+  } else if (replaced_) {  // the new one aside, the old one back, the new one to the staging name (removed)
     const std::string aside = final_ + ".tmp-new-" + std::to_string(::getpid());
     fs::rename(final_, aside, ec);
     if (!ec) {
