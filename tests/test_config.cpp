@@ -146,7 +146,9 @@ TEST(Config, ALineTheReaderCannotReadIsAnErrorNamingFileAndLine) {
             at + "line 2: a comment ends in '\\', which joins line 3 to it (MRPT would not read that line)");
   EXPECT_EQ(error("[kinfu] voxel_size = 0.004\n"),
             at + "line 1: text after the section name ('voxel_size = 0.004' would be dropped): put a key on a line of its own");
-  EXPECT_EQ(error("[kinfu]  ; the map\n[loop] # loops\n"), "");
+  EXPECT_EQ(error("[kinfu]  ; the map\n[loop] # loops\n[odometry] // MRPT's own comment\nkeypoints = star\n"), "");
+  EXPECT_EQ(loadConfig(dir + "/c.ini").read_string("odometry", "keypoints", ""), "star");
+  EXPECT_EQ(error("[kinfu] / 2\n"), at + "line 1: text after the section name ('/ 2' would be dropped): put a key on a line of its own");
   fs::create_directories(dir + "/folder.ini");
   EXPECT_THROW(
       {

@@ -46,11 +46,12 @@ void checkIniLines(const std::string& text, const std::string& path) {
     if (comment && continued)
       throw InputError(path, "line " + std::to_string(number) + ": a comment ends in '\\', which joins line " +
                                  std::to_string(number + 1) + " to it (MRPT would not read that line)");
-    // MRPT takes the name of "[kinfu] voxel_size = 0.004" and drops the rest of the line.
+    // MRPT takes the name of "[kinfu] voxel_size = 0.004" and drops the rest of the line (a comment
+    // after it, ';', '#' or MRPT's own '//', is dropped as meant).
     const std::size_t close = t.find(']');
     if (t[0] == '[' && close != std::string::npos) {
       const auto rest = t.find_first_not_of(" \t", close + 1);
-      if (rest != std::string::npos && t[rest] != ';' && t[rest] != '#')
+      if (rest != std::string::npos && t[rest] != ';' && t[rest] != '#' && t.compare(rest, 2, "//") != 0)
         throw InputError(path, "line " + std::to_string(number) + ": text after the section name ('" +
                                    shown(t.substr(rest)) + "' would be dropped): put a key on a line of its own");
     }
