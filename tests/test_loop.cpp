@@ -645,6 +645,23 @@ sim::SyntheticSequence roomAtFullResolution() {
 }
 }  // namespace
 
+// Only well-tracked frames' residuals make the window a frame is judged against: a fallback's is the
+// residual of the ICP that was refused, large by definition. A stretch of fallbacks lifted the median,
+// and the jump when tracking met the map again was not strained (nor were they counted as strained).
+TEST(LoopCloser, ResidualsOfFramesNotWellTrackedAreNoPartOfTheWindow) {
+  LoopCloser closer{LoopParams()};
+  Frame f;  // no depth: no keyframe, the residual judged all the same
+  const auto add = [&](bool well_tracked, double rms) {
+    closer.addFrame(f, Eigen::Isometry3d::Identity(), well_tracked, rms, nullptr);
+    ++f.index, f.timestamp += 1.0 / 30;
+  };
+  for (int i = 0; i < 60; ++i) add(true, 0.003);
+  for (int i = 0; i < 50; ++i) add(false, 0.05);
+  EXPECT_EQ(closer.strainedFrames(), 0u) << "fallbacks counted as strained";
+  add(true, 0.012);  // the map met again: 4x the well-tracked median
+  EXPECT_EQ(closer.strainedFrames(), 1u);
+}
+
 // Lost a few metres on, the camera is placed again by a keyframe the place index has not taken yet
 // (the last min_travel of path: neither among the newest keyframes nor indexed), not only by the
 // newest and the indexed ones: turned back to where it was 2 m before, it stayed lost.

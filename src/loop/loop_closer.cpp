@@ -304,7 +304,9 @@ LoopCloser::~LoopCloser() {
 bool LoopCloser::addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked, double icp_rms,
                           std::shared_ptr<const DescribedKeypoints> features) {
   Impl& m = *impl_;
-  const bool strained = m.residuals.strained(icp_rms);
+  // Only a well-tracked frame's residual is judged and joins the window: a fallback's is that of the
+  // ICP refused, large by definition (a stretch of them lifted the median past the jump after it).
+  const bool strained = well_tracked && m.residuals.strained(icp_rms);
   m.strained_frames += strained;
   const bool key = m.selector.next(tracked, well_tracked && !frame.depth.empty(), strained);
   if (well_tracked && !frame.depth.empty() && tracked.matrix().allFinite())

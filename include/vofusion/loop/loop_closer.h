@@ -66,7 +66,7 @@ class LoopCloser {
   ~LoopCloser();
 
   // Every processed frame, in order (lost ones too, well_tracked = false); icp_rms: the tracker's ICP
-  // residual RMS (m, 0 when none ran), see ResidualMonitor. Returns true when the
+  // residual RMS (m, 0 when none ran), judged by a ResidualMonitor of the well-tracked frames' only. Returns true when the
   // frame became a keyframe (its features and a reduced depth are kept; features may be null).
   bool addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked, double icp_rms,
                 std::shared_ptr<const DescribedKeypoints> features);
