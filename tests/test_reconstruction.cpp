@@ -259,6 +259,38 @@ TEST(Reconstruction, ColourOfAnotherPixelTypeIsTrackedAndFusedAsEightBitBgr) {
   }
 }
 
+// A caller that refills one Frame's buffers for every image (as the apps' readers may) gets the poses
+// of fresh frames, with the colour-time correction on: the odometry kept the caller's depth buffer for
+// its held frames, and read the current frame's depths at the reference's pixels.
+TEST(Reconstruction, ARefilledFrameGivesTheFreshFramesPoses) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 12, "shake"));  // colour up to 15 ms off the depth
+  const auto run = [&](bool refill, bool overlap) {
+    mrpt::config::CConfigFileMemory cfg = test::quickRoomConfig();
+    cfg.write("kinfu", "overlap_fusion", overlap);
+    Reconstruction rec(cfg, TrackingMode::Joint);
+    Frame frame;
+    for (std::size_t i = 0; i < seq.size(); ++i) {
+      const Frame f = seq.render(i);
+      if (!refill) {
+        rec.process(f);
+        continue;
+      }
+      if (frame.depth.empty()) frame = test::deepCopy(f);
+      f.depth.copyTo(frame.depth);
+      f.rgb.copyTo(frame.rgb);
+      frame.index = f.index, frame.timestamp = f.timestamp, frame.colour_offset = f.colour_offset;
+      rec.process(frame);
+    }
+    return rec.trajectory();
+  };
+  for (const bool overlap : {true, false}) {
+    const Trajectory fresh = run(false, overlap), refilled = run(true, overlap);
+    ASSERT_EQ(refilled.size(), fresh.size());
+    for (std::size_t i = 0; i < fresh.size(); ++i)
+      EXPECT_EQ(refilled[i].pose.asVectorVal(), fresh[i].pose.asVectorVal()) << "overlap " << overlap << " frame " << i;
+  }
+}
+
 // A frame whose every reading is NaN has no depth, as one of zeros: lost with the pose held, in every
 // mode (NaN counted as a reading: modes joint and odometry moved the frame on at constant velocity).
 TEST(Reconstruction, DepthOfNaNOnlyIsNoDepthAsZerosAre) {

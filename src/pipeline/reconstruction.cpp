@@ -127,10 +127,7 @@ struct Reconstruction::Impl {
   // The frame tracked against the map and fused (beside the next frame's odometry when overlap_fusion).
   FusionResult track(const Frame& frame, const fusion::MotionPrior* prior, const FrameGeometry* geometry) {
     if (!kinfu_params.overlap_fusion) return kinfu->process(frame, prior, geometry);
-    // The caller may refill its frame's buffers before the fusion has read them.
-    fusing_frame = frame;
-    fusing_frame.depth = frame.depth.clone();
-    fusing_frame.rgb = frame.rgb.clone();
+    fusing_frame = frame;  // its images process()'s own copies, which the caller cannot refill
     FusionResult f = kinfu->track(fusing_frame, prior, geometry);
     fusing_result = f;
     fusing_result.times = StageTimes();
@@ -163,15 +160,21 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
 
 Reconstruction::~Reconstruction() = default;
 
-FrameReport Reconstruction::process(const Frame& frame) {
+FrameReport Reconstruction::process(const Frame& in) {
+  // The images, copied once for all that keeps them past this call: the caller may refill its frame's
+  // buffers for the next one (the apps reuse one Frame), while the fusion beside the next frame reads
+  // both and the odometry's held frames read their depth again (colour time: the current frame's
+  // depths were read at the reference's pixels).
+  Frame frame = in;
+  frame.depth = in.depth.clone();
   // Frame::rgb is 8-bit BGR. A library caller's colour of another pixel type (16 bits a channel, BGRA)
   // is read as the loaders read it, once for every stage: the photometric term dropped it without a
   // word, and the map's colour read its bytes as 8-bit BGR.
-  if (!frame.rgb.empty() && frame.rgb.type() != CV_8UC3) {
-    Frame bgr8 = frame;
-    bgr8.rgb = asBgr8(frame.rgb);
-    bgr8.colour_file.reset();  // not these pixels' file
-    return process(bgr8);
+  if (in.rgb.empty() || in.rgb.type() == CV_8UC3) {
+    frame.rgb = in.rgb.clone();
+  } else {
+    frame.rgb = asBgr8(in.rgb);
+    frame.colour_file.reset();  // not these pixels' file
   }
   Impl& m = *impl_;
   // The odometry names its reference by index, and the tracker finds that frame's pose by it: frames
