@@ -114,6 +114,13 @@ void expectSameAs(const cv::Mat& got, const cv::Mat& want) {
 
 cv::Mat decode(const std::vector<std::uint8_t>& png) { return decodePlainPng(png.data(), png.size()); }
 
+std::string writeBytes(const std::string& path, const std::vector<std::uint8_t>& bytes) {
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  std::fwrite(bytes.data(), 1, bytes.size(), f);
+  std::fclose(f);
+  return path;
+}
+
 }  // namespace
 
 TEST(PngDecode, EveryRowFilterAsOpenCvDecodesIt) {
@@ -244,13 +251,7 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
   cv::randu(img, 0, 255);
   std::vector<std::uint8_t> png;
   ASSERT_TRUE(cv::imencode(".png", img, png));
-  const auto write = [&](const std::string& name, const std::vector<std::uint8_t>& bytes) {
-    const std::string path = dir + "/" + name;
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    std::fwrite(bytes.data(), 1, bytes.size(), f);
-    std::fclose(f);
-    return path;
-  };
+  const auto write = [&](const std::string& name, const std::vector<std::uint8_t>& bytes) { return writeBytes(dir + "/" + name, bytes); };
   EXPECT_EQ(imageFileDamage(write("whole.png", png)), "");
   EXPECT_EQ(imageFileDamage(write("cut.png", std::vector<std::uint8_t>(png.begin(), png.end() - 5))), "truncated PNG");
   EXPECT_EQ(imageFileDamage(write("header.png", std::vector<std::uint8_t>(png.begin(), png.begin() + 20))), "truncated PNG");
@@ -293,13 +294,7 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
 // 30000x30000 depth PNG of a few hundred bytes was decoded by OpenCV into a 1.8 GB image first.
 TEST(PngDecode, AnImageOfAnotherSizeIsRefusedByItsHeader) {
   const std::string dir = test::tempDir("png_header_size");
-  const auto write = [&](const std::string& name, const std::vector<std::uint8_t>& bytes) {
-    const std::string path = dir + "/" + name;
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    std::fwrite(bytes.data(), 1, bytes.size(), f);
-    std::fclose(f);
-    return path;
-  };
+  const auto write = [&](const std::string& name, const std::vector<std::uint8_t>& bytes) { return writeBytes(dir + "/" + name, bytes); };
   std::vector<std::uint8_t> png = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, ihdr;
   put32(ihdr, 30000);
   put32(ihdr, 30000);
