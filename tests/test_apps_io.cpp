@@ -52,10 +52,20 @@ void expectCleanFailure(const std::string& cmd, const std::string& needle, const
 TEST(AppsIo, SimulateIntoAFolderNamedWithATrailingSlash) {
   const std::string dir = test::tempDir("simulate_trailing_slash");
   std::string out;
+  std::string first_depth;  // pass 0's first depth image; pass 1 (another seed's noise) replaces it
   for (int pass = 0; pass < 2; ++pass) {
-    ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/sim/ --frames 2 --size 160x120", &out), 0) << out;
+    ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/sim/ --frames 2 --size 160x120 --seed " + std::to_string(pass + 1), &out), 0)
+        << out;
     EXPECT_TRUE(fs::exists(dir + "/sim/rgb.txt")) << pass;
     EXPECT_EQ(std::distance(fs::directory_iterator(dir), {}), 1) << pass;
+    std::string first;
+    for (const auto& e : fs::directory_iterator(dir + "/sim/depth"))
+      if (first.empty() || e.path().string() < first) first = e.path().string();
+    std::ifstream depth(first, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(depth)), {});
+    ASSERT_FALSE(bytes.empty()) << pass;
+    if (pass == 1) EXPECT_NE(bytes, first_depth) << "the folder of pass 0 was not replaced";
+    first_depth = bytes;
   }
 }
 

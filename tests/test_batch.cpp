@@ -300,14 +300,18 @@ TEST(Batch, ACtrlCToAJobStopsItsVofusion) {
   const std::string stand_in = dir + "/stand-in-vofusion";
   {
     std::ofstream f(stand_in);
-    f << "#!/bin/bash\ntrap 'kill $s; exit 143' TERM INT\nsleep 20 & s=$!\nwait\n";
+    // "ready" once its trap is set: the INT is sent to a job whose vofusion runs (a timer let it land on
+    // a loaded machine before batch-job's own trap).
+    f << "#!/bin/bash\ntrap 'kill $s; exit 143' TERM INT\ntouch " << dir << "/ready\nsleep 20 & s=$!\nwait\n";
   }
   fs::permissions(stand_in, fs::perms::owner_all);
   const std::string job = test::sourceDir() + "/scripts/batch-job " + stand_in + " " + dir + "/out j$i 0 " + dir;
   // bash with set -m: each job in a process group of its own, with SIGINT not ignored, as from a terminal.
   // INT to batch-job alone (jobs 1-2), and to the job's process group as a terminal sends it (3-4).
-  std::ofstream(dir + "/four-jobs") << "set -m\nfor i in 1 2 3 4; do " + job + " >/dev/null 2>&1 & p=$!; " +
-                                           "sleep 0.$i; s=$(date +%s%N); kill -INT $([ $i -le 2 ] || echo -)$p; " +
+  std::ofstream(dir + "/four-jobs") << "set -m\nfor i in 1 2 3 4; do rm -f " + dir + "/ready; " + job + " >/dev/null 2>&1 & p=$!; " +
+                                           "for t in $(seq 1 400); do [ -e " + dir + "/ready ] && break; sleep 0.05; done; " +
+                                           "[ -e " + dir + "/ready ] || echo \"job $i: its vofusion never started\"; " +
+                                           "s=$(date +%s%N); kill -INT $([ $i -le 2 ] || echo -)$p; " +
                                            "wait $p; echo \"rc=$? ms=$(( ($(date +%s%N) - s) / 1000000 ))\"; done\n";
   std::string log;
   test::run("bash " + dir + "/four-jobs", &log);
@@ -333,15 +337,17 @@ TEST(Batch, ACtrlCToTheBatchLetsEachVofusionWriteWhatItBuilt) {
   {
     std::ofstream f(dir + "/b/bin/vofusion");
     f << "#!/bin/bash\nout=''; while [ $# -gt 0 ]; do [ \"$1\" = --out ] && out=$2; shift; done\n"
-         "trap 'sleep 1; touch \"$out/wrote\"; exit 143' TERM INT\nsleep 30 & wait\n";
+         "trap 'sleep 1; touch \"$out/wrote\"; exit 143' TERM INT\ntouch \"$out/started\"\nsleep 30 & wait\n";
   }
   fs::permissions(dir + "/b/bin/vofusion", fs::perms::owner_all);
   std::ofstream(dir + "/ctrl-c") << "set -m\nbash " + test::sourceDir() + "/scripts/batch --out " + dir + "/out --build " + dir +
                                         "/b " + dir + "/rec >/dev/null 2>&1 & p=$!\n"
-                                        "for i in $(seq 1 100); do [ -e " + dir + "/out/rec/vofusion.log ] && break; sleep 0.1; done\n"
-                                        "sleep 0.5; kill -INT -$p; wait $p; echo rc=$?\n";
+                                        "for i in $(seq 1 400); do [ -e " + dir + "/out/rec/started ] && break; sleep 0.05; done\n"
+                                        "[ -e " + dir + "/out/rec/started ] || echo 'its vofusion never started'\n"
+                                        "kill -INT -$p; wait $p; echo rc=$?\n";
   std::string log;
   test::run("bash " + dir + "/ctrl-c", &log);
+  EXPECT_EQ(log.find("never started"), std::string::npos) << log;
   const std::size_t rc = log.find("rc=");
   ASSERT_NE(rc, std::string::npos) << log;
   EXPECT_NE(std::stoi(log.substr(rc + 3)), 0) << "a stopped batch is no success: " << log;

@@ -443,7 +443,8 @@ TEST(RunSessionEnd, ARecordingThatCannotBeReadAgainCostsTheRefusionOnly) {
     const nlohmann::json summary = run->finish(info, [&] { return std::make_unique<FailingRoom>(seq, 40); });
     EXPECT_EQ(summary["loop_closure_reintegration"]["error"], "/media/disk/room/depth/40.png: input/output error") << summary.dump();
     EXPECT_TRUE(summary["loop_closure"]["map_reintegrated"].get<bool>());
-    EXPECT_GT(summary["mesh"]["faces"].get<std::size_t>(), 0u) << "the frames fused again before the failure";
+    EXPECT_EQ(summary["loop_closure_reintegration"].value("frames_fused", 0u), 40u) << "the frames fused again before the failure";
+    EXPECT_GT(summary["mesh"]["faces"].get<std::size_t>(), 0u);
     for (const char* file : {"trajectory.txt", "mesh.ply", "summary.json"}) EXPECT_TRUE(fs::exists(dir + "/midway/" + file)) << file;
   }
   {
