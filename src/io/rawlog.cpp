@@ -407,6 +407,13 @@ bool RawlogSource::next(Frame& frame) {
   // External images and range matrices are named relative to the rawlog's "_Images" folder: made
   // absolute here, never through MRPT's process-wide images folder (io/external_files.h).
   resolveExternalFiles(*obs, images_dir_);
+  // No frame uses the point cloud: one stored beside the rawlog (rawlog-edit --externalize's _3D.bin)
+  // is not loaded. Missing, it cost its frame as a "missing or corrupt" range image; present, it was
+  // decoded for nothing (3.7 MB a frame).
+  if (obs->points3D_isExternallyStored()) {
+    obs->points3D_overrideExternalStoredFlag(false);
+    obs->hasPoints3D = false;
+  }
   std::optional<CameraIntrinsics> cam;
   if (opts_.intrinsics) cam = CameraIntrinsics::parse(*opts_.intrinsics);
   const std::size_t index = pos_++;
