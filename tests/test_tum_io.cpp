@@ -7,6 +7,7 @@
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
+#include "vofusion/io/png_decode.h"
 #include "vofusion/io/tum_source.h"
 
 using namespace vofusion;
@@ -115,10 +116,35 @@ TEST(TumFolder, TheImageSizeIsTheFramesWhateverAnExifOrientationSays) {
     out.write(reinterpret_cast<const char*>(jpeg.data()), std::streamsize(jpeg.size()));
   }
   ASSERT_EQ(cv::imread(path, cv::IMREAD_COLOR).size(), cv::Size(48, 64)) << "OpenCV no longer turns it: the test shows nothing";
-  const auto size = firstReadableImageSize({path});
+  const auto size = recordingImageSize({path});
   ASSERT_TRUE(size.has_value());
   EXPECT_EQ(*size, cv::Size(64, 48));
   EXPECT_EQ(loadColour(path, 64, 48).size(), cv::Size(64, 48));
+}
+
+// The recording's image size is the one most of its first PNGs' headers state, nothing decoded: an odd
+// first image set the size of the whole recording (each later frame refused as the wrong size), and a
+// crafted 30000x30000 one was decoded (1.8 GB) to find its size.
+TEST(TumFolder, TheImageSizeIsTheOneMostHeadersState) {
+  const std::string dir = test::tempDir("image_size_vote");
+  const auto png = [&](const std::string& name, int w, int h) {
+    const std::string path = dir + "/" + name;
+    EXPECT_TRUE(cv::imwrite(path, cv::Mat(h, w, CV_8UC3, cv::Scalar(1, 2, 3))));
+    return path;
+  };
+  std::vector<std::uint8_t> bytes;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(4, 5, 6)), bytes));
+  for (const int at : {16, 20}) bytes[at] = 0, bytes[at + 1] = 0, bytes[at + 2] = 0x75, bytes[at + 3] = 0x30;  // 30000
+  const std::string crafted = dir + "/crafted.png";
+  {
+    std::ofstream out(crafted, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  }
+  ASSERT_EQ(pngHeaderSize(crafted), cv::Size(30000, 30000));
+  const std::vector<std::string> paths{crafted, png("odd.png", 32, 24), png("a.png", 64, 48), png("b.png", 64, 48)};
+  const auto size = recordingImageSize(paths);
+  ASSERT_TRUE(size.has_value());
+  EXPECT_EQ(*size, cv::Size(64, 48));
 }
 
 TEST(Trajectory, WriteReadRoundTrip) {

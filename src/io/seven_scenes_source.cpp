@@ -107,7 +107,7 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
   // The first colour image that can be read gives the size (a damaged one is its own frame's problem).
   std::vector<std::string> colours;
   for (std::size_t i = 0; i < std::min(frames_.size(), kFramesForImageSize); ++i) colours.push_back(frames_[i].colour);
-  const auto size = firstReadableImageSize(colours);
+  const auto size = recordingImageSize(colours);
   if (!size)
     throw InputError(colours.front().empty() ? frames_.front().stem + ".color.png" : colours.front(),
                      "colour image cannot be read, nor can any of the first " + std::to_string(colours.size()) + " frames'");

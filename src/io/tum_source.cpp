@@ -289,7 +289,17 @@ double medianRaw(const cv::Mat& raw) {
 
 }  // namespace
 
-std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths) {
+std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths) {
+  std::vector<std::pair<cv::Size, int>> votes;  // in the order first seen: a tie goes to the earlier
+  for (const std::string& path : paths) {
+    const cv::Size header = pngHeaderSize(path);
+    if (header.empty()) continue;
+    const auto it = std::find_if(votes.begin(), votes.end(), [&](const auto& v) { return v.first == header; });
+    if (it == votes.end()) votes.emplace_back(header, 1);
+    else ++it->second;
+  }
+  if (!votes.empty())
+    return std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) { return a.second < b.second; })->first;
   for (const std::string& path : paths) {
     std::error_code ec;  // a file that cannot be stat'ed (a symlink loop) is its own frame's damage, not the run's
     if (path.empty() || !fs::is_regular_file(path, ec) || !imageFileDamage(path).empty()) continue;
@@ -311,7 +321,7 @@ cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssocia
   std::vector<std::string> paths;
   for (std::size_t i = 0; i < std::min(pairs.size(), kFramesForImageSize); ++i)
     paths.push_back((fs::path(folder) / pairs[i].rgb.file).string());
-  if (const auto size = firstReadableImageSize(paths)) return *size;
+  if (const auto size = recordingImageSize(paths)) return *size;
   throw InputError(paths.front(), "colour image cannot be read, nor can any of the first " + std::to_string(paths.size()) +
                                       " listed in rgb.txt");
 }

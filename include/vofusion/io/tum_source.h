@@ -74,11 +74,13 @@ cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double
 // A 16-bit single-channel depth PNG of the expected size, in its raw units (CV_16UC1); throws
 // InputError(path, ...) when it is missing, undecodable, of another type (message + unit_note) or size.
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note = "");
-// The size of the first colour image of `paths` that can be read (missing, cut short or undecodable ones
-// are passed over: each is its own frame's problem); nullopt when none can. Sources look at this many of
-// their first frames' images for it.
+// The colour images' size: the one most of `paths`' PNG headers state (nothing decoded, so one odd or
+// crafted image neither sets the recording's size nor is decoded: a crafted 30000x30000 first image
+// was a 1.8 GB decode); with no PNG among them (JPEG), the size of the first that can be read (missing,
+// cut short or undecodable ones are passed over: each is its own frame's problem); nullopt when none
+// can. Sources look at this many of their first frames' images for it.
 constexpr std::size_t kFramesForImageSize = 30;
-std::optional<cv::Size> firstReadableImageSize(const std::vector<std::string>& paths);
+std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths);
 // A camera description read from a file: intrinsics, and what else the file says.
 struct CameraFile {
   CameraIntrinsics camera;
