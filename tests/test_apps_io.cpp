@@ -464,3 +464,22 @@ TEST(AppsIoBadInput, RawlogInputs) {
   for (const char* cover : {"1:0", "0.01:0.01"})
     expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --frames 5 --blackout " + cover, "covers no frame", outdir);
 }
+
+// A ground truth, accelerometer or intrinsics file that is a link to itself costs what it would give,
+// said in one line naming it: std::filesystem::exists threw on it, and the run ended with its error.
+TEST(AppsIo, ASidecarFileLinkedToItselfCostsWhatItGives) {
+  const std::string seq = smallTum("self_linked_sidecar");
+  for (const char* name : {"groundtruth.txt", "accelerometer.txt"}) {
+    fs::remove(seq + "/" + name);
+    fs::create_symlink(name, seq + "/" + name);
+  }
+  std::string log;
+  ASSERT_EQ(run(app("rgbd-odometry") + " " + seq + " --out " + fs::path(seq).parent_path().string() + "/out", &log), 0) << log;
+  EXPECT_NE(log.find(seq + "/groundtruth.txt: "), std::string::npos) << log;
+  EXPECT_EQ(log.find("filesystem error"), std::string::npos) << log;
+  fs::remove(seq + "/intrinsics.txt");
+  fs::create_symlink("intrinsics.txt", seq + "/intrinsics.txt");
+  const std::string out2 = fs::path(seq).parent_path().string() + "/out2";
+  fs::create_directories(out2);
+  expectCleanFailure(app("rgbd-odometry") + " " + seq + " --out " + out2, seq + "/intrinsics.txt: ", out2);
+}

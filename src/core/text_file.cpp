@@ -23,6 +23,11 @@ std::string readTextFile(const std::string& path) {
   return readCapped(f, path, kMaxBytes, "256 MiB", "a text file");
 }
 
+bool entryExists(const std::string& path) {
+  std::error_code ec;
+  return std::filesystem::exists(std::filesystem::symlink_status(path, ec));
+}
+
 std::string readCapped(std::istream& stream, const std::string& path, std::size_t max_bytes, const std::string& what,
                        const std::string& kind) {
   std::string data;

@@ -34,6 +34,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/gzip_members.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/text_file.h"
 
 namespace fs = std::filesystem;
 using mrpt::obs::CObservation3DRangeScan;
@@ -335,16 +336,17 @@ struct RawlogSource::Reader {
 };
 
 RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) : path_(path), opts_(opts) {
-  if (!fs::exists(path)) throw InputError(path, "no such file");
-  if (fs::is_directory(path)) throw InputError(path, "is a folder, expected a .rawlog file");
+  if (!entryExists(path)) throw InputError(path, "no such file");
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw InputError(path, "is a folder, expected a .rawlog file");
   images_dir_ = RawlogWriter::imagesDirFor(path);
-  if (!fs::is_directory(images_dir_)) {
+  if (!fs::is_directory(images_dir_, ec)) {
     // MRPT also accepts "_images" / "_IMAGES", and a folder "Images" beside the rawlog
     // (CRawlog::detectImagesDirectory), which RawLogViewer opens.
     for (const char* alt : {"_images", "_IMAGES"})
-      if (fs::is_directory(stripRawlogExtension(path) + alt)) images_dir_ = stripRawlogExtension(path) + alt;
+      if (fs::is_directory(stripRawlogExtension(path) + alt, ec)) images_dir_ = stripRawlogExtension(path) + alt;
     const std::string beside = (fs::path(path).parent_path() / "Images").string();
-    if (!fs::is_directory(images_dir_) && fs::is_directory(beside)) images_dir_ = beside;
+    if (!fs::is_directory(images_dir_, ec) && fs::is_directory(beside, ec)) images_dir_ = beside;
   }
   if (opts.intrinsics) CameraIntrinsics::parse(*opts.intrinsics);  // fail early on a bad preset
 
@@ -385,7 +387,7 @@ RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) :
             [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
   const std::string gt_file = RawlogWriter::groundTruthPathFor(path);
   // The file beside the rawlog wins when it gives poses.
-  gt_ = fs::exists(gt_file) ? readGroundTruthFile(gt_file, opts, std::move(embedded_gt)) : std::move(embedded_gt);
+  gt_ = entryExists(gt_file) ? readGroundTruthFile(gt_file, opts, std::move(embedded_gt)) : std::move(embedded_gt);
   rewind();
 }
 

@@ -89,7 +89,8 @@ bool parseSevenScenesPose(const std::string& text, const std::string& origin, mr
 }
 
 SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
-  if (!fs::is_directory(folder)) throw InputError(folder, "no such folder");
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) throw InputError(folder, "no such folder");
   for (const auto& e : fs::directory_iterator(folder)) {
     const std::string n = e.path().filename().string();
     std::smatch m;

@@ -328,11 +328,12 @@ cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssocia
 }  // namespace
 
 TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
-  if (!fs::is_directory(folder)) throw InputError(folder, "no such folder");
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) throw InputError(folder, "no such folder");
   const std::string rgb_list = (fs::path(folder) / "rgb.txt").string();
   const std::string depth_list = (fs::path(folder) / "depth.txt").string();
   for (const auto& f : {rgb_list, depth_list})
-    if (!fs::exists(f)) throw InputError(f, "missing (not a TUM RGB-D folder?)");
+    if (!entryExists(f)) throw InputError(f, "missing (not a TUM RGB-D folder?)");
   const auto rgb = readTumList(rgb_list);
   const auto depth = readTumList(depth_list);
   if (rgb.empty()) throw InputError(rgb_list, "lists no frames");
@@ -346,8 +347,8 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   const std::string txt = (fs::path(folder) / "intrinsics.txt").string(), yaml = (fs::path(folder) / "camera.yaml").string();
   std::optional<CameraFile> file;
   std::string origin = folder;
-  if (fs::exists(txt)) file = readIntrinsicsFile(txt), origin = txt;
-  else if (fs::exists(yaml)) file = readCameraYaml(yaml), origin = yaml;
+  if (entryExists(txt)) file = readIntrinsicsFile(txt), origin = txt;
+  else if (entryExists(yaml)) file = readCameraYaml(yaml), origin = yaml;
   const cv::Size image = colourImageSize(folder, pairs_);
   const int width = image.width, height = image.height;
   const std::string size = std::to_string(width) + "x" + std::to_string(height);
@@ -392,14 +393,14 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   }
 
   const std::string gt = (fs::path(folder) / "groundtruth.txt").string();
-  if (fs::exists(gt)) gt_ = readGroundTruthFile(gt, opts);
+  if (entryExists(gt)) gt_ = readGroundTruthFile(gt, opts);
 
   // The Kinect's accelerometer reads the reaction to gravity ("up") with its x and y axes opposite to
   // the optical frame's (checked on fr1 xyz and rpy against their ground truth).
   const std::string accel = (fs::path(folder) / "accelerometer.txt").string();
   // Like the ground truth it only goes along with the frames: damaged, it costs the pictures' measured
   // "up" (they are then oriented as for a recording without one), not the run, unless --strict.
-  if (fs::exists(accel)) {
+  if (entryExists(accel)) {
     try {
       accel_ = readAccelerometer(accel);
     } catch (const InputError& e) {

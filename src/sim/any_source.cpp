@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/seven_scenes_source.h"
 #include "vofusion/io/tum_source.h"
@@ -22,19 +23,20 @@ void refuseDepthScale(const SourceOptions& opts, const std::string& path, const 
 }  // namespace
 
 std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts) {
-  if (path.rfind("synthetic", 0) == 0 && !fs::exists(path)) {
+  if (path.rfind("synthetic", 0) == 0 && !entryExists(path)) {
     refuseDepthScale(opts, path, "a synthetic recording");
     return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));
   }
-  if (fs::is_directory(path)) {
-    if (fs::exists(fs::path(path) / "rgb.txt")) return std::make_unique<TumFolderSource>(path, opts);
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) {
+    if (entryExists((fs::path(path) / "rgb.txt").string())) return std::make_unique<TumFolderSource>(path, opts);
     if (SevenScenesSource::looksLike(path)) {
       refuseDepthScale(opts, path, "a 7-Scenes folder (millimetres)");
       return std::make_unique<SevenScenesSource>(path, opts);
     }
     throw InputError(path, "folder is not a TUM RGB-D sequence (no rgb.txt) nor a 7-Scenes one (no frame-XXXXXX.depth.png)");
   }
-  if (!fs::exists(path)) throw InputError(path, "no such file or folder");
+  if (!entryExists(path)) throw InputError(path, "no such file or folder");
   if (fs::path(path).extension() == ".rawlog") {
     refuseDepthScale(opts, path, "a rawlog");
     return std::make_unique<RawlogSource>(path, opts);

@@ -10,6 +10,10 @@ namespace vofusion {
 
 // The whole file; throws InputError(path, ...) when it cannot be opened or is over 256 MiB.
 std::string readTextFile(const std::string& path);
+// Whether there is an entry at `path`, whatever it leads to: a link to nowhere or to itself is there,
+// and its reader names the problem in one line (std::filesystem::exists threw on a link to itself,
+// and the run ended with its error). Never throws.
+bool entryExists(const std::string& path);
 // Everything `stream` gives, read in 64 KiB pieces; InputError(path, "goes on past <what>: too large
 // for <kind> here") once it is longer than max_bytes (a pipe or a device has no size to check first).
 std::string readCapped(std::istream& stream, const std::string& path, std::size_t max_bytes, const std::string& what,
