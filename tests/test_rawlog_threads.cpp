@@ -200,6 +200,22 @@ TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
       EXPECT_EQ(std::string(e.what()), name + ": corrupt range image file (cut short or damaged: its gzip check fails)");
     }
   }
+  // Dimensions whose product wraps in 64 bits to the readings' size (65536 x 2 bytes here): no range
+  // image of 2^31 rows, left to MRPT (within the reader's memory limit). Taken as the size, it asked for
+  // 2^63 readings, and std::length_error ended the run.
+  {
+    std::vector<std::uint8_t> crafted(8 + 65536, 0);
+    const std::uint32_t dims[2] = {(1u << 31) + 32768u, 0xFFFFFFFFu - 65534u};
+    std::memcpy(crafted.data(), dims, sizeof dims);
+    const std::vector<std::uint8_t> gz = gzipCompress(crafted.data(), crafted.size());
+    std::ofstream(file, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(gz.data()), std::streamsize(gz.size()));
+    auto obs = observationFromFrame(markedFrame(3, 41));
+    useExternalRangeImage(*obs, file);
+    std::optional<DepthFile> read;
+    ASSERT_NO_THROW(read = loadExternalRangeImage(*obs));
+    EXPECT_FALSE(read.has_value());
+    EXPECT_TRUE(obs->rangeImage_isExternallyStored()) << "left to MRPT's load()";
+  }
   std::ofstream(file, std::ios::binary | std::ios::trunc).flush();
   auto empty = observationFromFrame(markedFrame(3, 41));
   useExternalRangeImage(*empty, file);

@@ -73,7 +73,8 @@ std::optional<DepthFile> loadExternalRangeImage(CObservation3DRangeScan& obs) {
   std::string extension = fs::path(path).extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
   if (extension == ".txt") return std::nullopt;
-  constexpr std::size_t kLargest = 8 + std::size_t(8192) * 8192 * 2;  // rows, cols and 8192 x 8192 readings
+  constexpr std::uint32_t kLargestSide = 8192;
+  constexpr std::size_t kLargest = 8 + std::size_t(kLargestSide) * kLargestSide * 2;  // rows, cols and 8192 x 8192 readings
   std::error_code ec;
   const std::uintmax_t stored = fs::file_size(path, ec);
   if (ec) throw InputError(path, "cannot load external range image (missing or unreadable)");
@@ -86,7 +87,11 @@ std::optional<DepthFile> loadExternalRangeImage(CObservation3DRangeScan& obs) {
     throw InputError(path, "corrupt range image file (cut short or damaged: its gzip check fails)");
   std::uint32_t dims[2] = {0, 0};
   if (raw.size() >= sizeof dims) std::memcpy(dims, raw.data(), sizeof dims);
-  if (dims[0] == 0 || dims[1] == 0 || raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2) return std::nullopt;
+  // Each side at most kLargestSide first: a product of two 32-bit sides wraps in 64 bits (a crafted
+  // file's came to its size, and the range image asked for 2^63 readings).
+  if (dims[0] == 0 || dims[1] == 0 || dims[0] > kLargestSide || dims[1] > kLargestSide ||
+      raw.size() != sizeof dims + std::size_t(dims[0]) * dims[1] * 2)
+    return std::nullopt;
   auto& ri = obs.rangeImage;
   ri.setSize(dims[0], dims[1]);
   static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the range image's bytes are read as they are in memory");
