@@ -2,6 +2,9 @@
 // 7-Scenes and synthetic sources.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
+#include <set>
 #include <vector>
 
 #include "vofusion/core/errors.h"
@@ -112,4 +115,36 @@ TEST(PrefetchingSource, AnErrorSurfacesWithTheFrameThatCausedIt) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("frame 2"), std::string::npos);
   }
+}
+
+namespace {
+// Records the thread each frame is read on, by the kernel's id (a pthread id is reused by the next
+// thread as soon as one ends, and would not tell a thread per frame from one thread).
+class ThreadRecording : public Counting {
+ public:
+  using Counting::Counting;
+  Frame read(std::size_t i) const override {
+    threads.insert(::gettid());
+    return Counting::read(i);
+  }
+  mutable std::set<pid_t> threads;
+};
+}  // namespace
+
+// Every frame is read ahead on one thread, the same from first to last and after a rewind: the readers'
+// per-thread buffers (a frame's PNG bytes and inflated rows) are kept for the next frame. A thread per
+// frame (std::async) made them fresh pages each time.
+TEST(PrefetchingSource, ReadsEveryFrameOnOneThread) {
+  auto inner = std::make_unique<ThreadRecording>(6);
+  const ThreadRecording& recording = *inner;
+  PrefetchingSource src(std::move(inner));
+  Frame f;
+  for (int pass = 0; pass < 2; ++pass) {
+    while (src.next(f)) {
+    }
+    src.rewind();
+  }
+  EXPECT_EQ(recording.reads.size(), 12u);
+  EXPECT_EQ(recording.threads.size(), 1u);
+  EXPECT_EQ(recording.threads.count(::gettid()), 0u) << "read on the caller's thread";
 }
