@@ -21,7 +21,7 @@
 #include "vofusion/io/png_decode.h"  // asBgr8
 #include "vofusion/odometry/colour_time_evidence.h"
 #include "vofusion/core/state_archive.h"
-#include "vofusion/core/thread_name.h"
+#include "vofusion/core/task_thread.h"
 
 namespace vofusion {
 
@@ -139,9 +139,14 @@ struct RgbdOdometry::Impl {
   // frame is matched against it only when the good reference no longer matches.
   std::optional<FrameFeatures> failed;
   Eigen::Isometry3d T_kf_last = Eigen::Isometry3d::Identity();
+  // NARF's interest search beside the rest of each frame's extraction, always on this thread (a thread
+  // per frame made its heap fresh pages each time); none when NARF runs inline or not at all.
+  std::unique_ptr<TaskThread> narf_thread;
   explicit Impl(const OdometryParams& p)
       : params(p), keypoints(keypointSetOf(p)), motion(motionMethodOf(p)), nearest_depth(nearestDepthOf(p)),
-        colour_velocity(colourTimeVelocityOf(p)), brand(p.brand) {}
+        colour_velocity(colourTimeVelocityOf(p)), brand(p.brand) {
+    if (keypoints != KeypointSet::Star && params.narf_concurrent) narf_thread = std::make_unique<TaskThread>("vof-narf");
+  }
 
   // Extraction in two steps, so the STAR part can be matched while NARF still runs on its thread:
   // begin() detects STAR, builds the normals and describes the STAR keypoints; finish() waits for
@@ -244,8 +249,7 @@ FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, Stag
       ScopedStageTimer t(times, "narf_prepare");
       prepared = prepareNarf(frame.depth, frame.camera, params.narf);
     }
-    ex.narf_job = std::async(std::launch::async, [prepared = std::move(prepared)] {
-      nameThisThread("vof-narf");
+    ex.narf_job = narf_thread->run([prepared = std::move(prepared)] {
       const auto t0 = std::chrono::steady_clock::now();
       auto k = detectNarf(prepared);
       return std::make_pair(std::move(k), secondsSince(t0));

@@ -6,6 +6,7 @@
 #include <future>
 #include <memory>
 
+#include "vofusion/core/task_thread.h"
 #include "vofusion/io/frame_source.h"
 
 namespace vofusion {
@@ -28,13 +29,12 @@ class PrefetchingSource : public FrameSource {
     bool ok = false;
     Frame frame;
   };
-  class ReadThread;
   void start();  // begins reading the frame after the last one handed out
   std::unique_ptr<FrameSource> inner_;
   // One thread for every read ahead, made at the first: the readers' per-thread buffers (a frame's PNG
-  // bytes, its inflated rows, the inflater) stay from one frame to the next; a thread per frame made
-  // them fresh pages each time. Declared after inner_, so it ends first.
-  std::unique_ptr<ReadThread> thread_;
+  // bytes, its inflated rows, the inflater) stay from one frame to the next. Declared after inner_, so
+  // it ends first.
+  std::unique_ptr<TaskThread> thread_;
   std::future<Read> ahead_;
   bool ended_ = false;
 };
