@@ -482,4 +482,12 @@ TEST(AppsIo, ASidecarFileLinkedToItselfCostsWhatItGives) {
   const std::string out2 = fs::path(seq).parent_path().string() + "/out2";
   fs::create_directories(out2);
   expectCleanFailure(app("rgbd-odometry") + " " + seq + " --out " + out2, seq + "/intrinsics.txt: ", out2);
+  // A link to nowhere: as a file that is not there, the input named so; an intrinsics file, named.
+  fs::remove(seq + "/intrinsics.txt");
+  fs::create_symlink("nowhere.txt", seq + "/intrinsics.txt");
+  expectCleanFailure(app("rgbd-odometry") + " " + seq + " --out " + out2,
+                     seq + "/intrinsics.txt: cannot open file (No such file or directory)", out2);
+  const std::string dangling = fs::path(seq).parent_path().string() + "/dangling.rawlog";
+  fs::create_symlink("nowhere.rawlog", dangling);
+  expectCleanFailure(app("rgbd-odometry") + " " + dangling + " --out " + out2, dangling + ": no such file or folder", out2);
 }

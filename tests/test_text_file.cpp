@@ -41,7 +41,7 @@ TEST(TextFile, ReadsWholeFileOrNamesIt) {
     readTextFile(dir + "/missing.txt");
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_EQ(std::string(e.what()), dir + "/missing.txt: cannot open file");
+    EXPECT_EQ(std::string(e.what()), dir + "/missing.txt: cannot open file (No such file or directory)");
   }
   // A file far larger than any list (a sparse 300 MiB here) is refused before it is read.
   std::ofstream(dir + "/huge.txt") << "1 2 3\n";

@@ -1,6 +1,8 @@
 #include "vofusion/core/text_file.h"
 
 #include <array>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -18,7 +20,7 @@ std::string readTextFile(const std::string& path) {
   if (const auto size = std::filesystem::file_size(path, ec); !ec && size > kMaxBytes)
     throw InputError(path, "is " + std::to_string(size >> 20) + " MiB: too large for a text file here (256 MiB at most)");
   std::ifstream f(path, std::ios::binary);
-  if (!f) throw InputError(path, "cannot open file");
+  if (!f) throw InputError(path, std::string("cannot open file (") + std::strerror(errno) + ")");
   // The read itself is capped too: a pipe or a device (/dev/zero) has no size to check first.
   return readCapped(f, path, kMaxBytes, "256 MiB", "a text file");
 }

@@ -336,8 +336,8 @@ struct RawlogSource::Reader {
 };
 
 RawlogSource::RawlogSource(const std::string& path, const SourceOptions& opts) : path_(path), opts_(opts) {
-  if (!entryExists(path)) throw InputError(path, "no such file");
-  std::error_code ec;
+  std::error_code ec;  // a link to nowhere or to itself: no such file
+  if (!fs::exists(path, ec)) throw InputError(path, "no such file");
   if (fs::is_directory(path, ec)) throw InputError(path, "is a folder, expected a .rawlog file");
   images_dir_ = RawlogWriter::imagesDirFor(path);
   if (!fs::is_directory(images_dir_, ec)) {

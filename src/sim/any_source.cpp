@@ -23,11 +23,11 @@ void refuseDepthScale(const SourceOptions& opts, const std::string& path, const 
 }  // namespace
 
 std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const SourceOptions& opts) {
-  if (path.rfind("synthetic", 0) == 0 && !entryExists(path)) {
+  std::error_code ec;  // a link to nowhere or to itself is no input: "no such file or folder"
+  if (path.rfind("synthetic", 0) == 0 && !fs::exists(path, ec)) {
     refuseDepthScale(opts, path, "a synthetic recording");
     return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));
   }
-  std::error_code ec;
   if (fs::is_directory(path, ec)) {
     if (entryExists((fs::path(path) / "rgb.txt").string())) return std::make_unique<TumFolderSource>(path, opts);
     if (SevenScenesSource::looksLike(path)) {
@@ -36,7 +36,7 @@ std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const Sour
     }
     throw InputError(path, "folder is not a TUM RGB-D sequence (no rgb.txt) nor a 7-Scenes one (no frame-XXXXXX.depth.png)");
   }
-  if (!entryExists(path)) throw InputError(path, "no such file or folder");
+  if (!fs::exists(path, ec)) throw InputError(path, "no such file or folder");
   if (fs::path(path).extension() == ".rawlog") {
     refuseDepthScale(opts, path, "a rawlog");
     return std::make_unique<RawlogSource>(path, opts);
