@@ -1,7 +1,13 @@
 #include <Eigen/Dense>
 // TUM lists, association, trajectories and the TUM folder source.
+#include <sys/stat.h>
+
+#include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <future>
+#include <memory>
+#include <thread>
 #include <opencv2/imgcodecs.hpp>
 
 #include "support.h"
@@ -145,6 +151,23 @@ TEST(TumFolder, TheImageSizeIsTheOneMostHeadersState) {
   const auto size = recordingImageSize(paths);
   ASSERT_TRUE(size.has_value());
   EXPECT_EQ(*size, cv::Size(64, 48));
+  // Every one of the size cut short: no size (the recording is refused at once, not frame by frame).
+  std::vector<std::string> cut;
+  for (const char* name : {"a.png", "b.png"}) {
+    std::vector<std::uint8_t> whole;
+    ASSERT_TRUE(cv::imencode(".png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(7, 8, 9)), whole));
+    cut.push_back(dir + "/cut_" + name);
+    std::ofstream(cut.back(), std::ios::binary).write(reinterpret_cast<const char*>(whole.data()), std::streamsize(whole.size() / 2));
+  }
+  EXPECT_FALSE(recordingImageSize(cut).has_value());
+  // A FIFO listed as an image is passed over, never opened (opening it would wait for a writer).
+  const std::string fifo = dir + "/fifo.png";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  auto probe = std::make_shared<std::promise<std::optional<cv::Size>>>();
+  auto result = probe->get_future();
+  std::thread([probe, fifo, a = paths[2]] { probe->set_value(recordingImageSize({fifo, a})); }).detach();
+  ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
+  EXPECT_EQ(result.get(), std::optional<cv::Size>(cv::Size(64, 48)));
 }
 
 TEST(Trajectory, WriteReadRoundTrip) {

@@ -105,7 +105,7 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
   std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });
   if (opts.max_frames > 0 && frames_.size() > opts.max_frames) frames_.resize(opts.max_frames);
 
-  // The first colour image that can be read gives the size (a damaged one is its own frame's problem).
+  // The first frames' colour images give the size (recordingImageSize; a damaged one is its own frame's problem).
   std::vector<std::string> colours;
   for (std::size_t i = 0; i < std::min(frames_.size(), kFramesForImageSize); ++i) colours.push_back(frames_[i].colour);
   const auto size = recordingImageSize(colours);

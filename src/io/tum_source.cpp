@@ -290,19 +290,29 @@ double medianRaw(const cv::Mat& raw) {
 }  // namespace
 
 std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths) {
+  const auto regular = [](const std::string& path) {
+    std::error_code ec;  // a file that cannot be stat'ed (a symlink loop) is its own frame's damage, not the run's
+    return !path.empty() && fs::is_regular_file(path, ec);  // and no FIFO is opened (it would block)
+  };
   std::vector<std::pair<cv::Size, int>> votes;  // in the order first seen: a tie goes to the earlier
   for (const std::string& path : paths) {
-    const cv::Size header = pngHeaderSize(path);
+    const cv::Size header = regular(path) ? pngHeaderSize(path) : cv::Size();
     if (header.empty()) continue;
     const auto it = std::find_if(votes.begin(), votes.end(), [&](const auto& v) { return v.first == header; });
     if (it == votes.end()) votes.emplace_back(header, 1);
     else ++it->second;
   }
-  if (!votes.empty())
-    return std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) { return a.second < b.second; })->first;
+  if (!votes.empty()) {
+    const cv::Size size =
+        std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) { return a.second < b.second; })->first;
+    // One of them whole, at least: with every one cut short the recording is refused at once (as when
+    // none decodes), not frame by frame.
+    for (const std::string& path : paths)
+      if (regular(path) && pngHeaderSize(path) == size && imageFileDamage(path).empty()) return size;
+    return std::nullopt;
+  }
   for (const std::string& path : paths) {
-    std::error_code ec;  // a file that cannot be stat'ed (a symlink loop) is its own frame's damage, not the run's
-    if (path.empty() || !fs::is_regular_file(path, ec) || !imageFileDamage(path).empty()) continue;
+    if (!regular(path) || !imageFileDamage(path).empty()) continue;
     try {
       // As loadColour reads it (IMREAD_UNCHANGED ignores an EXIF orientation): IMREAD_COLOR turned a
       // JPEG tagged "rotate 90" to 480x640, and every 640x480 frame was then refused as the wrong size.
@@ -315,8 +325,8 @@ std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths
 }
 
 namespace {
-// The image size comes from the data itself: the first colour image of the first frames that can be
-// read sets it for the whole sequence; an error naming the first when none of them can.
+// The image size comes from the data itself: the first frames' colour images set it for the whole
+// sequence (recordingImageSize); an error naming the first when none of them can be read.
 cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssociation>& pairs) {
   std::vector<std::string> paths;
   for (std::size_t i = 0; i < std::min(pairs.size(), kFramesForImageSize); ++i)
