@@ -155,6 +155,14 @@ struct RgbdOdometry::Impl {
     std::future<std::pair<std::vector<cv::KeyPoint>, double>> narf_job;
     std::vector<cv::KeyPoint> star;
     cv::Mat points, normals, smoothed;
+    Extraction() = default;
+    Extraction(const Extraction&) = delete;
+    Extraction& operator=(const Extraction&) = delete;
+    // A search not taken (the frame's extraction threw midway) is waited for: it reads the frame's depth,
+    // and a TaskThread's future, unlike std::async's, does not wait when dropped.
+    ~Extraction() {
+      if (narf_job.valid()) narf_job.wait();
+    }
   };
   FrameFeatures begin(const Frame& frame, Extraction& ex, StageTimes& times) const;
   void finish(const Frame& frame, Extraction& ex, FrameFeatures& f, StageTimes& times) const;

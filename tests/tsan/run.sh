@@ -10,7 +10,7 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
 build="${TSAN_BUILD:-$root/build-tsan}"
 out="${TSAN_OUT:-/tmp/vofusion-tsan}"
-tests=("$@"); [ ${#tests[@]} -gt 0 ] || tests=(test_rawlog_threads test_gzip_members test_live test_loop test_reconstruction test_world_model test_live_grab_app)
+tests=("$@"); [ ${#tests[@]} -gt 0 ] || tests=(test_rawlog_threads test_gzip_members test_live test_loop test_reconstruction test_world_model test_live_grab_app test_task_thread test_indexed_source)
 # target_clones' resolvers run before TSAN's runtime is up (a segfault at start-up): one version each.
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVOFUSION_BUILD_TESTS=ON \
   -DCMAKE_CXX_FLAGS="-fsanitize=thread -D'target_clones(...)=used'" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \

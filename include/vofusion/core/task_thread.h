@@ -22,7 +22,8 @@ class TaskThread {
   TaskThread(const TaskThread&) = delete;
   TaskThread& operator=(const TaskThread&) = delete;
 
-  // The task's result, or what it threw, through the future.
+  // The task's result, or what it threw, through the future. Unlike std::async's, the future does not
+  // wait when dropped: a caller whose task reads what it owns waits for it before letting go.
   template <class F>
   std::future<std::invoke_result_t<F>> run(F&& f) {
     auto task = std::make_shared<std::packaged_task<std::invoke_result_t<F>()>>(std::forward<F>(f));
