@@ -17,8 +17,8 @@
 #include <nlohmann/json.hpp>
 
 #include "support.h"
-#include "vofusion/core/allocation_limit.h"
 #include "test_mesh_fixtures.h"
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/mesh/mesh_clean.h"
 #include "vofusion/mesh/mesh_io.h"
 #include "vofusion/mesh/nearest_triangle.h"

@@ -12,10 +12,10 @@
 #include <zlib.h>
 
 #include "support.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/io/png_encode.h"
 #include "vofusion/io/tum_source.h"
-#include "vofusion/core/errors.h"
 
 using namespace vofusion;
 namespace fs = std::filesystem;

@@ -218,8 +218,9 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
   } catch (const std::exception& e) {
     // A write that failed under a part of the state (the map's "write failed (disk full?)", MRPT's
     // archive) or memory that ran out for the copies it is written from is said of the checkpoint,
-    // the file the user asked for; anything else (the loop closer's thread failing) is not the
-    // checkpoint's and goes on as it is.
+    // the file the user asked for (memory that ran out on the fusion or loop thread, which the
+    // checkpoint waits for, is said so too, and the run meets it again at its next frame); anything
+    // else (the loop closer's thread failing) is not the checkpoint's and goes on as it is.
     if (os.good() && !dynamic_cast<const std::bad_alloc*>(&e)) throw;
     throw InputError(path, "cannot write the checkpoint: " + (os.good() ? std::string("out of memory") : oneLineMessage(e)));
   }

@@ -66,8 +66,9 @@ class LoopCloser {
   ~LoopCloser();
 
   // Every processed frame, in order (lost ones too, well_tracked = false); icp_rms: the tracker's ICP
-  // residual RMS (m, 0 when none ran), judged by a ResidualMonitor of the well-tracked frames' only. Returns true when the
-  // frame became a keyframe (its features and a reduced depth are kept; features may be null).
+  // residual RMS (m, 0 when none ran), judged against the well-tracked frames' recent ones
+  // (ResidualMonitor). Returns true when the frame became a keyframe (its features and a reduced depth
+  // are kept; features may be null).
   bool addFrame(const Frame& frame, const Eigen::Isometry3d& tracked, bool well_tracked, double icp_rms,
                 std::shared_ptr<const DescribedKeypoints> features);
   // Checkpoints. saveState waits for the thread to take in every queued keyframe, then writes the
