@@ -44,6 +44,14 @@ Buffers& buffers() {
   return b;
 }
 
+// The size a PNG's first 24 bytes state (signature, then IHDR's width and height); empty for no PNG.
+cv::Size headerSizeOf(const std::uint8_t* h, std::size_t n) {
+  if (n < 24 || std::memcmp(h, kSignature, 8) != 0 || !isChunk(h + 12, "IHDR")) return {};
+  const std::uint32_t w = be32(h + 16), ht = be32(h + 20);
+  constexpr std::uint32_t kIntMax = std::uint32_t(std::numeric_limits<int>::max());
+  return {int(std::min(w, kIntMax)), int(std::min(ht, kIntMax))};
+}
+
 bool readChunks(const std::uint8_t* p, std::size_t n, PngImage& img) {
   if (n < 8 || std::memcmp(p, kSignature, 8) != 0) return false;
   bool header = false, in_stream = false, stream_ended = false;
@@ -194,9 +202,14 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
   return read;
 }
 
-cv::Mat readPlainPng(const std::string& path) {
+cv::Mat readPlainPng(const std::string& path, cv::Size expect, cv::Size* header) {
   std::vector<std::uint8_t>& bytes = buffers().file;
-  return readWholeFile(path, bytes) ? decodePlainPng(bytes.data(), bytes.size()) : cv::Mat();
+  if (header) *header = cv::Size();
+  if (!readWholeFile(path, bytes)) return {};
+  const cv::Size stated = headerSizeOf(bytes.data(), bytes.size());
+  if (header) *header = stated;
+  if (!expect.empty() && !stated.empty() && stated != expect) return {};
+  return decodePlainPng(bytes.data(), bytes.size());
 }
 
 bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
@@ -212,10 +225,7 @@ cv::Size pngHeaderSize(const std::string& path) {
   if (!f) return {};
   const bool read = std::fread(h, 1, sizeof h, f) == sizeof h;
   std::fclose(f);
-  if (!read || std::memcmp(h, kSignature, 8) != 0 || !isChunk(h + 12, "IHDR")) return {};
-  const std::uint32_t w = be32(h + 16), ht = be32(h + 20);
-  constexpr std::uint32_t kIntMax = std::uint32_t(std::numeric_limits<int>::max());
-  return {int(std::min(w, kIntMax)), int(std::min(ht, kIntMax))};
+  return read ? headerSizeOf(h, sizeof h) : cv::Size();
 }
 
 namespace {

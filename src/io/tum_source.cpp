@@ -121,20 +121,23 @@ std::string sizeMismatch(const char* what, cv::Size got, int expect_w, int expec
          ", expected " + std::to_string(expect_w) + "x" + std::to_string(expect_h);
 }
 
-// A PNG whose header states another size is refused before it is decoded (pngHeaderSize).
-void requireHeaderSize(const std::string& path, const char* what, int expect_w, int expect_h) {
-  const cv::Size header = pngHeaderSize(path);
+// The image as readPlainPng decodes it; a PNG whose header states another size is refused before any
+// decoder allocates its pixels (a crafted 30000x30000 depth PNG of 1 KB reached libpng, its own line
+// printed and 1.8 GB allocated). Empty for anything readPlainPng leaves to OpenCV.
+cv::Mat readPlainPngOfSize(const std::string& path, const char* what, int expect_w, int expect_h) {
+  cv::Size header;
+  cv::Mat image = readPlainPng(path, cv::Size(expect_w, expect_h), &header);
   if (!header.empty() && header != cv::Size(expect_w, expect_h))
     throw InputError(path, sizeMismatch(what, header, expect_w, expect_h));
+  return image;
 }
 }  // namespace
 
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note) {
   requireImageFile(path, "depth");
-  requireHeaderSize(path, "depth", expect_w, expect_h);
   // A 16-bit grey PNG in about half OpenCV's time; only a whole file decodes (IEND, CRCs), so the
   // truncation check is needed (and the file opened again) only for what OpenCV gets.
-  cv::Mat raw = readPlainPng(path);
+  cv::Mat raw = readPlainPngOfSize(path, "depth", expect_w, expect_h);
   if (raw.empty()) {
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode depth image (" + damage + ")");
@@ -156,8 +159,7 @@ cv::Mat loadTumDepth(const std::string& path, int expect_w, int expect_h, double
 
 cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   requireImageFile(path, "colour");
-  requireHeaderSize(path, "colour", expect_w, expect_h);
-  cv::Mat img = readPlainPng(path);  // an 8-bit RGB PNG, as loadRawDepthPng does
+  cv::Mat img = readPlainPngOfSize(path, "colour", expect_w, expect_h);  // an 8-bit RGB PNG, as loadRawDepthPng does
   if (img.type() != CV_8UC3) {
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode colour image (" + damage + ")");

@@ -18,8 +18,10 @@
 namespace vofusion {
 
 cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size);
-// The same for a file (empty also when it cannot be read).
-cv::Mat readPlainPng(const std::string& path);
+// The same for a file (empty also when it cannot be read). header: the size its PNG header states
+// (empty for a file that is no PNG), from the same bytes; a PNG stating another size than `expect`
+// (when given) is not decoded, so the caller refuses it before any decoder allocates its pixels.
+cv::Mat readPlainPng(const std::string& path, cv::Size expect = {}, cv::Size* header = nullptr);
 
 // The file's bytes into `bytes` (its storage reused); false when it cannot be read, is no regular file or
 // is larger than any image (256 MiB).
@@ -28,9 +30,8 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes);
 // rawlog writer then copies a recording's colour PNG instead of encoding its pixels again.
 bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
 // The width and height a PNG file's header states (its first 24 bytes; nothing decoded, no CRC
-// checked); an empty size for a file that is no PNG or cannot be read. The readers refuse an image
-// of the wrong size by it before its pixels are allocated: a crafted 2 MB PNG says 30000x30000, and
-// both decoders allocated its 1.8 GB to find out.
+// checked); an empty size for a file that is no PNG or cannot be read. A recording's image size is
+// voted by it (a crafted 2 MB PNG says 30000x30000, and a decoder allocated its 1.8 GB to find out).
 cv::Size pngHeaderSize(const std::string& path);
 // A colour image of 1 to 4 channels (8- or 16-bit, or float in [0, 1]) as 8-bit BGR: what the
 // frames carry whatever the file held (grey, grey and alpha, BGRA, 16 bits a channel). An 8-bit
