@@ -296,9 +296,10 @@ std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths
     std::error_code ec;  // a file that cannot be stat'ed (a symlink loop) is its own frame's damage, not the run's
     return !path.empty() && fs::is_regular_file(path, ec);  // and no FIFO is opened (it would block)
   };
+  std::vector<cv::Size> headers;  // each path's, empty for no PNG
   std::vector<std::pair<cv::Size, int>> votes;  // in the order first seen: a tie goes to the earlier
   for (const std::string& path : paths) {
-    const cv::Size header = regular(path) ? pngHeaderSize(path) : cv::Size();
+    const cv::Size header = headers.emplace_back(regular(path) ? pngHeaderSize(path) : cv::Size());
     if (header.empty()) continue;
     const auto it = std::find_if(votes.begin(), votes.end(), [&](const auto& v) { return v.first == header; });
     if (it == votes.end()) votes.emplace_back(header, 1);
@@ -309,8 +310,8 @@ std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths
         std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) { return a.second < b.second; })->first;
     // One of them whole, at least: with every one cut short the recording is refused at once (as when
     // none decodes), not frame by frame.
-    for (const std::string& path : paths)
-      if (regular(path) && pngHeaderSize(path) == size && imageFileDamage(path).empty()) return size;
+    for (std::size_t i = 0; i < paths.size(); ++i)
+      if (headers[i] == size && imageFileDamage(paths[i]).empty()) return size;
     return std::nullopt;
   }
   for (const std::string& path : paths) {

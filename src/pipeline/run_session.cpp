@@ -375,7 +375,8 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
   about["frames_fused"] = fused;
   // Frames the reader no longer gives (damaged or removed since, skipped without --strict; a recording
   // cut short since) are left out of the map without an error: counted, and said.
-  const std::size_t missing = rec_.framesFused() - std::min(fused, rec_.framesFused());
+  const std::size_t fused_while_tracking = rec_.framesFused();
+  const std::size_t missing = fused_while_tracking - std::min(fused, fused_while_tracking);
   if (missing > 0) about["frames_missing"] = missing;
   if (!failure.empty()) {
     // An I/O error, a frame damaged since under --strict: the map holds the frames re-fused before it,
@@ -384,7 +385,7 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
     printWarning(failure + "; re-fusing stopped after " + std::to_string(read) + " of " +
                  std::to_string(rec_.framesProcessed()) + " frames: the mesh holds those");
   } else if (missing > 0) {
-    printWarning(again->name() + ": " + std::to_string(missing) + " of the " + std::to_string(rec_.framesFused()) +
+    printWarning(again->name() + ": " + std::to_string(missing) + " of the " + std::to_string(fused_while_tracking) +
                  " frames fused while tracking were not there when it was read again (damaged, removed or cut "
                  "short since): the mesh lacks them");
   }
