@@ -91,11 +91,19 @@ TEST(CommandLine, ShortHelpAndUnknownOptions) {
   EXPECT_EQ(parse({"--x", "-1"}).value("--x", ""), "-1");     // a negative number is a value
 }
 
+// An empty value ("--config \"$UNSET\"", "--out=") is a slip, not a choice: it ran on the defaults,
+// in the temporary folder, or failed naming no file.
+TEST(CommandLine, AnEmptyValueIsRefused) {
+  EXPECT_NE(usageError({"in", "--out", ""}).find("option --out needs a value (it is empty)"), std::string::npos);
+  EXPECT_NE(usageError({"in", "--out="}).find("option --out needs a value (it is empty)"), std::string::npos);
+  EXPECT_EQ(parse({"--out", " "}).value("--out", ""), " ");  // a blank name is a name (the app judges it)
+}
+
 TEST(CommandLine, IntegerWithMinimum) {
   EXPECT_EQ(parse({}).count("--n", 7, 1), 7u);
   EXPECT_EQ(parse({"--n", "3"}).count("--n", 0, 1), 3u);
   EXPECT_EQ(parse({"--n", "0"}).count("--n", 5), 0u);
-  for (const char* bad : {"0", "-2", "2.5", "x", ""}) {
+  for (const char* bad : {"0", "-2", "2.5", "x", " 5", "\t3"}) {
     try {
       parse({"--n", bad}).count("--n", 0, 1);
       ADD_FAILURE() << bad;
@@ -118,7 +126,7 @@ TEST(CommandLine, NumberInRange) {
     }
   }
   // What std::stod takes but no option means: not a number, whatever the range.
-  for (const char* bad : {"abc", "1.5x", "nan", "inf", "-inf", "infinity", "0x10", "0x1p3"}) {
+  for (const char* bad : {"abc", "1.5x", "nan", "inf", "-inf", "infinity", "0x10", "0x1p3", " 0.5"}) {
     try {
       parse({"--x", bad}).number("--x", 1.0, 0.0);
       ADD_FAILURE() << bad;

@@ -1,5 +1,6 @@
 #include "vofusion/core/cli.h"
 
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -48,6 +49,8 @@ CommandLine::CommandLine(int argc, char** argv, std::set<std::string> value_opti
           if (i + 1 >= argc || isOption(argv[i + 1])) throw InputError("usage", "option " + name + " needs a value");
           val = argv[++i];
         }
+        // "--config \"$UNSET\"": an empty value ran on the defaults (or in the temporary folder) without a word.
+        if (val.empty()) throw InputError("usage", "option " + name + " needs a value (it is empty)");
         values_.emplace_back(name, val);
       } else if (flag_options.count(name)) {
         if (inline_value) throw InputError("usage", "option " + name + " takes no value");
@@ -88,7 +91,8 @@ std::size_t CommandLine::count(const std::string& name, std::size_t fallback, st
     n = std::stoll(*v, &used);
   } catch (const std::exception&) {
   }
-  if (n < 0 || used != v->size() || static_cast<std::size_t>(n) < min)
+  // std::stoll skips leading blanks: " 5" is not how a count is written (a quoting slip).
+  if (n < 0 || used != v->size() || std::isspace(static_cast<unsigned char>(v->front())) || static_cast<std::size_t>(n) < min)
     throw InputError("usage", name + " expects " +
                                   (min == 0 ? std::string("a non-negative integer")
                                             : "an integer >= " + std::to_string(min)) +
@@ -107,7 +111,8 @@ double CommandLine::number(const std::string& name, double fallback) const {
     used = 0;
   }
   // std::stod also takes "inf", "nan" and hex floats: none is an option's value (--max-dt inf paired every pose).
-  if (used == 0 || used != v->size() || !std::isfinite(x) || v->find_first_of("xXpP") != std::string::npos)
+  if (used == 0 || used != v->size() || !std::isfinite(x) || v->find_first_of("xXpP") != std::string::npos ||
+      std::isspace(static_cast<unsigned char>(v->front())))
     throw InputError("usage", name + " expects a number, got '" + *v + "'");
   return x;
 }
