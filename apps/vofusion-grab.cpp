@@ -70,7 +70,8 @@ const char* kUsage =
     "  DIR/grab-summary.txt holds the counts.\n"
     "  --checkpoint-every  --live with a recording: every S seconds (default 60, 0 = never) the whole\n"
     "  reconstruction to DIR/checkpoint. After a crash, `vofusion DIR/grab.rawlog --out DIR --resume\n"
-    "  DIR/checkpoint` finishes it from there; a session that ends normally deletes it.\n";
+    "  DIR/checkpoint` finishes it from there; a session that ends normally deletes it. An earlier run's\n"
+    "  checkpoint in DIR is never replaced: the session does not start.\n";
 
 
 struct Args {
@@ -363,15 +364,28 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
   return 0;
 }
 
+// --live checkpoints to DIR/checkpoint, and a session that ends well deletes it: one already there is an
+// interrupted run's (vofusion --checkpoint-every, or a killed session), which would be replaced, then
+// deleted, and that run could no longer be finished.
+void refuseToReplaceACheckpoint(const Args& args) {
+  if (args.checkpoint_every <= 0) return;
+  const std::string path = (fs::path(args.out) / "checkpoint").string();
+  std::error_code ec;
+  if (fs::is_regular_file(fs::symlink_status(path, ec)))
+    throw InputError(path, "an earlier run's checkpoint, which this session's checkpoints would replace: finish that "
+                           "run with vofusion --resume " + path + ", or delete it (or --checkpoint-every 0)");
+}
+
 int run(const Args& args) {
   if (args.dump) {
     std::fputs(dumpConfig(ownSections(LiveOptions())).c_str(), stdout);
     return 0;
   }
   const GrabPlan plan = planGrab(args);
-  ensureWritableDirectory(args.out);
+  refuseToReplaceACheckpoint(args);
   std::string label = "KINECT";
   const GrabSource source = openGrabSource(args, plan, label);
+  ensureWritableDirectory(args.out);  // once there is something to record: no sensor leaves no empty folder
   // Before the recording is created: a Ctrl-C from here on lets the writer's end remove an empty one
   // (it was left, and refused the next run into the folder).
   installStopSignals();  // Ctrl-C or SIGTERM stops cleanly; a second one kills at once

@@ -96,6 +96,13 @@ TEST(GrabApp, NoSensorFailsInOneLineQuicklyWithNonZeroExit) {
   EXPECT_NE(log.find("OpenNI2"), std::string::npos) << log;
   EXPECT_LT(secs, 60.0);
   EXPECT_FALSE(fs::exists(out + "/grab.rawlog"));  // nothing half-written
+  // A folder to be made is not made for a session that cannot start.
+  EXPECT_EQ(test::run("timeout 60 " + test::app("vofusion-grab") + " --config " + test::shareDir() +
+                          "/grab-openni2.ini --out " + out + "/new --no-gui",
+                      &log),
+            2)
+      << log;
+  EXPECT_FALSE(fs::exists(out + "/new")) << log;
 }
 
 TEST(GrabApp, UsageErrorsExitTwo) {
@@ -477,6 +484,26 @@ TEST(GrabApp, AKilledLiveSessionIsFinishedOfflineFromItsCheckpoint) {
   EXPECT_LE(poses, recorded);
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.03);
   EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "the finished run deleted it";
+}
+
+// A checkpoint in the folder is an interrupted run's, which --live's checkpoints would replace and the
+// session's end delete: the session does not start, and the checkpoint is as it was.
+TEST(GrabApp, ALiveSessionDoesNotReplaceAnEarlierRunsCheckpoint) {
+  const std::string out = test::tempDir("grab_app_earlier_checkpoint");
+  std::ofstream(out + "/checkpoint") << "an earlier run's checkpoint";
+  std::string log;
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --out " + out + " --max-frames 3 --live --no-gui", &log), 2);
+  EXPECT_EQ(countLines(log), 1u) << log;
+  EXPECT_NE(log.find(out + "/checkpoint: an earlier run's checkpoint"), std::string::npos) << log;
+  std::ifstream in(out + "/checkpoint");
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()), "an earlier run's checkpoint");
+  EXPECT_FALSE(fs::exists(out + "/grab.rawlog"));
+  // Without checkpoints, nothing is replaced: the session runs.
+  EXPECT_EQ(test::run(test::app("vofusion-grab") + " --replay synthetic --out " + out +
+                          " --max-frames 3 --live --no-gui --checkpoint-every 0",
+                      &log),
+            0)
+      << log;
 }
 
 // An empty recording file with no image beside it, as a kill before the first frame left it (the
