@@ -34,8 +34,25 @@ class ImuOnlySensor : public mrpt::hwdrivers::CGenericSensor {
  protected:
   void loadConfig_sensorSpecific(const mrpt::config::CConfigFileBase&, const std::string&) override {}
 };
+
+// A driver that fails to initialise and then throws from its destructor, as COpenNI2Sensor does for a
+// device_number past the devices plugged in (it closes that device): destroyed, it ends the program.
+class UnopenableSensor : public mrpt::hwdrivers::CGenericSensor {
+  DEFINE_GENERIC_SENSOR(UnopenableSensor)
+ public:
+  void doProcess() override {}
+  void initialize() override { throw std::runtime_error("Sensor index is higher than the number of connected devices."); }
+  ~UnopenableSensor() override { close(); }
+
+ protected:
+  void loadConfig_sensorSpecific(const mrpt::config::CConfigFileBase&, const std::string&) override {}
+
+ private:
+  static void close() { throw std::runtime_error("close(): no such device"); }
+};
 }  // namespace vofusion_test
 IMPLEMENTS_GENERIC_SENSOR(ImuOnlySensor, vofusion_test)
+IMPLEMENTS_GENERIC_SENSOR(UnopenableSensor, vofusion_test)
 
 using namespace vofusion;
 namespace fs = std::filesystem;
@@ -395,6 +412,21 @@ TEST(SensorSource, ADriverGivingNoDepthFrameTimesOut) {
   timeout.join();
   EXPECT_FALSE(stopped) << "no timeout within 3 s";
   EXPECT_NE(error.find("no frame for 0.3 s (sensor unplugged?)"), std::string::npos) << error;
+}
+
+// A sensor that cannot be opened is one line naming the config and its section, not an abort (exit
+// 134) from the failed driver's destructor.
+TEST(SensorSource, ADriverThatCannotOpenIsOneLineNotAnAbort) {
+  vofusion_test::UnopenableSensor::doRegister();
+  mrpt::config::CConfigFileMemory cfg;
+  cfg.write("cam", "driver", "UnopenableSensor");
+  try {
+    SensorSource src(cfg, "cam", 0.3, "grab.ini");
+    ADD_FAILURE() << "opened";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("grab.ini [cam]: UnopenableSensor: Sensor index is higher"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(LiveReplay, TumThroughTheLivePathWithSlowConsumerAndRecording) {

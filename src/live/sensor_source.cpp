@@ -173,12 +173,20 @@ SensorSource::SensorSource(const mrpt::config::CConfigFileBase& cfg, const std::
   } catch (const InputError&) {
     throw;
   } catch (const std::exception& e) {
-    throw InputError(where, driver_ + ": " + oneLineMessage(e));
+    // A driver that failed to initialise may throw again from its destructor (COpenNI2Sensor closes the
+    // device it was asked for, there or not: device_number past the devices plugged in), which ends the
+    // program: it is never destroyed.
+    if (sensor_) abandonSensor(std::move(sensor_));
+    const bool openni2 = driver_.find("OpenNI2") != std::string::npos;
+    throw InputError(where, driver_ + ": " + oneLineMessage(e) + (openni2 ? " (" + diagnoseOpenNI2() + ")" : ""));
   }
   // COpenNI2Sensor::initialize() returns quietly when no device is found (and its doProcess()
   // then aborts the program on an assertion): check here and say why.
   if (auto* oni = dynamic_cast<mrpt::hwdrivers::COpenNI2Generic*>(sensor_.get())) {
-    const int device = cfg.read_int(section, "device_number", 0);
+    int device = cfg.read_int(section, "device_number", 0);
+    // Chosen by serial number, the device is the one with that serial, whatever device_number says.
+    const int serial = cfg.read_int(section, "serial_number", 0);
+    if (int id = 0; serial != 0 && oni->getDeviceIDFromSerialNum(unsigned(serial), id)) device = id;
     if (oni->getNumDevices() <= 0) {
       abandonSensor(std::move(sensor_));
       throw InputError(where, "OpenNI2 found no device: " + diagnoseOpenNI2());
@@ -190,8 +198,10 @@ SensorSource::SensorSource(const mrpt::config::CConfigFileBase& cfg, const std::
                                   ": " + diagnoseOpenNI2());
     }
   }
-  if (sensor_->getState() == mrpt::hwdrivers::CGenericSensor::ssError)
+  if (sensor_->getState() == mrpt::hwdrivers::CGenericSensor::ssError) {
+    abandonSensor(std::move(sensor_));  // as above: its destructor may throw
     throw InputError(where, driver_ + " reported an error while initialising");
+  }
 }
 
 SensorSource::~SensorSource() = default;
