@@ -404,6 +404,24 @@ TEST(MarchingCubes, AnEndNeverPaintedLendsNoBlack) {
   }
 }
 
+// A crossing so near a voxel that its offset rounds away in float (|tsdf| 1 against -6553 at 19 m:
+// 0.9 um against half an ulp of 0.95 um) is on that voxel: the crossings there are one vertex, and the
+// faces between them, of zero area, are dropped (as for a voxel at exactly 0).
+TEST(MarchingCubes, CrossingsThatRoundOntoAVoxelAreThatVoxelsVertex) {
+  Brick b;  // one voxel just in front of a surface all around it: a tiny octahedron
+  for (auto& v : b.voxels) v.weight = 1, v.tsdf = -6553;
+  b.voxels[Brick::index(3, 3, 3)].tsdf = 1;
+  const float vs = 0.006f;
+  EXPECT_EQ(marchingCubes({{Eigen::Vector3i(0, 0, 0), &b}}, vs).faces.size(), 8u);  // resolved near the origin
+  for (const int at : {0, 400}) {
+    const TriangleMesh mesh = marchingCubes({{Eigen::Vector3i(at, at, at), &b}}, vs);
+    for (const auto& f : mesh.faces) {
+      const Eigen::Vector3f a = mesh.vertices[f[0]], c = mesh.vertices[f[1]], d = mesh.vertices[f[2]];
+      EXPECT_GT((c - a).cross(d - a).norm(), 0.f) << "a face of zero area at brick " << at;
+    }
+  }
+}
+
 namespace {
 
 // Bricks holding the truncated SDF of a sphere (weight 1, colour by height), no camera involved.

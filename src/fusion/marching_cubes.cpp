@@ -179,10 +179,15 @@ void edgeVertices(const Grid& grid, const int* nb, const CornerStates& state, st
           const float fa = a->tsdf, fb = b->tsdf;
           const float t = fa / (fa - fb);
           Eigen::Vector3f p((o.x() + x) * voxel_size, (o.y() + y) * voxel_size, (o.z() + z) * voxel_size);
+          const float start = p[axis], end = float(o[axis] + (axis == 0 ? x : axis == 1 ? y : z) + 1) * voxel_size;
           p[axis] += t * voxel_size;
-          if (t == 0.f || t == 1.f) {  // on a voxel: the same arithmetic from every edge (and region) there
+          // On a voxel: t is 0 or 1, or so near it that the offset rounds away in float (far from the
+          // origin: 0.9 um is half an ulp at 19 m), which made vertices apart at one position.
+          const bool at_a = t == 0.f || p[axis] == start;
+          const bool at_b = !at_a && (t == 1.f || end - (1.f - t) * voxel_size == end);
+          if (at_a || at_b) {  // the same arithmetic from every edge (and region) there
             Eigen::Vector3i g = o + Eigen::Vector3i(x, y, z);
-            if (t == 1.f) ++g[axis];
+            if (at_b) ++g[axis];
             p = Eigen::Vector3f(g.x() * voxel_size, g.y() * voxel_size, g.z() * voxel_size);
             bv.on_voxel.emplace_back(std::uint32_t(bv.points.size()), g);
           }
