@@ -211,6 +211,39 @@ TEST(Eval, APathOfOnePoseShows) {
   EXPECT_GT(cv::countNonZero(blue), 10);
 }
 
+// Samples either side of a gap (frames lost, a blackout) are not joined: a line drew a smooth ramp
+// over the error plot's gap and a chord across the top view's.
+TEST(Eval, PlotsLeaveGapsOpen) {
+  const std::string dir = test::tempDir("eval_plot_gaps");
+  std::vector<double> times, errors;
+  for (int i = 0; i < 20; ++i) times.push_back(0.1 * i), errors.push_back(0.01);
+  for (int i = 0; i < 20; ++i) times.push_back(5.0 + 0.1 * i), errors.push_back(0.01);
+  plotErrorOverTime(dir + "/e.png", times, errors, "err");
+  cv::Mat img = cv::imread(dir + "/e.png");
+  ASSERT_FALSE(img.empty());
+  // The plot box is x 90..870 over t 0..6.9 (5 % margins); the column at t = 3.5 s, in the gap.
+  const int gap_x = 90 + int(780 * (0.05 * 6.9 + 3.5) / (1.1 * 6.9)), ok_x = 90 + int(780 * (0.05 * 6.9 + 1.0) / (1.1 * 6.9));
+  const auto redIn = [&](int x) {
+    cv::Mat red;
+    cv::inRange(img(cv::Rect(x, 50, 1, 580)), cv::Scalar(0, 0, 150), cv::Scalar(120, 120, 255), red);
+    return cv::countNonZero(red);
+  };
+  EXPECT_GT(redIn(ok_x), 0) << "the line where there are samples";
+  EXPECT_EQ(redIn(gap_x), 0) << "a line across the gap";
+  // The top view: a straight walk along x with the same gap; no blue at its middle.
+  Trajectory walk;
+  for (double t : times) walk.push_back({t, CPose3D(t, 0.1 * std::sin(t), 0, 0, 0, 0)});
+  plotTrajectoriesOverlay(dir + "/o.png", {}, {{"estimate", walk}}, "path");
+  img = cv::imread(dir + "/o.png");
+  ASSERT_FALSE(img.empty());
+  cv::Mat blue;
+  const int mid = 90 + 290;  // x = 3.45 m at the box's centre (equal aspect, centred)
+  cv::inRange(img(cv::Rect(mid - 20, 50, 40, 580)), cv::Scalar(150, 0, 0), cv::Scalar(255, 120, 120), blue);
+  EXPECT_EQ(cv::countNonZero(blue), 0) << "a chord across the gap";
+  cv::inRange(img(cv::Rect(90 + 60, 50, 40, 580)), cv::Scalar(150, 0, 0), cv::Scalar(255, 120, 120), blue);
+  EXPECT_GT(cv::countNonZero(blue), 0) << "the path where there are poses";
+}
+
 TEST(Eval, PlotsAreWritten) {
   const std::string dir = test::tempDir("eval_plots");
   const Trajectory gt = wavy();

@@ -103,6 +103,29 @@ void savePng(const std::string& path, const cv::Mat& img) {
   writeFileAtomically(path, std::string(buf.begin(), buf.end()));
 }
 
+// Whether samples taken at ta and tb are joined by a line: not across a gap of more than 3 of the
+// usual spacing (frames lost, a blackout), which a line drew as a smooth ramp or a straight chord.
+class Gaps {
+ public:
+  explicit Gaps(std::vector<double> times) {
+    std::vector<double> steps;
+    for (std::size_t i = 1; i < times.size(); ++i) steps.push_back(times[i] - times[i - 1]);
+    if (steps.empty()) return;
+    std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+    longest_joined_ = 3.0 * steps[steps.size() / 2];
+  }
+  bool joined(double ta, double tb) const { return !(tb - ta > longest_joined_); }
+
+ private:
+  double longest_joined_ = 0.0;
+};
+
+std::vector<double> stampsOf(const Trajectory& t) {
+  std::vector<double> s;
+  for (const auto& p : t) s.push_back(p.timestamp);
+  return s;
+}
+
 // The two coordinate axes along which the ground truth (or, lacking it, all poses) spreads most.
 std::pair<int, int> topAxes(const std::vector<const Trajectory*>& trajs) {
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
@@ -134,13 +157,18 @@ cv::Mat renderTopView(const Trajectory& gt, const std::vector<std::pair<std::str
   auto P = [&](const mrpt::poses::CPose3D& p) { return ax.px(p[a], p[b]) - off; };
   if (error_vectors && ests.size() == 1 && ests[0].second.size() == gt.size())
     for (std::size_t i = 0; i < gt.size(); ++i) cv::line(plot, P(gt[i].pose), P(ests[0].second[i].pose), kRed, 1, cv::LINE_AA);
-  for (std::size_t i = 1; i < gt.size(); ++i) cv::line(plot, P(gt[i - 1].pose), P(gt[i].pose), kBlack, 2, cv::LINE_AA);
+  const auto path = [&](const Trajectory& tr, const cv::Scalar& c) {
+    const Gaps gaps(stampsOf(tr));
+    for (std::size_t i = 1; i < tr.size(); ++i)
+      if (gaps.joined(tr[i - 1].timestamp, tr[i].timestamp)) cv::line(plot, P(tr[i - 1].pose), P(tr[i].pose), c, 2, cv::LINE_AA);
+  };
+  path(gt, kBlack);
   std::vector<std::pair<std::string, cv::Scalar>> entries;
   if (!gt.empty()) entries.push_back({"ground truth", kBlack});
   for (std::size_t k = 0; k < ests.size(); ++k) {
     const cv::Scalar c = ests.size() == 1 ? kBlue : kPalette[k % kPalette.size()];
     const Trajectory& e = ests[k].second;
-    for (std::size_t i = 1; i < e.size(); ++i) cv::line(plot, P(e[i - 1].pose), P(e[i].pose), c, 2, cv::LINE_AA);
+    path(e, c);
     if (!e.empty()) cv::circle(plot, P(e.front().pose), 4, c, cv::FILLED, cv::LINE_AA);  // where it starts (a path of one pose: all of it)
     entries.push_back({ests[k].first, c});
   }
@@ -162,8 +190,10 @@ cv::Mat renderErrorOverTime(const std::vector<double>& times, const std::vector<
   ax.draw(img, "time [s]", ylabel);
   cv::Mat plot = img(ax.box);
   const cv::Point off(ax.box.x, ax.box.y);
+  const Gaps gaps(times);
   for (std::size_t i = 1; i < times.size() && i < errors.size(); ++i)
-    cv::line(plot, ax.px(times[i - 1] - t0, errors[i - 1]) - off, ax.px(times[i] - t0, errors[i]) - off, kRed, 2, cv::LINE_AA);
+    if (gaps.joined(times[i - 1], times[i]))
+      cv::line(plot, ax.px(times[i - 1] - t0, errors[i - 1]) - off, ax.px(times[i] - t0, errors[i]) - off, kRed, 2, cv::LINE_AA);
   return img;
 }
 
