@@ -179,6 +179,51 @@ TEST(KinFu, ANonFinitePriorIsTrackedAsNoPrior) {
   }
 }
 
+// A frame that is not fused (a fallback or a predicted pose) still moves the model's prediction with
+// the camera: the ray cast looks where that frame has readings. Hinted by the last prediction alone,
+// the model kept only pixels that had a surface the frame before, and lost a band each frame the
+// camera panned without fusing, leaving ICP less to pair with.
+TEST(KinFu, PredictionFollowsAPanWhileFramesAreNotFused) {
+  const sim::SyntheticSequence seq(simOpts("room", 2));
+  const Frame f0 = seq.render(0);
+  const CameraIntrinsics cam = f0.camera;
+  auto iso = [](const CPose3D& p) {
+    Eigen::Isometry3d t;
+    t.matrix() = p.getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
+    return t;
+  };
+  KinFu map(testParams(), iso(seq.groundTruth(0)), {true, false});
+  StageTimes times;
+  FrameToFuse f;
+  f.depth = f.hint = f0.depth;
+  f.rgb = f0.rgb;
+  f.cam = f.track_cam = cam;
+  f.pose = iso(seq.groundTruth(0));
+  map.fuse(f, times);
+  for (int k = 1; k <= 8; ++k) {
+    const CPose3D pose = seq.groundTruth(0) + CPose3D(0, 0, 0, 0, 2.0 * k * M_PI / 180, 0);  // yaw about the camera's y
+    cv::Mat depth(cam.height, cam.width, CV_32F);
+    for (int y = 0; y < depth.rows; ++y)
+      for (int x = 0; x < depth.cols; ++x) depth.at<float>(y, x) = float(seq.exactDepth(pose, x, y));
+    FrameToFuse panned;
+    panned.integrate = false;
+    panned.depth = panned.hint = depth;
+    panned.cam = panned.track_cam = cam;
+    panned.pose = iso(pose);
+    map.fuse(panned, times);
+    const fusion::RaycastMaps full = map.volume().raycast(iso(pose).cast<float>(), cam, nullptr, false, false);
+    auto surfaces = [](const cv::Mat& vertices) {
+      int n = 0;
+      for (auto it = vertices.begin<cv::Vec3f>(); it != vertices.end<cv::Vec3f>(); ++it) n += std::isfinite((*it)[0]);
+      return n;
+    };
+    const int predicted = surfaces(map.model().vertices[0]), there = surfaces(full.vertices);
+    ASSERT_GT(there, cam.width * cam.height / 4) << "frame " << k;
+    EXPECT_GT(predicted, 0.97 * there) << "frame " << k << ": the prediction has " << predicted << " surface pixels, the volume "
+                                       << there;
+  }
+}
+
 // A checkpoint holds the tracker and the map together: between track() and fuse() the tracker has posed
 // a frame the map has not fused yet, so saving then is refused; once fused, the saved state reloads
 // into a map that tracks the next frame to the same pose.

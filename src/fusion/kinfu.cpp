@@ -122,8 +122,10 @@ bool KinFu::fuse(const FrameToFuse& f, StageTimes& times) {
     shifted = s.integrate(f.depth, f.rgb, f.cam, f.pose, times);
     if (s.predict.surfaces) s.raycastModel(f.pose, f.hint, f.track_cam, times);
   } else if (s.predict.surfaces) {
-    // Not fused (fallback or predicted pose): re-predict the model from the new pose so ICP keeps up.
-    s.raycastModel(f.pose, cv::Mat(), f.track_cam, times);
+    // Not fused (fallback or predicted pose): re-predict the model from the new pose so ICP keeps up,
+    // looking where this frame has readings (hinted by the last prediction alone, the predicted surface
+    // lost a band each frame a pan went unfused: KinFu.PredictionFollowsAPanWhileFramesAreNotFused).
+    s.raycastModel(f.pose, f.hint, f.track_cam, times);
   }
   // The ray cast was from this frame's pose: its intensity is the photometric term's reference.
   if (s.predict.intensity) {
