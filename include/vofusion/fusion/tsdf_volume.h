@@ -102,18 +102,19 @@ class TsdfVolume {
     const int s = slotOf(bx, by, bz);
     return s < 0 ? nullptr : slot_brick_[s];
   }
+  // b - origin, wrapped: anything before the origin is past n_. In unsigned arithmetic, because a far
+  // point's brick (cvFloor of a huge or NaN coordinate gives INT_MIN) overflowed int (undefined).
+  static unsigned offset(int b, int origin) { return static_cast<unsigned>(b) - static_cast<unsigned>(origin); }
   // -1 outside the volume. Table lookups: no integer division on the ray caster's hot path.
   int slotOf(int bx, int by, int bz) const {
-    const unsigned ux = static_cast<unsigned>(bx - origin_.x()), uy = static_cast<unsigned>(by - origin_.y()),
-                   uz = static_cast<unsigned>(bz - origin_.z());
+    const unsigned ux = offset(bx, origin_.x()), uy = offset(by, origin_.y()), uz = offset(bz, origin_.z());
     if (ux >= static_cast<unsigned>(n_) || uy >= static_cast<unsigned>(n_) || uz >= static_cast<unsigned>(n_)) return -1;
     return cyclic_[0][ux] + cyclic_[1][uy] + cyclic_[2][uz];
   }
   // False only when no brick of the 4x4x4-brick block holding world brick (bx,by,bz) is allocated:
   // the ray caster then skips the whole block. Outside the volume: true.
   bool blockOccupied(int bx, int by, int bz) const {
-    const unsigned ux = static_cast<unsigned>(bx - origin_.x()), uy = static_cast<unsigned>(by - origin_.y()),
-                   uz = static_cast<unsigned>(bz - origin_.z());
+    const unsigned ux = offset(bx, origin_.x()), uy = offset(by, origin_.y()), uz = offset(bz, origin_.z());
     if (block_count_.empty() || ux >= static_cast<unsigned>(n_) || uy >= static_cast<unsigned>(n_) ||
         uz >= static_cast<unsigned>(n_))
       return true;
