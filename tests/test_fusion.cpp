@@ -179,6 +179,20 @@ TEST(KinFu, ANonFinitePriorIsTrackedAsNoPrior) {
   }
 }
 
+// A placement (relocalise as prior) is for the next frame tracked: one lost before it (no depth) does
+// not carry it on to a later frame, which the stale placement would have pulled back to where it was.
+TEST(KinFu, APlacementIsNotCarriedPastALostFrame) {
+  const sim::SyntheticSequence seq(simOpts("room", 12));
+  TrackedMap map(testParams(), TrackingMode::Joint, seq.groundTruth(0));
+  for (std::size_t i = 0; i < 3; ++i) ASSERT_TRUE(map.process(seq.render(i), nullptr).tracked);
+  map.relocalise(seq.groundTruth(2), true);
+  Frame blank = seq.render(3);
+  blank.depth.setTo(0.f);
+  EXPECT_FALSE(map.process(blank, nullptr).tracked);
+  const FusionResult next = map.process(seq.render(4), nullptr);
+  EXPECT_NE(next.guess, InitialGuess::Prior) << "the placement outlived the frame it was for";
+}
+
 // A frame that is not fused (a fallback or a predicted pose) still moves the model's prediction with
 // the camera: the ray cast looks where that frame has readings. Hinted by the last prediction alone,
 // the model kept only pixels that had a surface the frame before, and lost a band each frame the

@@ -221,6 +221,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
     res.pose = toMrpt(s.history.pose());
     ++s.stats.frames;
     ++s.stats.lost;
+    s.placed.reset();  // a placement is for the frame tracked next: this one
     return res;
   };
   requireMetricDepth(frame.depth, "Tracker");
