@@ -128,7 +128,8 @@ LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, c
   LoopCheck c;
   fusion::PointMatches inliers;
   // No overlap bound: the view is usually a step away from the keyframe (the camera moved on while
-  // lost) and the tracker checks the pose against the whole map right after.
+  // lost). The tracker's ICP against the map refines the pose after, but a rejection there leaves the
+  // frame at this pose (a fallback): the features and ICP here are what accept it.
   LoopParams relaxed = P;
   relaxed.min_icp_overlap = 0.0;
   c.accepted = fitFeatures(keyframe, view, relaxed, c, inliers) && refineIcp(keyframe, view, relaxed, c, inliers, pyramids);

@@ -49,8 +49,10 @@ class PyramidCache {
 
 LoopCheck verifyLoop(const Keyframe& older, const Keyframe& newer, const LoopParams& params, PyramidCache& pyramids);
 // The same features and ICP for relocalisation, without the drift bound (the view's own pose is what
-// is sought) nor the overlap bound (the tracker verifies the pose against the map next). T_old_new:
-// the view in the keyframe's camera frame.
+// is sought) nor the overlap bound (the view is usually a step from the keyframe). The tracker then
+// refines the pose against the map; where its ICP rejects, the frame keeps this pose as a fallback
+// (fused as fallbacks are), so these checks are the placement's only proof. T_old_new: the view in the
+// keyframe's camera frame.
 LoopCheck verifyRelocalisation(const Keyframe& keyframe, const Keyframe& view, const LoopParams& params,
                                PyramidCache& pyramids);
 
