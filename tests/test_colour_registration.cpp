@@ -116,6 +116,10 @@ TEST(ColourRegistration, OffsetColourCameraIsReprojectedIntoTheDepthCamera) {
              cv::INTER_AREA);
   EXPECT_LT(agreement(resized, rig), 0.8);
   std::printf("colour agreement: re-projected %.4f, resized %.4f\n", registered, agreement(resized, rig));
+  // The depth camera's intrinsics given by hand (--intrinsics on a rawlog): the colour camera is still
+  // its own, and re-projected (the override made it be taken as registered, and resized).
+  const Frame given = frameFromObservation(*obs, "offset.rawlog", rig.depth_cam);
+  EXPECT_GT(agreement(given, rig), 0.99);
 }
 
 // Where the colour camera's view ends, a depth pixel is black (no colour) or the colour seen there,

@@ -216,7 +216,9 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     f.rgb = colourOf(obs, origin, plain);
     // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
     // depth camera. A registered one at another resolution (e.g. 1280x1024 over 640x480) is resized.
-    if (!override_camera && !colourRegisteredToDepth(obs)) {
+    // Decided by the observation's own cameras, whatever the depth camera's given intrinsics (a sensor
+    // registered in hardware passes its colour camera's, and registered it is).
+    if (!colourRegisteredToDepth(obs)) {
       const CameraIntrinsics colour_cam = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
       colour_cam.validate(origin + " (colour camera)");
       if (colour_cam.width != f.rgb.cols || colour_cam.height != f.rgb.rows)

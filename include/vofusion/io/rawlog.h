@@ -75,7 +75,8 @@ bool colourRegisteredToDepth(const mrpt::obs::CObservation3DRangeScan& obs);
 Eigen::Isometry3d colourFromDepth(const mrpt::obs::CObservation3DRangeScan& obs);
 // Converts one observation to a Frame (loads external data first). `origin` names the rawlog in errors.
 // A colour camera that is not registered to depth has its colour re-projected into the depth camera
-// (io/colour_registration.h); override_camera (the sensor's registered colour intrinsics) skips that.
+// (io/colour_registration.h), as the observation's own cameras say; override_camera replaces the depth
+// camera's intrinsics (--intrinsics, or a registered sensor's colour intrinsics), not that decision.
 Frame frameFromObservation(const mrpt::obs::CObservation3DRangeScan& obs, const std::string& origin,
                            const std::optional<CameraIntrinsics>& override_camera = std::nullopt);
 // Builds an observation (images embedded) from a Frame; depth quantised to range_units metres (a reading
