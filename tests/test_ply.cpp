@@ -104,13 +104,14 @@ TEST(Ply, ReadsBigEndian) {
 }
 
 TEST(Ply, ReadsPclPackedRgb) {
-  // PCL writes colour as one float "rgb" whose bits are 0x00RRGGBB.
+  // PCL writes colour as one float "rgb" whose bits are 0x00RRGGBB, or 0xFFRRGGBB with its alpha: then
+  // red 0x80-0xBF makes the bits a signalling NaN, which read as a double came back quieted (red's bit 6 set).
   const std::string dir = test::tempDir("ply_pcl");
-  std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+  std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
                   "property float z\nproperty float rgb\nelement face 1\nproperty list uchar int vertex_indices\n"
                   "end_header\n";
-  const std::uint32_t packed[3] = {0x00ff8000u, 0x0000ff00u, 0x00123456u};
-  for (int i = 0; i < 3; ++i) {
+  const std::uint32_t packed[4] = {0x00ff8000u, 0x0000ff00u, 0x00123456u, 0xff804020u};
+  for (int i = 0; i < 4; ++i) {
     const float xyz[3] = {float(i), float(i * i), 0.f};
     s.append(reinterpret_cast<const char*>(xyz), 12);
     s.append(reinterpret_cast<const char*>(&packed[i]), 4);
@@ -119,7 +120,8 @@ TEST(Ply, ReadsPclPackedRgb) {
   for (std::int32_t i : {0, 1, 2}) s.append(reinterpret_cast<const char*>(&i), 4);
   writeText(dir + "/pcl.ply", s);
   const TriangleMesh m = readPly(dir + "/pcl.ply");
-  ASSERT_EQ(m.colors.size(), 3u);
+  ASSERT_EQ(m.colors.size(), 4u);
+  EXPECT_EQ(m.colors[3], (std::array<std::uint8_t, 3>{0x80, 0x40, 0x20}));
   EXPECT_EQ(m.colors[0], (std::array<std::uint8_t, 3>{0xff, 0x80, 0x00}));
   EXPECT_EQ(m.colors[1], (std::array<std::uint8_t, 3>{0x00, 0xff, 0x00}));
   EXPECT_EQ(m.colors[2], (std::array<std::uint8_t, 3>{0x12, 0x34, 0x56}));

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -79,7 +80,7 @@ class BodyReader {
       case Scalar::UInt16: { std::uint16_t v; std::memcpy(&v, b, 2); return v; }
       case Scalar::Int32: { std::int32_t v; std::memcpy(&v, b, 4); return v; }
       case Scalar::UInt32: { std::uint32_t v; std::memcpy(&v, b, 4); return v; }
-      case Scalar::Float32: { float v; std::memcpy(&v, b, 4); return v; }
+      case Scalar::Float32: { float v; std::memcpy(&v, b, 4); std::memcpy(&last_float_bits_, b, 4); return v; }
       case Scalar::Float64: { double v; std::memcpy(&v, b, 8); return v; }
     }
     return 0;
@@ -98,7 +99,14 @@ class BodyReader {
     return least == 0 || e.count <= left / least;
   }
 
+  // The bits of the last binary float read, as the file holds them: a packed colour's (PCL's "float
+  // rgb"), which the double read() returns cannot carry when they are a signalling NaN (alpha 0xFF, red
+  // 0x80-0xBF: widening quiets it, and set red's bit 6).
+  std::uint32_t lastFloatBits() const { return last_float_bits_; }
+  bool binary() const { return fmt_ != Format::Ascii; }
+
  private:
+  std::uint32_t last_float_bits_ = 0;
   double readAscii(const char* what) {
     while (pos_ < data_.size() && std::isspace(static_cast<unsigned char>(data_[pos_]))) ++pos_;
     if (pos_ >= data_.size()) throw InputError(path_, std::string("file is truncated (while reading ") + what + ")");
@@ -251,7 +259,8 @@ VertexLayout vertexLayout(const std::string& path, const Element& e) {
 }
 
 // A vertex's colour from its property values `v`: packed bits, or channels in 0..255 (0..1 when float).
-std::array<std::uint8_t, 3> vertexColour(const Element& e, const VertexLayout& l, const std::vector<double>& v) {
+std::array<std::uint8_t, 3> vertexColour(const Element& e, const VertexLayout& l, const std::vector<double>& v,
+                                         const std::optional<std::uint32_t>& packed_bits) {
   const bool unit = !l.packed && (e.props[l.ir].type == Scalar::Float32 || e.props[l.ir].type == Scalar::Float64);
   const auto to8 = [&](double c) {
     const double s = unit ? c * 255.0 : c;
@@ -259,7 +268,9 @@ std::array<std::uint8_t, 3> vertexColour(const Element& e, const VertexLayout& l
   };
   if (l.packed) {
     std::uint32_t bits;
-    if (e.props[l.ipacked].type == Scalar::Float32) {
+    if (packed_bits) {
+      bits = *packed_bits;
+    } else if (e.props[l.ipacked].type == Scalar::Float32) {  // ASCII: the value as written
       const float f = static_cast<float>(v[l.ipacked]);
       std::memcpy(&bits, &f, 4);
     } else {
@@ -301,6 +312,7 @@ struct BodyParser {
     if (l.normals) mesh.normals.resize(e.count);
     if (l.colors) mesh.colors.resize(e.count);
     std::vector<double> v(e.props.size());
+    std::optional<std::uint32_t> packed_bits;  // a binary float packed colour's own bits
     for (std::size_t i = 0; i < e.count; ++i) {
       for (std::size_t k = 0; k < e.props.size(); ++k) {
         const Property& p = e.props[k];
@@ -310,13 +322,14 @@ struct BodyParser {
           v[k] = 0;
         } else {
           v[k] = body.read(p.type, "vertices");
+          if (l.packed && int(k) == l.ipacked && p.type == Scalar::Float32 && body.binary()) packed_bits = body.lastFloatBits();
         }
       }
       mesh.vertices[i] = Eigen::Vector3f(float(v[l.ix]), float(v[l.iy]), float(v[l.iz]));
       if (!mesh.vertices[i].allFinite())
         throw InputError(path, "vertex " + std::to_string(i) + " has a non-finite coordinate");
       if (l.normals) mesh.normals[i] = Eigen::Vector3f(float(v[l.inx]), float(v[l.iny]), float(v[l.inz]));
-      if (l.colors) mesh.colors[i] = vertexColour(e, l, v);
+      if (l.colors) mesh.colors[i] = vertexColour(e, l, v, packed_bits);
     }
     have_vertices = true;
   }
