@@ -420,6 +420,39 @@ TEST(RunSessionEnd, AnOutputFolderGoneSinceTheStartIsNamed) {
   }
 }
 
+// poses.rawlog that cannot be written any more (a full disk, here its images' staging folder gone and a
+// file in its place) costs poses.rawlog: said, its temporaries freed, the other outputs written and
+// summary.json says why. Every output was lost at the end, the frames after the failure run for nothing.
+TEST(RunSessionEnd, APosesRawlogThatCannotBeWrittenCostsItOnly) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 8));
+  const std::string dir = test::tempDir("run_session_rawlog_fails");
+  const std::string out = dir + "/out";
+  OutputParams params;
+  params.write_mesh = false;
+  RunSession run(test::quickRoomConfig(), TrackingMode::Joint, out, params, MeshCleanParams());
+  for (std::size_t i = 0; i < 3; ++i) run.process(seq.render(i));
+  std::string staging;
+  for (const auto& e : fs::directory_iterator(out))
+    if (e.path().filename().string().rfind("poses_Images.tmp-", 0) == 0) staging = e.path().string();
+  ASSERT_FALSE(staging.empty()) << "no staging folder for poses.rawlog's images";
+  fs::remove_all(staging);
+  std::ofstream(staging) << "a file where the images go";
+  testing::internal::CaptureStderr();
+  for (std::size_t i = 3; i < seq.size(); ++i) run.process(seq.render(i));
+  RunInfo info;
+  info.input = "room";
+  const nlohmann::json summary = run.finish(info, nullptr);
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_NE(said.find("the run goes on without poses.rawlog"), std::string::npos) << said;
+  EXPECT_NE(said.find(out + "/poses_Images/"), std::string::npos) << "the file as the user finds it: " << said;
+  ASSERT_TRUE(summary.contains("poses_rawlog_error")) << summary.dump();
+  for (const char* file : {"trajectory.txt", "summary.json"}) EXPECT_TRUE(fs::exists(out + "/" + file)) << file;
+  EXPECT_FALSE(fs::exists(out + "/poses.rawlog"));
+  fs::remove(staging);  // the file this test put there
+  for (const auto& e : fs::directory_iterator(out))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path() << " left";
+}
+
 // A recording that cannot be read again for re-fusion (moved or unmounted since it was tracked) costs
 // the re-fusion, not the run: the outputs are written, the mesh of the map fused at the tracked poses
 // (or of the frames fused again before a read failed), and summary.json says why. The exception left

@@ -45,6 +45,11 @@ class PosesRawlog {
     if (thread_.joinable()) thread_.join();
     return error_;
   }
+  // The writer's error, once a write failed (frames pushed after it are dropped).
+  std::optional<InputError> error() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return error_;
+  }
   RawlogWriter& writer() { return writer_; }
   // Drains the queue, then the ground truth and, with loop closure, the corrected pose of every frame
   // ("VOFUSION_POSE_OPTIMISED", in one last sensory frame). Throws InputError(path, ...) when a write failed.

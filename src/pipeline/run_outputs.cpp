@@ -48,12 +48,21 @@ struct RunRecorder::Impl {
   OutputParams params;
   MeshCleanParams mesh_params;
   std::unique_ptr<PosesRawlog> rawlog;
+  std::string rawlog_error;  // why poses.rawlog was given up (the run goes on without it)
   Trajectory ground_truth;
   Eigen::Vector3d up_sum = Eigen::Vector3d::Zero();  // accelerometer "up" of the frames, in the map
   CameraIntrinsics camera;
   bool have_camera = false;
 
   std::string file(const std::string& name) const { return (fs::path(dir) / name).string(); }
+  // poses.rawlog could not be written (a full disk): said at once, its temporaries freed, and the run
+  // goes on to its other outputs (it lost them all at the end, and kept the temporaries till then).
+  void giveUpRawlog(const InputError& e, const StagedOutputs* out = nullptr) {
+    const InputError named = out ? out->named(e) : e;
+    rawlog_error = named.what();
+    printWarning(rawlog_error + " (the run goes on without poses.rawlog)");
+    rawlog.reset();
+  }
   // The ground truth a run is evaluated against and its rawlog carries: the recording's own, as the
   // benchmark's tools take it (the frames' interpolated one gave xyz_first300 0.011902 m where
   // evaluate_ate.py and rgbd-eval say 0.011927), else the frames'.
@@ -82,7 +91,10 @@ void RunRecorder::add(const Frame& frame, const FrameReport& report) {
   if (!impl_->have_camera) impl_->camera = frame.camera, impl_->have_camera = true;
   if (frame.groundTruth) impl_->ground_truth.push_back({frame.timestamp, *frame.groundTruth});
   if (frame.up && report.tracked) impl_->up_sum += report.pose.getRotationMatrix().asEigen() * *frame.up;
-  if (impl_->rawlog) impl_->rawlog->push(frame, report);
+  if (impl_->rawlog) {
+    impl_->rawlog->push(frame, report);
+    if (const std::optional<InputError> err = impl_->rawlog->error()) impl_->giveUpRawlog(*err);
+  }
 }
 
 Trajectory RunRecorder::Impl::writeTrajectories(const Reconstruction& rec, const RunInfo& info, json& s,
@@ -187,7 +199,14 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
   try {
     json s = runSummary(rec, info);
-    if (m.rawlog) m.rawlog->finish(rec, m.truth(info));
+    if (m.rawlog) {
+      try {
+        m.rawlog->finish(rec, m.truth(info));
+      } catch (const InputError& e) {
+        m.giveUpRawlog(e, &out);
+      }
+    }
+    if (!m.rawlog_error.empty()) s["poses_rawlog_error"] = m.rawlog_error;
     const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
 
     returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
