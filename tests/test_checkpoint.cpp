@@ -492,4 +492,16 @@ TEST(RunSessionEnd, ARecordingThatCannotBeReadAgainCostsTheRefusionOnly) {
     EXPECT_EQ(about.value("frames_fused", 0u), 40u) << summary.dump();
     EXPECT_EQ(about.value("frames_missing", 0u), fused - 40) << summary.dump();
   }
+  {
+    // Interrupted (no recording to read again: the user asked the run to stop): the mesh keeps the
+    // tracked poses while the trajectory is loop-closed, which is said and in the summary (it was not).
+    const auto run = roomRunToRefuse(seq, dir + "/stopped");
+    RunInfo stopped = info;
+    stopped.interrupted = true;
+    testing::internal::CaptureStderr();
+    const nlohmann::json summary = run->finish(stopped, nullptr);
+    const std::string said = testing::internal::GetCapturedStderr();
+    EXPECT_EQ(summary["loop_closure_reintegration"].value("skipped", ""), "interrupted") << summary.dump();
+    EXPECT_NE(said.find("the mesh keeps the tracked poses"), std::string::npos) << said;
+  }
 }

@@ -344,8 +344,17 @@ std::string RunSession::checkpointOrigin(const std::string& input, TrackingMode 
 // Loops moved the poses: the map, fused at the tracked ones, is fused again at the corrected ones,
 // reading the recording a second time rather than keeping every frame in memory.
 void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
-  // No recording to read again (vofusion interrupted, vofusion-grab without one): the app says why.
-  if (!rec_.mapNeedsReintegration() || !reopen) return;
+  if (!rec_.mapNeedsReintegration()) return;
+  // No recording to read again: the mesh keeps the tracked poses while the trajectories are the
+  // loop-closed ones. Interrupted (the user asked the run to stop), that is said here; vofusion-grab
+  // without a recording says it itself.
+  if (!reopen) {
+    info.extra["loop_closure_reintegration"] = {{"skipped", info.interrupted ? "interrupted" : "no recording to read again"}};
+    if (info.interrupted)
+      printWarning("loops corrected the trajectory, but the run was stopped before the map was fused again at the "
+                   "corrected poses: the mesh keeps the tracked poses");
+    return;
+  }
   // A recording that cannot be opened again (moved, unmounted since) costs the re-fusion: the map fused
   // at the tracked poses is meshed, the trajectories are the loop-closed ones all the same.
   std::unique_ptr<FrameSource> again;
