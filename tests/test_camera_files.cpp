@@ -90,6 +90,18 @@ TEST(CameraFiles, CameraYamlAsOpenCvWritesIt) {
   EXPECT_NEAR(src.read(0).depth.at<float>(5, 5), 1.2f, 1e-6);
   std::ofstream(dir + "/camera.yaml") << "%YAML:1.0\nimage_width: 320\n";
   EXPECT_NE(errorOf(dir).find("camera.yaml: camera_matrix must be a 3x3 matrix"), std::string::npos) << errorOf(dir);
+  // --intrinsics (another tool's camera.yaml in the folder): the file is not the camera, and a file this
+  // reader cannot take does not stop the run: it is said and left (with --depth-scale, not read at all).
+  SourceOptions given;
+  given.intrinsics = "310,309,158,121";
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(errorOf(dir, given), "");
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_NE(said.find("camera.yaml: camera_matrix must be a 3x3 matrix"), std::string::npos) << said;
+  given.depth_scale = 1000;
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(errorOf(dir, given), "");
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
 }
 
 // ROS's camera_info YAML (camera_calibration writes it: no %YAML line, matrices as rows, cols, data) is

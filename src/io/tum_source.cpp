@@ -360,8 +360,22 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   const std::string txt = (fs::path(folder) / "intrinsics.txt").string(), yaml = (fs::path(folder) / "camera.yaml").string();
   std::optional<CameraFile> file;
   std::string origin = folder;
-  if (entryExists(txt)) file = readIntrinsicsFile(txt), origin = txt;
-  else if (entryExists(yaml)) file = readCameraYaml(yaml), origin = yaml;
+  const auto readCameraFile = [&] {
+    if (entryExists(txt)) file = readIntrinsicsFile(txt), origin = txt;
+    else if (entryExists(yaml)) file = readCameraYaml(yaml), origin = yaml;
+  };
+  if (!opts.intrinsics) {
+    readCameraFile();
+  } else if (!(opts.depth_scale > 0)) {
+    // Given --intrinsics, the file is read for its depth unit only: one this reader cannot take (another
+    // tool's camera.yaml) is said and left, where it made the folder unusable without editing it.
+    try {
+      readCameraFile();
+    } catch (const InputError& e) {
+      file.reset();
+      warn(e.file(), e.problem() + " (left: --intrinsics gives the camera; depth in 1/5000 m unless --depth-scale)");
+    }
+  }
   const cv::Size image = colourImageSize(folder, pairs_);
   const int width = image.width, height = image.height;
   const std::string size = std::to_string(width) + "x" + std::to_string(height);
