@@ -259,6 +259,22 @@ TEST(Scene, PictureLeavesOutTheCeilingOnly) {
   for (const auto& f : room.faces)
     if (bottom(room, f) < 2.49f) open_top.faces.push_back(f);
   EXPECT_FALSE(withoutCeiling(open_top, roomPath(20), CPose3D()).has_value());
+  // A robot's low camera (0.3 m) under a table (1 m^2 facing down at 0.7 m), no ceiling seen: the
+  // table is no ceiling, and cutting there left out most of the walls. A cut keeping less than half the
+  // mesh's area is none.
+  Trajectory low_path = roomPath(20);
+  for (auto& p : low_path) p.pose.z(0.3);
+  const auto table = std::uint32_t(open_top.vertices.size());
+  for (int j = 0; j <= 4; ++j)
+    for (int i = 0; i <= 4; ++i) open_top.vertices.emplace_back(-0.5f + 0.25f * float(j), -0.5f + 0.25f * float(i), 0.7f);
+  open_top.colors.resize(open_top.vertices.size(), open_top.colors.front());
+  for (std::uint32_t j = 0; j < 4; ++j)
+    for (std::uint32_t i = 0; i < 4; ++i) {
+      const std::uint32_t a = table + j * 5 + i, b = a + 1, c = a + 5, d = c + 1;
+      open_top.faces.push_back({a, b, d});  // facing down, as the ceiling's
+      open_top.faces.push_back({a, d, c});
+    }
+  EXPECT_FALSE(withoutCeiling(open_top, low_path, CPose3D()).has_value());
 }
 
 TEST(Scene, UnwritablePathIsAnInputErrorNamingIt) {
