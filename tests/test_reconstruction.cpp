@@ -399,17 +399,22 @@ TEST(Reconstruction, ReintegrationKeepsTheMapTheRunWentOnFrom) {
   const KinFuStats after = second.fusionStats();
   EXPECT_GE(after.bricks_in_volume + after.bricks_in_world_model, saved_bricks);
   EXPECT_GT(second.extractMesh().faces.size(), 1000u);
+  EXPECT_FALSE(second.reintegrationBlocked().has_value());
 
-  // A map saved over since (this run's --save-volume, then its checkpoint resumed) would hold the
-  // frames already: it is left out, with a warning, rather than fused into twice.
+  // A map saved over since (this run's --save-volume, then its checkpoint resumed) holds the frames
+  // already, so it cannot be fused into again; fusing them without it lost the earlier sessions (and
+  // --save-volume then wrote that over the file). The map stays as tracked, which holds them, and why is said.
   Reconstruction third(test::quickRoomConfig(), TrackingMode::Joint);
   third.resumeVolume(map_file);
   for (std::size_t i = first_session; i < frames; ++i) third.process(seq.render(i));
   third.saveVolume(map_file);
+  ASSERT_TRUE(third.reintegrationBlocked().has_value());
+  EXPECT_NE(third.reintegrationBlocked()->find("changed or gone since the run went on from it"), std::string::npos);
   next = first_session;
-  third.reintegrate([&](Frame& f) { return next < frames ? (f = seq.render(next++), true) : false; });
-  const KinFuStats alone = third.fusionStats();
-  EXPECT_LT(alone.bricks_in_volume + alone.bricks_in_world_model, saved_bricks) << "the changed map was read again";
+  EXPECT_EQ(third.reintegrate([&](Frame& f) { return next < frames ? (f = seq.render(next++), true) : false; }), 0u);
+  EXPECT_FALSE(third.reintegrated());
+  const KinFuStats kept = third.fusionStats();
+  EXPECT_GE(kept.bricks_in_volume + kept.bricks_in_world_model, saved_bricks) << "the earlier session was lost";
 }
 
 // A depth image of odd width or height: halved for tracking, its odd column and row are dropped, and

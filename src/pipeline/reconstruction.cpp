@@ -301,10 +301,18 @@ bool Reconstruction::mapNeedsReintegration() const {
   return m.finished && m.loops && m.loops->activeLoops() > 0 && m.max_correction > m.loop_params.reintegrate_min_correction;
 }
 
+std::optional<std::string> Reconstruction::reintegrationBlocked() const {
+  const Impl& m = *impl_;
+  if (m.resumed_map.empty() || mapStamp(m.resumed_map) == m.resumed_map_stamp) return std::nullopt;
+  return m.resumed_map + ": changed or gone since the run went on from it (saved over by an interrupted run?): "
+                         "fused again without it, the map would lose the sessions before this one";
+}
+
 std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
                                         const std::function<void(std::size_t)>& progress) {
   Impl& m = *impl_;
   finish();
+  if (reintegrationBlocked()) return 0;  // the map stays as tracked (the caller says why)
   // The map follows the loops, not the smoothing: each frame fused again where it was fused, corrected.
   const Trajectory& poses = m.loops ? m.optimised_as_tracked : m.trajectory;
   // The tracking run's statistics stay (guesses, shifts); the map and its memory are the new volume's.
@@ -316,17 +324,12 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   m.kinfu = std::make_unique<TrackedMap>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
   TrackedMap& map = *m.kinfu;
   // A run that went on from a saved map fuses its frames into that map again, not into an empty one:
-  // the earlier sessions' surfaces are the map's too. A map changed since (saved over by this run's
-  // --save-volume before a checkpoint was resumed) would hold these frames already: said, and left out.
+  // the earlier sessions' surfaces are the map's too (one changed since blocked this above).
   if (!m.resumed_map.empty()) {
-    if (mapStamp(m.resumed_map) != m.resumed_map_stamp) {
-      printWarning(m.resumed_map + ": changed or gone since the run went on from it: the frames are fused again without it");
-    } else {
-      try {
-        map.resume(m.resumed_map);
-      } catch (const InputError& e) {
-        printWarning(std::string(e.what()) + ": the frames are fused again without it");
-      }
+    try {
+      map.resume(m.resumed_map);
+    } catch (const InputError& e) {
+      printWarning(std::string(e.what()) + ": the frames are fused again without it");
     }
   }
   std::size_t read = 0, fused = 0;

@@ -355,6 +355,11 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
                    "corrected poses: the mesh keeps the tracked poses");
     return;
   }
+  if (const std::optional<std::string> blocked = rec_.reintegrationBlocked()) {
+    printWarning(*blocked + "; the map is not fused again at the loop-closed poses (its mesh is the tracked poses')");
+    info.extra["loop_closure_reintegration"] = {{"skipped", *blocked}};
+    return;
+  }
   // A recording that cannot be opened again (moved, unmounted since) costs the re-fusion: the map fused
   // at the tracked poses is meshed, the trajectories are the loop-closed ones all the same.
   std::unique_ptr<FrameSource> again;

@@ -10,6 +10,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -84,6 +85,10 @@ class Reconstruction {
   // After finish(): loops moved some pose by more than [loop] reintegrate_min_correction, so the map
   // (fused at the tracked poses) should be fused again at the corrected ones.
   bool mapNeedsReintegration() const;
+  // Why the map cannot be fused again, if so: the saved map the run went on from (resumeVolume) changed
+  // since (an interrupted run saved over it), so it holds some of these frames already, and fusing them
+  // again without it would lose the sessions before this one. reintegrate() then leaves the map as tracked.
+  std::optional<std::string> reintegrationBlocked() const;
   double maxLoopCorrection() const;  // after finish(): largest distance the loops moved a fused pose, m
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
   // fresh volume at the corrected poses (the loops' corrections of the poses as tracked); frames not
