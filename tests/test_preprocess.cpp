@@ -187,32 +187,3 @@ TEST(Pyramid, DownsampleAveragesOnlyConsistentReadings) {
   EXPECT_NEAR(h.at<float>(0, 0), (1.0f + 1.02f + 1.0f) / 3, 1e-6);  // 2.0 is another surface
   EXPECT_NEAR(h.at<float>(0, 1), 3.0f, 1e-6);                       // the only valid reading
 }
-
-// Tracking levels from the odometry's geometry keep only readings in [min_depth, max_depth], clipped
-// before blocks are averaged (as preprocessDepth clips before it halves): a block of 1 m and 6 m
-// readings (max 4 m) gave a vertex at 3.5 m, on no surface.
-TEST(Preprocess, LevelsFromGeometryClipBeforeAveraging) {
-  const int w = 8, h = 8;
-  CameraIntrinsics cam;
-  cam.fx = cam.fy = 10, cam.cx = 3.5, cam.cy = 3.5, cam.width = w, cam.height = h;
-  cv::Mat depth(h, w, CV_32F, cv::Scalar(1.f));
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x)
-      if (x % 2 == 1) depth.at<float>(y, x) = 6.f;  // every 2x2 block: two readings at 1 m, two at 6 m
-  FrameGeometry g;
-  g.points.create(h, w, CV_32FC3);
-  g.normals.create(h, w, CV_32FC3);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const float z = depth.at<float>(y, x);
-      g.points.at<cv::Vec3f>(y, x) = cv::Vec3f((x - cam.cx) * z / cam.fx, (y - cam.cy) * z / cam.fy, z);
-      g.normals.at<cv::Vec3f>(y, x) = cv::Vec3f(0, 0, -1);
-    }
-  PreprocessParams p;
-  p.min_depth = 0.3f, p.max_depth = 4.f, p.levels = 1;
-  const std::vector<DepthLevel> levels = levelsFromGeometry(g, depth, cam, 2, p);
-  ASSERT_EQ(levels[0].vertices.size(), cv::Size(w / 2, h / 2));
-  for (int y = 0; y < h / 2; ++y)
-    for (int x = 0; x < w / 2; ++x) EXPECT_FLOAT_EQ(levels[0].vertices.at<cv::Vec3f>(y, x)[2], 1.f) << x << "," << y;
-  EXPECT_EQ(g.points.at<cv::Vec3f>(0, 1)[2], 6.f) << "the shared maps are the odometry's: left as they are";
-}
