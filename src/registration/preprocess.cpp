@@ -231,18 +231,6 @@ std::vector<DepthLevel> preprocessDepth(const cv::Mat& depth, const CameraIntrin
   return levels;
 }
 
-namespace {
-// Points (and their normals) outside [min_depth, max_depth] become none (NaN), in place.
-void keepDepthRange(cv::Mat& vertices, cv::Mat& normals, float min_depth, float max_depth) {
-  parallelFor(0, vertices.rows, [&](int y) {
-    cv::Vec3f* v = vertices.ptr<cv::Vec3f>(y);
-    cv::Vec3f* n = normals.ptr<cv::Vec3f>(y);
-    for (int x = 0; x < vertices.cols; ++x)
-      if (!(v[x][2] >= min_depth && v[x][2] <= max_depth)) v[x] = n[x] = cv::Vec3f(kNaN, kNaN, kNaN);
-  }, 1, vertices.total() >= kParallelMinPixels);
-}
-}  // namespace
-
 std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat& depth, const CameraIntrinsics& cam,
                                            int downsample, const PreprocessParams& p) {
   std::vector<DepthLevel> levels(std::max(1, p.levels));
@@ -250,13 +238,6 @@ std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat
   CameraIntrinsics c = cam;
   c.width = depth.cols;
   c.height = depth.rows;
-  // Readings outside the tracker's range are none before any block is averaged, as preprocessDepth
-  // clips before it halves: a block of 1 m and 6 m readings (max 4 m) averaged to a vertex at 3.5 m,
-  // on no surface, and was kept.
-  if (downsample > 1) {
-    vertices = vertices.clone(), normals = normals.clone();  // the shared maps stay as they are
-    keepDepthRange(vertices, normals, p.min_depth, p.max_depth);
-  }
   for (int k = 1; k < downsample; ++k) {
     clipped = downsampleDepth(clipped, p.sigma_depth);
     cv::Mat v, n;
@@ -275,7 +256,12 @@ std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat
       vertices = vertices.clone(), normals = normals.clone();  // the shared maps stay as they are
     }
     // Only readings the tracker uses (the same depth range as preprocessDepth's clip).
-    keepDepthRange(vertices, normals, p.min_depth, p.max_depth);
+    parallelFor(0, vertices.rows, [&](int y) {
+      cv::Vec3f* v = vertices.ptr<cv::Vec3f>(y);
+      cv::Vec3f* n = normals.ptr<cv::Vec3f>(y);
+      for (int x = 0; x < vertices.cols; ++x)
+        if (!(v[x][2] >= p.min_depth && v[x][2] <= p.max_depth)) v[x] = n[x] = cv::Vec3f(kNaN, kNaN, kNaN);
+    }, 1, vertices.total() >= kParallelMinPixels);
     c.width = clipped.cols;  // an odd row or column is dropped by each halving, not rounded up
     c.height = clipped.rows;
     levels[l] = {clipped, vertices, normals, c};
