@@ -282,3 +282,41 @@ TEST(StopSignals, AStopRequestedInTheAppIsNoSignalAndASignalAfterItKills) {
   ASSERT_TRUE(WIFSIGNALED(status)) << ending(status);
   EXPECT_EQ(WTERMSIG(status), SIGINT);
 }
+
+// Ctrl-C through "| tee run.log" reaches tee too, which exits: the stop message, or the next progress
+// line, then goes to a closed pipe. SIGPIPE ended the run there, before it wrote what it had.
+TEST(StopSignals, AClosedPipeOnStderrDoesNotEndTheRun) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    int fds[2];
+    if (pipe(fds) != 0) _exit(3);
+    close(fds[0]);  // the reader (tee) is gone
+    dup2(fds[1], STDERR_FILENO);
+    installStopSignals();
+    std::raise(SIGINT);                      // "stopping ..." written to the closed pipe
+    std::fprintf(stderr, "a progress line\n");  // and the lines after it
+    std::fflush(stderr);
+    _exit(stopRequested() ? 0 : 1);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status)) << ending(status);
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+// Progress into a log (not a terminal) prints at most a line every 2 s, and the last item at once,
+// once: a caller ticking while nothing moves (a live session waiting for its sensor, total unknown)
+// printed a line per tick.
+TEST(Progress, TicksWithoutProgressAreNotALinePerTick) {
+  testing::internal::CaptureStderr();
+  {
+    Progress waiting("live", 0);
+    for (int i = 0; i < 20; ++i) waiting.update(0);
+    Progress drained("live", 5);
+    for (int i = 0; i < 20; ++i) drained.update(5);  // the last frame played, the queue drained
+  }
+  const std::string out = testing::internal::GetCapturedStderr();
+  std::size_t lines = 0;
+  for (char c : out) lines += c == '\n';
+  EXPECT_LE(lines, 2u) << out;
+}

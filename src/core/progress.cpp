@@ -26,6 +26,7 @@ double Progress::fps() const {
 
 static std::string formatDuration(double s) {
   char buf[32];
+  if (!(s < 1e8)) return "?";  // an hour count past int's range (and no ETA anyone waits for)
   if (s >= 3600) std::snprintf(buf, sizeof buf, "%dh%02dm", int(s / 3600), int(s / 60) % 60);
   else if (s >= 60) std::snprintf(buf, sizeof buf, "%dm%02ds", int(s / 60), int(s) % 60);
   else std::snprintf(buf, sizeof buf, "%.0fs", s);
@@ -36,8 +37,12 @@ void Progress::update(std::size_t done, const std::string& extra) {
   done_ = done;
   const auto now = std::chrono::steady_clock::now();
   const double since = std::chrono::duration<double>(now - last_print_).count();
-  if (since < (tty_ ? 0.2 : 2.0) && done != total_) return;
+  // The last item is said at once, once: a caller ticking on while nothing moves (a live session
+  // waiting for its sensor, total unknown: 0 of 0) printed a line per tick into a log.
+  const bool at_end = total_ > 0 && done == total_ && last_printed_ != done;
+  if (since < (tty_ ? 0.2 : 2.0) && !at_end) return;
   last_print_ = now;
+  last_printed_ = done;
   // No rate (nor ETA) from less than a second: the first item may have been done before the clock started.
   const double rate = elapsedSeconds() >= 1.0 ? fps() : 0.0;
   char rate_text[48] = "-";

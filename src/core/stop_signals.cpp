@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cerrno>
 #include <csignal>
 #include <cstdint>
 #include <cstdio>
@@ -31,6 +32,11 @@ std::atomic<const char*> g_stopping{kStopping};
 
 // Only async-signal-safe work: lock-free atomics, clock_gettime(), write(), signal() and raise().
 void onStopSignal(int signal) {
+  const int saved_errno = errno;  // the interrupted code may be about to read its own (a failed pwrite's)
+  struct RestoreErrno {
+    int value;
+    ~RestoreErrno() { errno = value; }
+  } restore{saved_errno};
   const std::int64_t now = monotonicNs();
   // Its time before the flag: a second signal that sees the flag set sees the first one's time too.
   if (!g_stop.load()) {
@@ -61,6 +67,10 @@ void installStopSignals(const char* stopping) {
   if (stopping) g_stopping = stopping;
   std::signal(SIGINT, onStopSignal);  // also where a background job started with SIGINT ignored
   std::signal(SIGTERM, onStopSignal);
+  // "vofusion ... | tee run.log" and Ctrl-C: tee exits too, and a write to stderr after it (the stop
+  // message, a progress line) ended the run by SIGPIPE before it wrote what it had. A closed pipe is
+  // then only a failed write.
+  std::signal(SIGPIPE, SIG_IGN);
 }
 
 bool stopRequested() { return g_stop.load(); }

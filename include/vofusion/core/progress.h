@@ -2,6 +2,7 @@
 // A one-line progress report for long jobs: "label 120/300 frames  28.4 fps  ETA 6s  <extra>".
 #include <chrono>
 #include <cstddef>
+#include <optional>
 #include <string>
 
 namespace vofusion {
@@ -30,6 +31,7 @@ class Progress {
  private:
   std::string label_, unit_, rate_unit_;
   std::size_t total_, done_ = 0, start_done_ = 0;
+  std::optional<std::size_t> last_printed_;  // the count last printed
   std::chrono::steady_clock::time_point start_, last_print_;
   bool tty_;
 };

@@ -24,7 +24,8 @@ namespace vofusion {
 inline constexpr double kSameRequestSeconds = 1.0;
 
 // `stopping`: what the first signal says at once, when not the default "stopping after the frame in
-// hand; what was done is written (Ctrl-C again to kill)" (a string that outlives the run).
+// hand; what was done is written (Ctrl-C again to kill)" (a string that outlives the run). SIGPIPE is
+// ignored from here on: a closed stderr pipe (tee gone with the Ctrl-C) is a failed write, not the end.
 void installStopSignals(const char* stopping = nullptr);
 // The `stopping` of apps whose part-done work is no result (a conversion, a rendering).
 inline constexpr char kStoppingWithNothingWritten[] = "\nstopping; nothing is written (Ctrl-C again to kill)\n";
