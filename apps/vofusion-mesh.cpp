@@ -64,6 +64,8 @@ int body(int argc, char** argv) {
     loadNamingOrigin(*config, [&] { params.loadFromConfigFile(cfg, "mesh"); });
   }
 
+  if (cl.value("--trajectory") && !cl.value("--png") && !cl.value("--scene"))
+    throw InputError("usage", "--trajectory is drawn in --png or --scene: give one of them");
   Trajectory traj;
   if (const auto t = cl.value("--trajectory")) traj = readTumTrajectory(*t);
 
@@ -71,6 +73,8 @@ int body(int argc, char** argv) {
   if (mesh.faces.empty()) throw InputError(in, "holds no faces (a point cloud?): nothing to clean");
   const auto ref_path = cl.value("--distance-to");
   const TriangleMesh ref = ref_path ? readPly(*ref_path) : TriangleMesh();
+  if (ref_path && ref.faces.empty())
+    throw InputError(*ref_path, "holds no faces (a point cloud?): no surface to measure the distance to");
   const std::size_t v0 = mesh.vertices.size(), f0 = mesh.faces.size();
   TriangleMesh full;
   const MeshCleanReport report = cleanMesh(mesh, params, cl.value("--full") ? &full : nullptr);

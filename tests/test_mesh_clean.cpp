@@ -783,6 +783,16 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/cloud.ply " + dir + "/o.ply", &out), 2);
   EXPECT_EQ(out, "vofusion-mesh: error: " + dir + "/cloud.ply: holds no faces (a point cloud?): nothing to clean\n");
   EXPECT_FALSE(std::filesystem::exists(dir + "/o.ply"));
+  // Nor is it a surface to measure a distance to (it gave "mean 0 m, max 0 m", a perfect match).
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/o.ply --distance-to " + dir + "/cloud.ply",
+                      &out),
+            2);
+  EXPECT_EQ(out, "vofusion-mesh: error: " + dir + "/cloud.ply: holds no faces (a point cloud?): no surface to measure "
+                 "the distance to\n");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/o.ply"));
+  // A camera path with nothing to draw it in was read and left unused.
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/in.ply " + dir + "/o.ply --trajectory " + dir + "/t.txt", &out), 2);
+  EXPECT_EQ(out, "vofusion-mesh: error: usage: --trajectory is drawn in --png or --scene: give one of them\n");
   // A vofusion-grab config's sensor section is not this app's to check, nor rawlog-grabber's key.
   std::ofstream(dir + "/grab.ini")
       << "[mesh]\nmin_component_faces = 10\nrawlog-grabber-ignore = true\n[OPENNI2]\ndriver = COpenNI2Sensor\n";
