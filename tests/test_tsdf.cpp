@@ -413,6 +413,8 @@ TEST(MarchingCubes, CrossingsThatRoundOntoAVoxelAreThatVoxelsVertex) {
   b.voxels[Brick::index(3, 3, 3)].tsdf = 1;
   const float vs = 0.006f;
   EXPECT_EQ(marchingCubes({{Eigen::Vector3i(0, 0, 0), &b}}, vs).faces.size(), 8u);  // resolved near the origin
+  // At 19 m every crossing rounds onto the voxel: one vertex, and no face of zero area left.
+  EXPECT_TRUE(marchingCubes({{Eigen::Vector3i(400, 400, 400), &b}}, vs).faces.empty());
   for (const int at : {0, 400}) {
     const TriangleMesh mesh = marchingCubes({{Eigen::Vector3i(at, at, at), &b}}, vs);
     for (const auto& f : mesh.faces) {

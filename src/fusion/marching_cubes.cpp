@@ -184,7 +184,7 @@ void edgeVertices(const Grid& grid, const int* nb, const CornerStates& state, st
           // On a voxel: t is 0 or 1, or so near it that the offset rounds away in float (far from the
           // origin: 0.9 um is half an ulp at 19 m), which made vertices apart at one position.
           const bool at_a = t == 0.f || p[axis] == start;
-          const bool at_b = !at_a && (t == 1.f || end - (1.f - t) * voxel_size == end);
+          const bool at_b = !at_a && (t == 1.f || p[axis] == end || end - (1.f - t) * voxel_size == end);
           if (at_a || at_b) {  // the same arithmetic from every edge (and region) there
             Eigen::Vector3i g = o + Eigen::Vector3i(x, y, z);
             if (at_b) ++g[axis];
