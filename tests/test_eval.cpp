@@ -223,13 +223,21 @@ TEST(Eval, PlotsLeaveGapsOpen) {
   ASSERT_FALSE(img.empty());
   // The plot box is x 90..870 over t 0..6.9 (5 % margins); the column at t = 3.5 s, in the gap.
   const int gap_x = 90 + int(780 * (0.05 * 6.9 + 3.5) / (1.1 * 6.9)), ok_x = 90 + int(780 * (0.05 * 6.9 + 1.0) / (1.1 * 6.9));
-  const auto redIn = [&](int x) {
+  const auto redIn = [&](int x, int width = 1) {
     cv::Mat red;
-    cv::inRange(img(cv::Rect(x, 50, 1, 580)), cv::Scalar(0, 0, 150), cv::Scalar(120, 120, 255), red);
+    cv::inRange(img(cv::Rect(x, 50, width, 580)), cv::Scalar(0, 0, 150), cv::Scalar(120, 120, 255), red);
     return cv::countNonZero(red);
   };
   EXPECT_GT(redIn(ok_x), 0) << "the line where there are samples";
   EXPECT_EQ(redIn(gap_x), 0) << "a line across the gap";
+  // A sample alone between two gaps shows, as a dot.
+  std::vector<double> lone_t = times, lone_e = errors;
+  lone_t.insert(lone_t.begin() + 20, 3.5), lone_e.insert(lone_e.begin() + 20, 0.01);
+  plotErrorOverTime(dir + "/lone.png", lone_t, lone_e, "err");
+  img = cv::imread(dir + "/lone.png");
+  EXPECT_GT(redIn(gap_x - 40, 80), 0) << "the sample at 3.5 s, alone";
+  img = cv::imread(dir + "/e.png");
+  EXPECT_EQ(redIn(gap_x - 40, 80), 0) << "the same columns without it";
   // The top view: a straight walk along x with the same gap; no blue at its middle.
   Trajectory walk;
   for (double t : times) walk.push_back({t, CPose3D(t, 0.1 * std::sin(t), 0, 0, 0, 0)});

@@ -108,13 +108,18 @@ void savePng(const std::string& path, const cv::Mat& img) {
 class Gaps {
  public:
   explicit Gaps(std::vector<double> times) {
-    std::vector<double> steps;
-    for (std::size_t i = 1; i < times.size(); ++i) steps.push_back(times[i] - times[i - 1]);
+    std::vector<double> steps;  // the positive ones: repeated stamps are no spacing
+    for (std::size_t i = 1; i < times.size(); ++i)
+      if (times[i] > times[i - 1]) steps.push_back(times[i] - times[i - 1]);
     if (steps.empty()) return;
     std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
     longest_joined_ = 3.0 * steps[steps.size() / 2];
   }
   bool joined(double ta, double tb) const { return !(tb - ta > longest_joined_); }
+  // Sample i of n, joined to neither neighbour: drawn as a dot, or it would not show at all.
+  bool alone(const std::vector<double>& t, std::size_t i) const {
+    return (i == 0 || !joined(t[i - 1], t[i])) && (i + 1 >= t.size() || !joined(t[i], t[i + 1]));
+  }
 
  private:
   double longest_joined_ = 0.0;
@@ -158,9 +163,12 @@ cv::Mat renderTopView(const Trajectory& gt, const std::vector<std::pair<std::str
   if (error_vectors && ests.size() == 1 && ests[0].second.size() == gt.size())
     for (std::size_t i = 0; i < gt.size(); ++i) cv::line(plot, P(gt[i].pose), P(ests[0].second[i].pose), kRed, 1, cv::LINE_AA);
   const auto path = [&](const Trajectory& tr, const cv::Scalar& c) {
-    const Gaps gaps(stampsOf(tr));
-    for (std::size_t i = 1; i < tr.size(); ++i)
-      if (gaps.joined(tr[i - 1].timestamp, tr[i].timestamp)) cv::line(plot, P(tr[i - 1].pose), P(tr[i].pose), c, 2, cv::LINE_AA);
+    const std::vector<double> stamps = stampsOf(tr);
+    const Gaps gaps(stamps);
+    for (std::size_t i = 0; i < tr.size(); ++i) {
+      if (i > 0 && gaps.joined(stamps[i - 1], stamps[i])) cv::line(plot, P(tr[i - 1].pose), P(tr[i].pose), c, 2, cv::LINE_AA);
+      if (tr.size() > 1 && gaps.alone(stamps, i)) cv::circle(plot, P(tr[i].pose), 2, c, cv::FILLED, cv::LINE_AA);
+    }
   };
   path(gt, kBlack);
   std::vector<std::pair<std::string, cv::Scalar>> entries;
@@ -191,9 +199,12 @@ cv::Mat renderErrorOverTime(const std::vector<double>& times, const std::vector<
   cv::Mat plot = img(ax.box);
   const cv::Point off(ax.box.x, ax.box.y);
   const Gaps gaps(times);
-  for (std::size_t i = 1; i < times.size() && i < errors.size(); ++i)
-    if (gaps.joined(times[i - 1], times[i]))
+  for (std::size_t i = 0; i < times.size() && i < errors.size(); ++i) {
+    if (gaps.alone(times, i))
+      cv::circle(plot, ax.px(times[i] - t0, errors[i]) - off, 2, kRed, cv::FILLED, cv::LINE_AA);
+    if (i > 0 && gaps.joined(times[i - 1], times[i]))
       cv::line(plot, ax.px(times[i - 1] - t0, errors[i - 1]) - off, ax.px(times[i] - t0, errors[i]) - off, kRed, 2, cv::LINE_AA);
+  }
   return img;
 }
 
