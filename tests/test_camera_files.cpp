@@ -98,6 +98,9 @@ TEST(CameraFiles, CameraYamlAsOpenCvWritesIt) {
   EXPECT_EQ(errorOf(dir, given), "");
   const std::string said = testing::internal::GetCapturedStderr();
   EXPECT_NE(said.find("camera.yaml: camera_matrix must be a 3x3 matrix"), std::string::npos) << said;
+  given.strict = true;  // --strict: what cannot be read stops the run
+  EXPECT_NE(errorOf(dir, given).find("camera.yaml: camera_matrix must be a 3x3 matrix"), std::string::npos);
+  given.strict = false;
   given.depth_scale = 1000;
   testing::internal::CaptureStderr();
   EXPECT_EQ(errorOf(dir, given), "");

@@ -340,6 +340,15 @@ cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssocia
 }
 }  // namespace
 
+namespace {
+// The folder's camera file, intrinsics.txt before camera.yaml (`origin` set to the one read); none: nullopt.
+std::optional<CameraFile> cameraFileIn(const std::string& txt, const std::string& yaml, std::string& origin) {
+  if (entryExists(txt)) return origin = txt, readIntrinsicsFile(txt);
+  if (entryExists(yaml)) return origin = yaml, readCameraYaml(yaml);
+  return std::nullopt;
+}
+}  // namespace
+
 TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
   std::error_code ec;
   if (!fs::is_directory(folder, ec)) throw InputError(folder, "no such folder");
@@ -360,19 +369,15 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   const std::string txt = (fs::path(folder) / "intrinsics.txt").string(), yaml = (fs::path(folder) / "camera.yaml").string();
   std::optional<CameraFile> file;
   std::string origin = folder;
-  const auto readCameraFile = [&] {
-    if (entryExists(txt)) file = readIntrinsicsFile(txt), origin = txt;
-    else if (entryExists(yaml)) file = readCameraYaml(yaml), origin = yaml;
-  };
   if (!opts.intrinsics) {
-    readCameraFile();
+    file = cameraFileIn(txt, yaml, origin);
   } else if (!(opts.depth_scale > 0)) {
     // Given --intrinsics, the file is read for its depth unit only: one this reader cannot take (another
     // tool's camera.yaml) is said and left, where it made the folder unusable without editing it.
     try {
-      readCameraFile();
+      file = cameraFileIn(txt, yaml, origin);
     } catch (const InputError& e) {
-      file.reset();
+      if (opts.strict) throw;
       warn(e.file(), e.problem() + " (left: --intrinsics gives the camera; depth in 1/5000 m unless --depth-scale)");
     }
   }

@@ -4,7 +4,9 @@
 // frame. The same layout from other sensors (RealSense, Azure Kinect, Open3D's recorder) stores
 // millimetres: SourceOptions::depth_scale or a camera file says so.
 // The camera, first found wins:
-//   SourceOptions::intrinsics (--intrinsics);
+//   SourceOptions::intrinsics (--intrinsics); a camera file in the folder is then read for its depth
+//     scale only (not at all with SourceOptions::depth_scale), and one that cannot be read is said and
+//     left (an error with SourceOptions::strict);
 //   intrinsics.txt in the folder: a line "fx fy cx cy [k1 k2 p1 p2 k3]", optional lines
 //     "size W H" and "depth_scale S", '#' comments (rgbd-simulate writes one);
 //   camera.yaml in the folder (OpenCV FileStorage, as OpenCV's calibration writes it, or ROS's camera_info
