@@ -260,8 +260,8 @@ TEST(Scene, PictureLeavesOutTheCeilingOnly) {
     if (bottom(room, f) < 2.49f) open_top.faces.push_back(f);
   EXPECT_FALSE(withoutCeiling(open_top, roomPath(20), CPose3D()).has_value());
   // A robot's low camera (0.3 m) under a table (1 m^2 facing down at 0.7 m), no ceiling seen: the
-  // table is no ceiling, and cutting there left out most of the walls. A cut keeping less than half the
-  // mesh's area is none.
+  // table is no ceiling, and cutting there left out most of the walls. A cut that leaves out mostly
+  // faces not facing down is none.
   Trajectory low_path = roomPath(20);
   for (auto& p : low_path) p.pose.z(0.3);
   const auto table = std::uint32_t(open_top.vertices.size());

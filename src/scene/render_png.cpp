@@ -43,17 +43,21 @@ std::optional<TriangleMesh> withoutCeiling(const TriangleMesh& mesh, const Traje
   out.vertices = mesh.vertices;  // faces left out keep their vertices: unused ones draw nothing
   out.normals = mesh.normals;
   out.colors = mesh.colors;
-  double area = 0.0, kept = 0.0;
+  double removed = 0.0, removed_down = 0.0;
   for (const auto& f : mesh.faces) {
     bool below = true;
     for (std::uint32_t i : f) below = below && z.dot(mesh.vertices[i].cast<double>()) < cut;
-    const double a = 0.5 * (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]).cast<double>().norm();
-    area += a;
-    if (below) out.faces.push_back(f), kept += a;
+    if (below) {
+      out.faces.push_back(f);
+      continue;
+    }
+    const Eigen::Vector3d n = (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]).cast<double>();
+    removed += 0.5 * n.norm();
+    if (z.dot(n) < -0.7 * n.norm()) removed_down += 0.5 * n.norm();
   }
-  // A ceiling takes itself and a fringe of wall: a cut leaving less than half the mesh is not at one (a
-  // table above a robot's low camera, no ceiling seen, took most of the walls).
-  if (kept < 0.5 * area) return std::nullopt;
+  // A ceiling takes itself and a fringe of wall: what a cut leaves out is mostly facing down. A table
+  // above a robot's low camera (no ceiling seen) took most of the walls out of the picture.
+  if (removed_down < 0.5 * removed) return std::nullopt;
   return out;
 }
 

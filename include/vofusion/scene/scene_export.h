@@ -59,8 +59,8 @@ mrpt::poses::CPose3D sceneUpRotation(const Trajectory& path, const TriangleMesh*
 // What mesh.png draws: the mesh without its ceiling (a dollhouse view; the picture looks in from
 // above). The ceiling is the height above the highest camera of `path` (along `up`'s z axis, as
 // sceneUpRotation gives it) with the most downward-facing area, at least 0.5 m^2; faces reaching
-// 10 cm below it or higher are left out. No path, no such ceiling, or a cut that would leave less than
-// half the mesh's area (not a ceiling: a table above a low camera): nullopt (draw the mesh as it is).
+// 10 cm below it or higher are left out. No path, no such ceiling, or a cut whose faces left out are
+// mostly not facing down (not a ceiling: a table above a low camera): nullopt (draw the mesh as it is).
 std::optional<TriangleMesh> withoutCeiling(const TriangleMesh& mesh, const Trajectory& path, const mrpt::poses::CPose3D& up);
 
 // The camera frustum pose for a camera-to-world optical pose (x right, y down, z forward):
