@@ -373,7 +373,8 @@ void refuseToReplaceACheckpoint(const Args& args) {
   std::error_code ec;
   if (fs::is_regular_file(fs::symlink_status(path, ec)))
     throw InputError(path, "an earlier run's checkpoint, which this session's checkpoints would replace: finish that "
-                           "run with vofusion --resume " + path + ", or delete it (or --checkpoint-every 0)");
+                           "run with vofusion <its input> --out " + args.out + " --resume " + path +
+                           ", or delete it (or --checkpoint-every 0)");
 }
 
 int run(const Args& args) {
