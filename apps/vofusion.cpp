@@ -328,8 +328,13 @@ int body(int argc, char** argv) {
   RunSession::Reopen reopen;  // an interrupted run is not fused again: the user asked it to stop
   if (!loop.interrupted())
     reopen = [&]() -> std::unique_ptr<FrameSource> { return openInput(plan, false).source; };
+  else
+    info.no_rereading = "interrupted";
   const auto summary = run.finish(info, reopen, plan.save_volume);
   const Reconstruction& rec = run.reconstruction();
+  if (plan.out_params.write_mesh && rec.mapNeedsReintegration() && !rec.reintegrated() && loop.interrupted())
+    std::fprintf(stderr, "vofusion: loops corrected the trajectory, but the run was stopped before the map was fused "
+                         "again at the corrected poses: the mesh keeps the tracked poses\n");
   std::fprintf(stderr, "vofusion: %zu frames, %.1f fps, %zu fallbacks, %zu lost", loop.done, summary.value("fps", 0.0),
                rec.fallbacks(), rec.lostFrames());
   if (const std::size_t skipped = summary.value("frames_skipped", std::size_t(0))) std::fprintf(stderr, ", %zu skipped", skipped);

@@ -435,7 +435,7 @@ TEST(RunSessionEnd, APosesRawlogThatCannotBeWrittenCostsItOnly) {
   for (const auto& e : fs::directory_iterator(out))
     if (e.path().filename().string().rfind("poses_Images.tmp-", 0) == 0) staging = e.path().string();
   ASSERT_FALSE(staging.empty()) << "no staging folder for poses.rawlog's images";
-  fs::remove_all(staging);
+  fs::rename(staging, dir + "/moved_away");  // in one step: the writer thread may be adding an image to it
   std::ofstream(staging) << "a file where the images go";
   testing::internal::CaptureStderr();
   for (std::size_t i = 3; i < seq.size(); ++i) run.process(seq.render(i));
@@ -493,15 +493,14 @@ TEST(RunSessionEnd, ARecordingThatCannotBeReadAgainCostsTheRefusionOnly) {
     EXPECT_EQ(about.value("frames_missing", 0u), fused - 40) << summary.dump();
   }
   {
-    // Interrupted (no recording to read again: the user asked the run to stop): the mesh keeps the
-    // tracked poses while the trajectory is loop-closed, which is said and in the summary (it was not).
+    // No recording read again (vofusion interrupted: the user asked the run to stop): the mesh keeps the
+    // tracked poses while the trajectory is loop-closed, and the summary says why (it did not).
     const auto run = roomRunToRefuse(seq, dir + "/stopped");
     RunInfo stopped = info;
     stopped.interrupted = true;
-    testing::internal::CaptureStderr();
+    stopped.no_rereading = "interrupted";
     const nlohmann::json summary = run->finish(stopped, nullptr);
-    const std::string said = testing::internal::GetCapturedStderr();
     EXPECT_EQ(summary["loop_closure_reintegration"].value("skipped", ""), "interrupted") << summary.dump();
-    EXPECT_NE(said.find("the mesh keeps the tracked poses"), std::string::npos) << said;
+    EXPECT_FALSE(summary["loop_closure"]["map_reintegrated"].get<bool>());
   }
 }

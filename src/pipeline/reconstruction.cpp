@@ -324,7 +324,9 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   m.kinfu = std::make_unique<TrackedMap>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
   TrackedMap& map = *m.kinfu;
   // A run that went on from a saved map fuses its frames into that map again, not into an empty one:
-  // the earlier sessions' surfaces are the map's too (one changed since blocked this above).
+  // the earlier sessions' surfaces are the map's too (one changed since blocked this above). Unchanged
+  // since it was read but unreadable now (its disk failing) is not checked before the tracked map goes:
+  // said, and the frames fused without it.
   if (!m.resumed_map.empty()) {
     try {
       map.resume(m.resumed_map);

@@ -57,8 +57,10 @@ struct RunRecorder::Impl {
   std::string file(const std::string& name) const { return (fs::path(dir) / name).string(); }
   // poses.rawlog could not be written (a full disk): said at once, its temporaries freed, and the run
   // goes on to its other outputs (it lost them all at the end, and kept the temporaries till then).
-  void giveUpRawlog(const InputError& e, const StagedOutputs* out = nullptr) {
-    const InputError named = out ? out->named(e) : e;
+  void giveUpRawlog(const std::exception& e, const StagedOutputs* out = nullptr) {
+    const auto* input = dynamic_cast<const InputError*>(&e);  // MRPT's serialisation throws its own
+    const InputError as_input = input ? *input : InputError(file("poses.rawlog"), oneLineMessage(e));
+    const InputError named = out ? out->named(as_input) : as_input;
     rawlog_error = named.what();
     printWarning(rawlog_error + " (the run goes on without poses.rawlog)");
     rawlog.reset();
@@ -202,7 +204,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     if (m.rawlog) {
       try {
         m.rawlog->finish(rec, m.truth(info));
-      } catch (const InputError& e) {
+      } catch (const std::exception& e) {
         m.giveUpRawlog(e, &out);
       }
     }
@@ -250,14 +252,23 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     s["peak_memory_mib"] = peakMemoryMiB();
     s["heap_huge_pages"] = heapAsksForHugePages();  // the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
     // A name that is no UTF-8 (a Latin-1 folder) is written with U+FFFD: strict, the writer threw and the run lost every output.
-    writeFileAtomically(out.path("summary.json"), s.dump(2, ' ', false, json::error_handler_t::replace) + "\n");
+    const auto writeSummary = [&] {
+      writeFileAtomically(out.path("summary.json"), s.dump(2, ' ', false, json::error_handler_t::replace) + "\n");
+    };
+    writeSummary();
     out.wrote("summary.json", "run statistics");
     // The rawlog replaces an earlier run's only once the staged files have their places: a folder where
     // summary.json goes left the new rawlog beside the earlier run's other outputs.
     out.checkPlaces();
     if (m.rawlog) {
-      m.rawlog->writer().commit();
-      out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);
+      try {
+        m.rawlog->writer().commit();  // what it throws changed nothing (RawlogWriter::commit)
+        out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);
+      } catch (const std::exception& e) {  // closing it failed (a full disk): the other outputs stay
+        m.giveUpRawlog(e, &out);
+        s["poses_rawlog_error"] = m.rawlog_error;
+        writeSummary();  // still staged: written again, saying why
+      }
     }
     out.commit(log);
     warnOfEarlierOutputs(out, m.dir);

@@ -346,13 +346,9 @@ std::string RunSession::checkpointOrigin(const std::string& input, TrackingMode 
 void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
   if (!rec_.mapNeedsReintegration()) return;
   // No recording to read again: the mesh keeps the tracked poses while the trajectories are the
-  // loop-closed ones. Interrupted (the user asked the run to stop), that is said here; vofusion-grab
-  // without a recording says it itself.
+  // loop-closed ones; the summary says why (the app says it to the user).
   if (!reopen) {
-    info.extra["loop_closure_reintegration"] = {{"skipped", info.interrupted ? "interrupted" : "no recording to read again"}};
-    if (info.interrupted)
-      printWarning("loops corrected the trajectory, but the run was stopped before the map was fused again at the "
-                   "corrected poses: the mesh keeps the tracked poses");
+    info.extra["loop_closure_reintegration"] = {{"skipped", info.no_rereading}};
     return;
   }
   if (const std::optional<std::string> blocked = rec_.reintegrationBlocked()) {

@@ -94,14 +94,16 @@ class Reconstruction {
   // fresh volume at the corrected poses (the loops' corrections of the poses as tracked); frames not
   // fused the first time are skipped again, and so are frames the run never processed (found by
   // Frame::index: the input read again gives each frame its index of the run). progress gets the number
-  // of frames read. Returns the number of frames fused.
+  // of frames read. Returns the number of frames fused: 0, the map left as tracked, when
+  // reintegrationBlocked() says why not.
   std::size_t reintegrate(const std::function<bool(Frame&)>& next,
                           const std::function<void(std::size_t)>& progress = nullptr);
   bool reintegrated() const;
   // The map and the current pose to a file (TrackedMap::save), after the fusion in flight finished.
   void saveVolume(const std::string& path) const;
   // Before the first frame: continue from a saved map and pose (TrackedMap::resume). reintegrate()
-  // reads the file again and fuses the frames into it (a checkpoint keeps its name).
+  // reads the file again and fuses the frames into it (a checkpoint keeps its name); changed or gone
+  // since, it blocks re-fusion (reintegrationBlocked).
   void resumeVolume(const std::string& path);
   // Checkpoints, between frames: every stage's state (odometry, tracker and map, loop closer) and the
   // run's poses and counts so far. A reconstruction made with the same configuration and mode that

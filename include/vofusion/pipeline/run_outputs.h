@@ -50,6 +50,9 @@ struct RunInfo {
   bool interrupted = false;    // stopped early (Ctrl-C, sensor lost): outputs hold what was built
   double seconds = 0.0;        // wall time of the frame loop
   nlohmann::json extra;        // caller-specific facts (e.g. live: played/dropped), merged into summary
+  // Why RunSession::finish is given no recording to read again (summary.json's
+  // loop_closure_reintegration.skipped when loops moved the poses; the caller says it to the user).
+  std::string no_rereading = "no recording to read again";
   // The recording's ground truth as it lists it (FrameSource::recordedGroundTruth): the ATE and RPE are
   // taken against it, as TUM's evaluate_ate.py and rgbd-eval take them (the nearest stamp within
   // 20 ms); empty: against the frames' own (Frame::groundTruth: exact for synthetic and 7-Scenes).
@@ -70,7 +73,9 @@ class RunRecorder {
   RunRecorder(const std::string& dir, const OutputParams& params, const MeshCleanParams& mesh_params);
   ~RunRecorder();  // without finish(): poses.rawlog is discarded, earlier outputs stay as they were
 
-  // Queues the frame for poses.rawlog (written by a background thread) and keeps its ground truth.
+  // Queues the frame for poses.rawlog (written by a background thread) and keeps its ground truth. A
+  // poses.rawlog that cannot be written (a full disk) is given up, said at once; the run goes on, and
+  // finish() writes the other outputs, summary.json's poses_rawlog_error saying why.
   void add(const Frame& frame, const FrameReport& report);
   // Writes every output and returns the summary that went into summary.json. `log` gets one line
   // per file written (may be null). Frees rec's map once it is meshed (Reconstruction::releaseMap).
