@@ -338,13 +338,17 @@ cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssocia
   throw InputError(paths.front(), "colour image cannot be read, nor can any of the first " + std::to_string(paths.size()) +
                                       " listed in rgb.txt");
 }
-}  // namespace
 
-namespace {
 // The folder's camera file, intrinsics.txt before camera.yaml (`origin` set to the one read); none: nullopt.
 std::optional<CameraFile> cameraFileIn(const std::string& txt, const std::string& yaml, std::string& origin) {
-  if (entryExists(txt)) return origin = txt, readIntrinsicsFile(txt);
-  if (entryExists(yaml)) return origin = yaml, readCameraYaml(yaml);
+  if (entryExists(txt)) {
+    origin = txt;
+    return readIntrinsicsFile(txt);
+  }
+  if (entryExists(yaml)) {
+    origin = yaml;
+    return readCameraYaml(yaml);
+  }
   return std::nullopt;
 }
 }  // namespace
