@@ -57,6 +57,18 @@ TEST(Config, UnknownKeyNamesFileSectionAndKey) {
   EXPECT_NE(refusal(dir + "/b.ini", "[kinfoo]\nvoxel = 0.01\n", "kinfu"), "");
 }
 
+// MRPT reads keys whatever their case ("Voxel" is voxel's value): the check takes them as MRPT does. It
+// refused them as unknown keys, a typo's message for a key that is read.
+TEST(Config, KeysInAnotherCaseAreTheKeysMrptReads) {
+  const std::string dir = test::tempDir("config_case");
+  EXPECT_EQ(refusal(dir + "/a.ini", "[kinfu]\nVoxel = 0.02\nWEIGHT_CAP = 9\n", "kinfu"), "");
+  DemoParams p;
+  p.loadFromConfigFile(loadConfig(dir + "/a.ini"), "kinfu");
+  EXPECT_DOUBLE_EQ(p.voxel, 0.02);
+  EXPECT_EQ(p.weight_cap, 9);
+  EXPECT_EQ(refusal(dir + "/b.ini", "[kinfu]\nVoxl = 0.01\n", "kinfu"), dir + "/b.ini: unknown key 'Voxl' in section [kinfu]");
+}
+
 // Parameters that save a section beside their own, as [odometry] saves [star], [narf] and [motion].
 struct NestedParams : DemoParams {
   int iterations = 500;

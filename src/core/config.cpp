@@ -92,6 +92,13 @@ static std::string trimmed(const std::string& s) {
   return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
 }
 
+// A key as MRPT looks it up: its INI reader ignores case ("Voxel_Size" is voxel_size's value).
+static std::string keyName(const std::string& s) {
+  std::string k = trimmed(s);
+  std::transform(k.begin(), k.end(), k.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return k;
+}
+
 Setting parseSetting(const std::string& text) {
   const auto dot = text.find('.'), eq = text.find('=');
   if (dot == std::string::npos || eq == std::string::npos || eq < dot) throw InputError("--set " + text, "expected section.key=value");
@@ -136,7 +143,7 @@ constexpr RetiredKey kRetiredKeys[] = {
 
 static std::string unknownKeyMessage(const std::string& section, const std::string& key) {
   for (const RetiredKey& r : kRetiredKeys)
-    if (section == r.section && key == r.key)
+    if (keyName(section) == r.section && keyName(key) == r.key)
       return "'" + key + "' in section [" + section + "] is no longer a key: its value is fixed in code (" + r.figures +
              " gives the figures); remove the line";
   return "unknown key '" + key + "' in section [" + section + "]";
@@ -163,11 +170,10 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
     if (!defaults.sectionExists(s)) throw InputError(origin, "unknown section [" + s + "]");
     std::vector<std::string> valid;
     defaults.getAllKeys(s, valid);
-    for (auto& v : valid) v = trimmed(v);
+    for (auto& v : valid) v = keyName(v);
     for (const auto& key : keys) {
-      const std::string k = trimmed(key);
-      if (std::find(valid.begin(), valid.end(), k) == valid.end())
-        throw InputError(origin, unknownKeyMessage(s, k));
+      if (std::find(valid.begin(), valid.end(), keyName(key)) == valid.end())
+        throw InputError(origin, unknownKeyMessage(s, trimmed(key)));
     }
   }
 }
@@ -183,7 +189,7 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
     std::vector<std::string> keys;
     user.getAllKeys(section, keys);
     for (const auto& k : keys)
-      if (k != "rawlog-grabber-ignore") ours.write(section, k, user.read_string(section, k, ""));
+      if (keyName(k) != "rawlog-grabber-ignore") ours.write(section, k, user.read_string(section, k, ""));
   }
   checkConfigKeys(ours, origin, known);
 }
@@ -192,7 +198,7 @@ bool isGrabberConfig(const mrpt::config::CConfigFileBase& user) {
   for (const auto& [s, keys] : sectionsWithKeys(user)) {
     if (s == "global") return true;
     for (const auto& k : keys)
-      if (trimmed(k) == "driver") return true;
+      if (keyName(k) == "driver") return true;
   }
   return false;
 }
