@@ -192,6 +192,7 @@ struct FrameLoop {
   std::size_t done = 0, frames_with_depth = 0;
   int stop_signal = 0;   // SIGINT or SIGTERM when one stopped the loop before the input's end
   bool interrupted() const { return stop_signal != 0; }
+  std::optional<std::size_t> stopped_at;  // interrupted: the frame read and not processed (its position)
   double seconds = 0.0;  // of the frame loop, a resumed checkpoint's included
   std::size_t checkpoints = 0;
   double checkpoint_seconds = 0.0;  // writing them
@@ -255,6 +256,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (!source.next(frame)) break;  // read first: a stop during the last frame is no interruption
     if (stopRequested()) {
       loop.stop_signal = stopSignal();
+      loop.stopped_at = frame.index;
       break;
     }
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
@@ -323,7 +325,7 @@ int body(int argc, char** argv) {
                                  {"seconds_writing", loop.checkpoint_seconds}, {"resumed_at_frame", resumed_at}};
   if (!loop.checkpoint_error.empty()) info.extra["checkpoints"]["error"] = loop.checkpoint_error;
   source->stop();  // the read ahead of a stopped run is done before its skipped frames are counted
-  reportSkipped(*input.frames, info);
+  reportSkipped(*input.frames, info, loop.stopped_at);
   source.reset();
   RunSession::Reopen reopen;  // an interrupted run is not fused again: the user asked it to stop
   if (!loop.interrupted())

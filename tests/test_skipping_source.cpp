@@ -8,6 +8,7 @@
 
 #include "vofusion/io/prefetching_source.h"
 #include "vofusion/io/skipping_source.h"
+#include "vofusion/pipeline/run_outputs.h"
 
 using namespace vofusion;
 
@@ -192,4 +193,29 @@ TEST(SkippingSource, AProblemOnManyFramesIsListedAFewTimes) {
   ASSERT_EQ(lines.size(), SkippingSource::kLinesPerProblem);
   EXPECT_EQ(lines.back(), "depth/5.png: depth image must be 16-bit single channel (frame 5 skipped); later frames with "
                           "this problem are counted, not listed");
+}
+
+// An interrupted run lists the damaged frames it met, not those the read ahead skipped past the frame
+// it stopped at (frames 5-7 here, met reading frame 8 while the run stopped at frame 4), nor a cut
+// short it never reached.
+TEST(SkippingSource, AnInterruptedRunReportsTheFramesItMetOnly) {
+  SkippingSource src(std::make_unique<Damaged>(40, std::set<std::size_t>{1, 5, 6, 7}, true), false);
+  Frame f;
+  std::vector<std::size_t> read;
+  for (int i = 0; i < 5; ++i) {  // 0, 2, 3, 4 (1 skipped), then the read ahead: 8 (5-7 skipped)
+    ASSERT_TRUE(src.next(f));
+    read.push_back(f.index);
+  }
+  ASSERT_EQ(read, (std::vector<std::size_t>{0, 2, 3, 4, 8}));
+  while (src.next(f)) {
+  }  // to the cut
+  RunInfo stopped;
+  reportSkipped(src, stopped, 4);  // frame 4 read, not processed: the run stopped there
+  EXPECT_EQ(stopped.extra["frames_skipped"], 1u);
+  EXPECT_EQ(stopped.extra["skipped_frames"][0]["frame"], 1u);
+  EXPECT_FALSE(stopped.extra.contains("recording_cut_short"));
+  RunInfo whole;
+  reportSkipped(src, whole);
+  EXPECT_EQ(whole.extra["frames_skipped"], 4u);
+  EXPECT_TRUE(whole.extra.contains("recording_cut_short"));
 }

@@ -141,12 +141,14 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
   return s;
 }
 
-void reportSkipped(const SkippingSource& frames, RunInfo& info) {
+void reportSkipped(const SkippingSource& frames, RunInfo& info, std::optional<std::size_t> stopped_at) {
   json list = json::array();
-  for (const SkippedFrame& f : frames.skipped()) list.push_back({{"frame", f.position}, {"file", f.file}, {"problem", f.problem}});
-  info.extra["frames_skipped"] = frames.skipped().size();
+  for (const SkippedFrame& f : frames.skipped())
+    if (!stopped_at || f.position < *stopped_at)
+      list.push_back({{"frame", f.position}, {"file", f.file}, {"problem", f.problem}});
+  info.extra["frames_skipped"] = list.size();
   info.extra["skipped_frames"] = list;
-  if (!frames.cutShort().empty()) info.extra["recording_cut_short"] = frames.cutShort();
+  if (!frames.cutShort().empty() && !stopped_at) info.extra["recording_cut_short"] = frames.cutShort();
 }
 
 }  // namespace vofusion

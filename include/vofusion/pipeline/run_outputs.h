@@ -9,6 +9,7 @@
 //   summary.json     frames, failures, fps per stage, peak memory, mesh statistics, ATE/RPE
 // Used by the offline app and the live one alike; the config sections by every app that reads a vofusion config.
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -65,7 +66,9 @@ std::vector<ConfigSection> vofusionConfigSections();
 
 // Adds the recording's damaged frames to info.extra: `frames_skipped` (how many), `skipped_frames` (frame,
 // file, problem each) and, when the recording ends in a damaged record, `recording_cut_short`.
-void reportSkipped(const SkippingSource& frames, RunInfo& info);
+// `stopped_at`: the position of the frame an interrupted run read but did not process; frames the read
+// ahead skipped past it are not the run's (the summary listed them, and a cut short it never reached).
+void reportSkipped(const SkippingSource& frames, RunInfo& info, std::optional<std::size_t> stopped_at = std::nullopt);
 
 class RunRecorder {
  public:
