@@ -428,6 +428,31 @@ TEST(MeshClean, WithoutRepairANonManifoldMeshIsAFailureNotALoss) {
   EXPECT_EQ(m.faces.size(), 3u);
 }
 
+// Without the repair, vertices at one position keep their own colours (a colour seam: each side its
+// own copy); colours were looked up by position, the first at a place painting every copy there.
+TEST(MeshClean, WithoutRepairCopiesAtOnePositionKeepTheirColours) {
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 0, 0}, {0, 0, 0}, {1, -1, 0}};
+  const std::array<std::uint8_t, 3> red{200, 0, 0}, blue{0, 0, 200};
+  m.colors = {red, red, red, blue, blue, blue};
+  m.faces = {{0, 1, 2}, {3, 4, 5}};  // two faces meeting along an edge, each with its own corners there
+  MeshCleanParams p;
+  p.repair = false;
+  p.min_component_faces = 0;
+  p.min_component_area = 0;
+  p.max_hole_perimeter = 0;
+  p.max_simplify_error = 0;
+  p.target_edge_length = 0;
+  const MeshCleanReport r = cleanMesh(m, p);
+  ASSERT_TRUE(r.success) << r.failure;
+  ASSERT_EQ(m.faces.size(), 2u);
+  for (const auto& f : m.faces) {
+    const auto colour = m.colors[f[0]];
+    for (std::uint32_t v : f) EXPECT_EQ(m.colors[v], colour) << "a face's corners in two colours";
+  }
+  EXPECT_NE(m.colors[m.faces[0][0]], m.colors[m.faces[1][0]]);
+}
+
 TEST(MeshClean, SimplifiesToEdgeLength) {
   TriangleMesh m = icosphere(4);  // edges ~0.08 m
   MeshCleanParams p;

@@ -526,8 +526,12 @@ class Cleaner {
     PMP::polygon_soup_to_polygon_mesh(pts, polys, m_);
     col_ = m_.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
     known_ = m_.add_property_map<VD, bool>("v:rgb_known", false).first;
+    // Not repaired, the soup's points are the mesh's vertices in order: each keeps its own colour (copies
+    // at one position, a colour seam, were all painted the first one's). Repaired, they went by position.
+    const bool in_order = !p_.repair && has_colours_ && m_.number_of_vertices() == in.colors.size();
     for (VD v : m_.vertices()) {
-      if (const Rgb* c = colour_at.find(m_.point(v))) col_[v] = *c;
+      if (in_order) col_[v] = in.colors[v.idx()];
+      else if (const Rgb* c = colour_at.find(m_.point(v))) col_[v] = *c;
       known_[v] = true;
     }
     if (job_.seam) {
