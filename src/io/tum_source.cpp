@@ -7,6 +7,7 @@
 #include <optional>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include <opencv2/core/persistence.hpp>
@@ -339,6 +340,20 @@ cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssocia
                                       " listed in rgb.txt");
 }
 
+// Depth frames no colour frame pairs with are not used: said when they are more than one in ten (a colour
+// camera at half the depth's rate halved the frames tracked without a word; TUM's lists leave one or two).
+void warnOfUnpairedDepth(const std::string& depth_list, const std::vector<TumEntry>& depth,
+                         const std::vector<TumAssociation>& pairs, double max_diff) {
+  std::set<std::string> used;
+  for (const TumAssociation& a : pairs) used.insert(a.depth.file);
+  const std::size_t unpaired = depth.size() - std::min(depth.size(), used.size());
+  if (unpaired * 10 <= depth.size()) return;
+  char within[32];
+  std::snprintf(within, sizeof within, "%g", max_diff);
+  warn(depth_list, std::to_string(unpaired) + " of its " + std::to_string(depth.size()) +
+                       " depth frames have no colour frame within " + within + " s and are not used (colour at a lower rate?)");
+}
+
 // The folder's camera file, intrinsics.txt before camera.yaml (`origin` set to the one read); none: nullopt.
 std::optional<CameraFile> cameraFileIn(const std::string& txt, const std::string& yaml, std::string& origin) {
   if (entryExists(txt)) {
@@ -367,6 +382,7 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   pairs_ = associate(rgb, depth, opts.max_time_diff, opts.unique_depth);
   if (pairs_.empty())
     throw InputError(folder, "no colour frame has a depth frame within " + std::to_string(opts.max_time_diff) + " s");
+  warnOfUnpairedDepth(depth_list, depth, pairs_, opts.max_time_diff);
   if (opts.max_frames > 0 && pairs_.size() > opts.max_frames) pairs_.resize(opts.max_frames);
 
   // The camera and the depth unit: the command line, else the folder's camera file, else a guess.
