@@ -451,6 +451,13 @@ TEST(MeshClean, WithoutRepairCopiesAtOnePositionKeepTheirColours) {
     for (std::uint32_t v : f) EXPECT_EQ(m.colors[v], colour) << "a face's corners in two colours";
   }
   EXPECT_NE(m.colors[m.faces[0][0]], m.colors[m.faces[1][0]]);
+  // A point no face uses is no surface: left out, as the repair leaves it out (it came out with a
+  // normal of zero).
+  m.vertices.push_back({5, 5, 5});
+  m.colors.push_back(red);
+  ASSERT_TRUE(cleanMesh(m, p).success);
+  EXPECT_EQ(m.vertices.size(), 6u);
+  for (const auto& n : m.normals) EXPECT_GT(n.norm(), 0.5f);
 }
 
 TEST(MeshClean, SimplifiesToEdgeLength) {

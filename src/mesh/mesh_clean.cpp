@@ -360,7 +360,7 @@ class Cleaner {
       r_.components_kept = m_.is_empty() ? 0 : PMP::connected_components(m_, fcc);
       m_.remove_property_map(fcc);
     }
-    r_.closed = r_.border_cycles_after == 0 && !m_.is_empty();
+    r_.closed = r_.border_cycles_after == 0 && m_.number_of_faces() > 0;  // points alone close nothing
     r_.manifold = nonManifoldVertexCount(m_) == 0;
     r_.area = m_.is_empty() ? 0.0 : PMP::area(m_);
     in = toTriangleMesh(m_);  // last but the seam flags: until here `in` is the caller's input (cleanMesh)
@@ -538,6 +538,9 @@ class Cleaner {
       fixed_ = m_.add_property_map<VD, bool>("v:fixed_seam", false).first;
       for (VD v : m_.vertices()) fixed_[v] = fixed_at.count(m_.point(v)) > 0;
     }
+    // Not repaired, points no face uses came along (the repair drops them): no surface, and a normal of
+    // zero in the output.
+    if (!p_.repair && PMP::remove_isolated_vertices(m_) > 0) m_.collect_garbage();
   }
 
   void removeSmallComponents() {
