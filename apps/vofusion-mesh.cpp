@@ -112,7 +112,10 @@ int body(int argc, char** argv) {
                  s.distance.mean, s.distance.max);
   if (ref_path) {
     const MeshDistance d = meshDistance(mesh, ref);
-    std::printf("distance to %s: mean %.6f m, max %.6f m (%zu samples)\n", ref_path->c_str(), d.mean, d.max, d.samples);
+    if (d.samples == 0)  // no face left to sample (or none of area): no distance, not a perfect match
+      std::printf("distance to %s: none (the result has no face to measure from)\n", ref_path->c_str());
+    else
+      std::printf("distance to %s: mean %.6f m, max %.6f m (%zu samples)\n", ref_path->c_str(), d.mean, d.max, d.samples);
   }
   return 0;
 }

@@ -458,6 +458,11 @@ TEST(MeshClean, WithoutRepairCopiesAtOnePositionKeepTheirColours) {
   ASSERT_TRUE(cleanMesh(m, p).success);
   EXPECT_EQ(m.vertices.size(), 6u);
   for (const auto& n : m.normals) EXPECT_GT(n.norm(), 0.5f);
+  // Points alone close nothing (it said closed, as a mesh without borders).
+  TriangleMesh points;
+  points.vertices = {{0, 0, 0}, {1, 0, 0}};
+  const MeshCleanReport alone = cleanMesh(points, p);
+  EXPECT_FALSE(alone.closed);
 }
 
 TEST(MeshClean, SimplifiesToEdgeLength) {
@@ -840,6 +845,13 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   EXPECT_EQ(out.rfind("warning: " + dir + "/one.ply: no face is left (fragments below [mesh] min_component_faces / " +
                           "min_component_area, degenerate or duplicate faces); " + dir + "/o.ply is empty\n", 0),
             0u) << out;
+  // Measured from nothing, the distance is none (it said mean 0, max 0: a perfect match).
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/one.ply " + dir + "/o.ply --distance-to " + dir + "/in.ply",
+                      &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("distance to " + dir + "/in.ply: none (the result has no face to measure from)"), std::string::npos)
+      << out;
   // The outputs go into place together: one that cannot be written (a scene in a folder that is not
   // there) leaves the mesh already at out.ply as it was, and the error names the file asked for.
   // The report goes with them (it said success beside the earlier out.ply).

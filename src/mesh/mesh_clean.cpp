@@ -528,7 +528,9 @@ class Cleaner {
     known_ = m_.add_property_map<VD, bool>("v:rgb_known", false).first;
     // Not repaired, the soup's points are the mesh's vertices in order: each keeps its own colour (copies
     // at one position, a colour seam, were all painted the first one's). Repaired, they went by position.
-    const bool in_order = !p_.repair && has_colours_ && m_.number_of_vertices() == in.colors.size();
+    const bool in_order = !p_.repair && has_colours_ && m_.number_of_vertices() == in.colors.size() &&
+                          std::all_of(m_.vertices().begin(), m_.vertices().end(),
+                                      [&](VD v) { return m_.point(v) == pts[v.idx()]; });
     for (VD v : m_.vertices()) {
       if (in_order) col_[v] = in.colors[v.idx()];
       else if (const Rgb* c = colour_at.find(m_.point(v))) col_[v] = *c;
