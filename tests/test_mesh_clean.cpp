@@ -412,16 +412,25 @@ TEST(MeshClean, AWarningOfASucceededReportIsWritten) {
 
 // Without the repair, a mesh the half-edge structure cannot hold (three faces on one edge) is a
 // failure that says so, and the mesh is left as given: its third face used to vanish, reported a success.
-TEST(MeshClean, WithoutRepairANonManifoldMeshIsAFailureNotALoss) {
-  TriangleMesh m;
-  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}};
-  m.faces = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}};  // edge 0-1 shared by three faces
+namespace {
+// No repair and no step that changes the surface: the mesh taken as it is given.
+MeshCleanParams withoutRepair() {
   MeshCleanParams p;
   p.repair = false;
   p.min_component_faces = 0;
   p.min_component_area = 0;
   p.max_hole_perimeter = 0;
   p.max_simplify_error = 0;
+  p.target_edge_length = 0;
+  return p;
+}
+}  // namespace
+
+TEST(MeshClean, WithoutRepairANonManifoldMeshIsAFailureNotALoss) {
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}};
+  m.faces = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}};  // edge 0-1 shared by three faces
+  const MeshCleanParams p = withoutRepair();
   const MeshCleanReport r = cleanMesh(m, p);
   EXPECT_FALSE(r.success);
   EXPECT_NE(r.failure.find("repair = true"), std::string::npos) << r.failure;
@@ -436,13 +445,7 @@ TEST(MeshClean, WithoutRepairCopiesAtOnePositionKeepTheirColours) {
   const std::array<std::uint8_t, 3> red{200, 0, 0}, blue{0, 0, 200};
   m.colors = {red, red, red, blue, blue, blue};
   m.faces = {{0, 1, 2}, {3, 4, 5}};  // two faces meeting along an edge, each with its own corners there
-  MeshCleanParams p;
-  p.repair = false;
-  p.min_component_faces = 0;
-  p.min_component_area = 0;
-  p.max_hole_perimeter = 0;
-  p.max_simplify_error = 0;
-  p.target_edge_length = 0;
+  const MeshCleanParams p = withoutRepair();
   const MeshCleanReport r = cleanMesh(m, p);
   ASSERT_TRUE(r.success) << r.failure;
   ASSERT_EQ(m.faces.size(), 2u);
