@@ -156,4 +156,10 @@ TEST(ColourRegistration, RegisteredCamerasKeepTheirPixels) {
   // The same camera at twice the resolution (a registered 640x480 colour over 320x240 depth).
   rig.colour_cam = CameraIntrinsics{};
   EXPECT_TRUE(colourRegisteredToDepth(*observe(rig)));
+  // Rows of another aspect (640x512 over 320x240, f twice the depth's): resized, a row went up to 8
+  // pixels off at the top and bottom. Re-projected, every pixel is the wall's.
+  rig.colour_cam.height = 512, rig.colour_cam.cy = 255.5;
+  const auto taller = observe(rig);
+  EXPECT_FALSE(colourRegisteredToDepth(*taller));
+  EXPECT_GT(agreement(frameFromObservation(*taller, "taller.rawlog"), rig), 0.99);
 }

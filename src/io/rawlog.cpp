@@ -133,8 +133,11 @@ bool colourRegisteredToDepth(const mrpt::obs::CObservation3DRangeScan& obs) {
   const bool same_pose = T.translation().norm() < 1e-4 && Eigen::AngleAxisd(T.linear()).angle() < 1e-5;
   auto close = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(a)); };
   const bool same_camera = close(d.fx(), c.fx()) && close(d.fy(), c.fy()) && close(d.cx(), c.cx()) && close(d.cy(), c.cy());
-  // The same camera at another resolution (intrinsics scaled with the image) is registered too.
-  const bool scaled = d.ncols > 0 && c.ncols > 0 && close(c.fx() / c.ncols, d.fx() / d.ncols) &&
+  // The same camera at another resolution (intrinsics scaled with the image, in both directions) is
+  // registered too: a resize maps its pixels. Rows of another aspect (Kinect's 1280x1024 over 640x480)
+  // are not: resized, a row went up to 16 depth pixels off; they are re-projected.
+  const bool scaled = d.ncols > 0 && c.ncols > 0 && d.nrows > 0 && c.nrows > 0 &&
+                      close(c.fx() / c.ncols, d.fx() / d.ncols) && close(c.fy() / c.nrows, d.fy() / d.nrows) &&
                       close((c.cx() + 0.5) / c.ncols, (d.cx() + 0.5) / d.ncols) &&
                       close((c.cy() + 0.5) / c.nrows, (d.cy() + 0.5) / d.nrows);
   return same_pose && (same_camera || scaled);
@@ -215,7 +218,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     bool plain = false;
     f.rgb = colourOf(obs, origin, plain);
     // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
-    // depth camera. A registered one at another resolution (e.g. 1280x1024 over 640x480) is resized.
+    // depth camera. A registered one at another resolution (e.g. 1280x960 over 640x480) is resized.
     // Decided by the observation's own cameras, whatever the depth camera's given intrinsics (a sensor
     // registered in hardware passes its colour camera's, and registered it is).
     if (!colourRegisteredToDepth(obs)) {
