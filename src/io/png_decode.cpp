@@ -214,9 +214,8 @@ cv::Mat readPlainPng(const std::string& path, cv::Size expect, cv::Size* header)
 
 bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
   // Signature, then IHDR first: length, name, width, height, bit depth 8, colour type 2.
-  const std::uint8_t* h = bytes.data();
-  return bytes.size() >= 29 && std::memcmp(h, kSignature, 8) == 0 && isChunk(h + 12, "IHDR") &&
-         be32(h + 16) == std::uint32_t(width) && be32(h + 20) == std::uint32_t(height) && h[24] == 8 && h[25] == 2;
+  return bytes.size() >= 29 && headerSizeOf(bytes.data(), bytes.size()) == cv::Size(width, height) && bytes[24] == 8 &&
+         bytes[25] == 2;
 }
 
 cv::Size pngHeaderSize(const std::string& path) {

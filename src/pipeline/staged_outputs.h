@@ -24,7 +24,7 @@ class StagedOutputs {
     // it, in one line (std::filesystem's error named the staging folder, with its own wording).
     std::error_code ec;
     std::filesystem::create_directories(staging_.tmp(), ec);
-    if (ec) throw InputError(std::filesystem::path(final_path_(".staging")).parent_path().string(), "cannot write: " + ec.message());
+    if (ec) throw InputError(std::filesystem::path(staging_.path()).parent_path().string(), "cannot write: " + ec.message());
   }
   std::string path(const std::string& name) const { return (std::filesystem::path(staging_.tmp()) / name).string(); }
   // An error a writer threw naming its staged copy, naming the file as the user will find it (the
