@@ -51,9 +51,10 @@ const char* kUsage =
     "                 and of keyframes beyond [loop] keyframe_cache_mib (default <out>/.tmp; each file is\n"
     "                 deleted as soon as it is created, so it never stays)\n"
     "  --save-volume  at the end, the map (volume + world model) and the camera pose to file f\n"
-    "  --checkpoint-every  every S seconds of the frame loop (and at Ctrl-C or SIGTERM), the whole run so\n"
-    "                 far to <out>/checkpoint, atomically (the map, every stage's state, the position in the\n"
-    "                 input); deleted when the run ends with its outputs written\n"
+    "  --checkpoint-every  every S seconds of the frame loop, after its last frame (before the meshing)\n"
+    "                 and at Ctrl-C or SIGTERM, the whole run so far to <out>/checkpoint, atomically (the map,\n"
+    "                 every stage's state, the position in the input); deleted when the run ends with its\n"
+    "                 outputs written\n"
     "  --resume       a checkpoint: the same command goes on from it, to the trajectory and mesh an\n"
     "                 uninterrupted run gives. A map saved with --save-volume: the camera continues from the\n"
     "                 saved pose, the map keeps its frame (the input should continue where the saved run stopped)\n"
@@ -233,7 +234,8 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   progress.startAt(loop.done);
   const double before = loop.seconds;
   double last_checkpoint = 0.0;
-  std::size_t checkpointed_at = std::size_t(-1);  // frames done at the last checkpoint
+  // Frames done at the last checkpoint: a resumed run's checkpoint holds those it went on from.
+  std::size_t checkpointed_at = loop.done > 0 ? loop.done : std::size_t(-1);
   const auto checkpoint = [&] {
     if (!loop.checkpoint_error.empty()) return;
     const double start = progress.elapsedSeconds();
@@ -268,10 +270,10 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     progress.update(loop.done, status);
   }
   const bool built = loop.interrupted() && loop.done > 0;
-  // --resume goes on from here; also after a stop during the last frame, where the loop-closed
-  // re-fusion and the meshing still come (a batch system's kill may follow its SIGTERM).
-  if ((built || (stopRequested() && loop.done > 0)) && plan.checkpoint_every > 0 && loop.done != checkpointed_at)
-    checkpoint();
+  // --resume goes on from here: after a stop, and after the last frame, where the loop-closed
+  // re-fusion and the meshing still come (a crash or a batch system's kill there would otherwise cost
+  // every frame since the last periodic checkpoint; resumed, the run goes straight to its end phase).
+  if (loop.done > 0 && plan.checkpoint_every > 0 && loop.done != checkpointed_at) checkpoint();
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + progress.elapsedSeconds();
 }

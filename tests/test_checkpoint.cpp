@@ -354,6 +354,32 @@ TEST(Checkpoint, RunsResumedFromTheirLastCheckpointWriteTheCleanRunsOutputs) {
   expectSameOutputs(clean, killed);
 }
 
+// A checkpoint comes after the last frame too, before the end phase: a run killed while meshing goes
+// on from there to the clean run's outputs without tracking a frame again. The last checkpoint was
+// the last periodic one (here: none at all, the period being longer than the run).
+TEST(Checkpoint, ARunKilledAfterItsLastFrameResumesAtItsEndPhase) {
+  const std::string dir = test::tempDir("checkpoint_end_phase");
+  const std::string clean = dir + "/clean";
+  constexpr std::size_t kRoomFrames = 6;
+  const auto command = [&](const std::string& out, const std::string& extra) {
+    return test::app("vofusion") + " synthetic:room --max-frames " + std::to_string(kRoomFrames) + " --out " + out +
+           " --checkpoint-every 100000 " + extra;
+  };
+  const auto kept = watchCheckpoints(clean + "/checkpoint", {kRoomFrames}, dir, [&] {
+    std::string log;
+    ASSERT_EQ(test::run(command(clean, ""), &log), 0) << log;
+  });
+  const auto summary = nlohmann::json::parse(slurp(clean + "/summary.json"));
+  EXPECT_EQ(summary["checkpoints"]["written"].get<int>(), 1) << summary["checkpoints"];
+  ASSERT_EQ(kept.size(), 1u) << "no checkpoint after the last frame";
+  std::string log;
+  ASSERT_EQ(test::run(command(dir + "/resumed", "--resume " + kept[0]), &log), 0) << log;
+  expectSameOutputs(clean, dir + "/resumed");
+  const auto resumed = nlohmann::json::parse(slurp(dir + "/resumed/summary.json"));
+  EXPECT_EQ(resumed["checkpoints"]["resumed_at_frame"].get<std::size_t>(), kRoomFrames);
+  EXPECT_EQ(resumed["checkpoints"]["written"].get<int>(), 0) << "the checkpoint it went on from held every frame";
+}
+
 namespace {
 
 // The synthetic room as a recording that fails to read from frame `fails_at` on (0: never).
