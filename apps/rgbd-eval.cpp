@@ -51,7 +51,7 @@ int body(int argc, char** argv) {
   if (pos.size() != 2) throw InputError("usage", "expected <groundtruth.txt> <estimate.txt> (see --help)");
 
   const Trajectory gt = readTumTrajectory(pos[0]);
-  const Trajectory est = readTumTrajectory(pos[1]);
+  const Trajectory est = readTumTrajectory(pos[1], StampOrder::AsWritten);  // a run's frames in their order
   if (gt.empty()) throw InputError(pos[0], "contains no poses");
   if (est.empty()) throw InputError(pos[1], "contains no poses");
   const AteResult ate = computeAte(gt, est, max_dt);

@@ -67,7 +67,7 @@ int body(int argc, char** argv) {
   if (cl.value("--trajectory") && !cl.value("--png") && !cl.value("--scene"))
     throw InputError("usage", "--trajectory is drawn in --png or --scene: give one of them");
   Trajectory traj;
-  if (const auto t = cl.value("--trajectory")) traj = readTumTrajectory(*t);
+  if (const auto t = cl.value("--trajectory")) traj = readTumTrajectory(*t, StampOrder::AsWritten);
 
   TriangleMesh mesh = readPly(in);
   if (mesh.faces.empty()) throw InputError(in, "holds no faces (a point cloud?): nothing to clean");

@@ -182,6 +182,27 @@ TEST(Trajectory, WriteReadRoundTrip) {
   }
 }
 
+// A run writes its frames in their order, and a recording's clock may step back: such a trajectory
+// reads back as written for an estimate (it was refused as "not strictly increasing" by our own
+// rgbd-eval and vofusion-mesh --trajectory), and sorted by time it serves the interpolation.
+TEST(Trajectory, AnEstimateWithAStampSteppedBackReadsAsWritten) {
+  const Trajectory t{{2.0, mrpt::poses::CPose3D(0, 0, 0, 0, 0, 0)},
+                     {1.0, mrpt::poses::CPose3D(1, 0, 0, 0, 0, 0)},
+                     {3.0, mrpt::poses::CPose3D(3, 0, 0, 0, 0, 0)}};
+  const std::string dir = test::tempDir("traj_stepped_back");
+  writeTumTrajectory(dir + "/t.txt", t);
+  EXPECT_THROW(readTumTrajectory(dir + "/t.txt"), InputError);
+  const Trajectory r = readTumTrajectory(dir + "/t.txt", StampOrder::AsWritten);
+  ASSERT_EQ(r.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_NEAR(r[i].timestamp, t[i].timestamp, 1e-9);
+  const Trajectory sorted = sortedByTime(r);
+  EXPECT_EQ(sorted[0].timestamp, 1.0);
+  EXPECT_EQ(sorted[2].timestamp, 3.0);
+  mrpt::poses::CPose3D p;
+  ASSERT_TRUE(interpolatePose(sorted, 2.5, 1.0, p));
+  EXPECT_NEAR(p.x(), 1.5, 1e-9);
+}
+
 // A line that is no pose names the file and the line: a huge coordinate (1e300 made rgbd-eval's RMSE
 // inf and its JSON invalid), a quaternion off unit length, a field too many.
 TEST(Trajectory, ALineThatIsNoPoseNamesTheLine) {

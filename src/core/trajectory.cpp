@@ -18,7 +18,7 @@
 
 namespace vofusion {
 
-Trajectory parseTumTrajectory(const std::string& text, const std::string& origin) {
+Trajectory parseTumTrajectory(const std::string& text, const std::string& origin, StampOrder order) {
   Trajectory traj;
   std::vector<std::size_t> line_of;  // each pose's line, for the order's message
   for (const auto& [n, text_line] : dataLines(text)) {
@@ -55,14 +55,22 @@ Trajectory parseTumTrajectory(const std::string& text, const std::string& origin
     traj.push_back({v[0], mrpt::poses::CPose3D(mrpt::poses::CPose3DQuat(v[1], v[2], v[3], q))});
     line_of.push_back(n);
   }
-  for (std::size_t i = 1; i < traj.size(); ++i)
+  for (std::size_t i = 1; i < traj.size() && order == StampOrder::Increasing; ++i)
     if (traj[i].timestamp <= traj[i - 1].timestamp)
       throw InputError(origin, "line " + std::to_string(line_of[i]) + ": timestamps are not strictly increasing (" +
                                    std::to_string(traj[i].timestamp) + " after " + std::to_string(traj[i - 1].timestamp) + ")");
   return traj;
 }
 
-Trajectory readTumTrajectory(const std::string& path) { return parseTumTrajectory(readTextFile(path), path); }
+Trajectory readTumTrajectory(const std::string& path, StampOrder order) {
+  return parseTumTrajectory(readTextFile(path), path, order);
+}
+
+Trajectory sortedByTime(const Trajectory& t) {
+  Trajectory s = t;
+  std::stable_sort(s.begin(), s.end(), [](const StampedPose& a, const StampedPose& b) { return a.timestamp < b.timestamp; });
+  return s;
+}
 
 void writeTumTrajectory(const std::string& path, const Trajectory& traj) {
   std::string out = "# timestamp tx ty tz qx qy qz qw (camera-to-world)\n";

@@ -45,12 +45,6 @@ std::vector<std::size_t> timeOrder(const Trajectory& t) {
   return order;
 }
 
-Trajectory sortedByTime(const Trajectory& t) {
-  Trajectory s;
-  s.reserve(t.size());
-  for (const std::size_t i : timeOrder(t)) s.push_back(t[i]);
-  return s;
-}
 }  // namespace
 
 ErrorStats computeStats(const std::vector<double>& e) {

@@ -33,7 +33,10 @@ json timesJson(const StageTimes& t, std::size_t frames) {
 
 json meshJson(const TriangleMesh& m) { return {{"vertices", m.vertices.size()}, {"faces", m.faces.size()}}; }
 
-json loopsJson(const loop::LoopCloser& lc, const Trajectory& ground_truth) {
+json loopsJson(const loop::LoopCloser& lc, const Trajectory& frames_ground_truth) {
+  // The frames' ground truth comes in frame order, out of time order where the recording's clock
+  // stepped back; the interpolation searches it by time.
+  const Trajectory ground_truth = sortedByTime(frames_ground_truth);
   json a = json::array();
   for (const loop::LoopRecord& l : lc.loops()) {
     json j = {{"from_frame", l.from_frame}, {"to_frame", l.to_frame}, {"from_keyframe", l.from_keyframe},

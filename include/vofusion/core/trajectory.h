@@ -13,9 +13,14 @@ struct StampedPose {
 };
 using Trajectory = std::vector<StampedPose>;
 
+// Whether a file's stamps must increase line by line. A ground truth must (a line out of order is a
+// damaged file); an estimate is taken as written: a run writes its frames in their order, and a
+// recording's clock may step back (a rawlog's stamps come as recorded).
+enum class StampOrder { Increasing, AsWritten };
+
 // Throws InputError(path, "line N: ...") on a malformed line; '#' comments and blank lines skipped.
-Trajectory readTumTrajectory(const std::string& path);
-Trajectory parseTumTrajectory(const std::string& text, const std::string& origin);
+Trajectory readTumTrajectory(const std::string& path, StampOrder order = StampOrder::Increasing);
+Trajectory parseTumTrajectory(const std::string& text, const std::string& origin, StampOrder order = StampOrder::Increasing);
 // Written whole or not at all (temporary file + rename).
 void writeTumTrajectory(const std::string& path, const Trajectory& traj);
 
@@ -26,6 +31,10 @@ void writeTumTrajectory(const std::string& path, const Trajectory& traj);
 // pose stands for t only within kHeldPoseWithin (the TUM benchmark's association tolerance): 0.05 s
 // beyond the end of a ground truth at 1 m/s put a 5 cm error into the frame's evaluation.
 constexpr double kHeldPoseWithin = 0.02;  // s
+// traj in time order (sortedByTime).
 bool interpolatePose(const Trajectory& traj, double t, double max_gap, mrpt::poses::CPose3D& out);
+
+// t's poses in time order, equal stamps in their order in t.
+Trajectory sortedByTime(const Trajectory& t);
 
 }  // namespace vofusion
