@@ -19,6 +19,7 @@
 #include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/registration/rigid_motion.h"
 #include "vofusion/sim/synthetic_sequence.h"
+#include "vofusion/tracking/motion_history.h"
 #include "vofusion/tracking/tracker_params.h"
 
 using namespace vofusion;
@@ -176,6 +177,59 @@ TEST(KinFu, ANonFinitePriorIsTrackedAsNoPrior) {
       for (std::size_t i = 0; i < path.size(); ++i)
         ASSERT_EQ(path[i].asVectorVal(), without[i].asVectorVal()) << toString(mode) << ", " << name << ", frame " << i;
     }
+  }
+}
+
+// Only measured frames teach the velocity, over the time since the last measured one. Learnt from
+// predicted frames, the camera that stopped while three frames were predicted came back measured at
+// -3 times its speed, and the next prediction went backwards. A checkpoint keeps what was measured.
+TEST(MotionHistory, APredictedFrameTeachesNoVelocity) {
+  const auto at = [](double x) {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.translation().x() = x;
+    return T;
+  };
+  const double dt = 1.0 / 30, step = 0.01;  // m a frame
+  MotionHistory h(at(0));
+  h.remember(0, 0.0, at(0));
+  h.remember(1, dt, at(step));
+  for (int k = 2; k <= 4; ++k) h.remember(std::size_t(k), k * dt, h.constantVelocity(k * dt), false);
+  EXPECT_NEAR(h.pose().translation().x(), 4 * step, 1e-12) << "predicted on at the measured velocity";
+  h.remember(5, 5 * dt, at(step));  // measured where frame 1 was: the camera had stopped
+  EXPECT_NEAR(h.constantVelocity(6 * dt).translation().x(), step, 1e-12);
+  EXPECT_EQ(h.lastMeasuredTimestamp(), 5 * dt);
+
+  std::stringstream saved;
+  {
+    auto a = state::archiveOf(static_cast<std::ostream&>(saved));
+    h.remember(6, 6 * dt, h.constantVelocity(6 * dt), false);
+    h.saveState(a);
+  }
+  MotionHistory reloaded(at(9));
+  {
+    auto a = state::archiveOf(static_cast<std::istream&>(saved));
+    reloaded.loadState(a);
+  }
+  for (MotionHistory* m : {&h, &reloaded}) m->remember(7, 7 * dt, at(3 * step));  // 2 steps over 2 frames since frame 5
+  EXPECT_NEAR(h.constantVelocity(8 * dt).translation().x(), 4 * step, 1e-12);
+  EXPECT_NEAR(reloaded.constantVelocity(8 * dt).translation().x(), 4 * step, 1e-12);
+}
+
+// Stamps a microsecond apart (a clock's doing) make no turn rate: the rolling shutter's ICP noise
+// stays that of a frame at the fastest sensor's rate. The prior's turn over 1e-6 s put it at
+// kilometres, and ICP's weight at zero.
+TEST(KinFu, StampsAMicrosecondApartMakeNoRollingShutterNoise) {
+  const sim::SyntheticSequence seq(simOpts("room", 4));
+  std::mt19937 rng(3);
+  TrackedMap map(testParams(), TrackingMode::Joint, seq.groundTruth(0));
+  ASSERT_TRUE(map.process(seq.render(0), nullptr).tracked);
+  for (std::size_t i = 1; i <= 2; ++i) {
+    Frame f = seq.render(i);
+    const fusion::MotionPrior prior = noisyPrior(seq, i, rng, 0.0, 0.0);
+    if (i == 2) f.timestamp = seq.render(1).timestamp + 1e-6;
+    const FusionResult r = map.process(f, &prior);
+    ASSERT_TRUE(r.tracked) << i;
+    EXPECT_LT(r.icp_sigma, 0.1) << "frame " << i;
   }
 }
 

@@ -38,8 +38,9 @@ PointMatches matchesOf(const TrackerParams& P, const MotionPrior& prior, const E
 double rollingShutterSigma(const TrackerParams& P, const MotionHistory& history, const std::vector<DepthLevel>& levels,
                            const Eigen::Isometry3d& initial, double timestamp) {
   if (!(P.joint_rolling_shutter > 0) || !history.hasLast() || !(timestamp > history.lastTimestamp())) return 0.0;
-  const double turn =
-      Eigen::AngleAxisd((history.pose().inverse() * initial).linear()).angle() / (timestamp - history.lastTimestamp());
+  // Over stamps a microsecond apart, a prior's turn made a turn rate of kilometres of noise.
+  const double turn = Eigen::AngleAxisd((history.pose().inverse() * initial).linear()).angle() /
+                      std::max(timestamp - history.lastTimestamp(), kShortestFrameInterval);
   const cv::Mat& d = levels.back().depth;
   return P.joint_rolling_shutter * turn * cv::mean(d, d > 0)[0];
 }
@@ -48,7 +49,9 @@ PosePrior motionModel(const TrackerParams& P, const MotionHistory& history, cons
                       double timestamp) {
   PosePrior m;
   m.pose = velocity_pose;
-  const double frames_since = history.hasLast() ? std::max(1.0, (timestamp - history.lastTimestamp()) * 30.0) : 1.0;
+  // The velocity pose extrapolates from the last measured frame: its spread grows from there (a
+  // predicted frame in between measured nothing).
+  const double frames_since = history.hasMeasured() ? std::max(1.0, (timestamp - history.lastMeasuredTimestamp()) * 30.0) : 1.0;
   m.sigma_translation = P.motion_sigma_translation * frames_since;
   m.sigma_rotation = P.motion_sigma_rotation * M_PI / 180.0 * frames_since;
   return m;

@@ -29,10 +29,15 @@ Eigen::Isometry3d MotionHistory::motionOver(double offset) const {
   return scaledMotion(last_motion_, std::clamp(offset / last_motion_dt_, -3.0, 3.0));
 }
 
-void MotionHistory::remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T) {
-  if (have_last_ && timestamp > last_timestamp_) {
-    last_motion_ = pose_.inverse() * T;
-    last_motion_dt_ = timestamp - last_timestamp_;
+void MotionHistory::remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T, bool measured) {
+  if (measured && have_measured_ && timestamp > measured_timestamp_) {
+    last_motion_ = measured_pose_.inverse() * T;
+    last_motion_dt_ = std::max(timestamp - measured_timestamp_, kShortestFrameInterval);
+  }
+  if (measured) {
+    measured_pose_ = T;
+    measured_timestamp_ = timestamp;
+    have_measured_ = true;
   }
   pose_ = T;
   last_timestamp_ = timestamp;
@@ -58,7 +63,7 @@ void MotionHistory::forgetOld() {
 
 void MotionHistory::restart(const Eigen::Isometry3d& T) {
   pose_ = T;
-  have_last_ = false;
+  have_last_ = have_measured_ = false;
   last_motion_dt_ = 0.0;
   recent_.clear();
 }
@@ -72,6 +77,8 @@ void MotionHistory::saveState(state::Archive& a) const {
   }
   state::write(a, last_motion_);
   a << last_motion_dt_ << last_timestamp_ << have_last_;
+  state::write(a, measured_pose_);
+  a << measured_timestamp_ << have_measured_;
 }
 
 void MotionHistory::loadState(state::Archive& a) {
@@ -89,6 +96,8 @@ void MotionHistory::loadState(state::Archive& a) {
   }
   state::read(a, last_motion_);
   a >> last_motion_dt_ >> last_timestamp_ >> have_last_;
+  state::read(a, measured_pose_);
+  a >> measured_timestamp_ >> have_measured_;
 }
 
 }  // namespace vofusion

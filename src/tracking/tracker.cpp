@@ -257,7 +257,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   } else {
     new_pose = s.trackIcp(frame, prior, levels, intensity, map.model(), res);
   }
-  if (res.tracked) s.history.remember(frame.index, frame.timestamp, new_pose);
+  if (res.tracked) s.history.remember(frame.index, frame.timestamp, new_pose, !res.predicted);
   if (s.mode == TrackingMode::Joint) s.reference = res.tracked ? std::optional(tracking::ReferenceFrame{levels, new_pose}) : std::nullopt;
   res.pose = toMrpt(s.history.pose());
   s.placed.reset();

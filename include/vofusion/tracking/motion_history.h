@@ -13,6 +13,11 @@
 
 namespace vofusion {
 
+// The shortest time between two frames a sensor gives: the fastest RGB-D depth stream (RealSense D4xx at
+// 90 Hz). Stamps closer than this are the clock's doing, not the camera's: a motion over them is no
+// velocity.
+constexpr double kShortestFrameInterval = 1.0 / 90.0;  // s
+
 // Motion m scaled to s times its length (rotation angle and translation).
 Eigen::Isometry3d scaledMotion(const Eigen::Isometry3d& m, double s);
 
@@ -36,8 +41,16 @@ class MotionHistory {
   bool hasMotion() const { return last_motion_dt_ > 0; }
   bool hasLast() const { return have_last_; }
   double lastTimestamp() const { return last_timestamp_; }
-  // Frame `index` at `timestamp` was placed at T.
-  void remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T);
+  // Frame `index` at `timestamp` was placed at T: measured (tracked, fallen back to the odometry,
+  // relocalised) or predicted (moved on at constant velocity). Only measured frames teach the
+  // velocity, over the time since the last measured one: learnt from a prediction, the velocity stayed
+  // locked to itself, and the first measured frame after it put the whole prediction's error into
+  // one frame's motion (a camera that stopped during three predicted frames came back at -3 times
+  // its speed).
+  void remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T, bool measured = true);
+  // The time of the last measured frame (hasLast: of any).
+  bool hasMeasured() const { return have_measured_; }
+  double lastMeasuredTimestamp() const { return measured_timestamp_; }
   // Placed at T from elsewhere (loop-closed re-fusion): no motion is learnt from it.
   void setPose(const Eigen::Isometry3d& T) { pose_ = T; }
   // A new start at T (a resumed map): no recent frames, no motion.
@@ -53,9 +66,12 @@ class MotionHistory {
   Eigen::Isometry3d pose_;  // camera-to-world of the last frame
   std::deque<std::pair<std::size_t, Eigen::Isometry3d>> recent_;  // oldest first
   std::vector<std::size_t> held_;
-  Eigen::Isometry3d last_motion_ = Eigen::Isometry3d::Identity();  // over the last two tracked frames
+  Eigen::Isometry3d last_motion_ = Eigen::Isometry3d::Identity();  // over the last two measured frames
   double last_motion_dt_ = 0.0, last_timestamp_ = 0.0;
   bool have_last_ = false;
+  Eigen::Isometry3d measured_pose_ = Eigen::Isometry3d::Identity();  // the last measured frame's
+  double measured_timestamp_ = 0.0;
+  bool have_measured_ = false;
 };
 
 }  // namespace vofusion
