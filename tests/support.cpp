@@ -1,7 +1,9 @@
 #include "support.h"
 
 #include <sys/mount.h>
+#include <grp.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -121,6 +123,34 @@ Frame deepCopy(const Frame& frame) {
   f.rgb = frame.rgb.clone();
   f.depth = frame.depth.clone();
   return f;
+}
+
+std::string errorWithoutPrivileges(const std::function<void()>& fn) {
+  int fds[2];
+  if (::pipe(fds) != 0) return {};
+  const pid_t pid = ::fork();
+  if (pid < 0) return {};
+  if (pid == 0) {
+    ::close(fds[0]);
+    constexpr uid_t kNobody = 65534;
+    if (::getuid() == 0 && (::setgroups(0, nullptr) != 0 || ::setgid(kNobody) != 0 || ::setuid(kNobody) != 0)) ::_exit(2);
+    std::string said = "no error";
+    try {
+      fn();
+    } catch (const std::exception& e) {
+      said = e.what();
+    }
+    const ssize_t wrote = ::write(fds[1], said.data(), said.size());
+    ::_exit(wrote == ssize_t(said.size()) ? 0 : 3);
+  }
+  ::close(fds[1]);
+  std::string said;
+  char buf[4096];
+  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) said.append(buf, std::size_t(n));
+  ::close(fds[0]);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return WIFEXITED(status) && WEXITSTATUS(status) == 0 ? said : std::string();
 }
 
 ScopedTmpfs::ScopedTmpfs(const std::string& dir, const std::string& size) : dir_(dir) {

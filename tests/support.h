@@ -1,6 +1,7 @@
 #pragma once
 // Shared helpers for the test suite.
 #include <cstddef>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -66,6 +67,10 @@ class ScopedTmpfs {
   std::string dir_;
   bool mounted_ = false;
 };
+// What fn throws (its what()), "no error" if nothing, called in a child process that runs as user
+// nobody when this one is root: a file made unreadable (chmod 000) is unreadable there too, where root
+// reads any file. Empty if the child could not be made or could not drop its rights.
+std::string errorWithoutPrivileges(const std::function<void()>& fn);
 // A synthetic sequence's options at 320x240, which keeps the suite quick.
 sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory = "smooth");
 // The first `count` frames of seq (all by default), rendered once, for a test that runs the same frames

@@ -916,6 +916,29 @@ TEST(RawlogBadInput, TruncatedAndGarbage) {
   expectInputError(dir + "/missing.rawlog", "missing.rawlog: no such file");
 }
 
+// An external image or range file that exists but cannot be opened (its permissions) names the
+// system's reason: it was "missing or corrupt".
+TEST(RawlogBadInput, AnUnreadableExternalFileSaysWhyNotCorrupt) {
+  const auto frames = simFrames(2);
+  for (const std::string kind : {".png", ".bin"}) {
+    const std::string dir = test::tempDir("rawlog_unreadable_ext" + kind);
+    const std::string path = writeRawlog(dir + "/e.rawlog", frames, {});
+    std::string victim;
+    for (const auto& e : fs::directory_iterator(dir + "/e_Images"))
+      if (e.path().string().find("000001") != std::string::npos && e.path().extension() == kind) victim = e.path();
+    ASSERT_FALSE(victim.empty()) << kind;
+    fs::permissions(victim, fs::perms::none);
+    const std::string said = test::errorWithoutPrivileges([&] {
+      RawlogSource src(path, {});
+      Frame f;
+      while (src.next(f)) {
+      }
+    });
+    EXPECT_NE(said.find(victim + ": cannot load "), std::string::npos) << said;
+    EXPECT_NE(said.find("(Permission denied)"), std::string::npos) << said;
+  }
+}
+
 TEST(RawlogBadInput, MissingExternalImageNamesTheImage) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_bad_ext");

@@ -17,6 +17,7 @@
 #include "vofusion/io/tum_source.h"
 
 using namespace vofusion;
+namespace fs = std::filesystem;
 
 TEST(TumList, ParsesCommentsAndEntries) {
   const auto l = parseTumList("# comment\n1.0 rgb/a.png\n\n2.5 rgb/b.png\n", "x");
@@ -168,6 +169,21 @@ TEST(TumFolder, TheImageSizeIsTheOneMostHeadersState) {
   std::thread([probe, fifo, a = paths[2]] { probe->set_value(recordingImageSize({fifo, a})); }).detach();
   ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
   EXPECT_EQ(result.get(), std::optional<cv::Size>(cv::Size(64, 48)));
+}
+
+// An image that exists but cannot be opened (its permissions) says so: it was "cannot decode ...
+// (corrupt or truncated PNG?)", sending the user to look for damage in a whole file.
+TEST(TumImages, AnUnreadableImageSaysWhyNotCorrupt) {
+  const std::string dir = test::tempDir("tum_unreadable");
+  const std::string colour = dir + "/c.png", depth = dir + "/d.png";
+  cv::imwrite(colour, cv::Mat(48, 64, CV_8UC3, cv::Scalar(10, 20, 30)));
+  cv::imwrite(depth, cv::Mat(48, 64, CV_16UC1, cv::Scalar(5000)));
+  fs::permissions(colour, fs::perms::none);
+  fs::permissions(depth, fs::perms::none);
+  const std::string colour_said = test::errorWithoutPrivileges([&] { loadColour(colour, 64, 48); });
+  const std::string depth_said = test::errorWithoutPrivileges([&] { loadTumDepth(depth, 64, 48, 5000.0); });
+  EXPECT_EQ(colour_said, colour + ": cannot read colour image (Permission denied)");
+  EXPECT_EQ(depth_said, depth + ": cannot read depth image (Permission denied)");
 }
 
 TEST(Trajectory, WriteReadRoundTrip) {

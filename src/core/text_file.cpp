@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -23,6 +24,13 @@ std::string readTextFile(const std::string& path) {
   if (!f) throw InputError(path, std::string("cannot open file (") + std::strerror(errno) + ")");
   // The read itself is capped too: a pipe or a device (/dev/zero) has no size to check first.
   return readCapped(f, path, kMaxBytes, "256 MiB", "a text file");
+}
+
+std::string whyUnreadable(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return std::strerror(errno);
+  std::fclose(f);
+  return {};
 }
 
 bool entryExists(const std::string& path) {

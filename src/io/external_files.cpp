@@ -13,6 +13,7 @@
 
 #include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
 #include "vofusion/io/png_decode.h"  // readWholeFile, isRgb8Png
 
 namespace fs = std::filesystem;
@@ -77,10 +78,13 @@ std::optional<DepthFile> loadExternalRangeImage(CObservation3DRangeScan& obs) {
   constexpr std::size_t kLargest = 8 + std::size_t(kLargestSide) * kLargestSide * 2;  // rows, cols and 8192 x 8192 readings
   std::error_code ec;
   const std::uintmax_t stored = fs::file_size(path, ec);
-  if (ec) throw InputError(path, "cannot load external range image (missing or unreadable)");
+  if (ec) throw InputError(path, "cannot load external range image (" + ec.message() + ")");
   if (stored > kLargest) throw InputError(path, "corrupt range image file (larger than any range image)");
   thread_local std::vector<std::uint8_t> packed, raw;  // a frame's worth, kept for the reader's next frames
-  if (!readWholeFile(path, packed)) throw InputError(path, "cannot load external range image (missing or unreadable)");
+  if (!readWholeFile(path, packed)) {
+    const std::string why = whyUnreadable(path);
+    throw InputError(path, "cannot load external range image (" + (why.empty() ? std::string("unreadable") : why) + ")");
+  }
   if (packed.empty()) throw InputError(path, "corrupt range image file (empty)");
   if (packed.size() < 2 || packed[0] != 0x1f || packed[1] != 0x8b) return std::nullopt;  // not gzip
   if (!gzipUncompress(packed.data(), packed.size(), raw, kLargest))

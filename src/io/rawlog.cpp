@@ -154,6 +154,8 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
   const std::string file = external ? obs.intensityImage.getExternalStorageFileAbsolutePath() : origin;
   plain = false;
   if (external) {
+    if (const std::string why = whyUnreadable(file); !why.empty())
+      throw InputError(file, "cannot load intensity image (" + why + ")");
     if (cv::Mat decoded = readPlainPng(file); decoded.type() == CV_8UC3) {
       plain = true;
       return decoded;
@@ -177,9 +179,10 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     const ScopedAllocationLimit limit(kMaxEntryBuffer, kMaxEntryTotal);  // external files have length fields too
     obs.load();
   } catch (const std::exception& e) {
-    throw InputError(obs.rangeImage_isExternallyStored() ? obs.rangeImage_getExternalStorageFileAbsolutePath("")
-                                                         : origin,
-                     "cannot load external range image (missing or corrupt)");
+    if (!obs.rangeImage_isExternallyStored()) throw InputError(origin, "cannot load external range image (missing or corrupt)");
+    const std::string file = obs.rangeImage_getExternalStorageFileAbsolutePath("");
+    const std::string why = whyUnreadable(file);
+    throw InputError(file, "cannot load external range image (" + (why.empty() ? std::string("corrupt") : why) + ")");
   }
   if (!obs.hasRangeImage || obs.rangeImage.rows() == 0)
     throw InputError(origin, "3D observation without a range image");

@@ -115,6 +115,9 @@ void requireImageFile(const std::string& path, const char* what) {
   const fs::file_status st = fs::status(path, ec);
   if (!fs::exists(st)) throw InputError(path, std::string(what) + " image is missing");
   if (!fs::is_regular_file(st)) throw InputError(path, std::string(what) + " image is not a file (a folder?)");
+  // A file that cannot be opened said "corrupt or truncated" below.
+  if (const std::string why = whyUnreadable(path); !why.empty())
+    throw InputError(path, std::string("cannot read ") + what + " image (" + why + ")");
 }
 
 std::string sizeMismatch(const char* what, cv::Size got, int expect_w, int expect_h) {

@@ -14,6 +14,10 @@ std::string readTextFile(const std::string& path);
 // and its reader names the problem in one line (std::filesystem::exists threw on a link to itself,
 // and the run ended with its error). Never throws.
 bool entryExists(const std::string& path);
+// Why the file at `path` cannot be opened for reading, as the system says it ("Permission denied",
+// "No such file or directory"); empty when it can. A reader that fails on a file names this cause
+// first, rather than calling an unreadable file corrupt. Never throws.
+std::string whyUnreadable(const std::string& path);
 // Everything `stream` gives, read in 64 KiB pieces; InputError(path, "goes on past <what>: too large
 // for <kind> here") once it is longer than max_bytes (a pipe or a device has no size to check first).
 std::string readCapped(std::istream& stream, const std::string& path, std::size_t max_bytes, const std::string& what,
