@@ -279,6 +279,41 @@ TEST(Rawlog, DepthIsWrittenAtTheUnitsItsObservationSays) {
   }
 }
 
+// Depth camera parameters calibrated at another size of the same aspect (640x480 over a 320x240 range
+// image) are scaled to the image: they were taken as they were, the focal length twice the image's.
+// Parameters whose size fields are stale (MRPT's default 640x480 around parameters for the stored
+// image) are taken as they are; another aspect is refused in one line.
+TEST(Rawlog, DepthCameraParametersOfAnotherSizeAreScaledToTheImage) {
+  const Frame f = simFrames(1).front();
+  ASSERT_EQ(f.camera.width, 320);
+  const auto obs = observationFromFrame(f, 1e-3);
+  const auto expectCamera = [&](const char* what) {
+    const CameraIntrinsics got = frameFromObservation(*obs, "x").camera;
+    EXPECT_NEAR(got.fx, f.camera.fx, 1e-9) << what;
+    EXPECT_NEAR(got.fy, f.camera.fy, 1e-9) << what;
+    EXPECT_NEAR(got.cx, f.camera.cx, 1e-9) << what;
+    EXPECT_NEAR(got.cy, f.camera.cy, 1e-9) << what;
+  };
+  const CameraIntrinsics full = f.camera.scaled(2.0);
+  obs->cameraParams = full.toMrpt();
+  expectCamera("calibrated at 640x480");
+  obs->cameraParams = f.camera.toMrpt();
+  obs->cameraParams.ncols = 640;
+  obs->cameraParams.nrows = 480;
+  expectCamera("stale size fields");
+  CameraIntrinsics taller = full;
+  taller.height = 512;
+  taller.cy = 255.5;
+  obs->cameraParams = taller.toMrpt();
+  try {
+    frameFromObservation(*obs, "x");
+    ADD_FAILURE() << "another aspect was taken";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "x: the depth camera's parameters are for 640x512 images, the range image is 320x240 "
+                                     "(another aspect: give --intrinsics)");
+  }
+}
+
 TEST(Rawlog, RoundTripSensoryFramesEmbeddedWithActions) {
   const auto frames = simFrames(3);
   const std::string dir = test::tempDir("rawlog_sf");
