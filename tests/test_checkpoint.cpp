@@ -167,6 +167,16 @@ TEST(Checkpoint, MemoryRunningOutCostsTheCheckpointOnly) {
   EXPECT_EQ(RunSession::peek(path)->frames, 6u);
 }
 
+// A setting that differs past its sixth decimal is another run: the origin wrote both as 0.003000, and
+// a run resumed with the other value went on with it.
+TEST(Checkpoint, AnOriginTellsSettingsApartPastTheSixthDecimal) {
+  mrpt::config::CConfigFileMemory a, b;
+  a.write("kinfu", "joint_icp_sigma", std::string("0.0030001"));
+  b.write("kinfu", "joint_icp_sigma", std::string("0.0030004"));
+  EXPECT_NE(RunSession::checkpointOrigin("synthetic:room", TrackingMode::Joint, a),
+            RunSession::checkpointOrigin("synthetic:room", TrackingMode::Joint, b));
+}
+
 TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
   const sim::SyntheticSequence seq(test::quickSim("room", 6));
   const auto cfg = roomConfig();

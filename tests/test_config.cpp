@@ -174,6 +174,29 @@ TEST(Config, ALineTheReaderCannotReadIsAnErrorNamingFileAndLine) {
       InputError);
 }
 
+// A number is saved so that it reads back as the same value: as MRPT writes it (6 decimals) where that
+// is exact, else in the fewest digits that are. 0.0030004 was saved as 0.003000, and a checkpoint's
+// origin took a run with 0.0030001 for the same run.
+TEST(Config, ANumberIsSavedSoThatItReadsBackTheSame) {
+  double precise = 0.0030004, plain = 0.05, tiny = 2.5e-7;
+  float single = 0.1234567f;
+  const auto table = [](double& a, double& b, double& c, float& d) {
+    return std::vector<ConfigKey>{{"precise", &a, "m", 0.0, 1.0}, {"plain", &b, "m", 0.0, 1.0},
+                                  {"tiny", &c, "m", 0.0, 1.0}, {"single", &d, "m", 0.0, 1.0}};
+  };
+  mrpt::config::CConfigFileMemory cfg;
+  saveKeys(cfg, "s", table(precise, plain, tiny, single));
+  EXPECT_EQ(cfg.read_string("s", "precise", ""), "0.0030004");
+  EXPECT_EQ(cfg.read_string("s", "plain", ""), "0.050000") << "as MRPT writes it, where that is exact";
+  double a = 0, b = 0, c = 0;
+  float d = 0;
+  loadKeys(cfg, "s", table(a, b, c, d));
+  EXPECT_EQ(a, precise);
+  EXPECT_EQ(b, plain);
+  EXPECT_EQ(c, tiny);
+  EXPECT_EQ(d, single);
+}
+
 TEST(Config, DumpHoldsEveryKey) {
   DemoParams p;
   const std::string text = dumpConfig({{"kinfu", &p}});

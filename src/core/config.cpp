@@ -297,6 +297,26 @@ void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& secti
         k.value);
 }
 
+namespace {
+// Whether `text` parses to exactly v at v's own precision (a float key is read into a float).
+template <typename T>
+bool readsBackAs(std::string text, T v) {
+  text.erase(0, text.find_first_not_of(" \t"));
+  text.erase(text.find_last_not_of(" \t\r") + 1);
+  T back{};
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), back);
+  return ec == std::errc() && end == text.data() + text.size() && (back == v || (std::isnan(back) && std::isnan(v)));
+}
+
+// The fewest digits that read back as v.
+template <typename T>
+std::string shortestText(T v) {
+  char buf[64];
+  const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  return ec == std::errc() ? std::string(buf, end) : std::to_string(v);
+}
+}  // namespace
+
 void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys) {
   for (const ConfigKey& k : keys) {
     std::string comment = std::isnan(k.lo) ? std::string(k.comment) : std::string(k.comment) + "; range " + rangeText(k);
@@ -307,6 +327,10 @@ void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, co
           if constexpr (std::is_same_v<T, bool>) cfg.write(section, k.name, std::string(*v ? "true" : "false"), -1, 1, comment);
           else if constexpr (std::is_same_v<T, float>) cfg.write(section, k.name, static_cast<double>(*v), -1, 1, comment);
           else cfg.write(section, k.name, *v, -1, 1, comment);
+          if constexpr (std::is_floating_point_v<T>) {
+            if (!readsBackAs(cfg.read_string(section, k.name, ""), *v))
+              cfg.write(section, k.name, shortestText(*v), -1, 1, comment);
+          }
         },
         k.value);
   }

@@ -99,6 +99,9 @@ void loadKeys(const mrpt::config::CConfigFileBase& cfg, const std::string& secti
 // key table; throws InputError("[section] key", "'1cm' is not a number") (or "not an integer").
 double readNumber(const mrpt::config::CConfigFileBase& cfg, const std::string& section, const char* key, double fallback,
                   bool integer = false);
+// Each key with its comment. A number as MRPT writes it (6 decimals, or 7 digits) where that reads back
+// as the same value, else in the fewest digits that do: a checkpoint's origin and --dump-config keep
+// 0.0030004 (written as 0.003000, it matched a run with 0.0030001).
 void saveKeys(mrpt::config::CConfigFileBase& cfg, const std::string& section, const std::vector<ConfigKey>& keys);
 
 }  // namespace vofusion
