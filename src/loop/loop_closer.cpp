@@ -212,15 +212,17 @@ struct LoopCloser::Impl {
     }
     loops_unsolved += accepted.size();
     std::vector<std::size_t> removed;
+    bool solved = false;
     {
       ScopedStageTimer timer(t, "pose_graph");
       if (solveDue()) {
         removed = graph.optimise(kMaxLoopChi2, kMaxChainChi2);
         loops_unsolved = 0;
         solved_at = graph.nodes();
+        solved = true;
       }
     }
-    publish(accepted, removed, rejected, t, vofusion::threadCpuSeconds() - cpu_start);
+    publish(accepted, removed, rejected, solved, t, vofusion::threadCpuSeconds() - cpu_start);
   }
 
   // The graph's poses are not used before the end, only its removals of false loops, which
@@ -271,16 +273,20 @@ struct LoopCloser::Impl {
     if (failure) std::rethrow_exception(failure);
   }
 
+  // solved: the graph was optimised, and every keyframe's pose may have moved; else only the new
+  // keyframe's entry is added (rebuilding them all made each keyframe cost the whole run's, under the
+  // lock the frame loop takes every frame: 0.25 ms a keyframe at 20 000).
   void publish(const std::vector<LoopRecord>& accepted, const std::vector<std::size_t>& removed,
-               const std::map<std::string, std::size_t>& rejected, const StageTimes& t, double cpu) {
+               const std::map<std::string, std::size_t>& rejected, bool solved, const StageTimes& t, double cpu) {
     std::lock_guard<std::mutex> lock(mu);
     loops.insert(loops.end(), accepted.begin(), accepted.end());
     for (const std::size_t e : removed)
       if (e < loop_edge_record.size() && loop_edge_record[e] < loops.size()) loops[loop_edge_record[e]].active = false;
     for (const auto& [why, n] : rejected) rejections[why] += n;
     if (!removed.empty()) rejections["did not fit the graph after optimisation"] += removed.size();
+    const std::size_t from = solved ? 0 : std::min(poses.size(), keyframes.size());
     poses.resize(keyframes.size());
-    for (std::size_t i = 0; i < keyframes.size(); ++i)
+    for (std::size_t i = from; i < keyframes.size(); ++i)
       poses[i] = {keyframes.at(i).frame_index, keyframes.at(i).timestamp, keyframes.at(i).tracked, graph.pose(i)};
     store = keyframes.stats();
     times.merge(t);

@@ -64,8 +64,10 @@ std::size_t PoseGraph::addEdge(const GraphEdge& e) {
 }
 
 void PoseGraph::chainNewNode(std::size_t node) {
-  for (const GraphEdge& e : edges_)
-    if (!e.loop && e.to == node && e.from < node) {
+  // From the newest edge back: the new node's tracker edge is the last one added (from the first, each
+  // keyframe read the whole graph's edges).
+  for (auto it = edges_.rbegin(); it != edges_.rend(); ++it)
+    if (const GraphEdge& e = *it; !e.loop && e.to == node && e.from < node) {
       nodes_[node] = nodes_[e.from] * e.T_from_to;
       return;
     }
