@@ -86,14 +86,15 @@ PoseGraph graphOf(const Circle& c) {
   return g;
 }
 
-GraphEdge loopEdge(std::size_t from, std::size_t to, const Eigen::Isometry3d& T) {
+// sigma: the loop's noise, m and rad (ICP's 3 mm floor by default).
+GraphEdge loopEdge(std::size_t from, std::size_t to, const Eigen::Isometry3d& T, double sigma = 0.003) {
   GraphEdge e;
   e.from = from;
   e.to = to;
   e.T_from_to = T;
   e.loop = true;
   e.information = Matrix6::Identity();
-  for (int i = 0; i < 3; ++i) e.information(i, i) = 1.0 / (0.003 * 0.003), e.information(i + 3, i + 3) = 1.0 / (0.003 * 0.003);
+  for (int i = 0; i < 3; ++i) e.information(i, i) = 1.0 / (sigma * sigma), e.information(i + 3, i + 3) = 1.0 / (sigma * sigma);
   return e;
 }
 
@@ -381,6 +382,24 @@ TEST(LoopPoseGraph, FalseLoopRemovedNotBentAround) {
   EXPECT_EQ(removed[0], bad);
   EXPECT_FALSE(g.edges()[bad].active);
   EXPECT_LE(maxError(g, c), before + 1e-3);
+}
+
+// A crisp false loop beside less certain true ones: the loop removed is the one whose removal leaves the
+// graph consistent, not the one with the largest chi2 of its own. A loop's own chi2 is its conflict
+// over its certainty, so the less certain true loop scored worse, went, and the false one (0.5 m off)
+// bent the map.
+TEST(LoopPoseGraph, ATrueLoopIsNotDroppedForACrisperFalseOne) {
+  const Circle c = circle(40, 3.0, 0.4);
+  const Eigen::Isometry3d false_loop = c.truth[1].inverse() * c.truth[37] * pose(0.5, 0, 0, 0);
+  for (const int true_loops : {1, 2, 3}) {
+    PoseGraph g = graphOf(c);
+    const double before = maxError(g, c);
+    for (int k = 0; k < true_loops; ++k)
+      g.addEdge(loopEdge(std::size_t(k), std::size_t(39 - k), c.truth[k].inverse() * c.truth[39 - k], 0.006));
+    const std::size_t bad = g.addEdge(loopEdge(1, 37, false_loop, 0.003));
+    EXPECT_EQ(g.optimise(kMaxLoopChi2, kMaxChainChi2), std::vector<std::size_t>{bad}) << true_loops << " true loops";
+    EXPECT_LT(maxError(g, c), 0.25 * before) << true_loops << " true loops";
+  }
 }
 
 // A loop edge of NaNs (a damaged pose) is the one removed: its chi2 lost every comparison, so the true

@@ -120,32 +120,59 @@ void PoseGraph::updateChi2() {
   }
 }
 
+namespace {
+// A loop's chi2 that is no number (an edge of NaNs) is the worst there is: it lost every comparison,
+// and the true loop beside it went instead.
+double badness(double chi2) { return std::isnan(chi2) ? std::numeric_limits<double>::infinity() : chi2; }
+}  // namespace
+
+double PoseGraph::misfit(double max_loop_chi2, double max_chain_chi2) const {
+  // A false loop shows either in its own residual or, when it is trusted more than the chain, in the
+  // chain it bent: a tracker edge far beyond its noise. (A chain edge's NaN is left out, as before: it
+  // would remove every loop.)
+  double worst = 0.0;
+  for (const GraphEdge& e : edges_) {
+    if (!e.active) continue;
+    if (e.loop) worst = std::max(worst, badness(e.chi2) / max_loop_chi2);
+    else if (e.chi2 > 0) worst = std::max(worst, e.chi2 / max_chain_chi2);
+  }
+  return worst;
+}
+
 std::vector<std::size_t> PoseGraph::optimise(double max_loop_chi2, double max_chain_chi2) {
   std::vector<std::size_t> removed;
   const std::vector<Eigen::Isometry3d> start = nodes_;
-  for (;;) {
+  const auto solveFromStart = [&] {
+    nodes_ = start;
     solve();
     updateChi2();
-    // A false loop shows either in its own residual or, when it is trusted more than the chain, in
-    // the chain it bent: a tracker edge far beyond its noise. Either way the worst loop goes.
-    // A loop's chi2 that is no number (an edge of NaNs) is the worst there is: it lost every comparison,
-    // and the true loop beside it went instead. (A chain edge's is left out of `chain`, as before: it
-    // would remove every loop.)
-    const auto badness = [](double chi2) { return std::isnan(chi2) ? std::numeric_limits<double>::infinity() : chi2; };
-    double chain = 0.0;
-    std::size_t worst = edges_.size();
-    for (std::size_t i = 0; i < edges_.size(); ++i) {
-      const GraphEdge& e = edges_[i];
-      if (!e.active) continue;
-      if (!e.loop) chain = std::max(chain, e.chi2);  // NaN: left out
-      else if (worst == edges_.size() || badness(e.chi2) > badness(edges_[worst].chi2)) worst = i;
+    return misfit(max_loop_chi2, max_chain_chi2);
+  };
+  for (double now = solveFromStart(); now > 1.0;) {
+    // The suspects: the active loops of largest chi2. The one that goes is the one whose removal leaves
+    // the graph most consistent (ties: the larger chi2). A loop's own chi2 is its conflict over its
+    // certainty, so a crisp false loop scored below the less certain true loop it conflicted with,
+    // and the true loop went (tests: ATrueLoopIsNotDroppedForACrisperFalseOne).
+    std::vector<std::size_t> suspects;
+    for (std::size_t i = 0; i < edges_.size(); ++i)
+      if (edges_[i].active && edges_[i].loop) suspects.push_back(i);
+    if (suspects.empty()) break;
+    std::stable_sort(suspects.begin(), suspects.end(),
+                     [&](std::size_t a, std::size_t b) { return badness(edges_[a].chi2) > badness(edges_[b].chi2); });
+    if (suspects.size() > kSuspects) suspects.resize(kSuspects);
+    std::size_t drop = suspects.front();
+    double best = std::numeric_limits<double>::infinity();
+    for (const std::size_t i : suspects) {
+      edges_[i].active = false;
+      const double left = solveFromStart();
+      edges_[i].active = true;
+      if (left < best) best = left, drop = i;
     }
-    if (worst == edges_.size() || (badness(edges_[worst].chi2) <= max_loop_chi2 && chain <= max_chain_chi2)) return removed;
-    // A false loop bent the map: drop it and start again from the poses before this optimisation.
-    edges_[worst].active = false;
-    removed.push_back(worst);
-    nodes_ = start;
+    edges_[drop].active = false;
+    removed.push_back(drop);
+    now = solveFromStart();
   }
+  return removed;
 }
 
 std::vector<std::size_t> PoseGraph::optimiseAll(double max_loop_chi2, double max_chain_chi2) {

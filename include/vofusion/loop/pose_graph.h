@@ -32,8 +32,10 @@ class PoseGraph {
   // Node ids are 0, 1, 2, ...: node 0 is fixed (the map is anchored at the first keyframe).
   std::size_t addNode(const Eigen::Isometry3d& initial);
   std::size_t addEdge(const GraphEdge& e);  // returns the edge's index
-  // Optimises all nodes; then, while the worst loop edge's chi2 exceeds max_loop_chi2 or any tracker
-  // edge's exceeds max_chain_chi2, removes that loop and optimises again from the poses before.
+  // Optimises all nodes; then, while some loop edge's chi2 exceeds max_loop_chi2 or any tracker edge's
+  // exceeds max_chain_chi2, removes one loop and optimises again from the poses before: of the
+  // kSuspects loops of largest chi2, the one whose removal leaves the graph most consistent (each is
+  // tried: a graph that fits costs one solve, one that does not kSuspects + 1 per loop removed).
   // Returns the indices of the edges removed this time.
   std::vector<std::size_t> optimise(double max_loop_chi2, double max_chain_chi2);
   // The same over every loop ever added, those removed before included: a loop that did not fit
@@ -46,8 +48,12 @@ class PoseGraph {
   void chainNewNode(std::size_t node);
 
  private:
+  static constexpr std::size_t kSuspects = 8;
   void solve();
   void updateChi2();
+  // The worst active edge against its gate: a loop's chi2 / max_loop_chi2, a tracker edge's /
+  // max_chain_chi2; over 1, the graph does not fit.
+  double misfit(double max_loop_chi2, double max_chain_chi2) const;
   std::vector<Eigen::Isometry3d> nodes_;
   std::vector<GraphEdge> edges_;
 };
