@@ -68,10 +68,10 @@ const char* kUsage =
     "  --replay plays a recording at its recorded rate instead of a sensor. Frames the processing\n"
     "  cannot keep up with are dropped (oldest first) and counted; the recording itself never drops.\n"
     "  DIR/grab-summary.txt holds the counts.\n"
-    "  --checkpoint-every  --live with a recording: every S seconds (default 60, 0 = never) the whole\n"
-    "  reconstruction to DIR/checkpoint. After a crash, `vofusion DIR/grab.rawlog --out DIR --resume\n"
-    "  DIR/checkpoint` finishes it from there; a session that ends normally deletes it. An earlier run's\n"
-    "  checkpoint in DIR is never replaced: the session does not start.\n";
+    "  --checkpoint-every  --live with a recording: every S seconds (default 60, 0 = never) and after the\n"
+    "  last frame, the whole reconstruction to DIR/checkpoint. After a crash, `vofusion DIR/grab.rawlog\n"
+    "  --out DIR --resume DIR/checkpoint` finishes it from there; a session that ends normally deletes it.\n"
+    "  An earlier run's checkpoint in DIR is never replaced: the session does not start.\n";
 
 
 struct Args {
@@ -230,12 +230,24 @@ struct LiveCheckpoints {
   std::string path, origin;
   std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now(), last = start;
   std::size_t written = 0;
+  std::size_t frames_at_last = 0;  // frames processed at the last one written
   double seconds_writing = 0.0;
   std::string error;  // why one could not be written: no more are tried
 
   void maybeWrite(const RunSession& run) {
     const auto now = std::chrono::steady_clock::now();
     if (every <= 0 || !error.empty() || std::chrono::duration<double>(now - last).count() < every) return;
+    write(run, now);
+  }
+  // After the session's last frame, before its end phase (the map fused again, the meshing): a crash
+  // there is resumed at the end phase instead of tracking again every frame since the last one.
+  void writeLast(const RunSession& run) {
+    if (every <= 0 || !error.empty() || run.reconstruction().framesProcessed() <= frames_at_last) return;
+    write(run, std::chrono::steady_clock::now());
+  }
+
+ private:
+  void write(const RunSession& run, std::chrono::steady_clock::time_point now) {
     try {
       // The frames it covers were recorded before they came here: on the disk first (records and
       // images), or after a power cut the checkpoint would name frames the recording lost.
@@ -250,6 +262,7 @@ struct LiveCheckpoints {
     last = std::chrono::steady_clock::now();
     seconds_writing += std::chrono::duration<double>(last - now).count();
     ++written;
+    frames_at_last = run.reconstruction().framesProcessed();
   }
 };
 
@@ -322,7 +335,7 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
 // Everything recorded so far is written, whatever stopped the run; then grab-summary.txt and the
 // reconstruction's outputs.
 int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& source, RawlogWriter* writer,
-               RunSession* session, const Args& args, const LiveCheckpoints& checkpoints) {
+               RunSession* session, const Args& args, LiveCheckpoints& checkpoints) {
   const std::size_t recorded = writer ? writer->framesWritten() : 0;
   // A recording whose last sync failed (EIO) is in place, if maybe not whole on the disk: the
   // reconstruction's outputs are still written, then the failure is said (it lost them all).
@@ -334,6 +347,8 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
       recording_error = oneLineMessage(e);
     }
   }
+  // Only over a recording that is whole on the disk: a checkpoint names the recording's frames.
+  if (session && recording_error.empty()) checkpoints.writeLast(*session);
   try {
     // The grab's own counts before the reconstruction's outputs, which may fail after a failed run.
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),

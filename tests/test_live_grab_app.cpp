@@ -403,6 +403,23 @@ TEST(GrabApp, AFullDiskStopsTheRecordingAndKeepsWhatWasWritten) {
   EXPECT_EQ(countLines(log), closed ? 3u : 2u) << log;
 }
 
+// A checkpoint comes after the session's last frame too, before its end phase (the map fused again,
+// the meshing): a crash there is resumed at the end phase. With a period longer than the session it
+// is the only one; there was none.
+TEST(GrabApp, ALiveSessionIsCheckpointedAfterItsLastFrame) {
+  const std::string tum = test::tumFirst300();
+  VOFUSION_REQUIRE_DATA(tum);
+  const std::string out = test::tempDir("grab_app_last_checkpoint");
+  std::string log;
+  const int rc = test::run(test::app("vofusion-grab") + " --replay " + tum + " --live --no-gui --max-frames 6 --out " +
+                               out + " --checkpoint-every 100000",
+                           &log);
+  ASSERT_EQ(rc, 0) << log;
+  std::ifstream summary_file(out + "/summary.json");
+  EXPECT_EQ(nlohmann::json::parse(summary_file)["checkpoints"]["written"].get<int>(), 1) << log;
+  EXPECT_FALSE(fs::exists(out + "/checkpoint")) << "a session that ended normally has nothing to resume";
+}
+
 TEST(GrabApp, LiveReconstructionWritesTheSameOutputsAsVofusion) {
   const std::string tum = test::tumFirst300();
   VOFUSION_REQUIRE_DATA(tum);

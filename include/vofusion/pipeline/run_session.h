@@ -35,6 +35,7 @@ class RunSession {
   ~RunSession();  // without finish(): no outputs replaced
 
   Reconstruction& reconstruction() { return rec_; }
+  const Reconstruction& reconstruction() const { return rec_; }
   // The frame through the reconstruction, then queued for poses.rawlog.
   FrameReport process(const Frame& frame);
   // The end of the run, once: loop closure finished, the map fused again at the corrected poses when
