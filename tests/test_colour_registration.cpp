@@ -8,6 +8,7 @@
 #include "support.h"
 #include "vofusion/io/colour_registration.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/live/live_source.h"
 
 using namespace vofusion;
 using mrpt::poses::CPose3D;
@@ -153,9 +154,15 @@ TEST(ColourRegistration, RegisteredCamerasKeepTheirPixels) {
   const Frame same = frameFromObservation(*obs, "registered.rawlog");
   EXPECT_GT(agreement(same, rig), 0.99);
   EXPECT_GT(coverage(same, rig), 0.99);
-  // The same camera at twice the resolution (a registered 640x480 colour over 320x240 depth).
+  // The same camera at twice the resolution (a registered 640x480 colour over 320x240 depth). A sensor
+  // takes the colour camera's parameters for the depth too: scaled to the depth image (they were taken
+  // at twice its focal length).
   rig.colour_cam = CameraIntrinsics{};
   EXPECT_TRUE(colourRegisteredToDepth(*observe(rig)));
+  const CameraIntrinsics sensed = sensorObservationToFrame(*observe(rig), "sensor").camera;
+  EXPECT_NEAR(sensed.fx, rig.depth_cam.fx, 1e-9);
+  EXPECT_NEAR(sensed.cx, rig.depth_cam.cx, 1e-9);
+  EXPECT_EQ(sensed.width, rig.depth_cam.width);
   // Rows of another aspect (640x512 over 320x240, f twice the depth's): resized, a row went up to 8
   // pixels off at the top and bottom. Re-projected, every pixel is the wall's.
   rig.colour_cam.height = 512, rig.colour_cam.cy = 255.5;

@@ -103,8 +103,13 @@ Frame sensorObservationToFrame(const mrpt::obs::CObservation3DRangeScan& obs, co
   // the depth image too, whatever the depth camera's own are. Otherwise the colour is re-projected into
   // the depth camera (frameFromObservation), as for a rawlog.
   std::optional<CameraIntrinsics> camera;
-  if (obs.cameraParamsIntensity.fx() > 0 && colourRegisteredToDepth(obs))
+  if (obs.cameraParamsIntensity.fx() > 0 && colourRegisteredToDepth(obs)) {
     camera = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
+    // Registered at another resolution (1280x960 colour over 640x480 depth): the same camera scaled to
+    // the depth image; taken as it was, the depth was tracked at twice its focal length.
+    const int cols = static_cast<int>(obs.rangeImage.cols());
+    if (camera->width > 0 && camera->width != cols) camera = camera->scaled(double(cols) / camera->width);
+  }
   try {
     return frameFromObservation(obs, origin, camera);
   } catch (const std::exception& e) {
