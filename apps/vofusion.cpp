@@ -270,12 +270,16 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     progress.update(loop.done, status);
   }
   const bool built = loop.interrupted() && loop.done > 0;
+  const double frame_loop_seconds = progress.elapsedSeconds();  // the last checkpoint's writing is no frame's
   // --resume goes on from here: after a stop, and after the last frame, where the loop-closed
   // re-fusion and the meshing still come (a crash or a batch system's kill there would otherwise cost
   // every frame since the last periodic checkpoint; resumed, the run goes straight to its end phase).
-  if (loop.done > 0 && plan.checkpoint_every > 0 && loop.done != checkpointed_at) checkpoint();
+  // Not after a run that fails once its frames are read (no depth, no frame tracked): resumed, it would
+  // fail again, and the checkpoint would bar the same folder to the next run.
+  const bool fails = !loop.interrupted() && (loop.frames_with_depth == 0 || rec.lostFrames() >= loop.done);
+  if (loop.done > 0 && !fails && plan.checkpoint_every > 0 && loop.done != checkpointed_at) checkpoint();
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
-  loop.seconds = before + progress.elapsedSeconds();
+  loop.seconds = before + frame_loop_seconds;
 }
 
 int body(int argc, char** argv) {

@@ -2,11 +2,13 @@
 
 #include <sys/mount.h>
 #include <grp.h>
+#include <poll.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <array>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -144,13 +146,27 @@ std::string errorWithoutPrivileges(const std::function<void()>& fn) {
     ::_exit(wrote == ssize_t(said.size()) ? 0 : 3);
   }
   ::close(fds[1]);
+  // The child is a fork of a process with threads (TBB's, a reader's): a lock one of them held stays
+  // held there. Waited for up to a minute, then killed, rather than hanging the test.
   std::string said;
   char buf[4096];
-  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) said.append(buf, std::size_t(n));
+  pollfd p{fds[0], POLLIN, 0};
+  bool timed_out = false;
+  for (;;) {
+    const int ready = ::poll(&p, 1, 60000);
+    if (ready <= 0) {
+      timed_out = ready == 0;
+      break;
+    }
+    const ssize_t n = ::read(fds[0], buf, sizeof buf);
+    if (n <= 0) break;
+    said.append(buf, std::size_t(n));
+  }
   ::close(fds[0]);
+  if (timed_out) ::kill(pid, SIGKILL);
   int status = 0;
   ::waitpid(pid, &status, 0);
-  return WIFEXITED(status) && WEXITSTATUS(status) == 0 ? said : std::string();
+  return !timed_out && WIFEXITED(status) && WEXITSTATUS(status) == 0 ? said : std::string();
 }
 
 ScopedTmpfs::ScopedTmpfs(const std::string& dir, const std::string& size) : dir_(dir) {

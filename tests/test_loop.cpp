@@ -430,8 +430,8 @@ TEST(LoopPoseGraph, NewNodesFollowTheirOptimisedPredecessor) {
   g.addEdge(e);
   g.chainNewNode(n);
   EXPECT_TRUE(g.pose(n).isApprox(g.pose(19) * step, 1e-9));
-  // A loop edge into it, newer than its tracker edge, does not place it (the search runs from the
-  // newest edge back).
+  // A loop edge into it, newer than its tracker edge, does not place it: the search for its tracker
+  // edge runs from the newest edge back, where the loops verified after it come.
   g.addEdge(loopEdge(3, n, pose(5.0, 0, 0, 0)));
   g.chainNewNode(n);
   EXPECT_TRUE(g.pose(n).isApprox(g.pose(19) * step, 1e-9));

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <system_error>
 
 #include "vofusion/core/errors.h"
 
@@ -28,7 +29,7 @@ std::string readTextFile(const std::string& path) {
 
 std::string whyUnreadable(const std::string& path) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return std::strerror(errno);
+  if (!f) return std::generic_category().message(errno);  // strerror is not for reader threads
   std::fclose(f);
   return {};
 }

@@ -29,7 +29,8 @@ namespace vofusion {
 
 namespace {
 
-// 2: the resumed map's name; 3: the checksum; 4: frame indices; 5: the loop closer's last well-tracked frame
+// 2: the resumed map's name; 3: the checksum; 4: frame indices; 5: the loop closer's last well-tracked frame;
+// 6: the tracker's last measured frame
 constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-6\n";
 
 // A checkpoint ends with kChecksumTag, the CRC-32 of every byte before the tag (4 bytes) and their count

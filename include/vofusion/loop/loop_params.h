@@ -38,8 +38,9 @@ inline constexpr double kStrainRmsRatio = 2.0;
 // mean at 900 frames 0.0091 -> 0.0124 m), better on three by at most 0.8 mm. 1 does not win by the rule
 // for defaults, so 10 is fixed here instead of a key.
 inline constexpr double kPoorTrackingSigmaScale = 10.0;
-// After each optimisation the worst loop goes while its residual (6 DoF chi2) exceeds kMaxLoopChi2 or
-// some tracker edge's exceeds kMaxChainChi2, and the graph is optimised again. A true loop carries some
+// After each optimisation a loop goes while some loop's residual (6 DoF chi2) exceeds kMaxLoopChi2 or
+// some tracker edge's exceeds kMaxChainChi2 (the one whose removal leaves the graph most consistent:
+// PoseGraph::optimise), and the graph is optimised again. A true loop carries some
 // of the tracker's tension (at 22.5, chi2's 99.9 %, 23 of 36 true loops went) and a false one is metres
 // off: trusted more than the chain, it bends the chain instead (true loops leave every tracker edge below
 // 2.7, the false loop of LoopPoseGraph.FalseLoopRemovedNotBentAround one at 2258). Fixed, not keys: half

@@ -14,9 +14,9 @@
 namespace vofusion {
 
 // The shortest time between two frames a sensor gives: the fastest RGB-D depth stream (RealSense D4xx at
-// 90 Hz). Stamps closer than this are the clock's doing, not the camera's: a motion over them is no
-// velocity.
-constexpr double kShortestFrameInterval = 1.0 / 90.0;  // s
+// 300 fps). Stamps closer than this are the clock's doing, not the camera's: a turn over them is no
+// turn rate.
+constexpr double kShortestFrameInterval = 1.0 / 300.0;  // s
 
 // Motion m scaled to s times its length (rotation angle and translation).
 Eigen::Isometry3d scaledMotion(const Eigen::Isometry3d& m, double s);
