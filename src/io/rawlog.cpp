@@ -154,12 +154,13 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
   const std::string file = external ? obs.intensityImage.getExternalStorageFileAbsolutePath() : origin;
   plain = false;
   if (external) {
-    if (const std::string why = whyUnreadable(file); !why.empty())
-      throw InputError(file, "cannot load intensity image (" + why + ")");
     if (cv::Mat decoded = readPlainPng(file); decoded.type() == CV_8UC3) {
       plain = true;
       return decoded;
     }
+    // Only where the plain decoder got nothing: a file that cannot be opened says why.
+    if (const std::string why = whyUnreadable(file); !why.empty())
+      throw InputError(file, "cannot load intensity image (" + why + ")");
     if (const std::string damage = imageFileDamage(file); !damage.empty())
       throw InputError(file, "cannot load intensity image (" + damage + ")");
   }

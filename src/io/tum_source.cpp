@@ -115,7 +115,11 @@ void requireImageFile(const std::string& path, const char* what) {
   const fs::file_status st = fs::status(path, ec);
   if (!fs::exists(st)) throw InputError(path, std::string(what) + " image is missing");
   if (!fs::is_regular_file(st)) throw InputError(path, std::string(what) + " image is not a file (a folder?)");
-  // A file that cannot be opened said "corrupt or truncated" below.
+}
+
+// Where the plain decoder got nothing: a file that cannot be opened says why (it was "corrupt or
+// truncated"). Only then: a second open of every image every frame is what the plain decoder saves.
+void requireReadable(const std::string& path, const char* what) {
   if (const std::string why = whyUnreadable(path); !why.empty())
     throw InputError(path, std::string("cannot read ") + what + " image (" + why + ")");
 }
@@ -143,6 +147,7 @@ cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, con
   // truncation check is needed (and the file opened again) only for what OpenCV gets.
   cv::Mat raw = readPlainPngOfSize(path, "depth", expect_w, expect_h);
   if (raw.empty()) {
+    requireReadable(path, "depth");
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode depth image (" + damage + ")");
     // The sensor's pixel grid, whatever an EXIF orientation says: depth and colour pair pixel by pixel.
@@ -165,6 +170,7 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
   requireImageFile(path, "colour");
   cv::Mat img = readPlainPngOfSize(path, "colour", expect_w, expect_h);  // an 8-bit RGB PNG, as loadRawDepthPng does
   if (img.type() != CV_8UC3) {
+    requireReadable(path, "colour");
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode colour image (" + damage + ")");
     img = readImage(path, cv::IMREAD_UNCHANGED, "colour");
