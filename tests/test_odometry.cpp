@@ -462,6 +462,44 @@ TEST(Odometry, OlderFramesJoinTheFit) {
   }
 }
 
+// A keypoint matched in three references is one measurement of the current pose, not three: min_inliers
+// counts the current frame's keypoints among the inliers once each. A camera at rest, the last frame
+// with its left half covered: its keypoints are matched in all three frames before. With min_inliers one
+// above them (and below the earlier frames' own), it passed on its threefold count.
+TEST(Odometry, AKeypointMatchedInThreeReferencesIsOneInlier) {
+  const auto seq = room(false);
+  const Frame still = seq.render(10);
+  OdometryParams three;
+  three.references = 3;
+  three.narf.downsample = 2;
+  const auto runStill = [&](const OdometryParams& p) {
+    RgbdOdometry odo(p);
+    std::vector<OdometryResult> r;
+    for (std::size_t i = 0; i < 4; ++i) {
+      Frame f = test::deepCopy(still);
+      f.index = i;
+      f.timestamp = still.timestamp + double(i) / 30.0;
+      if (i == 3) {
+        const cv::Rect left(0, 0, f.rgb.cols / 2, f.rgb.rows);
+        f.rgb(left).setTo(cv::Scalar::all(0));
+        f.depth(left).setTo(0.f);
+      }
+      r.push_back(odo.process(f));
+    }
+    return r;
+  };
+  const auto counted = runStill(three);
+  for (std::size_t i = 1; i < 4; ++i) ASSERT_TRUE(counted[i].success) << i << ": " << counted[i].failure;
+  const int covered = counted[3].inlier_keypoints;
+  ASSERT_GT(counted[3].inliers, 2 * covered) << "each keypoint matched in the three frames before";
+  ASSERT_GT(counted[1].inlier_keypoints, covered + 1) << "the frames before have more keypoints of their own";
+  three.min_inliers = covered + 1;
+  const auto short_of_one = runStill(three);
+  EXPECT_TRUE(short_of_one[1].success && short_of_one[2].success);
+  EXPECT_FALSE(short_of_one[3].success);
+  EXPECT_EQ(short_of_one[3].failure, "too few inliers");
+}
+
 // Colour captured 11 ms before or after the depth (alternating, as TUM's fr1 within +-20 ms): bearings
 // and depths then describe different camera poses. colour_time moves the keypoints to the depth
 // capture with the velocity of a first fit and fits again: most of the error goes (measured 2.0 vs

@@ -48,7 +48,7 @@ std::vector<ConfigKey> motionKeys(OdometryParams& p) {
       {"ray_noise", &p.robust.ray_noise, "robust: Kinect noise along rays in Gauss-Newton"},
       {"cauchy", &p.robust.cauchy, "robust: Cauchy kernel scale in Gauss-Newton, sigmas (0 = off)", 0.0, 100.0},
       {"ransac_seed", &p.robust.seed, "robust: seed of the odometry's RANSAC draws; a run repeats exactly for a seed, and bench/run --rules --perturb N runs seeds 1..N to tell a change from chaos", 0.0, 999999.0},
-      {"min_inliers", &p.min_inliers, "3D inliers needed", 3.0, 100000.0},
+      {"min_inliers", &p.min_inliers, "3D inliers needed, the current frame's keypoints counted once however many references matched them", 3.0, 100000.0},
       {"min_extent", &p.min_extent, "m, inlier spread needed", 0.0, 10.0},
       {"max_rms", &p.max_rms, "m at <= 1 m depth (grows with z^2 as the inlier threshold; motion_method paper: plain, at any depth), inlier RMS accepted", 0.0001, 10.0},
   };

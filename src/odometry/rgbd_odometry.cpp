@@ -533,12 +533,16 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   r.rms_error = fit.rms;
   r.inlier_current.clear();
   r.inlier_reference.clear();
+  std::vector<int> inlier_keypoints;
   for (const int k : fit.inliers) {
     r.inlier_current.push_back(src[k]);
     r.inlier_reference.push_back(dst[k]);
+    inlier_keypoints.push_back(corr[std::size_t(k)].query);
   }
+  std::sort(inlier_keypoints.begin(), inlier_keypoints.end());
+  r.inlier_keypoints = int(std::unique(inlier_keypoints.begin(), inlier_keypoints.end()) - inlier_keypoints.begin());
   if (!fit.ok) return fail(fit.failure);
-  if (r.inliers < P.min_inliers) return fail("too few inliers");
+  if (r.inlier_keypoints < P.min_inliers) return fail("too few inliers");
   if (secondaryExtent(src, fit.inliers) < P.min_extent) return fail("degenerate geometry (inliers nearly collinear)");
   // Against the noise the inliers were chosen with (it grows with z^2): far scenes are not inconsistent.
   if (fit.rms_at_1m > P.max_rms) return fail("inconsistent matches (inlier RMS too large)");
@@ -592,7 +596,8 @@ bool RgbdOdometry::Impl::tryReference(FrameFeatures& other, FrameFeatures& cur, 
   mo.fit = fit2;
   mo.T_last_cur = fit2.T;
   mo.T_last_fitref.setIdentity();
-  r.matches = r2.matches, r.inliers = r2.inliers, r.rms_error = r2.rms_error, r.failure = r2.failure;
+  r.matches = r2.matches, r.inliers = r2.inliers, r.inlier_keypoints = r2.inlier_keypoints, r.rms_error = r2.rms_error,
+  r.failure = r2.failure;
   r.colour_time_capture = r2.colour_time_capture, r.capture_fitted_better = r2.capture_fitted_better;
   r.inlier_current = std::move(r2.inlier_current);
   r.inlier_reference = std::move(r2.inlier_reference);

@@ -59,7 +59,7 @@ struct OdometryParams : public mrpt::config::CLoadableOptions {
   // [motion]
   PaperFitOptions paper;            // hypotheses (N), sample_size (s), paper_inlier_threshold (m)
   RobustFitOptions robust;          // ransac_iterations, inlier_threshold (m at 1 m), gauss_newton_iterations
-  int min_inliers = 8;              // 3D inliers needed, else "too few inliers"
+  int min_inliers = 8;              // the current frame's keypoints among the 3D inliers, else "too few inliers"
   double min_extent = 0.03;         // m; inliers spread less (second axis) = "degenerate geometry"
   double max_rms = 0.04;            // m at <= 1 m depth, scaled like the inlier threshold (z^2); inlier
                                     // RMS above this = "inconsistent matches"
@@ -85,6 +85,9 @@ struct OdometryResult {
   mrpt::poses::CPose3D motion;         // current camera pose in the previous camera's frame (T_prev_curr)
   mrpt::math::CMatrixDouble66 covariance;  // of motion, (x y z yaw pitch roll), for CPose3DPDFGaussian
   int keypoints = 0, matches = 0, inliers = 0;  // matches and inliers over all frames matched (references)
+  // The current frame's keypoints among the inliers, each once (matched in three references, a keypoint
+  // is three inliers but one measurement of the current pose): what min_inliers asks for.
+  int inlier_keypoints = 0;
   double rms_error = 0.0;              // m, over the inlier 3D correspondences
   StageTimes times;                    // this frame's per-stage wall time
   // Additions: which frame `motion` is relative to. Usually the previous frame; when that frame was
