@@ -126,8 +126,8 @@ RunStats runOdometry(FrameSource& source, OdometrySource& odo, RawlogWriter* wri
       writer->write(frame);
     }
     char extra[128];
-    std::snprintf(extra, sizeof extra, "kp %d  matches %d  inliers %d  failed %zu", r.keypoints, r.matches,
-                  r.inliers, odo.failures());
+    std::snprintf(extra, sizeof extra, "kp %d  matches %d  inliers %d (%d keypoints)  failed %zu", r.keypoints,
+                  r.matches, r.inliers, r.inlier_keypoints, odo.failures());
     progress.update(odo.frames(), extra);
   }
   const bool done_some = run.stopped_by && !run.est.empty();

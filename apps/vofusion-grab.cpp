@@ -243,7 +243,12 @@ struct LiveCheckpoints {
   // there is resumed at the end phase instead of tracking again every frame since the last one.
   void writeLast(const RunSession& run) {
     if (every <= 0 || !error.empty() || run.reconstruction().framesProcessed() <= frames_at_last) return;
-    write(run, std::chrono::steady_clock::now());
+    try {
+      write(run, std::chrono::steady_clock::now());
+    } catch (const std::exception& e) {  // a spare: the outputs come whatever it meets
+      error = oneLineMessage(e);
+      printWarning(error + "; the session's outputs are written without it");
+    }
   }
 
  private:
@@ -347,8 +352,9 @@ int finishGrab(const LiveStats& stats, const GrabPlan& plan, const GrabSource& s
       recording_error = oneLineMessage(e);
     }
   }
-  // Only over a recording that is whole on the disk: a checkpoint names the recording's frames.
-  if (session && recording_error.empty()) checkpoints.writeLast(*session);
+  // Only after a session that ended well (a failed one keeps no checkpoint it would be refused by next
+  // time), over a recording that is whole on the disk: a checkpoint names the recording's frames.
+  if (session && stats.ok() && recording_error.empty()) checkpoints.writeLast(*session);
   try {
     // The grab's own counts before the reconstruction's outputs, which may fail after a failed run.
     writeFileAtomically((fs::path(args.out) / "grab-summary.txt").string(),

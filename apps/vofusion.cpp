@@ -207,6 +207,12 @@ std::string mostFrequentRejection(const Reconstruction& rec) {
   return most == why.end() ? "no reason recorded" : toString(most->first);
 }
 
+// A run that fails once its frames are read: none had depth, or none was tracked. Resumed from a
+// checkpoint it would fail again, and the checkpoint would bar the same folder to the next run.
+bool failsAfterItsFrames(const FrameLoop& loop, const Reconstruction& rec) {
+  return !loop.interrupted() && (loop.frames_with_depth == 0 || rec.lostFrames() >= loop.done);
+}
+
 // --resume <checkpoint>: the run's state from it, and the frames it had processed read again for the
 // outputs (poses.rawlog, ground truth): the loop then goes on with the next frame.
 FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession& run) {
@@ -274,10 +280,9 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   // --resume goes on from here: after a stop, and after the last frame, where the loop-closed
   // re-fusion and the meshing still come (a crash or a batch system's kill there would otherwise cost
   // every frame since the last periodic checkpoint; resumed, the run goes straight to its end phase).
-  // Not after a run that fails once its frames are read (no depth, no frame tracked): resumed, it would
-  // fail again, and the checkpoint would bar the same folder to the next run.
-  const bool fails = !loop.interrupted() && (loop.frames_with_depth == 0 || rec.lostFrames() >= loop.done);
-  if (loop.done > 0 && !fails && plan.checkpoint_every > 0 && loop.done != checkpointed_at) checkpoint();
+  // Not after a run that fails there.
+  if (loop.done > 0 && !failsAfterItsFrames(loop, rec) && plan.checkpoint_every > 0 && loop.done != checkpointed_at)
+    checkpoint();
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + frame_loop_seconds;
 }
@@ -313,6 +318,10 @@ int body(int argc, char** argv) {
     return stoppedBeforeTheFirstFrame("vofusion", plan.resume ? *plan.resume + " is kept" : "");
   }
   if (loop.done == 0) throw InputError(source->name(), "no frames to process");
+  if (failsAfterItsFrames(loop, run.reconstruction()) && loop.checkpoints > 0) {
+    std::error_code ec;
+    std::filesystem::remove(plan.checkpoint_path, ec);  // its own periodic one
+  }
   if (loop.frames_with_depth == 0 && !loop.interrupted())
     throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
   if (run.reconstruction().lostFrames() >= loop.done && !loop.interrupted())

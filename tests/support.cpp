@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -154,6 +155,7 @@ std::string errorWithoutPrivileges(const std::function<void()>& fn) {
   bool timed_out = false;
   for (;;) {
     const int ready = ::poll(&p, 1, 60000);
+    if (ready < 0 && errno == EINTR) continue;
     if (ready <= 0) {
       timed_out = ready == 0;
       break;

@@ -163,6 +163,15 @@ TEST(ColourRegistration, RegisteredCamerasKeepTheirPixels) {
   EXPECT_NEAR(sensed.fx, rig.depth_cam.fx, 1e-9);
   EXPECT_NEAR(sensed.cx, rig.depth_cam.cx, 1e-9);
   EXPECT_EQ(sensed.width, rig.depth_cam.width);
+  // Each axis scales on its own (a driver computes both focal lengths from the fields of view: Kinect's
+  // 1280x1024 colour over 640x480 depth counts as registered): the depth gets its own, fy too.
+  const CameraIntrinsics wide = rig.depth_cam.resizedTo(640, 512);
+  Rig other = rig;
+  other.colour_cam = wide;
+  ASSERT_TRUE(colourRegisteredToDepth(*observe(other)));
+  const CameraIntrinsics per_axis = sensorObservationToFrame(*observe(other), "sensor").camera;
+  EXPECT_NEAR(per_axis.fy, rig.depth_cam.fy, 1e-9);
+  EXPECT_NEAR(per_axis.cy, rig.depth_cam.cy, 1e-9);
   // Rows of another aspect (640x512 over 320x240, f twice the depth's): resized, a row went up to 8
   // pixels off at the top and bottom. Re-projected, every pixel is the wall's.
   rig.colour_cam.height = 512, rig.colour_cam.cy = 255.5;

@@ -84,6 +84,24 @@ CameraIntrinsics CameraIntrinsics::scaled(double s) const {
   return c;
 }
 
+CameraIntrinsics CameraIntrinsics::resizedTo(int cols, int rows) const {
+  CameraIntrinsics c = *this;
+  const double sx = double(cols) / width, sy = double(rows) / height;
+  c.width = cols;
+  c.height = rows;
+  c.fx = fx * sx;
+  c.fy = fy * sy;
+  c.cx = (cx + 0.5) * sx - 0.5;
+  c.cy = (cy + 0.5) * sy - 0.5;
+  return c;
+}
+
+bool CameraIntrinsics::writtenFor(int cols, int rows) const {
+  if (width <= 0 || height <= 0 || (width == cols && height == rows)) return true;
+  const auto offCentre = [&](int w, int h) { return std::abs((cx + 0.5) / w - 0.5) + std::abs((cy + 0.5) / h - 0.5); };
+  return offCentre(cols, rows) <= offCentre(width, height);
+}
+
 void CameraIntrinsics::validate(const std::string& origin) const {
   std::ostringstream why;
   if (!(fx > 0 && fy > 0)) why << "focal length must be positive (fx=" << fx << ", fy=" << fy << ")";

@@ -175,27 +175,18 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
 }  // namespace
 
 namespace {
-// How far a principal point lies from the centre of a w x h image, in image widths and heights.
-double offCentre(const CameraIntrinsics& c, int w, int h) {
-  return std::abs((c.cx + 0.5) / w - 0.5) + std::abs((c.cy + 0.5) / h - 0.5);
-}
-
 // The depth camera's parameters for the range image's own size (cols x rows). They state the size they
 // were calibrated at: a range image of another size with the same aspect (a 320x240 stream of a camera
 // calibrated at 640x480) takes them scaled; taken as they were, the focal length was twice the image's.
-// Unless their size fields are stale: a principal point nearer the stored image's centre than its own
-// size's says they were written for the stored image (MRPT's TCamera starts out at 640x480, and a
-// writer may fill in only the intrinsics).
+// Unless they were written for the stored image whatever size they state (CameraIntrinsics::writtenFor).
 CameraIntrinsics depthCameraOf(const CObservation3DRangeScan& obs, int cols, int rows, const std::string& origin) {
   CameraIntrinsics c = CameraIntrinsics::fromMrpt(obs.cameraParams);
-  const bool stated = c.width > 0 && c.height > 0 && (c.width != cols || c.height != rows);
-  if (stated && offCentre(c, c.width, c.height) < offCentre(c, cols, rows)) {
-    const double s = double(cols) / c.width;
-    if (std::abs(c.height * s - rows) > 0.5)
+  if (!c.writtenFor(cols, rows)) {
+    if (std::abs(c.height * double(cols) / c.width - rows) > 0.5)
       throw InputError(origin, "the depth camera's parameters are for " + std::to_string(c.width) + "x" +
                                    std::to_string(c.height) + " images, the range image is " + std::to_string(cols) +
                                    "x" + std::to_string(rows) + " (another aspect: give --intrinsics)");
-    c = c.scaled(s);
+    c = c.resizedTo(cols, rows);
   }
   c.width = cols;
   c.height = rows;

@@ -106,9 +106,9 @@ Frame sensorObservationToFrame(const mrpt::obs::CObservation3DRangeScan& obs, co
   if (obs.cameraParamsIntensity.fx() > 0 && colourRegisteredToDepth(obs)) {
     camera = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
     // Registered at another resolution (1280x960 colour over 640x480 depth): the same camera scaled to
-    // the depth image; taken as it was, the depth was tracked at twice its focal length.
-    const int cols = static_cast<int>(obs.rangeImage.cols());
-    if (camera->width > 0 && camera->width != cols) camera = camera->scaled(double(cols) / camera->width);
+    // the depth image, axis by axis; taken as it was, the depth was tracked at twice its focal length.
+    const int cols = static_cast<int>(obs.rangeImage.cols()), rows = static_cast<int>(obs.rangeImage.rows());
+    if (!camera->writtenFor(cols, rows)) camera = camera->resizedTo(cols, rows);
   }
   try {
     return frameFromObservation(obs, origin, camera);

@@ -469,7 +469,7 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
     r.failure = why;
     return false;
   };
-  r.matches = r.inliers = 0;
+  r.matches = r.inliers = r.inlier_keypoints = 0;
   r.rms_error = 0.0;
   // Correspondences: current point -> a reference point in the reference frame's coordinates. Older
   // frames' points come through their pose in the reference frame, so one fit sees every match.

@@ -32,7 +32,7 @@ Eigen::Isometry3d MotionHistory::motionOver(double offset) const {
 void MotionHistory::remember(std::size_t index, double timestamp, const Eigen::Isometry3d& T, bool measured) {
   if (measured && have_measured_ && timestamp > measured_timestamp_) {
     last_motion_ = measured_pose_.inverse() * T;
-    last_motion_dt_ = timestamp - measured_timestamp_;
+    last_motion_dt_ = std::max(timestamp - measured_timestamp_, kShortestFrameInterval);
   }
   if (measured) {
     measured_pose_ = T;

@@ -25,6 +25,12 @@ struct CameraIntrinsics {
 
   // Scaled to another resolution (pyramids, reduced-resolution detectors).
   CameraIntrinsics scaled(double s) const;
+  // For an image of cols x rows, each axis scaled from the size these state (pixel centres kept).
+  CameraIntrinsics resizedTo(int cols, int rows) const;
+  // Whether these intrinsics were written for an image of cols x rows, whatever size they state: their
+  // principal point lies nearer that image's centre than their stated size's (a writer that filled in
+  // only the intrinsics left MRPT's default 640x480), or they state that size.
+  bool writtenFor(int cols, int rows) const;
   // Sanity check (positive focal lengths, principal point inside the image); throws InputError.
   void validate(const std::string& origin) const;
 

@@ -14,8 +14,8 @@
 namespace vofusion {
 
 // The shortest time between two frames a sensor gives: the fastest RGB-D depth stream (RealSense D4xx at
-// 300 fps). Stamps closer than this are the clock's doing, not the camera's: a turn over them is no
-// turn rate.
+// 300 fps). Stamps closer than this are the clock's doing, not the camera's: a motion over them is no
+// velocity, a turn no turn rate.
 constexpr double kShortestFrameInterval = 1.0 / 300.0;  // s
 
 // Motion m scaled to s times its length (rotation angle and translation).
