@@ -475,6 +475,17 @@ TEST(LoopVerifier, SamePlaceAfterALapIsAcceptedWithTheTruePose) {
   EXPECT_LT(dt, 0.015);
   EXPECT_LT(dr, 0.5);
   EXPECT_NEAR(c.correction_m, 0.2, 0.05);
+  // The covariance the graph takes is isotropic in translation and in rotation, so its axes' order
+  // (the graph's: translation, rotation vector; a fit's: x y z yaw pitch roll) cannot mix them up.
+  const Eigen::Matrix<double, 6, 6> cov = c.covariance;
+  const Eigen::Matrix<double, 6, 6> diagonal = cov.diagonal().asDiagonal();
+  EXPECT_TRUE(cov == diagonal);
+  EXPECT_GT(cov(0, 0), 0.0);
+  EXPECT_GT(cov(3, 3), 0.0);
+  for (int i = 1; i < 3; ++i) {
+    EXPECT_EQ(cov(i, i), cov(0, 0));
+    EXPECT_EQ(cov(i + 3, i + 3), cov(3, 3));
+  }
   // Verified again through the same cache: both pyramids are reused, the answer is the same.
   EXPECT_EQ(pyramids.misses(), 2u);
   const LoopCheck again = verifyLoop(older, newer, LoopParams(), pyramids);

@@ -60,8 +60,7 @@ bool fitFeatures(const Keyframe& older, const Keyframe& newer, const LoopParams&
   if (!fit.ok) return c.reason = fit.failure, false;
   if (c.inliers < P.min_inliers) return c.reason = "too few inliers", false;
   if (secondaryExtent(src, fit.inliers) < 0.1) return c.reason = "degenerate inliers", false;
-  c.T_old_new = fit.T;
-  c.covariance = fit.covariance;
+  c.T_old_new = fit.T;  // its covariance (x y z yaw pitch roll) is not the graph's: see LoopCheck
   for (const int i : fit.inliers) {
     inliers.camera_points.push_back(src[std::size_t(i)]);
     inliers.world_points.push_back(dst[std::size_t(i)]);

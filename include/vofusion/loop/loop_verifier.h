@@ -27,7 +27,11 @@ struct LoopCheck {
   double icp_rms = 0.0;          // m
   double icp_condition = 0.0;    // smallest / largest eigenvalue of the ICP system (depth-scaled)
   Eigen::Isometry3d T_old_new = Eigen::Isometry3d::Identity();  // the newer keyframe in the older's camera frame
-  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();  // x y z yaw pitch roll
+  // Of T_old_new, in the pose graph's order (GraphEdge: translation, then rotation vector), set on
+  // acceptance: the same on the three translation axes and on the three rotation axes, so the order
+  // and frame of the axes do not matter. Anything per axis needs converting from a fit's (x y z yaw
+  // pitch roll) first.
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
   double correction_m = 0.0, correction_deg = 0.0;  // measured vs tracked relative pose
 };
 
