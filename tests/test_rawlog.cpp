@@ -974,6 +974,29 @@ TEST(RawlogBadInput, AnUnreadableExternalFileSaysWhyNotCorrupt) {
   }
 }
 
+// An external colour image that is a JPEG with a marker inside its image data (a byte turned into
+// 0xFF): libjpeg decodes it to smeared blocks and MRPT's CImage handed them on as the frame's colour.
+TEST(RawlogBadInput, ACorruptButCompleteExternalJpegNamesItsDamage) {
+  const auto frames = simFrames(2);
+  const std::string dir = test::tempDir("rawlog_corrupt_jpeg");
+  const std::string path = writeRawlog(dir + "/e.rawlog", frames, {});
+  std::string victim;
+  for (const auto& e : fs::directory_iterator(dir + "/e_Images"))
+    if (e.path().string().find("000001") != std::string::npos && e.path().extension() == ".png") victim = e.path();
+  ASSERT_FALSE(victim.empty());
+  std::vector<std::uint8_t> jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", cv::imread(victim), jpeg));
+  std::size_t scan = 2;  // the entropy-coded data: after the SOS segment
+  while (scan + 4 <= jpeg.size() && jpeg[scan + 1] != 0xDA) scan += 2 + ((std::size_t(jpeg[scan + 2]) << 8) | jpeg[scan + 3]);
+  ASSERT_LT(scan + 4, jpeg.size());
+  scan += 2 + ((std::size_t(jpeg[scan + 2]) << 8) | jpeg[scan + 3]);
+  const std::size_t mid = scan + (jpeg.size() - scan) / 2;
+  jpeg[mid] = 0xFF, jpeg[mid + 1] = 0xD3;
+  ASSERT_FALSE(cv::imdecode(jpeg, cv::IMREAD_COLOR).empty());  // what CImage passed on
+  std::ofstream(victim, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(jpeg.data()), std::streamsize(jpeg.size()));
+  expectInputError(path, victim + ": cannot load intensity image (Corrupt JPEG data: premature end of data segment)");
+}
+
 TEST(RawlogBadInput, MissingExternalImageNamesTheImage) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_bad_ext");

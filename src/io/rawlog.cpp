@@ -1,6 +1,7 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/colour_registration.h"
 #include "vofusion/io/external_files.h"
+#include "vofusion/io/jpeg_decode.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/io/png_encode.h"
 #include "record_file.h"
@@ -146,8 +147,10 @@ bool colourRegisteredToDepth(const mrpt::obs::CObservation3DRangeScan& obs) {
 namespace {
 // The observation's colour as 8-bit BGR pixels of the frame's own. An external 8-bit RGB PNG (what
 // rawlogs hold) is decoded by io/png_decode, as a TUM folder's (libpng and zlib were 6 % of a kinfu
-// run's CPU in the reader: bench/results/2026-12-04-rawlog-input-speed.md); anything else goes through
-// MRPT's CImage, after the damage check (libpng prints its own line for a file cut short or damaged).
+// run's CPU in the reader: bench/results/2026-12-04-rawlog-input-speed.md); an external JPEG by
+// io/jpeg_decode, whose corrupt data is damage (CImage, through cv::imread, passes its smeared picture
+// on); anything else goes through MRPT's CImage, after the damage check (libpng prints its own line for
+// a file cut short or damaged).
 // `plain`: whether the pixels are exactly the plain PNG's (its bytes can stand for them).
 cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, bool& plain) {
   const bool external = obs.intensityImage.isExternallyStored();
@@ -163,6 +166,9 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
       throw InputError(file, "cannot load intensity image (" + why + ")");
     if (const std::string damage = imageFileDamage(file); !damage.empty())
       throw InputError(file, "cannot load intensity image (" + damage + ")");
+    const JpegDecode jpeg = readJpeg(file);
+    if (!jpeg.damage.empty()) throw InputError(file, "cannot load intensity image (" + jpeg.damage + ")");
+    if (!jpeg.image.empty()) return asBgr8(jpeg.image);
   }
   cv::Mat img;
   try {

@@ -15,6 +15,7 @@
 
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/io/jpeg_decode.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/core/text_file.h"
 
@@ -139,6 +140,16 @@ cv::Mat readPlainPngOfSize(const std::string& path, const char* what, int expect
     throw InputError(path, sizeMismatch(what, header, expect_w, expect_h));
   return image;
 }
+
+// The same for a JPEG, whose corrupt data (a hole in the middle, flipped bytes) is the file's damage:
+// cv::imread returns such a picture with grey or smeared blocks. Empty for what is no JPEG.
+cv::Mat readJpegOfSize(const std::string& path, const char* what, int expect_w, int expect_h) {
+  const JpegDecode jpeg = readJpeg(path, cv::Size(expect_w, expect_h));
+  if (!jpeg.damage.empty()) throw InputError(path, std::string("cannot decode ") + what + " image (" + jpeg.damage + ")");
+  if (!jpeg.header.empty() && jpeg.header != cv::Size(expect_w, expect_h))
+    throw InputError(path, sizeMismatch(what, jpeg.header, expect_w, expect_h));
+  return jpeg.image;
+}
 }  // namespace
 
 cv::Mat loadRawDepthPng(const std::string& path, int expect_w, int expect_h, const std::string& unit_note) {
@@ -173,7 +184,8 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
     requireReadable(path, "colour");
     if (const std::string damage = imageFileDamage(path); !damage.empty())
       throw InputError(path, "cannot decode colour image (" + damage + ")");
-    img = readImage(path, cv::IMREAD_UNCHANGED, "colour");
+    img = readJpegOfSize(path, "colour", expect_w, expect_h);
+    if (img.empty()) img = readImage(path, cv::IMREAD_UNCHANGED, "colour");
     // A depth map read as colour gave a grey picture of the depths, tracked as if it were colour.
     if (img.type() == CV_16UC1)
       throw InputError(path, "colour image is 16-bit single channel, as depth images are (a depth file in rgb.txt?)");

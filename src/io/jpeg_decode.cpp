@@ -1,0 +1,143 @@
+#include "vofusion/io/jpeg_decode.h"
+
+#include <csetjmp>
+#include <cstdio>
+#include <vector>
+
+#include <jpeglib.h>
+#include <jerror.h>
+
+#include "vofusion/io/png_decode.h"
+
+namespace vofusion {
+
+namespace {
+
+constexpr double kMaxPixels = double(1 << 30);  // OpenCV's OPENCV_IO_MAX_IMAGE_PIXELS default
+
+// libjpeg reports through its error manager: a fatal error ends in error_exit (which must not return:
+// it jumps back to the decoding function), a warning goes to emit_message at level -1.
+struct ErrorManager {
+  jpeg_error_mgr pub;
+  std::jmp_buf jump;
+  char message[JMSG_LENGTH_MAX] = "";
+  bool damaged = false;
+};
+
+// The warnings that mean the pixels are not the file's: the entropy-coded data did not decode as it
+// was written. Not among them: an unknown JFIF revision or Adobe transform, a bad ICC marker (metadata).
+bool isCorruptData(int code) {
+  switch (code) {
+    case JWRN_ARITH_BAD_CODE:
+    case JWRN_BOGUS_PROGRESSION:
+    case JWRN_EXTRANEOUS_DATA:
+    case JWRN_HIT_MARKER:
+    case JWRN_HUFF_BAD_CODE:
+    case JWRN_JPEG_EOF:
+    case JWRN_MUST_RESYNC:
+    case JWRN_NOT_SEQUENTIAL:
+      return true;
+    default:
+      return false;
+  }
+}
+
+void onError(j_common_ptr cinfo) {
+  auto* err = reinterpret_cast<ErrorManager*>(cinfo->err);
+  (*cinfo->err->format_message)(cinfo, err->message);
+  err->damaged = true;
+  std::longjmp(err->jump, 1);
+}
+
+// Nothing is printed: the damage is the caller's one line. The first corrupt-data warning is kept.
+void onMessage(j_common_ptr cinfo, int level) {
+  auto* err = reinterpret_cast<ErrorManager*>(cinfo->err);
+  if (level >= 0 || err->damaged || !isCorruptData(cinfo->err->msg_code)) return;
+  (*cinfo->err->format_message)(cinfo, err->message);
+  err->damaged = true;
+}
+
+// The decompressor's life, with the two steps libjpeg may jump out of. Between setjmp and a jump no
+// object with a destructor is made: the Mat is allocated between the two steps.
+class Decompressor {
+ public:
+  Decompressor(const std::uint8_t* data, std::size_t size) {
+    cinfo_.err = jpeg_std_error(&err_.pub);
+    err_.pub.error_exit = onError;
+    err_.pub.emit_message = onMessage;
+    jpeg_create_decompress(&cinfo_);
+    jpeg_mem_src(&cinfo_, data, static_cast<unsigned long>(size));
+  }
+  ~Decompressor() { jpeg_destroy_decompress(&cinfo_); }
+  Decompressor(const Decompressor&) = delete;
+  Decompressor& operator=(const Decompressor&) = delete;
+
+  // The header read and the output set: BGR for colour, grey for grey; false for another colour space.
+  bool readHeader() {
+    if (setjmp(err_.jump)) return false;
+    jpeg_read_header(&cinfo_, TRUE);
+    header_read_ = true;
+    if (cinfo_.jpeg_color_space == JCS_GRAYSCALE) cinfo_.out_color_space = JCS_GRAYSCALE;
+    else if (cinfo_.jpeg_color_space == JCS_YCbCr || cinfo_.jpeg_color_space == JCS_RGB) cinfo_.out_color_space = JCS_EXT_BGR;
+    else return false;
+    return true;
+  }
+  int rows() const { return header_read_ ? int(cinfo_.image_height) : 0; }
+  int cols() const { return header_read_ ? int(cinfo_.image_width) : 0; }
+  int channels() const { return cinfo_.out_color_space == JCS_GRAYSCALE ? 1 : 3; }
+
+  // The rows decoded into `image`, which has the header's size; false when libjpeg gave up.
+  bool decodeInto(cv::Mat& image) {
+    if (setjmp(err_.jump)) return false;
+    jpeg_start_decompress(&cinfo_);
+    while (cinfo_.output_scanline < cinfo_.output_height) {
+      JSAMPROW row = image.ptr<JSAMPLE>(int(cinfo_.output_scanline));
+      jpeg_read_scanlines(&cinfo_, &row, 1);
+    }
+    jpeg_finish_decompress(&cinfo_);  // reads to the end-of-image marker: warnings past the last row
+    return true;
+  }
+
+  bool damaged() const { return err_.damaged; }
+  std::string message() const { return err_.message; }
+
+ private:
+  ErrorManager err_;
+  jpeg_decompress_struct cinfo_{};
+  bool header_read_ = false;
+};
+
+}  // namespace
+
+JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expect) {
+  JpegDecode out;
+  if (size < 3 || data[0] != 0xFF || data[1] != 0xD8 || data[2] != 0xFF) return out;
+  Decompressor d(data, size);
+  const bool supported = d.readHeader();
+  if (d.damaged()) {
+    out.damage = d.message();
+    return out;
+  }
+  out.header = cv::Size(d.cols(), d.rows());
+  if (!expect.empty() && out.header != expect) return out;
+  if (expect.empty() && double(d.cols()) * d.rows() > kMaxPixels) {
+    out.damage = "its header states " + std::to_string(d.cols()) + "x" + std::to_string(d.rows()) + " pixels, more than any image";
+    return out;
+  }
+  if (!supported) return out;
+  cv::Mat image(d.rows(), d.cols(), d.channels() == 1 ? CV_8UC1 : CV_8UC3);
+  if (!d.decodeInto(image) || d.damaged()) {
+    out.damage = d.damaged() ? d.message() : "libjpeg stopped";
+    return out;
+  }
+  out.image = image;
+  return out;
+}
+
+JpegDecode readJpeg(const std::string& path, cv::Size expect) {
+  thread_local std::vector<std::uint8_t> bytes;
+  if (!readWholeFile(path, bytes)) return {};
+  return decodeJpeg(bytes.data(), bytes.size(), expect);
+}
+
+}  // namespace vofusion

@@ -1,0 +1,133 @@
+// decodeJpeg gives cv::imdecode's pixels for a whole JPEG (colour and grey), and names the damage of
+// one whose entropy-coded data libjpeg finds corrupt, where cv::imdecode returns a picture with smeared
+// blocks; the TUM reader refuses such a colour image in one line naming the file.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "support.h"
+#include "vofusion/core/errors.h"
+#include "vofusion/io/jpeg_decode.h"
+#include "vofusion/io/tum_source.h"
+
+using namespace vofusion;
+
+namespace {
+
+// A picture with edges and texture at every scale (random noise alone is one the encoder cannot
+// compress, a flat one decodes to no data worth damaging).
+cv::Mat scene(int w, int h) {
+  cv::Mat img(h, w, CV_8UC3);
+  cv::RNG rng(7);
+  rng.fill(img, cv::RNG::UNIFORM, 0, 255);
+  cv::GaussianBlur(img, img, cv::Size(0, 0), 3.0);
+  for (int k = 0; k < 40; ++k)
+    cv::rectangle(img, cv::Rect(rng.uniform(0, w), rng.uniform(0, h), rng.uniform(4, w / 3), rng.uniform(4, h / 3)),
+                  cv::Scalar(rng.uniform(0, 255), rng.uniform(0, 255), rng.uniform(0, 255)), rng.uniform(-1, 3));
+  return img;
+}
+
+std::vector<std::uint8_t> encodeJpeg(const cv::Mat& img) {
+  std::vector<std::uint8_t> jpeg;
+  EXPECT_TRUE(cv::imencode(".jpg", img, jpeg, {cv::IMWRITE_JPEG_QUALITY, 90}));
+  return jpeg;
+}
+
+// Where the first scan's entropy-coded data starts (after the SOS segment).
+std::size_t scanStart(const std::vector<std::uint8_t>& jpeg) {
+  for (std::size_t at = 2; at + 4 <= jpeg.size();) {
+    const std::size_t len = (std::size_t(jpeg[at + 2]) << 8) | jpeg[at + 3];
+    if (jpeg[at + 1] == 0xDA) return at + 2 + len;
+    at += 2 + len;
+  }
+  ADD_FAILURE() << "no scan";
+  return jpeg.size();
+}
+
+bool same(const cv::Mat& a, const cv::Mat& b) {
+  return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0;
+}
+
+std::string writeFile(const std::string& path, const std::vector<std::uint8_t>& bytes) {
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  return path;
+}
+
+// The two ways a whole-looking file is damaged that libjpeg notices: bytes lost from the middle (a
+// copy or a transfer with a hole), and a marker where data should be (a byte turned into 0xFF).
+std::vector<std::uint8_t> withHole(std::vector<std::uint8_t> jpeg) {
+  const std::size_t scan = scanStart(jpeg), mid = scan + (jpeg.size() - scan) / 2;
+  jpeg.erase(jpeg.begin() + std::ptrdiff_t(mid), jpeg.begin() + std::ptrdiff_t(mid + (jpeg.size() - scan) / 4));
+  return jpeg;
+}
+std::vector<std::uint8_t> withMarkerInside(std::vector<std::uint8_t> jpeg) {
+  const std::size_t mid = scanStart(jpeg) + (jpeg.size() - scanStart(jpeg)) / 2;
+  jpeg[mid] = 0xFF, jpeg[mid + 1] = 0xD3;  // RST3 in a scan without restart intervals
+  return jpeg;
+}
+
+}  // namespace
+
+TEST(JpegDecode, AWholeJpegDecodesToOpenCvsPixels) {
+  const cv::Mat colour = scene(160, 120);
+  cv::Mat grey;
+  cv::cvtColor(colour, grey, cv::COLOR_BGR2GRAY);
+  for (const cv::Mat& img : {colour, grey}) {
+    const std::vector<std::uint8_t> jpeg = encodeJpeg(img);
+    const JpegDecode d = decodeJpeg(jpeg.data(), jpeg.size());
+    EXPECT_EQ(d.damage, "");
+    EXPECT_EQ(d.header, cv::Size(160, 120));
+    EXPECT_TRUE(same(d.image, cv::imdecode(jpeg, cv::IMREAD_UNCHANGED))) << img.channels() << " channels";
+  }
+  const std::vector<std::uint8_t> png{0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  const JpegDecode none = decodeJpeg(png.data(), png.size());  // no JPEG: the caller's cv::imread decides
+  EXPECT_TRUE(none.image.empty());
+  EXPECT_EQ(none.damage, "");
+  EXPECT_TRUE(none.header.empty());
+}
+
+TEST(JpegDecode, CorruptDataIsDamageWhereOpenCvGivesAPicture) {
+  const std::vector<std::uint8_t> whole = encodeJpeg(scene(320, 240));
+  const cv::Mat clean = cv::imdecode(whole, cv::IMREAD_UNCHANGED);
+  for (const auto& damaged : {withHole(whole), withMarkerInside(whole)}) {
+    const cv::Mat passed = cv::imdecode(damaged, cv::IMREAD_UNCHANGED);  // what cv::imread hands on
+    ASSERT_EQ(passed.size(), clean.size());
+    EXPECT_FALSE(same(passed, clean));
+    const JpegDecode d = decodeJpeg(damaged.data(), damaged.size());
+    EXPECT_TRUE(d.image.empty());
+    EXPECT_EQ(d.damage.rfind("Corrupt JPEG data: ", 0), 0u) << d.damage;
+  }
+}
+
+// A header stating another size is not decoded (the reader refuses it before allocating its pixels).
+TEST(JpegDecode, AnotherSizeIsToldByTheHeaderAlone) {
+  const std::vector<std::uint8_t> jpeg = encodeJpeg(scene(160, 120));
+  const JpegDecode d = decodeJpeg(jpeg.data(), jpeg.size(), cv::Size(640, 480));
+  EXPECT_EQ(d.header, cv::Size(160, 120));
+  EXPECT_TRUE(d.image.empty());
+  EXPECT_EQ(d.damage, "");
+}
+
+TEST(TumImages, ACorruptButCompleteJpegIsRefusedInOneLine) {
+  const std::string dir = test::tempDir("tum_corrupt_jpeg");
+  const std::vector<std::uint8_t> whole = encodeJpeg(scene(320, 240));
+  EXPECT_EQ(loadColour(writeFile(dir + "/whole.jpg", whole), 320, 240).size(), cv::Size(320, 240));
+  const std::string damaged = writeFile(dir + "/damaged.jpg", withHole(whole));
+  try {
+    loadColour(damaged, 320, 240);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(damaged + ": cannot decode colour image (Corrupt JPEG data: ", 0), 0u) << e.what();
+  }
+  try {
+    loadColour(dir + "/whole.jpg", 640, 480);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), dir + "/whole.jpg: colour image is 320x240, expected 640x480");
+  }
+}
