@@ -326,3 +326,27 @@ TEST(CameraFiles, DepthFramesLeftUnpairedAreSaid) {
             std::string::npos)
       << said;
 }
+
+// A driver that repeats a frame lists one depth file at two stamps; both are paired (each depth line is
+// a frame) and none is said to be unused (counted by file name, 4 of 8 were).
+TEST(CameraFiles, ADepthFileListedTwiceIsTwoPairedFrames) {
+  const std::string dir = test::tempDir("cam_repeated") + "/seq";
+  fs::create_directories(dir + "/rgb");
+  fs::create_directories(dir + "/depth");
+  std::ofstream rgb(dir + "/rgb.txt"), depth(dir + "/depth.txt");
+  for (int i = 0; i < 8; ++i) {
+    const std::string t = cv::format("%.6f", i / 30.0), file = cv::format("depth/%d.png", i / 2);
+    cv::imwrite(dir + "/" + file, cv::Mat(240, 320, CV_16UC1, cv::Scalar(5000)));
+    depth << t << " " << file << "\n";
+    cv::imwrite(dir + "/rgb/" + t + ".png", cv::Mat(240, 320, CV_8UC3, cv::Scalar(90, 120, 150)));
+    rgb << t << " rgb/" << t << ".png\n";
+  }
+  rgb.close(), depth.close();
+  SourceOptions so;
+  so.intrinsics = "262.5,262.5,159.5,119.5";
+  testing::internal::CaptureStderr();
+  const TumFolderSource src(dir, so);
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(src.size(), 8u);
+  EXPECT_EQ(said.find("are not used"), std::string::npos) << said;
+}

@@ -7,7 +7,6 @@
 #include <optional>
 #include <filesystem>
 #include <fstream>
-#include <set>
 #include <sstream>
 
 #include <opencv2/core/persistence.hpp>
@@ -363,11 +362,11 @@ cv::Size colourImageSize(const std::string& folder, const std::vector<TumAssocia
 
 // Depth frames no colour frame pairs with are not used: said when they are more than one in ten (a colour
 // camera at half the depth's rate halved the frames tracked without a word; TUM's lists leave one or two).
+// associate() uses each depth line at most once, so the pairs count the lines used (by file name, a
+// file listed at two stamps, as a driver repeating a frame writes, was one used and one not).
 void warnOfUnpairedDepth(const std::string& depth_list, const std::vector<TumEntry>& depth,
                          const std::vector<TumAssociation>& pairs, double max_diff) {
-  std::set<std::string> used;
-  for (const TumAssociation& a : pairs) used.insert(a.depth.file);
-  const std::size_t unpaired = depth.size() - std::min(depth.size(), used.size());
+  const std::size_t unpaired = depth.size() - std::min(depth.size(), pairs.size());
   if (unpaired * 10 <= depth.size()) return;
   char within[32];
   std::snprintf(within, sizeof within, "%g", max_diff);
