@@ -300,18 +300,19 @@ TEST(CameraFiles, AccelerometerUpMatchesGroundTruthUp) {
   }
 }
 
-// Depth frames no colour frame pairs with are not used, which is said when they are many: a colour
-// camera at 15 Hz beside depth at 30 Hz halved the frames tracked without a word.
-TEST(CameraFiles, DepthFramesLeftUnpairedAreSaid) {
-  const std::string dir = test::tempDir("cam_rates") + "/seq";
+namespace {
+// A TUM folder of 8 frames at 30 Hz, 320x240: depth line i names depth_file(i) (written), and a colour
+// frame at the same stamp when with_colour(i). Returns the frames its source pairs, and what it printed.
+template <class DepthFile, class WithColour>
+std::pair<std::size_t, std::string> openEightFrames(const std::string& dir, DepthFile depth_file, WithColour with_colour) {
   fs::create_directories(dir + "/rgb");
   fs::create_directories(dir + "/depth");
   std::ofstream rgb(dir + "/rgb.txt"), depth(dir + "/depth.txt");
   for (int i = 0; i < 8; ++i) {
-    const std::string t = cv::format("%.6f", i / 30.0);
-    cv::imwrite(dir + "/depth/" + t + ".png", cv::Mat(240, 320, CV_16UC1, cv::Scalar(5000)));
-    depth << t << " depth/" << t << ".png\n";
-    if (i % 2) continue;  // colour at half the rate
+    const std::string t = cv::format("%.6f", i / 30.0), file = depth_file(i, t);
+    cv::imwrite(dir + "/" + file, cv::Mat(240, 320, CV_16UC1, cv::Scalar(5000)));
+    depth << t << " " << file << "\n";
+    if (!with_colour(i)) continue;
     cv::imwrite(dir + "/rgb/" + t + ".png", cv::Mat(240, 320, CV_8UC3, cv::Scalar(90, 120, 150)));
     rgb << t << " rgb/" << t << ".png\n";
   }
@@ -320,8 +321,17 @@ TEST(CameraFiles, DepthFramesLeftUnpairedAreSaid) {
   so.intrinsics = "262.5,262.5,159.5,119.5";
   testing::internal::CaptureStderr();
   const TumFolderSource src(dir, so);
-  const std::string said = testing::internal::GetCapturedStderr();
-  EXPECT_EQ(src.size(), 4u);
+  return {src.size(), testing::internal::GetCapturedStderr()};
+}
+}  // namespace
+
+// Depth frames no colour frame pairs with are not used, which is said when they are many: a colour
+// camera at 15 Hz beside depth at 30 Hz halved the frames tracked without a word.
+TEST(CameraFiles, DepthFramesLeftUnpairedAreSaid) {
+  const std::string dir = test::tempDir("cam_rates") + "/seq";
+  const auto [frames, said] = openEightFrames(
+      dir, [](int, const std::string& t) { return "depth/" + t + ".png"; }, [](int i) { return i % 2 == 0; });
+  EXPECT_EQ(frames, 4u);
   EXPECT_NE(said.find(dir + "/depth.txt: 4 of its 8 depth frames have no colour frame within 0.02 s and are not used"),
             std::string::npos)
       << said;
@@ -330,23 +340,9 @@ TEST(CameraFiles, DepthFramesLeftUnpairedAreSaid) {
 // A driver that repeats a frame lists one depth file at two stamps; both are paired (each depth line is
 // a frame) and none is said to be unused (counted by file name, 4 of 8 were).
 TEST(CameraFiles, ADepthFileListedTwiceIsTwoPairedFrames) {
-  const std::string dir = test::tempDir("cam_repeated") + "/seq";
-  fs::create_directories(dir + "/rgb");
-  fs::create_directories(dir + "/depth");
-  std::ofstream rgb(dir + "/rgb.txt"), depth(dir + "/depth.txt");
-  for (int i = 0; i < 8; ++i) {
-    const std::string t = cv::format("%.6f", i / 30.0), file = cv::format("depth/%d.png", i / 2);
-    cv::imwrite(dir + "/" + file, cv::Mat(240, 320, CV_16UC1, cv::Scalar(5000)));
-    depth << t << " " << file << "\n";
-    cv::imwrite(dir + "/rgb/" + t + ".png", cv::Mat(240, 320, CV_8UC3, cv::Scalar(90, 120, 150)));
-    rgb << t << " rgb/" << t << ".png\n";
-  }
-  rgb.close(), depth.close();
-  SourceOptions so;
-  so.intrinsics = "262.5,262.5,159.5,119.5";
-  testing::internal::CaptureStderr();
-  const TumFolderSource src(dir, so);
-  const std::string said = testing::internal::GetCapturedStderr();
-  EXPECT_EQ(src.size(), 8u);
+  const auto [frames, said] = openEightFrames(
+      test::tempDir("cam_repeated") + "/seq", [](int i, const std::string&) { return cv::format("depth/%d.png", i / 2); },
+      [](int) { return true; });
+  EXPECT_EQ(frames, 8u);
   EXPECT_EQ(said.find("are not used"), std::string::npos) << said;
 }

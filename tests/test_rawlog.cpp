@@ -903,6 +903,13 @@ TEST(Rawlog, ObservationsFormatRejectsActions) {
 }
 
 namespace {
+// The external file (".png" colour, ".bin" range) of frame 1 in a rawlog dir/e.rawlog; empty if none.
+std::string secondFramesFile(const std::string& dir, const std::string& extension) {
+  for (const auto& e : fs::directory_iterator(dir + "/e_Images"))
+    if (e.path().string().find("000001") != std::string::npos && e.path().extension() == extension) return e.path();
+  return {};
+}
+
 void expectInputError(const std::string& path, const std::string& needle, const SourceOptions& so = {}) {
   try {
     RawlogSource src(path, so);
@@ -958,9 +965,7 @@ TEST(RawlogBadInput, AnUnreadableExternalFileSaysWhyNotCorrupt) {
   for (const std::string kind : {".png", ".bin"}) {
     const std::string dir = test::tempDir("rawlog_unreadable_ext" + kind);
     const std::string path = writeRawlog(dir + "/e.rawlog", frames, {});
-    std::string victim;
-    for (const auto& e : fs::directory_iterator(dir + "/e_Images"))
-      if (e.path().string().find("000001") != std::string::npos && e.path().extension() == kind) victim = e.path();
+    const std::string victim = secondFramesFile(dir, kind);
     ASSERT_FALSE(victim.empty()) << kind;
     fs::permissions(victim, fs::perms::none);
     const std::string said = test::errorWithoutPrivileges([&] {
@@ -980,9 +985,7 @@ TEST(RawlogBadInput, ACorruptButCompleteExternalJpegNamesItsDamage) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_corrupt_jpeg");
   const std::string path = writeRawlog(dir + "/e.rawlog", frames, {});
-  std::string victim;
-  for (const auto& e : fs::directory_iterator(dir + "/e_Images"))
-    if (e.path().string().find("000001") != std::string::npos && e.path().extension() == ".png") victim = e.path();
+  const std::string victim = secondFramesFile(dir, ".png");
   ASSERT_FALSE(victim.empty());
   std::vector<std::uint8_t> jpeg;
   ASSERT_TRUE(cv::imencode(".jpg", cv::imread(victim), jpeg));
@@ -1001,9 +1004,7 @@ TEST(RawlogBadInput, MissingExternalImageNamesTheImage) {
   const auto frames = simFrames(2);
   const std::string dir = test::tempDir("rawlog_bad_ext");
   const std::string path = writeRawlog(dir + "/e.rawlog", frames, {});
-  std::string victim;
-  for (const auto& e : fs::directory_iterator(dir + "/e_Images"))
-    if (e.path().string().find("000001") != std::string::npos && e.path().extension() == ".png") victim = e.path();
+  const std::string victim = secondFramesFile(dir, ".png");
   ASSERT_FALSE(victim.empty());
   fs::remove(victim);
   expectInputError(path, fs::path(victim).filename().string());
