@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -104,6 +105,48 @@ TEST(JpegDecode, CorruptDataIsDamageWhereOpenCvGivesAPicture) {
   }
 }
 
+// What libjpeg warns of but is no damage: zero bytes before the end marker (some MJPEG cameras pad every
+// frame so), zeros between header segments, and a baseline scan whose spectral bytes are zero (libjpeg
+// corrects them). Each decodes to the whole file's pixels.
+TEST(JpegDecode, PaddingAndCorrectedScanParametersAreNoDamage) {
+  const std::vector<std::uint8_t> whole = encodeJpeg(scene(160, 120));
+  const cv::Mat clean = cv::imdecode(whole, cv::IMREAD_UNCHANGED);
+  auto padded = whole;
+  padded.insert(padded.end() - 2, 16, std::uint8_t(0));
+  auto spaced = whole;
+  const std::size_t dqt = std::string(whole.begin(), whole.end()).find("\xFF\xDB");
+  ASSERT_NE(dqt, std::string::npos);
+  spaced.insert(spaced.begin() + std::ptrdiff_t(dqt), 4, std::uint8_t(0));
+  auto zero_se = whole;
+  const std::size_t sos = std::string(whole.begin(), whole.end()).find("\xFF\xDA");
+  ASSERT_NE(sos, std::string::npos);
+  zero_se[sos + 4 + 1 + 2 * whole[sos + 4] + 1] = 0;  // Se: after the length, Ns, the components and Ss
+  for (const auto& bytes : {padded, spaced, zero_se}) {
+    const JpegDecode d = decodeJpeg(bytes.data(), bytes.size());
+    EXPECT_EQ(d.damage, "");
+    EXPECT_TRUE(same(d.image, clean));
+  }
+}
+
+// A bit flipped in the scan that leaves the decoder short of its end: the rest of the data is
+// discarded before the end marker ("extraneous bytes"), and the picture is another one.
+TEST(JpegDecode, ImageDataLeftOverAtTheEndIsDamage) {
+  const std::vector<std::uint8_t> whole = encodeJpeg(scene(320, 240));
+  const cv::Mat clean = cv::imdecode(whole, cv::IMREAD_UNCHANGED);
+  const std::size_t start = scanStart(whole) + (whole.size() - scanStart(whole)) / 3;
+  int found = 0;
+  for (std::size_t at = start; at < start + 400 && found < 3; ++at) {
+    auto flipped = whole;
+    flipped[at] ^= 0x10;
+    const JpegDecode d = decodeJpeg(flipped.data(), flipped.size());
+    if (d.damage.find("extraneous bytes") == std::string::npos) continue;
+    ++found;
+    EXPECT_TRUE(d.image.empty());
+    EXPECT_FALSE(same(cv::imdecode(flipped, cv::IMREAD_UNCHANGED), clean)) << "byte " << at;
+  }
+  EXPECT_EQ(found, 3) << "no flip among 400 bytes left data over";
+}
+
 // A header stating another size is not decoded (the reader refuses it before allocating its pixels).
 TEST(JpegDecode, AnotherSizeIsToldByTheHeaderAlone) {
   const std::vector<std::uint8_t> jpeg = encodeJpeg(scene(160, 120));
@@ -124,6 +167,12 @@ TEST(TumImages, ACorruptButCompleteJpegIsRefusedInOneLine) {
   } catch (const InputError& e) {
     EXPECT_EQ(std::string(e.what()).rfind(damaged + ": cannot decode colour image (Corrupt JPEG data: ", 0), 0u) << e.what();
   }
+  // The recording's size comes from a JPEG that decodes whole, and libjpeg prints no line of its own.
+  const std::string small = writeFile(dir + "/small.jpg", encodeJpeg(scene(160, 120)));
+  testing::internal::CaptureStderr();
+  const std::optional<cv::Size> size = recordingImageSize({damaged, small});
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+  EXPECT_EQ(size, std::optional<cv::Size>(cv::Size(160, 120)));
   try {
     loadColour(dir + "/whole.jpg", 640, 480);
     FAIL() << "no error";

@@ -997,7 +997,7 @@ TEST(RawlogBadInput, ACorruptButCompleteExternalJpegNamesItsDamage) {
   jpeg[mid] = 0xFF, jpeg[mid + 1] = 0xD3;
   ASSERT_FALSE(cv::imdecode(jpeg, cv::IMREAD_COLOR).empty());  // what CImage passed on
   std::ofstream(victim, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(jpeg.data()), std::streamsize(jpeg.size()));
-  expectInputError(path, victim + ": cannot load intensity image (Corrupt JPEG data: premature end of data segment)");
+  expectInputError(path, victim + ": cannot load intensity image (Corrupt JPEG data: ");
 }
 
 TEST(RawlogBadInput, MissingExternalImageNamesTheImage) {

@@ -2,6 +2,7 @@
 
 #include <csetjmp>
 #include <cstdio>
+#include <exception>
 #include <vector>
 
 #include <jpeglib.h>
@@ -22,24 +23,39 @@ struct ErrorManager {
   std::jmp_buf jump;
   char message[JMSG_LENGTH_MAX] = "";
   bool damaged = false;
+  bool in_scan = false;  // past the header: extraneous bytes before a marker are the image data's
 };
 
 // The warnings that mean the pixels are not the file's: the entropy-coded data did not decode as it
-// was written. Not among them: an unknown JFIF revision or Adobe transform, a bad ICC marker (metadata).
+// was written. Not among them: an unknown JFIF revision or Adobe transform, a bad ICC marker
+// (metadata), and a scan's parameters libjpeg corrects (baseline files with zero spectral bytes
+// decode to their pixels, "Invalid SOS parameters for sequential JPEG").
 bool isCorruptData(int code) {
   switch (code) {
     case JWRN_ARITH_BAD_CODE:
-    case JWRN_BOGUS_PROGRESSION:
     case JWRN_EXTRANEOUS_DATA:
     case JWRN_HIT_MARKER:
     case JWRN_HUFF_BAD_CODE:
     case JWRN_JPEG_EOF:
     case JWRN_MUST_RESYNC:
-    case JWRN_NOT_SEQUENTIAL:
       return true;
     default:
       return false;
   }
+}
+
+// Extraneous bytes before a marker are the bytes just before the source's position (libjpeg has
+// synchronised it to the marker's first 0xFF, in the memory it reads). Zeros alone are padding: some
+// MJPEG cameras write a few before the end marker of every frame, whose pixels are whole. In the
+// header they are padding between segments, whatever they hold.
+bool isPadding(j_common_ptr cinfo, const ErrorManager& err) {
+  if (!err.in_scan) return true;
+  const auto* src = reinterpret_cast<j_decompress_ptr>(cinfo)->src;
+  const long count = cinfo->err->msg_parm.i[0];
+  const std::uint8_t* end = src->next_input_byte;
+  for (long k = 1; k <= count; ++k)
+    if (end[-k] != 0) return false;
+  return true;
 }
 
 void onError(j_common_ptr cinfo) {
@@ -52,29 +68,31 @@ void onError(j_common_ptr cinfo) {
 // Nothing is printed: the damage is the caller's one line. The first corrupt-data warning is kept.
 void onMessage(j_common_ptr cinfo, int level) {
   auto* err = reinterpret_cast<ErrorManager*>(cinfo->err);
-  if (level >= 0 || err->damaged || !isCorruptData(cinfo->err->msg_code)) return;
+  const int code = cinfo->err->msg_code;
+  if (level >= 0 || err->damaged || !isCorruptData(code)) return;
+  if (code == JWRN_EXTRANEOUS_DATA && isPadding(cinfo, *err)) return;
   (*cinfo->err->format_message)(cinfo, err->message);
   err->damaged = true;
 }
 
-// The decompressor's life, with the two steps libjpeg may jump out of. Between setjmp and a jump no
-// object with a destructor is made: the Mat is allocated between the two steps.
+// The decompressor's life, with the two steps libjpeg may jump out of (its creation is in the first).
+// Between setjmp and a jump no object with a destructor is made: the Mat is allocated between them.
 class Decompressor {
  public:
-  Decompressor(const std::uint8_t* data, std::size_t size) {
+  Decompressor() {
     cinfo_.err = jpeg_std_error(&err_.pub);
     err_.pub.error_exit = onError;
     err_.pub.emit_message = onMessage;
-    jpeg_create_decompress(&cinfo_);
-    jpeg_mem_src(&cinfo_, data, static_cast<unsigned long>(size));
   }
-  ~Decompressor() { jpeg_destroy_decompress(&cinfo_); }
+  ~Decompressor() { jpeg_destroy_decompress(&cinfo_); }  // nothing to free before it was created (mem NULL)
   Decompressor(const Decompressor&) = delete;
   Decompressor& operator=(const Decompressor&) = delete;
 
   // The header read and the output set: BGR for colour, grey for grey; false for another colour space.
-  bool readHeader() {
+  bool readHeader(const std::uint8_t* data, std::size_t size) {
     if (setjmp(err_.jump)) return false;
+    jpeg_create_decompress(&cinfo_);
+    jpeg_mem_src(&cinfo_, data, static_cast<unsigned long>(size));
     jpeg_read_header(&cinfo_, TRUE);
     header_read_ = true;
     if (cinfo_.jpeg_color_space == JCS_GRAYSCALE) cinfo_.out_color_space = JCS_GRAYSCALE;
@@ -88,6 +106,7 @@ class Decompressor {
 
   // The rows decoded into `image`, which has the header's size; false when libjpeg gave up.
   bool decodeInto(cv::Mat& image) {
+    err_.in_scan = true;
     if (setjmp(err_.jump)) return false;
     jpeg_start_decompress(&cinfo_);
     while (cinfo_.output_scanline < cinfo_.output_height) {
@@ -107,13 +126,15 @@ class Decompressor {
   bool header_read_ = false;
 };
 
+bool startsAsJpeg(const std::uint8_t* p, std::size_t n) { return n >= 3 && p[0] == 0xFF && p[1] == 0xD8 && p[2] == 0xFF; }
+
 }  // namespace
 
 JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expect) {
   JpegDecode out;
-  if (size < 3 || data[0] != 0xFF || data[1] != 0xD8 || data[2] != 0xFF) return out;
-  Decompressor d(data, size);
-  const bool supported = d.readHeader();
+  if (!startsAsJpeg(data, size)) return out;
+  Decompressor d;
+  const bool supported = d.readHeader(data, size);
   if (d.damaged()) {
     out.damage = d.message();
     return out;
@@ -125,7 +146,13 @@ JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expec
     return out;
   }
   if (!supported) return out;
-  cv::Mat image(d.rows(), d.cols(), d.channels() == 1 ? CV_8UC1 : CV_8UC3);
+  cv::Mat image;
+  try {
+    image.create(d.rows(), d.cols(), d.channels() == 1 ? CV_8UC1 : CV_8UC3);
+  } catch (const std::exception&) {  // cv::Exception or std::bad_alloc: the file's size is the problem
+    out.damage = "its header states " + std::to_string(d.cols()) + "x" + std::to_string(d.rows()) + " pixels, more than memory holds";
+    return out;
+  }
   if (!d.decodeInto(image) || d.damaged()) {
     out.damage = d.damaged() ? d.message() : "libjpeg stopped";
     return out;
@@ -135,6 +162,13 @@ JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expec
 }
 
 JpegDecode readJpeg(const std::string& path, cv::Size expect) {
+  // Its first bytes first: a PNG is not read whole again to be told apart.
+  std::uint8_t head[3];
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return {};
+  const bool read = std::fread(head, 1, sizeof head, f) == sizeof head;
+  std::fclose(f);
+  if (!read || !startsAsJpeg(head, sizeof head)) return {};
   thread_local std::vector<std::uint8_t> bytes;
   if (!readWholeFile(path, bytes)) return {};
   return decodeJpeg(bytes.data(), bytes.size(), expect);

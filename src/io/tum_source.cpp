@@ -337,6 +337,11 @@ std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths
   }
   for (const std::string& path : paths) {
     if (!regular(path) || !imageFileDamage(path).empty()) continue;
+    // A JPEG as loadColour decodes it: one whose data libjpeg finds corrupt gives no size (nor a line
+    // of libjpeg's own).
+    const JpegDecode jpeg = readJpeg(path);
+    if (!jpeg.image.empty()) return jpeg.image.size();
+    if (!jpeg.damage.empty()) continue;
     try {
       // As loadColour reads it (IMREAD_UNCHANGED ignores an EXIF orientation): IMREAD_COLOR turned a
       // JPEG tagged "rotate 90" to 480x640, and every 640x480 frame was then refused as the wrong size.

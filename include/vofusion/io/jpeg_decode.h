@@ -2,7 +2,10 @@
 // JPEG decoding that tells a damaged image from a whole one. libjpeg decodes a JPEG whose entropy-coded
 // data is corrupt (a hole in the middle of the file, bytes flipped) to grey or smeared blocks, prints
 // "Corrupt JPEG data: ..." to stderr and returns the picture; cv::imread hands it on as a good frame.
-// Here the same decoder (libjpeg-turbo) counts its own corrupt-data warnings as the file's damage.
+// Here the same decoder (libjpeg-turbo) counts its own corrupt-data warnings as the file's damage:
+// a bad Huffman or arithmetic code, a data segment ended early, image data left over before a marker,
+// a lost restart marker, the file ended early. Not damage: zero bytes before a marker (padding some
+// MJPEG cameras write in every frame), bytes between header segments, scan parameters libjpeg corrects.
 // JPEG has no checksum: damage that decodes without a warning is not seen. Of 1000 random damages to
 // a TUM frame's JPEG (a bit flipped, 1-64 bytes cut, 16 bytes zeroed) libjpeg warned on 379; of the
 // 621 it passed, 368 changed the picture (by over 1 level a pixel on average): Huffman codes mostly
