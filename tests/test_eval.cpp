@@ -167,6 +167,22 @@ TEST(Eval, TooFewPosesNamesTheShortTrajectory) {
   EXPECT_EQ(log.rfind("rgbd-eval: error: " + dir + "/gt.txt: only 2 poses", 0), 0u) << log;
 }
 
+// Stamps that never meet: the message gives both spans, and a power of 1000 between them is named as
+// another unit (ROS 2 and EuRoC write nanoseconds: "do the timestamps match?" alone left the user to find it).
+TEST(Eval, StampsThatNeverMeetAreShownWithTheirUnit) {
+  const Trajectory gt = wavy(1305031002.0);  // from 1305031102 s
+  Trajectory nanoseconds = gt, elsewhere = gt;
+  for (auto& p : nanoseconds) p.timestamp *= 1e9;
+  for (auto& p : elsewhere) p.timestamp += 100.0;
+  const std::string ns = computeAte(gt, nanoseconds).message, later = computeAte(gt, elsewhere).message;
+  EXPECT_EQ(ns.rfind("only 0 poses associated within 0.02 s (need 3; do the timestamps match?: the ground truth's run from 1305031102 to ", 0), 0u) << ns;
+  EXPECT_NE(ns.find(", the estimate's from 1.305031102e+18 to "), std::string::npos) << ns;
+  EXPECT_NE(ns.find("(the estimate's in nanoseconds?))"), std::string::npos) << ns;
+  EXPECT_NE(computeAte(nanoseconds, gt).message.find("(the ground truth's in nanoseconds?))"), std::string::npos);
+  EXPECT_NE(later.find("the estimate's from 1305031202 to "), std::string::npos) << later;
+  EXPECT_EQ(later.find("seconds?"), std::string::npos) << later;
+}
+
 TEST(Eval, AssociationTolerance) {
   const Trajectory gt = wavy();
   const Trajectory late = wavy(0.5);  // 0.5 s off: only overlapping stamps 1/30 s grid -> none within 0.02

@@ -96,6 +96,30 @@ std::vector<std::pair<std::size_t, std::size_t>> associateTrajectories(const Tra
   return out;
 }
 
+namespace {
+// What the two trajectories' stamps span, for a user whose stamps do not meet: another unit (ROS 2
+// and EuRoC write nanoseconds), a recording's own clock against the benchmark's, another sequence.
+std::string stampSpans(const Trajectory& gt, const Trajectory& est) {
+  const auto span = [](const Trajectory& t) {
+    const auto [lo, hi] = std::minmax_element(t.begin(), t.end(), [](const StampedPose& a, const StampedPose& b) {
+      return a.timestamp < b.timestamp;
+    });
+    return std::pair(lo->timestamp, hi->timestamp);
+  };
+  const auto [g0, g1] = span(gt);
+  const auto [e0, e1] = span(est);
+  char text[160];
+  std::snprintf(text, sizeof text, ": the ground truth's run from %.10g to %.10g, the estimate's from %.10g to %.10g", g0, g1, e0, e1);
+  std::string said = text;
+  // Starts a power of 1000 apart (within 1 %): the same clock in other units.
+  for (const auto& [factor, unit] : {std::pair(1e3, "milli"), std::pair(1e6, "micro"), std::pair(1e9, "nano")}) {
+    if (g0 > 0 && e0 > 0 && std::abs(e0 / g0 / factor - 1) < 0.01) said += std::string(" (the estimate's in ") + unit + "seconds?)";
+    if (g0 > 0 && e0 > 0 && std::abs(g0 / e0 / factor - 1) < 0.01) said += std::string(" (the ground truth's in ") + unit + "seconds?)";
+  }
+  return said;
+}
+}  // namespace
+
 AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt) {
   AteResult r;
   const auto pairs = associateTrajectories(gt, est, max_dt);
@@ -105,7 +129,7 @@ AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt)
     r.message = "only " + std::to_string(pairs.size()) + " poses associated within " + within + " s (need 3; ";
     if (gt.size() < 3) r.message += "the ground truth has " + std::to_string(gt.size()) + ")";
     else if (est.size() < 3) r.message += "the estimate has " + std::to_string(est.size()) + ")";
-    else r.message += "do the timestamps match?)";
+    else r.message += "do the timestamps match?" + stampSpans(gt, est) + ")";
     return r;
   }
   Eigen::Matrix3Xd src(3, pairs.size()), dst(3, pairs.size());
