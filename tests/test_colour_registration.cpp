@@ -1,11 +1,15 @@
 // A rawlog whose colour camera is not its depth camera (another pose, other intrinsics, another
 // size): colour is re-projected into the depth camera, not resized onto it.
 #include <cmath>
+#include <fstream>
+#include <vector>
 
 #include <mrpt/img/CImage.h>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "support.h"
+#include "vofusion/core/errors.h"
 #include "vofusion/io/colour_registration.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/live/live_source.h"
@@ -178,4 +182,42 @@ TEST(ColourRegistration, RegisteredCamerasKeepTheirPixels) {
   const auto taller = observe(rig);
   EXPECT_FALSE(colourRegisteredToDepth(*taller));
   EXPECT_GT(agreement(frameFromObservation(*taller, "taller.rawlog"), rig), 0.99);
+}
+
+// An external JPEG colour image of another size than its own camera's is refused by its header, in the
+// line an image decoded at that size gets (a 19 KB JPEG claiming 32768x32768 was decoded first: 3.2 GB
+// and 11 s).
+TEST(ColourRegistration, AnExternalJpegOfAnotherSizeThanItsCameraIsRefusedByItsHeader) {
+  Rig rig;
+  rig.depth_cam = CameraIntrinsics{}.scaled(0.5);
+  rig.colour_cam = CameraIntrinsics{};
+  rig.T_depth_colour.translation() = Eigen::Vector3d(0.052, 0, 0);
+  const auto obs = observe(rig);
+  ASSERT_FALSE(colourRegisteredToDepth(*obs));
+  const std::string dir = test::tempDir("colour_jpeg_size");
+  cv::Mat colour = obs->intensityImage.asCvMat<cv::Mat>(mrpt::img::DEEP_COPY);
+  ASSERT_TRUE(cv::imwrite(dir + "/whole.jpg", colour));
+  // Its frame header claiming 40000x40000 pixels (past OpenCV's limit: it would be refused as damage
+  // after the header's size, not as the camera's mismatch).
+  std::vector<std::uint8_t> jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", colour, jpeg));
+  const std::size_t sof = std::string(jpeg.begin(), jpeg.end()).find("\xFF\xC0");
+  ASSERT_NE(sof, std::string::npos);
+  for (const std::size_t k : {sof + 5, sof + 7}) jpeg[k] = 0x9C, jpeg[k + 1] = 0x40;  // height, width
+  std::ofstream(dir + "/huge.jpg", std::ios::binary).write(reinterpret_cast<const char*>(jpeg.data()), std::streamsize(jpeg.size()));
+  // Of the right size it gives the frame OpenCV's decoding of the file gives.
+  auto in_memory = observe(rig);
+  in_memory->intensityImage = mrpt::img::CImage(cv::imread(dir + "/whole.jpg"), mrpt::img::DEEP_COPY);
+  const Frame expected = frameFromObservation(*in_memory, "jpeg.rawlog");
+  obs->intensityImage.setExternalStorage(dir + "/whole.jpg");
+  const Frame got = frameFromObservation(*obs, "jpeg.rawlog");
+  EXPECT_EQ(cv::norm(got.rgb, expected.rgb, cv::NORM_INF), 0.0);
+  EXPECT_GT(agreement(got, rig), 0.85);  // JPEG's chroma at the paint's edges
+  obs->intensityImage.setExternalStorage(dir + "/huge.jpg");
+  try {
+    frameFromObservation(*obs, "jpeg.rawlog");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "jpeg.rawlog: colour image is 40000x40000, its camera parameters say 640x480");
+  }
 }

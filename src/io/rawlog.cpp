@@ -152,7 +152,13 @@ namespace {
 // on); anything else goes through MRPT's CImage, after the damage check (libpng prints its own line for
 // a file cut short or damaged).
 // `plain`: whether the pixels are exactly the plain PNG's (its bytes can stand for them).
-cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, bool& plain) {
+std::string colourSizeMismatch(cv::Size got, const CameraIntrinsics& colour_cam) {
+  return "colour image is " + std::to_string(got.width) + "x" + std::to_string(got.height) + ", its camera parameters say " +
+         std::to_string(colour_cam.width) + "x" + std::to_string(colour_cam.height);
+}
+
+// `colour_cam`: the colour camera the image must fit (not registered to the depth), else nullptr.
+cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, const CameraIntrinsics* colour_cam, bool& plain) {
   const bool external = obs.intensityImage.isExternallyStored();
   const std::string file = external ? obs.intensityImage.getExternalStorageFileAbsolutePath() : origin;
   plain = false;
@@ -166,8 +172,12 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
       throw InputError(file, "cannot load intensity image (" + why + ")");
     if (const std::string damage = imageFileDamage(file); !damage.empty())
       throw InputError(file, "cannot load intensity image (" + damage + ")");
-    const JpegDecode jpeg = readJpeg(file);
+    // A JPEG of another size than its camera's is refused by its header, before its pixels are allocated.
+    const cv::Size expect = colour_cam ? cv::Size(colour_cam->width, colour_cam->height) : cv::Size();
+    const JpegDecode jpeg = readJpeg(file, expect);
     if (!jpeg.damage.empty()) throw InputError(file, "cannot load intensity image (" + jpeg.damage + ")");
+    if (!expect.empty() && !jpeg.header.empty() && jpeg.header != expect)
+      throw InputError(origin, colourSizeMismatch(jpeg.header, *colour_cam));
     if (!jpeg.image.empty()) return asBgr8(jpeg.image);
   }
   cv::Mat img;
@@ -245,20 +255,22 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   }
 
   if (obs.hasIntensityImage) {
-    bool plain = false;
-    f.rgb = colourOf(obs, origin, plain);
     // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
     // depth camera. A registered one at another resolution (e.g. 1280x960 over 640x480) is resized.
     // Decided by the observation's own cameras, whatever the depth camera's given intrinsics (a sensor
     // registered in hardware passes its colour camera's, and registered it is).
-    if (!colourRegisteredToDepth(obs)) {
-      const CameraIntrinsics colour_cam = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
-      colour_cam.validate(origin + " (colour camera)");
-      if (colour_cam.width != f.rgb.cols || colour_cam.height != f.rgb.rows)
-        throw InputError(origin, "colour image is " + std::to_string(f.rgb.cols) + "x" + std::to_string(f.rgb.rows) +
-                                     ", its camera parameters say " + std::to_string(colour_cam.width) + "x" +
-                                     std::to_string(colour_cam.height));
-      f.rgb = colourInDepthCamera(f.rgb, f.depth, f.camera, colour_cam, colourFromDepth(obs));
+    const bool registered = colourRegisteredToDepth(obs);
+    std::optional<CameraIntrinsics> colour_cam;
+    if (!registered) {
+      colour_cam = CameraIntrinsics::fromMrpt(obs.cameraParamsIntensity);
+      colour_cam->validate(origin + " (colour camera)");
+    }
+    bool plain = false;
+    f.rgb = colourOf(obs, origin, colour_cam ? &*colour_cam : nullptr, plain);
+    if (colour_cam) {
+      if (colour_cam->width != f.rgb.cols || colour_cam->height != f.rgb.rows)
+        throw InputError(origin, colourSizeMismatch(f.rgb.size(), *colour_cam));
+      f.rgb = colourInDepthCamera(f.rgb, f.depth, f.camera, *colour_cam, colourFromDepth(obs));
     } else if (f.rgb.cols != cols || f.rgb.rows != rows) {
       cv::resize(f.rgb, f.rgb, cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
     } else if (plain) {
