@@ -175,6 +175,22 @@ ScopedTmpfs::ScopedTmpfs(const std::string& dir, const std::string& size) : dir_
   mounted_ = ::mount("tmpfs", dir.c_str(), "tmpfs", 0, ("size=" + size).c_str()) == 0;
 }
 
+std::size_t jpegScanStart(const std::vector<std::uint8_t>& jpeg) {
+  for (std::size_t at = 2; at + 4 <= jpeg.size();) {
+    const std::size_t len = (std::size_t(jpeg[at + 2]) << 8) | jpeg[at + 3];
+    if (jpeg[at + 1] == 0xDA) return at + 2 + len;
+    at += 2 + len;
+  }
+  return jpeg.size();
+}
+
+std::vector<std::uint8_t> jpegWithMarkerInside(std::vector<std::uint8_t> jpeg) {
+  const std::size_t scan = jpegScanStart(jpeg), mid = scan + (jpeg.size() - scan) / 2;
+  EXPECT_LT(scan + 4, jpeg.size()) << "no scan";
+  if (mid + 1 < jpeg.size()) jpeg[mid] = 0xFF, jpeg[mid + 1] = 0xD3;
+  return jpeg;
+}
+
 ScopedTmpfs::~ScopedTmpfs() {
   if (mounted_) ::umount(dir_.c_str());
 }

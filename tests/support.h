@@ -1,6 +1,7 @@
 #pragma once
 // Shared helpers for the test suite.
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -71,6 +72,12 @@ class ScopedTmpfs {
 // nobody when this one is root: a file made unreadable (chmod 000) is unreadable there too, where root
 // reads any file. Empty if the child could not be made or could not drop its rights.
 std::string errorWithoutPrivileges(const std::function<void()>& fn);
+// Where a JPEG's first scan's entropy-coded data starts (after its SOS segment); size() if none.
+std::size_t jpegScanStart(const std::vector<std::uint8_t>& jpeg);
+// The JPEG with a restart marker (RST3) written over two bytes in the middle of its scan, where the
+// file has no restart intervals: damage libjpeg always notices ("premature end of data segment"), and
+// cv::imdecode still gives a picture.
+std::vector<std::uint8_t> jpegWithMarkerInside(std::vector<std::uint8_t> jpeg);
 // A synthetic sequence's options at 320x240, which keeps the suite quick.
 sim::SimOptions quickSim(const std::string& scene, std::size_t frames, const std::string& trajectory = "smooth");
 // The first `count` frames of seq (all by default), rendered once, for a test that runs the same frames

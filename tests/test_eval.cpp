@@ -181,6 +181,13 @@ TEST(Eval, StampsThatNeverMeetAreShownWithTheirUnit) {
   EXPECT_NE(computeAte(nanoseconds, gt).message.find("(the ground truth's in nanoseconds?))"), std::string::npos);
   EXPECT_NE(later.find("the estimate's from 1305031202 to "), std::string::npos) << later;
   EXPECT_EQ(later.find("seconds?"), std::string::npos) << later;
+  // A clock from 0 (a simulator's) against the same in milliseconds: told by the ends.
+  Trajectory from_zero = gt, milliseconds;
+  for (auto& p : from_zero) p.timestamp -= gt.front().timestamp;
+  milliseconds = from_zero;
+  for (auto& p : milliseconds) p.timestamp *= 1e3;
+  const std::string ms = computeAte(from_zero, milliseconds).message;
+  EXPECT_NE(ms.find("(the estimate's in milliseconds?))"), std::string::npos) << ms;
 }
 
 TEST(Eval, AssociationTolerance) {

@@ -39,17 +39,6 @@ std::vector<std::uint8_t> encodeJpeg(const cv::Mat& img) {
   return jpeg;
 }
 
-// Where the first scan's entropy-coded data starts (after the SOS segment).
-std::size_t scanStart(const std::vector<std::uint8_t>& jpeg) {
-  for (std::size_t at = 2; at + 4 <= jpeg.size();) {
-    const std::size_t len = (std::size_t(jpeg[at + 2]) << 8) | jpeg[at + 3];
-    if (jpeg[at + 1] == 0xDA) return at + 2 + len;
-    at += 2 + len;
-  }
-  ADD_FAILURE() << "no scan";
-  return jpeg.size();
-}
-
 bool same(const cv::Mat& a, const cv::Mat& b) {
   return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0;
 }
@@ -60,18 +49,12 @@ std::string writeFile(const std::string& path, const std::vector<std::uint8_t>& 
 }
 
 // The two ways a whole-looking file is damaged that libjpeg notices: bytes lost from the middle (a
-// copy or a transfer with a hole), and a marker where data should be (a byte turned into 0xFF).
+// copy or a transfer with a hole), and a marker where data should be (test::jpegWithMarkerInside).
 std::vector<std::uint8_t> withHole(std::vector<std::uint8_t> jpeg) {
-  const std::size_t scan = scanStart(jpeg), mid = scan + (jpeg.size() - scan) / 2;
+  const std::size_t scan = test::jpegScanStart(jpeg), mid = scan + (jpeg.size() - scan) / 2;
   jpeg.erase(jpeg.begin() + std::ptrdiff_t(mid), jpeg.begin() + std::ptrdiff_t(mid + (jpeg.size() - scan) / 4));
   return jpeg;
 }
-std::vector<std::uint8_t> withMarkerInside(std::vector<std::uint8_t> jpeg) {
-  const std::size_t mid = scanStart(jpeg) + (jpeg.size() - scanStart(jpeg)) / 2;
-  jpeg[mid] = 0xFF, jpeg[mid + 1] = 0xD3;  // RST3 in a scan without restart intervals
-  return jpeg;
-}
-
 }  // namespace
 
 TEST(JpegDecode, AWholeJpegDecodesToOpenCvsPixels) {
@@ -95,7 +78,7 @@ TEST(JpegDecode, AWholeJpegDecodesToOpenCvsPixels) {
 TEST(JpegDecode, CorruptDataIsDamageWhereOpenCvGivesAPicture) {
   const std::vector<std::uint8_t> whole = encodeJpeg(scene(320, 240));
   const cv::Mat clean = cv::imdecode(whole, cv::IMREAD_UNCHANGED);
-  for (const auto& damaged : {withHole(whole), withMarkerInside(whole)}) {
+  for (const auto& damaged : {withHole(whole), test::jpegWithMarkerInside(whole)}) {
     const cv::Mat passed = cv::imdecode(damaged, cv::IMREAD_UNCHANGED);  // what cv::imread hands on
     ASSERT_EQ(passed.size(), clean.size());
     EXPECT_FALSE(same(passed, clean));
@@ -128,12 +111,35 @@ TEST(JpegDecode, PaddingAndCorrectedScanParametersAreNoDamage) {
   }
 }
 
+// A file with restart intervals, as MJPEG webcams write, with a few bytes left before restart markers
+// (zeros, or not): libjpeg resynchronises at each marker and the pixels are the whole file's. Every
+// frame of such a camera warns "extraneous bytes before marker 0xd<n>".
+TEST(JpegDecode, BytesBeforeARestartMarkerAreNoDamage) {
+  std::vector<std::uint8_t> whole;
+  ASSERT_TRUE(cv::imencode(".jpg", scene(320, 240), whole, {cv::IMWRITE_JPEG_QUALITY, 90, cv::IMWRITE_JPEG_RST_INTERVAL, 4}));
+  const cv::Mat clean = cv::imdecode(whole, cv::IMREAD_UNCHANGED);
+  std::vector<std::size_t> restarts;  // where each RSTn marker starts
+  for (std::size_t at = test::jpegScanStart(whole); at + 1 < whole.size(); ++at)
+    if (whole[at] == 0xFF && whole[at + 1] >= 0xD0 && whole[at + 1] <= 0xD7) restarts.push_back(at);
+  ASSERT_GT(restarts.size(), 20u);
+  for (const std::uint8_t fill : {0x00, 0xAB}) {
+    for (const std::size_t k : {restarts.size() / 4, restarts.size() / 2, restarts.size() - 1}) {
+      auto padded = whole;
+      padded.insert(padded.begin() + std::ptrdiff_t(restarts[k]), 2, fill);
+      ASSERT_TRUE(same(cv::imdecode(padded, cv::IMREAD_UNCHANGED), clean)) << "the padding changed the picture";
+      const JpegDecode d = decodeJpeg(padded.data(), padded.size());
+      EXPECT_EQ(d.damage, "") << int(fill) << " before restart " << k;
+      EXPECT_TRUE(same(d.image, clean));
+    }
+  }
+}
+
 // A bit flipped in the scan that leaves the decoder short of its end: the rest of the data is
 // discarded before the end marker ("extraneous bytes"), and the picture is another one.
 TEST(JpegDecode, ImageDataLeftOverAtTheEndIsDamage) {
   const std::vector<std::uint8_t> whole = encodeJpeg(scene(320, 240));
   const cv::Mat clean = cv::imdecode(whole, cv::IMREAD_UNCHANGED);
-  const std::size_t start = scanStart(whole) + (whole.size() - scanStart(whole)) / 3;
+  const std::size_t start = test::jpegScanStart(whole) + (whole.size() - test::jpegScanStart(whole)) / 3;
   int found = 0;
   for (std::size_t at = start; at < start + 400 && found < 3; ++at) {
     auto flipped = whole;

@@ -989,12 +989,7 @@ TEST(RawlogBadInput, ACorruptButCompleteExternalJpegNamesItsDamage) {
   ASSERT_FALSE(victim.empty());
   std::vector<std::uint8_t> jpeg;
   ASSERT_TRUE(cv::imencode(".jpg", cv::imread(victim), jpeg));
-  std::size_t scan = 2;  // the entropy-coded data: after the SOS segment
-  while (scan + 4 <= jpeg.size() && jpeg[scan + 1] != 0xDA) scan += 2 + ((std::size_t(jpeg[scan + 2]) << 8) | jpeg[scan + 3]);
-  ASSERT_LT(scan + 4, jpeg.size());
-  scan += 2 + ((std::size_t(jpeg[scan + 2]) << 8) | jpeg[scan + 3]);
-  const std::size_t mid = scan + (jpeg.size() - scan) / 2;
-  jpeg[mid] = 0xFF, jpeg[mid + 1] = 0xD3;
+  jpeg = test::jpegWithMarkerInside(jpeg);
   ASSERT_FALSE(cv::imdecode(jpeg, cv::IMREAD_COLOR).empty());  // what CImage passed on
   std::ofstream(victim, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(jpeg.data()), std::streamsize(jpeg.size()));
   expectInputError(path, victim + ": cannot load intensity image (Corrupt JPEG data: ");

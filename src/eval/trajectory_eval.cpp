@@ -111,10 +111,13 @@ std::string stampSpans(const Trajectory& gt, const Trajectory& est) {
   char text[160];
   std::snprintf(text, sizeof text, ": the ground truth's run from %.10g to %.10g, the estimate's from %.10g to %.10g", g0, g1, e0, e1);
   std::string said = text;
-  // Starts a power of 1000 apart (within 1 %): the same clock in other units.
+  // Starts a power of 1000 apart (within 1 %), or ends where a clock starts at 0 (a simulator's, a
+  // relative one): the same clock in other units.
+  const bool starts = g0 > 0 && e0 > 0;
+  const double ratio = starts ? e0 / g0 : (g1 > 0 && e1 > 0 ? e1 / g1 : 1.0);
   for (const auto& [factor, unit] : {std::pair(1e3, "milli"), std::pair(1e6, "micro"), std::pair(1e9, "nano")}) {
-    if (g0 > 0 && e0 > 0 && std::abs(e0 / g0 / factor - 1) < 0.01) said += std::string(" (the estimate's in ") + unit + "seconds?)";
-    if (g0 > 0 && e0 > 0 && std::abs(g0 / e0 / factor - 1) < 0.01) said += std::string(" (the ground truth's in ") + unit + "seconds?)";
+    if (std::abs(ratio / factor - 1) < 0.01) said += std::string(" (the estimate's in ") + unit + "seconds?)";
+    if (std::abs(1 / ratio / factor - 1) < 0.01) said += std::string(" (the ground truth's in ") + unit + "seconds?)";
   }
   return said;
 }

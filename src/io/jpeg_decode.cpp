@@ -1,5 +1,6 @@
 #include "vofusion/io/jpeg_decode.h"
 
+#include <algorithm>
 #include <csetjmp>
 #include <cstdio>
 #include <exception>
@@ -7,6 +8,9 @@
 
 #include <jpeglib.h>
 #include <jerror.h>
+#ifndef JCS_EXTENSIONS
+#error "io/jpeg_decode needs libjpeg-turbo (its JCS_EXT_BGR output): Debian's libjpeg-dev is it"
+#endif
 
 #include "vofusion/io/png_decode.h"
 
@@ -24,6 +28,7 @@ struct ErrorManager {
   char message[JMSG_LENGTH_MAX] = "";
   bool damaged = false;
   bool in_scan = false;  // past the header: extraneous bytes before a marker are the image data's
+  const std::uint8_t* data = nullptr;  // the file's bytes, which libjpeg reads in place
 };
 
 // The warnings that mean the pixels are not the file's: the entropy-coded data did not decode as it
@@ -44,15 +49,18 @@ bool isCorruptData(int code) {
   }
 }
 
-// Extraneous bytes before a marker are the bytes just before the source's position (libjpeg has
-// synchronised it to the marker's first 0xFF, in the memory it reads). Zeros alone are padding: some
-// MJPEG cameras write a few before the end marker of every frame, whose pixels are whole. In the
-// header they are padding between segments, whatever they hold.
+// Extraneous bytes that say nothing of the pixels. In the header: padding between segments, whatever
+// they hold. Before a restart marker: libjpeg resynchronises there, and MJPEG webcams leave a byte or
+// two before one in every frame, whose pixels are whole (the warning may name a later restart marker
+// than the one the bytes sit before, so their place is not checked). Before the end marker: zeros
+// alone, a camera's padding; they are the bytes just before the source's position (libjpeg has
+// synchronised it to the marker's first 0xFF, in the memory it reads).
 bool isPadding(j_common_ptr cinfo, const ErrorManager& err) {
-  if (!err.in_scan) return true;
-  const auto* src = reinterpret_cast<j_decompress_ptr>(cinfo)->src;
-  const long count = cinfo->err->msg_parm.i[0];
-  const std::uint8_t* end = src->next_input_byte;
+  const int marker = cinfo->err->msg_parm.i[1];
+  if (!err.in_scan || (marker >= 0xD0 && marker <= 0xD7)) return true;
+  const std::uint8_t* end = reinterpret_cast<j_decompress_ptr>(cinfo)->src->next_input_byte;
+  if (end < err.data) return false;  // libjpeg's own buffer (past the file's end): no place to check
+  const long count = std::min<long>(cinfo->err->msg_parm.i[0], end - err.data);
   for (long k = 1; k <= count; ++k)
     if (end[-k] != 0) return false;
   return true;
@@ -90,6 +98,7 @@ class Decompressor {
 
   // The header read and the output set: BGR for colour, grey for grey; false for another colour space.
   bool readHeader(const std::uint8_t* data, std::size_t size) {
+    err_.data = data;
     if (setjmp(err_.jump)) return false;
     jpeg_create_decompress(&cinfo_);
     jpeg_mem_src(&cinfo_, data, static_cast<unsigned long>(size));
@@ -110,6 +119,7 @@ class Decompressor {
     if (setjmp(err_.jump)) return false;
     jpeg_start_decompress(&cinfo_);
     while (cinfo_.output_scanline < cinfo_.output_height) {
+      if (err_.damaged) return false;  // the rest would be decoded for nothing
       JSAMPROW row = image.ptr<JSAMPLE>(int(cinfo_.output_scanline));
       jpeg_read_scanlines(&cinfo_, &row, 1);
     }

@@ -4,12 +4,14 @@
 // "Corrupt JPEG data: ..." to stderr and returns the picture; cv::imread hands it on as a good frame.
 // Here the same decoder (libjpeg-turbo) counts its own corrupt-data warnings as the file's damage:
 // a bad Huffman or arithmetic code, a data segment ended early, image data left over before a marker,
-// a lost restart marker, the file ended early. Not damage: zero bytes before a marker (padding some
-// MJPEG cameras write in every frame), bytes between header segments, scan parameters libjpeg corrects.
+// a lost restart marker, the file ended early. Not damage: bytes before a restart marker and zeros
+// before the end marker (MJPEG cameras leave such in every frame, whose pixels are whole), bytes between
+// header segments, scan parameters libjpeg corrects.
 // JPEG has no checksum: damage that decodes without a warning is not seen. Of 1000 random damages to
 // a TUM frame's JPEG (a bit flipped, 1-64 bytes cut, 16 bytes zeroed) libjpeg warned on 379; of the
-// 621 it passed, 368 changed the picture (by over 1 level a pixel on average): Huffman codes mostly
-// resynchronise within a few blocks (bench/results/2026-12-06-fourth-session.md).
+// 621 it passed, 368 changed the picture (by over 1 a pixel, the three channels' absolute differences
+// summed and averaged): Huffman codes mostly resynchronise within a few blocks
+// (bench/results/2026-12-06-fourth-session.md).
 #include <cstddef>
 #include <cstdint>
 #include <string>
