@@ -488,6 +488,26 @@ TEST(WorldModel, SpillFileThatCannotBeMadeAnswersNoPlace) {
   EXPECT_EQ(f.bytes(), 0u);
 }
 
+// A spill file at the most its records' places can say (1 TiB; 200 bytes here) fails as a full disk
+// does: what would go to it stays in RAM. A place past it was cut to 40 bits, and the record written
+// over the file's start.
+TEST(WorldModel, ASpillFileAtItsMostAnswersNoPlace) {
+  const std::string dir = test::tempDir("spill_file_full");
+  SpillFile f(dir, "the test's spill file", 200);
+  const SpillFile::Record a = *f.append(std::vector<std::uint8_t>(150, 1));
+  EXPECT_FALSE(f.append(std::vector<std::uint8_t>(60, 2)).has_value());
+  EXPECT_EQ(f.failure(), dir + ": the test's spill file is full: 200 bytes, the most a record's place can say");
+  EXPECT_EQ(f.read(a), std::vector<std::uint8_t>(150, 1));
+  EXPECT_FALSE(f.append(std::vector<std::uint8_t>(10, 3)).has_value());  // the first failure is kept
+  // The default is where a place stops fitting a Record.
+  volatile std::uint64_t last = SpillFile::kMaxFileBytes - 1, past = SpillFile::kMaxFileBytes;  // no constant folding
+  SpillFile::Record r{};
+  r.offset = last;
+  EXPECT_EQ(std::uint64_t(r.offset), SpillFile::kMaxFileBytes - 1);
+  r.offset = past;
+  EXPECT_EQ(std::uint64_t(r.offset), 0u);
+}
+
 // Walking back and forth over the same place: every brick taken back frees its place in the spill
 // file, so the file stays at the size of one pass instead of growing by a pass each time.
 TEST(WorldModel, SpillFileStaysAtTheSizeOfWhatIsStored) {

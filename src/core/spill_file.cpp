@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -15,7 +16,8 @@
 
 namespace vofusion {
 
-SpillFile::SpillFile(std::string dir, std::string what) : dir_(std::move(dir)), what_(std::move(what)) {}
+SpillFile::SpillFile(std::string dir, std::string what, std::uint64_t max_bytes)
+    : dir_(std::move(dir)), what_(std::move(what)), max_bytes_(std::min(max_bytes, kMaxFileBytes)) {}
 
 SpillFile::~SpillFile() {
   if (fd_ >= 0) ::close(fd_);
@@ -50,6 +52,15 @@ std::optional<SpillFile::Record> SpillFile::append(const std::vector<std::uint8_
     return std::nullopt;
   }
   const std::uint64_t at = place(bytes.size());
+  if (at + bytes.size() > max_bytes_) {
+    {
+      const std::lock_guard<std::mutex> lock(free_mu_);
+      free_bytes_ += bytes.size();
+      addFree(at, bytes.size());  // its place is free again, as the statistics count it
+    }
+    fail(folder_ + ": " + what_ + " is full: " + std::to_string(max_bytes_) + " bytes, the most a record's place can say");
+    return std::nullopt;
+  }
   std::size_t done = 0;
   while (done < bytes.size()) {
     const ssize_t w = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(at + done));

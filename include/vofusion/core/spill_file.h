@@ -25,14 +25,17 @@ class SpillFile {
     std::uint64_t length : 24;
   };
   static constexpr std::uint64_t kMaxRecordBytes = (std::uint64_t(1) << 24) - 1;
+  static constexpr std::uint64_t kMaxFileBytes = std::uint64_t(1) << 40;  // what a Record's offset can say
 
-  // what: names the file in errors ("the world model's spill file").
-  SpillFile(std::string dir, std::string what);
+  // what: names the file in errors ("the world model's spill file"). max_bytes: the file's size past
+  // which an append fails as a full disk does (kMaxFileBytes; less only in tests).
+  SpillFile(std::string dir, std::string what, std::uint64_t max_bytes = kMaxFileBytes);
   ~SpillFile();
   SpillFile(const SpillFile&) = delete;
   SpillFile& operator=(const SpillFile&) = delete;
 
-  // The record's place; std::nullopt when the file cannot be created or written (a full disk): the
+  // The record's place; std::nullopt when the file cannot be created or written (a full disk, or the
+  // file at max_bytes: a place past it was written over the file's start before): the
   // first failure is warned of once ("<folder>: cannot write <what>: <why>: what would go to it stays
   // in memory from now on") and kept (failure()), and every later append returns std::nullopt without
   // trying. The caller keeps in RAM what it could not spill, so nothing is lost. Throws
@@ -57,6 +60,7 @@ class SpillFile {
   std::uint64_t place(std::uint64_t size);  // where `size` bytes go: a free place, else the end
   void addFree(std::uint64_t offset, std::uint64_t size);
   std::string dir_, what_;
+  std::uint64_t max_bytes_;
   std::string folder_;  // where the file was made (dir_, or the temporary folder for "auto")
   mutable std::mutex open_mu_;
   std::string failure_;  // under open_mu_
