@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <csetjmp>
-#include <cstdio>
 #include <exception>
 #include <vector>
 
@@ -174,11 +173,7 @@ JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expec
 JpegDecode readJpeg(const std::string& path, cv::Size expect) {
   // Its first bytes first: a PNG is not read whole again to be told apart.
   std::uint8_t head[3];
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return {};
-  const bool read = std::fread(head, 1, sizeof head, f) == sizeof head;
-  std::fclose(f);
-  if (!read || !startsAsJpeg(head, sizeof head)) return {};
+  if (!readFileStart(path, head, sizeof head) || !startsAsJpeg(head, sizeof head)) return {};
   thread_local std::vector<std::uint8_t> bytes;
   if (!readWholeFile(path, bytes)) return {};
   return decodeJpeg(bytes.data(), bytes.size(), expect);

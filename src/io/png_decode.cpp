@@ -218,13 +218,17 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
          bytes[25] == 2;
 }
 
+bool readFileStart(const std::string& path, std::uint8_t* out, std::size_t n) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return false;
+  const bool read = std::fread(out, 1, n, f) == n;
+  std::fclose(f);
+  return read;
+}
+
 cv::Size pngHeaderSize(const std::string& path) {
   std::uint8_t h[24];
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return {};
-  const bool read = std::fread(h, 1, sizeof h, f) == sizeof h;
-  std::fclose(f);
-  return read ? headerSizeOf(h, sizeof h) : cv::Size();
+  return readFileStart(path, h, sizeof h) ? headerSizeOf(h, sizeof h) : cv::Size();
 }
 
 namespace {

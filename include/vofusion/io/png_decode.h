@@ -26,6 +26,9 @@ cv::Mat readPlainPng(const std::string& path, cv::Size expect = {}, cv::Size* he
 // The file's bytes into `bytes` (its storage reused); false when it cannot be read, is no regular file or
 // is larger than any image (256 MiB).
 bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes);
+// The file's first n bytes into `out`; false when it cannot be read or is shorter (nothing else read:
+// a file's kind is told by them).
+bool readFileStart(const std::string& path, std::uint8_t* out, std::size_t n);
 // Whether `bytes` is a PNG whose header says 8-bit RGB of width x height (nothing decoded): the
 // rawlog writer then copies a recording's colour PNG instead of encoding its pixels again.
 bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height);
