@@ -51,6 +51,16 @@ std::string tempDir(const std::string& name) {
   return p.lexically_normal().string();
 }
 
+int spillFileIn(const std::string& dir) {
+  const std::string prefix = (fs::weakly_canonical(dir) / "vofusion-spill-").string();
+  for (int fd = 3; fd < 1024; ++fd) {
+    char target[4096];
+    const ssize_t n = ::readlink(("/proc/self/fd/" + std::to_string(fd)).c_str(), target, sizeof target);
+    if (n > 0 && std::string(target, std::size_t(n)).rfind(prefix, 0) == 0) return fd;
+  }
+  return -1;
+}
+
 std::string app(const std::string& name) { return (fs::path(VOFUSION_BIN_DIR) / name).string(); }
 
 std::vector<std::string> lines(const std::string& text) {

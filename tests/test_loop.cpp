@@ -3,6 +3,7 @@
 // verification on rendered frames of the synthetic loop and look-alike scenes.
 #include <cstring>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -604,6 +605,50 @@ TEST(LoopKeyframeStore, ASpillFileThatCannotBeWrittenKeepsTheKeyframesInRam) {
     ASSERT_TRUE(k.features);
     EXPECT_EQ(cv::norm(k.features->descriptors, made[i].features->descriptors, cv::NORM_HAMMING), 0.0);
   }
+}
+
+// A spilled keyframe whose record cannot be read back (bytes damaged on the disk) comes back without
+// features and depth, from load() and from what a checkpoint writes: no loop is closed or relocalised at
+// it any more, nothing throws on the loop closer's thread, it is said once and counted; the others come
+// back whole.
+TEST(LoopKeyframeStore, AKeyframeWhoseRecordIsDamagedIsLostAloneAndSaidOnce) {
+  sim::SimOptions o;
+  o.scene = "loop";
+  o.frames = 30;
+  const sim::SyntheticSequence seq(o);
+  const std::string dir = test::tempDir("keyframe_spill_damaged");
+  KeyframeStore store(0, dir);  // no budget: all but the newest spilled
+  std::vector<Keyframe> made;
+  for (std::size_t i = 0; i < 3; ++i) {
+    made.push_back(keyframeOf(seq, 10 * i, pose(0.1 * double(i), 0, 0, 0), 0.1 * double(i), i));
+    store.add(made.back());
+  }
+  ASSERT_EQ(store.stats().spilled, 2u);
+  const int fd = test::spillFileIn(dir);
+  ASSERT_GE(fd, 0);
+  const std::vector<std::uint8_t> junk(64, 0xa5);
+  ASSERT_EQ(::pwrite(fd, junk.data(), junk.size(), 32), ssize_t(junk.size()));  // in keyframe 0's compressed depth
+  testing::internal::CaptureStderr();
+  for (int round = 0; round < 2; ++round) {
+    Keyframe k;
+    ASSERT_NO_THROW(k = store.load(0));
+    EXPECT_FALSE(k.features);
+    EXPECT_TRUE(k.depth.empty());
+    EXPECT_TRUE(k.tracked.isApprox(made[0].tracked));  // its pose stays: the pose graph holds it
+  }
+  Keyframe saved;
+  ASSERT_NO_THROW(decodeKeyframeData(store.data(0), saved));  // a checkpoint holds it as lost
+  EXPECT_FALSE(saved.features);
+  for (std::size_t i = 1; i < made.size(); ++i) {
+    const Keyframe k = store.load(i);
+    ASSERT_TRUE(k.features) << i;
+    EXPECT_EQ(cv::norm(k.depth, made[i].depth, cv::NORM_INF), 0.0);
+    EXPECT_EQ(store.data(i), encodeKeyframeData(made[i]));
+  }
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_NE(said.find(dir + ": cannot read a keyframe back (corrupt depth in the keyframes' spill file)"), std::string::npos) << said;
+  EXPECT_EQ(std::count(said.begin(), said.end(), '\n'), 1) << said;
+  EXPECT_EQ(store.stats().lost, 1u);
 }
 
 // Two places 3 m apart in the look-alike corridor look the same; the camera's tracked path says they

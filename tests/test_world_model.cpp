@@ -2,6 +2,7 @@
 // within its limit, the region-by-region mesh equals the one-shot one, and a saved map resumes.
 #include <sys/mman.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <csignal>
@@ -11,6 +12,7 @@
 #include <set>
 #include <unordered_map>
 #include <sstream>
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <thread>
@@ -405,6 +407,67 @@ TEST(WorldModel, ReadsSideBySideBesideHandOversGiveEveryBrickWhole) {
   EXPECT_EQ(missing.load(), 0);
   EXPECT_EQ(wrong.load(), 0);
   EXPECT_EQ(wm.stats().reloaded - reloaded_before, std::size_t(kReaders * kRounds) * kept.size());
+}
+
+namespace {
+bool neverObserved(const Brick& b) {
+  for (const Voxel& v : b.voxels)
+    if (v.weight != 0) return false;
+  return true;
+}
+}  // namespace
+
+// A spilled brick whose record cannot be read back (bytes damaged on the disk, a file cut short)
+// costs that brick, not the run: it comes back as never observed from every way of reading it (the
+// camera sees the place anew), is said once and counted; every other brick comes back whole.
+TEST(WorldModel, ABrickWhoseRecordIsDamagedIsLostAloneAndSaidOnce) {
+  std::mt19937 rng(21);
+  const std::string dir = test::tempDir("world_model_damaged");
+  WorldModel wm(4 * sizeof(Brick), dir);
+  const std::vector<std::unique_ptr<Brick>> kept = putRow(wm, 20, rng);  // bricks 0-15 on disk, oldest first
+  const int fd = test::spillFileIn(dir);
+  ASSERT_GE(fd, 0);
+  const std::vector<std::uint8_t> junk(64, 0xa5);
+  ASSERT_EQ(::pwrite(fd, junk.data(), junk.size(), 0), ssize_t(junk.size()));  // brick 0's record starts there
+  testing::internal::CaptureStderr();
+  Brick got;
+  for (int round = 0; round < 2; ++round)
+    for (const auto& k : kept) {
+      ASSERT_TRUE(wm.read(k->coord, got)) << "brick " << k->coord.transpose();
+      if (k->coord.x() == 0) EXPECT_TRUE(neverObserved(got));
+      else EXPECT_TRUE(sameVoxels(got, *k)) << "brick " << k->coord.transpose();
+    }
+  std::vector<std::uint8_t> packed;
+  ASSERT_TRUE(wm.readCompressed(kept[0]->coord, packed));
+  ASSERT_TRUE(decompressBrick(packed.data(), packed.size(), got));
+  EXPECT_TRUE(neverObserved(got));
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(wm.stats().lost, 1u);
+  EXPECT_NE(said.find(dir + ": cannot read a brick back from the world model's spill file (damaged record)"), std::string::npos) << said;
+  EXPECT_EQ(std::count(said.begin(), said.end(), '\n'), 1) << said;
+
+  // Cut short after brick 7's record: 8-15 are lost too, and taking them all back gives the rest whole.
+  struct stat st {};
+  ASSERT_EQ(::fstat(fd, &st), 0);
+  ASSERT_EQ(::ftruncate(fd, st.st_size / 2), 0);
+  std::vector<Eigen::Vector3i> coords;
+  for (const auto& k : kept) coords.push_back(k->coord);
+  testing::internal::CaptureStderr();
+  std::vector<std::unique_ptr<Brick>> back;
+  ASSERT_NO_THROW(back = wm.takeAll(coords));
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");  // said once for the run
+  ASSERT_EQ(back.size(), kept.size());
+  std::size_t lost = 0;
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    ASSERT_TRUE(back[i]) << i;
+    EXPECT_EQ(back[i]->coord, kept[i]->coord);
+    if (neverObserved(*back[i])) ++lost;
+    else EXPECT_TRUE(sameVoxels(*back[i], *kept[i])) << i;
+  }
+  EXPECT_GT(lost, 2u);
+  EXPECT_LT(lost, 16u);
+  EXPECT_EQ(wm.stats().lost, lost);
+  EXPECT_EQ(wm.size(), 0u);
 }
 
 // Bricks and keyframe depths are written by libdeflate as zlib streams: zlib reads what we write

@@ -1,5 +1,6 @@
 #include "vofusion/fusion/world_model.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <limits>
@@ -7,6 +8,7 @@
 
 #include "vofusion/core/deflate.h"
 #include "vofusion/core/parallel.h"
+#include "vofusion/core/progress.h"
 
 namespace vofusion::fusion {
 
@@ -145,14 +147,27 @@ void WorldModel::spillDue(std::size_t& due) {
   due = 0;
 }
 
-void WorldModel::readRecord(SpillFile::Record r, Brick& out) const {
+void WorldModel::readRecord(std::uint64_t k, SpillFile::Record r, Brick& out) const {
   const auto t0 = std::chrono::steady_clock::now();
-  const std::vector<std::uint8_t> bytes = spill_.read(r);
-  if (!decompressBrick(bytes.data(), bytes.size(), out)) throw std::runtime_error(spill_.folder() + ": corrupt record in the world model's spill file");
+  std::string why = "damaged record";
+  try {
+    const std::vector<std::uint8_t> bytes = spill_.read(r);
+    if (!decompressBrick(bytes.data(), bytes.size(), out)) return lose(k, why, out);
+  } catch (const std::runtime_error& e) {  // pread failed, or the file is short (not memory: that goes on up)
+    return lose(k, e.what(), out);
+  }
   reloaded_.fetch_add(1, std::memory_order_relaxed);
   reload_nanoseconds_.fetch_add(
       std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count()),
       std::memory_order_relaxed);
+}
+
+void WorldModel::lose(std::uint64_t k, const std::string& why, Brick& out) const {
+  std::fill(std::begin(out.voxels), std::end(out.voxels), Voxel{});
+  const std::lock_guard<std::mutex> lock(lost_mutex_);
+  if (lost_.insert(k).second && lost_.size() == 1)
+    printWarning(spill_.folder() + ": cannot read a brick back from the world model's spill file (" + why +
+                 "): such bricks are lost from the map (summary.json: fusion.world_model.bricks_lost), the run goes on");
 }
 
 std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
@@ -177,7 +192,10 @@ std::vector<std::unique_ptr<Brick>> WorldModel::takeAll(const std::vector<Eigen:
     }
   }
   for (const auto& [i, record] : on_disk) out[i] = std::make_unique<Brick>();  // here, not on the workers (above)
-  parallelForEvery(0, int(on_disk.size()), [&](int j) { readRecord(on_disk[j].second, *out[on_disk[j].first]); }, 8);
+  parallelForEvery(0, int(on_disk.size()), [&](int j) {
+    const auto& [i, record] = on_disk[j];
+    readRecord(key(coords[i]), record, *out[i]);
+  }, 8);
   for (std::size_t i = 0; i < coords.size(); ++i) {
     if (repeat[i]) continue;
     const std::uint64_t k = key(coords[i]);
@@ -197,7 +215,7 @@ bool WorldModel::read(const Eigen::Vector3i& c, Brick& out) const {
   const std::shared_lock lock(mutex_);
   const std::uint64_t k = key(c);
   if (const auto it = ram_.find(k); it != ram_.end()) std::memcpy(out.voxels, it->second.brick->voxels, kVoxelBytes);
-  else if (const auto record = disk_.find(k)) readRecord(*record, out);
+  else if (const auto record = disk_.find(k)) readRecord(k, *record, out);
   else return false;
   out.coord = c;
   return true;
@@ -212,12 +230,17 @@ bool WorldModel::readCompressed(const Eigen::Vector3i& c, std::vector<std::uint8
   }
   const auto record = disk_.find(k);
   if (!record) return false;
-  out = spill_.read(*record);  // spilled as compressBrick makes it
-  // Inflated once to check it (a fraction of compressing it again): a damaged record is said now, not
+  // Inflated once to check it (a fraction of compressing it again): a damaged record is found now, not
   // sealed into a checkpoint that fails only when resumed.
   Brick check;
-  if (!decompressBrick(out.data(), out.size(), check))
-    throw std::runtime_error(spill_.folder() + ": corrupt record in the world model's spill file");
+  try {
+    out = spill_.read(*record);  // spilled as compressBrick makes it
+    if (decompressBrick(out.data(), out.size(), check)) return true;
+    lose(k, "damaged record", check);
+  } catch (const std::runtime_error& e) {
+    lose(k, e.what(), check);
+  }
+  out = compressBrick(check);
   return true;
 }
 
@@ -288,6 +311,10 @@ WorldModelStats WorldModel::stats() const {
   s.spill_free_bytes = spill_.freeBytes();
   s.spill_error = spill_.failure();
   s.reloaded = reloaded_.load(std::memory_order_relaxed);
+  {
+    const std::lock_guard<std::mutex> lost_lock(lost_mutex_);
+    s.lost = lost_.size();
+  }
   s.spill_seconds += 1e-9 * double(reload_nanoseconds_.load(std::memory_order_relaxed));
   return s;
 }

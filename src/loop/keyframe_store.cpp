@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "vofusion/core/deflate.h"
+#include "vofusion/core/progress.h"
 
 namespace vofusion::loop {
 
@@ -120,20 +121,40 @@ void KeyframeStore::add(Keyframe k) {
   }
 }
 
+bool KeyframeStore::readBack(std::size_t id, std::vector<std::uint8_t>& bytes, Keyframe& k) const {
+  std::string why;
+  try {
+    bytes = spill_.read(records_[id]);
+    decodeKeyframeData(bytes, k);
+    return true;
+  } catch (const std::runtime_error& e) {  // pread failed, a short file, a damaged record (not memory)
+    why = e.what();
+  }
+  k.features.reset();
+  k.depth.release();
+  const std::lock_guard<std::mutex> lock(lost_mutex_);
+  if (lost_.insert(id).second && lost_.size() == 1)
+    printWarning(spill_.folder() + ": cannot read a keyframe back (" + why +
+                 "): such keyframes close no loop any more (summary.json: loop_closure.keyframes_lost), the run goes on");
+  return false;
+}
+
 Keyframe KeyframeStore::load(std::size_t id) const {
   Keyframe k = keyframes_.at(id);
   if (id >= spilled_) return k;
-  decodeKeyframeData(spill_.read(records_[id]), k);
-  reloaded_.fetch_add(1, std::memory_order_relaxed);
+  std::vector<std::uint8_t> bytes;
+  if (readBack(id, bytes, k)) reloaded_.fetch_add(1, std::memory_order_relaxed);
   return k;
 }
 
 std::vector<std::uint8_t> KeyframeStore::data(std::size_t id) const {
   if (id >= spilled_) return encodeKeyframeData(keyframes_.at(id));
-  std::vector<std::uint8_t> bytes = spill_.read(records_[id]);  // spilled as encodeKeyframeData made it
-  Keyframe check;  // decoded once to check it (not compressed again): damage fails the checkpoint, not its resume
-  decodeKeyframeData(bytes, check);
-  return bytes;
+  // Spilled as encodeKeyframeData made it, decoded once to check it (not compressed again): damage is
+  // found now, not sealed into a checkpoint that fails only when resumed.
+  std::vector<std::uint8_t> bytes;
+  Keyframe check;
+  if (readBack(id, bytes, check)) return bytes;
+  return encodeKeyframeData(check);  // lost: no features, no depth
 }
 
 KeyframeStoreStats KeyframeStore::stats() const {
@@ -142,6 +163,10 @@ KeyframeStoreStats KeyframeStore::stats() const {
   s.in_ram = keyframes_.size() - spilled_;
   s.spilled = spilled_;
   s.reloaded = reloaded_.load(std::memory_order_relaxed);
+  {
+    const std::lock_guard<std::mutex> lock(lost_mutex_);
+    s.lost = lost_.size();
+  }
   s.spill_file_bytes = spill_.bytes();
   s.spill_error = spill_.failure();
   return s;

@@ -493,6 +493,7 @@ KinFuStats Reconstruction::fusionStats() const {
   s.bricks_in_world_model = map.bricks_in_world_model;
   s.memory_bytes = map.memory_bytes;
   if (s.world.spill_error.empty()) s.world.spill_error = map.world.spill_error;  // a disk that filled while re-fusing
+  s.world.lost += map.world.lost;  // the re-fused map's own
   return s;
 }
 

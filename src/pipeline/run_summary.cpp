@@ -83,6 +83,7 @@ json loopClosureJson(const loop::LoopCloser& lc, const Reconstruction& rec, std:
             {"keyframes_in_ram", store.in_ram},
             {"keyframes_spilled", store.spilled},
             {"keyframe_spill_mib", double(store.spill_file_bytes) / (1 << 20)},
+            {"keyframes_lost", store.lost},
             {"loops_accepted", active},
             {"loops_removed_after_optimisation", removed},
             {"candidates_rejected", lc.rejections()},
@@ -137,7 +138,7 @@ json runSummary(const Reconstruction& rec, const RunInfo& info) {
                  {"bricks_in_volume", ks.bricks_in_volume},
                  {"bricks_in_world_model", ks.bricks_in_world_model}, {"tsdf_memory_mib", ks.memory_bytes / 1048576.0},
                  {"world_model", {{"cache_mib", ks.world.ram_bytes / 1048576.0}, {"bricks_spilled", ks.world.spilled},
-                                  {"bricks_reloaded", ks.world.reloaded}, {"spill_file_mib", ks.world.spill_file_bytes / 1048576.0},
+                                  {"bricks_reloaded", ks.world.reloaded}, {"bricks_lost", ks.world.lost}, {"spill_file_mib", ks.world.spill_file_bytes / 1048576.0},
                                   {"spill_free_mib", ks.world.spill_free_bytes / 1048576.0}, {"spill_seconds", ks.world.spill_seconds}}}};
   if (!ks.world.spill_error.empty()) s["fusion"]["world_model"]["spill_error"] = ks.world.spill_error;
   if (!info.extra.is_null()) s.update(info.extra);

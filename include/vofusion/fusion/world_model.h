@@ -18,6 +18,7 @@
 #include <shared_mutex>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "vofusion/core/spill_file.h"
@@ -38,6 +39,7 @@ struct WorldModelStats {
   std::size_t spill_file_bytes = 0;  // the spill file's size: the records stored, and free places
   std::size_t spill_free_bytes = 0;  // of it, bricks taken back whose place no brick took since
   std::size_t spilled = 0, reloaded = 0;  // bricks written to / read back from the spill file
+  std::size_t lost = 0;            // bricks whose record could not be read back (read as never observed)
   double spill_seconds = 0.0;      // wall time compressing + writing + reading + decompressing (batches on every core)
   std::string spill_error;         // why the spill file could not be written (disk full); empty when it could
 };
@@ -69,10 +71,13 @@ class WorldModel {
   std::vector<Eigen::Vector3i> coords() const;
   // Copies a stored brick without changing what is cached; false when there is none. Safe beside
   // other reads on other threads.
+  // A spilled brick whose record cannot be read back whole (an I/O error, bytes damaged on the disk)
+  // comes back from read, readCompressed and takeAll as never observed (every weight 0): the map loses
+  // that brick and the camera sees the place anew, the run goes on. Said once, counted in stats().lost.
   bool read(const Eigen::Vector3i& c, Brick& out) const;
   // A stored brick's voxels as compressBrick() gives them: a brick on disk is its record as stored, not
   // decompressed and compressed again (what a save of a long run's map spent most of its time on).
-  // False when there is none; throws std::runtime_error for a damaged record.
+  // False when there is none.
   bool readCompressed(const Eigen::Vector3i& c, std::vector<std::uint8_t>& out) const;
 
   std::size_t size() const;
@@ -97,7 +102,8 @@ class WorldModel {
   void spillDue(std::size_t& due);
   void cache(std::unique_ptr<Brick> brick);  // into RAM at the front of lru_, replacing what is stored there
   void erase(std::uint64_t k);
-  void readRecord(SpillFile::Record r, Brick& out) const;  // under either lock
+  void readRecord(std::uint64_t k, SpillFile::Record r, Brick& out) const;  // under either lock
+  void lose(std::uint64_t k, const std::string& why, Brick& out) const;     // out: never observed
   template <class F> void forEachKey(F&& f) const;
 
   std::size_t cache_bytes_;
@@ -108,6 +114,8 @@ class WorldModel {
   WorldModelStats stats_;                      // but reloaded and spill_seconds' reading part:
   mutable std::atomic<std::size_t> reloaded_{0};          // counted under a shared lock
   mutable std::atomic<std::uint64_t> reload_nanoseconds_{0};
+  mutable std::mutex lost_mutex_;
+  mutable std::unordered_set<std::uint64_t> lost_;  // keys of the bricks lost so far
   mutable std::shared_mutex mutex_;            // put/take exclusive, the rest shared
 };
 

@@ -7,6 +7,8 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <mutex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -22,6 +24,7 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k);
 struct KeyframeStoreStats {
   std::size_t keyframes = 0, in_ram = 0;  // in_ram: keyframes whose features and depth are in RAM
   std::size_t spilled = 0, reloaded = 0;
+  std::size_t lost = 0;     // spilled keyframes whose record could not be read back (no features, no depth)
   std::uint64_t spill_file_bytes = 0;
   std::string spill_error;  // why the spill file could not be written (disk full); empty when it could
 };
@@ -38,7 +41,9 @@ class KeyframeStore {
   const Keyframe& at(std::size_t id) const { return keyframes_.at(id); }
   const Keyframe& back() const { return keyframes_.back(); }
   // The whole keyframe, read back from disk when spilled (not cached again: old keyframes are
-  // visited once per loop candidate).
+  // visited once per loop candidate). One whose record cannot be read back whole (an I/O error, bytes
+  // damaged on the disk) comes back without features and depth, from load and data alike: it is no
+  // place to close a loop or relocalise at any more, and the run goes on. Said once, counted in stats().lost.
   Keyframe load(std::size_t id) const;
   // Its depth and features as encodeKeyframeData() gives them: a spilled keyframe's record as stored,
   // not read back, decoded and encoded again (a checkpoint does so for every keyframe of the run).
@@ -53,6 +58,10 @@ class KeyframeStore {
   std::size_t spilled_ = 0;                 // keyframes [0, spilled_) are on disk
   std::size_t ram_bytes_ = 0;
   mutable std::atomic<std::size_t> reloaded_{0};  // load() runs on the loop thread and in relocalise()
+  mutable std::mutex lost_mutex_;
+  mutable std::set<std::size_t> lost_;  // ids of the keyframes lost so far
+  // The keyframe's record, or (damaged) none: k keeps its pose, its features and depth are dropped.
+  bool readBack(std::size_t id, std::vector<std::uint8_t>& bytes, Keyframe& k) const;
 };
 
 }  // namespace vofusion::loop
