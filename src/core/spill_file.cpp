@@ -103,7 +103,10 @@ std::vector<std::uint8_t> SpillFile::read(Record r) const {
   while (done < bytes.size()) {
     const ssize_t n = ::pread(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(r.offset + done));
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw std::runtime_error(folder_ + ": cannot read " + what_ + ": " + (n == 0 ? std::string("short file") : std::strerror(errno)));
+    if (n <= 0) {
+      const std::string cause = n == 0 ? std::string("short file") : std::strerror(errno);
+      throw ReadError(folder_ + ": cannot read " + what_ + ": " + cause, cause);
+    }
     done += static_cast<std::size_t>(n);
   }
   return bytes;

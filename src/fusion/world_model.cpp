@@ -149,12 +149,11 @@ void WorldModel::spillDue(std::size_t& due) {
 
 void WorldModel::readRecord(std::uint64_t k, SpillFile::Record r, Brick& out) const {
   const auto t0 = std::chrono::steady_clock::now();
-  std::string why = "damaged record";
   try {
     const std::vector<std::uint8_t> bytes = spill_.read(r);
-    if (!decompressBrick(bytes.data(), bytes.size(), out)) return lose(k, why, out);
-  } catch (const std::runtime_error& e) {  // pread failed, or the file is short (not memory: that goes on up)
-    return lose(k, e.what(), out);
+    if (!decompressBrick(bytes.data(), bytes.size(), out)) return lose(k, "damaged record", out);
+  } catch (const SpillFile::ReadError& e) {  // pread failed, or the file is short (not memory: that goes on up)
+    return lose(k, e.cause, out);
   }
   reloaded_.fetch_add(1, std::memory_order_relaxed);
   reload_nanoseconds_.fetch_add(
@@ -237,8 +236,8 @@ bool WorldModel::readCompressed(const Eigen::Vector3i& c, std::vector<std::uint8
     out = spill_.read(*record);  // spilled as compressBrick makes it
     if (decompressBrick(out.data(), out.size(), check)) return true;
     lose(k, "damaged record", check);
-  } catch (const std::runtime_error& e) {
-    lose(k, e.what(), check);
+  } catch (const SpillFile::ReadError& e) {
+    lose(k, e.cause, check);
   }
   out = compressBrick(check);
   return true;

@@ -127,7 +127,9 @@ bool KeyframeStore::readBack(std::size_t id, std::vector<std::uint8_t>& bytes, K
     bytes = spill_.read(records_[id]);
     decodeKeyframeData(bytes, k);
     return true;
-  } catch (const std::runtime_error& e) {  // pread failed, a short file, a damaged record (not memory)
+  } catch (const SpillFile::ReadError& e) {  // pread failed, or the file is short (not memory)
+    why = e.cause;
+  } catch (const std::runtime_error& e) {  // a damaged record
     why = e.what();
   }
   k.features.reset();

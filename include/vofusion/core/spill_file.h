@@ -11,6 +11,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -43,7 +44,12 @@ class SpillFile {
   std::optional<Record> append(const std::vector<std::uint8_t>& bytes);
   // Why the file could not be created or written; empty while it could.
   std::string failure() const;
-  // Throws std::runtime_error ("<folder>: cannot read <what>: ...") when the record cannot be read whole.
+  // A record that cannot be read whole: what() is "<folder>: cannot read <what>: <cause>".
+  struct ReadError : std::runtime_error {
+    ReadError(const std::string& message, std::string why) : std::runtime_error(message), cause(std::move(why)) {}
+    std::string cause;  // "short file", or the system's error text
+  };
+  // Throws ReadError when the record cannot be read whole.
   std::vector<std::uint8_t> read(Record r) const;
   // Where the file was made, for errors about what it holds (once a record was appended).
   const std::string& folder() const { return folder_; }
