@@ -446,7 +446,8 @@ TEST(WorldModel, ABrickWhoseRecordIsDamagedIsLostAloneAndSaidOnce) {
   EXPECT_NE(said.find(dir + ": cannot read a brick back from the world model's spill file (damaged record)"), std::string::npos) << said;
   EXPECT_EQ(std::count(said.begin(), said.end(), '\n'), 1) << said;
 
-  // Cut short after brick 7's record: 8-15 are lost too, and taking them all back gives the rest whole.
+  // Cut in half (inside brick 7's or 8's record): the bricks from there on are lost too, and taking
+  // them all back gives the rest whole.
   struct stat st {};
   ASSERT_EQ(::fstat(fd, &st), 0);
   ASSERT_EQ(::ftruncate(fd, st.st_size / 2), 0);

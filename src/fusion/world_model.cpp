@@ -163,8 +163,12 @@ void WorldModel::readRecord(std::uint64_t k, SpillFile::Record r, Brick& out) co
 
 void WorldModel::lose(std::uint64_t k, const std::string& why, Brick& out) const {
   std::fill(std::begin(out.voxels), std::end(out.voxels), Voxel{});
-  const std::lock_guard<std::mutex> lock(lost_mutex_);
-  if (lost_.insert(k).second && lost_.size() == 1)
+  bool first;
+  {
+    const std::lock_guard<std::mutex> lock(lost_mutex_);
+    first = lost_.insert(k).second && lost_.size() == 1;
+  }
+  if (first)
     printWarning(spill_.folder() + ": cannot read a brick back from the world model's spill file (" + why +
                  "): such bricks are lost from the map (summary.json: fusion.world_model.bricks_lost), the run goes on");
 }

@@ -106,7 +106,12 @@ void KeyframeStore::add(Keyframe k) {
   // The newest keyframe always stays (it is about to be matched); older ones leave oldest first.
   while (ram_bytes_ > cache_bytes_ && spilled_ + 1 < keyframes_.size()) {
     Keyframe& old = keyframes_[spilled_];
-    const std::optional<SpillFile::Record> record = spill_.append(encodeKeyframeData(old));
+    // With a CRC-32 after it: zlib's check covers the depth only, and damaged descriptors or points
+    // would read back as another keyframe's features.
+    std::vector<std::uint8_t> bytes = encodeKeyframeData(old);
+    const std::uint32_t crc = crc32(bytes.data(), bytes.size());
+    bytes.insert(bytes.end(), reinterpret_cast<const std::uint8_t*>(&crc), reinterpret_cast<const std::uint8_t*>(&crc) + sizeof crc);
+    const std::optional<SpillFile::Record> record = spill_.append(bytes);
     if (!record) {
       // The spill file cannot be written (disk full; SpillFile warns): every keyframe stays in RAM
       // from now on, beyond the budget, and loops are still found among them all.
@@ -125,6 +130,11 @@ bool KeyframeStore::readBack(std::size_t id, std::vector<std::uint8_t>& bytes, K
   std::string why;
   try {
     bytes = spill_.read(records_[id]);
+    std::uint32_t crc = 0;
+    if (bytes.size() >= sizeof crc) std::memcpy(&crc, bytes.data() + bytes.size() - sizeof crc, sizeof crc);
+    if (bytes.size() < sizeof crc || crc != crc32(bytes.data(), bytes.size() - sizeof crc))
+      throw std::runtime_error("damaged record");
+    bytes.resize(bytes.size() - sizeof crc);  // as encodeKeyframeData made it
     decodeKeyframeData(bytes, k);
     return true;
   } catch (const SpillFile::ReadError& e) {  // pread failed, or the file is short (not memory)
@@ -134,9 +144,13 @@ bool KeyframeStore::readBack(std::size_t id, std::vector<std::uint8_t>& bytes, K
   }
   k.features.reset();
   k.depth.release();
-  const std::lock_guard<std::mutex> lock(lost_mutex_);
-  if (lost_.insert(id).second && lost_.size() == 1)
-    printWarning(spill_.folder() + ": cannot read a keyframe back (" + why +
+  bool first;
+  {
+    const std::lock_guard<std::mutex> lock(lost_mutex_);
+    first = lost_.insert(id).second && lost_.size() == 1;
+  }
+  if (first)
+    printWarning(spill_.folder() + ": cannot read a keyframe back from the keyframes' spill file (" + why +
                  "): such keyframes close no loop any more (summary.json: loop_closure.keyframes_lost), the run goes on");
   return false;
 }

@@ -103,8 +103,9 @@ struct LoopCloser::Impl {
       try {
         alone.execute([&] { process(std::move(k)); });
       } catch (...) {
-        // A keyframe that could not be read back (spill file), a failure inside OpenCV: the thread
-        // ends, and the caller's thread rethrows it at its next hand-over (it was std::terminate).
+        // Memory that ran out, a failure inside OpenCV (a keyframe that cannot be read back is no
+        // failure: it comes without features): the thread ends, and the caller's thread rethrows it at
+        // its next hand-over (it was std::terminate).
         std::lock_guard<std::mutex> lock(mu);
         failure = std::current_exception();
         queue.clear();
@@ -193,6 +194,10 @@ struct LoopCloser::Impl {
       ScopedStageTimer timer(t, "loop_verification");
       for (const PlaceCandidate& c : candidates) {
         const Keyframe old = keyframes.load(c.keyframe);
+        if (!old.features) {  // the index takes only keyframes with features: this one's spill record was lost
+          ++rejected["keyframe lost (its spill record could not be read back)"];
+          continue;
+        }
         const LoopCheck check = verifyLoop(old, cur, params, pyramids);
         if (!check.accepted) {
           ++rejected[check.reason];

@@ -150,8 +150,8 @@ void RegionPremesher::run() {
         for (const Key& n : neighboursOf(region)) simplifyIfReady(n);
       });
     } catch (...) {
-      // A spilled brick that does not read back (or no memory): the end meshes this region and
-      // reports what is wrong with it there.
+      // No memory (a spilled brick that does not read back comes as never observed, no failure):
+      // the end meshes this region and reports what is wrong with it there.
     }
     const std::lock_guard<std::mutex> lock(mutex_);
     in_hand_ = false;
