@@ -97,6 +97,20 @@ std::string SpillFile::failure() const {
   return failure_;
 }
 
+void SpillFile::lost(std::uint64_t id, const std::string& warning) const {
+  bool first;
+  {
+    const std::lock_guard<std::mutex> lock(lost_mu_);
+    first = lost_.insert(id).second && lost_.size() == 1;
+  }
+  if (first) printWarning(warning);  // outside the lock: stderr may be slow
+}
+
+std::size_t SpillFile::lostCount() const {
+  const std::lock_guard<std::mutex> lock(lost_mu_);
+  return lost_.size();
+}
+
 std::vector<std::uint8_t> SpillFile::read(Record r) const {
   std::vector<std::uint8_t> bytes(r.length);
   std::size_t done = 0;

@@ -8,7 +8,6 @@
 
 #include "vofusion/core/deflate.h"
 #include "vofusion/core/parallel.h"
-#include "vofusion/core/progress.h"
 
 namespace vofusion::fusion {
 
@@ -163,14 +162,8 @@ void WorldModel::readRecord(std::uint64_t k, SpillFile::Record r, Brick& out) co
 
 void WorldModel::lose(std::uint64_t k, const std::string& why, Brick& out) const {
   std::fill(std::begin(out.voxels), std::end(out.voxels), Voxel{});
-  bool first;
-  {
-    const std::lock_guard<std::mutex> lock(lost_mutex_);
-    first = lost_.insert(k).second && lost_.size() == 1;
-  }
-  if (first)
-    printWarning(spill_.folder() + ": cannot read a brick back from the world model's spill file (" + why +
-                 "): such bricks are lost from the map (summary.json: fusion.world_model.bricks_lost), the run goes on");
+  spill_.lost(k, spill_.folder() + ": cannot read a brick back from the world model's spill file (" + why +
+                     "): such bricks are lost from the map (summary.json: fusion.world_model.bricks_lost), the run goes on");
 }
 
 std::unique_ptr<Brick> WorldModel::take(const Eigen::Vector3i& c) {
@@ -314,10 +307,7 @@ WorldModelStats WorldModel::stats() const {
   s.spill_free_bytes = spill_.freeBytes();
   s.spill_error = spill_.failure();
   s.reloaded = reloaded_.load(std::memory_order_relaxed);
-  {
-    const std::lock_guard<std::mutex> lost_lock(lost_mutex_);
-    s.lost = lost_.size();
-  }
+  s.lost = spill_.lostCount();
   s.spill_seconds += 1e-9 * double(reload_nanoseconds_.load(std::memory_order_relaxed));
   return s;
 }

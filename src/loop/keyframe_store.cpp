@@ -5,7 +5,6 @@
 #include <stdexcept>
 
 #include "vofusion/core/deflate.h"
-#include "vofusion/core/progress.h"
 
 namespace vofusion::loop {
 
@@ -144,14 +143,8 @@ bool KeyframeStore::readBack(std::size_t id, std::vector<std::uint8_t>& bytes, K
   }
   k.features.reset();
   k.depth.release();
-  bool first;
-  {
-    const std::lock_guard<std::mutex> lock(lost_mutex_);
-    first = lost_.insert(id).second && lost_.size() == 1;
-  }
-  if (first)
-    printWarning(spill_.folder() + ": cannot read a keyframe back from the keyframes' spill file (" + why +
-                 "): such keyframes close no loop any more (summary.json: loop_closure.keyframes_lost), the run goes on");
+  spill_.lost(id, spill_.folder() + ": cannot read a keyframe back from the keyframes' spill file (" + why +
+                      "): such keyframes close no loop any more (summary.json: loop_closure.keyframes_lost), the run goes on");
   return false;
 }
 
@@ -179,10 +172,7 @@ KeyframeStoreStats KeyframeStore::stats() const {
   s.in_ram = keyframes_.size() - spilled_;
   s.spilled = spilled_;
   s.reloaded = reloaded_.load(std::memory_order_relaxed);
-  {
-    const std::lock_guard<std::mutex> lock(lost_mutex_);
-    s.lost = lost_.size();
-  }
+  s.lost = spill_.lostCount();
   s.spill_file_bytes = spill_.bytes();
   s.spill_error = spill_.failure();
   return s;

@@ -13,6 +13,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 namespace vofusion {
@@ -53,6 +54,10 @@ class SpillFile {
   std::vector<std::uint8_t> read(Record r) const;
   // Where the file was made, for errors about what it holds (once a record was appended).
   const std::string& folder() const { return folder_; }
+  // The caller's item `id` (a brick's key, a keyframe's id) could not be read back: counted once however
+  // often it is met again, and `warning` printed for the first item lost (once per file). Any thread.
+  void lost(std::uint64_t id, const std::string& warning) const;
+  std::size_t lostCount() const;
   // r's place may be written again: only once nothing will read r (the world model releases a brick
   // when it takes it back, on the thread that appends).
   void release(Record r);
@@ -77,6 +82,8 @@ class SpillFile {
   std::map<std::uint64_t, std::uint64_t> free_by_offset_;       // offset -> size
   std::multimap<std::uint64_t, std::uint64_t> free_by_size_;    // size -> offset
   std::uint64_t free_bytes_ = 0;
+  mutable std::mutex lost_mu_;
+  mutable std::unordered_set<std::uint64_t> lost_;  // under lost_mu_
 };
 
 }  // namespace vofusion

@@ -18,7 +18,6 @@
 #include <shared_mutex>
 #include <string>
 #include <unordered_map>
-#include <unordered_set>
 #include <vector>
 
 #include "vofusion/core/spill_file.h"
@@ -114,8 +113,6 @@ class WorldModel {
   WorldModelStats stats_;                      // but reloaded and spill_seconds' reading part:
   mutable std::atomic<std::size_t> reloaded_{0};          // counted under a shared lock
   mutable std::atomic<std::uint64_t> reload_nanoseconds_{0};
-  mutable std::mutex lost_mutex_;
-  mutable std::unordered_set<std::uint64_t> lost_;  // keys of the bricks lost so far
   mutable std::shared_mutex mutex_;            // put/take exclusive, the rest shared
 };
 

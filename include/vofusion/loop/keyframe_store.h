@@ -7,8 +7,6 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
-#include <mutex>
-#include <set>
 #include <string>
 #include <vector>
 
@@ -58,8 +56,6 @@ class KeyframeStore {
   std::size_t spilled_ = 0;                 // keyframes [0, spilled_) are on disk
   std::size_t ram_bytes_ = 0;
   mutable std::atomic<std::size_t> reloaded_{0};  // load() runs on the loop thread and in relocalise()
-  mutable std::mutex lost_mutex_;
-  mutable std::set<std::size_t> lost_;  // ids of the keyframes lost so far
   // The keyframe's record, or (damaged) none: k keeps its pose, its features and depth are dropped.
   bool readBack(std::size_t id, std::vector<std::uint8_t>& bytes, Keyframe& k) const;
 };
