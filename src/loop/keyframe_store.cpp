@@ -42,6 +42,21 @@ std::size_t dataBytes(const Keyframe& k) {
   if (k.features) n += k.features->descriptors.total() * k.features->descriptors.elemSize() + k.features->points.size() * sizeof(Eigen::Vector3d);
   return n;
 }
+
+// A spilled record is the encoded keyframe and a CRC-32 of it: zlib's check covers the depth only, and
+// damaged descriptors or points would read back as another keyframe's features.
+void seal(std::vector<std::uint8_t>& bytes) {
+  const std::uint32_t crc = crc32(bytes.data(), bytes.size());
+  putBytes(bytes, &crc, sizeof crc);
+}
+// The encoded keyframe back (the CRC taken off); false when the CRC does not hold.
+bool unseal(std::vector<std::uint8_t>& bytes) {
+  std::uint32_t crc = 0;
+  if (bytes.size() < sizeof crc) return false;
+  std::memcpy(&crc, bytes.data() + bytes.size() - sizeof crc, sizeof crc);
+  bytes.resize(bytes.size() - sizeof crc);
+  return crc == crc32(bytes.data(), bytes.size());
+}
 }  // namespace
 
 std::vector<std::uint8_t> encodeKeyframeData(const Keyframe& k) {
@@ -105,11 +120,8 @@ void KeyframeStore::add(Keyframe k) {
   // The newest keyframe always stays (it is about to be matched); older ones leave oldest first.
   while (ram_bytes_ > cache_bytes_ && spilled_ + 1 < keyframes_.size()) {
     Keyframe& old = keyframes_[spilled_];
-    // With a CRC-32 after it: zlib's check covers the depth only, and damaged descriptors or points
-    // would read back as another keyframe's features.
     std::vector<std::uint8_t> bytes = encodeKeyframeData(old);
-    const std::uint32_t crc = crc32(bytes.data(), bytes.size());
-    bytes.insert(bytes.end(), reinterpret_cast<const std::uint8_t*>(&crc), reinterpret_cast<const std::uint8_t*>(&crc) + sizeof crc);
+    seal(bytes);
     const std::optional<SpillFile::Record> record = spill_.append(bytes);
     if (!record) {
       // The spill file cannot be written (disk full; SpillFile warns): every keyframe stays in RAM
@@ -126,19 +138,16 @@ void KeyframeStore::add(Keyframe k) {
 }
 
 bool KeyframeStore::readBack(std::size_t id, std::vector<std::uint8_t>& bytes, Keyframe& k) const {
-  std::string why;
+  std::string why = "damaged record";
   try {
     bytes = spill_.read(records_[id]);
-    std::uint32_t crc = 0;
-    if (bytes.size() >= sizeof crc) std::memcpy(&crc, bytes.data() + bytes.size() - sizeof crc, sizeof crc);
-    if (bytes.size() < sizeof crc || crc != crc32(bytes.data(), bytes.size() - sizeof crc))
-      throw std::runtime_error("damaged record");
-    bytes.resize(bytes.size() - sizeof crc);  // as encodeKeyframeData made it
-    decodeKeyframeData(bytes, k);
-    return true;
+    if (unseal(bytes)) {
+      decodeKeyframeData(bytes, k);
+      return true;
+    }
   } catch (const SpillFile::ReadError& e) {  // pread failed, or the file is short (not memory)
     why = e.cause;
-  } catch (const std::runtime_error& e) {  // a damaged record
+  } catch (const std::runtime_error& e) {  // decoding refused it (a CRC that held over damage)
     why = e.what();
   }
   k.features.reset();
