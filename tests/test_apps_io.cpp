@@ -64,7 +64,9 @@ TEST(AppsIo, SimulateIntoAFolderNamedWithATrailingSlash) {
     std::ifstream depth(first, std::ios::binary);
     const std::string bytes((std::istreambuf_iterator<char>(depth)), {});
     ASSERT_FALSE(bytes.empty()) << pass;
-    if (pass == 1) EXPECT_NE(bytes, first_depth) << "the folder of pass 0 was not replaced";
+    if (pass == 1) {
+      EXPECT_NE(bytes, first_depth) << "the folder of pass 0 was not replaced";
+    }
     first_depth = bytes;
   }
 }

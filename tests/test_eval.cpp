@@ -142,7 +142,9 @@ TEST(Eval, StampsOutOfOrderAreMatchedAsSorted) {
   ASSERT_EQ(pairs.size(), gt.size());
   for (std::size_t k = 0; k < pairs.size(); ++k) {
     EXPECT_EQ(gt_shuffled[pairs[k].first].timestamp, shuffled[pairs[k].second].timestamp);
-    if (k) EXPECT_LT(gt_shuffled[pairs[k - 1].first].timestamp, gt_shuffled[pairs[k].first].timestamp) << "in time order";
+    if (k) {
+      EXPECT_LT(gt_shuffled[pairs[k - 1].first].timestamp, gt_shuffled[pairs[k].first].timestamp) << "in time order";
+    }
   }
   const AteResult sorted_ate = computeAte(gt, est), ate = computeAte(gt_shuffled, shuffled);
   ASSERT_TRUE(ate.success);

@@ -267,8 +267,9 @@ TEST(GrabApp, KilledAtRandomMomentsTheRecordingReadsToItsLastFrame) {
               &log);
     ASSERT_TRUE(fs::exists(out + "/grab.rawlog")) << log;
     for (const auto& e : fs::directory_iterator(out))  // the recording's files: no temporary name (one ends in a pid)
-      if (e.path().filename().string().rfind("grab", 0) == 0)
+      if (e.path().filename().string().rfind("grab", 0) == 0) {
         EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+      }
     // The replay's own ground truth beside it from its first frame (it came with commit(), never reached).
     ASSERT_TRUE(fs::exists(out + "/grab.groundtruth.txt"));
     EXPECT_EQ(readTumTrajectory(out + "/grab.groundtruth.txt").size(), readTumTrajectory(tum + "/groundtruth.txt").size());

@@ -475,7 +475,9 @@ TEST(Rawlog, AGroundTruthEntryThatIsNoPoseIsLeftOut) {
   for (const StampedPose& p : src.groundTruth()) EXPECT_TRUE(p.pose.asVectorVal().asEigen().allFinite()) << p.timestamp;
   Frame f;
   while (src.next(f))
-    if (f.groundTruth) EXPECT_TRUE(f.groundTruth->asVectorVal().asEigen().allFinite()) << "frame " << f.index;
+    if (f.groundTruth) {
+      EXPECT_TRUE(f.groundTruth->asVectorVal().asEigen().allFinite()) << "frame " << f.index;
+    }
 }
 
 // A depth file that cannot be written is named where the user will look for it, <out>_Images/..., not

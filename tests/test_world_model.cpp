@@ -268,7 +268,7 @@ TEST(WorldModel, BoxQueriesAnswerAsAWalkOverEveryBrick) {
     const int n = size(rng);
     ASSERT_EQ(wm.coordsInBox(lo, n), walk(lo, n)) << "box at " << lo.transpose() << ", " << n;
   }
-  for (const Eigen::Vector3i lo : {Eigen::Vector3i(-WorldModel::kKeyReach - 2, -1, -1), Eigen::Vector3i(WorldModel::kKeyReach - 2, -1, -1)})
+  for (const Eigen::Vector3i& lo : {Eigen::Vector3i(-WorldModel::kKeyReach - 2, -1, -1), Eigen::Vector3i(WorldModel::kKeyReach - 2, -1, -1)})
     EXPECT_EQ(wm.coordsInBox(lo, 4), walk(lo, 4)) << lo.transpose();
   EXPECT_EQ(wm.coordsInBox(Eigen::Vector3i(-100, -100, -100), 200), walk(Eigen::Vector3i(-100, -100, -100), 200));  // more rows than bricks
 }
