@@ -51,14 +51,20 @@ std::string tempDir(const std::string& name) {
   return p.lexically_normal().string();
 }
 
-int spillFileIn(const std::string& dir) {
+std::vector<int> spillFilesIn(const std::string& dir) {
   const std::string prefix = (fs::weakly_canonical(dir) / "vofusion-spill-").string();
+  std::vector<int> fds;
   for (int fd = 3; fd < 1024; ++fd) {
     char target[4096];
     const ssize_t n = ::readlink(("/proc/self/fd/" + std::to_string(fd)).c_str(), target, sizeof target);
-    if (n > 0 && std::string(target, std::size_t(n)).rfind(prefix, 0) == 0) return fd;
+    if (n > 0 && std::string(target, std::size_t(n)).rfind(prefix, 0) == 0) fds.push_back(fd);
   }
-  return -1;
+  return fds;
+}
+
+int spillFileIn(const std::string& dir) {
+  const std::vector<int> fds = spillFilesIn(dir);
+  return fds.empty() ? -1 : fds.front();
 }
 
 std::string app(const std::string& name) { return (fs::path(VOFUSION_BIN_DIR) / name).string(); }

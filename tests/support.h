@@ -33,8 +33,9 @@ bool inCi();
 // A fresh empty directory under the build tree, in a folder of the running test case's own (ctest runs
 // cases in parallel); removed at process exit is not promised.
 std::string tempDir(const std::string& name);
-// The descriptor of the spill file (core/spill_file.h, unlinked once made) this process holds in `dir`,
-// or -1: a test damages or cuts it as a failing disk would.
+// The descriptors of the spill files (core/spill_file.h, unlinked once made) this process holds in
+// `dir`; spillFileIn: the first, or -1. A test damages or cuts them as a failing disk would.
+std::vector<int> spillFilesIn(const std::string& dir);
 int spillFileIn(const std::string& dir);
 // Path of an app built by this project (build/bin/<name>).
 std::string app(const std::string& name);

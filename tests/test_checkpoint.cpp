@@ -11,6 +11,7 @@
 #include <sstream>
 #include <thread>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -167,6 +168,51 @@ TEST(Checkpoint, MemoryRunningOutCostsTheCheckpointOnly) {
   EXPECT_EQ(RunSession::peek(path)->frames, 6u);
 }
 
+// Bricks and keyframes whose spill records could not be read back are held in the checkpoint as never
+// observed / without features: the resumed run still counts them (summary.json's bricks_lost and
+// keyframes_lost said 0 after a resume, under a mesh with holes).
+TEST(Checkpoint, BricksAndKeyframesLostBeforeACheckpointStayCountedAfterTheResume) {
+  const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(test::quickSim("corridor", 30)));
+  const std::string dir = test::tempDir("checkpoint_lost_records");
+  auto cfg = roomConfig();
+  cfg.write("kinfu", "volume_voxels", 128);
+  cfg.write("kinfu", "shift_threshold", 0.05);
+  cfg.write("kinfu", "world_cache_mib", 0);
+  cfg.write("kinfu", "work_dir", dir);
+  cfg.write("loop", "keyframe_cache_mib", 0);
+  std::stringstream saved;
+  std::size_t bricks_lost = 0, keyframes_lost = 0;
+  {
+    Reconstruction first(cfg, TrackingMode::Joint);
+    feed(first, frames, 0, 20);
+    ASSERT_GT(first.fusionStats().world.spilled, 0u) << "the volume should have left bricks on disk";
+    ASSERT_GT(first.loopCloser()->storeStats().spilled, 0u) << "keyframes should be on disk";
+    const std::vector<int> files = test::spillFilesIn(dir);
+    ASSERT_EQ(files.size(), 2u);
+    for (const int fd : files) {  // every record damaged, as a failing disk would
+      struct stat st {};
+      ASSERT_EQ(::fstat(fd, &st), 0);
+      const std::vector<std::uint8_t> junk(std::size_t(st.st_size), 0xa5);
+      ASSERT_EQ(::pwrite(fd, junk.data(), junk.size(), 0), ssize_t(junk.size()));
+    }
+    testing::internal::CaptureStderr();
+    first.saveState(saved);  // reads every spilled record: each one is lost there
+    testing::internal::GetCapturedStderr();
+    bricks_lost = first.fusionStats().world.lost;
+    keyframes_lost = first.loopCloser()->storeStats().lost;
+    ASSERT_GT(bricks_lost, 0u);
+    ASSERT_GT(keyframes_lost, 0u);
+  }
+  Reconstruction second(cfg, TrackingMode::Joint);
+  second.loadState(saved);
+  EXPECT_EQ(second.fusionStats().world.lost, bricks_lost);
+  EXPECT_EQ(second.loopCloser()->storeStats().lost, keyframes_lost);
+  feed(second, frames, 20, frames.size());
+  second.finish();
+  EXPECT_GE(second.fusionStats().world.lost, bricks_lost);
+  EXPECT_GE(second.loopCloser()->storeStats().lost, keyframes_lost);
+}
+
 // A setting that differs past its sixth decimal is another run: the origin wrote both as 0.003000, and
 // a run resumed with the other value went on with it.
 TEST(Checkpoint, AnOriginTellsSettingsApartPastTheSixthDecimal) {
@@ -225,8 +271,8 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
   // matches (so that the reader's own guard is what is tested): refused, not first zero-filled (4 GiB).
   {
     std::string huge = bytes;
-    const std::size_t at = std::string("VOFUSION-CHECKPOINT-6\n").size();
-    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-6\n"), 0);
+    const std::size_t at = std::string("VOFUSION-CHECKPOINT-7\n").size();
+    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-7\n"), 0);
     huge.replace(at, 4, "\xff\xff\xff\xff");
     const std::size_t body = huge.size() - 20;  // the trailer: "CHECKSUM", CRC-32, length
     ASSERT_EQ(huge.compare(body, 8, "CHECKSUM"), 0);

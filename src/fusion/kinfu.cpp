@@ -25,6 +25,8 @@ struct KinFu::Impl {
   ModelPrediction model;     // ray cast after the last fusion, for the next frame's tracking
   bool have_model = false;   // a frame was fused: the next one is tracked against the map
   bool model_stale = false;  // resumed from a file: the model is ray cast (unhinted) before tracking
+  // Resumed from a checkpoint: the world model's bricks lost before it (held there as never observed).
+  std::size_t bricks_lost_before = 0;
 
   Eigen::Vector3f focusPoint(const Eigen::Isometry3d& T) const {
     return (T.translation() + T.linear().col(2) * params.focus_distance).cast<float>();
@@ -213,7 +215,10 @@ void KinFu::saveState(std::ostream& os) const {
     }
     state::write(a, s.model_depth);
   }
-  s.volume->save(os);
+  s.volume->save(os);  // finds the bricks whose spill records cannot be read any more
+  auto a = state::archiveOf(os);
+  state::tag(a, "map losses");
+  a << uint64_t(stats().world.lost);
 }
 
 void KinFu::loadState(std::istream& is) {
@@ -237,6 +242,11 @@ void KinFu::loadState(std::istream& is) {
     state::read(a, s.model_depth);
   }
   s.volume->load(is);
+  auto a = state::archiveOf(is);
+  state::expectTag(a, "map losses");
+  uint64_t lost = 0;
+  a >> lost;
+  s.bricks_lost_before = lost;
   if (s.on_shift) s.on_shift(*s.volume, std::nullopt);
 }
 
@@ -272,6 +282,7 @@ MapStats KinFu::stats() const {
   st.bricks_in_world_model = impl_->volume->bricksInWorldModel();
   st.memory_bytes = impl_->volume->memoryBytes();
   st.world = impl_->volume->worldModel().stats();
+  st.world.lost += impl_->bricks_lost_before;
   return st;
 }
 

@@ -71,6 +71,7 @@ struct LoopCloser::Impl {
   StageTimes times;
   double cpu_seconds = 0.0;  // the thread's CPU time in process()
   KeyframeStoreStats store;
+  std::size_t keyframes_lost_before = 0;  // resumed from a checkpoint: those lost before it (held without features)
   std::exception_ptr failure;  // what ended the thread (guarded by mu): rethrown on the caller's thread
   std::thread worker;
 
@@ -341,9 +342,9 @@ void LoopCloser::saveState(std::ostream& os) const {
   m.waitStored();
   auto a = state::archiveOf(os);
   // "v2": the keyframe selector keeps whether strained frames came since the last keyframe (b9be6fb);
-  // "v3": the last well-tracked frame and the queue's statistics. A checkpoint of an earlier build is
-  // refused by name instead of read out of step.
-  state::tag(a, "loop v3");
+  // "v3": the last well-tracked frame and the queue's statistics; "v4": the keyframes lost so far. A
+  // checkpoint of an earlier build is refused by name instead of read out of step.
+  state::tag(a, "loop v4");
   m.selector.saveState(a);
   m.residuals.saveState(a);
   a << uint64_t(m.strained_frames) << uint64_t(m.keyframes_made);
@@ -363,12 +364,15 @@ void LoopCloser::saveState(std::ostream& os) const {
     state::write(a, k.camera);
     a << m.keyframes.data(id);
   }
+  std::lock_guard<std::mutex> lock(m.mu);
+  m.store = m.keyframes.stats();  // with the keyframes data() found lost just now
+  a << uint64_t(m.store.lost + m.keyframes_lost_before);
 }
 
 void LoopCloser::loadState(std::istream& is) {
   Impl& m = *impl_;
   auto a = state::archiveOf(is);
-  state::expectTag(a, "loop v3");
+  state::expectTag(a, "loop v4");
   m.selector.loadState(a);
   m.residuals.loadState(a);
   uint64_t strained = 0, made = 0, count = 0, max_queued = 0, waits = 0;
@@ -398,9 +402,12 @@ void LoopCloser::loadState(std::istream& is) {
     decodeKeyframeData(bytes, k);
     m.enqueue(std::move(k), false);
   }
+  uint64_t lost = 0;
+  a >> lost;
   std::lock_guard<std::mutex> lock(m.mu);  // the run's, not the replay's (which does not count them)
   m.max_queued = max_queued;
   m.frame_loop_waits = waits;
+  m.keyframes_lost_before = lost;
 }
 
 void LoopCloser::setAfterIndexingHook(std::function<void(std::size_t)> hook) {
@@ -500,7 +507,9 @@ std::size_t LoopCloser::strainedFrames() const { return impl_->strained_frames; 
 std::size_t LoopCloser::keyframesMade() const { return impl_->keyframes_made; }
 KeyframeStoreStats LoopCloser::storeStats() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
-  return impl_->store;
+  KeyframeStoreStats s = impl_->store;
+  s.lost += impl_->keyframes_lost_before;
+  return s;
 }
 double LoopCloser::threadCpuSeconds() const {
   std::lock_guard<std::mutex> lock(impl_->mu);

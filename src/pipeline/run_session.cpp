@@ -30,8 +30,8 @@ namespace vofusion {
 namespace {
 
 // 2: the resumed map's name; 3: the checksum; 4: frame indices; 5: the loop closer's last well-tracked frame;
-// 6: the tracker's last measured frame
-constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-6\n";
+// 6: the tracker's last measured frame; 7: the bricks and keyframes lost so far (their spill records unreadable)
+constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-7\n";
 
 // A checkpoint ends with kChecksumTag, the CRC-32 of every byte before the tag (4 bytes) and their count
 // (8), little-endian: a flipped byte in a pose or a descriptor is refused, not resumed from.
