@@ -57,6 +57,27 @@ std::string mapStamp(const std::string& path) {
 }
 }  // namespace
 
+namespace {
+// The images, copied once for all that keeps them past process(): the caller may refill its frame's
+// buffers for the next one (the apps reuse one Frame), while the fusion beside the next frame reads
+// both and the odometry's held frames read their depth again (colour time: the current frame's
+// depths were read at the reference's pixels).
+Frame ownedCopy(const Frame& in) {
+  Frame frame = in;
+  frame.depth = in.depth.clone();
+  // Frame::rgb is 8-bit BGR. A library caller's colour of another pixel type (16 bits a channel, BGRA)
+  // is read as the loaders read it, once for every stage: the photometric term dropped it without a
+  // word, and the map's colour read its bytes as 8-bit BGR.
+  if (in.rgb.empty() || in.rgb.type() == CV_8UC3) {
+    frame.rgb = in.rgb.clone();
+  } else {
+    frame.rgb = asBgr8(in.rgb);
+    frame.colour_file.reset();  // not these pixels' file
+  }
+  return frame;
+}
+}  // namespace
+
 struct Reconstruction::Impl {
   TrackingMode mode;
   OdometryParams odo_params;
@@ -135,6 +156,78 @@ struct Reconstruction::Impl {
     fusing.run([this] { kinfu->fuse(fusing_result); });
     return f;
   }
+  // A frame out of order or without a usable stamp is refused before anything changes.
+  void checkNext(const Frame& frame) {
+    // The odometry names its reference by index, and the tracker finds that frame's pose by it: frames
+    // left at the default index 0 were all "frame 0" (a library caller's), and got wrong poses.
+    if (last_index && frame.index <= *last_index)
+      throw std::invalid_argument("Reconstruction: frame index " + std::to_string(frame.index) + " after " +
+                                  std::to_string(*last_index) + " (Frame::index must grow: its position in the input)");
+    // Velocities, the colour-time correction and the trajectory are taken from the stamps: a NaN one
+    // would put NaN in the pose and every pose after it.
+    if (!std::isfinite(frame.timestamp))
+      throw std::invalid_argument("Reconstruction: frame " + std::to_string(frame.index) + " has a timestamp of " +
+                                  std::to_string(frame.timestamp) + " (Frame::timestamp must be a number of seconds)");
+    last_index = frame.index;
+  }
+  OdometryResult runOdometry(const Frame& frame) {
+    OdometryResult o = odometry->process(frame);
+    // The frame the odometry starts from has no motion to estimate: not a failure.
+    if (!o.success && !o.started) ++odo_failures;
+    if (o.success) colour_time = {true, o.colour_time_capture, o.colour_time_votes, o.colour_time_capture_votes};
+    return o;
+  }
+  // Lost: the frame is tracked only once a keyframe places it (from there, as its prior: not from a
+  // frame before the loss), verified against that keyframe as a loop is; until then it stays lost, its
+  // pose held, never guessed (ICP from the held pose may converge anywhere once the camera has moved on).
+  // ICP against the map then refines the keyframe's pose, or, where it rejects, the frame keeps that
+  // pose (a fallback, fused as fallbacks are). Asking the map to agree as well was measured: the brisk
+  // blackout's seed 2 resumed 22 frames after the view came back instead of 0 (ATE after it 4.0 against
+  // 7.7 mm), over issue 30's 10.
+  FusionResult trackOrRelocalise(const Frame& frame, const OdometryResult& odo) {
+    if (!searching) {
+      fusion::MotionPrior prior;
+      if (odo.success) prior = motionPriorOf(odo);
+      return track(frame, odo.success ? &prior : nullptr, odo.geometry.get());
+    }
+    const mrpt::poses::CPose3D held = kinfu->pose();
+    const std::optional<loop::Relocalisation> found = loops->relocalise(frame, odo.features);
+    FusionResult f;
+    if (found) {
+      kinfu->relocalise(toMrpt(found->pose), true);
+      f = track(frame, nullptr, odo.geometry.get());
+      if (f.tracked && !f.predicted) {
+        searching = false;
+        relocalisations.push_back(*found);
+        return f;
+      }
+      waitFusion();  // the keyframe's pose did not hold: back to the held pose, once the fusion task is done
+      kinfu->relocalise(held);
+    }
+    FusionResult lost;
+    lost.rejection = Rejection::NotRelocalised;
+    lost.reason = toString(lost.rejection) + (f.reason.empty() ? "" : " (" + f.reason + ")");
+    lost.pose = held;
+    lost.times = f.times;
+    return lost;
+  }
+  // The frame's outcome into its report, the run's counts and the per-frame lists.
+  void record(const Frame& frame, const FusionResult& f, FrameReport& r) {
+    r.tracked = f.tracked;  // the first frame with readings in range starts the map; one before it is lost
+    r.fell_back = f.fell_back;
+    r.predicted = f.predicted;
+    r.note = f.reason;
+    r.pose = f.pose;
+    if (f.rejection != Rejection::None) ++rejections[f.rejection];
+    if (f.fell_back) ++fallbacks;
+    if (f.predicted) ++predicted;
+    if (!r.tracked) ++lost;
+    updateLost(r);
+    ++frames;
+    trajectory.push_back({frame.timestamp, f.pose});
+    fused.push_back(r.tracked && !r.predicted && (!r.fell_back || kinfu_params.integrate_on_fallback));
+    indices.push_back(frame.index);
+  }
   // Lost once a frame had no pose, or kLostAfterPredicted were guessed in a row; found only by
   // relocalisation, so only with loop closure's keyframes (none yet: the frame starts the map).
   void updateLost(const FrameReport& r) {
@@ -161,97 +254,25 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
 Reconstruction::~Reconstruction() = default;
 
 FrameReport Reconstruction::process(const Frame& in) {
-  // The images, copied once for all that keeps them past this call: the caller may refill its frame's
-  // buffers for the next one (the apps reuse one Frame), while the fusion beside the next frame reads
-  // both and the odometry's held frames read their depth again (colour time: the current frame's
-  // depths were read at the reference's pixels).
-  Frame frame = in;
-  frame.depth = in.depth.clone();
-  // Frame::rgb is 8-bit BGR. A library caller's colour of another pixel type (16 bits a channel, BGRA)
-  // is read as the loaders read it, once for every stage: the photometric term dropped it without a
-  // word, and the map's colour read its bytes as 8-bit BGR.
-  if (in.rgb.empty() || in.rgb.type() == CV_8UC3) {
-    frame.rgb = in.rgb.clone();
-  } else {
-    frame.rgb = asBgr8(in.rgb);
-    frame.colour_file.reset();  // not these pixels' file
-  }
   Impl& m = *impl_;
-  // The odometry names its reference by index, and the tracker finds that frame's pose by it: frames
-  // left at the default index 0 were all "frame 0" (a library caller's), and got wrong poses.
-  if (m.last_index && frame.index <= *m.last_index)
-    throw std::invalid_argument("Reconstruction: frame index " + std::to_string(frame.index) + " after " +
-                                std::to_string(*m.last_index) + " (Frame::index must grow: its position in the input)");
-  // Velocities, the colour-time correction and the trajectory are taken from the stamps: a NaN one
-  // would put NaN in the pose and every pose after it.
-  if (!std::isfinite(frame.timestamp))
-    throw std::invalid_argument("Reconstruction: frame " + std::to_string(frame.index) + " has a timestamp of " +
-                                std::to_string(frame.timestamp) + " (Frame::timestamp must be a number of seconds)");
-  m.last_index = frame.index;
+  const Frame frame = ownedCopy(in);
+  m.checkNext(frame);
   const auto start = std::chrono::steady_clock::now();
   FrameReport r;
   r.index = frame.index;
   r.timestamp = frame.timestamp;
   if (m.odometry) {
     ScopedStageTimer t(r.times, "odometry");
-    r.odometry = m.odometry->process(frame);
-    // The frame the odometry starts from has no motion to estimate: not a failure.
-    if (!r.odometry.success && !r.odometry.started) ++m.odo_failures;
-    if (r.odometry.success)
-      m.colour_time = {true, r.odometry.colour_time_capture, r.odometry.colour_time_votes, r.odometry.colour_time_capture_votes};
+    r.odometry = m.runOdometry(frame);
   }
   m.waitFusion();
   // The frames a later prior may name keep their poses, however old: the odometry matches against its
   // last good frame after any number of failed ones (ICP tracked a covered lens on; past 32 frames the
   // match that came back had no reference pose, and the frame was guessed).
   if (m.odometry) m.kinfu->holdFrames(m.odometry->heldFrames());
-  // Lost: the frame is tracked only once a keyframe places it (from there, as its prior: not from a
-  // frame before the loss), verified against that keyframe as a loop is; until then it stays lost, its
-  // pose held, never guessed (ICP from the held pose may converge anywhere once the camera has moved on).
-  // ICP against the map then refines the keyframe's pose, or, where it rejects, the frame keeps that
-  // pose (a fallback, fused as fallbacks are). Asking the map to agree as well was measured: the brisk
-  // blackout's seed 2 resumed 22 frames after the view came back instead of 0 (ATE after it 4.0 against
-  // 7.7 mm), over issue 30's 10.
-  const bool searching = m.searching;
-  const mrpt::poses::CPose3D held = m.kinfu->pose();
-  std::optional<loop::Relocalisation> found;
-  if (searching) found = m.loops->relocalise(frame, r.odometry.features);
-  if (found) m.kinfu->relocalise(toMrpt(found->pose), true);
-  fusion::MotionPrior prior;
-  const bool use_prior = r.odometry.success && !searching;
-  if (use_prior) prior = motionPriorOf(r.odometry);
-  FusionResult f;
-  if (!searching || found) f = m.track(frame, use_prior ? &prior : nullptr, r.odometry.geometry.get());
-  if (searching && found && f.tracked && !f.predicted) {
-    m.searching = false;
-    m.relocalisations.push_back(*found);
-  } else if (searching) {
-    if (found) {  // the keyframe's pose did not hold: back to the held pose, once the fusion task is done
-      m.waitFusion();
-      m.kinfu->relocalise(held);
-    }
-    FusionResult lost;
-    lost.rejection = Rejection::NotRelocalised;
-    lost.reason = toString(lost.rejection) + (f.reason.empty() ? "" : " (" + f.reason + ")");
-    lost.pose = held;
-    lost.times = f.times;
-    f = lost;
-  }
+  const FusionResult f = m.trackOrRelocalise(frame, r.odometry);
   r.times.merge(f.times);
-  r.tracked = f.tracked;  // the first frame with readings in range starts the map; one before it is lost
-  r.fell_back = f.fell_back;
-  r.predicted = f.predicted;
-  r.note = f.reason;
-  if (f.rejection != Rejection::None) ++m.rejections[f.rejection];
-  r.pose = f.pose;
-  if (f.fell_back) ++m.fallbacks;
-  if (f.predicted) ++m.predicted;
-  if (!r.tracked) ++m.lost;
-  m.updateLost(r);
-  ++m.frames;
-  m.trajectory.push_back({frame.timestamp, f.pose});
-  m.fused.push_back(r.tracked && !r.predicted && (!r.fell_back || m.kinfu_params.integrate_on_fallback));
-  m.indices.push_back(frame.index);
+  m.record(frame, f, r);
   if (m.loops) {
     ScopedStageTimer t(r.times, "keyframes");
     m.loops->addFrame(frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, f.icp_rms, r.odometry.features);
