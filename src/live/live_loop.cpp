@@ -1,8 +1,10 @@
 #include "vofusion/live/live_loop.h"
 
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "vofusion/core/config.h"
@@ -137,87 +139,111 @@ void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks,
 
 }  // namespace
 
+namespace {
+
+// hooks.on_tick with the statistics so far and the seconds since the start: at most every 100 ms
+// unless forced (after each processed frame).
+class Ticker {
+ public:
+  Ticker(Shared& sh, const LiveHooks& hooks) : sh_(sh), hooks_(hooks) {}
+  double seconds() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
+  void operator()(bool force) {
+    if (!hooks_.on_tick) return;
+    const auto now = std::chrono::steady_clock::now();
+    if (!force && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    LiveStats snapshot;
+    {
+      std::lock_guard<std::mutex> lk(sh_.m);
+      snapshot = sh_.stats;
+    }
+    snapshot.seconds = seconds();
+    hooks_.on_tick(snapshot);
+  }
+
+ private:
+  Shared& sh_;
+  const LiveHooks& hooks_;
+  const std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point last_ = start_;
+};
+
+// The oldest queued frame, or std::nullopt once the run is over: the producer done and nothing queued,
+// or, when stopping (asked to, or after an error), the producer out of grab(). Ticks every 100 ms
+// while it waits.
+std::optional<Frame> nextFrame(Shared& sh, const LiveHooks& hooks, Ticker& tick) {
+  for (;;) {
+    {
+      std::unique_lock<std::mutex> lk(sh.m);
+      if (externalStop(hooks)) sh.stop = true;
+      if (sh.stop || !sh.stats.error.empty()) {
+        // What is still queued then counts as dropped (runLive's end).
+        sh.stop = true;
+        if (sh.cv.wait_for(lk, std::chrono::milliseconds(100), [&] { return sh.producer_done; })) return std::nullopt;
+      } else {
+        sh.cv.wait_for(lk, std::chrono::milliseconds(100),
+                       [&] { return !sh.queue.empty() || sh.producer_done || externalStop(hooks); });
+        if (!sh.queue.empty() && !externalStop(hooks)) {
+          Frame frame = std::move(sh.queue.front());
+          sh.queue.pop_front();
+          return frame;
+        }
+        if (sh.producer_done && sh.queue.empty()) return std::nullopt;
+      }
+    }
+    tick(false);
+  }
+}
+
+// The consumer on one frame, counted as processed (true). What it throws stops the run (the first error
+// is its cause) and is counted as dropped, unless the frame was done before a later step failed.
+bool consume(Shared& sh, const FrameConsumer& consumer, Frame& frame) {
+  try {
+    consumer(frame);
+  } catch (...) {
+    std::lock_guard<std::mutex> lk(sh.m);
+    // Not finished: counted as dropped so processed stays honest; finished, then a later step failed:
+    // processed, as the reconstruction holds it.
+    ++(frameWasDone() ? sh.stats.processed : sh.stats.dropped);
+    if (sh.stats.error.empty()) {  // the first error is the cause (a full disk: the recorder's, first)
+      sh.stats.stop = StopReason::ConsumerError;
+      sh.stats.error = currentExceptionText();
+    }
+    sh.stop = true;
+    return false;
+  }
+  std::lock_guard<std::mutex> lk(sh.m);
+  ++sh.stats.processed;
+  return true;
+}
+
+// Whatever leaves runLive (an exception from a hook) stops and joins the producer first: a joinable
+// std::thread's destructor ends the process.
+struct JoinOnExit {
+  Shared& sh;
+  std::thread& t;
+  ~JoinOnExit() {
+    if (!t.joinable()) return;
+    {
+      std::lock_guard<std::mutex> lk(sh.m);
+      sh.stop = true;
+    }
+    t.join();
+  }
+};
+
+}  // namespace
+
 LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveOptions& options,
                   const LiveHooks& hooks) {
   LiveOptions opt = options;
   if (opt.queue_capacity < 1) opt.queue_capacity = 1;
   Shared sh;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+  Ticker tick(sh, hooks);
   std::thread producer([&] { produce(source, opt, hooks, sh); });
-  // Whatever leaves this function (an exception from a hook) stops and joins the producer first: a
-  // joinable std::thread's destructor ends the process.
-  struct JoinOnExit {
-    Shared& sh;
-    std::thread& t;
-    ~JoinOnExit() {
-      if (!t.joinable()) return;
-      {
-        std::lock_guard<std::mutex> lk(sh.m);
-        sh.stop = true;
-      }
-      t.join();
-    }
-  } join_on_exit{sh, producer};
-
-  auto last_tick = std::chrono::steady_clock::now();
-  auto tick = [&](bool force) {
-    if (!hooks.on_tick) return;
-    const auto now = std::chrono::steady_clock::now();
-    if (!force && now - last_tick < std::chrono::milliseconds(100)) return;
-    last_tick = now;
-    LiveStats snapshot;
-    {
-      std::lock_guard<std::mutex> lk(sh.m);
-      snapshot = sh.stats;
-    }
-    snapshot.seconds = elapsed();
-    hooks.on_tick(snapshot);
-  };
-
-  for (;;) {
-    Frame frame;
-    {
-      std::unique_lock<std::mutex> lk(sh.m);
-      if (externalStop(hooks)) sh.stop = true;
-      if (sh.stop || !sh.stats.error.empty()) {
-        // Stopping: wait for the producer to leave grab(); what is still queued counts as dropped.
-        sh.stop = true;
-        if (sh.cv.wait_for(lk, std::chrono::milliseconds(100), [&] { return sh.producer_done; })) break;
-        lk.unlock();
-        tick(false);
-        continue;
-      }
-      sh.cv.wait_for(lk, std::chrono::milliseconds(100),
-                     [&] { return !sh.queue.empty() || sh.producer_done || externalStop(hooks); });
-      if (sh.queue.empty() || externalStop(hooks)) {
-        if (sh.producer_done && sh.queue.empty()) break;
-        lk.unlock();
-        tick(false);
-        continue;
-      }
-      frame = std::move(sh.queue.front());
-      sh.queue.pop_front();
-    }
-    try {
-      consumer(frame);
-    } catch (...) {
-      std::lock_guard<std::mutex> lk(sh.m);
-      // Not finished: counted as dropped so processed stays honest; finished, then a later step failed:
-      // processed, as the reconstruction holds it.
-      ++(frameWasDone() ? sh.stats.processed : sh.stats.dropped);
-      if (sh.stats.error.empty()) {  // the first error is the cause (a full disk: the recorder's, first)
-        sh.stats.stop = StopReason::ConsumerError;
-        sh.stats.error = currentExceptionText();
-      }
-      sh.stop = true;
-      continue;
-    }
-    {
-      std::lock_guard<std::mutex> lk(sh.m);
-      ++sh.stats.processed;
-    }
-    tick(true);
+  const JoinOnExit join_on_exit{sh, producer};
+  while (std::optional<Frame> frame = nextFrame(sh, hooks, tick)) {
+    if (consume(sh, consumer, *frame)) tick(true);
   }
   producer.join();
   LiveStats out;
@@ -228,7 +254,7 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
     if (sh.stop && sh.stats.stop == StopReason::EndOfStream) sh.stats.stop = StopReason::Interrupted;
     out = sh.stats;
   }
-  out.seconds = elapsed();
+  out.seconds = tick.seconds();
   if (hooks.on_tick) hooks.on_tick(out);
   return out;
 }
