@@ -414,6 +414,30 @@ class OrderedRegionSimplifier {
   std::deque<std::unique_ptr<Item>> queue_;  // region order; the front is welded next
 };
 
+// The whole mesh's face budget (target_faces) shared among the regions by their raw faces.
+class FaceBudget {
+ public:
+  explicit FaceBudget(int target_faces) : target_(target_faces) {}
+  bool active() const { return target_ > 0; }
+  void add(const fusion::RegionMesh& r) {
+    if (raw_faces_of_.size() <= r.ordinal) raw_faces_of_.resize(r.ordinal + 1, 0);
+    raw_faces_of_[r.ordinal] = r.mesh.faces.size();
+    raw_faces_total_ += r.mesh.faces.size();
+  }
+  // A region's share, at least 1 (0 would mean no budget). Locked seam vertices may keep a region
+  // above its share.
+  int shareOf(const fusion::RegionMesh& r) const {
+    if (!active() || raw_faces_total_ == 0 || r.ordinal >= raw_faces_of_.size()) return target_;
+    const double share = std::ceil(double(target_) * double(raw_faces_of_[r.ordinal]) / double(raw_faces_total_));
+    return std::max(1, int(share));
+  }
+
+ private:
+  int target_;
+  std::vector<std::size_t> raw_faces_of_;  // by region ordinal
+  std::size_t raw_faces_total_ = 0;
+};
+
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
                               const MeshProgress& progress, const std::function<void()>& regions_done,
                               const PremeshedLookup& premeshed) {
@@ -433,16 +457,12 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   std::unique_ptr<RawComponents> fragments;
   if (params.min_component_faces > 0 || params.min_component_area > 0)
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
-  const bool budget = params.target_faces > 0;
-  std::vector<std::size_t> raw_faces_of;  // by region ordinal
-  std::size_t raw_faces_total = 0;
-  if (fragments || budget) {
+  FaceBudget budget(params.target_faces);
+  if (fragments || budget.active()) {
     std::size_t region_count = 0;
     regions([&](fusion::RegionMesh& r) {
       if (fragments) fragments->add(r);
-      if (raw_faces_of.size() <= r.ordinal) raw_faces_of.resize(r.ordinal + 1, 0);
-      raw_faces_of[r.ordinal] = r.mesh.faces.size();
-      raw_faces_total += r.mesh.faces.size();
+      budget.add(r);
       told(1, r);
       region_count = r.regions;
     });
@@ -450,13 +470,6 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
     if (progress && region_count) progress(2, 0, region_count);
   }
-  // A region's share of the budget, by its raw faces (at least 1: 0 would mean no budget). Locked
-  // seam vertices may keep a region above its share.
-  const auto shareOf = [&](const fusion::RegionMesh& r) {
-    if (!budget || raw_faces_total == 0 || r.ordinal >= raw_faces_of.size()) return params.target_faces;
-    const double share = std::ceil(double(params.target_faces) * double(raw_faces_of[r.ordinal]) / double(raw_faces_total));
-    return std::max(1, int(share));
-  };
   // Pass 2: the same regions again, each simplified on a task of its own as soon as it is made (CGAL
   // works on the region's own mesh) while the next regions are marched, and welded in region order,
   // so the mesh is the one a single core gives.
@@ -471,7 +484,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     out.raw_faces += r.mesh.faces.size();
     step.faces_before += r.mesh.faces.size();
     if (fragments) fragments->filter(r);
-    if (premeshed && !budget)  // a budget's shares are known only now (RunSession starts no premesher then)
+    if (premeshed && !budget.active())  // a budget's shares are known only now (RunSession starts no premesher then)
       if (std::optional<PremeshedRegion> done = premeshed(r)) {
         r.mesh = std::move(done->mesh);
         r.on_seam = std::move(done->on_seam);
@@ -479,7 +492,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
         simplifier.addDone(std::move(r), std::move(done->report));
         return;
       }
-    const int share = shareOf(r);
+    const int share = budget.shareOf(r);
     simplifier.add(std::move(r), share);
   });
   simplifier.finish();
