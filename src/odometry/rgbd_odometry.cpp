@@ -213,6 +213,13 @@ struct RgbdOdometry::Impl {
   // is favoured by being the one the frame's fit used.
   bool captureFitsBetter(const FrameFeatures& ref, const FrameFeatures& cur, const std::vector<Corr>& corr,
                          const RigidFit& uncorrected) const;
+  // The rigid fit of src onto dst, with the colour-time correction where the frames' colour and depth
+  // were taken apart (`uncorrected`: the fit before it, when it ran).
+  RigidFit fitAtDepthTime(const FrameFeatures& ref, const FrameFeatures& cur, const std::vector<Corr>& corr,
+                          ColourTimeVelocity mode, Points3& src, Points3& dst, std::optional<RigidFit>& uncorrected) const;
+  // The fit's counts and inlier points into the result (inlier_keypoints: distinct current keypoints).
+  static void reportFit(const RigidFit& fit, const std::vector<Corr>& corr, const Points3& src, const Points3& dst,
+                        OdometryResult& r);
   bool estimate(const FrameFeatures& ref, const std::vector<OlderFrame>& older, const FrameFeatures& cur,
                 std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r, RigidFit& fit,
                 FitVelocities& velocities) const;
@@ -461,6 +468,54 @@ bool RgbdOdometry::Impl::captureFitsBetter(const FrameFeatures& ref, const Frame
   return residualAfter(ColourTimeVelocity::Capture, 3) < residualAfter(ColourTimeVelocity::Interval, 1);
 }
 
+RigidFit RgbdOdometry::Impl::fitAtDepthTime(const FrameFeatures& ref, const FrameFeatures& cur, const std::vector<Corr>& corr,
+                                            ColourTimeVelocity mode, Points3& src, Points3& dst,
+                                            std::optional<RigidFit>& uncorrected) const {
+  const OdometryParams& P = params;
+  // Only the last fit's covariance is reported: the fits before it skip computing theirs.
+  auto fitMotion = [&](bool last) {
+    return motion == MotionMethod::Paper ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust, last);
+  };
+  // Bearings are from colour, depths from depth images taken up to 20 ms apart: move every point to
+  // its frame's depth capture at the camera's velocity and fit again. The velocities come from the
+  // fit they correct: "capture" repeats the correction on its own result (three passes; the shake's
+  // ATE is 0.0129 / 0.0095 / 0.0084 m in mode odometry after 2 / 3 / 4); "interval" corrects once.
+  const bool offsets = cur.colour_offset != 0.0 ||
+                       std::any_of(corr.begin(), corr.end(), [](const Corr& c) { return c.frame->colour_offset != 0.0; });
+  // The velocity is the motion over the interval; carried over more than three of it (stamps 2 ms
+  // apart, colour 15 ms off) it moved keypoints by a guess: no correction then (the tracker's
+  // motionOver clamps there instead: it has no uncorrected estimate to keep).
+  double largest_offset = std::abs(cur.colour_offset);
+  for (const Corr& c : corr) largest_offset = std::max(largest_offset, std::abs(c.frame->colour_offset));
+  const bool correct = P.colour_time && offsets && cur.timestamp > ref.timestamp &&
+                       largest_offset <= 3.0 * (cur.timestamp - ref.timestamp);
+  const int passes = !correct ? 0 : mode == ColourTimeVelocity::Capture ? 3 : 1;
+  RigidFit fit = fitMotion(passes == 0);
+  if (correct) uncorrected = fit;
+  for (int pass = 0; pass < passes && fit.ok; ++pass) {
+    placeAtDepthTime(ref, cur, corr, fit.T, mode, src, dst);
+    fit = fitMotion(pass == passes - 1);
+  }
+  return fit;
+}
+
+void RgbdOdometry::Impl::reportFit(const RigidFit& fit, const std::vector<Corr>& corr, const Points3& src, const Points3& dst,
+                                   OdometryResult& r) {
+  r.matches = int(corr.size());
+  r.inliers = int(fit.inliers.size());
+  r.rms_error = fit.rms;
+  r.inlier_current.clear();
+  r.inlier_reference.clear();
+  std::vector<int> inlier_keypoints;
+  for (const int k : fit.inliers) {
+    r.inlier_current.push_back(src[k]);
+    r.inlier_reference.push_back(dst[k]);
+    inlier_keypoints.push_back(corr[std::size_t(k)].query);
+  }
+  std::sort(inlier_keypoints.begin(), inlier_keypoints.end());
+  r.inlier_keypoints = int(std::unique(inlier_keypoints.begin(), inlier_keypoints.end()) - inlier_keypoints.begin());
+}
+
 bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<OlderFrame>& older,
                                   const FrameFeatures& cur, std::vector<CrossCheckedHammingMatcher>& split, OdometryResult& r,
                                   RigidFit& fit, FitVelocities& velocities) const {
@@ -494,30 +549,7 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   std::optional<RigidFit> uncorrected;  // the fit before the colour-time correction, when there was one
   {
     ScopedStageTimer t(r.times, "motion");
-    // Only the last fit's covariance is reported: the fits before it skip computing theirs.
-    auto fitMotion = [&](bool last) {
-      return motion == MotionMethod::Paper ? fitPaper(src, dst, P.paper) : fitRobust(src, dst, P.robust, last);
-    };
-    // Bearings are from colour, depths from depth images taken up to 20 ms apart: move every point to
-    // its frame's depth capture at the camera's velocity and fit again. The velocities come from the
-    // fit they correct: "capture" repeats the correction on its own result (three passes; the shake's
-    // ATE is 0.0129 / 0.0095 / 0.0084 m in mode odometry after 2 / 3 / 4); "interval" corrects once.
-    const bool offsets = cur.colour_offset != 0.0 ||
-                         std::any_of(corr.begin(), corr.end(), [](const Corr& c) { return c.frame->colour_offset != 0.0; });
-    // The velocity is the motion over the interval; carried over more than three of it (stamps 2 ms
-    // apart, colour 15 ms off) it moved keypoints by a guess: no correction then (the tracker's
-    // motionOver clamps there instead: it has no uncorrected estimate to keep).
-    double largest_offset = std::abs(cur.colour_offset);
-    for (const Corr& c : corr) largest_offset = std::max(largest_offset, std::abs(c.frame->colour_offset));
-    const bool correct = P.colour_time && offsets && cur.timestamp > ref.timestamp &&
-                         largest_offset <= 3.0 * (cur.timestamp - ref.timestamp);
-    const int passes = !correct ? 0 : mode == ColourTimeVelocity::Capture ? 3 : 1;
-    fit = fitMotion(passes == 0);
-    if (correct) uncorrected = fit;
-    for (int pass = 0; pass < passes && fit.ok; ++pass) {
-      placeAtDepthTime(ref, cur, corr, fit.T, mode, src, dst);
-      fit = fitMotion(pass == passes - 1);
-    }
+    fit = fitAtDepthTime(ref, cur, corr, mode, src, dst, uncorrected);
   }
   r.colour_time_capture = mode == ColourTimeVelocity::Capture;
   // Offsets under a millisecond move no keypoint measurably: no evidence either way.
@@ -528,19 +560,7 @@ bool RgbdOdometry::Impl::estimate(const FrameFeatures& ref, const std::vector<Ol
   }
   // The history capture needs (kept whatever the mode: auto may switch to capture).
   if (fit.ok && cur.timestamp > ref.timestamp) velocities = velocitiesOf(ref, cur, fit.T, ColourTimeVelocity::Capture);
-  r.matches = int(corr.size());
-  r.inliers = int(fit.inliers.size());
-  r.rms_error = fit.rms;
-  r.inlier_current.clear();
-  r.inlier_reference.clear();
-  std::vector<int> inlier_keypoints;
-  for (const int k : fit.inliers) {
-    r.inlier_current.push_back(src[k]);
-    r.inlier_reference.push_back(dst[k]);
-    inlier_keypoints.push_back(corr[std::size_t(k)].query);
-  }
-  std::sort(inlier_keypoints.begin(), inlier_keypoints.end());
-  r.inlier_keypoints = int(std::unique(inlier_keypoints.begin(), inlier_keypoints.end()) - inlier_keypoints.begin());
+  reportFit(fit, corr, src, dst, r);
   if (!fit.ok) return fail(fit.failure);
   if (r.inlier_keypoints < P.min_inliers) return fail("too few inliers");
   if (secondaryExtent(src, fit.inliers) < P.min_extent) return fail("degenerate geometry (inliers nearly collinear)");
