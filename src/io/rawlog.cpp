@@ -210,8 +210,9 @@ CameraIntrinsics depthCameraOf(const CObservation3DRangeScan& obs, int cols, int
 }
 }  // namespace
 
-Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string& origin,
-                           const std::optional<CameraIntrinsics>& override_camera) {
+namespace {
+// The observation's external images into memory; a file that cannot be read is named.
+void loadImages(const CObservation3DRangeScan& obs, const std::string& origin) {
   try {
     const ScopedAllocationLimit limit(kMaxEntryBuffer, kMaxEntryTotal);  // external files have length fields too
     obs.load();
@@ -221,19 +222,12 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     const std::string why = whyUnreadable(file);
     throw InputError(file, "cannot load external range image (" + (why.empty() ? std::string("corrupt") : why) + ")");
   }
-  if (!obs.hasRangeImage || obs.rangeImage.rows() == 0)
-    throw InputError(origin, "3D observation without a range image");
+}
+
+// The range image in metres as depth along the optical axis, converted as the TUM loader converts
+// (16-bit -> float by cv::convertTo), so converted data reads back bit-identical.
+cv::Mat depthInMetres(const CObservation3DRangeScan& obs, const CameraIntrinsics& k, const std::string& origin) {
   const int rows = int(obs.rangeImage.rows()), cols = int(obs.rangeImage.cols());
-
-  Frame f;
-  f.timestamp = mrpt::Clock::toDouble(obs.timestamp);
-  f.camera = override_camera ? *override_camera : depthCameraOf(obs, cols, rows, origin);
-  f.camera.width = cols;
-  f.camera.height = rows;
-  f.camera.validate(override_camera ? "--intrinsics" : origin);
-
-  // Same conversion as the TUM loader (16-bit -> float by cv::convertTo), so converted data reads back
-  // bit-identical.
   cv::Mat raw(rows, cols, CV_16U);
   for (int r = 0; r < rows; ++r) {
     uint16_t* out = raw.ptr<uint16_t>(r);
@@ -241,19 +235,24 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   }
   if (!(obs.rangeUnits > 0.f) || !std::isfinite(obs.rangeUnits))
     throw InputError(origin, "depth units of " + std::to_string(obs.rangeUnits) + " m (expected a positive number)");
-  raw.convertTo(f.depth, CV_32F, exactUnits(obs.rangeUnits));
+  cv::Mat depth;
+  raw.convertTo(depth, CV_32F, exactUnits(obs.rangeUnits));
   if (!obs.range_is_depth) {
     // Ranges along the pixel ray -> depth along the optical axis.
-    const CameraIntrinsics& k = f.camera;
     for (int r = 0; r < rows; ++r) {
-      float* out = f.depth.ptr<float>(r);
+      float* out = depth.ptr<float>(r);
       for (int c = 0; c < cols; ++c) {
         const double x = (c - k.cx) / k.fx, y = (r - k.cy) / k.fy;
         out[c] = float(out[c] / std::sqrt(1 + x * x + y * y));
       }
     }
   }
+  return depth;
+}
 
+// The frame's colour in its depth camera's pixels (grey when the observation has none).
+void setColour(const CObservation3DRangeScan& obs, const std::string& origin, Frame& f) {
+  const int rows = f.depth.rows, cols = f.depth.cols;
   if (obs.hasIntensityImage) {
     // A colour camera of its own (another pose or other intrinsics): its colour is re-projected into the
     // depth camera. A registered one at another resolution (e.g. 1280x960 over 640x480) is resized.
@@ -282,6 +281,23 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   } else {
     f.rgb = cv::Mat(rows, cols, CV_8UC3, cv::Scalar(128, 128, 128));
   }
+}
+}  // namespace
+
+Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string& origin,
+                           const std::optional<CameraIntrinsics>& override_camera) {
+  loadImages(obs, origin);
+  if (!obs.hasRangeImage || obs.rangeImage.rows() == 0)
+    throw InputError(origin, "3D observation without a range image");
+  const int rows = int(obs.rangeImage.rows()), cols = int(obs.rangeImage.cols());
+  Frame f;
+  f.timestamp = mrpt::Clock::toDouble(obs.timestamp);
+  f.camera = override_camera ? *override_camera : depthCameraOf(obs, cols, rows, origin);
+  f.camera.width = cols;
+  f.camera.height = rows;
+  f.camera.validate(override_camera ? "--intrinsics" : origin);
+  f.depth = depthInMetres(obs, f.camera, origin);
+  setColour(obs, origin, f);
   obs.unload();
   return f;
 }
