@@ -1,5 +1,6 @@
 #include "mesh_stage.h"
 
+#include <functional>
 #include <memory>
 
 #include "run_summary.h"
@@ -19,7 +20,50 @@ void sayWhatCleaningLeft(const MeshCleanReport& r) {
   if (!r.success) printWarning("mesh post-processing failed (the mesh is written as it was before): " + r.failure);
   if (!r.warning.empty()) printWarning("mesh post-processing: " + r.warning);
 }
+// One progress bar per pass of the meshing by region ("finding fragments", then "repair, simplify").
+class PassProgress {
+ public:
+  void operator()(int pass, std::size_t done, std::size_t regions) {
+    if (pass != pass_) {
+      finish();
+      shown_ = std::make_unique<Progress>(pass == 1 ? "meshing [finding fragments]" : "meshing [repair, simplify]", regions,
+                                          "regions");
+      pass_ = pass;
+    }
+    shown_->update(done);
+  }
+  void finish() {
+    if (shown_) shown_->finish();
+  }
+
+ private:
+  std::unique_ptr<Progress> shown_;
+  int pass_ = 0;
+};
+
+// The map meshed, repaired and simplified one region at a time (mesh_by_region.h), its statistics into
+// the summary; `streamed_raw`: mesh_raw.ply's line, when it was streamed.
+TriangleMesh meshRegionByRegion(Reconstruction& rec, const OutputParams& p, const MeshCleanParams& mesh_params, json& s,
+                                StagedOutputs& out, RegionPremesher* premeshed, const std::function<void()>& release_map,
+                                std::string& streamed_raw) {
+  const auto source = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
+    rec.extractMeshByRegion(mesh_params.region_bricks, sink);
+  };
+  PassProgress progress;
+  RegionMeshResult r = meshByRegion(source, mesh_params, p.save_raw_mesh ? out.path("mesh_raw.ply") : "", std::ref(progress),
+                                    release_map, premeshed ? premeshed->lookup() : PremeshedLookup());
+  if (premeshed)
+    s["mesh_while_tracking"] = {{"regions_meshed", premeshed->regionsMeshed()}, {"regions_reused", r.regions_premeshed}};
+  progress.finish();
+  s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
+  if (p.save_raw_mesh) streamed_raw = std::to_string(r.raw_faces) + " faces, streamed region by region";
+  s["mesh_clean"] = json::parse(r.report.toJson());
+  sayWhatCleaningLeft(r.report);
+  if (r.report.simplification.ran) s["mesh_simplification"] = simplificationJson(r.report.simplification, r.raw_faces);
+  return std::move(r.mesh);
+}
 }  // namespace
+
 
 bool meshesByRegion(const OutputParams& p, const MeshCleanParams& mesh_params) {
   return p.write_mesh && p.clean_mesh && mesh_params.region_bricks > 0 && !p.save_full_mesh;
@@ -39,31 +83,7 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
   // Region by region unless the unsimplified whole (mesh_full.ply) is asked for.
   const bool by_region = meshesByRegion(p, mesh_params);
   if (by_region) {
-    const auto source = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
-      rec.extractMeshByRegion(mesh_params.region_bricks, sink);
-    };
-    std::unique_ptr<Progress> shown;
-    int shown_pass = 0;
-    const auto progress = [&](int pass, std::size_t done, std::size_t regions) {
-      if (pass != shown_pass) {
-        if (shown) shown->finish();
-        shown = std::make_unique<Progress>(pass == 1 ? "meshing [finding fragments]" : "meshing [repair, simplify]",
-                                           regions, "regions");
-        shown_pass = pass;
-      }
-      shown->update(done);
-    };
-    RegionMeshResult r = meshByRegion(source, mesh_params, p.save_raw_mesh ? out.path("mesh_raw.ply") : "", progress,
-                                      release_map, premeshed ? premeshed->lookup() : PremeshedLookup());
-    if (premeshed)
-      s["mesh_while_tracking"] = {{"regions_meshed", premeshed->regionsMeshed()}, {"regions_reused", r.regions_premeshed}};
-    if (shown) shown->finish();
-    mesh = std::move(r.mesh);
-    s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
-    if (p.save_raw_mesh) streamed_raw = std::to_string(r.raw_faces) + " faces, streamed region by region";
-    s["mesh_clean"] = json::parse(r.report.toJson());
-    sayWhatCleaningLeft(r.report);
-    if (r.report.simplification.ran) s["mesh_simplification"] = simplificationJson(r.report.simplification, r.raw_faces);
+    mesh = meshRegionByRegion(rec, p, mesh_params, s, out, premeshed, release_map, streamed_raw);
   } else {
     mesh = rec.extractMesh();
     s["mesh_raw"] = meshJson(mesh);
