@@ -177,7 +177,8 @@ std::optional<Frame> nextFrame(Shared& sh, const LiveHooks& hooks, Ticker& tick)
       std::unique_lock<std::mutex> lk(sh.m);
       if (externalStop(hooks)) sh.stop = true;
       if (sh.stop || !sh.stats.error.empty()) {
-        // What is still queued then counts as dropped (runLive's end).
+        // Stopping: wait for the producer to leave grab(); what is still queued counts as dropped (at
+        // runLive's end).
         sh.stop = true;
         if (sh.cv.wait_for(lk, std::chrono::milliseconds(100), [&] { return sh.producer_done; })) return std::nullopt;
       } else {
