@@ -287,6 +287,42 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   loop.seconds = before + frame_loop_seconds;
 }
 
+// A run whose frames hold no depth, or none of which was tracked, has nothing to write: said in one line
+// (an interrupted one writes what it has).
+void refuseUntrackedRun(const FrameLoop& loop, const Reconstruction& rec, const std::string& input) {
+  if (loop.interrupted()) return;
+  if (loop.frames_with_depth == 0) throw InputError(input, "no depth readings in any frame (all depth images are zero)");
+  if (rec.lostFrames() >= loop.done)
+    throw InputError(input, "no frame was tracked, all " + std::to_string(loop.done) + " lost (" + mostFrequentRejection(rec) + ")");
+}
+
+// What summary.json tells of the run beyond the reconstruction: input, timing, stop, checkpoints.
+RunInfo runInfoOf(const RunPlan& plan, const FrameLoop& loop, const FrameSource& source, double before_frames,
+                  std::size_t resumed_at) {
+  RunInfo info;
+  info.input = source.name();
+  info.config = plan.config_path;
+  info.interrupted = loop.interrupted();
+  if (loop.interrupted()) info.extra["stop_signal"] = signalName(loop.stop_signal);
+  info.seconds = loop.seconds;
+  if (const Trajectory* gt = source.recordedGroundTruth()) info.recorded_ground_truth = *gt;
+  if (std::isfinite(before_frames)) info.extra["seconds_before_frames"] = before_frames;
+  if (plan.checkpoint_every > 0 || resumed_at)
+    info.extra["checkpoints"] = {{"every_seconds", plan.checkpoint_every}, {"written", loop.checkpoints},
+                                 {"seconds_writing", loop.checkpoint_seconds}, {"resumed_at_frame", resumed_at}};
+  if (!loop.checkpoint_error.empty()) info.extra["checkpoints"]["error"] = loop.checkpoint_error;
+  return info;
+}
+
+// The run's last line: frames, fps, fallbacks, lost and skipped frames, ATE.
+void printOutcome(const FrameLoop& loop, const Reconstruction& rec, const nlohmann::json& summary) {
+  std::fprintf(stderr, "vofusion: %zu frames, %.1f fps, %zu fallbacks, %zu lost", loop.done, summary.value("fps", 0.0),
+               rec.fallbacks(), rec.lostFrames());
+  if (const std::size_t skipped = summary.value("frames_skipped", std::size_t(0))) std::fprintf(stderr, ", %zu skipped", skipped);
+  if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
+  std::fprintf(stderr, "\n");
+}
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale", "--work-dir",
                         "--save-volume", "--resume", "--checkpoint-every"},
@@ -322,23 +358,8 @@ int body(int argc, char** argv) {
     std::error_code ec;
     std::filesystem::remove(plan.checkpoint_path, ec);  // its own periodic one
   }
-  if (loop.frames_with_depth == 0 && !loop.interrupted())
-    throw InputError(source->name(), "no depth readings in any frame (all depth images are zero)");
-  if (run.reconstruction().lostFrames() >= loop.done && !loop.interrupted())
-    throw InputError(source->name(), "no frame was tracked, all " + std::to_string(loop.done) + " lost (" +
-                                         mostFrequentRejection(run.reconstruction()) + ")");
-  RunInfo info;
-  info.input = source->name();
-  info.config = plan.config_path;
-  info.interrupted = loop.interrupted();
-  if (loop.interrupted()) info.extra["stop_signal"] = signalName(loop.stop_signal);
-  info.seconds = loop.seconds;
-  if (const Trajectory* gt = source->recordedGroundTruth()) info.recorded_ground_truth = *gt;
-  if (std::isfinite(before_frames)) info.extra["seconds_before_frames"] = before_frames;
-  if (plan.checkpoint_every > 0 || resumed_at)
-    info.extra["checkpoints"] = {{"every_seconds", plan.checkpoint_every}, {"written", loop.checkpoints},
-                                 {"seconds_writing", loop.checkpoint_seconds}, {"resumed_at_frame", resumed_at}};
-  if (!loop.checkpoint_error.empty()) info.extra["checkpoints"]["error"] = loop.checkpoint_error;
+  refuseUntrackedRun(loop, run.reconstruction(), source->name());
+  RunInfo info = runInfoOf(plan, loop, *source, before_frames, resumed_at);
   source->stop();  // the read ahead of a stopped run is done before its skipped frames are counted
   reportSkipped(*input.frames, info, loop.stopped_at);
   source.reset();
@@ -352,11 +373,7 @@ int body(int argc, char** argv) {
   if (plan.out_params.write_mesh && rec.mapNeedsReintegration() && !rec.reintegrated() && loop.interrupted())
     std::fprintf(stderr, "vofusion: loops corrected the trajectory, but the run was stopped before the map was fused "
                          "again at the corrected poses: the mesh keeps the tracked poses\n");
-  std::fprintf(stderr, "vofusion: %zu frames, %.1f fps, %zu fallbacks, %zu lost", loop.done, summary.value("fps", 0.0),
-               rec.fallbacks(), rec.lostFrames());
-  if (const std::size_t skipped = summary.value("frames_skipped", std::size_t(0))) std::fprintf(stderr, ", %zu skipped", skipped);
-  if (summary.contains("ate")) std::fprintf(stderr, ", ATE RMSE %.4f m", summary["ate"]["rmse"].get<double>());
-  std::fprintf(stderr, "\n");
+  printOutcome(loop, rec, summary);
   std::error_code ec;
   // The outputs are whole: a checkpoint this run wrote or went on from has nothing left to resume.
   // Another run's in the same folder (another input, configuration or length) is left for its --resume.
