@@ -45,6 +45,41 @@ void requireDistinctOutputs(const CommandLine& cl, const std::string& out) {
   }
 }
 
+// out.ply and the asked-for --full, --png, --scene and --report, all or none (an output that cannot be
+// written leaves the earlier ones as they were).
+void writeOutputs(const CommandLine& cl, const std::string& out, const TriangleMesh& mesh, const TriangleMesh& full,
+                  const Trajectory& traj, const MeshCleanReport& report) {
+  AtomicFileSet outputs;
+  outputs.write(out, [&](const std::string& tmp) { writeMesh(tmp, mesh, meshFormatOf(out)); });
+  if (const auto f = cl.value("--full"))
+    outputs.write(*f, [&](const std::string& tmp) { writeMesh(tmp, full, meshFormatOf(*f)); });
+  if (const auto png = cl.value("--png"))
+    outputs.write(*png, [&](const std::string& tmp) { renderMeshPng(tmp, mesh, traj.empty() ? nullptr : &traj); });
+  if (const auto scene = cl.value("--scene"))
+    outputs.write(*scene, [&](const std::string& tmp) { exportScene(tmp, mesh, traj, nullptr, CameraIntrinsics{}); });
+  // With the outputs it describes: a scene that could not be written left a report of success beside
+  // the earlier out.ply.
+  if (const auto rp = cl.value("--report"))
+    outputs.write(*rp, [&](const std::string& tmp) { writeFileAtomically(tmp, report.toJson() + "\n"); });
+  outputs.commit();
+}
+
+// What the cleaning did, in a line (and one for the simplification).
+void printCleaning(std::size_t vertices_before, std::size_t faces_before, const TriangleMesh& mesh, const MeshCleanReport& report) {
+  double seconds = 0;
+  for (const auto& s : report.steps) seconds += s.seconds;
+  std::fprintf(stderr,
+               "%zu vertices / %zu faces -> %zu / %zu in %.2f s; %zu fragments removed, %zu holes filled (%zu left), "
+               "%s, %s\n",
+               vertices_before, faces_before, mesh.vertices.size(), mesh.faces.size(), seconds, report.components_removed,
+               report.holes_filled, report.holes_left, report.closed ? "closed" : "open",
+               report.manifold ? "manifold" : "NOT manifold");
+  if (const auto& s = report.simplification; s.ran)
+    std::fprintf(stderr, "simplified %zu -> %zu faces (%.1f %%) in %.2f s; distance to the unsimplified mesh mean %.4f m, max %.4f m\n",
+                 s.faces_before, s.faces_after, s.faces_before ? 100.0 * s.faces_after / s.faces_before : 0.0, s.seconds,
+                 s.distance.mean, s.distance.max);
+}
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--config", "--report", "--png", "--scene", "--trajectory", "--full", "--distance-to"}, {"--dump-config", "--help"});
   MeshCleanParams params;
@@ -86,30 +121,8 @@ int body(int argc, char** argv) {
   if (mesh.faces.empty())
     printWarning(in + ": no face is left (fragments below [mesh] min_component_faces / min_component_area, " +
                  "degenerate or duplicate faces); " + out + " is empty");
-  AtomicFileSet outputs;  // together: a scene that cannot be written leaves an earlier out.ply as it was
-  outputs.write(out, [&](const std::string& tmp) { writeMesh(tmp, mesh, meshFormatOf(out)); });
-  if (const auto f = cl.value("--full"))
-    outputs.write(*f, [&](const std::string& tmp) { writeMesh(tmp, full, meshFormatOf(*f)); });
-  if (const auto png = cl.value("--png"))
-    outputs.write(*png, [&](const std::string& tmp) { renderMeshPng(tmp, mesh, traj.empty() ? nullptr : &traj); });
-  if (const auto scene = cl.value("--scene"))
-    outputs.write(*scene, [&](const std::string& tmp) { exportScene(tmp, mesh, traj, nullptr, CameraIntrinsics{}); });
-  // With the outputs it describes: a scene that could not be written left a report of success beside
-  // the earlier out.ply.
-  if (rp) outputs.write(*rp, [&](const std::string& tmp) { writeFileAtomically(tmp, report.toJson() + "\n"); });
-  outputs.commit();
-  double seconds = 0;
-  for (const auto& s : report.steps) seconds += s.seconds;
-  std::fprintf(stderr,
-               "%zu vertices / %zu faces -> %zu / %zu in %.2f s; %zu fragments removed, %zu holes filled (%zu left), "
-               "%s, %s\n",
-               v0, f0, mesh.vertices.size(), mesh.faces.size(), seconds, report.components_removed,
-               report.holes_filled, report.holes_left, report.closed ? "closed" : "open",
-               report.manifold ? "manifold" : "NOT manifold");
-  if (const auto& s = report.simplification; s.ran)
-    std::fprintf(stderr, "simplified %zu -> %zu faces (%.1f %%) in %.2f s; distance to the unsimplified mesh mean %.4f m, max %.4f m\n",
-                 s.faces_before, s.faces_after, s.faces_before ? 100.0 * s.faces_after / s.faces_before : 0.0, s.seconds,
-                 s.distance.mean, s.distance.max);
+  writeOutputs(cl, out, mesh, full, traj, report);
+  printCleaning(v0, f0, mesh, report);
   if (ref_path) {
     const MeshDistance d = meshDistance(mesh, ref);
     if (d.samples == 0)  // no face left to sample (or none of area): no distance, not a perfect match
