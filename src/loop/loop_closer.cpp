@@ -364,9 +364,13 @@ void LoopCloser::saveState(std::ostream& os) const {
     state::write(a, k.camera);
     a << m.keyframes.data(id);
   }
-  std::lock_guard<std::mutex> lock(m.mu);
-  m.store = m.keyframes.stats();  // with the keyframes data() found lost just now
-  a << uint64_t(m.store.lost + m.keyframes_lost_before);
+  uint64_t lost = 0;
+  {
+    std::lock_guard<std::mutex> lock(m.mu);
+    m.store = m.keyframes.stats();  // with the keyframes data() found lost just now
+    lost = m.store.lost + m.keyframes_lost_before;
+  }
+  a << lost;  // one lost again after a resume (its new record damaged too) counts again: it lost more
 }
 
 void LoopCloser::loadState(std::istream& is) {

@@ -64,7 +64,6 @@ TriangleMesh meshRegionByRegion(Reconstruction& rec, const OutputParams& p, cons
 }
 }  // namespace
 
-
 bool meshesByRegion(const OutputParams& p, const MeshCleanParams& mesh_params) {
   return p.write_mesh && p.clean_mesh && mesh_params.region_bricks > 0 && !p.save_full_mesh;
 }
