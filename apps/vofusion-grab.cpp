@@ -130,7 +130,7 @@ Args parseArgs(int argc, char** argv) {
   if (cl.value("--checkpoint-every")) {
     if (!a.live || !a.record)
       throw InputError("--checkpoint-every", "needs --live and the recording (a checkpoint is resumed from grab.rawlog)");
-    a.checkpoint_every = cl.number("--checkpoint-every", 0.0, -1e-9, 1e6);
+    a.checkpoint_every = cl.numberFrom("--checkpoint-every", 0.0, 0.0, 1e6);
   }
   if (a.queue && !(*a.queue >= 1 && *a.queue <= LiveOptions::kMostQueued))
     throw InputError("--queue", "must be in [1, 1000] frames (each waiting frame holds ~2 MB)");

@@ -182,7 +182,7 @@ RunPlan planRun(const CommandLine& cl) {
   plan.strict = plan.src_opts.strict = cl.flag("--strict");
   plan.save_volume = cl.value("--save-volume");
   if (plan.save_volume) checkMapPath(*plan.save_volume);
-  plan.checkpoint_every = cl.number("--checkpoint-every", 0.0, -1e-9, 1e6);
+  plan.checkpoint_every = cl.numberFrom("--checkpoint-every", 0.0, 0.0, 1e6);
   plan.checkpoint_path = (std::filesystem::path(plan.out_dir) / "checkpoint").string();
   refuseToReplaceACheckpoint(plan);
   plan.origin = runOrigin(plan, cl);

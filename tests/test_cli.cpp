@@ -125,6 +125,19 @@ TEST(CommandLine, NumberInRange) {
       EXPECT_NE(std::string(e.what()).find("--x expects a number > 0 and <= 1"), std::string::npos) << e.what();
     }
   }
+  // A closed range, as for a zero meaning "off": the message names the bound as the user gives it.
+  EXPECT_DOUBLE_EQ(parse({"--x", "0"}).numberFrom("--x", 5.0, 0.0, 1e6), 0.0);
+  EXPECT_DOUBLE_EQ(parse({}).numberFrom("--x", 5.0, 0.0, 1e6), 5.0);
+  for (const char* bad : {"-5", "-0.001", "2e6"}) {
+    try {
+      parse({"--x", bad}).numberFrom("--x", 0.0, 0.0, 1e6);
+      ADD_FAILURE() << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("--x expects a number >= 0 and <= 1e+06, got '" + std::string(bad) + "'"),
+                std::string::npos)
+          << e.what();
+    }
+  }
   // What std::stod takes but no option means: not a number, whatever the range.
   for (const char* bad : {"abc", "1.5x", "nan", "inf", "-inf", "infinity", "0x10", "0x1p3", " 0.5"}) {
     try {

@@ -127,6 +127,14 @@ double CommandLine::number(const std::string& name, double fallback, double abov
   return x;
 }
 
+double CommandLine::numberFrom(const std::string& name, double fallback, double at_least, double at_most) const {
+  const double x = number(name, fallback);
+  if (!(x >= at_least && x <= at_most))
+    throw InputError("usage", name + " expects a number >= " + fmt(at_least) + " and <= " + fmt(at_most) + ", got '" +
+                                  value(name, fmt(x)) + "'");
+  return x;
+}
+
 bool CommandLine::flag(const std::string& name) const { return flags_.count(name) > 0; }
 
 namespace {

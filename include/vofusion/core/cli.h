@@ -24,6 +24,8 @@ class CommandLine {
   // A number with above < x <= at_most.
   double number(const std::string& name, double fallback, double above,
                 double at_most = std::numeric_limits<double>::infinity()) const;
+  // A number with at_least <= x <= at_most (a zero that means "off" among positive values).
+  double numberFrom(const std::string& name, double fallback, double at_least, double at_most) const;
   bool flag(const std::string& name) const;
   const std::vector<std::string>& positional() const { return positional_; }
 
