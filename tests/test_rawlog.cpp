@@ -28,6 +28,7 @@
 #include "sync_watch.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/io/rawlog_time.h"
 #include "vofusion/sim/synthetic_sequence.h"
 #include "vofusion/sim/any_source.h"
 
@@ -373,9 +374,12 @@ TEST(Rawlog, ManyObservationsAfterTheFramesGoOutInBoundedEntries) {
 // back from a rawlog, in both formats: an observation holds one time, so a COLOUR_TIME comment stamped at
 // the colour image's time follows the scan. Without it the odometry's colour-time correction had nothing
 // to use (rpy_first100 from a rawlog: ATE 0.0177 against 0.0164 m from the folder).
+// Frame 0 is at 0 s, so its colour image, taken 8.1 ms before, is stamped before 1970: MRPT's toDouble
+// read that back as ~1.8e12 s, and the offset was dropped.
 TEST(Rawlog, ColourOffsetsComeBack) {
   auto frames = simFrames(4);
-  const double offsets[] = {0.0, 0.0172, -0.0081, 0.0};
+  ASSERT_EQ(frames[0].timestamp, 0.0);
+  const double offsets[] = {-0.0081, 0.0172, -0.0081, 0.0};
   for (std::size_t i = 0; i < frames.size(); ++i) frames[i].colour_offset = offsets[i];
   const std::string dir = test::tempDir("rawlog_colour_offsets");
   for (const auto format : {RawlogWriterOptions::Format::Observations, RawlogWriterOptions::Format::ActionsSensoryFrames}) {
@@ -401,9 +405,21 @@ TEST(Rawlog, ColourOffsetsComeBack) {
       std::size_t colour_times = 0;
       for (std::size_t i = 0; i < log.size(); ++i)
         if (log.getType(i) == mrpt::obs::CRawlog::etObservation) colour_times += log.getAsObservation(i)->sensorLabel == "COLOUR_TIME";
-      EXPECT_EQ(colour_times, 2u);
+      EXPECT_EQ(colour_times, 3u);
     }
   }
+}
+
+// Against MRPT's own conversion where it is defined (from 0 s on), the same ticks and the same seconds;
+// before 1970 back to the same seconds; beyond the clock, refused.
+TEST(RawlogTime, MrptsConversionFromZeroOnAndExactBefore) {
+  for (const double t : {0.0, 1e-7, 0.033333, 1305031102.175304, 1305031102.2, 1.7e9, 8.9e11}) {
+    EXPECT_EQ(rawlogTime(t), mrpt::Clock::fromDouble(t)) << t;
+    EXPECT_EQ(rawlogSeconds(rawlogTime(t)), mrpt::Clock::toDouble(mrpt::Clock::fromDouble(t))) << t;
+  }
+  for (const double t : {-0.0081, -1.5, -1e9, kEarliestRawlogSeconds + 1}) EXPECT_NEAR(rawlogSeconds(rawlogTime(t)), t, 1e-7) << t;
+  EXPECT_EQ(rawlogSeconds(mrpt::Clock::time_point()), 0.0);  // unset, as MRPT's
+  for (const double t : {1.7e18, 1.7e15, -2e10, kEarliestRawlogSeconds, std::numeric_limits<double>::quiet_NaN()}) EXPECT_THROW(rawlogTime(t), std::out_of_range) << t;
 }
 
 TEST(Rawlog, GroundTruthCompanionFile) {

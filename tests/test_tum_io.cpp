@@ -39,6 +39,20 @@ TEST(TumList, DuplicateTimestampRejected) {
   EXPECT_THROW(parseTumList("1.0 a.png\n1.0 b.png\n", "rgb.txt"), InputError);
 }
 
+// Stamps in nanoseconds (a simulator's or a ROS 2 export's) are refused where they are read: every frame
+// interval would be 1e9 times too long, and a rawlog written from them held every frame at 0 s.
+TEST(TumList, StampsThatAreNotSecondsAreRefusedWithTheirLine) {
+  try {
+    parseTumList("# rgb\n1700000000033333333 rgb/1.png\n", "rgb.txt");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("rgb.txt: line 2: timestamp 1.7e+18 is not in seconds"), std::string::npos)
+        << e.what();
+  }
+  // Seconds before 1970 are seconds: a clock that starts at 0 and a colour image taken just before.
+  EXPECT_EQ(parseTumList("-0.008 a.png\n0.0 b.png\n1305031102.175304 c.png\n", "rgb.txt").size(), 3u);
+}
+
 TEST(Associate, NearestWithinToleranceEachUsedOnce) {
   std::vector<TumEntry> rgb{{1.00, "a"}, {1.10, "b"}, {1.20, "c"}};
   std::vector<TumEntry> depth{{1.005, "da"}, {1.115, "db"}, {1.50, "dc"}};

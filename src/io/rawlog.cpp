@@ -4,6 +4,7 @@
 #include "vofusion/io/jpeg_decode.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/io/png_encode.h"
+#include "vofusion/io/rawlog_time.h"
 #include "record_file.h"
 
 #include <algorithm>
@@ -291,7 +292,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
     throw InputError(origin, "3D observation without a range image");
   const int rows = int(obs.rangeImage.rows()), cols = int(obs.rangeImage.cols());
   Frame f;
-  f.timestamp = mrpt::Clock::toDouble(obs.timestamp);
+  f.timestamp = rawlogSeconds(obs.timestamp);
   f.camera = override_camera ? *override_camera : depthCameraOf(obs, cols, rows, origin);
   f.camera.width = cols;
   f.camera.height = rows;
@@ -377,12 +378,12 @@ struct RawlogSource::Reader {
           ++other_cameras[s->sensorLabel];
           continue;
         }
-        last_scan_time = mrpt::Clock::toDouble(s->timestamp);
+        last_scan_time = rawlogSeconds(s->timestamp);
         ++scans;
         return s;
       }
       if (o->sensorLabel == kColourTimeLabel && std::dynamic_pointer_cast<mrpt::obs::CObservationRawDAQ>(o)) {
-        const double offset = mrpt::Clock::toDouble(o->timestamp) - last_scan_time;
+        const double offset = rawlogSeconds(o->timestamp) - last_scan_time;
         if (colour_offsets && scans > 0 && std::isfinite(offset) && std::abs(offset) < 1.0) {
           if (colour_offsets->size() < scans) colour_offsets->resize(scans, 0.0);
           (*colour_offsets)[scans - 1] = offset;
@@ -391,7 +392,7 @@ struct RawlogSource::Reader {
         // A pose that is no pose (NaN, infinite: mocap lost the camera) is unknown, as in 7-Scenes.
         if (auto rp = std::dynamic_pointer_cast<mrpt::obs::CObservationRobotPose>(o);
             rp && rp->pose.mean.asVectorVal().asEigen().allFinite())
-          gt->push_back({mrpt::Clock::toDouble(rp->timestamp), rp->pose.mean});
+          gt->push_back({rawlogSeconds(rp->timestamp), rp->pose.mean});
       }
     }
     return nullptr;
@@ -507,7 +508,7 @@ CObservation3DRangeScan::Ptr observationWithoutPixels(const Frame& f, double ran
   if (!(range_units > 0)) throw std::invalid_argument("observationFromFrame: range_units must be positive");
   auto obs = std::make_shared<CObservation3DRangeScan>();
   obs->sensorLabel = sensor_label;
-  obs->timestamp = mrpt::Clock::fromDouble(f.timestamp);
+  obs->timestamp = rawlogTime(f.timestamp);
   obs->hasRangeImage = true;
   obs->range_is_depth = true;
   obs->rangeUnits = float(range_units);
@@ -575,7 +576,7 @@ mrpt::obs::CActionRobotMovement3D makeOdometryAction(const mrpt::poses::CPose3D&
   if (cov) a.poseChange.cov = *cov;
   else a.poseChange.cov.setZero();
   a.rawOdometryIncrementReading = delta;
-  a.timestamp = mrpt::Clock::fromDouble(timestamp);
+  a.timestamp = rawlogTime(timestamp);
   return a;
 }
 
@@ -752,7 +753,7 @@ std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
   if (frame.colour_offset != 0.0 && std::abs(frame.colour_offset) < 1.0) {  // a reader takes offsets under 1 s
     auto colour_time = std::make_shared<mrpt::obs::CObservationRawDAQ>();
     colour_time->sensorLabel = kColourTimeLabel;
-    colour_time->timestamp = mrpt::Clock::fromDouble(frame.timestamp + frame.colour_offset);
+    colour_time->timestamp = rawlogTime(frame.timestamp + frame.colour_offset);
     obs_list.push_back(colour_time);
   }
   if (frame.groundTruth && opts_.ground_truth_observations) {

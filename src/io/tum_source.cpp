@@ -15,6 +15,7 @@
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/io/jpeg_decode.h"
+#include "vofusion/io/rawlog_time.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/core/text_file.h"
 
@@ -31,6 +32,11 @@ std::vector<TumEntry> parseTumList(const std::string& text, const std::string& o
       throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp filename'");
     std::string extra;
     if (ls >> extra) throw InputError(origin, "line " + std::to_string(n) + ": unexpected extra field '" + extra + "'");
+    // Seconds past any clock's end are another unit: every frame interval would be a billion times too
+    // long (the motion model's velocities), and no rawlog could hold the stamp.
+    if (!rawlogCanHold(e.timestamp))
+      throw InputError(origin, "line " + std::to_string(n) + ": timestamp " + cv::format("%.10g", e.timestamp) +
+                                   " is not in seconds (TUM lists give Unix time in seconds; nanoseconds?)");
     if (!out.empty() && e.timestamp <= out.back().timestamp)
       throw InputError(origin, "line " + std::to_string(n) + ": timestamp " + std::to_string(e.timestamp) +
                                    " is out of order or duplicated");

@@ -1,6 +1,5 @@
 #include "poses_rawlog.h"
 
-#include <mrpt/core/Clock.h>
 #include <mrpt/obs/CObservationRobotPose.h>
 
 #include "vofusion/core/errors.h"
@@ -17,7 +16,7 @@ void PosesRawlog::finish(const Reconstruction& rec, const Trajectory& ground_tru
     for (const StampedPose& sp : rec.trajectory()) {
       mrpt::obs::CObservationRobotPose pose;
       pose.sensorLabel = "VOFUSION_POSE_OPTIMISED";
-      pose.timestamp = mrpt::Clock::fromDouble(sp.timestamp);
+      pose.timestamp = rawlogTime(sp.timestamp);
       pose.pose.mean = sp.pose;
       writer_.writeObservation(pose);
     }

@@ -9,7 +9,6 @@
 #include <thread>
 #include <utility>
 
-#include <mrpt/core/Clock.h>
 #include <mrpt/obs/CObservationRobotPose.h>
 
 #include "vofusion/core/errors.h"
@@ -17,6 +16,7 @@
 #include "vofusion/core/thread_name.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/io/rawlog_time.h"
 #include "vofusion/pipeline/reconstruction.h"
 
 namespace vofusion {
@@ -92,7 +92,7 @@ class PosesRawlog {
       writer_.writeAction(makeOdometryAction(r.odometry.motion, f.timestamp, &r.odometry.covariance));
     mrpt::obs::CObservationRobotPose pose;
     pose.sensorLabel = "VOFUSION_POSE";
-    pose.timestamp = mrpt::Clock::fromDouble(f.timestamp);
+    pose.timestamp = rawlogTime(f.timestamp);
     pose.pose.mean = r.pose;
     writer_.writeObservation(pose);
     writer_.write(f);
