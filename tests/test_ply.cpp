@@ -208,6 +208,28 @@ TEST(Ply, MalformedFilesAreInputErrors) {
   EXPECT_EQ(readPly(dir + "/empty_elements.ply").faces.size(), 1u);
 }
 
+// PLY puts elements in any order. Faces before the vertices they name were refused as "references vertex
+// 0 out of range"; and an index no integer holds went through a cast to long long (undefined).
+TEST(Ply, FacesBeforeTheirVerticesAreRead) {
+  const std::string dir = test::tempDir("ply_order");
+  writeText(dir + "/faces_first.ply",
+            "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nelement vertex 3\n"
+            "property float x\nproperty float y\nproperty float z\nend_header\n3 0 1 2\n0 0 0\n1 0 0\n0 1 0\n");
+  const TriangleMesh m = readPly(dir + "/faces_first.ply");
+  ASSERT_EQ(m.vertices.size(), 3u);
+  ASSERT_EQ(m.faces.size(), 1u);
+  EXPECT_EQ(m.faces[0], (std::array<std::uint32_t, 3>{0, 1, 2}));
+  writeText(dir + "/huge_index.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face 1\nproperty list uchar double vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 1e19\n");
+  try {
+    readPly(dir + "/huge_index.ply");
+    ADD_FAILURE() << "read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("face 0 references vertex 1e+19 out of range (3 vertices)"), std::string::npos) << e.what();
+  }
+}
+
 // A header's counts are held against the bytes each record needs at least, before they size a buffer:
 // 2 MB claiming 2 million vertices of 27 bytes (54 MB zero-filled) is refused as truncated at once.
 TEST(Ply, ACountTheBytesCannotHoldAllocatesNothing) {

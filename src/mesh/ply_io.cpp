@@ -281,16 +281,32 @@ std::array<std::uint8_t, 3> vertexColour(const Element& e, const VertexLayout& l
   return {to8(v[l.ir]), to8(v[l.ig]), to8(v[l.ib])};
 }
 
+// A number read from the file as it was written ("5", "-1", "1e+19", "nan"), for a message.
+std::string numberText(double x) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.17g", x);
+  return text;
+}
+
 // Reads the body element by element into a mesh.
 struct BodyParser {
   BodyParser(const std::string& path, const std::string& data, const Header& h)
-      : path(path), data(data), body(path, data, h.body, h.fmt) {}
+      : path(path), data(data), body(path, data, h.body, h.fmt) {
+    // PLY puts elements in any order: faces may come before the vertices they name, whose number the
+    // header gives.
+    for (const Element& e : h.elements)
+      if (e.name == "vertex") {
+        vertex_count = e.count;
+        break;
+      }
+  }
 
   const std::string& path;
   const std::string& data;
   BodyReader body;
   TriangleMesh mesh;
   bool have_vertices = false;
+  std::optional<std::size_t> vertex_count;  // the header's
 
   // A list's count, read (`what` for a truncation's message): a whole number up to a million, or the
   // file's error naming record `i` of `kind`. Written so that NaN (an ASCII "nan", a float list) fails
@@ -351,10 +367,10 @@ struct BodyParser {
         for (std::size_t j = 0; j < n; ++j) {
           const double idx = body.read(p.type, "faces");
           if (static_cast<int>(k) != il) continue;
-          if (!(idx >= 0 && idx < static_cast<double>(mesh.vertices.size())) || !have_vertices)
-            throw InputError(path, "face " + std::to_string(i) + " references vertex " +
-                                       (std::isfinite(idx) ? std::to_string(static_cast<long long>(idx)) : "nan") +
-                                       " out of range");
+          if (!vertex_count) throw InputError(path, "PLY has no vertex element");
+          if (!(idx >= 0 && idx < static_cast<double>(*vertex_count)))
+            throw InputError(path, "face " + std::to_string(i) + " references vertex " + numberText(idx) +
+                                       " out of range (" + std::to_string(*vertex_count) + " vertices)");
           if (idx != std::floor(idx))  // "1.9" was vertex 1
             throw InputError(path, "face " + std::to_string(i) + " references vertex " + std::to_string(idx) +
                                        " (not a whole number)");
