@@ -205,6 +205,16 @@ class RawComponents {
   double total_area_ = 0.0;
 };
 
+// The repair's counts of `from` added to `to`'s: most of the repair is the regions', the welded mesh's
+// own repair only joins them (summary.json's mesh_clean counts both, as meshing the whole mesh at once does).
+void addRepairs(MeshCleanReport& to, const MeshCleanReport& from) {
+  to.duplicate_vertices_merged += from.duplicate_vertices_merged;
+  to.degenerate_faces_removed += from.degenerate_faces_removed;
+  to.duplicate_faces_removed += from.duplicate_faces_removed;
+  to.border_edges_stitched += from.border_edges_stitched;
+  to.non_manifold_vertices_split += from.non_manifold_vertices_split;
+}
+
 // Pass 2's running sums: each region, once simplified, welded into the merged mesh in region order.
 struct RegionMerge {
   RegionMerge(TriangleMesh& m, MeshSimplification& s) : merged(m), simp(s) {}
@@ -214,9 +224,11 @@ struct RegionMerge {
   double distance_sum = 0.0;
   std::size_t failed = 0;
   std::string failure;
+  MeshCleanReport repairs;  // the regions' repair counts, summed
 
   void add(fusion::RegionMesh& r, const MeshCleanReport& rr) {
     if (!rr.success) ++failed, failure = rr.failure;  // the region stays as marching cubes made it
+    addRepairs(repairs, rr);
     const MeshSimplification& s = rr.simplification;
     if (s.ran) {
       simp.ran = true;
@@ -259,6 +271,7 @@ void cleanWelded(RegionMeshResult& out, const MeshCleanParams& params, double me
   if (!out.report.success && params.recompute_normals) computeVertexNormals(out.mesh);
   out.report.simplification = regional;
   out.report.components_removed += removed;
+  addRepairs(out.report, merge.repairs);
   out.report.steps.insert(out.report.steps.begin(), step);
   // Said beside the welded mesh's own outcome (a failure there keeps its message), in summary.json.
   if (merge.failed) out.report.warning = std::to_string(merge.failed) + " region(s) left unsimplified: " + merge.failure;
