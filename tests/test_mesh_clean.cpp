@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 
 #include <random>
 #include <set>
@@ -647,6 +648,42 @@ TEST(MeshClean, NearestTriangleFindsWhatCgalsAabbTreeFinds) {
       ASSERT_EQ((g.closestPoint(q) - q).squaredNorm(), brute) << "at " << q.transpose();
     }
   EXPECT_TRUE(NearestTriangle({}, {}).empty());
+}
+
+// A few hundred long slivers across 200 000 small faces: at the small faces' cells every sliver was
+// listed in all ~470 000 of them (560 MB here; a million faces gave ~4e9 listings, refused, and the
+// cleaning failed over its distance measurement). The cells grow instead, and what is found is the same.
+TEST(MeshClean, NearestTriangleTakesLongSliversAmongSmallFaces) {
+  std::vector<Eigen::Vector3d> points;
+  std::vector<std::array<std::size_t, 3>> tris;
+  const int side = 317;  // 2 x 316^2 ~ 200 000 triangles on the unit square at z = 0
+  for (int y = 0; y < side; ++y)
+    for (int x = 0; x < side; ++x) points.emplace_back(x / double(side - 1), y / double(side - 1), 0.0);
+  for (int y = 0; y + 1 < side; ++y)
+    for (int x = 0; x + 1 < side; ++x) {
+      const std::size_t a = std::size_t(y * side + x);
+      tris.push_back({a, a + 1, a + side + 1});
+      tris.push_back({a, a + side + 1, a + side});
+    }
+  for (int k = 0; k < 300; ++k) {  // across the unit cube, each a little turned
+    const double t = k / 300.0;
+    const std::size_t n = points.size();
+    points.insert(points.end(), {{0.0, t, 0.0}, {1.0, 1.0 - t, 1.0}, {1.0, 1.0 - t + 0.001, 1.0}});
+    tris.push_back({n, n + 1, n + 2});
+  }
+  std::optional<NearestTriangle> grid;
+  {
+    const ScopedAllocationLimit limit(std::size_t(256) << 20, std::size_t(256) << 20);
+    ASSERT_NO_THROW(grid.emplace(points, tris));
+  }
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> unit(-0.2, 1.2);
+  for (int i = 0; i < 50; ++i) {
+    const Eigen::Vector3d q(unit(rng), unit(rng), unit(rng));
+    double brute = std::numeric_limits<double>::infinity();
+    for (const auto& t : tris) brute = std::min(brute, (closestPointOnTriangle(q, points[t[0]], points[t[1]], points[t[2]]) - q).squaredNorm());
+    ASSERT_EQ((grid->closestPoint(q) - q).squaredNorm(), brute) << "at " << q.transpose();
+  }
 }
 
 TEST(MeshClean, FaceBudgetStillStopsErrorBoundedSimplification) {

@@ -73,6 +73,25 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
   };
   cell_ = std::max({2.0 * edge_sum / double(tris_.size()), extent.maxCoeff() * 1e-6, 1e-12});
   while (cellsOf(cell_) > 8.0 * double(tris_.size()) + 64.0) cell_ *= 1.25;
+  // Long triangles among short ones are listed in every cell their box covers: a few hundred slivers
+  // across a mesh of a million small faces asked for ~4e9 listings (16 GB, or the 2^32 refusal, which
+  // failed the whole cleaning over its distance measurement). Larger cells then, at most 32 listings a
+  // triangle on average: the search is exact at any cell size.
+  const auto listingsAt = [&](double cell) {
+    std::uint64_t n = 0;
+    for (const auto& v : tris_) {
+      std::uint64_t k = 1;
+      for (int i = 0; i < 3; ++i) {
+        const double a = std::min({v[0][i], v[1][i], v[2][i]}) - lo[i], b = std::max({v[0][i], v[1][i], v[2][i]}) - lo[i];
+        k *= std::uint64_t(std::floor(b / cell) - std::floor(a / cell)) + 1;
+      }
+      n += k;
+    }
+    return n;
+  };
+  const std::uint64_t budget = 32 * std::uint64_t(tris_.size()) + 1000000;
+  std::uint64_t listings = listingsAt(cell_);
+  while (listings > budget) cell_ *= 1.25, listings = listingsAt(cell_);
   origin_ = lo;
   for (int i = 0; i < 3; ++i) dims_[i] = std::int64_t(std::floor(extent[i] / cell_)) + 1;
   const auto index = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return std::size_t((z * dims_[1] + y) * dims_[0] + x); };
@@ -89,13 +108,8 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
       for (std::int64_t y = a[1]; y <= b[1]; ++y)
         for (std::int64_t x = a[0]; x <= b[0]; ++x) visit(index(x, y, z));
   };
-  // Counting sort into cells: counts, their running sum, then the ids. Long triangles among short
-  // ones are listed in many cells: more listings than 32-bit offsets hold is refused.
-  std::uint64_t listings = 0;
-  for (const auto& v : tris_) {
-    const auto [a, b] = cellBox(v);
-    listings += std::uint64_t(b[0] - a[0] + 1) * std::uint64_t(b[1] - a[1] + 1) * std::uint64_t(b[2] - a[2] + 1);
-  }
+  // Counting sort into cells: counts, their running sum, then the ids. More listings than 32-bit
+  // offsets hold (beyond ~130 million triangles) is refused.
   if (listings > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error("NearestTriangle: " + std::to_string(listings) + " cell listings, more than 2^32");
   begin_.assign(std::size_t(dims_[0] * dims_[1] * dims_[2]) + 1, 0);

@@ -16,8 +16,9 @@ namespace vofusion {
 class NearestTriangle {
  public:
   // Triangles as indices into `points`; both are copied. Cells are twice the mean longest edge, or
-  // larger where the box would otherwise hold more than eight cells per triangle. Throws
-  // std::length_error when the triangles would be listed in more than 2^32 cells in all.
+  // larger where the box would otherwise hold more than eight cells per triangle, or the triangles be
+  // listed in more than 32 cells each on average (long ones among short ones). Throws std::length_error
+  // beyond 2^32 listings in all (~130 million triangles).
   NearestTriangle(const std::vector<Eigen::Vector3d>& points, const std::vector<std::array<std::size_t, 3>>& triangles);
 
   bool empty() const { return tris_.empty(); }
