@@ -200,6 +200,19 @@ TEST(TumImages, AnUnreadableImageSaysWhyNotCorrupt) {
   EXPECT_EQ(depth_said, depth + ": cannot read depth image (Permission denied)");
 }
 
+// A folder that cannot be searched (read but no execute permission): stat fails with EACCES, which
+// std::filesystem reports as a file that does not exist, and the image was "missing".
+TEST(TumImages, AFolderThatCannotBeSearchedSaysWhyNotMissing) {
+  const std::string dir = test::tempDir("tum_unsearchable") + "/rgb";
+  fs::create_directories(dir);
+  const std::string colour = dir + "/c.png";
+  cv::imwrite(colour, cv::Mat(48, 64, CV_8UC3, cv::Scalar(10, 20, 30)));
+  fs::permissions(dir, fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  const std::string said = test::errorWithoutPrivileges([&] { loadColour(colour, 64, 48); });
+  fs::permissions(dir, fs::perms::owner_all);
+  EXPECT_EQ(said, colour + ": cannot read colour image (Permission denied)");
+}
+
 TEST(Trajectory, WriteReadRoundTrip) {
   Trajectory t{{1.0, mrpt::poses::CPose3D(1, 2, 3, 0.1, -0.2, 0.3)}, {2.0, mrpt::poses::CPose3D(-1, 0, 0.5, 1.0, 0.2, -0.1)}};
   const std::string dir = test::tempDir("traj");

@@ -119,6 +119,9 @@ cv::Mat readImage(const std::string& path, int flags, const char* what) {
 void requireImageFile(const std::string& path, const char* what) {
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
+  // A folder on the way that cannot be searched (no x permission) is no missing image: say why.
+  if (ec && ec != std::errc::no_such_file_or_directory && ec != std::errc::not_a_directory)
+    throw InputError(path, std::string("cannot read ") + what + " image (" + ec.message() + ")");
   if (!fs::exists(st)) throw InputError(path, std::string(what) + " image is missing");
   if (!fs::is_regular_file(st)) throw InputError(path, std::string(what) + " image is not a file (a folder?)");
 }
