@@ -750,3 +750,50 @@ TEST(WorldModel, CorruptOrTruncatedSaveFileIsAOneLineError) {
   EXPECT_THROW(kf.resume(bad), InputError);
   EXPECT_THROW(kf.resume(dir + "/missing.vfmap"), InputError);
 }
+
+// A flipped bit that every range check lets through: a brick's coordinate (the brick went elsewhere) or
+// the camera pose (the camera somewhere). The map ends with its checksum (layout 2) and is refused in one
+// line; a map of layout 1 (no checksum) is still read, its pose checked to be a rotation.
+TEST(WorldModel, ASavedMapWithAFlippedBitIsRefused) {
+  const sim::SyntheticSequence seq(corridor(4));
+  const KinFuParams p = smallKinFu(0);
+  TrackedMap first(p, TrackingMode::Odometry, *seq.render(0).groundTruth);
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const Frame f = seq.render(i);
+    first.integrateAt(f, *f.groundTruth);
+  }
+  const std::string dir = test::tempDir("world_model_flipped");
+  first.save(dir + "/map.vfmap");
+  std::ifstream in(dir + "/map.vfmap", std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), {});
+  ASSERT_EQ(bytes.compare(0, 15, "VOFUSION-MAP 2\n"), 0);
+  ASSERT_EQ(bytes.compare(bytes.size() - 20, 8, "CHECKSUM"), 0);
+  const auto refusal = [&](const std::string& name, const std::string& content) {
+    std::ofstream(dir + "/" + name, std::ios::binary) << content;
+    TrackedMap kf(p, TrackingMode::Odometry);
+    try {
+      kf.resume(dir + "/" + name);
+      return std::string("read");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+  };
+  // The first brick's x: after the magic (16), the pose (128), the volume's header (magic 16, 3 numbers
+  // 12, origin 12, count 8).
+  std::string flipped = bytes;
+  flipped[16 + 128 + 16 + 12 + 12 + 8] ^= 0x04;
+  EXPECT_EQ(refusal("brick.vfmap", flipped), dir + "/brick.vfmap: truncated or corrupt map: its checksum does not match (a damaged byte)");
+  std::string pose = bytes;
+  pose[16 + 8 * 1] ^= 0x01;  // a rotation entry, off by an ulp or so
+  EXPECT_NE(refusal("pose.vfmap", pose).find("checksum does not match"), std::string::npos);
+  // Layout 1: the same without the trailer.
+  std::string v1 = bytes.substr(0, bytes.size() - 20);
+  v1[13] = '1';
+  EXPECT_EQ(refusal("v1.vfmap", v1), "read");
+  std::string v1_brick = v1;  // the brick flipped above passes every range check: only the checksum sees it
+  v1_brick[16 + 128 + 16 + 12 + 12 + 8] ^= 0x04;
+  EXPECT_EQ(refusal("v1brick.vfmap", v1_brick), "read");
+  std::string v1_pose = v1;
+  v1_pose[16 + 8 * 0 + 7] ^= 0x10;  // R(0,0)'s exponent: no longer a rotation
+  EXPECT_EQ(refusal("v1pose.vfmap", v1_pose), dir + "/v1pose.vfmap: truncated or corrupt map (camera pose)");
+}

@@ -10,6 +10,7 @@
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/file_checksum.h"
 #include "vofusion/core/parallel.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/state_archive.h"
@@ -151,8 +152,19 @@ bool KinFu::integrateAt(const Frame& frame, const Eigen::Isometry3d& cam_to_worl
 TriangleMesh KinFu::extractMesh() const { return impl_->volume->extractMesh(); }
 
 namespace {
-constexpr char kMapMagic[16] = {'V', 'O', 'F', 'U', 'S', 'I', 'O', 'N', '-', 'M', 'A', 'P', ' ', '1', '\n', '\0'};
+// 2: the file ends with its checksum (core/file_checksum.h). A flipped bit in a brick's coordinates or
+// the camera pose passed every range check: the brick went elsewhere, the camera somewhere. Maps of
+// layout 1 are still read, without it.
+constexpr char kMapMagic[16] = {'V', 'O', 'F', 'U', 'S', 'I', 'O', 'N', '-', 'M', 'A', 'P', ' ', '2', '\n', '\0'};
+constexpr char kMapMagicV1[16] = {'V', 'O', 'F', 'U', 'S', 'I', 'O', 'N', '-', 'M', 'A', 'P', ' ', '1', '\n', '\0'};
+
+// A camera pose: finite, a rotation (orthonormal, det +1) and the last row 0 0 0 1.
+bool isRigid(const Eigen::Matrix4d& T) {
+  if (!T.allFinite() || !T.row(3).isApprox(Eigen::RowVector4d(0, 0, 0, 1), 1e-12)) return false;
+  const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+  return (R.transpose() * R - Eigen::Matrix3d::Identity()).norm() < 1e-6 && std::abs(R.determinant() - 1.0) < 1e-6;
 }
+}  // namespace
 
 void KinFu::save(const std::string& path, const Eigen::Isometry3d& pose) const {
   AtomicPath out(path);
@@ -170,6 +182,7 @@ void KinFu::save(const std::string& path, const Eigen::Isometry3d& pose) const {
     os.close();
     if (!os) throw InputError(path, "cannot write the map (disk full?)");
   }
+  if (std::string why; !appendFileChecksum(out.tmp(), why)) throw InputError(path, "cannot write the map (" + why + ")");
   out.commit();
 }
 
@@ -178,10 +191,13 @@ Eigen::Isometry3d KinFu::resume(const std::string& path) {
   std::ifstream is(path, std::ios::binary);
   if (!is) throw InputError(path, "cannot open the saved map");
   char magic[sizeof(kMapMagic)];
-  if (!is.read(magic, sizeof(magic)) || std::memcmp(magic, kMapMagic, sizeof(kMapMagic)) != 0)
+  if (!is.read(magic, sizeof(magic)) ||
+      (std::memcmp(magic, kMapMagic, sizeof(kMapMagic)) != 0 && std::memcmp(magic, kMapMagicV1, sizeof(kMapMagicV1)) != 0))
     throw InputError(path, "not a vofusion map (written by --save-volume)");
+  if (std::string why; std::memcmp(magic, kMapMagic, sizeof(kMapMagic)) == 0 && !fileChecksumHolds(path, why))
+    throw InputError(path, "truncated or corrupt map: " + why);
   Eigen::Matrix4d T;
-  if (!is.read(reinterpret_cast<char*>(T.data()), sizeof(double) * 16) || !T.allFinite())
+  if (!is.read(reinterpret_cast<char*>(T.data()), sizeof(double) * 16) || !isRigid(T))
     throw InputError(path, "truncated or corrupt map (camera pose)");
   try {
     s.volume->load(is);

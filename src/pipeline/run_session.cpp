@@ -17,8 +17,8 @@
 #include "vofusion/pipeline/region_premesher.h"
 #include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/atomic_file.h"
-#include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/file_checksum.h"
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/core/state_archive.h"
@@ -33,67 +33,8 @@ namespace {
 // 6: the tracker's last measured frame; 7: the bricks and keyframes lost so far (their spill records unreadable)
 constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-7\n";
 
-// A checkpoint ends with kChecksumTag, the CRC-32 of every byte before the tag (4 bytes) and their count
-// (8), little-endian: a flipped byte in a pose or a descriptor is refused, not resumed from.
-constexpr char kChecksumTag[] = "CHECKSUM";
-constexpr std::size_t kTrailerBytes = sizeof(kChecksumTag) - 1 + 4 + 8;
-
-template <typename T>
-void putLittleEndian(std::string& out, T v) {
-  for (std::size_t i = 0; i < sizeof(T); ++i) out.push_back(char((v >> (8 * i)) & 0xff));
-}
-template <typename T>
-T getLittleEndian(const char* at) {
-  T v = 0;
-  for (std::size_t i = 0; i < sizeof(T); ++i) v |= T(static_cast<unsigned char>(at[i])) << (8 * i);
-  return v;
-}
-
-// The CRC-32 of a file's first `bytes` bytes, and whether it had that many.
-std::pair<std::uint32_t, bool> crcOfFile(const std::string& path, std::uint64_t bytes) {
-  std::ifstream is(path, std::ios::binary);
-  std::vector<char> buf(std::size_t(1) << 20);
-  std::uint32_t crc = 0;
-  std::uint64_t left = bytes;
-  while (left > 0 && is.read(buf.data(), std::streamsize(std::min<std::uint64_t>(left, buf.size())))) {
-    crc = crc32(buf.data(), std::size_t(is.gcount()), crc);
-    left -= std::uint64_t(is.gcount());
-  }
-  return {crc, left == 0};
-}
-
-// Appends the trailer to a checkpoint written whole to `path`.
-void appendChecksum(const std::string& path, const std::string& named) {
-  std::error_code ec;
-  const std::uint64_t bytes = std::filesystem::file_size(path, ec);
-  const auto [crc, whole] = crcOfFile(path, bytes);
-  if (ec || !whole) throw InputError(named, "cannot write the checkpoint (read back failed)");
-  std::string trailer(kChecksumTag);
-  putLittleEndian(trailer, crc);
-  putLittleEndian(trailer, bytes);
-  std::ofstream os(path, std::ios::binary | std::ios::app);
-  os.write(trailer.data(), std::streamsize(trailer.size()));
-  os.close();
-  if (!os) throw InputError(named, "cannot write the checkpoint (disk full?)");
-}
-
-// Whether the file ends with a trailer that matches its bytes; why not in `why`.
-bool checksumHolds(const std::string& path, std::string& why) {
-  std::error_code ec;
-  const std::uint64_t size = std::filesystem::file_size(path, ec);
-  if (ec || size < kTrailerBytes) return why = "shorter than its checksum", false;
-  std::ifstream is(path, std::ios::binary);
-  char t[kTrailerBytes];
-  is.seekg(std::streamoff(size - kTrailerBytes));
-  if (!is.read(t, sizeof t) || std::memcmp(t, kChecksumTag, sizeof(kChecksumTag) - 1) != 0)
-    return why = "it does not end with its checksum (cut short?)", false;
-  const auto crc = getLittleEndian<std::uint32_t>(t + sizeof(kChecksumTag) - 1);
-  const auto bytes = getLittleEndian<std::uint64_t>(t + sizeof(kChecksumTag) - 1 + 4);
-  if (bytes != size - kTrailerBytes) return why = "its length is not the one its checksum was made of", false;
-  if (crcOfFile(path, bytes) != std::pair<std::uint32_t, bool>{crc, true})
-    return why = "its checksum does not match (a damaged byte)", false;
-  return true;
-}
+// A checkpoint ends with its own checksum (core/file_checksum.h): a flipped byte in a pose or a
+// descriptor is refused, not resumed from.
 
 // The first line where two checkpoint origins differ, as "'<saved>' where this run has '<now>'".
 std::string firstDifference(const std::string& saved, const std::string& now) {
@@ -213,7 +154,7 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
     state::tag(a, "end");
     os.close();
     if (!os) throw InputError(path, "cannot write the checkpoint (disk full?)");
-    appendChecksum(out.tmp(), path);
+    if (std::string why; !appendFileChecksum(out.tmp(), why)) throw InputError(path, "cannot write the checkpoint (" + why + ")");
   } catch (const InputError&) {
     throw;
   } catch (const std::exception& e) {
@@ -263,7 +204,7 @@ RunSession::Checkpoint RunSession::resume(const std::string& path, const std::st
   if (!isCheckpoint(path)) throw InputError(path, "not a vofusion checkpoint (written by --checkpoint-every)");
   if (!startsWith(path, kCheckpointMagic))
     throw InputError(path, "a checkpoint of an earlier vofusion, which this one cannot read: delete it to start over");
-  if (std::string why; !checksumHolds(path, why)) throw InputError(path, "truncated or corrupt checkpoint: " + why);
+  if (std::string why; !fileChecksumHolds(path, why)) throw InputError(path, "truncated or corrupt checkpoint: " + why);
   std::ifstream is(path, std::ios::binary);
   is.seekg(sizeof(kCheckpointMagic) - 1);
   Checkpoint c;
