@@ -24,6 +24,34 @@
 using namespace vofusion;
 namespace fs = std::filesystem;
 
+// Without RENAME_EXCHANGE (NFS, FUSE) a folder is replaced in two renames: the earlier one to
+// "<path>.old-<pid>", then the complete staging to <path>. A run killed between them left nothing at
+// <path>; the next writer removed the new folder as a dead run's staging and never saw the earlier one.
+// Now it finishes that commit; killed after both renames, the earlier folder is removed.
+TEST(AtomicFile, ACommitKilledBetweenItsTwoRenamesIsFinishedByTheNextWriter) {
+  const std::string dir = test::tempDir("atomic_dead_commit");
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ASSERT_EQ(::waitpid(child, nullptr, 0), child);
+  const std::string pid = std::to_string(child);
+  // Between the renames: the new folder at the staging name, the earlier one aside.
+  fs::create_directories(dir + "/out.tmp-" + pid);
+  std::ofstream(dir + "/out.tmp-" + pid + "/mesh.ply") << "new";
+  fs::create_directories(dir + "/out.old-" + pid);
+  std::ofstream(dir + "/out.old-" + pid + "/mesh.ply") << "earlier";
+  { AtomicPath next(dir + "/out"); }  // another output's writer: only cleans up
+  EXPECT_EQ(readTextFile(dir + "/out/mesh.ply"), "new");
+  EXPECT_FALSE(fs::exists(dir + "/out.tmp-" + pid));
+  EXPECT_FALSE(fs::exists(dir + "/out.old-" + pid));
+  // After both renames: the new folder in place, the earlier one still aside.
+  fs::create_directories(dir + "/out.old-" + pid);
+  std::ofstream(dir + "/out.old-" + pid + "/mesh.ply") << "earlier";
+  { AtomicPath next(dir + "/out"); }
+  EXPECT_EQ(readTextFile(dir + "/out/mesh.ply"), "new");
+  EXPECT_FALSE(fs::exists(dir + "/out.old-" + pid));
+}
+
 // A run killed by a signal leaves "<path>.tmp-<pid>" behind; the next writer of <path> removes it,
 // but not the staging of a process that still runs (another run writing there now).
 TEST(AtomicFile, RemovesStagingOfProcessesThatAreGone) {

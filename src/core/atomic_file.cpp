@@ -24,20 +24,39 @@ namespace {
 
 // "<name>.tmp-<pid>" beside `final_path` whose process no longer runs: staging a killed run left
 // (a signal skips the destructor). A live pid's, another run's in progress, stays.
+// The pid of "<name><tag><digits>" (a process that is gone), or 0.
+pid_t deadPidOf(const std::string& n, const std::string& prefix) {
+  if (n.size() <= prefix.size() || n.size() > prefix.size() + 9 || n.compare(0, prefix.size(), prefix) != 0) return 0;
+  const std::string digits = n.substr(prefix.size());
+  if (digits.find_first_not_of("0123456789") != std::string::npos) return 0;
+  const pid_t pid = static_cast<pid_t>(std::stol(digits));
+  return pid > 0 && ::kill(pid, 0) != 0 && errno == ESRCH ? pid : 0;
+}
+
+// A dead run's "<name>.old-<pid>": commit() without RENAME_EXCHANGE moved the earlier folder there,
+// then its complete staging to the name. Killed between the two, nothing is at the name: the staging
+// (synced before the first rename) goes there. Killed after them, the earlier folder is removed.
+void finishDeadCommit(const fs::path& final_path, const fs::path& old, pid_t pid) {
+  std::error_code ec;
+  const fs::path staging = final_path.string() + ".tmp-" + std::to_string(pid);
+  if (!fs::exists(final_path, ec) && fs::is_directory(staging, ec)) fs::rename(staging, final_path, ec);
+  if (fs::exists(final_path, ec)) fs::remove_all(old, ec);
+  else fs::rename(old, final_path, ec);  // no staging left: the earlier folder back
+}
+
 void removeStaleStaging(const std::string& final_path) {
   const fs::path p(final_path);
   const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
-  const std::string prefix = p.filename().string() + ".tmp-";
+  const std::string prefix = p.filename().string() + ".tmp-", old_prefix = p.filename().string() + ".old-";
   std::vector<fs::path> stale;
+  std::vector<std::pair<fs::path, pid_t>> old;
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string n = it->path().filename().string();
-    if (n.size() <= prefix.size() || n.size() > prefix.size() + 9 || n.compare(0, prefix.size(), prefix) != 0) continue;
-    const std::string digits = n.substr(prefix.size());
-    if (digits.find_first_not_of("0123456789") != std::string::npos) continue;
-    const pid_t pid = static_cast<pid_t>(std::stol(digits));
-    if (pid > 0 && ::kill(pid, 0) != 0 && errno == ESRCH) stale.push_back(it->path());
+    if (deadPidOf(n, prefix)) stale.push_back(it->path());
+    else if (const pid_t pid = deadPidOf(n, old_prefix)) old.emplace_back(it->path(), pid);
   }
+  for (const auto& [o, pid] : old) finishDeadCommit(p, o, pid);
   for (const fs::path& s : stale) fs::remove_all(s, ec);
 }
 
