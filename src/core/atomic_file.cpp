@@ -22,8 +22,6 @@ namespace vofusion {
 
 namespace {
 
-// "<name>.tmp-<pid>" beside `final_path` whose process no longer runs: staging a killed run left
-// (a signal skips the destructor). A live pid's, another run's in progress, stays.
 // The pid of "<name><tag><digits>" (a process that is gone), or 0.
 pid_t deadPidOf(const std::string& n, const std::string& prefix) {
   if (n.size() <= prefix.size() || n.size() > prefix.size() + 9 || n.compare(0, prefix.size(), prefix) != 0) return 0;
@@ -44,6 +42,9 @@ void finishDeadCommit(const fs::path& final_path, const fs::path& old, pid_t pid
   else fs::rename(old, final_path, ec);  // no staging left: the earlier folder back
 }
 
+// "<name>.tmp-<pid>" beside `final_path` whose process no longer runs: staging a killed run left
+// (a signal skips the destructor). A live pid's, another run's in progress, stays. A dead run's
+// "<name>.old-<pid>" first has its commit finished.
 void removeStaleStaging(const std::string& final_path) {
   const fs::path p(final_path);
   const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");

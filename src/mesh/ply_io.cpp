@@ -372,7 +372,7 @@ struct BodyParser {
             throw InputError(path, "face " + std::to_string(i) + " references vertex " + numberText(idx) +
                                        " out of range (" + std::to_string(*vertex_count) + " vertices)");
           if (idx != std::floor(idx))  // "1.9" was vertex 1
-            throw InputError(path, "face " + std::to_string(i) + " references vertex " + std::to_string(idx) +
+            throw InputError(path, "face " + std::to_string(i) + " references vertex " + numberText(idx) +
                                        " (not a whole number)");
           poly.push_back(static_cast<std::uint32_t>(idx));
         }
