@@ -801,6 +801,29 @@ TEST(MarchingCubes, MeshByRegionJudgesFragmentsWholeAcrossSeams) {
   for (const auto& v : r.mesh.vertices) ASSERT_LT(std::fabs((v - centre).norm() - 0.3f), 0.02f);
 }
 
+// A region read differently in pass 2 (a spilled brick lost between the passes) has seam vertices
+// pass 1 never met: they count as on no seam, where a bare std::out_of_range ended the meshing.
+TEST(MarchingCubes, MeshByRegionMeshesARegionThatChangedBetweenPasses) {
+  const SphereBricks sphere(Eigen::Vector3f(-0.05f, 0.13f, 0.02f), 0.3f, 0.01f, 0.04f);
+  int pass = 0;
+  std::size_t moved = 0;
+  const RegionMeshResult r = meshByRegion(
+      [&](const std::function<void(RegionMesh&)>& sink) {
+        ++pass;
+        marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, [&](RegionMesh& region) {
+          if (pass == 2 && moved == 0)  // the first region with seam vertices
+            for (std::size_t v = 0; v < region.mesh.vertices.size(); ++v)
+              if (region.on_seam[v]) region.mesh.vertices[v].x() += 1e-4f, ++moved;
+          sink(region);
+        });
+      },
+      MeshCleanParams{}, "");
+  ASSERT_EQ(pass, 2);  // fragments judged: min_component_faces is on by default
+  ASSERT_GT(moved, 0u);
+  EXPECT_TRUE(r.report.success) << r.report.failure;
+  EXPECT_GT(r.mesh.faces.size(), 1000u);
+}
+
 // The ray cast's floor (OpenCV's cvFloor) must be the integer std::floor gives, or the ray cast's bytes
 // change: voxel coordinates on both sides of zero, whole numbers and their neighbours, and floats too
 // large to have a fraction.

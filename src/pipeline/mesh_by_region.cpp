@@ -184,7 +184,11 @@ class RawComponents {
         if (fresh) seams_.add(), faces_.push_back(0), area_.push_back(0.0);
         slot = it->second;
       } else {
-        slot = slot_of_.at(key);
+        // Not met in pass 1: the region read differently this time (a spilled brick lost between the
+        // passes). Its component is judged as if the vertex were on no seam.
+        const auto it = slot_of_.find(key);
+        if (it == slot_of_.end()) continue;
+        slot = it->second;
       }
       std::int64_t& s = l.seam_slot[l.of_vertex[v]];
       if (s < 0) s = slot;
