@@ -173,6 +173,22 @@ TEST(SevenScenes, NotASequenceFolder) {
   EXPECT_THROW(openFrameSource(dir), InputError);
 }
 
+// A folder that cannot be listed or searched says so: it was "not a TUM RGB-D sequence nor a 7-Scenes
+// one", sending the user to look at the folder's layout.
+TEST(SevenScenes, AnUnreadableFolderSaysWhy) {
+  const std::string dir = test::tempDir("sevenscenes_unreadable");
+  cv::imwrite(stem(dir, 0) + ".color.png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(10, 20, 30)));
+  cv::imwrite(stem(dir, 0) + ".depth.png", cv::Mat(48, 64, CV_16UC1, cv::Scalar(1000)));
+  ASSERT_TRUE(SevenScenesSource::looksLike(dir));
+  // Searchable but not listable, then listable but not searchable (the test runs as nobody: "others").
+  for (const fs::perms p : {fs::perms::owner_exec | fs::perms::others_exec, fs::perms::owner_read | fs::perms::others_read}) {
+    fs::permissions(dir, p);
+    const std::string said = test::errorWithoutPrivileges([&] { openFrameSource(dir); });
+    fs::permissions(dir, fs::perms::owner_all);
+    EXPECT_EQ(said, dir + ": folder cannot be read (Permission denied)");
+  }
+}
+
 // The real TUM excerpt rewritten in the 7-Scenes layout (depth in mm, ground-truth pose per frame)
 // reads back as the TUM source does, to the millimetre.
 TEST(SevenScenes, MatchesTumSourceOnConvertedRealFrames) {
