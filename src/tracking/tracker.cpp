@@ -42,6 +42,12 @@ struct Tracker::Impl {
   // Modes with ICP: the frame's pose from ICP against the map's model, or the fallback the mode allows.
   Eigen::Isometry3d trackIcp(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels,
                              const std::vector<IntensityLevel>& intensity, const ModelPrediction& model, FusionResult& res);
+  struct IcpStart;
+  IcpStart icpStart(const Frame& frame, const MotionPrior* prior) const;
+  // ICP's pose if judge() accepts it (or the frame check's, when the model pulled ICP away), else the
+  // fallback the mode allows.
+  Eigen::Isometry3d acceptOrFallBack(const IcpResult& icp, const IcpStart& s, const std::vector<DepthLevel>& levels,
+                                     const IcpParams& ip, FusionResult& res);
   void count(const FusionResult& res, bool had_model);
   void keepForFusion(const Frame& frame, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
                      const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity, const FusionResult& res);
@@ -90,37 +96,52 @@ Eigen::Isometry3d Tracker::Impl::trackOdometry(const Frame& frame, const MotionP
   return history.constantVelocity(frame.timestamp);
 }
 
+// Where a frame's ICP may start: the prior (the odometry's, when its reference frame has a pose here),
+// relocalisation's placement, the constant-velocity prediction or the last pose.
+struct Tracker::Impl::IcpStart {
+  const Eigen::Isometry3d* ref_pose;  // the prior's reference frame's pose, null when none
+  bool have_prior;
+  Eigen::Isometry3d prior_pose, velocity_pose;
+  bool joint, seeded;  // mode joint; mode paper-handoff with a prior (ICP seeded by the odometry)
+};
+
+Tracker::Impl::IcpStart Tracker::Impl::icpStart(const Frame& frame, const MotionPrior* prior) const {
+  IcpStart s;
+  // The prior counts only when its reference frame has a pose here.
+  s.ref_pose = prior ? history.poseOf(prior->reference_index) : nullptr;
+  s.have_prior = s.ref_pose != nullptr || placed;
+  s.prior_pose = s.ref_pose ? *s.ref_pose * prior->T_ref_cur : placed ? *placed : history.pose();
+  s.velocity_pose = history.constantVelocity(frame.timestamp);
+  s.joint = mode == TrackingMode::Joint;
+  s.seeded = mode == TrackingMode::PaperHandoff && s.have_prior;
+  return s;
+}
+
 Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels,
                                           const std::vector<IntensityLevel>& intensity, const ModelPrediction& model,
                                           FusionResult& res) {
   const TrackerParams& P = params;
-  // The prior counts only when its reference frame has a pose here.
-  const Eigen::Isometry3d* ref_pose = prior ? history.poseOf(prior->reference_index) : nullptr;
-  const bool have_prior = ref_pose != nullptr || placed;
-  const Eigen::Isometry3d prior_pose = ref_pose ? *ref_pose * prior->T_ref_cur : placed ? *placed : history.pose();
-  const Eigen::Isometry3d velocity_pose = history.constantVelocity(frame.timestamp);
-  const bool joint = mode == TrackingMode::Joint;
-  const bool seeded = mode == TrackingMode::PaperHandoff && have_prior;
-  IcpParams ip = tracking::icpParams(P, joint, seeded, have_prior);
+  const IcpStart s = icpStart(frame, prior);
+  IcpParams ip = tracking::icpParams(P, s.joint, s.seeded, s.have_prior);
   PointMatches matches;
-  if (joint) {
-    res.guess = tracking::chooseGuess(P, model, history.pose(), levels, ip, have_prior, prior_pose, velocity_pose);
-    if (ref_pose) matches = tracking::matchesOf(P, *prior, *ref_pose, prior_pose);
+  if (s.joint) {
+    res.guess = tracking::chooseGuess(P, model, history.pose(), levels, ip, s.have_prior, s.prior_pose, s.velocity_pose);
+    if (s.ref_pose) matches = tracking::matchesOf(P, *prior, *s.ref_pose, s.prior_pose);
   } else {
-    res.guess = seeded ? InitialGuess::Prior : InitialGuess::LastPose;
+    res.guess = s.seeded ? InitialGuess::Prior : InitialGuess::LastPose;
   }
-  const Eigen::Isometry3d& initial = res.guess == InitialGuess::Prior              ? prior_pose
-                                     : res.guess == InitialGuess::ConstantVelocity ? velocity_pose
+  const Eigen::Isometry3d& initial = res.guess == InitialGuess::Prior              ? s.prior_pose
+                                     : res.guess == InitialGuess::ConstantVelocity ? s.velocity_pose
                                                                                    : history.pose();
-  if (joint) ip.point_to_plane_sigma += tracking::rollingShutterSigma(P, history, levels, initial, frame.timestamp);
+  if (s.joint) ip.point_to_plane_sigma += tracking::rollingShutterSigma(P, history, levels, initial, frame.timestamp);
   res.icp_sigma = ip.point_to_plane_sigma;
   const auto t0 = std::chrono::steady_clock::now();
-  const PosePrior motion = tracking::motionModel(P, history, velocity_pose, frame.timestamp);
+  const PosePrior motion = tracking::motionModel(P, history, s.velocity_pose, frame.timestamp);
   JointTerms terms;
-  if (joint) {
+  if (s.joint) {
     if (!matches.camera_points.empty()) terms.matches = &matches;
     if (history.hasMotion() && (motion.sigma_translation > 0 || motion.sigma_rotation > 0)) terms.motion = &motion;
-    if (have_prior) terms.weak_anchor = &prior_pose;
+    if (s.have_prior) terms.weak_anchor = &s.prior_pose;
   }
   PhotometricTerms photometric = tracking::photometricTerms(P, model, intensity, levels);
   photometric.colour_motion = colourMotion(frame.colour_offset);
@@ -133,26 +154,34 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
   res.condition = icp.condition;
   res.degenerate_dims = icp.degenerate_dims;
   res.match_inliers = icp.point_inliers;
-  std::tie(res.rejection, res.reason) = tracking::judge(P, icp, joint, seeded || (joint && have_prior) ? &prior_pose : nullptr);
+  return acceptOrFallBack(icp, s, levels, ip, res);
+}
+
+Eigen::Isometry3d Tracker::Impl::acceptOrFallBack(const IcpResult& icp, const IcpStart& s,
+                                                  const std::vector<DepthLevel>& levels, const IcpParams& ip,
+                                                  FusionResult& res) {
+  const TrackerParams& P = params;
+  std::tie(res.rejection, res.reason) =
+      tracking::judge(P, icp, s.joint, s.seeded || (s.joint && s.have_prior) ? &s.prior_pose : nullptr);
   if (res.rejection == Rejection::None) {
     res.tracked = true;
-    if (joint && ref_pose && reference && history.hasMotion() && tracking::worthChecking(P, icp.pose, prior_pose)) {
+    if (s.joint && s.ref_pose && reference && history.hasMotion() && tracking::worthChecking(P, icp.pose, s.prior_pose)) {
       const auto t1 = std::chrono::steady_clock::now();
-      const IcpResult own = tracking::trackAgainstFrame(*reference, levels, prior_pose, ip);
+      const IcpResult own = tracking::trackAgainstFrame(*reference, levels, s.prior_pose, ip);
       res.times.add("frame_check", secondsSince(t1));
-      res.model_overruled = own.solved && tracking::modelPulledAway(P, icp.pose, own.pose, prior_pose);
+      res.model_overruled = own.solved && tracking::modelPulledAway(P, icp.pose, own.pose, s.prior_pose);
       if (res.model_overruled) return own.pose;
     }
     return icp.pose;
   }
-  if (mode != TrackingMode::KinFu && have_prior) {
+  if (mode != TrackingMode::KinFu && s.have_prior) {
     res.tracked = res.fell_back = true;
-    return prior_pose;
+    return s.prior_pose;
   }
-  if (joint) {
+  if (s.joint) {
     // No motion is dropped: without ICP and without a prior the frame moves on at constant velocity.
     res.tracked = res.predicted = true;
-    return velocity_pose;
+    return s.velocity_pose;
   }
   return history.pose();
 }
