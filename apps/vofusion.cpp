@@ -39,6 +39,8 @@ const char* kUsage =
     "                [--work-dir d] [--save-volume f] [--checkpoint-every S] [--resume f]\n"
     "  synthetic      a rendered recording with exact ground truth: scene room (default), corridor, bare_wall,\n"
     "                 loop, lookalike or longwalk, trajectory smooth (default) or shake (rgbd-simulate --help)\n"
+    "  --max-frames   process at most N frames; a synthetic scene is rendered in N frames (as rgbd-simulate\n"
+    "                 --frames N: the same path, not its first N frames)\n"
     "  --strict       stop at the first damaged frame (missing or corrupt image, unreadable record), at a\n"
     "                 recording cut short or at a damaged ground truth. By default a damaged frame is skipped\n"
     "                 with a line naming its file (the first three with each problem), counted in summary.json\n"
@@ -337,6 +339,7 @@ int body(int argc, char** argv) {
   }
   installStopSignals();  // what a stop does here: kUsage's last lines
   const RunPlan plan = planRun(cl);
+  if (stopRequested()) return stoppedBeforeTheFirstFrame("vofusion", "");  // while rendering the default recording
   Input input = openInput(plan, true);
   auto& source = input.source;
   RunSession run(plan.cfg, plan.mode, plan.out_dir, plan.out_params, plan.mesh_params);

@@ -1,5 +1,7 @@
 #include <algorithm>
 #include <filesystem>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <tuple>
 #include <Eigen/Dense>
 // The synthetic sequence: exact geometry, Kinect noise statistics, determinism, smooth trajectories.
@@ -15,6 +17,8 @@
 #include "vofusion/io/rawlog.h"
 #include "vofusion/sim/synthetic_sequence.h"
 #include "vofusion/sim/any_source.h"
+#include "vofusion/sim/default_recording.h"
+#include "vofusion/core/stop_signals.h"
 
 using namespace vofusion;
 using namespace vofusion::sim;
@@ -547,4 +551,26 @@ TEST(Sim, DistanceToTheNearestSurface) {
   EXPECT_NEAR(room.distanceToSurface({1.15, 0.0, 0.40}), 0.05, 1e-12); // inside that box, under its top
   const SyntheticSequence wall(test::quickSim("bare_wall", 2));
   EXPECT_NEAR(wall.distanceToSurface({0.3, 1.0, 1.0}), kBareWallY - 1.0, 1e-12);
+}
+
+// A stop (Ctrl-C) while the default recording is rendered leaves nothing: the render went on to the
+// end and committed the recording, and vofusion then said "nothing written".
+TEST(Sim, AStoppedRenderingLeavesNoRecording) {
+  const std::string path = test::tempDir("stopped_render") + "/room.rawlog";
+  const pid_t pid = fork();  // the stop flag is the process's
+  if (pid == 0) {
+    requestStop();
+    const bool rendered = renderRecording(path, test::quickSim("room", 5));
+    _exit(rendered ? 1 : 0);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "rendered to the end";
+  EXPECT_FALSE(std::filesystem::exists(path));
+  EXPECT_FALSE(std::filesystem::exists(RawlogWriter::imagesDirFor(path)));
+  EXPECT_FALSE(std::filesystem::exists(RawlogWriter::groundTruthPathFor(path)));
+  // Not stopped: the whole recording.
+  ASSERT_TRUE(renderRecording(path, test::quickSim("room", 5)));
+  EXPECT_EQ(openFrameSource(path)->size(), 5u);
 }

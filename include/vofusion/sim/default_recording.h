@@ -4,9 +4,15 @@
 // can be opened in RawLogViewer.
 #include <string>
 
+#include "vofusion/sim/synthetic_sequence.h"
+
 namespace vofusion {
 
-// Path of the default rawlog, rendering it first (with a progress line) if it does not exist yet.
+// Path of the default rawlog, rendering it first (with a progress line) if it does not exist yet;
+// empty when a stop was asked for (stopRequested()) while rendering: nothing is left of it.
 std::string defaultRecording();
+// The synthetic recording `options` rendered into the rawlog at `path` (images and ground truth beside
+// it), with a progress line; false, and nothing left, when a stop was asked for before its end.
+bool renderRecording(const std::string& path, const sim::SimOptions& options);
 
 }  // namespace vofusion
