@@ -74,9 +74,13 @@ def lap_end_error(gt_path, est_path):
 def render(build, root, seed, frames):
     path = os.path.join(root, "loop_s%d_f%d.rawlog" % (seed, frames))
     if not os.path.exists(path):
+        # --overwrite: a rawlog deleted to force a new render leaves its images and ground truth beside it,
+        # which rgbd-simulate would not replace.
         cmd = [os.path.join(build, "bin", "rgbd-simulate"), "--scene", "loop", "--seed", str(seed),
-               "--frames", str(frames), "--out", path]
-        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+               "--frames", str(frames), "--out", path, "--overwrite"]
+        p = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        if p.returncode != 0:
+            sys.exit("bench loops: rendering %s failed: %s" % (path, p.stderr.strip()[-2000:]))
     return path
 
 
