@@ -117,22 +117,23 @@ double CommandLine::number(const std::string& name, double fallback) const {
   return x;
 }
 
-double CommandLine::number(const std::string& name, double fallback, double above, double at_most) const {
+double CommandLine::numberIn(const std::string& name, double fallback, double low, bool low_included,
+                             double at_most) const {
   const double x = number(name, fallback);
-  if (!(x > above && x <= at_most)) {
-    std::string range = "a number > " + fmt(above);
+  if (!((low_included ? x >= low : x > low) && x <= at_most)) {
+    std::string range = std::string("a number ") + (low_included ? ">= " : "> ") + fmt(low);
     if (std::isfinite(at_most)) range += " and <= " + fmt(at_most);
     throw InputError("usage", name + " expects " + range + ", got '" + value(name, fmt(x)) + "'");
   }
   return x;
 }
 
+double CommandLine::number(const std::string& name, double fallback, double above, double at_most) const {
+  return numberIn(name, fallback, above, false, at_most);
+}
+
 double CommandLine::numberFrom(const std::string& name, double fallback, double at_least, double at_most) const {
-  const double x = number(name, fallback);
-  if (!(x >= at_least && x <= at_most))
-    throw InputError("usage", name + " expects a number >= " + fmt(at_least) + " and <= " + fmt(at_most) + ", got '" +
-                                  value(name, fmt(x)) + "'");
-  return x;
+  return numberIn(name, fallback, at_least, true, at_most);
 }
 
 bool CommandLine::flag(const std::string& name) const { return flags_.count(name) > 0; }

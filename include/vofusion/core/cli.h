@@ -30,6 +30,8 @@ class CommandLine {
   const std::vector<std::string>& positional() const { return positional_; }
 
  private:
+  // A number from low (included or not) to at_most; the message names the range.
+  double numberIn(const std::string& name, double fallback, double low, bool low_included, double at_most) const;
   std::vector<std::pair<std::string, std::string>> values_;
   std::set<std::string> flags_;
   std::vector<std::string> positional_;
