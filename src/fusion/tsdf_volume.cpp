@@ -357,32 +357,37 @@ void TsdfVolume::save(std::ostream& os) const {
   if (!os) throw std::runtime_error("write failed (disk full?)");
 }
 
-void TsdfVolume::load(std::istream& is) {
+namespace {
+// The map file's header, whose settings must be these `params`; returns the saved volume origin.
+Eigen::Vector3i readMapHeader(std::istream& is, const TsdfParams& params, int volume_bricks) {
   char magic[sizeof(kMagic)];
   if (!is.read(magic, sizeof(magic)) || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
     throw std::runtime_error("not a vofusion TSDF map");
   const auto vv = get<std::int32_t>(is, "header");
   const auto vs = get<float>(is, "header");
   const auto tr = get<float>(is, "header");
-  if (vv != params_.volume_voxels || vs != params_.voxel_size || tr != params_.truncation)
+  if (vv != params.volume_voxels || vs != params.voxel_size || tr != params.truncation)
     throw std::runtime_error("saved with volume_voxels " + std::to_string(vv) + ", voxel_size " + std::to_string(vs) +
                              ", truncation " + std::to_string(tr) + ": the [kinfu] settings differ");
   Eigen::Vector3i o;
   for (int i = 0; i < 3; ++i) o[i] = get<std::int32_t>(is, "header");
   // Checked, as the zlib checksums cover only the voxels: a flipped byte here would place bricks
   // elsewhere, or overflow the volume's indices.
-  if (!WorldModel::keyHolds(o) || !WorldModel::keyHolds(o + Eigen::Vector3i::Constant(n_)))
+  if (!WorldModel::keyHolds(o) || !WorldModel::keyHolds(o + Eigen::Vector3i::Constant(volume_bricks)))
     throw std::runtime_error("corrupt header (volume origin out of range)");
+  return o;
+}
+
+using PackedBricks = std::vector<std::pair<Eigen::Vector3i, std::vector<std::uint8_t>>>;
+
+// The map file's bricks, each checked, up to its end marker: those outside the volume at `origin` go
+// into `world` (spilled as it fills), those inside are returned compressed.
+PackedBricks readMapBricks(std::istream& is, const Eigen::Vector3i& origin, int volume_bricks, WorldModel& world) {
+  const auto inVolume = [&](const Eigen::Vector3i& c) {
+    return ((c - origin).array() >= 0).all() && ((c - origin).array() < volume_bricks).all();
+  };
   const auto count = get<std::uint64_t>(is, "brick count");
-  // The whole file is read before the map changes: a bad one leaves the map as it was (a re-fusion
-  // that could not take a saved map, and said it fused the frames again without it, kept the part read
-  // before the damage). Bricks beyond the volume go to a world model of their own (spilled as it fills);
-  // those in it wait compressed (checked whole), and are decompressed into the volume's arena once the
-  // file is read: staged whole, they sat on glibc's heap, which keeps freed memory for the frame loop.
-  auto world = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
-                                            params_.work_dir);
-  const auto inVolume = [&](const Eigen::Vector3i& c) { return ((c - o).array() >= 0).all() && ((c - o).array() < n_).all(); };
-  std::vector<std::pair<Eigen::Vector3i, std::vector<std::uint8_t>>> in_volume;
+  PackedBricks in_volume;
   std::unordered_set<std::uint64_t> in_volume_keys;
   std::vector<std::uint8_t> bytes;
   auto scratch = std::make_unique<Brick>();
@@ -402,12 +407,26 @@ void TsdfVolume::load(std::istream& is) {
       auto b = std::make_unique<Brick>();
       if (!decompressBrick(bytes.data(), len, *b)) throw std::runtime_error("corrupt brick data");
       b->coord = c;
-      if (world->contains(c)) throw std::runtime_error("brick stored twice");
-      world->put(std::move(b));
+      if (world.contains(c)) throw std::runtime_error("brick stored twice");
+      world.put(std::move(b));
     }
   }
   char end[4];
   if (!is.read(end, 4) || std::memcmp(end, "END\n", 4) != 0) throw std::runtime_error("truncated (no end marker)");
+  return in_volume;
+}
+}  // namespace
+
+void TsdfVolume::load(std::istream& is) {
+  // The whole file is read before the map changes: a bad one leaves the map as it was (a re-fusion
+  // that could not take a saved map, and said it fused the frames again without it, kept the part read
+  // before the damage). Bricks beyond the volume go to a world model of their own (spilled as it fills);
+  // those in it wait compressed (checked whole), and are decompressed into the volume's arena once the
+  // file is read: staged whole, they sat on glibc's heap, which keeps freed memory for the frame loop.
+  const Eigen::Vector3i o = readMapHeader(is, params_, n_);
+  auto world = std::make_unique<WorldModel>(static_cast<std::size_t>(std::max(0, params_.world_cache_mib)) << 20,
+                                            params_.work_dir);
+  PackedBricks in_volume = readMapBricks(is, o, n_, *world);
   // Read whole: the map becomes the file's, at the saved origin.
   for (std::size_t s = 0; s < slots_.size(); ++s)
     if (slots_[s] >= 0) setSlot(static_cast<int>(s), -1);
@@ -415,8 +434,9 @@ void TsdfVolume::load(std::istream& is) {
   world_ = std::move(world);
   origin_ = o;
   updateCyclicTables();
+  auto scratch = std::make_unique<Brick>();
   for (auto& [c, packed] : in_volume) {
-    decompressBrick(packed.data(), packed.size(), *scratch);  // checked above
+    decompressBrick(packed.data(), packed.size(), *scratch);  // checked on reading
     scratch->coord = c;
     setSlot(slotOf(c.x(), c.y(), c.z()), bricks_.add(*scratch));
     std::vector<std::uint8_t>().swap(packed);
