@@ -714,6 +714,54 @@ void RawlogWriter::writeObservation(const mrpt::obs::CObservation& obs) {
 
 void RawlogWriter::writeGroundTruth(const Trajectory& gt) { impl_->gt = gt; }
 
+namespace {
+// The frame's observation and what goes with it: its colour image's capture time (a reader takes
+// offsets under 1 s) and its ground-truth pose.
+std::vector<mrpt::obs::CObservation::Ptr> withCompanions(const Frame& frame, const CObservation3DRangeScan::Ptr& obs,
+                                                         bool ground_truth_observations) {
+  std::vector<mrpt::obs::CObservation::Ptr> list{obs};
+  if (frame.colour_offset != 0.0 && std::abs(frame.colour_offset) < 1.0) {
+    auto colour_time = std::make_shared<mrpt::obs::CObservationRawDAQ>();
+    colour_time->sensorLabel = kColourTimeLabel;
+    colour_time->timestamp = rawlogTime(frame.timestamp + frame.colour_offset);
+    list.push_back(colour_time);
+  }
+  if (frame.groundTruth && ground_truth_observations) {
+    auto gt = std::make_shared<mrpt::obs::CObservationRobotPose>();
+    gt->sensorLabel = kGroundTruthLabel;
+    gt->timestamp = obs->timestamp;
+    gt->pose.mean = *frame.groundTruth;
+    gt->pose.cov.setZero();
+    list.push_back(gt);
+  }
+  return list;
+}
+}  // namespace
+
+std::optional<RecordedFiles> RawlogWriter::writeImagesBeside(const Frame& frame, CObservation3DRangeScan& obs) {
+  char stem[128];
+  std::snprintf(stem, sizeof stem, "%s_%06zu_%.6f", opts_.sensor_label.c_str(), frames_, frame.timestamp);
+  const std::string png = std::string(stem) + "_INTENSITY.png", bin = std::string(stem) + "_DEPTH.bin";
+  const std::string dir = impl_->images_dir, shown = imagesDirFor(path_) + "/";
+  // The files the frame came from (a recording's linked, others copied), else written.
+  writeColourPng(frame, dir + "/" + png, shown + png);
+  obs.intensityImage.setExternalStorage(png);
+  std::optional<DepthFile> depth;
+  if (frame.depth_file) depth = reuseRangeImageFile(*frame.depth_file, opts_.range_units, dir + "/" + bin, shown + bin);
+  if (depth) {
+    useExternalRangeImage(obs, bin);
+  } else {
+    readings_beyond_range_ += setRangeImage(obs, frame.depth);
+    depth = writeRangeImageExternally(obs, bin, dir, shown + bin);
+  }
+  impl_->images_used = true;
+  // Only a recording's files keep their names: a result's folder is renamed by commit().
+  if (!opts_.in_place) return std::nullopt;
+  depth->path = fs::absolute(dir + "/" + bin).string();
+  depth->recorded = true;
+  return RecordedFiles{ColourFile{fs::absolute(dir + "/" + png).string(), true}, *depth};
+}
+
 std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
   // A recording in place has its ground truth beside it from its first frame on: a run killed before
   // commit() (SIGKILL, a power cut) is finished offline from the recording, and evaluated against it.
@@ -725,45 +773,8 @@ std::optional<RecordedFiles> RawlogWriter::write(const Frame& frame) {
                  ? observationWithoutPixels(frame, opts_.range_units, opts_.sensor_label)
                  : observationWithPixels(frame, opts_.range_units, opts_.sensor_label, readings_beyond_range_);
   std::optional<RecordedFiles> files;
-  if (opts_.external_images) {
-    char stem[128];
-    std::snprintf(stem, sizeof stem, "%s_%06zu_%.6f", opts_.sensor_label.c_str(), frames_, frame.timestamp);
-    const std::string png = std::string(stem) + "_INTENSITY.png", bin = std::string(stem) + "_DEPTH.bin";
-    const std::string dir = impl_->images_dir, shown = imagesDirFor(path_) + "/";
-    // The files the frame came from (a recording's linked, others copied), else written.
-    writeColourPng(frame, dir + "/" + png, shown + png);
-    obs->intensityImage.setExternalStorage(png);
-    std::optional<DepthFile> depth;
-    if (frame.depth_file) depth = reuseRangeImageFile(*frame.depth_file, opts_.range_units, dir + "/" + bin, shown + bin);
-    if (depth) {
-      useExternalRangeImage(*obs, bin);
-    } else {
-      readings_beyond_range_ += setRangeImage(*obs, frame.depth);
-      depth = writeRangeImageExternally(*obs, bin, dir, shown + bin);
-    }
-    impl_->images_used = true;
-    // Only a recording's files keep their names: a result's folder is renamed by commit().
-    if (opts_.in_place) {
-      depth->path = fs::absolute(dir + "/" + bin).string();
-      depth->recorded = true;
-      files = RecordedFiles{ColourFile{fs::absolute(dir + "/" + png).string(), true}, *depth};
-    }
-  }
-  std::vector<mrpt::obs::CObservation::Ptr> obs_list{obs};
-  if (frame.colour_offset != 0.0 && std::abs(frame.colour_offset) < 1.0) {  // a reader takes offsets under 1 s
-    auto colour_time = std::make_shared<mrpt::obs::CObservationRawDAQ>();
-    colour_time->sensorLabel = kColourTimeLabel;
-    colour_time->timestamp = rawlogTime(frame.timestamp + frame.colour_offset);
-    obs_list.push_back(colour_time);
-  }
-  if (frame.groundTruth && opts_.ground_truth_observations) {
-    auto gt = std::make_shared<mrpt::obs::CObservationRobotPose>();
-    gt->sensorLabel = kGroundTruthLabel;
-    gt->timestamp = obs->timestamp;
-    gt->pose.mean = *frame.groundTruth;
-    gt->pose.cov.setZero();
-    obs_list.push_back(gt);
-  }
+  if (opts_.external_images) files = writeImagesBeside(frame, *obs);
+  const std::vector<mrpt::obs::CObservation::Ptr> obs_list = withCompanions(frame, obs, opts_.ground_truth_observations);
   try {
     if (opts_.format == RawlogWriterOptions::Format::Observations) {
       for (const auto& o : obs_list) *impl_->arch << *o;

@@ -148,6 +148,9 @@ class RawlogWriter {
 
  private:
   struct Impl;
+  // External images: the frame's colour and depth files beside the rawlog, named in `obs`; a
+  // recording's (in place) returned for the frame to carry.
+  std::optional<RecordedFiles> writeImagesBeside(const Frame& frame, mrpt::obs::CObservation3DRangeScan& obs);
   std::string path_;
   RawlogWriterOptions opts_;
   std::size_t frames_ = 0;
