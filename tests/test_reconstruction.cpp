@@ -390,6 +390,12 @@ TEST(Reconstruction, ReintegrationKeepsTheMapTheRunWentOnFrom) {
     const KinFuStats s = first.fusionStats();
     saved_bricks = s.bricks_in_volume + s.bricks_in_world_model;
   }
+  {
+    // Only before the first frame: the map would be replaced under what reads it during the run.
+    Reconstruction late(test::quickRoomConfig(), TrackingMode::Joint);
+    late.process(seq.render(0));
+    EXPECT_THROW(late.resumeVolume(map_file), std::logic_error);
+  }
   Reconstruction second(test::quickRoomConfig(), TrackingMode::Joint);
   second.resumeVolume(map_file);
   for (std::size_t i = first_session; i < frames; ++i) second.process(seq.render(i));

@@ -380,6 +380,9 @@ void Reconstruction::saveVolume(const std::string& path) const {
   impl_->map().save(path);
 }
 void Reconstruction::resumeVolume(const std::string& path) {
+  // Checked before the map is replaced: a map replaced under a premesher that reads the world model it
+  // holds would be freed under it (its shift observer refuses the load, but only afterwards).
+  if (impl_->frames > 0 || impl_->finished) throw std::logic_error("Reconstruction::resumeVolume after the first frame");
   impl_->map().resume(path);
   impl_->resumed_map = std::filesystem::absolute(path).string();
   impl_->resumed_map_stamp = mapStamp(path);
