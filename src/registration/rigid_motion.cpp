@@ -100,23 +100,54 @@ double secondaryExtent(const Points3& pts, const std::vector<int>& subset) {
   return std::sqrt(std::max(0.0, es.eigenvalues()[1]));  // ascending: [1] is the middle one
 }
 
-Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
-                                    const Eigen::Isometry3d& T0, int iterations,
-                                    Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise, double cauchy) {
-  const std::vector<int> idx = subset.empty() ? allIndices(src.size()) : subset;
-  Eigen::Matrix<double, 6, 1> p = toVector(T0);
-  // Whitening of each residual T s - d: the inverse Cholesky factor of R C_s R^T + C_d (R from T0).
+namespace {
+// Whitening of each residual T s - d: the inverse Cholesky factor of R C_s R^T + C_d (R from T0), or
+// 1 / pointSigma without the ray noise model.
+std::vector<Eigen::Matrix3d> whiteners(const Points3& src, const Points3& dst, const std::vector<int>& idx,
+                                       const Eigen::Isometry3d& T0, bool ray_noise) {
   std::vector<Eigen::Matrix3d> w(idx.size());
+  const Eigen::Matrix3d R = T0.linear();
   for (std::size_t k = 0; k < idx.size(); ++k) {
     const Eigen::Vector3d &s = src[idx[k]], &d = dst[idx[k]];
     if (ray_noise) {
-      const Eigen::Matrix3d R = T0.linear();
       const Eigen::Matrix3d C = R * rayCovariance(s) * R.transpose() + rayCovariance(d);
       w[k] = Eigen::Matrix3d(C.llt().matrixL()).inverse();
     } else {
       w[k] = Eigen::Matrix3d::Identity() / pointSigma(s, d);
     }
   }
+  return w;
+}
+
+// Central-difference Jacobian of `residuals` at p: 12 cheap evaluations, exact enough for 6 parameters.
+template <class Residuals>
+void numericJacobian(const Residuals& residuals, const Eigen::Matrix<double, 6, 1>& p, Eigen::MatrixXd& J) {
+  Eigen::VectorXd rp, rm;
+  for (int j = 0; j < 6; ++j) {
+    const double h = j < 3 ? 1e-6 : 1e-7;
+    Eigen::Matrix<double, 6, 1> q = p;
+    q[j] += h; residuals(q, rp);
+    q[j] -= 2 * h; residuals(q, rm);
+    J.col(j) = (rp - rm) / (2 * h);
+  }
+}
+
+// The fit's covariance: H^-1 scaled by the residuals' variance per degree of freedom (1e3 I if H is
+// singular).
+Eigen::Matrix<double, 6, 6> fitCovariance(const Eigen::Matrix<double, 6, 6>& H, double chi2, std::size_t matches) {
+  const double dof = std::max(1.0, 3.0 * double(matches) - 6.0);
+  Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(H);
+  return lu.isInvertible() ? Eigen::Matrix<double, 6, 6>(lu.inverse() * (chi2 / dof))
+                           : Eigen::Matrix<double, 6, 6>(Eigen::Matrix<double, 6, 6>::Identity() * 1e3);
+}
+}  // namespace
+
+Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
+                                    const Eigen::Isometry3d& T0, int iterations,
+                                    Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise, double cauchy) {
+  const std::vector<int> idx = subset.empty() ? allIndices(src.size()) : subset;
+  Eigen::Matrix<double, 6, 1> p = toVector(T0);
+  const std::vector<Eigen::Matrix3d> w = whiteners(src, dst, idx, T0, ray_noise);
   // Cauchy kernel by iteratively reweighted least squares: each pass weighs a whitened residual e by
   // 1 / (1 + (e/c)^2), fixed while the step is solved and tested (all ones without a kernel).
   std::vector<double> sw(idx.size(), 1.0);
@@ -133,7 +164,7 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
       sw[k] = 1.0 / std::sqrt(1.0 + e * e);
     }
   };
-  Eigen::VectorXd r, rp, rm;
+  Eigen::VectorXd r;
   Eigen::MatrixXd J(3 * idx.size(), 6);
   Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Identity();
   double chi2 = 0;
@@ -142,14 +173,7 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
     residuals(p, r);
     chi2 = r.squaredNorm();
     if (it == iterations && !covariance) break;  // H at the solution is only for the covariance
-    // Central-difference Jacobian: 12 cheap evaluations, exact enough for 6 parameters.
-    for (int j = 0; j < 6; ++j) {
-      const double h = j < 3 ? 1e-6 : 1e-7;
-      Eigen::Matrix<double, 6, 1> q = p;
-      q[j] += h; residuals(q, rp);
-      q[j] -= 2 * h; residuals(q, rm);
-      J.col(j) = (rp - rm) / (2 * h);
-    }
+    numericJacobian(residuals, p, J);
     H = J.transpose() * J;
     if (it == iterations) break;  // last pass only evaluates H at the solution
     const Eigen::Matrix<double, 6, 1> step = H.ldlt().solve(-J.transpose() * r);
@@ -160,12 +184,7 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
     p += step;
     if (step.norm() < 1e-10) { iterations = it + 1; }
   }
-  if (covariance) {
-    const double dof = std::max(1.0, 3.0 * idx.size() - 6.0);
-    Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(H);
-    *covariance = lu.isInvertible() ? Eigen::Matrix<double, 6, 6>(lu.inverse() * (chi2 / dof))
-                                    : Eigen::Matrix<double, 6, 6>(Eigen::Matrix<double, 6, 6>::Identity() * 1e3);
-  }
+  if (covariance) *covariance = fitCovariance(H, chi2, idx.size());
   return fromVector(p);
 }
 
