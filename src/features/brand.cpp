@@ -81,12 +81,45 @@ void BrandExtractor::compute(const cv::Mat& gray, const cv::Mat& points, const c
   computeSmoothed(smooth(gray), points, normals, keypoints, descriptors);
 }
 
+float BrandExtractor::orientationAt(const cv::Mat& img, int kx, int ky, float S) const {
+  const int R = std::max(2, int(S * 0.5f));
+  double gx = 0, gy = 0;
+  const std::size_t stride = img.step;
+  for (const OrientationTap& t : orientation_taps_.at(R)) {
+    const uint8_t* p = img.ptr<uint8_t>(ky + t.dy) + kx + t.dx;
+    gx += t.weight * (int(p[1]) - int(p[-1]));
+    gy += t.weight * (int(p[stride]) - int(p[-std::ptrdiff_t(stride)]));
+  }
+  return float(std::atan2(gy, gx));
+}
+
+void BrandExtractor::describe(const cv::Mat& img, const cv::Mat& points, const cv::Mat& normals, int kx, int ky,
+                              float S, float angle, std::uint8_t* d) const {
+  const float cos_thr = float(std::cos(params_.normal_angle * M_PI / 180.0));
+  const float ca = std::cos(angle) * S, sa = std::sin(angle) * S;
+  for (int i = 0; i < 256; ++i) {
+    const cv::Point2f& a = pattern_[2 * i];
+    const cv::Point2f& b = pattern_[2 * i + 1];
+    const int ax = kx + cvRound(ca * a.x - sa * a.y), ay = ky + cvRound(sa * a.x + ca * a.y);
+    const int bx = kx + cvRound(ca * b.x - sa * b.y), by = ky + cvRound(sa * b.x + ca * b.y);
+    bool bit = params_.use_intensity && img.at<uint8_t>(ay, ax) < img.at<uint8_t>(by, bx);
+    if (!bit && params_.use_geometry) {
+      const cv::Vec3f& na = normals.at<cv::Vec3f>(ay, ax);
+      const cv::Vec3f& nb = normals.at<cv::Vec3f>(by, bx);
+      if (std::isfinite(na[0]) && std::isfinite(nb[0]) && na.dot(nb) < cos_thr) {
+        const cv::Vec3f dp = points.at<cv::Vec3f>(ay, ax) - points.at<cv::Vec3f>(by, bx);
+        bit = dp.dot(na - nb) > 0.f;  // convex between the two samples
+      }
+    }
+    if (bit) d[i >> 3] |= uint8_t(1u << (i & 7));
+  }
+}
+
 void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, const cv::Mat& normals,
                                      std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors) const {
   CV_Assert(img.type() == CV_8UC1 && points.type() == CV_32FC3 && normals.type() == CV_32FC3);
   CV_Assert(points.size() == img.size() && normals.size() == img.size());  // read at the image's pixels
   const int rows = img.rows, cols = img.cols;
-  const float cos_thr = float(std::cos(params_.normal_angle * M_PI / 180.0));
   std::vector<cv::KeyPoint> kept(keypoints.size());
   std::vector<char> ok(keypoints.size(), 0);
   cv::Mat desc(int(keypoints.size()), 32, CV_8U, cv::Scalar(0));
@@ -100,38 +133,8 @@ void BrandExtractor::computeSmoothed(const cv::Mat& img, const cv::Mat& points, 
     const float S = float(params_.patch_size * scaleForDepth(z));
     const float reach = S * 0.5f * 1.4143f + 1.f;  // rotated patch corner
     if (kx - reach < 1 || ky - reach < 1 || kx + reach > cols - 2 || ky + reach > rows - 2) return;
-
-    float angle = 0.f;
-    if (params_.oriented) {
-      // Canonical orientation: direction of the Gaussian-weighted sum of intensity gradients.
-      const int R = std::max(2, int(S * 0.5f));
-      double gx = 0, gy = 0;
-      const std::size_t stride = img.step;
-      for (const OrientationTap& t : orientation_taps_.at(R)) {
-        const uint8_t* p = img.ptr<uint8_t>(ky + t.dy) + kx + t.dx;
-        gx += t.weight * (int(p[1]) - int(p[-1]));
-        gy += t.weight * (int(p[stride]) - int(p[-std::ptrdiff_t(stride)]));
-      }
-      angle = float(std::atan2(gy, gx));
-    }
-    const float ca = std::cos(angle) * S, sa = std::sin(angle) * S;
-    uint8_t* d = desc.ptr<uint8_t>(k);
-    for (int i = 0; i < 256; ++i) {
-      const cv::Point2f& a = pattern_[2 * i];
-      const cv::Point2f& b = pattern_[2 * i + 1];
-      const int ax = kx + cvRound(ca * a.x - sa * a.y), ay = ky + cvRound(sa * a.x + ca * a.y);
-      const int bx = kx + cvRound(ca * b.x - sa * b.y), by = ky + cvRound(sa * b.x + ca * b.y);
-      bool bit = params_.use_intensity && img.at<uint8_t>(ay, ax) < img.at<uint8_t>(by, bx);
-      if (!bit && params_.use_geometry) {
-        const cv::Vec3f& na = normals.at<cv::Vec3f>(ay, ax);
-        const cv::Vec3f& nb = normals.at<cv::Vec3f>(by, bx);
-        if (std::isfinite(na[0]) && std::isfinite(nb[0]) && na.dot(nb) < cos_thr) {
-          const cv::Vec3f dp = points.at<cv::Vec3f>(ay, ax) - points.at<cv::Vec3f>(by, bx);
-          bit = dp.dot(na - nb) > 0.f;  // convex between the two samples
-        }
-      }
-      if (bit) d[i >> 3] |= uint8_t(1u << (i & 7));
-    }
+    const float angle = params_.oriented ? orientationAt(img, kx, ky, S) : 0.f;
+    describe(img, points, normals, kx, ky, S, angle, desc.ptr<uint8_t>(k));
     kp.angle = float(angle * 180.0 / M_PI);
     if (kp.angle < 0) kp.angle += 360.f;
     kept[k] = kp;

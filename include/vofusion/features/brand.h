@@ -6,6 +6,7 @@
 //   geometric bit  <n_x, n_y> < cos(normal_angle)  AND  the surface is convex between them,
 //                  <P_x - P_y, n_x - n_y> > 0
 // and the descriptor bit is their OR (the paper's fusion). Normals come from the depth image.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -58,6 +59,12 @@ class BrandExtractor {
   };
   std::vector<std::vector<OrientationTap>> orientation_taps_;
   static std::vector<OrientationTap> orientationTaps(int R);
+  // The patch's canonical orientation (radians) at pixel (kx, ky), patch size S: the direction of its
+  // Gaussian-weighted intensity gradients.
+  float orientationAt(const cv::Mat& img, int kx, int ky, float S) const;
+  // The 256 tests of the patch at (kx, ky), size S, turned by `angle`, into the 32 bytes at d.
+  void describe(const cv::Mat& img, const cv::Mat& points, const cv::Mat& normals, int kx, int ky, float S, float angle,
+                std::uint8_t* d) const;
 };
 
 }  // namespace vofusion
