@@ -62,38 +62,48 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
     const Eigen::Vector3d centre = (v[0] + v[1] + v[2]) / 3.0;
     bounds_.push_back({centre, std::max({(v[0] - centre).norm(), (v[1] - centre).norm(), (v[2] - centre).norm()})});
   }
+  origin_ = lo;
+  const Eigen::Vector3d extent = hi - lo;
+  std::uint64_t listings = 0;
+  cell_ = cellSize(extent, edge_sum / double(tris_.size()), listings);
+  for (int i = 0; i < 3; ++i) dims_[i] = std::int64_t(std::floor(extent[i] / cell_)) + 1;
+  listTriangles(listings);
+}
+
+double NearestTriangle::cellSize(const Eigen::Vector3d& extent, double mean_longest_edge, std::uint64_t& listings) const {
   // Twice the mean longest edge: a triangle spans one or two cells a side, and a query near the
   // surface usually ends after its own cell and a few of its neighbours. A whole room's mesh, or a
   // flat one, would need too many such cells: then larger ones, at most eight cells per triangle.
-  const Eigen::Vector3d extent = hi - lo;
   const auto cellsOf = [&](double cell) {
     double n = 1.0;
     for (int i = 0; i < 3; ++i) n *= std::floor(extent[i] / cell) + 1.0;
     return n;
   };
-  cell_ = std::max({2.0 * edge_sum / double(tris_.size()), extent.maxCoeff() * 1e-6, 1e-12});
-  while (cellsOf(cell_) > 8.0 * double(tris_.size()) + 64.0) cell_ *= 1.25;
+  double cell = std::max({2.0 * mean_longest_edge, extent.maxCoeff() * 1e-6, 1e-12});
+  while (cellsOf(cell) > 8.0 * double(tris_.size()) + 64.0) cell *= 1.25;
   // Long triangles among short ones are listed in every cell their box covers: a few hundred slivers
   // across a mesh of a million small faces asked for ~4e9 listings (16 GB, or the 2^32 refusal, which
   // failed the whole cleaning over its distance measurement). Larger cells then, at most 32 listings a
   // triangle on average: the search is exact at any cell size.
-  const auto listingsAt = [&](double cell) {
+  const auto listingsAt = [&](double c) {
     std::uint64_t n = 0;
     for (const auto& v : tris_) {
       std::uint64_t k = 1;
       for (int i = 0; i < 3; ++i) {
-        const double a = std::min({v[0][i], v[1][i], v[2][i]}) - lo[i], b = std::max({v[0][i], v[1][i], v[2][i]}) - lo[i];
-        k *= std::uint64_t(std::floor(b / cell) - std::floor(a / cell)) + 1;
+        const double a = std::min({v[0][i], v[1][i], v[2][i]}) - origin_[i], b = std::max({v[0][i], v[1][i], v[2][i]}) - origin_[i];
+        k *= std::uint64_t(std::floor(b / c) - std::floor(a / c)) + 1;
       }
       n += k;
     }
     return n;
   };
   const std::uint64_t budget = 32 * std::uint64_t(tris_.size()) + 1000000;
-  std::uint64_t listings = listingsAt(cell_);
-  while (listings > budget) cell_ *= 1.25, listings = listingsAt(cell_);
-  origin_ = lo;
-  for (int i = 0; i < 3; ++i) dims_[i] = std::int64_t(std::floor(extent[i] / cell_)) + 1;
+  listings = listingsAt(cell);
+  while (listings > budget) cell *= 1.25, listings = listingsAt(cell);
+  return cell;
+}
+
+void NearestTriangle::listTriangles(std::uint64_t listings) {
   const auto index = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return std::size_t((z * dims_[1] + y) * dims_[0] + x); };
   // The cells a triangle's bounding box covers, clamped to the grid: first and last per axis.
   const auto cellBox = [&](const std::array<Eigen::Vector3d, 3>& v) {
