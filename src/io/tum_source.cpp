@@ -402,9 +402,9 @@ std::optional<CameraFile> cameraFileIn(const std::string& txt, const std::string
 }
 }  // namespace
 
-TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
-  std::error_code ec;
-  if (!fs::is_directory(folder, ec)) throw InputError(folder, "no such folder");
+namespace {
+// rgb.txt and depth.txt paired by time (at most opts.max_frames pairs).
+std::vector<TumAssociation> framePairsIn(const std::string& folder, const SourceOptions& opts) {
   const std::string rgb_list = (fs::path(folder) / "rgb.txt").string();
   const std::string depth_list = (fs::path(folder) / "depth.txt").string();
   for (const auto& f : {rgb_list, depth_list})
@@ -413,88 +413,113 @@ TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions&
   const auto depth = readTumList(depth_list);
   if (rgb.empty()) throw InputError(rgb_list, "lists no frames");
   if (depth.empty()) throw InputError(depth_list, "lists no frames");
-  pairs_ = associate(rgb, depth, opts.max_time_diff, opts.unique_depth);
-  if (pairs_.empty())
+  std::vector<TumAssociation> pairs = associate(rgb, depth, opts.max_time_diff, opts.unique_depth);
+  if (pairs.empty())
     throw InputError(folder, "no colour frame has a depth frame within " + std::to_string(opts.max_time_diff) + " s");
-  warnOfUnpairedDepth(depth_list, depth, pairs_, opts.max_time_diff);
-  if (opts.max_frames > 0 && pairs_.size() > opts.max_frames) pairs_.resize(opts.max_frames);
+  warnOfUnpairedDepth(depth_list, depth, pairs, opts.max_time_diff);
+  if (opts.max_frames > 0 && pairs.size() > opts.max_frames) pairs.resize(opts.max_frames);
+  return pairs;
+}
 
-  // The camera and the depth unit: the command line, else the folder's camera file, else a guess.
+// The folder's camera file as the options let it be read (`origin` set to the one read, else the folder).
+std::optional<CameraFile> cameraFileFor(const std::string& folder, const SourceOptions& opts, std::string& origin) {
   const std::string txt = (fs::path(folder) / "intrinsics.txt").string(), yaml = (fs::path(folder) / "camera.yaml").string();
-  std::optional<CameraFile> file;
-  std::string origin = folder;
-  if (!opts.intrinsics) {
-    file = cameraFileIn(txt, yaml, origin);
-  } else if (!(opts.depth_scale > 0)) {
-    // Given --intrinsics, the file is read for its depth unit only: one this reader cannot take (another
-    // tool's camera.yaml) is said and left, where it made the folder unusable without editing it.
-    try {
-      file = cameraFileIn(txt, yaml, origin);
-    } catch (const InputError& e) {
-      if (opts.strict) throw;
-      warn(e.file(), e.problem() + " (left: --intrinsics gives the camera; depth in 1/5000 m unless --depth-scale)");
-    }
+  origin = folder;
+  if (!opts.intrinsics) return cameraFileIn(txt, yaml, origin);
+  if (opts.depth_scale > 0) return std::nullopt;
+  // Given --intrinsics, the file is read for its depth unit only: one this reader cannot take (another
+  // tool's camera.yaml) is said and left, where it made the folder unusable without editing it.
+  try {
+    return cameraFileIn(txt, yaml, origin);
+  } catch (const InputError& e) {
+    if (opts.strict) throw;
+    warn(e.file(), e.problem() + " (left: --intrinsics gives the camera; depth in 1/5000 m unless --depth-scale)");
+    return std::nullopt;
   }
-  const cv::Size image = colourImageSize(folder, pairs_);
-  const int width = image.width, height = image.height;
-  const std::string size = std::to_string(width) + "x" + std::to_string(height);
+}
+
+// The camera for `image`-sized frames: the command line, else the folder's camera file, else a guess
+// (TUM's fr1 default, 640x480 only).
+CameraIntrinsics cameraOf(const std::string& folder, const SourceOptions& opts, const std::optional<CameraFile>& file,
+                          std::string origin, const cv::Size& image) {
+  const std::string size = std::to_string(image.width) + "x" + std::to_string(image.height);
+  CameraIntrinsics camera;
   if (opts.intrinsics) {
-    camera_ = CameraIntrinsics::parse(*opts.intrinsics);
+    camera = CameraIntrinsics::parse(*opts.intrinsics);
     origin = "--intrinsics";
   } else if (file) {
-    camera_ = file->camera;
-    if (file->has_size && (camera_.width != width || camera_.height != height))
-      throw InputError(origin, "intrinsics are for " + std::to_string(camera_.width) + "x" + std::to_string(camera_.height) +
+    camera = file->camera;
+    if (file->has_size && (camera.width != image.width || camera.height != image.height))
+      throw InputError(origin, "intrinsics are for " + std::to_string(camera.width) + "x" + std::to_string(camera.height) +
                                    " images, this recording's are " + size);
   } else {
-    camera_ = CameraIntrinsics::forTumFolder(folder);
-    const bool tum = CameraIntrinsics::namesAFreiburgCamera(folder);
-    if (width != 640 || height != 480)
+    camera = CameraIntrinsics::forTumFolder(folder);
+    if (image.width != 640 || image.height != 480)
       throw InputError(folder, "no intrinsics for its " + size + " images: give --intrinsics fx,fy,cx,cy or put an "
                                "intrinsics.txt ('fx fy cx cy') or camera.yaml beside rgb.txt");
-    if (!tum)
+    if (!CameraIntrinsics::namesAFreiburgCamera(folder))
       warn(folder, "no intrinsics.txt or camera.yaml and no --intrinsics: assuming fx = fy = 525, cx = 319.5, cy = 239.5");
   }
-  camera_.width = width;
-  camera_.height = height;
-  camera_.validate(origin);
+  camera.width = image.width;
+  camera.height = image.height;
+  camera.validate(origin);
+  return camera;
+}
 
-  depth_scale_ = opts.depth_scale > 0 ? opts.depth_scale : file && file->depth_scale > 0 ? file->depth_scale : 5000.0;
-  // A unit mix-up shows in the first frame's median reading (indoor RGB-D: 0.4-5 m; millimetres read
-  // as TUM's units land at a fifth, TUM's read as millimetres at five times).
-  // The first depth image that loads: a damaged one is the reader's to report, frame by frame.
-  for (std::size_t i = 0; i < std::min<std::size_t>(pairs_.size(), 10); ++i) {
-    const std::string d = (fs::path(folder) / pairs_[i].depth.file).string();
+// A unit mix-up shows in the first frame's median reading (indoor RGB-D: 0.4-5 m; millimetres read
+// as TUM's units land at a fifth, TUM's read as millimetres at five times). The first depth image that
+// loads: a damaged one is the reader's to report, frame by frame.
+void warnOfAnotherDepthUnit(const std::string& folder, const std::vector<TumAssociation>& pairs, const cv::Size& image,
+                            double depth_scale) {
+  for (std::size_t i = 0; i < std::min<std::size_t>(pairs.size(), 10); ++i) {
+    const std::string d = (fs::path(folder) / pairs[i].depth.file).string();
     cv::Mat raw;
     try {
-      raw = loadRawDepthPng(d, width, height);
+      raw = loadRawDepthPng(d, image.width, image.height);
     } catch (const InputError&) {
       continue;
     }
-    const double median = medianRaw(raw) / depth_scale_;
+    const double median = medianRaw(raw) / depth_scale;
     if (median > 5.0 || (median > 0 && median < 0.4))
       warn(d, cv::format("median depth %.2f m at %g depth units per metre: another unit? (--depth-scale: 1000 for "
-                         "millimetres, 5000 for TUM)", median, depth_scale_));
-    break;
+                         "millimetres, 5000 for TUM)", median, depth_scale));
+    return;
   }
+}
 
+// The Kinect's accelerometer reads the reaction to gravity ("up") with its x and y axes opposite to
+// the optical frame's (checked on fr1 xyz and rpy against their ground truth). Like the ground truth
+// it only goes along with the frames: damaged, it costs the pictures' measured "up" (they are then
+// oriented as for a recording without one), not the run, unless --strict. Sorted by time.
+std::vector<std::pair<double, Eigen::Vector3d>> accelerometerIn(const std::string& folder, bool strict) {
+  const std::string accel = (fs::path(folder) / "accelerometer.txt").string();
+  std::vector<std::pair<double, Eigen::Vector3d>> readings;
+  if (!entryExists(accel)) return readings;
+  try {
+    readings = readAccelerometer(accel);
+  } catch (const InputError& e) {
+    if (strict) throw;
+    printWarning(std::string(e.what()) + " (read without the accelerometer's up)");
+  }
+  std::sort(readings.begin(), readings.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return readings;
+}
+}  // namespace
+
+TumFolderSource::TumFolderSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) throw InputError(folder, "no such folder");
+  pairs_ = framePairsIn(folder, opts);
+  // The camera and the depth unit: the command line, else the folder's camera file, else a guess.
+  std::string origin;
+  const std::optional<CameraFile> file = cameraFileFor(folder, opts, origin);
+  const cv::Size image = colourImageSize(folder, pairs_);
+  camera_ = cameraOf(folder, opts, file, origin, image);
+  depth_scale_ = opts.depth_scale > 0 ? opts.depth_scale : file && file->depth_scale > 0 ? file->depth_scale : 5000.0;
+  warnOfAnotherDepthUnit(folder, pairs_, image, depth_scale_);
   const std::string gt = (fs::path(folder) / "groundtruth.txt").string();
   if (entryExists(gt)) gt_ = readGroundTruthFile(gt, opts);
-
-  // The Kinect's accelerometer reads the reaction to gravity ("up") with its x and y axes opposite to
-  // the optical frame's (checked on fr1 xyz and rpy against their ground truth).
-  const std::string accel = (fs::path(folder) / "accelerometer.txt").string();
-  // Like the ground truth it only goes along with the frames: damaged, it costs the pictures' measured
-  // "up" (they are then oriented as for a recording without one), not the run, unless --strict.
-  if (entryExists(accel)) {
-    try {
-      accel_ = readAccelerometer(accel);
-    } catch (const InputError& e) {
-      if (opts.strict) throw;
-      printWarning(std::string(e.what()) + " (read without the accelerometer's up)");
-    }
-  }
-  std::sort(accel_.begin(), accel_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  accel_ = accelerometerIn(folder, opts.strict);
 }
 
 Frame TumFolderSource::read(std::size_t i) const {
