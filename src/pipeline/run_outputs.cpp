@@ -76,6 +76,9 @@ struct RunRecorder::Impl {
   // the map's frame (empty without one).
   Trajectory writeTrajectories(const Reconstruction& rec, const RunInfo& info, json& s, StagedOutputs& out) const;
   SceneOptions sceneOptions(const Reconstruction& rec, json& s) const;
+  // scene.3Dscene, and mesh.png beside it (a picture that cannot be rendered costs the picture only).
+  void writeScene(const TriangleMesh& mesh, const Reconstruction& rec, const Trajectory& gt_in_map, json& s,
+                  StagedOutputs& out) const;
 };
 
 RunRecorder::RunRecorder(const std::string& dir, const OutputParams& params, const MeshCleanParams& mesh_params)
@@ -196,6 +199,42 @@ void warnOfEarlierOutputs(const StagedOutputs& out, const std::string& dir) {
 }
 }  // namespace
 
+void RunRecorder::Impl::writeScene(const TriangleMesh& mesh, const Reconstruction& rec, const Trajectory& gt_in_map,
+                                   json& s, StagedOutputs& out) const {
+  const SceneOptions scene_opts = sceneOptions(rec, s);
+  const CameraIntrinsics cam = have_camera ? camera : CameraIntrinsics();
+  // The picture rendered beside the scene's building and writing (each took ~0.35 s of rpy_first100's
+  // time after its last frame, one after the other) where memory allows, else
+  // deferred: rendered by get(), after the scene. The render takes its own copy of the path (reading a
+  // CPose3D's angles fills its cache) and its file name. `png` is declared after all it reads: if the
+  // scene throws, its destructor waits for a render in flight first.
+  const bool beside = !mesh.empty() && pictureBesideScene(mesh);
+  std::future<void> png;
+  if (!mesh.empty())
+    png = std::async(beside ? std::launch::async | std::launch::deferred : std::launch::deferred,
+                     [&mesh, this, &scene_opts, path = rec.trajectory(), file = out.path("mesh.png")] {
+                       renderMeshPng(file, mesh, &path, params.image_width, params.image_height,
+                                     scene_opts.up_vector);
+                     });
+  exportScene(out.path("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam,
+              scene_opts);
+  out.wrote("scene.3Dscene", "open with SceneViewer3D");
+  if (png.valid()) {
+    // A picture that cannot be rendered (no OpenGL device on a headless machine) costs the picture:
+    // the run's every output was lost with it.
+    try {
+      png.get();  // rethrows what the render threw
+      out.wrote("mesh.png", std::to_string(params.image_width) + "x" + std::to_string(params.image_height) +
+                                (beside ? ", rendered beside the scene" : ""));
+    } catch (const std::exception& e) {  // InputError, or OpenCV's encoder, or memory
+      const auto* input = dynamic_cast<const InputError*>(&e);
+      const InputError named = out.named(input ? *input : InputError(out.path("mesh.png"), oneLineMessage(e)));
+      printWarning(named.what());
+      s["mesh_png_error"] = named.what();
+    }
+  }
+}
+
 json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log, RegionPremesher* premeshed) {
   Impl& m = *impl_;
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
@@ -216,38 +255,7 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed);
     else rec.releaseMap();
 
-    const SceneOptions scene_opts = m.sceneOptions(rec, s);
-    const CameraIntrinsics cam = m.have_camera ? m.camera : CameraIntrinsics();
-    // The picture rendered beside the scene's building and writing (each took ~0.35 s of rpy_first100's
-    // time after its last frame, one after the other) where memory allows, else
-    // deferred: rendered by get(), after the scene. The render takes its own copy of the path (reading a
-    // CPose3D's angles fills its cache) and its file name. `png` is declared after all it reads: if the
-    // scene throws, its destructor waits for a render in flight first.
-    const bool beside = !mesh.empty() && pictureBesideScene(mesh);
-    std::future<void> png;
-    if (!mesh.empty())
-      png = std::async(beside ? std::launch::async | std::launch::deferred : std::launch::deferred,
-                       [&mesh, &m, &scene_opts, path = rec.trajectory(), file = out.path("mesh.png")] {
-                         renderMeshPng(file, mesh, &path, m.params.image_width, m.params.image_height,
-                                       scene_opts.up_vector);
-                       });
-    exportScene(out.path("scene.3Dscene"), mesh, rec.trajectory(), gt_in_map.empty() ? nullptr : &gt_in_map, cam,
-                scene_opts);
-    out.wrote("scene.3Dscene", "open with SceneViewer3D");
-    if (png.valid()) {
-      // A picture that cannot be rendered (no OpenGL device on a headless machine) costs the picture:
-      // the run's every output was lost with it.
-      try {
-        png.get();  // rethrows what the render threw
-        out.wrote("mesh.png", std::to_string(m.params.image_width) + "x" + std::to_string(m.params.image_height) +
-                                  (beside ? ", rendered beside the scene" : ""));
-      } catch (const std::exception& e) {  // InputError, or OpenCV's encoder, or memory
-        const auto* input = dynamic_cast<const InputError*>(&e);
-        const InputError named = out.named(input ? *input : InputError(out.path("mesh.png"), oneLineMessage(e)));
-        printWarning(named.what());
-        s["mesh_png_error"] = named.what();
-      }
-    }
+    m.writeScene(mesh, rec, gt_in_map, s, out);
 
     s["peak_memory_mib"] = peakMemoryMiB();
     s["heap_huge_pages"] = heapAsksForHugePages();  // the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
