@@ -157,19 +157,7 @@ struct LoopCloser::Impl {
     const double cpu_start = vofusion::threadCpuSeconds();
     StageTimes t;
     const std::size_t id = graph.addNode(k.tracked);
-    if (id > 0) {
-      const Keyframe& prev = keyframes.back();
-      GraphEdge e;
-      e.from = id - 1;
-      e.to = id;
-      e.T_from_to = prev.tracked.inverse() * k.tracked;
-      e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, kOdometrySigmaFloor);
-      // Across frames the tracker lost, predicted or took from a fallback the chain may hold a jump:
-      // a loop should move it there, not spread it over the whole path.
-      if (k.after_poor_tracking) e.information /= kPoorTrackingSigmaScale * kPoorTrackingSigmaScale;
-      graph.addEdge(e);
-      graph.chainNewNode(id);
-    }
+    if (id > 0) chainToPrevious(k, id);
     keyframes.add(std::move(k));
     const Keyframe& cur = keyframes.back();
     indexEligible(cur);
@@ -193,28 +181,7 @@ struct LoopCloser::Impl {
     std::map<std::string, std::size_t> rejected;
     {
       ScopedStageTimer timer(t, "loop_verification");
-      for (const PlaceCandidate& c : candidates) {
-        const Keyframe old = keyframes.load(c.keyframe);
-        if (!old.features) {  // the index takes only keyframes with features: this one's spill record was lost
-          ++rejected["keyframe lost (its spill record could not be read back)"];
-          continue;
-        }
-        const LoopCheck check = verifyLoop(old, cur, params, pyramids);
-        if (!check.accepted) {
-          ++rejected[check.reason];
-          continue;
-        }
-        GraphEdge e;
-        e.from = old.id;
-        e.to = cur.id;
-        e.T_from_to = check.T_old_new;
-        e.information = check.covariance.inverse();
-        e.loop = true;
-        loop_edge_record.resize(graph.edges().size() + 1, std::size_t(-1));
-        loop_edge_record[graph.addEdge(e)] = loops.size() + accepted.size();
-        accepted.push_back({old.frame_index, cur.frame_index, old.id, cur.id, check.matches, check.inliers, check.icp_rms,
-                            check.icp_condition, check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp, check.T_old_new});
-      }
+      for (const PlaceCandidate& c : candidates) verifyCandidate(c, cur, accepted, rejected);
     }
     loops_unsolved += accepted.size();
     std::vector<std::size_t> removed;
@@ -229,6 +196,48 @@ struct LoopCloser::Impl {
       }
     }
     publish(accepted, removed, rejected, solved, t, vofusion::threadCpuSeconds() - cpu_start);
+  }
+
+  // Node id (keyframe k) chained to the previous keyframe by their tracked poses.
+  void chainToPrevious(const Keyframe& k, std::size_t id) {
+    const Keyframe& prev = keyframes.back();
+    GraphEdge e;
+    e.from = id - 1;
+    e.to = id;
+    e.T_from_to = prev.tracked.inverse() * k.tracked;
+    e.information = odometryInformation(e.T_from_to, kOdometrySigmaRate, kOdometrySigmaFloor);
+    // Across frames the tracker lost, predicted or took from a fallback the chain may hold a jump:
+    // a loop should move it there, not spread it over the whole path.
+    if (k.after_poor_tracking) e.information /= kPoorTrackingSigmaScale * kPoorTrackingSigmaScale;
+    graph.addEdge(e);
+    graph.chainNewNode(id);
+  }
+
+  // A place candidate verified as a loop with the current keyframe: a loop edge and its record into
+  // `accepted`, else its reason counted in `rejected`.
+  void verifyCandidate(const PlaceCandidate& c, const Keyframe& cur, std::vector<LoopRecord>& accepted,
+                       std::map<std::string, std::size_t>& rejected) {
+    const Keyframe old = keyframes.load(c.keyframe);
+    if (!old.features) {  // the index takes only keyframes with features: this one's spill record was lost
+      ++rejected["keyframe lost (its spill record could not be read back)"];
+      return;
+    }
+    const LoopCheck check = verifyLoop(old, cur, params, pyramids);
+    if (!check.accepted) {
+      ++rejected[check.reason];
+      return;
+    }
+    GraphEdge e;
+    e.from = old.id;
+    e.to = cur.id;
+    e.T_from_to = check.T_old_new;
+    e.information = check.covariance.inverse();
+    e.loop = true;
+    loop_edge_record.resize(graph.edges().size() + 1, std::size_t(-1));
+    loop_edge_record[graph.addEdge(e)] = loops.size() + accepted.size();
+    accepted.push_back({old.frame_index, cur.frame_index, old.id, cur.id, check.matches, check.inliers, check.icp_rms,
+                        check.icp_condition, check.correction_m, check.correction_deg, true, old.timestamp, cur.timestamp,
+                        check.T_old_new});
   }
 
   // The graph's poses are not used before the end, only its removals of false loops, which
