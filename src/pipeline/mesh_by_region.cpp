@@ -455,6 +455,34 @@ class FaceBudget {
   std::size_t raw_faces_total_ = 0;
 };
 
+namespace {
+// Pass 1 of meshByRegion (marching cubes only): each region's raw components into `fragments` (when
+// fragments are judged) and its faces into the budget; returns the number of regions (0 if none).
+std::size_t firstPass(const RegionSource& regions, RawComponents* fragments, FaceBudget& budget,
+                      const std::function<void(int, const fusion::RegionMesh&)>& told) {
+  std::size_t region_count = 0;
+  regions([&](fusion::RegionMesh& r) {
+    if (fragments) fragments->add(r);
+    budget.add(r);
+    told(1, r);
+    region_count = r.regions;
+  });
+  return region_count;
+}
+
+// The "regions" step's figures once every region is welded: the simplification's mean distance over
+// all regions' samples, the merged mesh's size, and the time (marching cubes, repair and simplification
+// interleaved, so the simplification's seconds are the step's).
+void closeRegionsStep(RegionMeshResult& out, const RegionMerge& merge, MeshCleanStep& step, double seconds) {
+  MeshSimplification& simp = out.report.simplification;
+  if (simp.distance.samples) simp.distance.mean = merge.distance_sum / double(simp.distance.samples);
+  step.faces_after = out.mesh.faces.size();
+  step.vertices_after = out.mesh.vertices.size();
+  step.seconds = seconds;
+  simp.seconds = seconds;
+}
+}  // namespace
+
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
                               const MeshProgress& progress, const std::function<void()>& regions_done,
                               const PremeshedLookup& premeshed) {
@@ -476,13 +504,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
   FaceBudget budget(params.target_faces);
   if (fragments || budget.active()) {
-    std::size_t region_count = 0;
-    regions([&](fusion::RegionMesh& r) {
-      if (fragments) fragments->add(r);
-      budget.add(r);
-      told(1, r);
-      region_count = r.regions;
-    });
+    const std::size_t region_count = firstPass(regions, fragments.get(), budget, told);
     if (fragments) out.report.components_removed = fragments->judge();
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
     if (progress && region_count) progress(2, 0, region_count);
@@ -514,13 +536,8 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   });
   simplifier.finish();
   TriangleMesh& merged = out.mesh;
-  MeshSimplification& simp = out.report.simplification;
   if (merged.colors.size() != merged.vertices.size()) merged.colors.clear();
-  if (simp.distance.samples) simp.distance.mean = merge.distance_sum / double(simp.distance.samples);
-  step.faces_after = merged.faces.size();
-  step.vertices_after = merged.vertices.size();
-  step.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  simp.seconds = step.seconds;  // marching cubes, repair and simplification are interleaved
+  closeRegionsStep(out, merge, step, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   out.raw_vertices = raw_count.vertices();
   if (raw) {
     raw->finish();
