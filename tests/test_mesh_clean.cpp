@@ -805,8 +805,8 @@ TEST(MeshClean, SharedIniDocumentsEveryKeyWithItsDefault) {
   std::sort(want.begin(), want.end());
   std::sort(have.begin(), have.end());
   EXPECT_EQ(have, want);
-  for (const auto& k : want)
-    EXPECT_DOUBLE_EQ(shipped.read_double("mesh", k, -12345), dumped.read_double("mesh", k, -54321)) << k;
+  // As text: read as numbers, "true" and "false" were both 0 and a switch shipped wrong passed.
+  for (const auto& k : want) EXPECT_EQ(shipped.read_string("mesh", k, "?"), dumped.read_string("mesh", k, "!")) << k;
 }
 
 namespace {
