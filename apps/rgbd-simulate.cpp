@@ -21,6 +21,7 @@
 #include "vofusion/io/external_files.h"
 #include "vofusion/io/png_encode.h"
 #include "vofusion/io/rawlog.h"
+#include "vofusion/sim/default_recording.h"
 #include "vofusion/sim/synthetic_sequence.h"
 
 using namespace vofusion;
@@ -140,25 +141,6 @@ void requireColourOffsetsATumFolderPairs(const sim::SimOptions& o) {
   throw InputError("--colour-offset", why);
 }
 
-bool writeRawlog(const sim::SyntheticSequence& seq, const std::string& path, bool overwrite) {
-  RawlogWriterOptions options;
-  options.replace = overwrite;
-  RawlogWriter out(path, options);
-  Trajectory gt;
-  Progress progress("rgbd-simulate", seq.size());
-  for (std::size_t i = 0; i < seq.size(); ++i) {
-    if (stopRequested()) return false;
-    const Frame f = seq.render(i);
-    out.write(f);
-    gt.push_back({f.timestamp, *f.groundTruth});
-    progress.update(i + 1);
-  }
-  out.writeGroundTruth(gt);
-  if (stopRequested()) return false;
-  out.commit();
-  progress.finish("-> " + path);
-  return true;
-}
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--scene", "--trajectory", "--frames", "--seed", "--fps", "--pace", "--size", "--exposure", "--depth-readout",
                                      "--colour-offset", "--blackout"},
@@ -202,7 +184,7 @@ int body(int argc, char** argv) {
   if (!rawlog && o.trajectory == "shake") requireColourOffsetsATumFolderPairs(o);
   const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
   installStopSignals(kStoppingWithNothingWritten);
-  const bool done = rawlog ? writeRawlog(seq, out, cl.flag("--overwrite")) : writeTum(seq, out);
+  const bool done = rawlog ? renderRecording(seq, out, cl.flag("--overwrite")) : writeTum(seq, out);
   // A part of a sequence is no sequence: nothing is written (the writers remove their temporaries).
   return done ? 0 : stoppedWithNothingWritten("rgbd-simulate", "");
 }

@@ -180,6 +180,7 @@ RunPlan planRun(const CommandLine& cl) {
   plan.src_opts.intrinsics = cl.value("--intrinsics");
   if (cl.value("--depth-scale")) plan.src_opts.depth_scale = cl.number("--depth-scale", 5000.0, 1.0, 1e6);
   plan.input = cl.positional().empty() ? defaultRecording() : cl.positional()[0];
+  if (stopRequested()) return plan;  // while rendering the default recording: body() says so
   plan.resume = cl.value("--resume");
   plan.strict = plan.src_opts.strict = cl.flag("--strict");
   plan.save_volume = cl.value("--save-volume");

@@ -560,7 +560,7 @@ TEST(Sim, AStoppedRenderingLeavesNoRecording) {
   const pid_t pid = fork();  // the stop flag is the process's
   if (pid == 0) {
     requestStop();
-    const bool rendered = renderRecording(path, test::quickSim("room", 5));
+    const bool rendered = renderRecording(sim::SyntheticSequence(test::quickSim("room", 5)), path);
     _exit(rendered ? 1 : 0);
   }
   int status = 0;
@@ -571,6 +571,6 @@ TEST(Sim, AStoppedRenderingLeavesNoRecording) {
   EXPECT_FALSE(std::filesystem::exists(RawlogWriter::imagesDirFor(path)));
   EXPECT_FALSE(std::filesystem::exists(RawlogWriter::groundTruthPathFor(path)));
   // Not stopped: the whole recording.
-  ASSERT_TRUE(renderRecording(path, test::quickSim("room", 5)));
+  ASSERT_TRUE(renderRecording(sim::SyntheticSequence(test::quickSim("room", 5)), path));
   EXPECT_EQ(openFrameSource(path)->size(), 5u);
 }

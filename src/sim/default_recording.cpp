@@ -6,7 +6,6 @@
 #include "vofusion/core/progress.h"
 #include "vofusion/core/stop_signals.h"
 #include "vofusion/io/rawlog.h"
-#include "vofusion/sim/synthetic_source.h"
 
 namespace fs = std::filesystem;
 
@@ -17,25 +16,28 @@ std::string defaultRecording() {
   if (fs::exists(path)) return path.string();
   fs::create_directories(path.parent_path());
   std::fprintf(stderr, "vofusion: rendering the default recording %s (first run only)\n", path.c_str());
-  return renderRecording(path.string(), sim::SimOptions{}) ? path.string() : std::string();  // room, 300 frames
+  const sim::SyntheticSequence room{sim::SimOptions{}};  // room, 300 frames, Kinect-like noise
+  return renderRecording(room, path.string()) ? path.string() : std::string();
 }
 
-bool renderRecording(const std::string& path, const sim::SimOptions& options) {
-  sim::SyntheticSource source(options);
-  RawlogWriter writer(path);
-  Trajectory gt;
-  Progress progress("rgbd-simulate " + options.scene, source.size());
-  Frame f;
+bool renderRecording(const sim::SyntheticSequence& seq, const std::string& path, bool replace) {
+  RawlogWriterOptions options;
+  options.replace = replace;
   // Stopped (Ctrl-C): the writer's staged files go with it, and the next run renders it again.
-  while (!stopRequested() && source.next(f)) {
-    writer.write(f);
+  RawlogWriter out(path, options);
+  Trajectory gt;
+  Progress progress("rgbd-simulate " + seq.options().scene, seq.size());
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    if (stopRequested()) return false;
+    const Frame f = seq.render(i);
+    out.write(f);
     gt.push_back({f.timestamp, *f.groundTruth});
-    progress.update(f.index + 1);
+    progress.update(i + 1);
   }
+  out.writeGroundTruth(gt);
   if (stopRequested()) return false;
-  writer.writeGroundTruth(gt);
-  writer.commit();
-  progress.finish();
+  out.commit();
+  progress.finish("-> " + path);
   return true;
 }
 

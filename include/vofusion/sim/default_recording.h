@@ -11,8 +11,9 @@ namespace vofusion {
 // Path of the default rawlog, rendering it first (with a progress line) if it does not exist yet;
 // empty when a stop was asked for (stopRequested()) while rendering: nothing is left of it.
 std::string defaultRecording();
-// The synthetic recording `options` rendered into the rawlog at `path` (images and ground truth beside
-// it), with a progress line; false, and nothing left, when a stop was asked for before its end.
-bool renderRecording(const std::string& path, const sim::SimOptions& options);
+// The synthetic recording `seq` rendered into the rawlog at `path` (images and ground truth beside it;
+// an existing rawlog replaced only with `replace`), with a progress line; false, and nothing left, when
+// a stop was asked for (stopRequested()) before its end.
+bool renderRecording(const sim::SyntheticSequence& seq, const std::string& path, bool replace = false);
 
 }  // namespace vofusion
