@@ -23,13 +23,18 @@ void refuseDepthScale(const SourceOptions& opts, const std::string& path, const 
 
 // A folder that cannot be searched (no execute permission) or listed (no read) says so: it was "not a
 // TUM RGB-D sequence nor a 7-Scenes one", since rgb.txt then reads as missing and no frame is seen.
-// Searching comes first: a TUM folder is read by its files' names and needs no listing.
-void requireSearchableFolder(const std::string& path, bool listed) {
+void refuseUnreadableFolder(const std::string& path, const std::error_code& ec) {
+  if (ec && ec != std::errc::no_such_file_or_directory) throw InputError(path, "folder cannot be read (" + ec.message() + ")");
+}
+void requireSearchable(const std::string& path) {
   std::error_code ec;
-  if (listed) fs::directory_iterator(path, ec);
-  else static_cast<void>(fs::symlink_status(fs::path(path) / "rgb.txt", ec));
-  if (ec && ec != std::errc::no_such_file_or_directory)
-    throw InputError(path, "folder cannot be read (" + ec.message() + ")");
+  static_cast<void>(fs::symlink_status(fs::path(path) / "rgb.txt", ec));
+  refuseUnreadableFolder(path, ec);
+}
+void requireListable(const std::string& path) {
+  std::error_code ec;
+  fs::directory_iterator(path, ec);
+  refuseUnreadableFolder(path, ec);
 }
 }  // namespace
 
@@ -40,9 +45,9 @@ std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const Sour
     return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));
   }
   if (fs::is_directory(path, ec)) {
-    requireSearchableFolder(path, false);
+    requireSearchable(path);  // first: a TUM folder is read by its files' names and needs no listing
     if (entryExists((fs::path(path) / "rgb.txt").string())) return std::make_unique<TumFolderSource>(path, opts);
-    requireSearchableFolder(path, true);
+    requireListable(path);
     if (SevenScenesSource::looksLike(path)) {
       refuseDepthScale(opts, path, "a 7-Scenes folder (millimetres)");
       return std::make_unique<SevenScenesSource>(path, opts);
