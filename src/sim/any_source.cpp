@@ -3,7 +3,6 @@
 #include <filesystem>
 
 #include "vofusion/core/errors.h"
-#include "vofusion/core/text_file.h"
 #include "vofusion/io/rawlog.h"
 #include "vofusion/io/seven_scenes_source.h"
 #include "vofusion/io/tum_source.h"
@@ -26,10 +25,13 @@ void refuseDepthScale(const SourceOptions& opts, const std::string& path, const 
 void refuseUnreadableFolder(const std::string& path, const std::error_code& ec) {
   if (ec && ec != std::errc::no_such_file_or_directory) throw InputError(path, "folder cannot be read (" + ec.message() + ")");
 }
-void requireSearchable(const std::string& path) {
+// Whether the folder lists its colour images in rgb.txt (a TUM folder, read by its files' names: it
+// needs no listing), refused when the folder cannot be searched.
+bool holdsRgbList(const std::string& path) {
   std::error_code ec;
-  static_cast<void>(fs::symlink_status(fs::path(path) / "rgb.txt", ec));
+  const fs::file_status st = fs::symlink_status(fs::path(path) / "rgb.txt", ec);
   refuseUnreadableFolder(path, ec);
+  return fs::exists(st);
 }
 void requireListable(const std::string& path) {
   std::error_code ec;
@@ -45,8 +47,7 @@ std::unique_ptr<FrameSource> openFrameSource(const std::string& path, const Sour
     return std::make_unique<sim::SyntheticSource>(sim::SyntheticSource::optionsFromSpec(path, opts));
   }
   if (fs::is_directory(path, ec)) {
-    requireSearchable(path);  // first: a TUM folder is read by its files' names and needs no listing
-    if (entryExists((fs::path(path) / "rgb.txt").string())) return std::make_unique<TumFolderSource>(path, opts);
+    if (holdsRgbList(path)) return std::make_unique<TumFolderSource>(path, opts);
     requireListable(path);
     if (SevenScenesSource::looksLike(path)) {
       refuseDepthScale(opts, path, "a 7-Scenes folder (millimetres)");
