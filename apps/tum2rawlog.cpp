@@ -1,5 +1,5 @@
 // tum2rawlog <tum_dir> <out.rawlog> [--intrinsics fr1|fr2|fr3|ros|fx,fy,cx,cy] [--max-frames N]
-//            [--format obs|sf] [--embed-images] [--range-units 2e-4|1e-3] [--strict] [--overwrite]
+//            [--depth-scale S] [--format obs|sf] [--embed-images] [--range-units U] [--strict] [--overwrite]
 // One CObservation3DRangeScan per associated colour/depth pair; images in "<out>_Images"; ground truth
 // as CObservationRobotPose "GROUND_TRUTH" per frame plus "<out>.groundtruth.txt" (the full TUM file).
 #include <iostream>

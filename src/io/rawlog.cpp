@@ -651,6 +651,23 @@ struct RawlogWriter::Impl {
   void syncIfDue() {
     if (records) records->syncIfDue();
   }
+  // The staged rawlog in place, with its images folder when it has one: the earlier folder is removed
+  // only once this rawlog is in place (the writer's destructor), and put back if the rawlog cannot be.
+  void commitRawlogWithImages(bool with_images) {
+    if (with_images) images->commit();
+    try {
+      rawlog->commit();
+    } catch (const InputError&) {
+      if (with_images) {
+        try {
+          images->revert();
+        } catch (const InputError& e) {  // the rawlog's own error is the one to report
+          printWarning(e.what());
+        }
+      }
+      throw;
+    }
+  }
 };
 
 RawlogWriter::RawlogWriter(const std::string& path, const RawlogWriterOptions& opts) : path_(path), opts_(opts) {
@@ -832,21 +849,7 @@ void RawlogWriter::commit() {
   if (gt) gt->prepare();
   impl_->rawlog->prepare();
   if (opts_.external_images) impl_->images->prepare();
-  // The images folder and the rawlog change together: the earlier folder is removed only once this
-  // rawlog is in place (the writer's destructor), and put back if the rawlog cannot be.
-  if (opts_.external_images) impl_->images->commit();
-  try {
-    impl_->rawlog->commit();
-  } catch (const InputError&) {
-    if (opts_.external_images) {
-      try {
-        impl_->images->revert();
-      } catch (const InputError& e) {  // the rawlog's own error is the one to report
-        printWarning(e.what());
-      }
-    }
-    throw;
-  }
+  impl_->commitRawlogWithImages(opts_.external_images);  // the images folder and the rawlog change together
   if (gt) {
     gt->commit();
   } else {

@@ -575,6 +575,30 @@ OdometryResult failed(OdometryResult& r, const std::string& why) {
   r.failure = why;
   return r;
 }
+
+// r with the motion found, as an MRPT pose, and the covariance of the fit that gave it
+// (keyframe-to-current when a keyframe was kept: an upper bound on the frame-to-frame uncertainty).
+OdometryResult succeeded(OdometryResult& r, const Eigen::Isometry3d& T_last_cur, const Eigen::Matrix<double, 6, 6>& covariance) {
+  mrpt::math::CMatrixDouble44 Mm;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) Mm(i, j) = T_last_cur.matrix()(i, j);
+  r.motion = mrpt::poses::CPose3D(Mm);
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) r.covariance(i, j) = covariance(i, j);
+  r.failure.clear();
+  r.success = true;
+  return r;
+}
+
+// Metric depth, and colour of its size: keypoints found in the colour image are looked up in the
+// depth's maps, pixel for pixel.
+void requireRegisteredDepth(const Frame& frame) {
+  requireMetricDepth(frame.depth, "RgbdOdometry");
+  if (frame.rgb.size() != frame.depth.size())
+    throw std::invalid_argument("RgbdOdometry: colour " + std::to_string(frame.rgb.cols) + "x" +
+                                std::to_string(frame.rgb.rows) + " and depth " + std::to_string(frame.depth.cols) +
+                                "x" + std::to_string(frame.depth.rows) + " differ in size");
+}
 }  // namespace
 
 FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, const std::vector<OlderFrame>& older,
@@ -685,12 +709,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   const OdometryParams& P = impl_->params;
   Impl& m = *impl_;
   if (!frame.valid()) return failed(r, "empty frame");
-  requireMetricDepth(frame.depth, "RgbdOdometry");
-  // Keypoints found in the colour image are looked up in the depth's maps, pixel for pixel.
-  if (frame.rgb.size() != frame.depth.size())
-    throw std::invalid_argument("RgbdOdometry: colour " + std::to_string(frame.rgb.cols) + "x" +
-                                std::to_string(frame.rgb.rows) + " and depth " + std::to_string(frame.depth.cols) +
-                                "x" + std::to_string(frame.depth.rows) + " differ in size");
+  requireRegisteredDepth(frame);
   // Frame to frame, the frames before the previous one join the fit (references > 1).
   std::vector<Impl::OlderFrame> older;
   if (P.keyframe_min_inliers <= 0)
@@ -727,17 +746,7 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   for (auto& p : r.inlier_reference) p = mo.T_last_fitref * p;
   m.advance(std::move(cur), mo);
 
-  mrpt::math::CMatrixDouble44 Mm;
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) Mm(i, j) = mo.T_last_cur.matrix()(i, j);
-  r.motion = mrpt::poses::CPose3D(Mm);
-  // The covariance is the one of the fit that gave the motion (keyframe-to-current when a keyframe
-  // was kept: an upper bound on the frame-to-frame uncertainty).
-  for (int i = 0; i < 6; ++i)
-    for (int j = 0; j < 6; ++j) r.covariance(i, j) = mo.fit.covariance(i, j);
-  r.failure.clear();
-  r.success = true;
-  return r;
+  return succeeded(r, mo.T_last_cur, mo.fit.covariance);
 }
 
 

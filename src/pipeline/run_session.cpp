@@ -285,6 +285,24 @@ std::string RunSession::checkpointOrigin(const std::string& input, TrackingMode 
 
 // Loops moved the poses: the map, fused at the tracked ones, is fused again at the corrected ones,
 // reading the recording a second time rather than keeping every frame in memory.
+namespace {
+
+// The recording read again for the re-fusion; null, said and noted in info, when it cannot be opened
+// (moved, unmounted since): then the map fused at the tracked poses is meshed, and the trajectories
+// are the loop-closed ones all the same.
+std::unique_ptr<FrameSource> openAgain(const RunSession::Reopen& reopen, RunInfo& info) {
+  try {
+    return reopen();
+  } catch (const std::exception& e) {
+    const std::string why = oneLineMessage(e);
+    printWarning(why + "; the map is not fused again at the loop-closed poses (its mesh is the tracked poses')");
+    info.extra["loop_closure_reintegration"] = {{"error", why}};
+    return nullptr;
+  }
+}
+
+}  // namespace
+
 void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
   if (!rec_.mapNeedsReintegration()) return;
   // No recording to read again: the mesh keeps the tracked poses while the trajectories are the
@@ -298,17 +316,8 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
     info.extra["loop_closure_reintegration"] = {{"skipped", *blocked}};
     return;
   }
-  // A recording that cannot be opened again (moved, unmounted since) costs the re-fusion: the map fused
-  // at the tracked poses is meshed, the trajectories are the loop-closed ones all the same.
-  std::unique_ptr<FrameSource> again;
-  try {
-    again = reopen();
-  } catch (const std::exception& e) {
-    const std::string why = oneLineMessage(e);
-    printWarning(why + "; the map is not fused again at the loop-closed poses (its mesh is the tracked poses')");
-    info.extra["loop_closure_reintegration"] = {{"error", why}};
-    return;
-  }
+  const std::unique_ptr<FrameSource> again = openAgain(reopen, info);
+  if (!again) return;
   if (premesher_) premesher_->discard();  // made from the map fused at the tracked poses: none is expected to match
   Progress progress(info.app + " [re-fusing at the loop-closed poses]", rec_.framesProcessed());
   std::size_t read = 0;

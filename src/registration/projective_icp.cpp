@@ -311,6 +311,21 @@ Accum accumulateTerms(const IcpLevel& L, const Eigen::Isometry3d& pose, Photomet
   return total;
 }
 
+// ICP alone's step, in the scaled coordinates of es: the Gauss-Newton solution over the directions
+// whose eigenvalue is at least degenerate_ratio of the largest; the others (a plane's slide) stay 0.
+Vec6 stepOverWellPosed(const Eigen::SelfAdjointEigenSolver<Mat6>& es, double emax, const Vec6& b_scaled,
+                       double degenerate_ratio, int& degenerate) {
+  Vec6 xs = Vec6::Zero();
+  degenerate = 0;
+  for (int i = 0; i < 6; ++i) {
+    const double e = es.eigenvalues()[i];
+    // Floored as the joint step's is: icp_degenerate_ratio 0 (in range) divided by a plane's zero eigenvalues.
+    if (e >= std::max(degenerate_ratio, 1e-9) * emax) xs += es.eigenvectors().col(i) * (es.eigenvectors().col(i).dot(b_scaled) / e);
+    else ++degenerate;
+  }
+  return xs;
+}
+
 // One Gauss-Newton iteration at a level; false when the level stops (converged or unsolvable).
 bool icpIteration(const IcpLevel& L, IcpResult& res) {
   PhotometricSums ps;
@@ -347,12 +362,7 @@ bool icpIteration(const IcpLevel& L, IcpResult& res) {
   Vec6 xs = Vec6::Zero();
   if (!other_terms) {
     int degenerate = 0;
-    for (int i = 0; i < 6; ++i) {
-      const double e = es.eigenvalues()[i];
-      // Floored as the joint step's is: icp_degenerate_ratio 0 (in range) divided by a plane's zero eigenvalues.
-      if (e >= std::max(L.params.degenerate_ratio, 1e-9) * emax) xs += es.eigenvectors().col(i) * (es.eigenvectors().col(i).dot(b_icp) / e);
-      else ++degenerate;
-    }
+    xs = stepOverWellPosed(es, emax, b_icp, L.params.degenerate_ratio, degenerate);
     if (L.level == 0) res.degenerate_dims = degenerate;
   } else {
     if (!L.weak->decided) decideWeakDirections(es, emax, L.params.degenerate_ratio, *L.weak);

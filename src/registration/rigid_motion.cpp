@@ -237,32 +237,26 @@ double rmsAtOneMetre(const Eigen::Isometry3d& T, const Points3& src, const Point
   return std::sqrt(sum / in.size());
 }
 
-RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& o, bool with_covariance) {
-  RigidFit fit;
-  const int n = int(src.size());
-  if (n < 3) {
-    fit.failure = "too few correspondences";
-    return fit;
-  }
-  auto threshold2 = [&](int i) {
-    const double z = std::max(1.0, 0.5 * (src[i].z() + dst[i].z()));
-    const double t = o.inlier_threshold * z * z;
-    return t * t;
-  };
-  std::vector<double> thr2(n);
-  for (int i = 0; i < n; ++i) thr2[i] = threshold2(i);
-  auto inliersOf = [&](const Eigen::Isometry3d& T, std::vector<int>& in) {
-    in.clear();
-    for (int i = 0; i < n; ++i)
-      if (squaredError(T, src[i], dst[i]) <= thr2[i]) in.push_back(i);
-  };
+namespace {
 
+// The correspondences whose squared error under T is within their own threshold thr2[i].
+void inliersUnder(const Eigen::Isometry3d& T, const Points3& src, const Points3& dst, const std::vector<double>& thr2,
+                  std::vector<int>& in) {
+  in.clear();
+  for (int i = 0; i < int(src.size()); ++i)
+    if (squaredError(T, src[i], dst[i]) <= thr2[i]) in.push_back(i);
+}
+
+// RANSAC over 3-point Umeyama fits: the largest inlier set any hypothesis had (empty when none drew).
+std::vector<int> ransacInliers(const Points3& src, const Points3& dst, const std::vector<double>& thr2,
+                               const RobustFitOptions& o) {
+  const int n = int(src.size());
   std::mt19937 rng(o.seed);
   std::vector<int> sample, in, best_in;
   int needed = o.iterations;
   for (int h = 0; h < std::min(needed, o.iterations); ++h) {
     if (!drawSample(src.size(), 3, rng, src, sample)) continue;
-    inliersOf(umeyamaRigid(src, dst, sample), in);
+    inliersUnder(umeyamaRigid(src, dst, sample), src, dst, thr2, in);
     if (in.size() > best_in.size()) {
       best_in = in;
       // Adaptive stop: enough draws for 99.9 % probability of one all-inlier sample.
@@ -273,6 +267,27 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
       else if (p_good > 0) needed = int(std::min<double>(o.iterations, std::ceil(std::log(1e-3) / std::log1p(-p_good)) + 1));
     }
   }
+  return best_in;
+}
+
+}  // namespace
+
+RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOptions& o, bool with_covariance) {
+  RigidFit fit;
+  const int n = int(src.size());
+  if (n < 3) {
+    fit.failure = "too few correspondences";
+    return fit;
+  }
+  // Each pair's threshold grows with its depth as the sensor's noise does (z^2).
+  std::vector<double> thr2(n);
+  for (int i = 0; i < n; ++i) {
+    const double z = std::max(1.0, 0.5 * (src[i].z() + dst[i].z()));
+    const double t = o.inlier_threshold * z * z;
+    thr2[i] = t * t;
+  }
+  auto inliersOf = [&](const Eigen::Isometry3d& T, std::vector<int>& in) { inliersUnder(T, src, dst, thr2, in); };
+  std::vector<int> in, best_in = ransacInliers(src, dst, thr2, o);
   if (best_in.size() < 3) {
     fit.failure = "degenerate geometry";
     return fit;

@@ -48,6 +48,8 @@ struct Tracker::Impl {
   // fallback the mode allows.
   Eigen::Isometry3d acceptOrFallBack(const IcpResult& icp, const IcpStart& s, const std::vector<DepthLevel>& levels,
                                      const IcpParams& ip, FusionResult& res);
+  // Why a first frame with this depth (the tracking level's) cannot start the map; None when it can.
+  Rejection cannotStartMap(const cv::Mat& depth, const ModelSource& map) const;
   void count(const FusionResult& res, bool had_model);
   void keepForFusion(const Frame& frame, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
                      const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity, const FusionResult& res);
@@ -236,6 +238,17 @@ bool hasReadingIn(const cv::Mat& depth, const std::pair<float, float>& range) {
 }
 }  // namespace
 
+// The first frame starts the map only with readings in [min_depth, max_depth]: one without (a camera
+// face down on a desk) would start an empty model that no later frame can track against. In mode
+// kinfu, which has no odometry to go on from until the map holds a surface, they must be fused too (a
+// wall between integrate_max_depth, 3.5 m, and max_depth, 4 m, started an empty map, and every frame
+// after it was lost); the other modes' fallbacks build the map from such a start.
+Rejection Tracker::Impl::cannotStartMap(const cv::Mat& depth, const ModelSource& map) const {
+  if (cv::countNonZero(depth) == 0) return Rejection::NoReadingInRange;
+  if (mode == TrackingMode::KinFu && !hasReadingIn(depth, map.fusedDepthRange())) return Rejection::NoReadingFused;
+  return Rejection::None;
+}
+
 FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const FrameGeometry* geometry, ModelSource& map) {
   Impl& s = *impl_;
   s.pending.reset();
@@ -262,14 +275,8 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   const std::vector<DepthLevel> levels = s.trackingLevels(frame, geometry, cam, track_cam);
   res.times.add("preprocess", secondsSince(t0));
   const bool had_model = map.hasModel();
-  // The first frame starts the map only with readings in [min_depth, max_depth]: one without (a camera
-  // face down on a desk) would start an empty model that no later frame can track against. In mode
-  // kinfu, which has no odometry to go on from until the map holds a surface, they must be fused too (a
-  // wall between integrate_max_depth, 3.5 m, and max_depth, 4 m, started an empty map, and every frame
-  // after it was lost); the other modes' fallbacks build the map from such a start.
-  if (!had_model && cv::countNonZero(levels[0].depth) == 0) return lost(Rejection::NoReadingInRange);
-  if (!had_model && s.mode == TrackingMode::KinFu && !hasReadingIn(levels[0].depth, map.fusedDepthRange()))
-    return lost(Rejection::NoReadingFused);
+  if (!had_model)
+    if (const Rejection why = s.cannotStartMap(levels[0].depth, map); why != Rejection::None) return lost(why);
   map.predictIfStale(s.history.pose(), track_cam, res.times);  // a resumed map: a full ray cast first
   // Mode joint's photometric term: this frame's intensity, tracked against now and a reference later.
   std::vector<IntensityLevel> intensity;
