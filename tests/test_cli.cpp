@@ -318,6 +318,44 @@ TEST(StopSignals, AClosedPipeOnStderrDoesNotEndTheRun) {
   EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 
+// What the first signal says is the step's while a ScopedStoppingMessage lives, and the app's again
+// after it: vofusion said "what was done is written" while it rendered the default recording, which
+// a stop leaves unwritten.
+TEST(StopSignals, AStepSaysWhatItsStopLeaves) {
+  int fds[2];
+  ASSERT_EQ(pipe(fds), 0);
+  const auto childSaying = [&](bool during_step) {
+    const pid_t pid = fork();
+    if (pid == 0) {
+      close(fds[0]);
+      dup2(fds[1], STDERR_FILENO);
+      installStopSignals();
+      if (during_step) {
+        const ScopedStoppingMessage rendering(kStoppingWithNothingWritten);
+        std::raise(SIGINT);
+      } else {
+        { const ScopedStoppingMessage rendering(kStoppingWithNothingWritten); }
+        std::raise(SIGINT);
+      }
+      _exit(0);
+    }
+    int status = 0;
+    waitpid(pid, &status, 0);
+    return status;
+  };
+  const auto said = [&] {
+    char buffer[256] = {};
+    const ssize_t n = read(fds[0], buffer, sizeof buffer - 1);
+    return std::string(buffer, n > 0 ? std::size_t(n) : 0);
+  };
+  ASSERT_TRUE(WIFEXITED(childSaying(true)));
+  EXPECT_EQ(said(), kStoppingWithNothingWritten);
+  ASSERT_TRUE(WIFEXITED(childSaying(false)));
+  EXPECT_NE(said().find("what was done is written"), std::string::npos);
+  close(fds[0]);
+  close(fds[1]);
+}
+
 // Progress into a log (not a terminal) prints at most a line every 2 s, and the last item at once,
 // once: a caller ticking while nothing moves (a live session waiting for its sensor, total unknown)
 // printed a line per tick.

@@ -73,6 +73,9 @@ void installStopSignals(const char* stopping) {
   std::signal(SIGPIPE, SIG_IGN);
 }
 
+ScopedStoppingMessage::ScopedStoppingMessage(const char* stopping) : earlier_(g_stopping.exchange(stopping)) {}
+ScopedStoppingMessage::~ScopedStoppingMessage() { g_stopping = earlier_; }
+
 bool stopRequested() { return g_stop.load(); }
 const std::atomic<bool>& stopFlag() { return g_stop; }
 void requestStop() { g_stop = true; }

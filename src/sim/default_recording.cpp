@@ -21,6 +21,8 @@ std::string defaultRecording() {
 }
 
 bool renderRecording(const sim::SyntheticSequence& seq, const std::string& path, bool replace) {
+  // A stop leaves no recording, whatever the app keeps of its own work ("what was done is written").
+  const ScopedStoppingMessage stopping(kStoppingWithNothingWritten);
   RawlogWriterOptions options;
   options.replace = replace;
   // Stopped (Ctrl-C): the writer's staged files go with it, and the next run renders it again.

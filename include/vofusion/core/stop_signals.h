@@ -29,6 +29,19 @@ inline constexpr double kSameRequestSeconds = 1.0;
 void installStopSignals(const char* stopping = nullptr);
 // The `stopping` of apps whose part-done work is no result (a conversion, a rendering).
 inline constexpr char kStoppingWithNothingWritten[] = "\nstopping; nothing is written (Ctrl-C again to kill)\n";
+// What the first signal says while this lives (a string that outlives it); the earlier words after
+// it. For a step whose part-done work is no result inside an app whose is (vofusion's first run
+// rendering the default recording). Main's thread only, one at a time.
+class ScopedStoppingMessage {
+ public:
+  explicit ScopedStoppingMessage(const char* stopping);
+  ~ScopedStoppingMessage();
+  ScopedStoppingMessage(const ScopedStoppingMessage&) = delete;
+  ScopedStoppingMessage& operator=(const ScopedStoppingMessage&) = delete;
+
+ private:
+  const char* earlier_;
+};
 // True once a stop was asked for, by a signal or by requestStop().
 bool stopRequested();
 // The flag itself, for loops on other threads that poll it (live/live_loop.h's LiveHooks::stop).
