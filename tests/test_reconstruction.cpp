@@ -354,6 +354,8 @@ TEST(Reconstruction, ReleasingTheMapKeepsTrajectoryAndStatistics) {
   EXPECT_EQ(rec.trajectory().back().pose.asVectorVal(), poses.back().pose.asVectorVal());
   EXPECT_THROW(rec.extractMesh(), std::logic_error);
   EXPECT_THROW(rec.saveVolume(testing::TempDir() + "/released.vfvol"), std::logic_error);
+  // Re-fusing needs the tracked map's statistics: it dereferenced the released map.
+  EXPECT_THROW(rec.reintegrate([](Frame&) { return false; }), std::logic_error);
   rec.releaseMap();  // twice is harmless
 }
 

@@ -184,8 +184,12 @@ TEST(SevenScenes, AnUnreadableFolderSaysWhy) {
   for (const fs::perms p : {fs::perms::owner_exec | fs::perms::others_exec, fs::perms::owner_read | fs::perms::others_read}) {
     fs::permissions(dir, p);
     const std::string said = test::errorWithoutPrivileges([&] { openFrameSource(dir); });
+    // The source on its own, as a library user makes it: a folder it cannot list said a bare
+    // filesystem_error ("directory iterator cannot open directory").
+    const std::string unlisted = test::errorWithoutPrivileges([&] { SevenScenesSource(dir, {}); });
     fs::permissions(dir, fs::perms::owner_all);
     EXPECT_EQ(said, dir + ": folder cannot be read (Permission denied)");
+    if ((p & fs::perms::others_read) == fs::perms::none) EXPECT_EQ(unlisted, dir + ": folder cannot be read (Permission denied)");
   }
 }
 

@@ -91,15 +91,19 @@ bool parseSevenScenesPose(const std::string& text, const std::string& origin, mr
 SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
   std::error_code ec;
   if (!fs::is_directory(folder, ec)) throw InputError(folder, "no such folder");
-  for (const auto& e : fs::directory_iterator(folder)) {
-    const std::string n = e.path().filename().string();
-    std::smatch m;
-    if (!std::regex_match(n, m, kDepthName)) continue;
-    Entry en;
-    en.stem = (fs::path(folder) / n.substr(0, n.find('.'))).string();
-    en.number = std::stoi(m[1].str());
-    en.colour = colourFor(en.stem);  // empty: missing, that frame's problem when it is read
-    frames_.push_back(std::move(en));
+  try {
+    for (const auto& e : fs::directory_iterator(folder)) {
+      const std::string n = e.path().filename().string();
+      std::smatch m;
+      if (!std::regex_match(n, m, kDepthName)) continue;
+      Entry en;
+      en.stem = (fs::path(folder) / n.substr(0, n.find('.'))).string();
+      en.number = std::stoi(m[1].str());
+      en.colour = colourFor(en.stem);  // empty: missing, that frame's problem when it is read
+      frames_.push_back(std::move(en));
+    }
+  } catch (const fs::filesystem_error& e) {  // a folder that can be stat'ed but not listed
+    throw InputError(folder, "folder cannot be read (" + e.code().message() + ")");
   }
   if (frames_.empty()) throw InputError(folder, "folder holds no 7-Scenes frames (frame-XXXXXX.depth.png)");
   std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });

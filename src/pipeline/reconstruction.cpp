@@ -337,7 +337,7 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   // The map follows the loops, not the smoothing: each frame fused again where it was fused, corrected.
   const Trajectory& poses = m.loops ? m.optimised_as_tracked : m.trajectory;
   // The tracking run's statistics stay (guesses, shifts); the map and its memory are the new volume's.
-  const KinFuStats tracking = m.kinfu->stats();
+  const KinFuStats tracking = m.map().stats();  // a released map throws, as its contract says
   // The tracking run's map goes before the new one is made: two volumes with their world models at
   // once were the run's peak (loop scene: 820 MiB while re-fusing, 369 MiB while tracking).
   // If reading fails midway, the partly re-fused map is the one left (never none).
