@@ -53,6 +53,20 @@ TEST(CameraFiles, IntrinsicsOfALargerCameraParseAndAreCheckedAgainstItsSize) {
   EXPECT_THROW(CameraIntrinsics::parse("915,915,-3,360.1"), InputError);  // negative: outside any image
 }
 
+// A focal length under a pixel became 0 in the float maths (1e-50: vofusion's ray cast never ended);
+// one of 1e300 tracked nothing (every pose the identity, exit 0). Both are refused, naming the file.
+TEST(CameraFiles, ImplausibleFocalLengthsAreRefused) {
+  const std::string dir = oneFrameFolder(test::tempDir("cam_focal") + "/seq", 160, 120, 1500);
+  for (const char* focal : {"1e-50", "0.5", "1e300", "16001"}) {
+    SCOPED_TRACE(focal);
+    std::ofstream(dir + "/intrinsics.txt") << focal << " " << focal << " 79.5 59.5\n";
+    EXPECT_NE(errorOf(dir).find("intrinsics.txt: inconsistent intrinsics: focal length must be between 1 and 16000 pixels"),
+              std::string::npos) << errorOf(dir);
+  }
+  std::ofstream(dir + "/intrinsics.txt") << "16000 16000 79.5 59.5\n";  // a 0.6 degree field of view: the limit
+  EXPECT_EQ(errorOf(dir), "");
+}
+
 TEST(CameraFiles, IntrinsicsTxtWithSizeAndDepthScale) {
   const std::string dir = oneFrameFolder(test::tempDir("cam_txt") + "/seq", 320, 240, 1500);
   std::ofstream(dir + "/intrinsics.txt") << "# from a RealSense\n300 301 160.5 119.5 0.1 -0.2 0 0 0.05\nsize 320 240\n"
@@ -105,6 +119,16 @@ TEST(CameraFiles, CameraYamlAsOpenCvWritesIt) {
   testing::internal::CaptureStderr();
   EXPECT_EQ(errorOf(dir, given), "");
   EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+}
+
+// A camera.yaml without distortion_coefficients (an undistorted camera's) is a camera without
+// distortion: it stopped every app with SIGFPE.
+TEST(CameraFiles, CameraYamlWithoutDistortionHasNone) {
+  const std::string dir = oneFrameFolder(test::tempDir("cam_nodist") + "/seq", 320, 240, 1200);
+  std::ofstream(dir + "/camera.yaml") << "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [310, 0, 158, 0, 309, 121, 0, 0, 1]\n";
+  TumFolderSource src(dir, {});
+  EXPECT_DOUBLE_EQ(src.camera().fx, 310);
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(src.camera().dist[i], 0.0);
 }
 
 // ROS's camera_info YAML (camera_calibration writes it: no %YAML line, matrices as rows, cols, data) is

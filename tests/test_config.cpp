@@ -146,6 +146,11 @@ TEST(Config, ALineTheReaderCannotReadIsAnErrorNamingFileAndLine) {
   EXPECT_EQ(error(std::string("\x7f" "ELF\x02\x01\x00\x00 = x", 12)),
             at + "line 1: expected key = value, a [section] or a comment, got '?ELF???? = x'");
   EXPECT_EQ(error("[odometry]\nkeypoints = ${NO_SUCH_NAME}\n"), at + "Line 2: Unknown variable `${NO_SUCH_NAME}`");
+  // An expression MRPT cannot parse: its exception's first line is only a banner ("==== MRPT exception ====").
+  const std::string bad_eval = error("[kinfu]\nvoxel_size = $eval{2*}\n");
+  EXPECT_EQ(bad_eval.find(at), 0u) << bad_eval;
+  EXPECT_EQ(bad_eval.find("MRPT exception"), std::string::npos) << bad_eval;
+  EXPECT_NE(bad_eval.find("2*"), std::string::npos) << bad_eval;
   EXPECT_EQ(error("\xEF\xBB\xBF[odometry]\r\n# a comment\r\n// another\r\n@define\tKP star\r\nkeypoints = ${KP}\r\n\r\n"), "");
   EXPECT_EQ(loadConfig(dir + "/c.ini").read_string("odometry", "keypoints", ""), "star");
   // A value continued on the next line with a trailing '\', as MRPT reads it.

@@ -104,8 +104,14 @@ bool CameraIntrinsics::writtenFor(int cols, int rows) const {
 
 void CameraIntrinsics::validate(const std::string& origin) const {
   std::ostringstream why;
+  // A focal length under a pixel is 0 in the float maths (1e-50: the ray cast never ended), one past
+  // kMaxFocalInImages image sizes a field of view under 0.6 degrees (1e300: every pose the identity).
+  const double longest = std::max(width, height);
   if (!(fx > 0 && fy > 0)) why << "focal length must be positive (fx=" << fx << ", fy=" << fy << ")";
   else if (width <= 0 || height <= 0) why << "image size must be positive (" << width << "x" << height << ")";
+  else if (!(fx >= 1 && fy >= 1 && fx <= kMaxFocalInImages * longest && fy <= kMaxFocalInImages * longest))
+    why << "focal length must be between 1 and " << kMaxFocalInImages * longest << " pixels, " << kMaxFocalInImages
+        << " times the image's side (fx=" << fx << ", fy=" << fy << ")";
   else if (!(cx >= 0 && cx < width && cy >= 0 && cy < height))
     why << "principal point (" << cx << ", " << cy << ") lies outside the " << width << "x" << height << " image";
   else if (fx / fy > 1.5 || fy / fx > 1.5) why << "fx/fy ratio is implausible (fx=" << fx << ", fy=" << fy << ")";

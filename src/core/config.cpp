@@ -79,8 +79,8 @@ mrpt::config::CConfigFileMemory loadConfig(const std::string& path) {
   try {
     cfg.setContent(text);  // MRPT's preprocessor: @define, ${NAME}, $env{NAME}, $eval{...}
   } catch (const std::exception& e) {
-    const std::string what = e.what();
-    throw InputError(path, shown(what.substr(0, what.find('\n')), 160));  // "Line 2: Unknown variable `${X}`"
+    // "Line 2: Unknown variable `${X}`"; an MRPT exception's message after its banner line ($eval{((}).
+    throw InputError(path, shown(oneLineMessage(e), 160));
   }
   return cfg;
 }

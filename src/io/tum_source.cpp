@@ -285,7 +285,8 @@ CameraFile readCameraYaml(const std::string& path) {
   // fit this model at zero, and equidistant is another model altogether.
   const bool named = !fsr["distortion_model"].empty();
   const std::string model = named ? std::string(fsr["distortion_model"]) : "plumb_bob";
-  const bool beyond_five = std::any_of(d.begin<double>() + std::min<int>(5, int(d.total())), d.end<double>(), [](double k) { return k != 0.0; });
+  // (no distortion_coefficients: an empty matrix, whose iterators OpenCV cannot make: SIGFPE)
+  const bool beyond_five = d.total() > 5 && std::any_of(d.begin<double>() + 5, d.end<double>(), [](double k) { return k != 0.0; });
   if ((model != "plumb_bob" && model != "rational_polynomial") || beyond_five)
     throw InputError(path, (named ? "distortion '" + model + "' with " : "distortion with ") + std::to_string(d.total()) +
                                " coefficients" + (beyond_five ? ", some beyond k3 not zero" : "") +

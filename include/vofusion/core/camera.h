@@ -31,8 +31,10 @@ struct CameraIntrinsics {
   // principal point lies nearer that image's centre than their stated size's (a writer that filled in
   // only the intrinsics left MRPT's default 640x480), or they state that size.
   bool writtenFor(int cols, int rows) const;
-  // Sanity check (positive focal lengths, principal point inside the image); throws InputError.
+  // Sanity check (focal lengths from 1 pixel to kMaxFocalInImages times the image's longer side,
+  // principal point inside the image, fx/fy within 1.5); throws InputError.
   void validate(const std::string& origin) const;
+  static constexpr double kMaxFocalInImages = 100.0;  // a Kinect's is 0.8; a 0.6 degree field of view
 
   mrpt::img::TCamera toMrpt() const;
   static CameraIntrinsics fromMrpt(const mrpt::img::TCamera& c);
