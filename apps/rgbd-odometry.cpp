@@ -156,6 +156,26 @@ void printAccuracy(const Trajectory& gt, const Trajectory& est) {
   }
 }
 
+// The trajectory, and the rawlog with its ground truth when one is written: the recording's own where
+// it lists one (a later run evaluates against it as TUM's tools do), else the frames'.
+void writeOutputs(const std::string& traj_path, const RunStats& run, const Trajectory* recorded, RawlogWriter* writer) {
+  // The trajectory goes in place after the rawlog, whose commit is what fails on a full disk: a run
+  // that fails there leaves the earlier trajectory, never a new one beside an earlier rawlog.
+  AtomicPath trajectory(traj_path);
+  try {
+    writeTumTrajectory(trajectory.tmp(), run.est);
+  } catch (const InputError& e) {
+    throw InputError(traj_path, e.problem());  // the temporary is gone by the time this is read
+  }
+  trajectory.prepare();  // its bytes on the disk before the rawlog replaces an earlier one
+  if (writer) {
+    if (recorded) writer->writeGroundTruth(*recorded);
+    else if (!run.gt.empty()) writer->writeGroundTruth(run.gt);
+    writer->commit();
+  }
+  trajectory.commit();
+}
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--max-frames", "--set", "--depth-scale"},
                        {"--no-rawlog", "--dump-config", "--strict", "--help"});
@@ -192,24 +212,8 @@ int body(int argc, char** argv) {
   if (run.est.empty()) throw InputError(args.input, "no frames");
   if (run.frames_with_depth == 0 && !run.stopped_by)
     throw InputError(args.input, "no depth readings in any frame (all depth images are zero)");
-  // The trajectory goes in place after the rawlog, whose commit is what fails on a full disk: a run
-  // that fails there leaves the earlier trajectory, never a new one beside an earlier rawlog.
-  AtomicPath trajectory(traj_path);
-  try {
-    writeTumTrajectory(trajectory.tmp(), run.est);
-  } catch (const InputError& e) {
-    throw InputError(traj_path, e.problem());  // the temporary is gone by the time this is read
-  }
-  // The recording's own ground truth beside the rawlog where it lists one (a later run evaluates against
-  // it as TUM's tools do), else the frames'.
   const Trajectory* recorded = source.recordedGroundTruth();
-  trajectory.prepare();  // its bytes on the disk before the rawlog replaces an earlier one
-  if (writer) {
-    if (recorded) writer->writeGroundTruth(*recorded);
-    else if (!run.gt.empty()) writer->writeGroundTruth(run.gt);
-    writer->commit();
-  }
-  trajectory.commit();
+  writeOutputs(traj_path, run, recorded, writer.get());
   if (!source.skipped().empty()) std::fprintf(stderr, "%zu damaged frames skipped\n", source.skipped().size());
   printTimes(odo, run);
   // As TUM's tools evaluate it: against the recording's ground truth at its own stamps, where it lists one.

@@ -398,6 +398,18 @@ void refuseToReplaceACheckpoint(const Args& args) {
                            ", or delete it (or --checkpoint-every 0)");
 }
 
+// <out>/grab.rawlog, written in place: a recording valid to its last frame whatever stops the program.
+// A replay's own ground truth goes beside it from its first frame, as tum2rawlog writes it: a run on
+// grab.rawlog (a killed session finished offline) evaluates as this one does.
+std::unique_ptr<RawlogWriter> openRecording(const std::string& out, const std::string& label, const Trajectory* gt) {
+  RawlogWriterOptions wopts;
+  wopts.sensor_label = label;
+  wopts.in_place = true;
+  auto writer = std::make_unique<RawlogWriter>((fs::path(out) / "grab.rawlog").string(), wopts);
+  if (gt) writer->writeGroundTruth(*gt);
+  return writer;
+}
+
 int run(const Args& args) {
   if (args.dump) {
     std::fputs(dumpConfig(ownSections(LiveOptions())).c_str(), stdout);
@@ -412,15 +424,7 @@ int run(const Args& args) {
   // (it was left, and refused the next run into the folder).
   installStopSignals();  // Ctrl-C or SIGTERM stops cleanly; a second one kills at once
   std::unique_ptr<RawlogWriter> writer;
-  if (args.record) {
-    RawlogWriterOptions wopts;
-    wopts.sensor_label = label;
-    wopts.in_place = true;  // a recording: valid to its last frame whatever stops the program
-    writer = std::make_unique<RawlogWriter>((fs::path(args.out) / "grab.rawlog").string(), wopts);
-    // A replay's own ground truth beside the recording from its first frame, as tum2rawlog writes it: a
-    // run on grab.rawlog (a killed session finished offline) evaluates as this one does.
-    if (const Trajectory* gt = source.recordedGroundTruth()) writer->writeGroundTruth(*gt);
-  }
+  if (args.record) writer = openRecording(args.out, label, source.recordedGroundTruth());
   std::unique_ptr<RunSession> session;  // the same outputs as vofusion, for what was reconstructed
   if (plan.mode) session = std::make_unique<RunSession>(plan.cfg, *plan.mode, args.out, plan.out_params, plan.mesh_params);
   std::unique_ptr<LiveViewer> viewer;

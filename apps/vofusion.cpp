@@ -326,6 +326,15 @@ void printOutcome(const FrameLoop& loop, const Reconstruction& rec, const nlohma
   std::fprintf(stderr, "\n");
 }
 
+// Once the outputs are whole: a checkpoint this run wrote or went on from has nothing left to resume.
+// Another run's in the same folder (another input, configuration or length) is left for its --resume.
+void removeSpentFiles(const RunPlan& plan, const FrameLoop& loop) {
+  std::error_code ec;
+  const bool resumed_from_it = plan.resume && std::filesystem::equivalent(*plan.resume, plan.checkpoint_path, ec);
+  if (!loop.interrupted() && (loop.checkpoints > 0 || resumed_from_it)) std::filesystem::remove(plan.checkpoint_path, ec);
+  std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
+}
+
 int body(int argc, char** argv) {
   const CommandLine cl(argc, argv, {"--out", "--config", "--mode", "--max-frames", "--intrinsics", "--depth-scale", "--work-dir",
                         "--save-volume", "--resume", "--checkpoint-every"},
@@ -378,12 +387,7 @@ int body(int argc, char** argv) {
     std::fprintf(stderr, "vofusion: loops corrected the trajectory, but the run was stopped before the map was fused "
                          "again at the corrected poses: the mesh keeps the tracked poses\n");
   printOutcome(loop, rec, summary);
-  std::error_code ec;
-  // The outputs are whole: a checkpoint this run wrote or went on from has nothing left to resume.
-  // Another run's in the same folder (another input, configuration or length) is left for its --resume.
-  const bool resumed_from_it = plan.resume && std::filesystem::equivalent(*plan.resume, plan.checkpoint_path, ec);
-  if (!loop.interrupted() && (loop.checkpoints > 0 || resumed_from_it)) std::filesystem::remove(plan.checkpoint_path, ec);
-  std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
+  removeSpentFiles(plan, loop);
   return loop.interrupted() ? 128 + loop.stop_signal : 0;  // as the shell reports a signal: 130, 143
 }
 
