@@ -39,6 +39,8 @@ struct PngSpec {
   int first_filter = 0;              // row y is filtered with (first_filter + y) % 5
   const char* extra = nullptr;       // another chunk (empty body) after IHDR, e.g. "tRNS", "eXIf"
   bool text_between_idats = false;   // an ancillary chunk splitting the IDATs (libpng refuses it)
+  int rows_in_stream = -1;           // the image data stops after this many rows (-1: all of them)
+  int bad_filter_row = -1;           // this row's filter type byte is 7 (PNG has 0-4)
 };
 
 // A PNG of `img` (CV_16UC1 or CV_8UC3 BGR) whose row y is filtered with filter (first + y) % 5, as an
@@ -71,6 +73,8 @@ std::vector<std::uint8_t> makePng(const cv::Mat& img, const PngSpec& spec = {}) 
       filtered.push_back(std::uint8_t(raw[y * stride + i] - predictor[f]));
     }
   }
+  if (spec.rows_in_stream >= 0) filtered.resize(spec.rows_in_stream * (stride + 1));
+  if (spec.bad_filter_row >= 0) filtered[spec.bad_filter_row * (stride + 1)] = 7;
   std::vector<std::uint8_t> z(compressBound(uLong(filtered.size())));
   uLongf zlen = z.size();
   EXPECT_EQ(compress2(z.data(), &zlen, filtered.data(), uLong(filtered.size()), 6), Z_OK);
@@ -288,6 +292,32 @@ TEST(PngDecode, DamageIsNamedBeforeOpenCvSeesIt) {
   EXPECT_EQ(imageFileDamage(dir), "");                                 // a folder is no file to read
   std::vector<std::uint8_t> bytes{1, 2, 3};
   EXPECT_FALSE(readWholeFile(dir, bytes));
+}
+
+// A whole PNG (CRCs, IEND) whose image data is damaged: short of its last rows, or a row with a filter
+// type PNG has not. The plain decoder declined it and libpng, under cv::imread, printed "libpng error:
+// Not enough image data" on a line of its own before the reader's line naming the file.
+TEST(PngDecode, DamagedImageDataIsNamedBeforeOpenCvSeesIt) {
+  const std::string dir = test::tempDir("png_data_damage");
+  const cv::Mat depth = depthImage(40, 30);
+  const auto write = [&](const std::string& name, const PngSpec& spec) { return writeBytes(dir + "/" + name, makePng(depth, spec)); };
+  PngSpec few;
+  few.rows_in_stream = 10;
+  PngSpec bad_filter;
+  bad_filter.bad_filter_row = 12;
+  EXPECT_EQ(imageFileDamage(write("whole.png", {})), "");
+  EXPECT_EQ(imageFileDamage(write("few.png", few)), "damaged PNG: its image data ends before its last row");
+  EXPECT_EQ(imageFileDamage(write("filter.png", bad_filter)), "damaged PNG: row 12's filter type is 7 (0-4)");
+  for (const char* name : {"few.png", "filter.png"}) {
+    testing::internal::CaptureStderr();
+    try {
+      loadRawDepthPng(dir + "/" + name, 40, 30);
+      ADD_FAILURE() << name << " decoded";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string(name) + ": cannot decode depth image (damaged PNG"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(testing::internal::GetCapturedStderr(), "") << name;
+  }
 }
 
 // A PNG's header states its size: a frame of another size is refused by it before decoding. A crafted

@@ -61,6 +61,15 @@ bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, 
          got == size;
 }
 
+Inflated zlibInflate(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
+  std::size_t got = 0;
+  switch (libdeflate_zlib_decompress(&decompressor(), data, data_size, out, size, &got)) {
+    case LIBDEFLATE_SUCCESS: return got == size ? Inflated::Whole : Inflated::Short;
+    case LIBDEFLATE_INSUFFICIENT_SPACE: return Inflated::Long;
+    default: return Inflated::Corrupt;
+  }
+}
+
 std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size) {
   return compressWith(data, size, libdeflate_gzip_compress_bound, libdeflate_gzip_compress);
 }

@@ -260,6 +260,29 @@ std::size_t jpegScanStart(const std::uint8_t* p, std::size_t n) {
 }
 }  // namespace
 
+namespace {
+// A whole PNG of the kinds decodePlainPng reads: what is wrong with its image data, which libpng
+// would say on a line of its own ("libpng error: Not enough image data"); empty when nothing is (or
+// when the PNG is of another kind: OpenCV decides). Data past the last row is no damage (libpng warns).
+std::string plainImageDataDamage(const std::uint8_t* data, std::size_t size) {
+  std::vector<std::uint8_t> stream;
+  PngImage img{0, 0, 0, -1, stream};
+  if (!readChunks(data, size, img)) return {};
+  const std::size_t stride = std::size_t(img.width) * img.bytes_per_pixel, row = stride + 1;
+  if (row * img.height > img.stream.size() * 1032 + 1024) return "damaged PNG: its image data is far short of its size";
+  if (row * img.height > kMaxImageFileBytes) return {};  // beyond any frame: not inflated here
+  std::vector<std::uint8_t> raw(row * img.height);
+  switch (zlibInflate(img.stream.data(), img.stream.size(), raw.data(), raw.size())) {
+    case Inflated::Short: return "damaged PNG: its image data ends before its last row";
+    case Inflated::Corrupt: return "damaged PNG: its image data cannot be inflated";
+    default: break;
+  }
+  for (std::size_t y = 0; y < img.height; ++y)
+    if (raw[row * y] > 4) return "damaged PNG: row " + std::to_string(y) + "'s filter type is " + std::to_string(raw[row * y]) + " (0-4)";
+  return {};
+}
+}  // namespace
+
 // A PNG's chunks walked to IEND, each critical one's CRC checked (libpng stops at a bad one with its
 // own "libpng error" line; an ancillary chunk with a bad CRC it only drops); a JPEG's end marker after
 // its scan starts.
@@ -285,7 +308,7 @@ std::string imageFileDamage(const std::string& path) {
     const bool critical = !(tag[0] & 0x20);  // IHDR, PLTE, IDAT, IEND: an upper-case first letter
     if (critical && libdeflate_crc32(0, tag, len + 4) != be32(tag + 4 + len))
       return "damaged PNG: its " + std::string(reinterpret_cast<const char*>(tag), 4) + " chunk fails its CRC";
-    if (isChunk(tag, "IEND")) return {};
+    if (isChunk(tag, "IEND")) return plainImageDataDamage(p, n);
   }
   return "truncated PNG";
 }

@@ -17,6 +17,10 @@ std::size_t zlibCompressBound(std::size_t size);
 std::size_t zlibCompressInto(const void* data, std::size_t size, std::uint8_t* out, std::size_t capacity);
 // Fills exactly `size` bytes at `out`; false when `data` is not a zlib stream of that length.
 bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size);
+// The same, telling a failure's kind: a stream that inflates to fewer bytes, to more (only its first
+// `size` are inflated), or that is no whole zlib stream.
+enum class Inflated { Whole, Short, Long, Corrupt };
+Inflated zlibInflate(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size);
 // A gzip file's bytes (one member) of `size` bytes at `data`, at level 1.
 std::vector<std::uint8_t> gzipCompress(const void* data, std::size_t size);
 // What a gzip member's trailer says its data's length is, modulo 2^32 (RFC 1952's ISIZE): the

@@ -40,8 +40,9 @@ cv::Size pngHeaderSize(const std::string& path);
 // frames carry whatever the file held (grey, grey and alpha, BGRA, 16 bits a channel). An 8-bit
 // BGR image comes back as it is (its pixels shared).
 cv::Mat asBgr8(cv::Mat image);
-// What is wrong with an image file: a PNG cut short ("truncated PNG") or with a chunk whose CRC fails
-// ("damaged PNG: its IDAT chunk fails its CRC"), a JPEG cut short ("truncated JPEG"), a file larger than
+// What is wrong with an image file: a PNG cut short ("truncated PNG"), with a chunk whose CRC fails
+// ("damaged PNG: its IDAT chunk fails its CRC") or, of the kinds decodePlainPng reads, with image data
+// short of its last row or with a row filter PNG has not, a JPEG cut short ("truncated JPEG"), a file larger than
 // any image ("... bytes, larger than any image": over 256 MiB); empty for a whole
 // one, or a file of another kind. Checked before cv::imread: libpng prints its own line to stderr for
 // such a PNG, and libjpeg fills a cut JPEG's missing rows with grey and returns it.
