@@ -41,7 +41,7 @@ const char* kUsage =
     "  --trajectory smooth (default: the scene's hand-held path) or shake: hand shake on top (turns up to\n"
     "             ~150 deg/s), motion-blurred colour taken up to 15 ms off the depth capture (a TUM\n"
     "             folder keeps that offset in rgb.txt, a rawlog in a COLOUR_TIME entry after each frame)\n"
-    "  --frames   number of frames (default 300); --fps frame rate (default 30)\n"
+    "  --frames   number of frames (default 300); --fps frame rate, 0.1 to 1000 (default 30)\n"
     "  --pace X   the path played X times as fast (default 1, (0, 4]): at 2 the room turns up to ~37 deg/s;\n"
     "             a corridor (corridor, lookalike, longwalk) is built for the path's time at that pace\n"
     "  --no-noise exact depth instead of the Kinect v1 noise model; --seed S random seed (default 1)\n"
@@ -159,7 +159,7 @@ int body(int argc, char** argv) {
   o.seed = std::uint32_t(seed);  // 2^32 + 1 was seed 1 again
   o.noise = !cl.flag("--no-noise");
   o.textured = !cl.flag("--plain");
-  o.fps = cl.number("--fps", o.fps, 0.0, 1000.0);
+  o.fps = cl.numberFrom("--fps", o.fps, 0.1, 1000.0);  // under 0.1 Hz no sensor streams
   o.pace = cl.number("--pace", o.pace);  // range checked by SyntheticSequence
   o.exposure = cl.number("--exposure", o.exposure);            // range checked by SyntheticSequence
   o.colour_offset_max = cl.number("--colour-offset", o.colour_offset_max);

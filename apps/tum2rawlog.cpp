@@ -27,7 +27,7 @@ const char* kUsage =
     "  --depth-scale  depth PNG units per metre (default: intrinsics.txt / camera.yaml, else 5000 as TUM)\n"
     "  --format       obs: observations only (default); sf: action/sensory-frame pairs\n"
     "  --embed-images keep images inside the rawlog instead of <out>_Images/\n"
-    "  --range-units  metres per range unit (default 2e-4 = TUM's 1/5000, lossless)\n"
+    "  --range-units  metres per range unit, 1e-6 to 0.01 (default 2e-4 = TUM's 1/5000, lossless)\n"
     "  --strict       stop at the first damaged frame or a damaged groundtruth.txt (default: skip the frame,\n"
     "                 or convert without ground truth, say so, convert the rest)\n"
     "  --overwrite    replace <out.rawlog> (and <out>_Images/) when they exist (default: refuse; it may be a\n"
@@ -51,7 +51,7 @@ int body(int argc, char** argv) {
   else if (format == "sf") wo.format = RawlogWriterOptions::Format::ActionsSensoryFrames;
   else throw InputError("--format", "expected obs or sf, got '" + format + "'");
   wo.external_images = !cl.flag("--embed-images");
-  wo.range_units = cl.number("--range-units", wo.range_units, 0.0, 0.01);
+  wo.range_units = cl.numberFrom("--range-units", wo.range_units, 1e-6, 0.01);  // 1e-6: 6.5 cm of range in 16 bits
   wo.replace = cl.flag("--overwrite");
   const auto& pos = cl.positional();
   if (pos.size() != 2) throw InputError("usage", "expected <tum_dir> <out.rawlog> (see --help)");

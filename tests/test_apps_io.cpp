@@ -418,6 +418,20 @@ TEST(AppsIoBadInput, EmptyFolderUnknownPresetAndMissingInput) {
   expectCleanFailure(app("tum2rawlog") + " " + empty + "/seq " + outdir + "/o.rawlog", "rgb.txt: lists no frames", outdir);
 }
 
+// Values no recording could use are refused by their flag: a range unit of 1e-300 m is 0 as the
+// rawlog's float (a recording nothing reads); a frame rate of 1e-300 made stamps too long for their
+// file names (OpenCV's "could not find a writer" for a name cut before ".png").
+TEST(AppsIoBadInput, RangeUnitsAndFrameRatesNoRecordingCouldUse) {
+  const std::string tum = smallTum("bad_units");
+  const std::string outdir = test::tempDir("bad_units_out");
+  for (const char* units : {"1e-300", "1e-7"})
+    expectCleanFailure(app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog --range-units " + units, "--range-units", outdir);
+  for (const char* fps : {"1e-300", "0.05"})
+    expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/sim --frames 2 --size 160x120 --fps " + fps, "--fps", outdir);
+  std::string out;
+  EXPECT_EQ(run(app("rgbd-simulate") + " --out " + outdir + "/slow --frames 2 --size 160x120 --fps 0.1", &out), 0) << out;
+}
+
 // --depth-scale is read by a TUM folder only: any other input refuses it rather than ignore it.
 TEST(AppsIoBadInput, DepthScaleOfAnInputWithItsOwnUnits) {
   const std::string dir = test::tempDir("bad_depth_scale");
