@@ -1,5 +1,6 @@
 // vofusion-mesh: clean up any triangle mesh PLY with the [mesh] post-processing of vofusion.
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -118,9 +119,14 @@ int body(int argc, char** argv) {
     if (rp) writeFileAtomically(*rp, report.toJson() + "\n");  // why it failed, where nothing else is written
     throw std::runtime_error(in + ": mesh post-processing failed: " + report.failure);
   }
-  if (mesh.faces.empty())
-    printWarning(in + ": no face is left (fragments below [mesh] min_component_faces / min_component_area, " +
-                 "degenerate or duplicate faces); " + out + " is empty");
+  if (mesh.faces.empty()) {
+    const std::string why = "no face is left (fragments below [mesh] min_component_faces / min_component_area, "
+                            "degenerate or duplicate faces)";
+    // Cleaned in place (out is in): an empty result would have replaced the only copy of the mesh.
+    std::error_code ec;
+    if (std::filesystem::equivalent(in, out, ec)) throw InputError(in, why + "; the input is kept, not replaced by an empty mesh");
+    printWarning(in + ": " + why + "; " + out + " is empty");
+  }
   writeOutputs(cl, out, mesh, full, traj, report);
   printCleaning(v0, f0, mesh, report);
   if (ref_path) {

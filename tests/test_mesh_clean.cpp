@@ -885,6 +885,12 @@ TEST(MeshCleanApp, CleansAPlyAndWritesAReport) {
   EXPECT_EQ(out.rfind("warning: " + dir + "/one.ply: no face is left (fragments below [mesh] min_component_faces / " +
                           "min_component_area, degenerate or duplicate faces); " + dir + "/o.ply is empty\n", 0),
             0u) << out;
+  // Cleaned in place to nothing: the input stays (it was replaced by the empty mesh, exit 0).
+  const std::string one_before = fileText(dir + "/one.ply");
+  EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/one.ply " + dir + "/one.ply", &out), 2) << out;
+  EXPECT_NE(out.find(dir + "/one.ply: no face is left"), std::string::npos) << out;
+  EXPECT_NE(out.find("the input is kept"), std::string::npos) << out;
+  EXPECT_EQ(fileText(dir + "/one.ply"), one_before);
   // Measured from nothing, the distance is none (it said mean 0, max 0: a perfect match).
   EXPECT_EQ(test::run(test::app("vofusion-mesh") + " " + dir + "/one.ply " + dir + "/o.ply --distance-to " + dir + "/in.ply",
                       &out),
