@@ -3,8 +3,9 @@
 // stream for numbers, strings and STL containers, plus the types the stages keep that MRPT does not
 // serialise (OpenCV images and keypoints, Eigen poses and points, stage times). Each stage writes and
 // reads its own state with these, between named tags, so a checkpoint from another version or a
-// damaged file fails at the first section that does not fit. A short or bad read throws
-// std::runtime_error; the caller names the file.
+// damaged file fails at the first section that does not fit. A short or bad read throws: these
+// functions' checks std::runtime_error, the archive's own reads MRPT's exception (a std::logic_error);
+// the caller catches std::exception and names the file.
 #include <istream>
 #include <optional>
 #include <ostream>

@@ -58,8 +58,9 @@ using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t 
 
 // raw_ply non-empty: the raw marching-cubes mesh is also streamed there (vertices shared across
 // seams, welded by exact position: seam vertices that coincide, crossings exactly at a voxel, become
-// one; a seam vertex's normal is its first region's). Throws on I/O errors; a region CGAL fails on
-// is kept unsimplified (counted in report.failure).
+// one; a seam vertex's normal is over the faces of every region using it, as for the whole mesh).
+// Throws on I/O errors; a region CGAL fails on is kept unsimplified (counted and said in
+// report.warning: report.success and report.failure are the welded mesh's cleaning's).
 // `regions_done` runs once the last region was read, before the welded mesh is cleaned: the caller
 // can free what the regions came from. `premeshed`: a region it has, made from the same input, is
 // taken instead of simplifying it again (the result is the same: simplifyRegion is deterministic).
