@@ -359,11 +359,27 @@ TEST(AppsIo, EvalKnownOffsetThroughFiles) {
 
 // ---- Bad input: one line naming the file, exit != 0, nothing left behind.
 
+// A damaged list line costs its frame, as a damaged image does: a recording whose rgb.txt was cut
+// mid-line (a crash while it was written) lost its whole run to that line. --strict stops; so does a
+// list more than one line in five of which is damaged.
 TEST(AppsIoBadInput, MalformedListLine) {
-  const std::string tum = smallTum("bad_line");
-  std::ofstream(tum + "/rgb.txt", std::ios::app) << "0.5 rgb/x.png extra-field\n";
+  const std::string dir = test::tempDir("bad_line");
+  std::string out;
+  ASSERT_EQ(run(app("rgbd-simulate") + " --out " + dir + "/seq --frames 8 --size 160x120", &out), 0) << out;
+  const std::string tum = dir + "/seq";
+  std::ofstream(tum + "/rgb.txt", std::ios::app) << "99.5 rgb/x.png extra-field\n100.25";  // cut mid-line, no newline
+  ASSERT_EQ(run(app("tum2rawlog") + " " + tum + " " + dir + "/o.rawlog", &out), 0) << out;
+  EXPECT_NE(out.find("warning: " + tum + "/rgb.txt: line 11: unexpected extra field 'extra-field' (its frame skipped)"),
+            std::string::npos) << out;
+  EXPECT_NE(out.find("warning: " + tum + "/rgb.txt: line 12: expected 'timestamp filename' (its frame skipped)"),
+            std::string::npos) << out;
+  EXPECT_EQ(RawlogSource(dir + "/o.rawlog", {}).size(), 8u);
   const std::string outdir = test::tempDir("bad_line_out");
-  expectCleanFailure(app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog", "rgb.txt: line", outdir);
+  expectCleanFailure(app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog --strict", "rgb.txt: line 11", outdir);
+  std::ofstream(tum + "/depth.txt", std::ios::app) << "a\nb\nc\n";  // 3 of 11 lines
+  expectCleanFailure(app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog",
+                     "depth.txt: line 11: expected 'timestamp filename' (and 2 more of its 11 lines: more than one in five is damaged)",
+                     outdir);
 }
 
 TEST(AppsIoBadInput, MissingCorruptWrongSizeAndDepthPng) {

@@ -240,6 +240,8 @@ TEST(FaultsInput, EmptyFolder) {
                      in + "/rgb.txt", "missing");
 }
 
+// In a list of two lines one damaged line is more than one in five: the run stops, naming it (in a
+// longer list it costs its frame: AppsIoBadInput.MalformedListLine).
 TEST(FaultsInput, RgbListMalformedLines) {
   REQUIRE_TUM();
   const std::vector<std::pair<std::string, std::string>> cases{
@@ -259,6 +261,7 @@ TEST(FaultsInput, RgbListMalformedLines) {
   }
 }
 
+// Three lines, one out of order: more than one in five (as above).
 TEST(FaultsInput, TimestampsOutOfOrderOrDuplicated) {
   REQUIRE_TUM();
   for (const auto& app : trackers()) {

@@ -35,6 +35,18 @@ TEST(TumList, MalformedLineNamesFileAndLine) {
   }
 }
 
+// Given somewhere to say it, a damaged line is left out and described; the others are read.
+TEST(TumList, DamagedLinesAreDescribedWhenAsked) {
+  TumListDamage damage;
+  const auto l = parseTumList("# c\n1.0 a.png\nx b.png\n2.0 c.png d\n0.5 e.png\n3.0 f.png\n3.5", "rgb.txt", &damage);
+  ASSERT_EQ(l.size(), 2u);
+  EXPECT_EQ(l[1].file, "f.png");
+  EXPECT_EQ(damage.lines, 6u);
+  EXPECT_EQ(damage.problems, (std::vector<std::string>{"line 3: expected 'timestamp filename'", "line 4: unexpected extra field 'd'",
+                                                       "line 5: timestamp 0.500000 is out of order or duplicated",
+                                                       "line 7: expected 'timestamp filename'"}));
+}
+
 TEST(TumList, DuplicateTimestampRejected) {
   EXPECT_THROW(parseTumList("1.0 a.png\n1.0 b.png\n", "rgb.txt"), InputError);
 }

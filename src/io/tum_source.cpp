@@ -23,23 +23,34 @@ namespace fs = std::filesystem;
 
 namespace vofusion {
 
-std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin) {
+namespace {
+// What is wrong with a list line ("" when nothing is), given the entries before it; e parsed from it.
+std::string listLineProblem(const std::string& line, const std::vector<TumEntry>& before, TumEntry& e) {
+  std::istringstream ls(line);
+  if (!(ls >> e.timestamp) || !std::isfinite(e.timestamp) || !(ls >> e.file)) return "expected 'timestamp filename'";
+  std::string extra;
+  if (ls >> extra) return "unexpected extra field '" + extra + "'";
+  // Seconds past any clock's end are another unit: every frame interval would be a billion times too
+  // long (the motion model's velocities), and no rawlog could hold the stamp.
+  if (!rawlogCanHold(e.timestamp))
+    return "timestamp " + cv::format("%.10g", e.timestamp) +
+           " is not in seconds (TUM lists give Unix time in seconds; nanoseconds?)";
+  if (!before.empty() && e.timestamp <= before.back().timestamp)
+    return "timestamp " + std::to_string(e.timestamp) + " is out of order or duplicated";
+  return {};
+}
+}  // namespace
+
+std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin, TumListDamage* damage) {
   std::vector<TumEntry> out;
   for (const auto& [n, line] : dataLines(text)) {
-    std::istringstream ls(line);
+    if (damage) ++damage->lines;
     TumEntry e;
-    if (!(ls >> e.timestamp) || !std::isfinite(e.timestamp) || !(ls >> e.file))
-      throw InputError(origin, "line " + std::to_string(n) + ": expected 'timestamp filename'");
-    std::string extra;
-    if (ls >> extra) throw InputError(origin, "line " + std::to_string(n) + ": unexpected extra field '" + extra + "'");
-    // Seconds past any clock's end are another unit: every frame interval would be a billion times too
-    // long (the motion model's velocities), and no rawlog could hold the stamp.
-    if (!rawlogCanHold(e.timestamp))
-      throw InputError(origin, "line " + std::to_string(n) + ": timestamp " + cv::format("%.10g", e.timestamp) +
-                                   " is not in seconds (TUM lists give Unix time in seconds; nanoseconds?)");
-    if (!out.empty() && e.timestamp <= out.back().timestamp)
-      throw InputError(origin, "line " + std::to_string(n) + ": timestamp " + std::to_string(e.timestamp) +
-                                   " is out of order or duplicated");
+    if (const std::string why = listLineProblem(line, out, e); !why.empty()) {
+      if (!damage) throw InputError(origin, "line " + std::to_string(n) + ": " + why);
+      damage->problems.push_back("line " + std::to_string(n) + ": " + why);
+      continue;
+    }
     out.push_back(std::move(e));
   }
   return out;
@@ -404,14 +415,37 @@ std::optional<CameraFile> cameraFileIn(const std::string& txt, const std::string
 }  // namespace
 
 namespace {
+// A frame list whose damaged lines cost those frames, as a damaged image does (warnOfDamagedLines says
+// them); more than one in five stops the run (the file itself is then in doubt). strict: the first
+// stops it. A recording cut short mid-line (a crash while it was written) lost its run to its last line.
+std::vector<TumEntry> readFrameList(const std::string& path, bool strict, TumListDamage& damage) {
+  if (strict) return readTumList(path);
+  std::vector<TumEntry> list = parseTumList(readTextFile(path), path, &damage);
+  const std::size_t bad = damage.problems.size();
+  if (bad * 5 > damage.lines)
+    throw InputError(path, damage.problems.front() + " (and " + std::to_string(bad - 1) + " more of its " +
+                               std::to_string(damage.lines) + " lines: more than one in five is damaged)");
+  return list;
+}
+
+// The first three damaged lines, and how many there were beyond them.
+void warnOfDamagedLines(const std::string& path, const TumListDamage& damage) {
+  const std::size_t bad = damage.problems.size();
+  for (std::size_t i = 0; i < std::min<std::size_t>(bad, 3); ++i) warn(path, damage.problems[i] + " (its frame skipped)");
+  if (bad > 3) warn(path, std::to_string(bad) + " damaged lines skipped in all");
+}
+
 // rgb.txt and depth.txt paired by time (at most opts.max_frames pairs).
 std::vector<TumAssociation> framePairsIn(const std::string& folder, const SourceOptions& opts) {
   const std::string rgb_list = (fs::path(folder) / "rgb.txt").string();
   const std::string depth_list = (fs::path(folder) / "depth.txt").string();
   for (const auto& f : {rgb_list, depth_list})
     if (!entryExists(f)) throw InputError(f, "missing (not a TUM RGB-D folder?)");
-  const auto rgb = readTumList(rgb_list);
-  const auto depth = readTumList(depth_list);
+  TumListDamage rgb_damage, depth_damage;
+  const auto rgb = readFrameList(rgb_list, opts.strict, rgb_damage);
+  const auto depth = readFrameList(depth_list, opts.strict, depth_damage);
+  warnOfDamagedLines(rgb_list, rgb_damage);  // once both lists are taken: nothing said before a refusal
+  warnOfDamagedLines(depth_list, depth_damage);
   if (rgb.empty()) throw InputError(rgb_list, "lists no frames");
   if (depth.empty()) throw InputError(depth_list, "lists no frames");
   std::vector<TumAssociation> pairs = associate(rgb, depth, opts.max_time_diff, opts.unique_depth);

@@ -34,9 +34,16 @@ struct TumEntry {
   double timestamp = 0.0;
   std::string file;  // relative to the folder
 };
-// Parses rgb.txt/depth.txt ("timestamp filename", '#' comments). Throws InputError(path, "line N: ...").
+// A list's lines that could not be taken: "line N: why" each, of `lines` data lines.
+struct TumListDamage {
+  std::size_t lines = 0;
+  std::vector<std::string> problems;
+};
+// Parses rgb.txt/depth.txt ("timestamp filename", '#' comments). Throws InputError(path, "line N: ...")
+// at the first damaged line (no stamp or name, an extra field, a stamp out of order or not in seconds);
+// given `damage`, such a line is left out and described there instead.
 std::vector<TumEntry> readTumList(const std::string& path);
-std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin);
+std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin, TumListDamage* damage = nullptr);
 
 struct TumAssociation {
   TumEntry rgb, depth;
