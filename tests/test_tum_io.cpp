@@ -26,6 +26,13 @@ TEST(TumList, ParsesCommentsAndEntries) {
   EXPECT_EQ(l[1].file, "rgb/b.png");
 }
 
+// Lines ended by CR alone (classic Mac OS) are lines: the file read as one comment, "lists no frames".
+TEST(TumList, LinesEndedByCarriageReturnsAlone) {
+  const auto l = parseTumList("# colour images\r1.0 rgb/a.png\r2.5 rgb/b.png\r", "x");
+  ASSERT_EQ(l.size(), 2u);
+  EXPECT_EQ(l[1].file, "rgb/b.png");
+}
+
 TEST(TumList, MalformedLineNamesFileAndLine) {
   try {
     parseTumList("1.0 a.png\nnot-a-number b.png\n", "rgb.txt");

@@ -56,8 +56,10 @@ std::vector<TextLine> dataLines(const std::string& text) {
   // A UTF-8 byte order mark (an editor's, e.g. Notepad's) is no part of the first line, as the config
   // reader takes it; it made a header comment line 1's data.
   std::istringstream in(text.rfind("\xEF\xBB\xBF", 0) == 0 ? text.substr(3) : text);
+  // Lines ended by CR alone (classic Mac OS editors) were one comment line: the list held no frames.
+  const char end = text.find('\n') == std::string::npos && text.find('\r') != std::string::npos ? '\r' : '\n';
   std::string line;
-  for (int n = 1; std::getline(in, line); ++n) {
+  for (int n = 1; std::getline(in, line, end); ++n) {
     const auto first = line.find_first_not_of(" \t\r");
     if (first == std::string::npos || line[first] == '#') continue;
     lines.push_back({n, std::move(line)});

@@ -27,7 +27,8 @@ struct TextLine {
   int number = 0;    // 1-based line number in the text
   std::string text;  // the line as written (may end with '\r')
 };
-// The lines that are neither blank nor comments (first non-blank character '#').
+// The lines that are neither blank nor comments (first non-blank character '#'); lines end at LF, or at
+// CR in a file that has no LF (classic Mac OS).
 std::vector<TextLine> dataLines(const std::string& text);
 
 }  // namespace vofusion
