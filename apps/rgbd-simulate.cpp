@@ -4,6 +4,7 @@
 // Renders a synthetic RGB-D sequence with exact ground truth, as a TUM folder (rgb.txt, depth.txt,
 // rgb/, depth/ 16-bit PNG at 5000 units/m, groundtruth.txt, intrinsics.txt) or as an MRPT rawlog.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -167,7 +168,8 @@ int body(int argc, char** argv) {
   if (const auto size = cl.value("--size")) o.camera = cameraForSize(*size);
   if (const auto blackout = cl.value("--blackout")) {
     char tail = 0;
-    if (std::sscanf(blackout->c_str(), "%lf:%lf%c", &o.blackout_start, &o.blackout_seconds, &tail) != 2)
+    if (std::sscanf(blackout->c_str(), "%lf:%lf%c", &o.blackout_start, &o.blackout_seconds, &tail) != 2 ||
+        std::isnan(o.blackout_start) || std::isnan(o.blackout_seconds))  // "nan" was a cover "of length 0"
       throw InputError("--blackout", "expected T:S (start and length in s), e.g. 4:1.5, got '" + *blackout + "'");
     // A cover of no length covers no frame (SimOptions takes 0 s as none; between frames: SyntheticSequence).
     if (!(o.blackout_seconds > 0)) throw InputError("--blackout", "'" + *blackout + "' covers no frame (its length is 0)");

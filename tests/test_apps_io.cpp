@@ -495,6 +495,9 @@ TEST(AppsIoBadInput, RawlogInputs) {
   // A cover of no length, or between two frames (30 fps: 0.01 to 0.02 s), covers no frame.
   for (const char* cover : {"1:0", "0.01:0.01"})
     expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --frames 5 --blackout " + cover, "covers no frame", outdir);
+  for (const char* cover : {"0:nan", "nan:1"})
+    expectCleanFailure(app("rgbd-simulate") + " --out " + outdir + "/x --frames 5 --blackout " + cover,
+                       std::string("--blackout: expected T:S (start and length in s), e.g. 4:1.5, got '") + cover + "'", outdir);
 }
 
 // A ground truth, accelerometer or intrinsics file that is a link to itself costs what it would give,
