@@ -110,6 +110,8 @@ TEST(Eval, RpeNeverPairsAPoseWithItself) {
   EXPECT_EQ(r.trans_errors.size(), est.size() - 3);
   const RpeResult too_short = computeRpe(gt, est, 0.01);
   EXPECT_FALSE(too_short.success) << too_short.trans.count << " pairs under half a frame apart";
+  EXPECT_EQ(too_short.message, "no pose pairs 0.01 s apart with ground truth (sequence too short?)");
+  EXPECT_EQ(computeRpe(gt, est, 1e-300).message, "no pose pairs 1e-300 s apart with ground truth (sequence too short?)");
 }
 
 TEST(Eval, NoiseOfKnownMagnitude) {

@@ -186,7 +186,9 @@ RpeResult computeRpe(const Trajectory& gt_as_given, const Trajectory& est_as_giv
     r.rot_errors_deg.push_back(rotationAngle(err) * 180.0 / M_PI);
   }
   if (r.trans_errors.empty()) {
-    r.message = "no pose pairs " + std::to_string(delta) + " s apart with ground truth (sequence too short?)";
+    char apart[32];  // %g: to_string said 1e-300 s as "0.000000" and 1e308 in 309 digits
+    std::snprintf(apart, sizeof apart, "%g", delta);
+    r.message = std::string("no pose pairs ") + apart + " s apart with ground truth (sequence too short?)";
     return r;
   }
   r.trans = computeStats(r.trans_errors);
