@@ -378,7 +378,7 @@ TEST(AppsIoBadInput, MalformedListLine) {
   expectCleanFailure(app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog --strict", "rgb.txt: line 11", outdir);
   std::ofstream(tum + "/depth.txt", std::ios::app) << "a\nb\nc\n";  // 3 of 11 lines
   expectCleanFailure(app("tum2rawlog") + " " + tum + " " + outdir + "/o.rawlog",
-                     "depth.txt: line 11: expected 'timestamp filename' (and 2 more of its 11 lines: more than one in five is damaged)",
+                     "depth.txt: line 11: expected 'timestamp filename' (3 of its 11 lines damaged: more than one in five)",
                      outdir);
 }
 

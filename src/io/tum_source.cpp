@@ -423,8 +423,8 @@ std::vector<TumEntry> readFrameList(const std::string& path, bool strict, TumLis
   std::vector<TumEntry> list = parseTumList(readTextFile(path), path, &damage);
   const std::size_t bad = damage.problems.size();
   if (bad * 5 > damage.lines)
-    throw InputError(path, damage.problems.front() + " (and " + std::to_string(bad - 1) + " more of its " +
-                               std::to_string(damage.lines) + " lines: more than one in five is damaged)");
+    throw InputError(path, damage.problems.front() + " (" + std::to_string(bad) + " of its " + std::to_string(damage.lines) +
+                               " lines damaged: more than one in five)");
   return list;
 }
 
