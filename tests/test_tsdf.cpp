@@ -265,7 +265,7 @@ TEST(Tsdf, RaysCastSideBySideGiveWhatEachGivesAlone) {
   }
 }
 
-// The world model's keys hold bricks within kKeyReach of the first camera on each axis: the volume
+// The world model's keys hold bricks within kKeyReach of the world's origin on each axis: the volume
 // follows a camera that goes past them no further (said once). It moved on, and its bricks were stored
 // under the keys of bricks 2 kKeyReach away (another place's, silently replaced).
 TEST(Tsdf, TheVolumeFollowsNoFurtherThanTheWorldModelsKeysReach) {
@@ -287,6 +287,11 @@ TEST(Tsdf, TheVolumeFollowsNoFurtherThanTheWorldModelsKeysReach) {
   const Eigen::Vector3i held = vol.originBrick();
   vol.shiftTo(Eigen::Vector3f(std::nanf(""), 0, 0));  // no place: the volume stays
   EXPECT_EQ(vol.originBrick(), held);
+  // Nor does it start beyond them: placed there, its first shift stored the map under wrapped keys (a
+  // start pose 60 km out at 6 mm voxels) and it never followed the camera again.
+  for (const float x : {1.5f, -1.5f, std::nanf("")})
+    EXPECT_THROW(TsdfVolume(p, Eigen::Vector3f(x * float(WorldModel::kKeyReach) * brick, 0, 0)), std::invalid_argument) << x;
+  EXPECT_NO_THROW(TsdfVolume(p, Eigen::Vector3f(0.9f * float(WorldModel::kKeyReach) * brick, 0, 0)));
 }
 
 TEST(Tsdf, ShiftMovesBricksToWorldModelAndBackWithoutLoss) {

@@ -45,7 +45,9 @@ struct RaycastMaps {
 
 class TsdfVolume {
  public:
-  // centre: world position (m) the volume starts centred on (snapped to the brick grid).
+  // centre: world position (m) the volume starts centred on (snapped to the brick grid); one beyond the
+  // world model's keys (kKeyReach bricks from the world's origin: 50 km at 6 mm voxels) or not finite
+  // throws std::invalid_argument.
   TsdfVolume(const TsdfParams& params, const Eigen::Vector3f& centre);
 
   // Fuses one depth (+ optional BGR colour) frame seen from cam_to_world. Returns voxels updated.
