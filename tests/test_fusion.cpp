@@ -233,6 +233,22 @@ TEST(KinFu, StampsAMicrosecondApartMakeNoRollingShutterNoise) {
   }
 }
 
+// A pose that is not finite places nothing: fused at NaN, every ray marched from min_depth to max_depth
+// a step at a time (minutes a frame at the config's extremes), and relocalised there the next frame had
+// no model to track against.
+TEST(KinFu, APoseThatIsNotFinitePlacesNothing) {
+  const sim::SyntheticSequence seq(simOpts("room", 3));
+  TrackedMap map(testParams(), TrackingMode::Joint, seq.groundTruth(0));
+  ASSERT_TRUE(map.process(seq.render(0), nullptr).tracked);
+  const std::size_t bricks = map.stats().bricks_in_volume;
+  mrpt::poses::CPose3D nowhere = seq.groundTruth(1);
+  nowhere.x(std::nan(""));
+  map.integrateAt(seq.render(1), nowhere);
+  EXPECT_EQ(map.stats().bricks_in_volume, bricks);
+  EXPECT_THROW(map.relocalise(nowhere), std::invalid_argument);
+  EXPECT_TRUE(map.process(seq.render(2), nullptr).tracked);
+}
+
 // A placement (relocalise as prior) is for the next frame tracked: one lost before it (no depth) does
 // not carry it on to a later frame, which the stale placement would have pulled back to where it was.
 TEST(KinFu, APlacementIsNotCarriedPastALostFrame) {

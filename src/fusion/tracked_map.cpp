@@ -1,5 +1,7 @@
 #include "vofusion/fusion/tracked_map.h"
 
+#include <stdexcept>
+
 #include "vofusion/core/pose_eigen.h"
 
 namespace vofusion {
@@ -30,6 +32,8 @@ void TrackedMap::fuse(FusionResult& res) {
 
 void TrackedMap::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world) {
   const Eigen::Isometry3d pose = toEigen(cam_to_world);
+  // No place to fuse it at: NaN marched every ray from min_depth to max_depth a step at a time.
+  if (!pose.matrix().allFinite()) return;
   if (!tracker_.placeAt(frame, pose)) return;
   StageTimes times;
   tracker_.fused(map_.integrateAt(frame, pose, times), times);
@@ -39,6 +43,7 @@ mrpt::poses::CPose3D TrackedMap::pose() const { return toMrpt(tracker_.pose()); 
 
 void TrackedMap::relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior) {
   const Eigen::Isometry3d pose = toEigen(cam_to_world);
+  if (!pose.matrix().allFinite()) throw std::invalid_argument("TrackedMap::relocalise: the pose is not finite");
   tracker_.relocalise(pose, as_prior);
   map_.predictAgain(pose);
 }

@@ -42,12 +42,12 @@ class TrackedMap {
   void fuse(FusionResult& res);
 
   // Fuses a frame at a pose known from elsewhere (re-integration with loop-closed poses): the volume
-  // follows the camera as in tracking; no ICP, no ray cast.
+  // follows the camera as in tracking; no ICP, no ray cast. A pose that is not finite fuses nothing.
   void integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
 
   mrpt::poses::CPose3D pose() const;
   // Tracking found again elsewhere (relocalisation): Tracker::relocalise, and the model predicted from
-  // there before the next frame is tracked.
+  // there before the next frame is tracked. A pose that is not finite throws std::invalid_argument.
   void relocalise(const mrpt::poses::CPose3D& cam_to_world, bool as_prior = false);
   // Tracker::holdFrames. Not while a fuse() runs.
   void holdFrames(std::vector<std::size_t> frames) { tracker_.holdFrames(std::move(frames)); }
