@@ -401,6 +401,38 @@ TEST(VofusionApp, SaveVolumeToAFolderFailsBeforeTheRun) {
   EXPECT_FALSE(fs::exists(dir + "/out/summary.json"));
 }
 
+// Nothing the run writes lands on its input: the map saved over the recording (or its ground truth), or
+// over one of the run's own outputs (which then replaced it), and a recording read from the folder the
+// run writes its poses.rawlog into, were all replaced without a word (exit 0).
+TEST(VofusionApp, NothingTheRunWritesLandsOnItsInput) {
+  const std::string dir = test::tempDir("vofusion_app_over_input");
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/in.rawlog --frames 3 --size 160x120", &log), 0) << log;
+  const std::string in = dir + "/in.rawlog", before = fileBytes(in), out = dir + "/out";
+  const auto refused = [&](const std::string& args, const std::string& said) {
+    const int rc = test::run("{ " + test::app("vofusion") + " " + args + " 2>&1 >/dev/null; }", &log);
+    EXPECT_EQ(rc, 2) << args;
+    EXPECT_NE(log.find(said), std::string::npos) << log;
+  };
+  refused(in + " --out " + out + " --save-volume " + in, dir + "/in.rawlog: is the input recording's");
+  refused(in + " --out " + out + " --save-volume " + dir + "/in.groundtruth.txt", "is the input recording's");
+  refused(in + " --out " + out + " --save-volume " + dir + "/in_Images/x.bin", "is the input recording's");
+  for (const char* output : {"trajectory.txt", "mesh.ply", "summary.json", "checkpoint"})
+    refused(in + " --out " + out + " --save-volume " + out + "/" + output, "is one of this run's outputs");
+  EXPECT_EQ(fileBytes(in), before);
+  EXPECT_FALSE(fs::exists(out + "/summary.json"));
+  // A run's poses.rawlog read again with --out its own folder: the run's poses.rawlog would replace it.
+  fs::create_directories(dir + "/again");
+  fs::copy_file(in, dir + "/again/poses.rawlog");
+  fs::copy(RawlogWriter::imagesDirFor(in), dir + "/again/poses_Images");
+  refused(dir + "/again/poses.rawlog --out " + dir + "/again", "is this run's own output");
+  EXPECT_EQ(fileBytes(dir + "/again/poses.rawlog"), before);
+  // The map in the output folder under a name of its own is fine.
+  EXPECT_EQ(test::run(test::app("vofusion") + " " + in + " --out " + out + " --save-volume " + out + "/map.vfvol 2>&1", &log), 0)
+      << log;
+  EXPECT_TRUE(fs::exists(out + "/map.vfvol"));
+}
+
 // The map is written after the run: when that write fails (here a file size limit, as a full disk
 // fails it) the run's other outputs are written all the same, the summary says why the map is missing,
 // the error is one line naming the map's file, and a map already there is left as it was.

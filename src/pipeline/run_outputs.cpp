@@ -13,6 +13,7 @@
 #include "vofusion/core/progress.h"  // printWarning
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/eval/trajectory_eval.h"
+#include "vofusion/io/rawlog.h"
 #include "vofusion/scene/scene_export.h"
 
 namespace fs = std::filesystem;
@@ -187,6 +188,38 @@ namespace {
 const std::vector<std::string> kRunOutputs = {
     "trajectory.txt", "trajectory_fused.txt", "trajectory_tracked.txt", "trajectory.png", "mesh.ply", "mesh_raw.ply",
     "mesh_full.ply", "mesh.png", "scene.3Dscene", "summary.json", "poses.rawlog"};
+}  // namespace
+
+std::vector<std::string> runOutputPaths(const std::string& out_dir) {
+  std::vector<std::string> paths;
+  for (const std::string& name : kRunOutputs) paths.push_back((std::filesystem::path(out_dir) / name).string());
+  const std::string poses = (std::filesystem::path(out_dir) / "poses.rawlog").string();
+  for (const std::string& more : {RawlogWriter::imagesDirFor(poses), RawlogWriter::groundTruthPathFor(poses),
+                                  (std::filesystem::path(out_dir) / "checkpoint").string(),
+                                  (std::filesystem::path(out_dir) / ".tmp").string()})
+    paths.push_back(more);
+  return paths;
+}
+
+std::vector<std::string> recordingPaths(const std::string& input) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(input, ec)) return {input};
+  return {input, RawlogWriter::imagesDirFor(input), RawlogWriter::groundTruthPathFor(input)};
+}
+
+bool isWithin(const std::string& path, const std::string& within) {
+  std::error_code ec;
+  const std::filesystem::path p = std::filesystem::weakly_canonical(std::filesystem::absolute(path), ec);
+  const std::filesystem::path w = std::filesystem::weakly_canonical(std::filesystem::absolute(within), ec);
+  if (ec) return false;
+  auto pi = p.begin();
+  for (auto wi = w.begin(); wi != w.end(); ++wi, ++pi)
+    if (wi->empty() && std::next(wi) == w.end()) return true;  // a trailing separator
+    else if (pi == p.end() || *pi != *wi) return false;
+  return true;
+}
+
+namespace {
 
 // A folder that also holds an earlier run's outputs (this run asked for fewer: mesh = false, no
 // ground truth) says so, rather than leave them to pass for this run's.

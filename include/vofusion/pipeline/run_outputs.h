@@ -60,6 +60,15 @@ struct RunInfo {
   Trajectory recorded_ground_truth;
 };
 
+// Every path a run may write into its folder out_dir, whichever outputs its config asks for: its
+// files, poses.rawlog's images folder and ground truth, its checkpoint and its default work folder.
+std::vector<std::string> runOutputPaths(const std::string& out_dir);
+// Every path a recording at `input` is made of: a folder (TUM, 7-Scenes) itself; a rawlog, its images
+// folder and its ground truth beside it.
+std::vector<std::string> recordingPaths(const std::string& input);
+// Whether `path` is `within` or inside it (after resolving links and dots; either may not exist yet).
+bool isWithin(const std::string& path, const std::string& within);
+
 // Every section of a vofusion config, at its defaults: the reconstruction's, [mesh] and [output]
 // (vofusion's --dump-config; the sections any app taking that file checks for typos).
 std::vector<ConfigSection> vofusionConfigSections();
