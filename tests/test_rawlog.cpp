@@ -280,6 +280,22 @@ TEST(Rawlog, DepthIsWrittenAtTheUnitsItsObservationSays) {
   }
 }
 
+// A record whose stamp no rawlog clock holds (a flipped byte) is a damaged frame, named: rgbd-odometry
+// lost its whole run at writing it ("timestamp ... beyond what a rawlog's clock holds", no file named).
+TEST(Rawlog, AStampBeyondAnySensorsClockIsTheFramesDamage) {
+  const Frame f = simFrames(1).front();
+  const auto obs = observationFromFrame(f, 1e-3);
+  obs->timestamp = rawlogTime(1.0e9);
+  obs->timestamp += std::chrono::seconds(1000000000000LL);  // 1e12 s after 1970: past the clock's end
+  try {
+    frameFromObservation(*obs, "x.rawlog: entry 3");
+    ADD_FAILURE() << "read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("x.rawlog: entry 3: timestamp 1.001e+12 s is beyond any sensor's clock"),
+              std::string::npos) << e.what();
+  }
+}
+
 // Depth camera parameters calibrated at another size of the same aspect (640x480 over a 320x240 range
 // image) are scaled to the image: they were taken as they were, the focal length twice the image's.
 // Parameters whose size fields are stale (MRPT's default 640x480 around parameters for the stored

@@ -293,6 +293,10 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   const int rows = int(obs.rangeImage.rows()), cols = int(obs.rangeImage.cols());
   Frame f;
   f.timestamp = rawlogSeconds(obs.timestamp);
+  // A stamp no rawlog can be written with (a damaged record's): the frame's problem, as a TUM list's
+  // line is. It ended rgbd-odometry's whole run at its rawlog output, with a message naming no file.
+  if (!rawlogCanHold(f.timestamp))
+    throw InputError(origin, "timestamp " + cv::format("%.10g", f.timestamp) + " s is beyond any sensor's clock (a damaged record?)");
   f.camera = override_camera ? *override_camera : depthCameraOf(obs, cols, rows, origin);
   f.camera.width = cols;
   f.camera.height = rows;
