@@ -173,6 +173,24 @@ TEST(SevenScenes, NotASequenceFolder) {
   EXPECT_THROW(openFrameSource(dir), InputError);
 }
 
+// frame-3 beside frame-000003 is one frame number twice: refused, naming both (the frame was read twice,
+// at one time, and the trajectory held it twice).
+TEST(SevenScenes, OneFrameNumberTwiceIsRefused) {
+  const std::string dir = test::tempDir("sevenscenes_twice");
+  for (const std::string& s : {stem(dir, 3), dir + "/frame-3", stem(dir, 4)}) {
+    cv::imwrite(s + ".color.png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(10, 20, 30)));
+    cv::imwrite(s + ".depth.png", cv::Mat(48, 64, CV_16UC1, cv::Scalar(1000)));
+  }
+  try {
+    SevenScenesSource(dir, {});
+    ADD_FAILURE() << "read";
+  } catch (const InputError& e) {
+    const std::string said = e.what();
+    EXPECT_NE(said.find(dir + ": frames frame-"), std::string::npos) << said;
+    EXPECT_NE(said.find("have one number: which is frame 3?"), std::string::npos) << said;
+  }
+}
+
 // A folder that cannot be listed or searched says so: it was "not a TUM RGB-D sequence nor a 7-Scenes
 // one", sending the user to look at the folder's layout.
 TEST(SevenScenes, AnUnreadableFolderSaysWhy) {

@@ -107,6 +107,12 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
   }
   if (frames_.empty()) throw InputError(folder, "folder holds no 7-Scenes frames (frame-XXXXXX.depth.png)");
   std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });
+  // frame-3 beside frame-000003: one frame twice, at one time (the trajectory held it twice).
+  const auto twin = std::adjacent_find(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number == b.number; });
+  if (twin != frames_.end())
+    throw InputError(folder, "frames " + fs::path(twin->stem).filename().string() + " and " +
+                                 fs::path(std::next(twin)->stem).filename().string() + " have one number: which is frame " +
+                                 std::to_string(twin->number) + "?");
   if (opts.max_frames > 0 && frames_.size() > opts.max_frames) frames_.resize(opts.max_frames);
 
   // The first frames' colour images give the size (recordingImageSize; a damaged one is its own frame's problem).
