@@ -289,3 +289,19 @@ TEST(AtomicFile, ACommitThatThrowsChangedNothing) {
     EXPECT_EQ(watch.synced().back(), "fsync " + dir + " failed");
   }
 }
+
+// A path inside a folder, by its parts once resolved as samePath resolves them: "a/bc" is not in "a/b",
+// a link into the folder is, and neither needs to exist.
+TEST(AtomicFile, WhetherAPathIsWithinAFolder) {
+  const std::string dir = testing::TempDir() + "/within";
+  fs::create_directories(dir + "/b");
+  std::error_code ec;
+  fs::remove(dir + "/link", ec);
+  fs::create_directory_symlink(dir + "/b", dir + "/link");
+  EXPECT_TRUE(isWithin(dir + "/b/c/d.txt", dir + "/b"));
+  EXPECT_TRUE(isWithin(dir + "/b", dir + "/b/"));
+  EXPECT_TRUE(isWithin(dir + "/link/x.bin", dir + "/b"));
+  EXPECT_TRUE(isWithin(dir + "/b/../b/x", dir + "/b"));
+  EXPECT_FALSE(isWithin(dir + "/bc", dir + "/b"));
+  EXPECT_FALSE(isWithin(dir, dir + "/b"));
+}

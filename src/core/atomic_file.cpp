@@ -245,13 +245,26 @@ void refuseFolderWhereAFileGoes(const std::string& path) {
   if (fs::is_directory(path, ec)) throw InputError(path, "is a folder: cannot write the file there");
 }
 
-bool samePath(const std::string& a, const std::string& b) {
-  const auto canonical = [](const std::string& p) {
-    std::error_code ec;
-    const fs::path c = fs::weakly_canonical(p, ec);
-    return ec ? fs::absolute(p).lexically_normal() : c;
-  };
-  return canonical(a) == canonical(b);
+namespace {
+// "a/./b", "a/../a/b" and symlinks resolved as far as they exist.
+fs::path canonicalPath(const std::string& p) {
+  std::error_code ec;
+  const fs::path c = fs::weakly_canonical(p, ec);
+  if (!ec) return c;
+  const fs::path a = fs::absolute(p, ec);  // the throwing overload threw for "" (an unset $SEQ)
+  return (ec ? fs::path(p) : a).lexically_normal();
+}
+}  // namespace
+
+bool samePath(const std::string& a, const std::string& b) { return canonicalPath(a) == canonicalPath(b); }
+
+bool isWithin(const std::string& path, const std::string& folder) {
+  const fs::path p = canonicalPath(path), f = canonicalPath(folder);
+  auto pi = p.begin();
+  for (auto fi = f.begin(); fi != f.end(); ++fi, ++pi)
+    if (fi->empty() && std::next(fi) == f.end()) return true;  // a trailing separator
+    else if (pi == p.end() || *pi != *fi) return false;
+  return true;
 }
 
 void writeFileAtomically(const std::string& path, const std::string& contents) {

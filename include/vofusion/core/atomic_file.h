@@ -62,6 +62,8 @@ void refuseFolderWhereAFileGoes(const std::string& path);
 
 // Whether two paths name one file ("a/./b", "a/../a/b" and symlinks resolved as far as they exist).
 bool samePath(const std::string& a, const std::string& b);
+// Whether `path` is `folder` or inside it, resolved as samePath resolves (either may not exist yet).
+bool isWithin(const std::string& path, const std::string& folder);
 
 // Convenience for text outputs; throws InputError(path, strerror) if the write fails (disk full...).
 void writeFileAtomically(const std::string& path, const std::string& contents);
