@@ -192,6 +192,8 @@ GrabPlan planGrab(const Args& args) {
   if (args.queue) plan.opts.queue_capacity = *args.queue;
   if (args.speed) plan.opts.replay_speed = *args.speed;
   if (args.live) plan.mode = parseTrackingMode(args.mode, "--mode");
+  // A replay of a run's poses.rawlog into that run's folder: the live run's would replace it.
+  if (args.live && !args.replay.empty()) refuseWritesOverTheInput(args.replay, runOutputPaths(args.out), std::nullopt);
   return plan;
 }
 

@@ -155,23 +155,6 @@ void checkMapPath(const std::string& path) {
   ensureWritableDirectory(parent.empty() ? "." : parent.string());
 }
 
-// Nothing the run writes lands on its input: --save-volume on the recording (or a file of it, its ground
-// truth) or on one of the run's own outputs, and an input that is one of them (--out the folder of the
-// poses.rawlog read), were replaced without a word.
-void refuseWritesOverTheInput(const RunPlan& plan) {
-  const std::vector<std::string> input = recordingPaths(plan.input), outputs = runOutputPaths(plan.out_dir);
-  for (const std::string& part : input)
-    for (const std::string& out : outputs)
-      if (isWithin(part, out)) throw InputError(plan.input, "is this run's own output " + out + ": choose another --out");
-  if (!plan.save_volume) return;
-  for (const std::string& part : input)
-    if (isWithin(*plan.save_volume, part))
-      throw InputError(*plan.save_volume, "is the input recording's (" + plan.input + "): --save-volume would write the map over it");
-  for (const std::string& out : outputs)
-    if (isWithin(*plan.save_volume, out))
-      throw InputError(*plan.save_volume, "is one of this run's outputs: --save-volume wants a name of its own");
-}
-
 // A run that checkpoints into a folder holding a checkpoint it does not go on from would replace it at
 // its first checkpoint and delete its own at the end: an earlier run's, which --resume could still
 // finish, would be lost.
@@ -205,7 +188,7 @@ RunPlan planRun(const CommandLine& cl) {
   plan.checkpoint_every = cl.numberFrom("--checkpoint-every", 0.0, 0.0, 1e6);
   plan.checkpoint_path = (std::filesystem::path(plan.out_dir) / "checkpoint").string();
   refuseToReplaceACheckpoint(plan);
-  refuseWritesOverTheInput(plan);
+  refuseWritesOverTheInput(plan.input, runOutputPaths(plan.out_dir), plan.save_volume);
   plan.origin = runOrigin(plan, cl);
   return plan;
 }

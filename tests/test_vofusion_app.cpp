@@ -409,11 +409,12 @@ TEST(VofusionApp, NothingTheRunWritesLandsOnItsInput) {
   std::string log;
   ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/in.rawlog --frames 3 --size 160x120", &log), 0) << log;
   const std::string in = dir + "/in.rawlog", before = fileBytes(in), out = dir + "/out";
-  const auto refused = [&](const std::string& args, const std::string& said) {
-    const int rc = test::run("{ " + test::app("vofusion") + " " + args + " 2>&1 >/dev/null; }", &log);
-    EXPECT_EQ(rc, 2) << args;
+  const auto refusedBy = [&](const std::string& command, const std::string& said) {
+    const int rc = test::run("{ " + command + " 2>&1 >/dev/null; }", &log);
+    EXPECT_EQ(rc, 2) << command;
     EXPECT_NE(log.find(said), std::string::npos) << log;
   };
+  const auto refused = [&](const std::string& args, const std::string& said) { refusedBy(test::app("vofusion") + " " + args, said); };
   refused(in + " --out " + out + " --save-volume " + in, dir + "/in.rawlog: is the input recording's");
   refused(in + " --out " + out + " --save-volume " + dir + "/in.groundtruth.txt", "is the input recording's");
   refused(in + " --out " + out + " --save-volume " + dir + "/in_Images/x.bin", "is the input recording's");
@@ -427,6 +428,17 @@ TEST(VofusionApp, NothingTheRunWritesLandsOnItsInput) {
   fs::copy(RawlogWriter::imagesDirFor(in), dir + "/again/poses_Images");
   refused(dir + "/again/poses.rawlog --out " + dir + "/again", "is this run's own output");
   EXPECT_EQ(fileBytes(dir + "/again/poses.rawlog"), before);
+  // Nor does vofusion-grab's live replay of it.
+  refusedBy(test::app("vofusion-grab") + " --replay " + dir + "/again/poses.rawlog --out " + dir + "/again --live --no-gui",
+            "is this run's own output");
+  EXPECT_EQ(fileBytes(dir + "/again/poses.rawlog"), before);
+  // A TUM folder's own file is refused, a new file beside its lists is fine.
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/tum --frames 3 --size 160x120", &log), 0) << log;
+  const std::string gt = fileBytes(dir + "/tum/groundtruth.txt");
+  refused(dir + "/tum --out " + out + " --save-volume " + dir + "/tum/groundtruth.txt", "is the input recording's");
+  EXPECT_EQ(fileBytes(dir + "/tum/groundtruth.txt"), gt);
+  EXPECT_EQ(test::run(test::app("vofusion") + " " + dir + "/tum --out " + out + " --save-volume " + dir + "/tum/map.vfvol 2>&1", &log), 0)
+      << log;
   // The map in the output folder under a name of its own is fine.
   EXPECT_EQ(test::run(test::app("vofusion") + " " + in + " --out " + out + " --save-volume " + out + "/map.vfvol 2>&1", &log), 0)
       << log;

@@ -192,31 +192,32 @@ const std::vector<std::string> kRunOutputs = {
 
 std::vector<std::string> runOutputPaths(const std::string& out_dir) {
   std::vector<std::string> paths;
-  for (const std::string& name : kRunOutputs) paths.push_back((std::filesystem::path(out_dir) / name).string());
-  const std::string poses = (std::filesystem::path(out_dir) / "poses.rawlog").string();
+  for (const std::string& name : kRunOutputs) paths.push_back((fs::path(out_dir) / name).string());
+  const std::string poses = (fs::path(out_dir) / "poses.rawlog").string();
   for (const std::string& more : {RawlogWriter::imagesDirFor(poses), RawlogWriter::groundTruthPathFor(poses),
-                                  (std::filesystem::path(out_dir) / "checkpoint").string(),
-                                  (std::filesystem::path(out_dir) / ".tmp").string()})
+                                  (fs::path(out_dir) / "checkpoint").string(), (fs::path(out_dir) / ".tmp").string()})
     paths.push_back(more);
   return paths;
 }
 
-std::vector<std::string> recordingPaths(const std::string& input) {
+void refuseWritesOverTheInput(const std::string& input, const std::vector<std::string>& writes,
+                              const std::optional<std::string>& save_volume) {
   std::error_code ec;
-  if (std::filesystem::is_directory(input, ec)) return {input};
-  return {input, RawlogWriter::imagesDirFor(input), RawlogWriter::groundTruthPathFor(input)};
-}
-
-bool isWithin(const std::string& path, const std::string& within) {
-  std::error_code ec;
-  const std::filesystem::path p = std::filesystem::weakly_canonical(std::filesystem::absolute(path), ec);
-  const std::filesystem::path w = std::filesystem::weakly_canonical(std::filesystem::absolute(within), ec);
-  if (ec) return false;
-  auto pi = p.begin();
-  for (auto wi = w.begin(); wi != w.end(); ++wi, ++pi)
-    if (wi->empty() && std::next(wi) == w.end()) return true;  // a trailing separator
-    else if (pi == p.end() || *pi != *wi) return false;
-  return true;
+  const bool folder = fs::is_directory(input, ec);
+  // A rawlog is its file, its images folder and its ground truth; a folder (TUM, 7-Scenes) its files.
+  const std::vector<std::string> parts =
+      folder ? std::vector<std::string>{input}
+             : std::vector<std::string>{input, RawlogWriter::imagesDirFor(input), RawlogWriter::groundTruthPathFor(input)};
+  for (const std::string& part : parts)
+    for (const std::string& w : writes)
+      if (isWithin(part, w)) throw InputError(input, "is this run's own output " + w + ": choose another --out");
+  if (!save_volume) return;
+  for (const std::string& part : parts)
+    if (isWithin(*save_volume, part) && (!folder || fs::exists(*save_volume, ec)))  // a new file in a folder replaces nothing
+      throw InputError(*save_volume, "is the input recording's (" + input + "): --save-volume would write the map over it");
+  for (const std::string& w : writes)
+    if (isWithin(*save_volume, w))
+      throw InputError(*save_volume, "is one of this run's outputs: --save-volume wants a name of its own");
 }
 
 namespace {

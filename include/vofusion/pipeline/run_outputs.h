@@ -63,11 +63,12 @@ struct RunInfo {
 // Every path a run may write into its folder out_dir, whichever outputs its config asks for: its
 // files, poses.rawlog's images folder and ground truth, its checkpoint and its default work folder.
 std::vector<std::string> runOutputPaths(const std::string& out_dir);
-// Every path a recording at `input` is made of: a folder (TUM, 7-Scenes) itself; a rawlog, its images
-// folder and its ground truth beside it.
-std::vector<std::string> recordingPaths(const std::string& input);
-// Whether `path` is `within` or inside it (after resolving links and dots; either may not exist yet).
-bool isWithin(const std::string& path, const std::string& within);
+// Nothing a run writes lands on its input recording: throws InputError when the input is (or is inside)
+// one of `writes` (--out the folder of the poses.rawlog read), or when `save_volume` (--save-volume) is
+// a rawlog input, its images or ground truth, a file already in a folder input, or one of `writes`.
+// Each was replaced without a word.
+void refuseWritesOverTheInput(const std::string& input, const std::vector<std::string>& writes,
+                              const std::optional<std::string>& save_volume);
 
 // Every section of a vofusion config, at its defaults: the reconstruction's, [mesh] and [output]
 // (vofusion's --dump-config; the sections any app taking that file checks for typos).
