@@ -243,7 +243,7 @@ TEST(KinFu, APoseThatIsNotFinitePlacesNothing) {
   const std::size_t bricks = map.stats().bricks_in_volume;
   mrpt::poses::CPose3D nowhere = seq.groundTruth(1);
   nowhere.x(std::nan(""));
-  map.integrateAt(seq.render(1), nowhere);
+  EXPECT_FALSE(map.integrateAt(seq.render(1), nowhere));
   EXPECT_EQ(map.stats().bricks_in_volume, bricks);
   EXPECT_THROW(map.relocalise(nowhere), std::invalid_argument);
   EXPECT_TRUE(map.process(seq.render(2), nullptr).tracked);

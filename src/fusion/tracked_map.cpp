@@ -30,13 +30,14 @@ void TrackedMap::fuse(FusionResult& res) {
   res.times.merge(times);
 }
 
-void TrackedMap::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world) {
+bool TrackedMap::integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world) {
   const Eigen::Isometry3d pose = toEigen(cam_to_world);
   // No place to fuse it at: NaN marched every ray from min_depth to max_depth a step at a time.
-  if (!pose.matrix().allFinite()) return;
-  if (!tracker_.placeAt(frame, pose)) return;
+  if (!pose.matrix().allFinite()) return false;
+  if (!tracker_.placeAt(frame, pose)) return false;
   StageTimes times;
   tracker_.fused(map_.integrateAt(frame, pose, times), times);
+  return true;
 }
 
 mrpt::poses::CPose3D TrackedMap::pose() const { return toMrpt(tracker_.pose()); }

@@ -365,7 +365,7 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
     while (read < poses.size() && frame.index > m.indices[read]) ++read;
     if (read == poses.size()) break;
     if (frame.index < m.indices[read]) continue;
-    if (m.fused[read]) map.integrateAt(frame, poses[read].pose), ++fused;
+    if (m.fused[read] && map.integrateAt(frame, poses[read].pose)) ++fused;
     ++read;
     if (progress) progress(read);
   }

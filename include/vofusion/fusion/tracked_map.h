@@ -42,8 +42,9 @@ class TrackedMap {
   void fuse(FusionResult& res);
 
   // Fuses a frame at a pose known from elsewhere (re-integration with loop-closed poses): the volume
-  // follows the camera as in tracking; no ICP, no ray cast. A pose that is not finite fuses nothing.
-  void integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
+  // follows the camera as in tracking; no ICP, no ray cast. Whether it was fused: a pose that is not
+  // finite, or a frame Tracker::placeAt cannot place, fuses nothing.
+  bool integrateAt(const Frame& frame, const mrpt::poses::CPose3D& cam_to_world);
 
   mrpt::poses::CPose3D pose() const;
   // Tracking found again elsewhere (relocalisation): Tracker::relocalise, and the model predicted from
