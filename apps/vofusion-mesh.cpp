@@ -1,6 +1,5 @@
 // vofusion-mesh: clean up any triangle mesh PLY with the [mesh] post-processing of vofusion.
 #include <cstdio>
-#include <filesystem>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -123,8 +122,7 @@ int body(int argc, char** argv) {
     const std::string why = "no face is left (fragments below [mesh] min_component_faces / min_component_area, "
                             "degenerate or duplicate faces)";
     // Cleaned in place (out is in): an empty result would have replaced the only copy of the mesh.
-    std::error_code ec;
-    if (std::filesystem::equivalent(in, out, ec)) throw InputError(in, why + "; the input is kept, not replaced by an empty mesh");
+    if (samePath(in, out)) throw InputError(in, why + "; the input is kept, not replaced by an empty mesh");
     printWarning(in + ": " + why + "; " + out + " is empty");
   }
   writeOutputs(cl, out, mesh, full, traj, report);

@@ -56,9 +56,7 @@ std::size_t zlibCompressInto(const void* data, std::size_t size, std::uint8_t* o
 
 bool zlibUncompress(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
   if (size == 0) return data_size == 0;
-  std::size_t got = 0;
-  return libdeflate_zlib_decompress(&decompressor(), data, data_size, out, size, &got) == LIBDEFLATE_SUCCESS &&
-         got == size;
+  return zlibInflate(data, data_size, out, size) == Inflated::Whole;
 }
 
 Inflated zlibInflate(const std::uint8_t* data, std::size_t data_size, void* out, std::size_t size) {
