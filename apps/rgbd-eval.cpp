@@ -1,6 +1,9 @@
 // rgbd-eval <groundtruth.txt> <estimate.txt> [--delta 1.0] [--max-dt 0.02] [--json] [--plot out.png]
 // The TUM benchmark's ATE and RPE, printed as the rows of the paper's Table 1.
+#include <algorithm>
+#include <cctype>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <string>
 
@@ -47,6 +50,10 @@ int body(int argc, char** argv) {
   const double max_dt = cl.number("--max-dt", 0.02, 0.0);
   const bool json = cl.flag("--json");
   const std::string plot = cl.value("--plot", "");
+  // The plot is a PNG's bytes: under another name (x.jpg) it passed for what it is not.
+  std::string ext = std::filesystem::path(plot).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (!plot.empty() && ext != ".png") throw InputError("--plot", "writes a PNG: give a .png name, got '" + plot + "'");
   const auto& pos = cl.positional();
   if (pos.size() != 2) throw InputError("usage", "expected <groundtruth.txt> <estimate.txt> (see --help)");
 

@@ -469,6 +469,9 @@ TEST(AppsIoBadInput, EvalBadFiles) {
   expectCleanFailure(app("rgbd-eval") + " " + dir + "/gt.txt " + dir + "/bad.txt" + plot, "bad.txt: line 2", outdir);
   expectCleanFailure(app("rgbd-eval") + " " + dir + "/gt.txt " + dir + "/nope.txt" + plot, "nope.txt: cannot open", outdir);
   expectCleanFailure(app("rgbd-eval") + " " + dir + "/gt.txt " + dir + "/far.txt" + plot, "far.txt: only 0 poses", outdir);
+  // A plot is a PNG: another name wrote PNG bytes under it.
+  expectCleanFailure(app("rgbd-eval") + " " + dir + "/gt.txt " + dir + "/gt.txt --plot " + outdir + "/p.jpg",
+                     "--plot: writes a PNG: give a .png name", outdir);
   std::string out;
   EXPECT_EQ(run(app("rgbd-eval") + " " + dir + "/gt.txt", &out), 2);
 }
