@@ -46,18 +46,13 @@ TsdfVolume::TsdfVolume(const TsdfParams& params, const Eigen::Vector3f& centre)
   n_ = params_.volume_voxels / kBrickEdge;
   slots_.assign(static_cast<std::size_t>(n_) * n_ * n_, -1);
   marks_.assign(slots_.size(), 0);
-  const float brick = kBrickEdge * params_.voxel_size;
   // Within the world model's keys, as shiftTo keeps it: placed beyond them, the first shift stored the
   // map's bricks under wrapped keys (tens of km away) and the volume never followed the camera again.
-  const long reach_lo = -WorldModel::kKeyReach, reach_hi = WorldModel::kKeyReach - n_ - 1;
   for (int i = 0; i < 3; ++i) {
-    const float q = centre[i] / brick;
-    const long o = std::isfinite(q) && std::fabs(q) < 1e12f ? std::lround(q) - n_ / 2 : reach_hi + 1;
-    if (o < reach_lo || o > reach_hi)
+    const long o = centredOrigin(centre[i]);
+    if (o < reachLo() || o > reachHi())
       throw std::invalid_argument("TsdfVolume: a start at (" + std::to_string(centre.x()) + ", " + std::to_string(centre.y()) +
-                                  ", " + std::to_string(centre.z()) + ") m is beyond the map's reach (" +
-                                  std::to_string(int(WorldModel::kKeyReach * double(brick) / 1000)) +
-                                  " km from the world's origin on each axis)");
+                                  ", " + std::to_string(centre.z()) + ") m is beyond the map's reach (" + reachText() + ")");
     origin_[i] = static_cast<int>(o);
   }
   slot_brick_.assign(slots_.size(), nullptr);
@@ -227,27 +222,32 @@ bool TsdfVolume::sdfAt(const Eigen::Vector3f& p, float& sdf_m) const {
   return true;
 }
 
+long TsdfVolume::centredOrigin(float metres) const {
+  const float q = metres / (kBrickEdge * params_.voxel_size);
+  if (!std::isfinite(q)) return reachHi() + 1;
+  return std::fabs(q) < 1e12f ? std::lround(q) - n_ / 2 : (q > 0 ? reachHi() + 1 : reachLo() - 1);
+}
+
+std::string TsdfVolume::reachText() const {
+  const double brick = kBrickEdge * params_.voxel_size;
+  return std::to_string(int(WorldModel::kKeyReach * brick / 1000)) + " km from the world's origin on each axis";
+}
+
 void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
-  const float brick = kBrickEdge * params_.voxel_size;
   Eigen::Vector3i o;
-  // The world model's keys hold bricks within kKeyReach of the world's origin (50 km at 6 mm voxels):
-  // past that the volume stops following, said once, rather than store bricks under another's key.
-  // (as load() takes a volume's origin back: its far corner within the keys too).
-  const long reach_lo = -WorldModel::kKeyReach, reach_hi = WorldModel::kKeyReach - n_ - 1;
+  // Past the world model's reach the volume stops following, said once, rather than store bricks
+  // under another's key.
   for (int i = 0; i < 3; ++i) {
-    const float q = point[i] / brick;
-    if (!std::isfinite(q)) {  // no place to follow: stay
+    if (!std::isfinite(point[i] / (kBrickEdge * params_.voxel_size))) {  // no place to follow: stay
       o[i] = origin_[i];
       continue;
     }
-    // Rounded in float as always (an origin a brick off would change every later frame's fusion).
-    const long wanted = std::fabs(q) < 1e12f ? std::lround(q) - n_ / 2 : (q > 0 ? reach_hi + 1 : reach_lo - 1);
-    if ((wanted < reach_lo || wanted > reach_hi) && !reach_warned_) {
-      printWarning("the camera left the map's reach (" + std::to_string(int(WorldModel::kKeyReach * double(brick) / 1000)) +
-                   " km from the world's origin on each axis): the volume follows it no further");
+    const long wanted = centredOrigin(point[i]);
+    if ((wanted < reachLo() || wanted > reachHi()) && !reach_warned_) {
+      printWarning("the camera left the map's reach (" + reachText() + "): the volume follows it no further");
       reach_warned_ = true;
     }
-    o[i] = static_cast<int>(std::clamp(wanted, reach_lo, reach_hi));
+    o[i] = static_cast<int>(std::clamp(wanted, reachLo(), reachHi()));
   }
   if (o == origin_) return;
   const auto inside = [&](const Eigen::Vector3i& c) {

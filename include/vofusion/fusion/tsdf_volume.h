@@ -153,6 +153,14 @@ class TsdfVolume {
   bool normalAt(PendingRay& r) const;
   void storeHits(PendingRay* rays, int n, RaycastMaps& maps, int y) const;
   cv::Vec3b colourAt(const Eigen::Vector3f& q) const;  // the nearest voxel's colour (BGR), black when none
+  // The world model's keys hold bricks within kKeyReach of the world's origin (50 km at 6 mm voxels):
+  // the origins (in bricks, each axis) whose far corner they hold too, as load() takes one back.
+  long reachLo() const { return -WorldModel::kKeyReach; }
+  long reachHi() const { return WorldModel::kKeyReach - n_ - 1; }
+  // The origin on one axis that centres the volume on `metres` there, rounded in float as always (an
+  // origin a brick off would change every later frame's fusion); past the reach when not finite or far.
+  long centredOrigin(float metres) const;
+  std::string reachText() const;  // "N km from the world's origin on each axis"
 
   TsdfParams params_;
   int n_;                        // bricks per edge
