@@ -277,6 +277,22 @@ TEST(Scene, PictureLeavesOutTheCeilingOnly) {
   EXPECT_FALSE(withoutCeiling(open_top, low_path, CPose3D()).has_value());
 }
 
+// The warm-up (the driver loaded and a throwaway render, on a thread of its own) changes nothing a
+// render after it draws: the same picture, byte for byte, as before it.
+TEST(Scene, ARenderAfterTheWarmUpDrawsTheSamePicture) {
+  const TriangleMesh mesh = test::boxRoom(4, 3, 2.5, 6);
+  const Trajectory est = roomPath(40);
+  const std::string dir = test::tempDir("scene_warm_up");
+  renderMeshPng(dir + "/before.png", mesh, &est, 320, 240);
+  { OffscreenRenderWarmUp warm_up; }
+  renderMeshPng(dir + "/after.png", mesh, &est, 320, 240);
+  const cv::Mat before = cv::imread(dir + "/before.png", cv::IMREAD_COLOR);
+  const cv::Mat after = cv::imread(dir + "/after.png", cv::IMREAD_COLOR);
+  ASSERT_FALSE(before.empty());
+  ASSERT_EQ(before.size(), after.size());
+  EXPECT_EQ(cv::norm(before, after, cv::NORM_INF), 0.0);
+}
+
 TEST(Scene, UnwritablePathIsAnInputErrorNamingIt) {
   const std::string path = "/nonexistent-dir/x/scene.3Dscene";
   try {

@@ -69,13 +69,14 @@ bool meshesByRegion(const OutputParams& p, const MeshCleanParams& mesh_params) {
 }
 
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshCleanParams& mesh_params, json& s,
-                         StagedOutputs& out, RegionPremesher* premeshed) {
+                         StagedOutputs& out, RegionPremesher* premeshed, const std::function<void()>& map_meshed) {
   // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
   const auto release_map = [&] {
     if (premeshed) premeshed->discard();  // the regions not taken: none is used after this
     if (rec.mapReleased()) return;
     rec.releaseMap();
     returnFreedHeap();
+    if (map_meshed) map_meshed();
   };
   TriangleMesh mesh;
   std::string streamed_raw;  // logged after mesh.ply, whose line then carries the meshing time

@@ -7,6 +7,7 @@
 #include <Eigen/Dense>
 #include <mrpt/img/CImage.h>
 #include <mrpt/opengl/CFBORender.h>
+#include <mrpt/opengl/CSetOfTriangles.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "vofusion/core/atomic_file.h"
@@ -177,5 +178,24 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   aimCamera(*scene, bounds, forward, width, height);
   writeRenderedPng(png, *scene, width, height);
 }
+
+OffscreenRenderWarmUp::OffscreenRenderWarmUp()
+    : thread_([] {
+        try {
+          mrpt::opengl::CFBORender fbo(16, 16);
+          mrpt::opengl::COpenGLScene scene;
+          auto triangle = mrpt::opengl::CSetOfTriangles::Create();
+          mrpt::opengl::TTriangle t;
+          t.vertex(1) = {1.f, 0.f, 0.f};
+          t.vertex(2) = {0.f, 1.f, 0.f};
+          triangle->insertTriangle(t);
+          scene.insert(triangle);
+          mrpt::img::CImage img;
+          fbo.render_RGB(scene, img);
+        } catch (...) {  // no OpenGL device: renderMeshPng says so
+        }
+      }) {}
+
+OffscreenRenderWarmUp::~OffscreenRenderWarmUp() { thread_.join(); }
 
 }  // namespace vofusion

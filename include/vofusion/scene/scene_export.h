@@ -14,6 +14,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -82,5 +83,21 @@ void exportScene(const std::string& path, const TriangleMesh& mesh, const Trajec
 // Written atomically as PNG; throws InputError(png, ...) on failure (including no EGL device).
 void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Trajectory* path, int width = 1024,
                    int height = 768, const std::optional<Eigen::Vector3d>& up_vector = std::nullopt);
+
+// The first off-screen render of a process loads the OpenGL driver (Mesa's llvmpipe: libLLVM) and
+// compiles its shaders, ~0.1 s; later ones find both done. This does that on a thread of its own with a
+// throwaway 16x16 render, to be started where a core is idle (vofusion: during the welded mesh's
+// one-core repair) before renderMeshPng. The destructor waits for it. Failures are ignored: the real
+// render reports them.
+class OffscreenRenderWarmUp {
+ public:
+  OffscreenRenderWarmUp();
+  ~OffscreenRenderWarmUp();
+  OffscreenRenderWarmUp(const OffscreenRenderWarmUp&) = delete;
+  OffscreenRenderWarmUp& operator=(const OffscreenRenderWarmUp&) = delete;
+
+ private:
+  std::thread thread_;
+};
 
 }  // namespace vofusion
