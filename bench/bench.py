@@ -225,7 +225,8 @@ def run_sequence(seq, args, command):
 
 
 def synthetic_sequences(args):
-    """Renders the synthetic sequences into <build>/bench-synthetic/ (kept while their arguments hold)."""
+    """Renders the synthetic sequences into <build>/bench-synthetic/ (kept while their arguments and the
+    simulator hold)."""
     simulate = os.path.join(args.build, "bin", "rgbd-simulate")
     root = os.path.join(args.build, "bench-synthetic")
     os.makedirs(root, exist_ok=True)
@@ -234,13 +235,17 @@ def synthetic_sequences(args):
         folder = os.path.join(root, name)
         cmd = [simulate, "--out", folder, "--frames", str(args.synthetic_frames)] + extra
         stamp = os.path.join(root, name + ".cmd")
-        if not (os.path.exists(stamp) and open(stamp).read() == " ".join(cmd) and os.path.isdir(folder)):
+        # The simulator's size and time too: a rebuilt rgbd-simulate renders anew (its earlier renders
+        # passed for this build's, with the same command line).
+        st = os.stat(simulate)
+        made_by = " ".join(cmd) + "\n%d %d" % (st.st_size, st.st_mtime_ns)
+        if not (os.path.exists(stamp) and open(stamp).read() == made_by and os.path.isdir(folder)):
             log("[%s] rendering: %s" % (name, " ".join(cmd)))
             if os.path.exists(folder):
                 subprocess.run(["rm", "-rf", folder], check=True)
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
             with open(stamp, "w") as f:
-                f.write(" ".join(cmd))
+                f.write(made_by)
         seqs.append(folder)
     return seqs
 

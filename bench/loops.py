@@ -73,14 +73,20 @@ def lap_end_error(gt_path, est_path):
 
 def render(build, root, seed, frames):
     path = os.path.join(root, "loop_s%d_f%d.rawlog" % (seed, frames))
-    if not os.path.exists(path):
+    simulate = os.path.join(build, "bin", "rgbd-simulate")
+    # Rendered again when the simulator was rebuilt (its size and time in a stamp beside the rawlog):
+    # an older rgbd-simulate's render passed for this build's.
+    st = os.stat(simulate)
+    made_by, stamp = "%s %d %d" % (simulate, st.st_size, st.st_mtime_ns), path + ".made-by"
+    if not (os.path.exists(path) and os.path.exists(stamp) and open(stamp).read() == made_by):
         # --overwrite: a rawlog deleted to force a new render leaves its images and ground truth beside it,
         # which rgbd-simulate would not replace.
-        cmd = [os.path.join(build, "bin", "rgbd-simulate"), "--scene", "loop", "--seed", str(seed),
-               "--frames", str(frames), "--out", path, "--overwrite"]
+        cmd = [simulate, "--scene", "loop", "--seed", str(seed), "--frames", str(frames), "--out", path, "--overwrite"]
         p = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         if p.returncode != 0:
             sys.exit("bench loops: rendering %s failed: %s" % (path, p.stderr.strip()[-2000:]))
+        with open(stamp, "w") as f:
+            f.write(made_by)
     return path
 
 

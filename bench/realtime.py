@@ -6,7 +6,9 @@
 For each shared sequence, the earlier build and this one run one after the other, N rounds (default 3)
 in alternating order, and each figure is the median of its rounds (this machine's speed drifts by
 ~25 %: only runs side by side in time compare, and one pair of 100-frame runs can come out either way):
-  - `vofusion <seq> --out o` (default config): frame-loop fps (summary.json), end-to-end fps (frames /
+  - `vofusion <seq> --out o` (default config): frame-loop fps (summary.json; builds without
+    seconds_before_frames, 618a78c's among them, counted the end's work in it: their progress line at
+    the loop's end), end-to-end fps (frames /
     wall time of the process, to the last output written), the start-up before the first frame, the
     time from the last frame to the last output against the frame loop's, ATE RMSE, peak RSS;
   - `vofusion-grab --replay <seq> --out o --live --no-gui` (recording included, at the recorded rate):
@@ -22,6 +24,7 @@ import argparse
 import gzip
 import json
 import os
+import re
 import shutil
 import statistics
 import subprocess
@@ -76,14 +79,30 @@ def offline(bin_dir, seq, out):
         sys.exit("vofusion failed, see " + out + ".log")
     with open(os.path.join(out, "summary.json")) as f:
         s = json.load(f)
-    frames, loop_s = s["frames"], s["seconds"]
+    frames, loop_s, loop_fps = s["frames"], s["seconds"], s["fps"]
     # Start-up is neither the frame loop nor the time after its last frame. Builds before summary.json
     # had seconds_before_frames: the wall time of `vofusion --help` (libraries loaded, no input opened).
     startup, by_help = s.get("seconds_before_frames"), False
     if startup is None:
         startup, by_help = help_seconds(bin_dir, out + ".help.log"), True
-    return {"loop_fps": s["fps"], "e2e_fps": frames / wall, "loop_s": loop_s, "startup_s": startup, "startup_by_help": by_help,
+        # Those builds' `seconds` and `fps` (618a78c's too) also held what came after the frame loop
+        # (rec.finish(), the loop-closed re-fusion, --save-volume); their progress line at the loop's end
+        # did not: its fps (0.1 fps steps, ~0.4 % at 25 fps) gives the frame loop.
+        loop_fps = frame_loop_fps_in_log(out + ".log") or loop_fps
+        loop_s = frames / loop_fps
+    return {"loop_fps": loop_fps, "e2e_fps": frames / wall, "loop_s": loop_s, "startup_s": startup, "startup_by_help": by_help,
             "tail_s": wall - startup - loop_s, "ate": s.get("ate", {}).get("rmse"), "rss": rss, "frames": frames}
+
+
+def frame_loop_fps_in_log(log_path):
+    """The fps of vofusion's progress line at the frame loop's end ("vofusion [joint] 100 frames in 4s
+    (23.5 fps)"), the first such line (a re-fusion's comes after it); None without one."""
+    with open(log_path, errors="replace") as f:
+        for line in f:
+            m = re.match(r"vofusion \[[a-z-]+\] \d+ frames in \S+ \(([0-9.]+) fps\)", line.split("\r")[-1])
+            if m and float(m.group(1)) > 0:
+                return float(m.group(1))
+    return None
 
 
 _help_seconds = {}
