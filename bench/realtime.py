@@ -167,6 +167,8 @@ def medians(runs):
             out[key] = max(r[key] for r in runs)
         elif isinstance(value, bool):
             out[key] = value
+        elif isinstance(value, int):  # a count: one round's (an even number of rounds gave x.5, shown as x)
+            out[key] = statistics.median_low(r[key] for r in runs)
         else:
             out[key] = median(r[key] for r in runs)
     return out
@@ -216,6 +218,9 @@ def main():
                 sensor = live(bins, as_sensor, os.path.join(work, "%s_%s_live_sensor" % (name, tag)))
                 r.update({"sensor_played": sensor["played"], "sensor_processed": sensor["processed"]})
                 r["tail_share"] = r["tail_s"] / r["loop_s"]
+                # Each round's own shares (a ratio of two medians mixed rounds).
+                r["live_share"] = r["processed"] / r["played"]
+                r["sensor_share"] = r["sensor_processed"] / r["sensor_played"]
                 runs[label].append(r)
         res = {label: medians(rs) for label, rs in runs.items()}
         b, t = res[rev], res["this build"]
@@ -232,12 +237,11 @@ def main():
                   "| start-up before the first frame, s | %s | %s | | |" % (startup(b), startup(t)),
                   "| tail after the last frame, s (share of the frame loop: the median of the rounds' own shares) | %.1f (%.0f %%) | %.1f (%.0f %%) | | <= 25 %% |" % (
                       b["tail_s"], 100 * b["tail_share"], t["tail_s"], 100 * t["tail_share"]),
-                  "| live: processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
-                      b["processed"], b["played"], 100.0 * b["processed"] / b["played"],
-                      t["processed"], t["played"], 100.0 * t["processed"] / t["played"]),
+                  "| live: processed / played (share: the median of the rounds' own) | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
+                      b["processed"], b["played"], 100.0 * b["live_share"], t["processed"], t["played"], 100.0 * t["live_share"]),
                   "| live as a sensor records it (colour PNG encoded, depth compressed): processed / played | %d / %d (%.0f %%) | %d / %d (%.0f %%) | | >= 95 %% |" % (
-                      b["sensor_processed"], b["sensor_played"], 100.0 * b["sensor_processed"] / b["sensor_played"],
-                      t["sensor_processed"], t["sensor_played"], 100.0 * t["sensor_processed"] / t["sensor_played"]),
+                      b["sensor_processed"], b["sensor_played"], 100.0 * b["sensor_share"],
+                      t["sensor_processed"], t["sensor_played"], 100.0 * t["sensor_share"]),
                   "| ATE RMSE, m | %s | %s | %s | within +2 %% |" % (fmt4(b["ate"]), fmt4(t["ate"]), ratio("ate")),
                   "| peak RSS, MiB | %.0f | %.0f | | <= 700 |" % (b["rss"], t["rss"]), ""]
     os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
