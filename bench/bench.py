@@ -228,6 +228,8 @@ def synthetic_sequences(args):
     """Renders the synthetic sequences into <build>/bench-synthetic/ (kept while their arguments and the
     simulator hold)."""
     simulate = os.path.join(args.build, "bin", "rgbd-simulate")
+    if not os.access(simulate, os.X_OK):  # its size and time stamp the renders, cached or not
+        sys.exit("bench: %s is not built (ninja -C %s rgbd-simulate), or --no-synthetic" % (simulate, args.build))
     root = os.path.join(args.build, "bench-synthetic")
     os.makedirs(root, exist_ok=True)
     seqs = []

@@ -74,6 +74,8 @@ def lap_end_error(gt_path, est_path):
 def render(build, root, seed, frames):
     path = os.path.join(root, "loop_s%d_f%d.rawlog" % (seed, frames))
     simulate = os.path.join(build, "bin", "rgbd-simulate")
+    if not os.access(simulate, os.X_OK):
+        sys.exit("bench loops: %s is not built (ninja -C %s rgbd-simulate)" % (simulate, build))
     # Rendered again when the simulator was rebuilt (its size and time in a stamp beside the rawlog):
     # an older rgbd-simulate's render passed for this build's.
     st = os.stat(simulate)

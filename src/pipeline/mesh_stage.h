@@ -19,8 +19,9 @@ bool meshesByRegion(const OutputParams& params, const MeshCleanParams& mesh_para
 
 // Meshes the map (region by region unless mesh_full.ply is asked for), releases it, and writes
 // mesh_raw.ply / mesh_full.ply / mesh.ply as asked; fills the mesh entries of s. Regions `premeshed`
-// made during the run are taken where they are still what the map gives. `map_meshed` is called once,
-// when the map is meshed and released, before the (one-core) repair of the welded mesh.
+// made during the run are taken where they are still what the map gives. `map_meshed` is called at most
+// once, when the map is meshed and released: before the welded mesh's one-core repair (region by
+// region), or before the whole mesh's cleaning.
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& params, const MeshCleanParams& mesh_params,
                          nlohmann::json& s, StagedOutputs& out, RegionPremesher* premeshed = nullptr,
                          const std::function<void()>& map_meshed = {});

@@ -287,8 +287,8 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
 
     returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
     TriangleMesh mesh;
-    // mesh.png's renderer readied on the core the welded mesh's repair leaves idle (~0.1 s of the
-    // picture's time after the last frame otherwise).
+    // mesh.png's renderer readied once the map is meshed, on the core the welded mesh's repair leaves
+    // idle (~0.1 s of the picture's time after the last frame otherwise).
     std::optional<OffscreenRenderWarmUp> renderer_ready;
     if (m.params.write_mesh)
       mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed, [&] { renderer_ready.emplace(); });

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <system_error>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -179,23 +180,33 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   writeRenderedPng(png, *scene, width, height);
 }
 
-OffscreenRenderWarmUp::OffscreenRenderWarmUp()
-    : thread_([] {
-        try {
-          mrpt::opengl::CFBORender fbo(16, 16);
-          mrpt::opengl::COpenGLScene scene;
-          auto triangle = mrpt::opengl::CSetOfTriangles::Create();
-          mrpt::opengl::TTriangle t;
-          t.vertex(1) = {1.f, 0.f, 0.f};
-          t.vertex(2) = {0.f, 1.f, 0.f};
-          triangle->insertTriangle(t);
-          scene.insert(triangle);
-          mrpt::img::CImage img;
-          fbo.render_RGB(scene, img);
-        } catch (...) {  // no OpenGL device: renderMeshPng says so
-        }
-      }) {}
+namespace {
+void renderOneTriangle() {
+  try {
+    mrpt::opengl::CFBORender fbo(16, 16);
+    mrpt::opengl::COpenGLScene scene;
+    auto triangle = mrpt::opengl::CSetOfTriangles::Create();
+    mrpt::opengl::TTriangle t;
+    t.vertex(1) = {1.f, 0.f, 0.f};
+    t.vertex(2) = {0.f, 1.f, 0.f};
+    triangle->insertTriangle(t);
+    scene.insert(triangle);
+    mrpt::img::CImage img;
+    fbo.render_RGB(scene, img);
+  } catch (...) {  // no OpenGL device: renderMeshPng says so
+  }
+}
+}  // namespace
 
-OffscreenRenderWarmUp::~OffscreenRenderWarmUp() { thread_.join(); }
+OffscreenRenderWarmUp::OffscreenRenderWarmUp() {
+  try {
+    thread_ = std::thread(renderOneTriangle);
+  } catch (const std::system_error&) {  // no thread to be had: the picture starts cold, the run goes on
+  }
+}
+
+OffscreenRenderWarmUp::~OffscreenRenderWarmUp() {
+  if (thread_.joinable()) thread_.join();
+}
 
 }  // namespace vofusion
