@@ -694,15 +694,16 @@ TEST(MarchingCubes, MeshByRegionSimplifiesWithClosedSeamsAndStreamsTheRawMesh) {
   params.max_simplify_error = 0.003;
   const std::string raw_path = testing::TempDir() + "/mesh_by_region_raw.ply";
   std::map<int, std::size_t> told;  // per pass: regions reported
-  std::size_t told_of = 0, regions_read_at_done = 0;
+  std::size_t told_of = 0, regions_read_at_done = 0, welded_faces_told = 0;
   int done_calls = 0;
   const RegionMeshResult r = meshByRegion(
       [&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); }, params,
       raw_path, [&](int pass, std::size_t done, std::size_t of) { told[pass] = done, told_of = of; },
-      [&] { ++done_calls, regions_read_at_done = told[2]; });
+      [&](std::size_t faces) { ++done_calls, regions_read_at_done = told[2], welded_faces_told = faces; });
   ASSERT_TRUE(r.report.success) << r.report.failure;
   EXPECT_EQ(done_calls, 1);  // once, after the last region was read (the source may be freed then)
   EXPECT_EQ(regions_read_at_done, told[2]);
+  EXPECT_EQ(welded_faces_told, r.report.steps.front().faces_after);  // the regions' simplified faces, welded
   EXPECT_EQ(told.count(1), 1u);  // fragments judged: a first pass (min_component_faces is on by default)
   EXPECT_GE(told[2], r.regions);  // ordinal + 1 of the last region with faces
   EXPECT_LE(told[2], told_of);

@@ -484,7 +484,7 @@ void closeRegionsStep(RegionMeshResult& out, const RegionMerge& merge, MeshClean
 }  // namespace
 
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
-                              const MeshProgress& progress, const std::function<void()>& regions_done,
+                              const MeshProgress& progress, const std::function<void(std::size_t)>& regions_done,
                               const PremeshedLookup& premeshed) {
   const auto told = [&](int pass, const fusion::RegionMesh& r) {
     if (progress) progress(pass, r.ordinal + 1, r.regions);
@@ -545,7 +545,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     raw.reset();
   }
   step.vertices_before = out.raw_vertices;
-  if (regions_done) regions_done();
+  if (regions_done) regions_done(out.mesh.faces.size());
   // The welded mesh's repair can be the run's peak (CGAL's mesh beside the merged one): the seam
   // indexes of both passes go first, and the merged mesh's spare capacity.
   const double mean_raw_face_area = fragments ? fragments->meanFaceArea() : 0.0;

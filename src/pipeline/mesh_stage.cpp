@@ -44,7 +44,7 @@ class PassProgress {
 // The map meshed, repaired and simplified one region at a time (mesh_by_region.h), its statistics into
 // the summary; `streamed_raw`: mesh_raw.ply's line, when it was streamed.
 TriangleMesh meshRegionByRegion(Reconstruction& rec, const OutputParams& p, const MeshCleanParams& mesh_params, json& s,
-                                StagedOutputs& out, RegionPremesher* premeshed, const std::function<void()>& release_map,
+                                StagedOutputs& out, RegionPremesher* premeshed, const std::function<void(std::size_t)>& release_map,
                                 std::string& streamed_raw) {
   const auto source = [&](const std::function<void(fusion::RegionMesh&)>& sink) {
     rec.extractMeshByRegion(mesh_params.region_bricks, sink);
@@ -69,14 +69,15 @@ bool meshesByRegion(const OutputParams& p, const MeshCleanParams& mesh_params) {
 }
 
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshCleanParams& mesh_params, json& s,
-                         StagedOutputs& out, RegionPremesher* premeshed, const std::function<void()>& map_meshed) {
+                         StagedOutputs& out, RegionPremesher* premeshed,
+                         const std::function<void(std::size_t)>& map_meshed) {
   // Once meshed the map goes, before the welded mesh's repair, the scene and the pictures.
-  const auto release_map = [&] {
+  const auto release_map = [&](std::size_t faces) {
     if (premeshed) premeshed->discard();  // the regions not taken: none is used after this
     if (rec.mapReleased()) return;
     rec.releaseMap();
     returnFreedHeap();
-    if (map_meshed) map_meshed();
+    if (map_meshed) map_meshed(faces);
   };
   TriangleMesh mesh;
   std::string streamed_raw;  // logged after mesh.ply, whose line then carries the meshing time
@@ -88,7 +89,7 @@ TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& p, const MeshC
     mesh = rec.extractMesh();
     s["mesh_raw"] = meshJson(mesh);
   }
-  release_map();
+  release_map(mesh.faces.size());
   if (!by_region && p.save_raw_mesh) {
     writePly(out.path("mesh_raw.ply"), mesh);
     out.wrote("mesh_raw.ply", std::to_string(mesh.faces.size()) + " faces");

@@ -20,10 +20,10 @@ bool meshesByRegion(const OutputParams& params, const MeshCleanParams& mesh_para
 // Meshes the map (region by region unless mesh_full.ply is asked for), releases it, and writes
 // mesh_raw.ply / mesh_full.ply / mesh.ply as asked; fills the mesh entries of s. Regions `premeshed`
 // made during the run are taken where they are still what the map gives. `map_meshed` is called at most
-// once, when the map is meshed and released: before the welded mesh's one-core repair (region by
-// region), or before the whole mesh's cleaning.
+// once, when the map is meshed and released, with the faces of the mesh about to be cleaned: before the
+// welded mesh's one-core repair (region by region), or before the whole mesh's cleaning.
 TriangleMesh writeMeshes(Reconstruction& rec, const OutputParams& params, const MeshCleanParams& mesh_params,
                          nlohmann::json& s, StagedOutputs& out, RegionPremesher* premeshed = nullptr,
-                         const std::function<void()>& map_meshed = {});
+                         const std::function<void(std::size_t faces)>& map_meshed = {});
 
 }  // namespace vofusion

@@ -30,9 +30,9 @@ constexpr double kFrameRpeDelta = 0.05;  // s
 // cost at most 32 MiB more than one after the other: on rpy_first100 (176 k faces) side by side
 // costs +15 MiB of peak RSS, while the long walk's 996 k faces lifted its peak 556 -> 679 MiB
 // (~130 B a face; bench/results/2026-12-02-tail.md).
-bool pictureBesideScene(const TriangleMesh& mesh) {
+bool pictureBesideScene(std::size_t faces) {
   constexpr double kExtraBytesPerFace = 130.0, kMaxExtraBytes = 32.0 * (1 << 20);
-  return kExtraBytesPerFace * double(mesh.faces.size()) <= kMaxExtraBytes;
+  return kExtraBytesPerFace * double(faces) <= kMaxExtraBytes;
 }
 
 // A recording as titles name it: its folder or file name ("rgbd_dataset_freiburg1_xyz", "loop7.rawlog",
@@ -243,7 +243,7 @@ void RunRecorder::Impl::writeScene(const TriangleMesh& mesh, const Reconstructio
   // deferred: rendered by get(), after the scene. The render takes its own copy of the path (reading a
   // CPose3D's angles fills its cache) and its file name. `png` is declared after all it reads: if the
   // scene throws, its destructor waits for a render in flight first.
-  const bool beside = !mesh.empty() && pictureBesideScene(mesh);
+  const bool beside = !mesh.empty() && pictureBesideScene(mesh.faces.size());
   std::future<void> png;
   if (!mesh.empty())
     png = std::async(beside ? std::launch::async | std::launch::deferred : std::launch::deferred,
@@ -288,10 +288,14 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
     TriangleMesh mesh;
     // mesh.png's renderer readied once the map is meshed, on the core the welded mesh's repair leaves
-    // idle (~0.1 s of the picture's time after the last frame otherwise).
+    // idle (~0.1 s of the picture's time after the last frame otherwise), where the picture will be
+    // rendered beside the scene: the driver then in memory at the welded repair's peak lifted the
+    // 300-frame loop scene's (1.6 M faces) 624-630 -> 666 MiB.
     std::optional<OffscreenRenderWarmUp> renderer_ready;
-    if (m.params.write_mesh)
-      mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed, [&] { renderer_ready.emplace(); });
+    const auto readyRenderer = [&](std::size_t faces) {
+      if (pictureBesideScene(faces)) renderer_ready.emplace();
+    };
+    if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed, readyRenderer);
     else rec.releaseMap();
     renderer_ready.reset();  // before the picture's own render: one EGL start-up at a time
     m.writeScene(mesh, rec, gt_in_map, s, out);
