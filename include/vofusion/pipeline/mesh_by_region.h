@@ -62,10 +62,12 @@ using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t 
 // Throws on I/O errors; a region CGAL fails on is kept unsimplified (counted and said in
 // report.warning: report.success and report.failure are the welded mesh's cleaning's).
 // `regions_done` runs once the last region was read, before the welded mesh is cleaned, told its faces
-// (simplified): the caller can free what the regions came from. `premeshed`: a region it has, made from the same input, is
-// taken instead of simplifying it again (the result is the same: simplifyRegion is deterministic).
+// (simplified): the caller can free what the regions came from. `premeshed`: a region it has, made
+// from the same input, is taken instead of simplifying it again (the result is the same:
+// simplifyRegion is deterministic).
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "",
-                              const MeshProgress& progress = {}, const std::function<void(std::size_t welded_faces)>& regions_done = {},
+                              const MeshProgress& progress = {},
+                              const std::function<void(std::size_t welded_faces)>& regions_done = {},
                               const PremeshedLookup& premeshed = {});
 
 }  // namespace vofusion
