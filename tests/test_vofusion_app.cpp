@@ -194,6 +194,23 @@ TEST(VofusionApp, SyntheticRunWritesEveryOutput) {
   const double before_frames = summary["seconds_before_frames"].get<double>();
   EXPECT_GT(before_frames, 0.0);
   EXPECT_LE(before_frames + summary["seconds"].get<double>(), wall + 0.02);
+  // After the frames, file by file in the order written, up to summary.json's own: the time each took
+  // since the one before, together within what the run had left.
+  ASSERT_TRUE(summary.contains("output_seconds")) << summary.dump(2);
+  std::vector<std::string> files;
+  double after_frames = 0.0;
+  for (const auto& o : summary["output_seconds"]) {
+    files.push_back(o["file"].get<std::string>());
+    EXPECT_GE(o["seconds_since_previous"].get<double>(), 0.0) << o.dump();
+    after_frames += o["seconds_since_previous"].get<double>();
+  }
+  const std::vector<std::string> first_files{"trajectory.txt", "trajectory_fused.txt", "trajectory_tracked.txt", "trajectory.png"};
+  ASSERT_GE(files.size(), first_files.size() + 3) << summary["output_seconds"].dump();
+  EXPECT_TRUE(std::equal(first_files.begin(), first_files.end(), files.begin())) << summary["output_seconds"].dump();
+  for (const char* f : {"mesh_full.ply", "mesh.ply", "scene.3Dscene", "mesh.png"})
+    EXPECT_NE(std::find(files.begin(), files.end(), f), files.end()) << f << ": " << summary["output_seconds"].dump();
+  EXPECT_EQ(std::find(files.begin(), files.end(), "summary.json"), files.end());  // written after it was
+  EXPECT_LE(before_frames + summary["seconds"].get<double>() + after_frames, wall + 0.02);
   ASSERT_TRUE(summary.contains("ate")) << summary.dump(2);  // the synthetic source knows its ground truth
   // The 12 frames move up to ~15 cm: a camera held still would score ~4 cm after the alignment.
   EXPECT_LT(summary["ate"]["rmse"].get<double>(), 0.005);

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "vofusion/core/atomic_file.h"
@@ -43,8 +44,12 @@ class StagedOutputs {
     log_lines_.push_back(line);
     if (staged) names_.push_back(name);
     written_.push_back(name);
+    seconds_.emplace_back(name, std::chrono::duration<double>(now - last_).count());
     last_ = now;
   }
+  // Each file written so far and the seconds since the one before it (the first: since the outputs
+  // began, after the last frame), as the log lines say them.
+  const std::vector<std::pair<std::string, double>>& secondsEach() const { return seconds_; }
   // Of the files a run may write (`every`), those in the folder that this run did not write: an
   // earlier run's, left as they were (nothing written is removed) but no longer this folder's results.
   std::vector<std::string> leftFromEarlier(const std::vector<std::string>& every) const {
@@ -80,6 +85,7 @@ class StagedOutputs {
   AtomicPath staging_;
   std::chrono::steady_clock::time_point last_;
   std::vector<std::string> names_, written_, log_lines_;
+  std::vector<std::pair<std::string, double>> seconds_;
 };
 
 }  // namespace vofusion
