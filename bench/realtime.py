@@ -10,7 +10,8 @@ in alternating order, and each figure is the median of its rounds (this machine'
     seconds_before_frames, 618a78c's among them, counted the end's work in it: their progress line at
     the loop's end), end-to-end fps (frames /
     wall time of the process, to the last output written), the start-up before the first frame, the
-    time from the last frame to the last output against the frame loop's, ATE RMSE, peak RSS;
+    time from the last frame to the last output against the frame loop's (and its parts: summary.json
+    output_seconds, where the build writes it), ATE RMSE, peak RSS;
   - `vofusion-grab --replay <seq> --out o --live --no-gui` (recording included, at the recorded rate):
     frames processed of those played;
   - the same replay of the sequence as an uncompressed rawlog with its images inside (`tum2rawlog
@@ -92,8 +93,12 @@ def offline(bin_dir, seq, out):
         if loop_fps is None:
             sys.exit("bench realtime: no frame-loop progress line in %s (its summary's fps counts the end's work)" % (out + ".log"))
         loop_s = frames / loop_fps
+    # The tail's parts, where the build says them (summary.json output_seconds): mesh.ply's holds the meshing.
+    parts = {o["file"]: o["seconds_since_previous"] for o in s.get("output_seconds", [])}
     return {"loop_fps": loop_fps, "e2e_fps": frames / wall, "loop_s": loop_s, "startup_s": startup, "startup_by_help": by_help,
-            "tail_s": wall - startup - loop_s, "ate": s.get("ate", {}).get("rmse"), "rss": rss, "frames": frames}
+            "tail_s": wall - startup - loop_s, "ate": s.get("ate", {}).get("rmse"), "rss": rss, "frames": frames,
+            "tail_mesh_s": parts.get("mesh.ply"), "tail_scene_s": parts.get("scene.3Dscene"),
+            "tail_picture_s": parts.get("mesh.png")}
 
 
 def frame_loop_fps_in_log(log_path):
@@ -142,6 +147,12 @@ def sensor_rawlog(bin_dir, seq, path):
     if os.path.exists(path + ".gz.groundtruth.txt"):  # tum2rawlog's companion (a sequence with ground truth);
         os.remove(path + ".gz.groundtruth.txt")       # the rawlog holds the ground truth too
     return path
+
+
+def tail_parts(r):
+    """'meshing / scene / picture' seconds of the tail, or "-" for a build whose summary has no output_seconds."""
+    parts = (r["tail_mesh_s"], r["tail_scene_s"], r["tail_picture_s"])
+    return "-" if all(x is None for x in parts) else " / ".join("-" if x is None else "%.2f" % x for x in parts)
 
 
 def fmt4(x):
@@ -246,6 +257,8 @@ def main():
                   "| start-up before the first frame, s | %s | %s | | |" % (startup(b), startup(t)),
                   "| tail after the last frame, s (share of the frame loop: the median of the rounds' own shares) | %.1f (%.0f %%) | %.1f (%.0f %%) | | <= 25 %% |" % (
                       b["tail_s"], 100 * b["tail_share"], t["tail_s"], 100 * t["tail_share"]),
+                  "| tail's parts, s: meshing to mesh.ply / scene.3Dscene / mesh.png after it (summary.json output_seconds) | %s | %s | | |" % (
+                      tail_parts(b), tail_parts(t)),
                   "| live: processed / played (the round of the median share) | %s | %s | | >= 95 %% |" % (
                       live_row(runs[rev], "processed", "played", "live_share"),
                       live_row(runs["this build"], "processed", "played", "live_share")),
