@@ -238,7 +238,7 @@ void TsdfVolume::shiftTo(const Eigen::Vector3f& point) {
   // Past the world model's reach the volume stops following, said once, rather than store bricks
   // under another's key.
   for (int i = 0; i < 3; ++i) {
-    if (!std::isfinite(point[i] / (kBrickEdge * params_.voxel_size))) {  // no place to follow: stay
+    if (!std::isfinite(point[i])) {  // no place to follow: stay
       o[i] = origin_[i];
       continue;
     }

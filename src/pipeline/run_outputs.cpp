@@ -302,11 +302,11 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
 
     s["peak_memory_mib"] = peakMemoryMiB();
     s["heap_huge_pages"] = heapAsksForHugePages();  // the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
-    // A name that is no UTF-8 (a Latin-1 folder) is written with U+FFFD: strict, the writer threw and the run lost every output.
     // Where the time after the last frame went, file by file (mesh.ply's includes the meshing, which
     // mesh_clean's steps break down); summary.json's own and poses.rawlog's come after it.
     for (const auto& [name, seconds] : out.secondsEach())
       s["output_seconds"].push_back({{"file", name}, {"seconds_since_previous", seconds}});
+    // A name that is no UTF-8 (a Latin-1 folder) is written with U+FFFD: strict, the writer threw and the run lost every output.
     const auto writeSummary = [&] {
       writeFileAtomically(out.path("summary.json"), s.dump(2, ' ', false, json::error_handler_t::replace) + "\n");
     };

@@ -43,7 +43,6 @@ class StagedOutputs {
                   std::chrono::duration<double>(now - last_).count());
     log_lines_.push_back(line);
     if (staged) names_.push_back(name);
-    written_.push_back(name);
     seconds_.emplace_back(name, std::chrono::duration<double>(now - last_).count());
     last_ = now;
   }
@@ -56,8 +55,8 @@ class StagedOutputs {
     std::vector<std::string> left;
     for (const std::string& name : every) {
       std::error_code ec;
-      if (std::find(written_.begin(), written_.end(), name) == written_.end() &&
-          std::filesystem::exists(final_path_(name), ec))
+      const bool written = std::any_of(seconds_.begin(), seconds_.end(), [&](const auto& w) { return w.first == name; });
+      if (!written && std::filesystem::exists(final_path_(name), ec))
         left.push_back(name);
     }
     return left;
@@ -84,8 +83,8 @@ class StagedOutputs {
   std::function<std::string(const std::string&)> final_path_;
   AtomicPath staging_;
   std::chrono::steady_clock::time_point last_;
-  std::vector<std::string> names_, written_, log_lines_;
-  std::vector<std::pair<std::string, double>> seconds_;
+  std::vector<std::string> names_, log_lines_;
+  std::vector<std::pair<std::string, double>> seconds_;  // every file written (staged or not), in order
 };
 
 }  // namespace vofusion
