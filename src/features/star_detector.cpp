@@ -115,21 +115,76 @@ void keepStronger(int n, const int* vin, const int* vout, float inv_inner, float
   }
 }
 
-// Per-pixel strongest response across scales and the (signed, see below) scale that gave it.
-int computeResponses(const cv::Mat& img, int max_size, cv::Mat& responses, cv::Mat& sizes) {
-  const int rows = img.rows, cols = img.cols;
-  // The next pattern is taken while its border leaves a response inside the image (responses need
-  // rows and cols above twice the border). OpenCV's test (border < min(rows, cols)) took patterns
-  // whose border left none: an image of 138 px or less on a side gave no keypoint at all (160x120).
+// How many patterns an image takes: the next one while its border leaves a response inside the image
+// (responses need rows and cols above twice the border). OpenCV's test (border < min(rows, cols)) took
+// patterns whose border left none: an image of 138 px or less on a side gave no keypoint at all (160x120).
+int patternsFor(int rows, int cols, int max_size) {
   int npatterns = 0;
   while (npatterns < kNumPairs - 1 && !(kSizes[kPairs[npatterns][0]] >= max_size ||
                                         2 * (kSizes[kPairs[npatterns + 1][0]] + kSizes[kPairs[npatterns + 1][0]] / 2) >=
                                             std::min(rows, cols)))
     ++npatterns;
-  npatterns += 1;  // the pattern that reaches max_size is included
-  const int max_idx = kPairs[npatterns - 1][0];
-  const int border = kSizes[max_idx] + kSizes[max_idx] / 2;
+  return npatterns + 1;  // the pattern that reaches max_size is included
+}
 
+// What the row loop needs of the filters and patterns: each filter's size tag, each pattern's inverse
+// inner and ring areas.
+struct Patterns {
+  int count = 0, max_idx = 0;
+  int size_tag[kMaxFilters];
+  float inv_outer[kNumPairs], inv_inner[kNumPairs];
+
+  explicit Patterns(int npatterns) : count(npatterns), max_idx(kPairs[npatterns - 1][0]) {
+    int area[kMaxFilters];
+    for (int i = 0; i <= max_idx; ++i) {
+      const int n = kSizes[i], t = n + n / 2;
+      area[i] = (2 * n + 1) * (2 * n + 1) + t * t + (t + 1) * (t + 1);
+      size_tag[i] = n;
+    }
+    // Scales at the ends of the range are tagged negative: their extrema are not localised in scale.
+    size_tag[0] = -size_tag[0];
+    size_tag[1] = -size_tag[1];
+    size_tag[max_idx] = -size_tag[max_idx];
+    for (int p = 0; p < count; ++p) {
+      const int inner = area[kPairs[p][1]], outer = area[kPairs[p][0]] - inner;
+      inv_outer[p] = 1.f / outer;
+      inv_inner[p] = 1.f / inner;
+    }
+  }
+};
+
+// Row y's strongest response in [x0, cols - x0) and its size tag, from the upright and tilted integrals.
+void responseRow(const cv::Mat& sum, const TiltedIntegrals& ti, const Patterns& pat, int y, int x0, float* r, short* sz) {
+  const int n = sum.cols - 1 - 2 * x0;
+  // Whole row at a time, one filter, then one pattern after the other: contiguous loops the
+  // compiler vectorises (per pixel over the filters it could not; same sums, same order).
+  // The executing thread's buffers, kept from row to row: filterSums writes every value (zeroing
+  // them for each row was a quarter of STAR's instructions under callgrind, xyz_first300).
+  thread_local std::vector<int> vals, best_size;
+  vals.resize(static_cast<std::size_t>(pat.max_idx + 1) * n);
+  for (int i = 0; i <= pat.max_idx; ++i) {  // each filter's 8 integral-image corners along the row
+    const int k = kSizes[i], t = k + k / 2;
+    filterSums(n, sum.ptr<int32_t>(y + k + 1) + k + 1 + x0, sum.ptr<int32_t>(y - k) + k + 1 + x0,
+               sum.ptr<int32_t>(y + k + 1) - k + x0, sum.ptr<int32_t>(y - k) - k + x0, ti.T(0, y + t) + x0,
+               ti.T(0, y - t - 1) + x0, ti.F(-t, y - 1) + x0, ti.F(t + 1, y - 1) + x0,
+               &vals[static_cast<std::size_t>(i) * n]);
+  }
+  float* best = r + x0;
+  best_size.assign(n, 0);
+  std::fill(best, best + n, 0.f);
+  for (int p = 0; p < pat.count; ++p) {
+    const int* vin = &vals[static_cast<std::size_t>(kPairs[p][1]) * n];
+    const int* vout = &vals[static_cast<std::size_t>(kPairs[p][0]) * n];
+    keepStronger(n, vin, vout, pat.inv_inner[p], pat.inv_outer[p], pat.size_tag[kPairs[p][0]], best, best_size.data());
+  }
+  for (int x = 0; x < n; ++x) sz[x0 + x] = static_cast<short>(best_size[x]);
+}
+
+// Per-pixel strongest response across scales and the (signed, see Patterns) scale that gave it.
+int computeResponses(const cv::Mat& img, int max_size, cv::Mat& responses, cv::Mat& sizes) {
+  const int rows = img.rows, cols = img.cols;
+  const Patterns pat(patternsFor(rows, cols, max_size));
+  const int border = kSizes[pat.max_idx] + kSizes[pat.max_idx] / 2;
   responses = cv::Mat::zeros(rows, cols, CV_32F);
   sizes = cv::Mat::zeros(rows, cols, CV_16S);
   if (rows <= 2 * border || cols <= 2 * border) return border;
@@ -138,64 +193,8 @@ int computeResponses(const cv::Mat& img, int max_size, cv::Mat& responses, cv::M
   cv::integral(img, sum, CV_32S);
   TiltedIntegrals ti;
   computeTilted(img, ti);
-
-  int area[kMaxFilters], size_tag[kMaxFilters];
-  for (int i = 0; i <= max_idx; ++i) {
-    const int n = kSizes[i], t = n + n / 2;
-    area[i] = (2 * n + 1) * (2 * n + 1) + t * t + (t + 1) * (t + 1);
-    size_tag[i] = n;
-  }
-  // Scales at the ends of the range are tagged negative: their extrema are not localised in scale.
-  size_tag[0] = -size_tag[0];
-  size_tag[1] = -size_tag[1];
-  size_tag[max_idx] = -size_tag[max_idx];
-  float inv_outer[kNumPairs], inv_inner[kNumPairs];
-  for (int p = 0; p < npatterns; ++p) {
-    const int inner = area[kPairs[p][1]], outer = area[kPairs[p][0]] - inner;
-    inv_outer[p] = 1.f / outer;
-    inv_inner[p] = 1.f / inner;
-  }
-
-  parallelFor(border, rows - border, [&](int y) {
-    float* r = responses.ptr<float>(y);
-    short* sz = sizes.ptr<short>(y);
-    // Row pointers for every filter's 8 corners.
-    const int32_t *b0[kMaxFilters], *b1[kMaxFilters], *b2[kMaxFilters], *b3[kMaxFilters];
-    const int32_t *t0[kMaxFilters], *t1[kMaxFilters], *f0[kMaxFilters], *f1[kMaxFilters];
-    for (int i = 0; i <= max_idx; ++i) {
-      const int n = kSizes[i], t = n + n / 2;
-      b0[i] = sum.ptr<int32_t>(y + n + 1) + n + 1;
-      b1[i] = sum.ptr<int32_t>(y - n) + n + 1;
-      b2[i] = sum.ptr<int32_t>(y + n + 1) - n;
-      b3[i] = sum.ptr<int32_t>(y - n) - n;
-      t0[i] = ti.T(0, y + t);
-      t1[i] = ti.T(0, y - t - 1);
-      f0[i] = ti.F(-t, y - 1);
-      f1[i] = ti.F(t + 1, y - 1);
-    }
-    // Whole row at a time, one filter, then one pattern after the other: contiguous loops the
-    // compiler vectorises (per pixel over the filters it could not; same sums, same order).
-    const int x0 = border, n = cols - 2 * border;
-    // The executing thread's buffers, kept from row to row: filterSums writes every value (zeroing
-    // them for each row was a quarter of STAR's instructions under callgrind, xyz_first300).
-    thread_local std::vector<int> vals, best_size;
-    vals.resize(static_cast<std::size_t>(max_idx + 1) * n);
-    for (int i = 0; i <= max_idx; ++i) {
-      int* v = &vals[static_cast<std::size_t>(i) * n];
-      const int32_t *B0 = b0[i] + x0, *B1 = b1[i] + x0, *B2 = b2[i] + x0, *B3 = b3[i] + x0;
-      const int32_t *T0 = t0[i] + x0, *T1 = t1[i] + x0, *F0 = f0[i] + x0, *F1 = f1[i] + x0;
-      filterSums(n, B0, B1, B2, B3, T0, T1, F0, F1, v);
-    }
-    float* best = r + x0;
-    best_size.assign(n, 0);
-    std::fill(best, best + n, 0.f);
-    for (int p = 0; p < npatterns; ++p) {
-      const int* vin = &vals[static_cast<std::size_t>(kPairs[p][1]) * n];
-      const int* vout = &vals[static_cast<std::size_t>(kPairs[p][0]) * n];
-      keepStronger(n, vin, vout, inv_inner[p], inv_outer[p], size_tag[kPairs[p][0]], best, best_size.data());
-    }
-    for (int x = 0; x < n; ++x) sz[x0 + x] = static_cast<short>(best_size[x]);
-  });
+  parallelFor(border, rows - border,
+              [&](int y) { responseRow(sum, ti, pat, y, border, responses.ptr<float>(y), sizes.ptr<short>(y)); });
   return border;
 }
 
