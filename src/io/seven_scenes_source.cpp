@@ -91,30 +91,7 @@ bool parseSevenScenesPose(const std::string& text, const std::string& origin, mr
 SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOptions& opts) : folder_(folder) {
   std::error_code ec;
   if (!fs::is_directory(folder, ec)) throw InputError(folder, "no such folder");
-  try {
-    for (const auto& e : fs::directory_iterator(folder)) {
-      const std::string n = e.path().filename().string();
-      std::smatch m;
-      if (!std::regex_match(n, m, kDepthName)) continue;
-      Entry en;
-      en.stem = (fs::path(folder) / n.substr(0, n.find('.'))).string();
-      en.number = std::stoi(m[1].str());
-      en.colour = colourFor(en.stem);  // empty: missing, that frame's problem when it is read
-      frames_.push_back(std::move(en));
-    }
-  } catch (const fs::filesystem_error& e) {  // a folder that can be stat'ed but not listed
-    throw InputError(folder, "folder cannot be read (" + e.code().message() + ")");
-  }
-  if (frames_.empty()) throw InputError(folder, "folder holds no 7-Scenes frames (frame-XXXXXX.depth.png)");
-  std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });
-  // frame-3 beside frame-000003: one frame twice, at one time (the trajectory held it twice).
-  const auto twin = std::adjacent_find(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number == b.number; });
-  if (twin != frames_.end())
-    throw InputError(folder, "frames " + fs::path(twin->stem).filename().string() + " and " +
-                                 fs::path(std::next(twin)->stem).filename().string() + " have one number: which is frame " +
-                                 std::to_string(twin->number) + "?");
-  if (opts.max_frames > 0 && frames_.size() > opts.max_frames) frames_.resize(opts.max_frames);
-
+  listFrames(opts);
   // The first frames' colour images give the size (recordingImageSize; a damaged one is its own frame's problem).
   std::vector<std::string> colours;
   for (std::size_t i = 0; i < std::min(frames_.size(), kFramesForImageSize); ++i) colours.push_back(frames_[i].colour);
@@ -127,7 +104,36 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
   camera_.width = size->width;
   camera_.height = size->height;
   camera_.validate(opts.intrinsics ? "--intrinsics" : folder);
+  readPoses(opts);
+}
 
+void SevenScenesSource::listFrames(const SourceOptions& opts) {
+  try {
+    for (const auto& e : fs::directory_iterator(folder_)) {
+      const std::string n = e.path().filename().string();
+      std::smatch m;
+      if (!std::regex_match(n, m, kDepthName)) continue;
+      Entry en;
+      en.stem = (fs::path(folder_) / n.substr(0, n.find('.'))).string();
+      en.number = std::stoi(m[1].str());
+      en.colour = colourFor(en.stem);  // empty: missing, that frame's problem when it is read
+      frames_.push_back(std::move(en));
+    }
+  } catch (const fs::filesystem_error& e) {  // a folder that can be stat'ed but not listed
+    throw InputError(folder_, "folder cannot be read (" + e.code().message() + ")");
+  }
+  if (frames_.empty()) throw InputError(folder_, "folder holds no 7-Scenes frames (frame-XXXXXX.depth.png)");
+  std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });
+  // frame-3 beside frame-000003: one frame twice, at one time (the trajectory held it twice).
+  const auto twin = std::adjacent_find(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number == b.number; });
+  if (twin != frames_.end())
+    throw InputError(folder_, "frames " + fs::path(twin->stem).filename().string() + " and " +
+                                  fs::path(std::next(twin)->stem).filename().string() + " have one number: which is frame " +
+                                  std::to_string(twin->number) + "?");
+  if (opts.max_frames > 0 && frames_.size() > opts.max_frames) frames_.resize(opts.max_frames);
+}
+
+void SevenScenesSource::readPoses(const SourceOptions& opts) {
   gt_index_.assign(frames_.size(), -1);
   std::size_t damaged_poses = 0;  // a damaged pose costs that frame's evaluation, not the run
   constexpr std::size_t kPoseLines = 3;
@@ -149,7 +155,7 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
     gt_.push_back({frames_[i].number / kFps, p});
   }
   if (damaged_poses > kPoseLines)
-    printWarning(folder + ": " + std::to_string(damaged_poses) + " pose files in all are damaged (those frames are not evaluated)");
+    printWarning(folder_ + ": " + std::to_string(damaged_poses) + " pose files in all are damaged (those frames are not evaluated)");
 }
 
 Frame SevenScenesSource::read(std::size_t i) const {

@@ -40,6 +40,8 @@ class SevenScenesSource : public IndexedFrameSource {
     std::string colour;  // ".color.png" or ".color.jpg" path
     int number = 0;      // the XXXXXX of the file name
   };
+  void listFrames(const SourceOptions& opts);  // frames_ in number order (at most opts.max_frames)
+  void readPoses(const SourceOptions& opts);   // gt_ and gt_index_ from the frames' pose files
   std::string folder_;
   CameraIntrinsics camera_;
   std::vector<Entry> frames_;
