@@ -81,6 +81,11 @@ struct RunRecorder::Impl {
   // scene.3Dscene, and mesh.png beside it (a picture that cannot be rendered costs the picture only).
   void writeScene(const TriangleMesh& mesh, const Reconstruction& rec, const Trajectory& gt_in_map, json& s,
                   StagedOutputs& out) const;
+  // mesh.ply (or the map released unmeshed), then scene.3Dscene and mesh.png.
+  void writeMeshAndScene(Reconstruction& rec, const Trajectory& gt_in_map, json& s, StagedOutputs& out,
+                         RegionPremesher* premeshed) const;
+  // summary.json (with the run's last figures), then poses.rawlog committed, then every staged file in place.
+  void writeSummaryAndCommit(json& s, StagedOutputs& out, std::FILE* log);
 };
 
 RunRecorder::RunRecorder(const std::string& dir, const OutputParams& params, const MeshCleanParams& mesh_params)
@@ -270,6 +275,53 @@ void RunRecorder::Impl::writeScene(const TriangleMesh& mesh, const Reconstructio
   }
 }
 
+void RunRecorder::Impl::writeMeshAndScene(Reconstruction& rec, const Trajectory& gt_in_map, json& s, StagedOutputs& out,
+                                          RegionPremesher* premeshed) const {
+  TriangleMesh mesh;
+  // mesh.png's renderer readied once the map is meshed, on the core the welded mesh's repair leaves
+  // idle (~0.1 s of the picture's time after the last frame otherwise), where the picture will be
+  // rendered beside the scene: the driver then in memory at the welded repair's peak lifted the
+  // 300-frame loop scene's (1.6 M faces) 624-630 -> 666 MiB.
+  std::optional<OffscreenRenderWarmUp> renderer_ready;
+  const auto readyRenderer = [&](std::size_t faces) {
+    if (pictureBesideScene(faces)) renderer_ready.emplace();
+  };
+  if (params.write_mesh) mesh = writeMeshes(rec, params, mesh_params, s, out, premeshed, readyRenderer);
+  else rec.releaseMap();
+  renderer_ready.reset();  // before the picture's own render: one EGL start-up at a time
+  writeScene(mesh, rec, gt_in_map, s, out);
+}
+
+void RunRecorder::Impl::writeSummaryAndCommit(json& s, StagedOutputs& out, std::FILE* log) {
+  s["peak_memory_mib"] = peakMemoryMiB();
+  s["heap_huge_pages"] = heapAsksForHugePages();  // the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
+  // Where the time after the last frame went, file by file (mesh.ply's includes the meshing, which
+  // mesh_clean's steps break down); summary.json's own and poses.rawlog's come after it.
+  for (const auto& [name, seconds] : out.secondsEach())
+    s["output_seconds"].push_back({{"file", name}, {"seconds_since_previous", seconds}});
+  // A name that is no UTF-8 (a Latin-1 folder) is written with U+FFFD: strict, the writer threw and the run lost every output.
+  const auto writeSummary = [&] {
+    writeFileAtomically(out.path("summary.json"), s.dump(2, ' ', false, json::error_handler_t::replace) + "\n");
+  };
+  writeSummary();
+  out.wrote("summary.json", "run statistics");
+  // The rawlog replaces an earlier run's only once the staged files have their places: a folder where
+  // summary.json goes left the new rawlog beside the earlier run's other outputs.
+  out.checkPlaces();
+  if (rawlog) {
+    try {
+      rawlog->writer().commit();  // what it throws changed nothing (RawlogWriter::commit)
+      out.wrote("poses.rawlog", std::to_string(rawlog->writer().framesWritten()) + " frames", false);
+    } catch (const std::exception& e) {  // closing it failed (a full disk): the other outputs stay
+      giveUpRawlog(e, &out);
+      s["poses_rawlog_error"] = rawlog_error;
+      writeSummary();  // still staged: written again, saying why
+    }
+  }
+  out.commit(log);
+  warnOfEarlierOutputs(out, dir);
+}
+
 json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* log, RegionPremesher* premeshed) {
   Impl& m = *impl_;
   StagedOutputs out([&m](const std::string& name) { return m.file(name); });
@@ -284,49 +336,9 @@ json RunRecorder::finish(Reconstruction& rec, const RunInfo& info, std::FILE* lo
     }
     if (!m.rawlog_error.empty()) s["poses_rawlog_error"] = m.rawlog_error;
     const Trajectory gt_in_map = m.writeTrajectories(rec, info, s, out);
-
     returnFreedHeap();  // the frames are done: what meshing frees goes back to the kernel
-    TriangleMesh mesh;
-    // mesh.png's renderer readied once the map is meshed, on the core the welded mesh's repair leaves
-    // idle (~0.1 s of the picture's time after the last frame otherwise), where the picture will be
-    // rendered beside the scene: the driver then in memory at the welded repair's peak lifted the
-    // 300-frame loop scene's (1.6 M faces) 624-630 -> 666 MiB.
-    std::optional<OffscreenRenderWarmUp> renderer_ready;
-    const auto readyRenderer = [&](std::size_t faces) {
-      if (pictureBesideScene(faces)) renderer_ready.emplace();
-    };
-    if (m.params.write_mesh) mesh = writeMeshes(rec, m.params, m.mesh_params, s, out, premeshed, readyRenderer);
-    else rec.releaseMap();
-    renderer_ready.reset();  // before the picture's own render: one EGL start-up at a time
-    m.writeScene(mesh, rec, gt_in_map, s, out);
-
-    s["peak_memory_mib"] = peakMemoryMiB();
-    s["heap_huge_pages"] = heapAsksForHugePages();  // the run's GLIBC_TUNABLES asks for huge pages (docs/memory.md)
-    // Where the time after the last frame went, file by file (mesh.ply's includes the meshing, which
-    // mesh_clean's steps break down); summary.json's own and poses.rawlog's come after it.
-    for (const auto& [name, seconds] : out.secondsEach())
-      s["output_seconds"].push_back({{"file", name}, {"seconds_since_previous", seconds}});
-    // A name that is no UTF-8 (a Latin-1 folder) is written with U+FFFD: strict, the writer threw and the run lost every output.
-    const auto writeSummary = [&] {
-      writeFileAtomically(out.path("summary.json"), s.dump(2, ' ', false, json::error_handler_t::replace) + "\n");
-    };
-    writeSummary();
-    out.wrote("summary.json", "run statistics");
-    // The rawlog replaces an earlier run's only once the staged files have their places: a folder where
-    // summary.json goes left the new rawlog beside the earlier run's other outputs.
-    out.checkPlaces();
-    if (m.rawlog) {
-      try {
-        m.rawlog->writer().commit();  // what it throws changed nothing (RawlogWriter::commit)
-        out.wrote("poses.rawlog", std::to_string(m.rawlog->writer().framesWritten()) + " frames", false);
-      } catch (const std::exception& e) {  // closing it failed (a full disk): the other outputs stay
-        m.giveUpRawlog(e, &out);
-        s["poses_rawlog_error"] = m.rawlog_error;
-        writeSummary();  // still staged: written again, saying why
-      }
-    }
-    out.commit(log);
-    warnOfEarlierOutputs(out, m.dir);
+    m.writeMeshAndScene(rec, gt_in_map, s, out, premeshed);
+    m.writeSummaryAndCommit(s, out, log);
     return s;
   } catch (const InputError& e) {
     throw out.named(e);  // the file as the user will find it, not its staged copy
