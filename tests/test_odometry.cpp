@@ -525,6 +525,28 @@ TEST(Odometry, AColourOffsetFarBeyondTheIntervalIsNotCorrected) {
   EXPECT_LT((motion[1] - motion[0]).translation().norm(), 1e-9);
 }
 
+// Two frames stamped 1 us apart (a driver stamping a USB burst on arrival): the fit's millimetre of
+// motion over 1 us is 10^4 m/s. Kept as the frame's velocity, capture mode moved the next frame's
+// reference keypoints by it over their 9 ms colour offset: the camera jumped 30 m and turned 90 deg,
+// reported as a success. A velocity is kept only where it would be carried over at most three of its
+// interval, the correction's own limit (AColourOffsetFarBeyondTheIntervalIsNotCorrected).
+TEST(Odometry, AVelocityFromStampsMicrosecondsApartIsNotCarriedToTheNextFrame) {
+  const auto seq = room(true);
+  Frame a = seq.render(0), b = seq.render(1), c = seq.render(2);
+  b.timestamp = a.timestamp + 1e-6;  // its motion from a (a frame's, 1-2 cm) read as 10^4 m/s
+  for (Frame* f : {&a, &b, &c}) f->colour_offset = 0.009;
+  OdometryParams p;
+  p.colour_time_velocity = "capture";
+  RgbdOdometry odo(p);
+  odo.process(a);
+  odo.process(b);
+  const OdometryResult r = odo.process(c);
+  ASSERT_TRUE(r.success) << r.failure;
+  const mrpt::poses::CPose3D e = r.motion - (seq.groundTruth(2) - seq.groundTruth(1));
+  EXPECT_LT(e.translation().norm(), 0.01);
+  EXPECT_LT(rotDeg(e), 0.5);
+}
+
 TEST(Odometry, ColourCaptureOffsetIsCompensated) {
   sim::SimOptions o;
   o.scene = "room";

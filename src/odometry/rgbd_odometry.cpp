@@ -621,10 +621,16 @@ FrameFeatures RgbdOdometry::Impl::extract(const Frame& frame, const std::vector<
 }
 
 void RgbdOdometry::Impl::keepVelocities(FrameFeatures& ref, FrameFeatures& cur, const FitVelocities& v) {
+  // A velocity is a motion over its interval: kept only where it will be carried over at most three of
+  // it, the correction's own limit (fitAtDepthTime). Stamps 1 us apart made a frame's motion 10^4 m/s,
+  // and the next frame's reference keypoints moved 30 m over their 9 ms colour offset. Neither frame
+  // keeps one then: the next interval's stands in.
+  const double dt = cur.timestamp - ref.timestamp;
+  if (!(dt > 0.0 && std::max(std::abs(ref.colour_offset), std::abs(cur.colour_offset)) <= 3.0 * dt)) return;
   if (!ref.velocity_final) ref.velocity = v.at_reference;
   ref.velocity_final = true;
   cur.arrival = v.interval;
-  cur.arrival_seconds = cur.timestamp - ref.timestamp;
+  cur.arrival_seconds = dt;
   cur.velocity = v.at_current;
 }
 
