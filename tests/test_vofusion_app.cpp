@@ -491,6 +491,26 @@ TEST(VofusionApp, AMapThatCannotBeWrittenCostsTheMapOnly) {
     EXPECT_TRUE(e.is_regular_file() && e.path().filename().string()[0] != '.') << "left behind: " << e.path();
 }
 
+// A run whose outputs fail leaves the map at --save-volume as it was: the map was put in place before
+// the outputs were, so a run that wrote nothing else replaced the earlier map, and `--resume m --save-volume
+// m` replaced the map it resumed from (the same command again fused the frames twice).
+TEST(VofusionApp, ARunWhoseOutputsFailKeepsTheEarlierMap) {
+  const std::string dir = test::tempDir("vofusion_app_savevolume_outputs_fail");
+  const std::string cfg = dir + "/path_only.ini", map = dir + "/map.bin", out = dir + "/out";
+  std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  std::ofstream(map) << "EARLIER";
+  fs::create_directories(out + "/summary.json");  // where a file goes: the outputs cannot be put in place
+  std::string log;
+  const int rc = test::run("{ " + test::app("vofusion") + " synthetic:room --max-frames 3 --out " + out + " --config " + cfg +
+                               " --save-volume " + map + " 2>&1 >/dev/null; }",
+                           &log);
+  EXPECT_EQ(rc, 2) << log;
+  EXPECT_NE(log.find(out + "/summary.json: is a folder"), std::string::npos) << log;
+  EXPECT_TRUE(fileBytes(map) == "EARLIER") << "the map was replaced (" << fs::file_size(map) << " bytes)";
+  for (const auto& e : fs::directory_iterator(dir))
+    EXPECT_TRUE(e.path() == map || e.path() == cfg || e.path() == out) << "left behind: " << e.path();
+}
+
 // A checkpoint that cannot be written (a file size limit, as a full disk) is one warning naming the
 // checkpoint, and costs the checkpoints only: the run goes on and writes its outputs, summary.json
 // saying why. It was the run's end (exit 2, nothing written), a stop's checkpoint too.

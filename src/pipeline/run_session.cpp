@@ -8,6 +8,7 @@
 #include <fstream>
 #include <limits>
 #include <new>
+#include <optional>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -360,18 +361,34 @@ nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std:
   if (premesher_) premesher_->stop();  // before the map is fused again or released
   if (write_mesh_ || save_volume) refuse(info, reopen);  // the map is not used otherwise
   // A map that cannot be written costs the map, not the run's other outputs: its error comes after them.
+  // It is written before them (the meshing releases the map) but put in place after them: a run whose
+  // outputs failed replaced the earlier map, the map it resumed from too.
   std::exception_ptr map_failed;
+  std::optional<AtomicPath> map;
   if (save_volume) {
     try {
-      rec_.saveVolume(*save_volume);
+      map.emplace(*save_volume);
+      saveMapTo(*map);
     } catch (const std::exception& e) {
+      map.reset();
       map_failed = std::current_exception();
       info.extra["save_volume_error"] = oneLineMessage(e);
     }
   }
   nlohmann::json summary = recorder_.finish(rec_, info, stderr, premesher_.get());
+  if (map) map->commit();
   if (map_failed) std::rethrow_exception(map_failed);
   return summary;
+}
+
+void RunSession::saveMapTo(AtomicPath& map) const {
+  try {
+    rec_.saveVolume(map.tmp());
+    map.prepare();  // on the disk: what is left to the end is the rename
+  } catch (const InputError& e) {
+    if (e.file() != map.tmp()) throw;
+    throw InputError(map.path(), e.problem());  // the file as the user named it
+  }
 }
 
 }  // namespace vofusion

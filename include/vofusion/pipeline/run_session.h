@@ -16,6 +16,7 @@
 #include <mrpt/config/CConfigFileBase.h>
 #include <nlohmann/json.hpp>
 
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/io/frame_source.h"
 #include "vofusion/pipeline/reconstruction.h"
 #include "vofusion/pipeline/run_outputs.h"
@@ -40,7 +41,8 @@ class RunSession {
   FrameReport process(const Frame& frame);
   // The end of the run, once: loop closure finished, the map fused again at the corrected poses when
   // loops moved them (from reopen(); without one the mesh keeps the tracked poses),
-  // saved to save_volume when given, and every output written. Returns summary.json's content.
+  // saved to save_volume when given (put in place after the other outputs: a run whose outputs fail
+  // leaves an earlier map as it was), and every output written. Returns summary.json's content.
   nlohmann::json finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume = std::nullopt);
 
   // Checkpoints (vofusion --checkpoint-every, --resume <checkpoint>; vofusion-grab --live). `origin`
@@ -83,6 +85,8 @@ class RunSession {
 
  private:
   void refuse(RunInfo& info, const Reopen& reopen);
+  // The map into map's temporary, on the disk; an InputError names map's path.
+  void saveMapTo(AtomicPath& map) const;
 
   // Meshing while tracking, when the mesh is made region by region. Declared before rec_, so it
   // outlives the fusion thread that tells it of shifts; its own thread is stopped first (destructor).
