@@ -11,6 +11,7 @@
 
 #include "vofusion/core/cli.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/core/trajectory.h"
 #include "vofusion/eval/trajectory_eval.h"
 
@@ -61,6 +62,9 @@ int body(int argc, char** argv) {
   const Trajectory est = readTumTrajectory(pos[1], StampOrder::AsWritten);  // a run's frames in their order
   if (gt.empty()) throw InputError(pos[0], "contains no poses");
   if (est.empty()) throw InputError(pos[1], "contains no poses");
+  if (const std::size_t repeated = est.size() - onePosePerStamp(est).size())
+    printWarning(pos[1] + ": " + std::to_string(repeated) + (repeated == 1 ? " pose repeats" : " poses repeat") +
+                 " an earlier pose's stamp: the last pose of each stamp is evaluated, as TUM's scripts read the file");
   const AteResult ate = computeAte(gt, est, max_dt);
   if (!ate.success) throw InputError(gt.size() < 3 ? pos[0] : pos[1], ate.message);  // the one too short, else the estimate
   const RpeResult rpe = computeRpe(gt, est, delta, max_dt);

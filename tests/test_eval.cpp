@@ -195,6 +195,31 @@ TEST(Eval, StampsThatNeverMeetAreShownWithTheirUnit) {
   EXPECT_NE(ms.find("(the estimate's in milliseconds?))"), std::string::npos) << ms;
 }
 
+// A stamp written twice (a recording whose clock repeated one) is one pose, the last, as TUM's scripts
+// read a file into a dict by stamp: both were associated (the copy with another ground-truth pose
+// within 20 ms) and counted, and rgbd-eval says so.
+TEST(Eval, ARepeatedStampIsOnePoseTheLast) {
+  const Trajectory gt = wavy(), est = wavy();
+  Trajectory repeated = est;
+  repeated.insert(repeated.begin() + 51, {est[50].timestamp, mrpt::poses::CPose3D(9, 9, 9, 0, 0, 0)});
+  std::swap(repeated[50], repeated[51]);  // the odd pose first, the right one last
+  const AteResult a = computeAte(gt, est), b = computeAte(gt, repeated);
+  ASSERT_TRUE(b.success) << b.message;
+  EXPECT_EQ(b.trans.count, a.trans.count);
+  EXPECT_NEAR(b.trans.rmse, a.trans.rmse, 1e-12);
+  const RpeResult ra = computeRpe(gt, est, 0.05), rb = computeRpe(gt, repeated, 0.05);
+  EXPECT_EQ(rb.trans.count, ra.trans.count);
+  EXPECT_NEAR(rb.trans.rmse, ra.trans.rmse, 1e-12);
+  EXPECT_EQ(onePosePerStamp(repeated).size(), est.size());
+  const std::string dir = test::tempDir("eval_repeated_stamp");
+  writeTumTrajectory(dir + "/gt.txt", gt);
+  writeTumTrajectory(dir + "/est.txt", repeated);
+  std::string log;
+  EXPECT_EQ(test::run("{ " + test::app("rgbd-eval") + " " + dir + "/gt.txt " + dir + "/est.txt 2>&1 >/dev/null; }", &log), 0);
+  EXPECT_EQ(log, "warning: " + dir + "/est.txt: 1 pose repeats an earlier pose's stamp: the last pose of each stamp is "
+                 "evaluated, as TUM's scripts read the file\n");
+}
+
 TEST(Eval, AssociationTolerance) {
   const Trajectory gt = wavy();
   const Trajectory late = wavy(0.5);  // 0.5 s off: only overlapping stamps 1/30 s grid -> none within 0.02

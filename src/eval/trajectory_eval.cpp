@@ -123,7 +123,8 @@ std::string stampSpans(const Trajectory& gt, const Trajectory& est) {
 }
 }  // namespace
 
-AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt) {
+AteResult computeAte(const Trajectory& gt, const Trajectory& est_as_given, double max_dt) {
+  const Trajectory est = onePosePerStamp(est_as_given);
   AteResult r;
   const auto pairs = associateTrajectories(gt, est, max_dt);
   if (pairs.size() < 3) {
@@ -159,7 +160,7 @@ AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt)
 }
 
 RpeResult computeRpe(const Trajectory& gt_as_given, const Trajectory& est_as_given, double delta, double max_dt) {
-  const Trajectory gt = sortedByTime(gt_as_given), est = sortedByTime(est_as_given);
+  const Trajectory gt = sortedByTime(gt_as_given), est = sortedByTime(onePosePerStamp(est_as_given));
   RpeResult r;
   r.delta = delta;
   if (est.size() < 2 || gt.empty()) {

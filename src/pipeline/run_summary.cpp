@@ -19,7 +19,8 @@ double peakMemoryMiB() {
 }
 
 json statsJson(const ErrorStats& s) {
-  return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std}, {"max", s.max}, {"p95", s.p95}, {"count", s.count}};
+  return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std}, {"min", s.min}, {"max", s.max},
+          {"p95", s.p95}, {"count", s.count}};  // rgbd-eval --json's fields
 }
 
 json timesJson(const StageTimes& t, std::size_t frames) {

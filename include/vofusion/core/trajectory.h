@@ -36,5 +36,8 @@ bool interpolatePose(const Trajectory& traj, double t, double max_gap, mrpt::pos
 
 // t's poses in time order, equal stamps in their order in t.
 Trajectory sortedByTime(const Trajectory& t);
+// t's poses, one per stamp: of those sharing a stamp the last in t, as TUM's scripts read a file (a
+// dict by stamp); the others in t's order. An evaluation counted a repeated stamp twice.
+Trajectory onePosePerStamp(const Trajectory& t);
 
 }  // namespace vofusion

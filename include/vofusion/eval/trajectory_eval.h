@@ -34,6 +34,7 @@ struct AteResult {
   Trajectory est_aligned;       // associated estimated poses, aligned onto the ground truth
   mrpt::poses::CPose3D alignment;  // est -> gt rigid transform
 };
+// Of estimated poses sharing a stamp, the last is evaluated (onePosePerStamp), as TUM's scripts read them.
 AteResult computeAte(const Trajectory& gt, const Trajectory& est, double max_dt = 0.02);
 
 struct RpeResult {
