@@ -277,6 +277,52 @@ TEST(LiveLoop, ExternalStopFlagInterrupts) {
   EXPECT_EQ(s.processed + s.dropped, s.played);
 }
 
+// Ctrl-C stops the recording at once, not once the frame in hand is done: the grab thread went on
+// recording while the consumer was inside one frame (a checkpoint, a slow first frame), 75 frames of a
+// 30 Hz replay after the Ctrl-C with a 4 s frame (a review's run).
+TEST(LiveLoop, AStopEndsTheRecordingWhileAFrameIsInHand) {
+  FakeSource src(100000, 2);
+  std::atomic<bool> stop{false};
+  std::atomic<std::size_t> recorded{0}, recorded_at_stop{0};
+  LiveHooks h;
+  h.stop = &stop;
+  h.on_grabbed = [&](Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++recorded; };
+  const LiveStats s = runLive(src,
+                              [&](const Frame&) {
+                                std::this_thread::sleep_for(std::chrono::milliseconds(50));
+                                stop = true;  // asked during the frame, which takes 300 ms more
+                                // At most a frame already past its check when the stop came is recorded after it.
+                                recorded_at_stop = recorded.load();
+                                std::this_thread::sleep_for(std::chrono::milliseconds(300));
+                              },
+                              queueOf(2), h);
+  EXPECT_EQ(s.stop, StopReason::Interrupted);
+  EXPECT_LE(recorded.load(), recorded_at_stop.load() + 1) << "recorded after the stop";
+  EXPECT_EQ(s.played, recorded.load());
+  EXPECT_EQ(s.processed + s.dropped, s.played);
+}
+
+// A stop after the play reached --max-frames, while frames still wait, costs them: an interruption, not
+// "max frames reached" (summary.json said interrupted: false with 58 of 60 frames dropped).
+TEST(LiveLoop, AStopWhileTheLastFramesWaitIsAnInterruption) {
+  FakeSource src(100, 0);
+  LiveOptions o = queueOf(8);
+  o.max_frames = 8;
+  std::atomic<bool> stop{false};
+  LiveHooks h;
+  h.stop = &stop;
+  const LiveStats s = runLive(src,
+                              [&](const Frame&) {
+                                std::this_thread::sleep_for(std::chrono::milliseconds(50));
+                                stop = true;
+                              },
+                              o, h);
+  EXPECT_EQ(s.stop, StopReason::Interrupted);
+  EXPECT_EQ(s.played, 8u);
+  EXPECT_GT(s.dropped, 0u);
+  EXPECT_EQ(s.processed + s.dropped, s.played);
+}
+
 TEST(LiveOptions, SaveWritesEveryKeyItLoads) {
   LiveOptions a;
   a.queue_capacity = 5;

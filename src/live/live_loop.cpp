@@ -95,7 +95,11 @@ void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks,
       }
       Frame frame;
       mrpt::obs::CObservation3DRangeScan::Ptr raw;
-      if (!source.grab(frame, raw, sh.stop)) break;
+      // A stop asked for (Ctrl-C) ends the recording here, not once the consumer is done with the frame
+      // in hand (only it copied the request into sh.stop: a 4 s frame recorded 75 more); a frame that
+      // arrives after it is not recorded.
+      if (externalStop(hooks)) sh.stop = true;
+      if (!source.grab(frame, raw, sh.stop) || externalStop(hooks)) break;
       frame.index = n;
       if (hooks.on_grabbed) {
         try {
@@ -128,6 +132,7 @@ void produce(LiveSource& source, const LiveOptions& opt, const LiveHooks& hooks,
     error = "the source failed with an unknown exception";
   }
   std::lock_guard<std::mutex> lk(sh.m);
+  if (externalStop(hooks)) sh.stop = true;
   if (sh.stop && reason == StopReason::EndOfStream) reason = StopReason::Interrupted;
   if (sh.stats.error.empty()) {  // a consumer error set first wins
     if (sh.stats.stop != StopReason::ConsumerError) sh.stats.stop = reason;
@@ -250,9 +255,12 @@ LiveStats runLive(LiveSource& source, const FrameConsumer& consumer, const LiveO
   LiveStats out;
   {
     std::lock_guard<std::mutex> lk(sh.m);
+    // A stop that left frames behind after the play reached max_frames cost them: an interruption.
+    const bool cost_frames = !sh.queue.empty();
     sh.stats.dropped += sh.queue.size();  // left behind by an interruption or an error
     sh.queue.clear();
-    if (sh.stop && sh.stats.stop == StopReason::EndOfStream) sh.stats.stop = StopReason::Interrupted;
+    if (sh.stop && (sh.stats.stop == StopReason::EndOfStream || (sh.stats.stop == StopReason::MaxFrames && cost_frames)))
+      sh.stats.stop = StopReason::Interrupted;
     out = sh.stats;
   }
   out.seconds = tick.seconds();
