@@ -1,5 +1,6 @@
 #include "vofusion/io/rawlog_time.h"
 
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <stdexcept>
@@ -18,9 +19,12 @@ mrpt::Clock::time_point rawlogTime(double seconds) {
                   kEarliestRawlogSeconds, kLatestRawlogSeconds);
     throw std::out_of_range(text);
   }
-  // MRPT's own arithmetic from 0 s on (truncated to the tick), mirrored below it.
-  const std::uint64_t ticks = seconds >= 0 ? kTicksTo1970 + std::uint64_t(seconds * 10000000.0)
-                                           : kTicksTo1970 - std::uint64_t(-seconds * 10000000.0);
+  // MRPT's own arithmetic from 0 s on (truncated to the tick), mirrored below it; but a value within a
+  // thousandth of a tick below a whole one is that tick: a stamp read from a rawlog (rawlogSeconds) lies
+  // just under its tick as often as over it, and truncated it lost one (3 % of 30 Hz stamps from 0).
+  const double t = std::abs(seconds) * 10000000.0, whole = std::ceil(t);
+  const std::uint64_t n = std::uint64_t(whole - t < 1e-3 ? whole : t);
+  const std::uint64_t ticks = seconds >= 0 ? kTicksTo1970 + n : kTicksTo1970 - n;
   return mrpt::Clock::time_point(mrpt::Clock::duration(mrpt::Clock::rep(ticks)));
 }
 
