@@ -309,11 +309,14 @@ TEST(LiveLoop, AStopWhileTheLastFramesWaitIsAnInterruption) {
   LiveOptions o = queueOf(8);
   o.max_frames = 8;
   std::atomic<bool> stop{false};
+  std::atomic<std::size_t> grabbed{0};
   LiveHooks h;
   h.stop = &stop;
+  h.on_grabbed = [&](Frame&, const mrpt::obs::CObservation3DRangeScan::Ptr&) { ++grabbed; };
   const LiveStats s = runLive(src,
                               [&](const Frame&) {
-                                std::this_thread::sleep_for(std::chrono::milliseconds(50));
+                                // Asked once the play is over (however slow the grab thread is), frames waiting.
+                                while (grabbed < 8) std::this_thread::sleep_for(std::chrono::milliseconds(1));
                                 stop = true;
                               },
                               o, h);

@@ -820,6 +820,29 @@ std::string fileText(const std::string& path) {
 // from cuts them off on corners of their own, and nothing joined them back: the synthetic room's whole
 // mesh (8 frames at 320x240) kept 199 components and 196 border cycles, nearly all pieces of a few
 // faces lying on the surface. They are judged as the welded regions are (by area), their holes filled.
+// Only what the collapse cut off goes: a small closed part beside large faces (a 20 cm sphere on a 10 m
+// floor of 128 faces) fell under the mean face's area and was removed whole (a review's case).
+TEST(MeshClean, TheCollapsesCutOffsAreTheOnlyPiecesJudgedAfterIt) {
+  TriangleMesh m = icosphere(4, 0.1f, Eigen::Vector3f(0.f, 0.f, 1.f));
+  const std::size_t sphere_faces = m.faces.size();
+  const int n = 8;
+  const std::uint32_t base = std::uint32_t(m.vertices.size());
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) m.vertices.emplace_back(10.f * i / n - 5.f, 10.f * j / n - 5.f, 0.f);
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const std::uint32_t a = base + j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      m.faces.push_back({a, b, d});
+      m.faces.push_back({a, d, c});
+    }
+  m.colors.assign(m.vertices.size(), {128, 128, 128});
+  const MeshCleanReport r = cleanMesh(m, MeshCleanParams());
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_EQ(r.components_kept, 2u);
+  EXPECT_EQ(r.components_removed, 0u);
+  EXPECT_GT(m.faces.size(), sphere_faces / 20);  // the sphere, simplified, beside the floor
+}
+
 TEST(MeshCleanApp, AWholeMeshKeepsNoPiecesTheCollapseCutOff) {
   const std::string dir = test::tempDir("mesh_app_cut_offs");
   std::string log;

@@ -426,8 +426,9 @@ TEST(Rawlog, ColourOffsetsComeBack) {
   }
 }
 
-// Against MRPT's own conversion where it is defined (from 0 s on), the same ticks and the same seconds;
-// before 1970 back to the same seconds; beyond the clock, refused.
+// Against MRPT's own conversion where it is defined (from 0 s on), the same ticks and the same seconds
+// (but for a value just under a whole tick, below); before 1970 back to the same seconds; beyond the
+// clock, refused.
 TEST(RawlogTime, MrptsConversionFromZeroOnAndExactBefore) {
   for (const double t : {0.0, 1e-7, 0.033333, 1305031102.175304, 1305031102.2, 1.7e9, 8.9e11}) {
     EXPECT_EQ(rawlogTime(t), mrpt::Clock::fromDouble(t)) << t;

@@ -62,6 +62,8 @@ using FD = Mesh::Face_index;
 using HD = Mesh::Halfedge_index;
 using Rgb = std::array<std::uint8_t, 3>;
 
+constexpr std::size_t kUnknownComponent = std::size_t(-1);
+
 struct PointHash {
   std::size_t operator()(const Point& p) const {
     std::size_t h = 1469598103934665603ull;
@@ -380,8 +382,8 @@ class Cleaner {
     if (simplifying) step("simplify", [&] { simplifyAndMeasure(before); });
     // A whole mesh's quadric collapse can fold three faces onto one edge, and the soup it is rebuilt from
     // cuts them off on corners of their own (the room's 562k raw faces: 276 pieces of 1-8 faces left on
-    // the surface, 595 positions held twice). Judged as the welded regions are: by area, against half of
-    // min_component_faces raw faces, and the holes they leave filled.
+    // the surface, 595 positions held twice). Those pieces are judged as the welded regions are (by area,
+    // against half of min_component_faces raw faces), and the holes they leave filled.
     if (p_.max_simplify_error > 0 && !job_.seam && p_.min_component_faces > 0 && before.number_of_faces() > 0)
       step("cut-offs", [&] { removeCutOffs(PMP::area(before) / double(before.number_of_faces())); });
     if (!job_.seam && (p_.smooth_iterations > 0 || p_.relax_iterations > 0)) step("smooth", [&] { smooth(); });
@@ -581,17 +583,47 @@ class Cleaner {
     if (!p_.repair && PMP::remove_isolated_vertices(m_) > 0) m_.collect_garbage();
   }
 
+  // Pieces the collapse split off a component (every piece of it but the largest) with less area than
+  // half of min_component_faces raw faces; then the holes their removal opened are filled, no other (the
+  // holes step judged those). A component the collapse left whole stays, however small: a 10 cm sphere
+  // beside large faces fell under the mean face's area and went whole.
   void removeCutOffs(double mean_raw_face_area) {
-    removeSmallComponents(0, std::max(p_.min_component_area, 0.5 * p_.min_component_faces * mean_raw_face_area));
-    if (p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) {
-      r_.holes_left = 0;  // counted again: what is left now
-      fillHoles();
+    auto [origin, have_origin] = m_.property_map<VD, std::size_t>("v:origin");
+    if (!have_origin) return;
+    const double min_area = std::max(p_.min_component_area, 0.5 * p_.min_component_faces * mean_raw_face_area);
+    auto fcc = m_.add_property_map<FD, std::size_t>("f:cc", 0).first;
+    const std::size_t n = PMP::connected_components(m_, fcc);
+    std::vector<double> area(n, 0.0);
+    std::vector<std::size_t> from(n, kUnknownComponent);  // the component before the collapse
+    for (FD f : m_.faces()) {
+      area[fcc[f]] += PMP::face_area(f, m_);
+      for (VD v : CGAL::vertices_around_face(m_.halfedge(f), m_))
+        if (from[fcc[f]] == kUnknownComponent) from[fcc[f]] = origin[v];
     }
+    std::unordered_map<std::size_t, std::size_t> largest;  // per component before: its largest piece now
+    for (std::size_t c = 0; c < n; ++c)
+      if (from[c] != kUnknownComponent) {
+        const auto [it, added] = largest.emplace(from[c], c);
+        if (!added && area[c] > area[it->second]) it->second = c;
+      }
+    std::vector<std::size_t> drop;
+    std::vector<bool> dropped(n, false);
+    for (std::size_t c = 0; c < n; ++c)
+      if (from[c] != kUnknownComponent && largest.at(from[c]) != c && area[c] < min_area) drop.push_back(c), dropped[c] = true;
+    std::unordered_set<Point, PointHash> corners;  // of the pieces dropped: where a hole may open
+    for (FD f : m_.faces())
+      if (dropped[fcc[f]])
+        for (VD v : CGAL::vertices_around_face(m_.halfedge(f), m_)) corners.insert(m_.point(v));
+    if (!drop.empty()) PMP::remove_connected_components(m_, drop, fcc);
+    m_.remove_property_map(fcc);
+    m_.remove_property_map(origin);
+    PMP::remove_isolated_vertices(m_);
+    m_.collect_garbage();
+    r_.components_removed += drop.size();
+    if (!corners.empty() && p_.max_hole_perimeter > 0 && p_.max_hole_edges > 0) fillHoles(&corners);
   }
 
-  void removeSmallComponents() { removeSmallComponents(std::size_t(std::max(0, p_.min_component_faces)), p_.min_component_area); }
-  // Components with fewer faces or less area than these (0: no such test).
-  void removeSmallComponents(std::size_t min_faces, double min_area) {
+  void removeSmallComponents() {
     auto fcc = m_.add_property_map<FD, std::size_t>("f:cc", 0).first;
     const std::size_t n = PMP::connected_components(m_, fcc);
     std::vector<std::size_t> faces(n, 0);
@@ -605,7 +637,8 @@ class Cleaner {
     }
     std::vector<std::size_t> drop;
     for (std::size_t c = 0; c < n; ++c)
-      if (!on_seam[c] && ((min_faces > 0 && faces[c] < min_faces) || (min_area > 0 && area[c] < min_area)))
+      if (!on_seam[c] && ((p_.min_component_faces > 0 && faces[c] < std::size_t(p_.min_component_faces)) ||
+                          (p_.min_component_area > 0 && area[c] < p_.min_component_area)))
         drop.push_back(c);
     if (!drop.empty()) PMP::remove_connected_components(m_, drop, fcc);
     m_.remove_property_map(fcc);
@@ -630,9 +663,18 @@ class Cleaner {
   }
 
   static constexpr std::size_t kFullSearchEdges = 200;
-  void fillHoles() {
+  // only_at: the border cycles through one of these positions only (the rest left as they are, uncounted).
+  void fillHoles(const std::unordered_set<Point, PointHash>* only_at = nullptr) {
     std::vector<HD> cycles;
     PMP::extract_boundary_cycles(m_, std::back_inserter(cycles));
+    if (only_at) {
+      const auto touches = [&](HD start) {
+        for (HD h : CGAL::halfedges_around_face(start, m_))
+          if (only_at->count(m_.point(m_.target(h)))) return true;
+        return false;
+      };
+      cycles.erase(std::remove_if(cycles.begin(), cycles.end(), [&](HD h) { return !touches(h); }), cycles.end());
+    }
     auto component = m_.add_property_map<FD, std::size_t>("f:cc_holes", 0).first;
     const Pieces pieces = piecesOf(cycles, component);
     std::vector<std::pair<HD, std::size_t>> holes;  // border cycle, edges
@@ -743,6 +785,18 @@ class Cleaner {
   // locked, before its repair.
   void collapseByQuadrics() {
     m_.collect_garbage();
+    // Each position's component before the collapse (a position in two: unknown), for the cut-offs step.
+    std::unordered_map<Point, std::size_t, PointHash> component_at;
+    {
+      auto fcc = m_.add_property_map<FD, std::size_t>("f:cc_before", 0).first;
+      PMP::connected_components(m_, fcc);
+      for (FD f : m_.faces())
+        for (VD v : CGAL::vertices_around_face(m_.halfedge(f), m_)) {
+          const auto [it, added] = component_at.emplace(m_.point(v), fcc[f]);
+          if (!added && it->second != fcc[f]) it->second = kUnknownComponent;
+        }
+      m_.remove_property_map(fcc);
+    }
     std::vector<Point> points;
     TriangleMesh t;
     for (VD v : m_.vertices()) {
@@ -770,8 +824,12 @@ class Cleaner {
     PMP::polygon_soup_to_polygon_mesh(points, triangles, out);
     auto col = out.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
     out.add_property_map<VD, bool>("v:rgb_known", true);
-    for (VD v : out.vertices())  // the soup's points, in order
+    auto origin = out.add_property_map<VD, std::size_t>("v:origin", kUnknownComponent).first;
+    for (VD v : out.vertices()) {  // the soup's points, in order
       col[v] = t.colors[v.idx() < before ? v.idx() : first_at.at(points[v.idx()])];
+      const auto it = component_at.find(points[v.idx()]);
+      if (it != component_at.end()) origin[v] = it->second;
+    }
     m_ = std::move(out);
     col_ = m_.property_map<VD, Rgb>("v:rgb").first;
     known_ = m_.property_map<VD, bool>("v:rgb_known").first;

@@ -3,7 +3,9 @@
 // mrpt::Clock counts 100 ns ticks since 1601 in a 64-bit number, but converts through unsigned ones:
 // Clock::fromDouble is undefined below 0 s and above ~1.84e12 s (a nanosecond stamp came back as 0), and
 // Clock::toDouble wraps a time before 1970 to ~1.8e12 s (a colour image taken 5 ms before a first frame
-// at 0 s). These convert the whole range a rawlog holds, the same as MRPT's from 0 s on.
+// at 0 s). These convert the whole range a rawlog holds, the same as MRPT's from 0 s on, except that a
+// value within a thousandth of a tick below a whole tick is that tick (MRPT truncates it to the one
+// before: a stamp read back from a rawlog lost 100 ns when written again).
 #include <mrpt/core/Clock.h>
 
 namespace vofusion {
