@@ -384,7 +384,7 @@ class Cleaner {
     // cuts them off on corners of their own (the room's 562k raw faces: 276 pieces of 1-8 faces left on
     // the surface, 595 positions held twice). Those pieces are judged as the welded regions are (by area,
     // against half of min_component_faces raw faces), and the holes they leave filled.
-    if (p_.max_simplify_error > 0 && !job_.seam && p_.min_component_faces > 0 && before.number_of_faces() > 0)
+    if (judgesCutOffs() && before.number_of_faces() > 0)
       step("cut-offs", [&] { removeCutOffs(PMP::area(before) / double(before.number_of_faces())); });
     if (!job_.seam && (p_.smooth_iterations > 0 || p_.relax_iterations > 0)) step("smooth", [&] { smooth(); });
     finish(m_);
@@ -582,6 +582,9 @@ class Cleaner {
     // zero in the output.
     if (!p_.repair && PMP::remove_isolated_vertices(m_) > 0) m_.collect_garbage();
   }
+
+  // Whether the cut-offs step runs: after a whole mesh's quadric collapse, fragments being judged.
+  bool judgesCutOffs() const { return p_.max_simplify_error > 0 && !job_.seam && p_.min_component_faces > 0; }
 
   // Pieces the collapse split off a component (every piece of it but the largest) with less area than
   // half of min_component_faces raw faces; then the holes their removal opened are filled, no other (the
@@ -787,7 +790,7 @@ class Cleaner {
     m_.collect_garbage();
     // Each position's component before the collapse (a position in two: unknown), for the cut-offs step.
     std::unordered_map<Point, std::size_t, PointHash> component_at;
-    {
+    if (judgesCutOffs()) {
       auto fcc = m_.add_property_map<FD, std::size_t>("f:cc_before", 0).first;
       PMP::connected_components(m_, fcc);
       for (FD f : m_.faces())
@@ -824,11 +827,12 @@ class Cleaner {
     PMP::polygon_soup_to_polygon_mesh(points, triangles, out);
     auto col = out.add_property_map<VD, Rgb>("v:rgb", Rgb{128, 128, 128}).first;
     out.add_property_map<VD, bool>("v:rgb_known", true);
-    auto origin = out.add_property_map<VD, std::size_t>("v:origin", kUnknownComponent).first;
-    for (VD v : out.vertices()) {  // the soup's points, in order
+    for (VD v : out.vertices())  // the soup's points, in order
       col[v] = t.colors[v.idx() < before ? v.idx() : first_at.at(points[v.idx()])];
-      const auto it = component_at.find(points[v.idx()]);
-      if (it != component_at.end()) origin[v] = it->second;
+    if (!component_at.empty()) {
+      auto origin = out.add_property_map<VD, std::size_t>("v:origin", kUnknownComponent).first;
+      for (VD v : out.vertices())
+        if (const auto it = component_at.find(points[v.idx()]); it != component_at.end()) origin[v] = it->second;
     }
     m_ = std::move(out);
     col_ = m_.property_map<VD, Rgb>("v:rgb").first;

@@ -38,13 +38,13 @@ class StagedOutputs {
   // `name` is done; staged = false: it was written in place (the rawlog, committed by its writer).
   void wrote(const std::string& name, const std::string& what, bool staged = true) {
     const auto now = std::chrono::steady_clock::now();
+    const double seconds = std::chrono::duration<double>(now - last_).count();
+    last_ = now;
     char line[1024];
-    std::snprintf(line, sizeof line, "  wrote %s  (%s; %.1f s)\n", final_path_(name).c_str(), what.c_str(),
-                  std::chrono::duration<double>(now - last_).count());
+    std::snprintf(line, sizeof line, "  wrote %s  (%s; %.1f s)\n", final_path_(name).c_str(), what.c_str(), seconds);
     log_lines_.push_back(line);
     if (staged) names_.push_back(name);
-    seconds_.emplace_back(name, std::chrono::duration<double>(now - last_).count());
-    last_ = now;
+    seconds_.emplace_back(name, seconds);
   }
   // Each file written so far and the seconds since the one before it (the first: since the outputs
   // began, after the last frame), as the log lines say them.
