@@ -54,6 +54,23 @@ TEST(TumList, DamagedLinesAreDescribedWhenAsked) {
                                                        "line 7: expected 'timestamp filename'"}));
 }
 
+// One stamp damaged forward (a digit changed) costs its own line: judged against the last line kept,
+// every good line after it was "out of order", and the message named the first of them.
+TEST(TumList, AStampDamagedForwardCostsOnlyItsOwnLine) {
+  TumListDamage damage;
+  const auto l = parseTumList("1.0 a.png\n2.0 b.png\n9.0 c.png\n3.0 d.png\n4.0 e.png\n5.0 f.png\n", "rgb.txt", &damage);
+  ASSERT_EQ(l.size(), 5u);
+  EXPECT_EQ(l[2].file, "d.png");
+  EXPECT_EQ(damage.problems, (std::vector<std::string>{"line 3: timestamp 9.000000 is out of order or duplicated"}));
+  // Damaged back, and a stamp given twice: the first line of the two is kept.
+  TumListDamage back;
+  const auto b = parseTumList("1.0 a.png\n2.0 b.png\n0.5 c.png\n2.0 d.png\n3.0 e.png\n", "rgb.txt", &back);
+  ASSERT_EQ(b.size(), 3u);
+  EXPECT_EQ(b[1].file, "b.png");
+  EXPECT_EQ(back.problems, (std::vector<std::string>{"line 3: timestamp 0.500000 is out of order or duplicated",
+                                                     "line 4: timestamp 2.000000 is out of order or duplicated"}));
+}
+
 TEST(TumList, DuplicateTimestampRejected) {
   EXPECT_THROW(parseTumList("1.0 a.png\n1.0 b.png\n", "rgb.txt"), InputError);
 }

@@ -24,8 +24,8 @@ namespace fs = std::filesystem;
 namespace vofusion {
 
 namespace {
-// What is wrong with a list line ("" when nothing is), given the entries before it; e parsed from it.
-std::string listLineProblem(const std::string& line, const std::vector<TumEntry>& before, TumEntry& e) {
+// What is wrong with a list line on its own ("" when nothing is); e parsed from it.
+std::string listLineProblem(const std::string& line, TumEntry& e) {
   std::istringstream ls(line);
   if (!(ls >> e.timestamp) || !std::isfinite(e.timestamp) || !(ls >> e.file)) return "expected 'timestamp filename'";
   std::string extra;
@@ -35,23 +35,57 @@ std::string listLineProblem(const std::string& line, const std::vector<TumEntry>
   if (!rawlogCanHold(e.timestamp))
     return "timestamp " + cv::format("%.10g", e.timestamp) +
            " is not in seconds (TUM lists give Unix time in seconds; nanoseconds?)";
-  if (!before.empty() && e.timestamp <= before.back().timestamp)
-    return "timestamp " + std::to_string(e.timestamp) + " is out of order or duplicated";
   return {};
+}
+
+// Which entries keep the list in time order: the longest run of rising stamps, of equal runs the one of
+// the earliest lines (a duplicated stamp keeps its first line). Judged against the last line kept, one
+// stamp damaged forward (a digit changed) put every good line after it "out of order".
+std::vector<bool> inTimeOrder(const std::vector<TumEntry>& entries) {
+  // Longest rising run starting at each entry, walked from the end: tails[k] is the entry that starts a
+  // run of k + 1 with the latest first stamp; next[i] the entry after i in its run.
+  std::vector<std::size_t> tails;
+  std::vector<long> next(entries.size(), -1);
+  for (std::size_t i = entries.size(); i-- > 0;) {
+    const double t = entries[i].timestamp;
+    // The first run whose start is not later than t: i cannot start it, but replaces its start.
+    const auto at = std::lower_bound(tails.begin(), tails.end(), t,
+                                     [&](std::size_t k, double v) { return entries[k].timestamp > v; });
+    if (at != tails.begin()) next[i] = long(*std::prev(at));
+    if (at == tails.end()) tails.push_back(i);
+    else *at = i;
+  }
+  std::vector<bool> keep(entries.size(), false);
+  for (long i = tails.empty() ? -1 : long(tails.back()); i >= 0; i = next[std::size_t(i)]) keep[std::size_t(i)] = true;
+  return keep;
 }
 }  // namespace
 
 std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin, TumListDamage* damage) {
-  std::vector<TumEntry> out;
+  std::vector<TumEntry> parsed;
+  std::vector<std::size_t> line_of;
+  std::vector<std::pair<std::size_t, std::string>> problems;  // (line, why), in line order at the end
   for (const auto& [n, line] : dataLines(text)) {
     if (damage) ++damage->lines;
     TumEntry e;
-    if (const std::string why = listLineProblem(line, out, e); !why.empty()) {
-      if (!damage) throw InputError(origin, "line " + std::to_string(n) + ": " + why);
-      damage->problems.push_back("line " + std::to_string(n) + ": " + why);
+    if (const std::string why = listLineProblem(line, e); !why.empty()) {
+      problems.emplace_back(n, why);
       continue;
     }
-    out.push_back(std::move(e));
+    parsed.push_back(std::move(e));
+    line_of.push_back(n);
+  }
+  const std::vector<bool> keep = inTimeOrder(parsed);
+  std::vector<TumEntry> out;
+  out.reserve(parsed.size());
+  for (std::size_t i = 0; i < parsed.size(); ++i) {
+    if (keep[i]) out.push_back(std::move(parsed[i]));
+    else problems.emplace_back(line_of[i], "timestamp " + std::to_string(parsed[i].timestamp) + " is out of order or duplicated");
+  }
+  std::sort(problems.begin(), problems.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [n, why] : problems) {
+    if (!damage) throw InputError(origin, "line " + std::to_string(n) + ": " + why);
+    damage->problems.push_back("line " + std::to_string(n) + ": " + why);
   }
   return out;
 }

@@ -41,7 +41,8 @@ struct TumListDamage {
 };
 // Parses rgb.txt/depth.txt ("timestamp filename", '#' comments). Throws InputError(path, "line N: ...")
 // at the first damaged line (no stamp or name, an extra field, a stamp out of order or not in seconds);
-// given `damage`, such a line is left out and described there instead.
+// given `damage`, such a line is left out and described there instead. Out of order: off the longest run
+// of rising stamps (one stamp damaged forward costs its own line, not every line after it).
 std::vector<TumEntry> readTumList(const std::string& path);
 std::vector<TumEntry> parseTumList(const std::string& text, const std::string& origin, TumListDamage* damage = nullptr);
 
