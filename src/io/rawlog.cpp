@@ -158,13 +158,39 @@ std::string colourSizeMismatch(cv::Size got, const CameraIntrinsics& colour_cam)
          std::to_string(colour_cam.width) + "x" + std::to_string(colour_cam.height);
 }
 
-// `colour_cam`: the colour camera the image must fit (not registered to the depth), else nullptr.
-cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, const CameraIntrinsics* colour_cam, bool& plain) {
+// A registered colour image is at most this many times the depth image's pixels (1280x960 over 320x240).
+constexpr int kMostColourPixelsPerDepthPixel = 16;
+
+// Refuses a colour file's stated size (before any decoder allocates its pixels) unless it is its own
+// camera's, or, registered, at most kMostColourPixelsPerDepthPixel times the depth image's pixels: a
+// crafted 3 MB PNG stating 32768x32768 was two 3.2 GB buffers a frame, and a failed allocation ended
+// the run naming no file.
+void refuseColourSize(const std::string& file, cv::Size stated, const CameraIntrinsics* colour_cam, cv::Size depth) {
+  if (colour_cam && stated != cv::Size(colour_cam->width, colour_cam->height))
+    throw InputError(file, colourSizeMismatch(stated, *colour_cam));
+  if (!colour_cam && double(stated.area()) > double(kMostColourPixelsPerDepthPixel) * depth.area())
+    throw InputError(file, "colour image is " + std::to_string(stated.width) + "x" + std::to_string(stated.height) +
+                               ", over " + std::to_string(kMostColourPixelsPerDepthPixel) + " times the " +
+                               std::to_string(depth.width) + "x" + std::to_string(depth.height) + " depth image's pixels");
+}
+
+// `colour_cam`: the colour camera the image must fit (not registered to the depth), else nullptr;
+// `depth`: the depth image's size, which a registered image has but for a larger sensor's colour.
+cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, const CameraIntrinsics* colour_cam,
+                 cv::Size depth, bool& plain) {
   const bool external = obs.intensityImage.isExternallyStored();
   const std::string file = external ? obs.intensityImage.getExternalStorageFileAbsolutePath() : origin;
   plain = false;
   if (external) {
-    if (cv::Mat decoded = readPlainPng(file); decoded.type() == CV_8UC3) {
+    // Decoded at the size it should have; a file stating another is judged by its header first.
+    const cv::Size want = colour_cam ? cv::Size(colour_cam->width, colour_cam->height) : depth;
+    cv::Size stated;
+    cv::Mat decoded = readPlainPng(file, want, &stated);
+    if (decoded.empty() && !stated.empty() && stated != want) {
+      refuseColourSize(file, stated, colour_cam, depth);
+      decoded = readPlainPng(file, stated);
+    }
+    if (decoded.type() == CV_8UC3) {
       plain = true;
       return decoded;
     }
@@ -173,12 +199,12 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
       throw InputError(file, "cannot load intensity image (" + why + ")");
     if (const std::string damage = imageFileDamage(file); !damage.empty())
       throw InputError(file, "cannot load intensity image (" + damage + ")");
-    // A JPEG of another size than its camera's is refused by its header, before its pixels are allocated.
-    const cv::Size expect = colour_cam ? cv::Size(colour_cam->width, colour_cam->height) : cv::Size();
-    const JpegDecode jpeg = readJpeg(file, expect);
+    JpegDecode jpeg = readJpeg(file, want);
+    if (jpeg.image.empty() && jpeg.damage.empty() && !jpeg.header.empty() && jpeg.header != want) {
+      refuseColourSize(file, jpeg.header, colour_cam, depth);
+      jpeg = readJpeg(file, jpeg.header);
+    }
     if (!jpeg.damage.empty()) throw InputError(file, "cannot load intensity image (" + jpeg.damage + ")");
-    if (!expect.empty() && !jpeg.header.empty() && jpeg.header != expect)
-      throw InputError(origin, colourSizeMismatch(jpeg.header, *colour_cam));
     if (!jpeg.image.empty()) return asBgr8(jpeg.image);
   }
   cv::Mat img;
@@ -266,7 +292,7 @@ void setColour(const CObservation3DRangeScan& obs, const std::string& origin, Fr
       colour_cam->validate(origin + " (colour camera)");
     }
     bool plain = false;
-    f.rgb = colourOf(obs, origin, colour_cam ? &*colour_cam : nullptr, plain);
+    f.rgb = colourOf(obs, origin, colour_cam ? &*colour_cam : nullptr, cv::Size(cols, rows), plain);
     if (colour_cam) {
       if (colour_cam->width != f.rgb.cols || colour_cam->height != f.rgb.rows)
         throw InputError(origin, colourSizeMismatch(f.rgb.size(), *colour_cam));
@@ -493,6 +519,11 @@ bool RawlogSource::next(Frame& frame) {
     if (obs->range_is_depth) frame.depth_file = range_file;  // ranges along the rays are not the depth a writer stores
   } catch (const InputError& e) {
     throw DamagedFrame(e);  // this record's images; the next record is read as usual
+  } catch (const std::bad_alloc&) {
+    // An image no check above bounds (another format, decoded by MRPT's CImage): its frame, not the run.
+    throw DamagedFrame(InputError(path_, "record " + std::to_string(index) + ": its images need more memory than there is"));
+  } catch (const cv::Exception& e) {
+    throw DamagedFrame(InputError(path_, "record " + std::to_string(index) + ": its images cannot be decoded (" + e.err + ")"));
   }
   frame.index = index;
   if (index < colour_offsets_.size()) frame.colour_offset = colour_offsets_[index];
