@@ -327,12 +327,19 @@ void printOutcome(const FrameLoop& loop, const Reconstruction& rec, const nlohma
   std::fprintf(stderr, "\n");
 }
 
-// Once the outputs are whole: a checkpoint this run wrote or went on from has nothing left to resume.
-// Another run's in the same folder (another input, configuration or length) is left for its --resume.
-void removeSpentFiles(const RunPlan& plan, const FrameLoop& loop) {
+// Once the outputs are whole: a checkpoint this run wrote or went on from has nothing left to resume,
+// unless the map could not be saved (`map_failed`): resumed from it, the run writes the map without its
+// frames again. Another run's in the same folder (another input, configuration or length) is left for
+// its --resume.
+void removeSpentFiles(const RunPlan& plan, const FrameLoop& loop, bool map_failed) {
   std::error_code ec;
   const bool resumed_from_it = plan.resume && std::filesystem::equivalent(*plan.resume, plan.checkpoint_path, ec);
-  if (!loop.interrupted() && (loop.checkpoints > 0 || resumed_from_it)) std::filesystem::remove(plan.checkpoint_path, ec);
+  const bool ours = loop.checkpoints > 0 || resumed_from_it;
+  if (ours && map_failed && std::filesystem::exists(plan.checkpoint_path, ec))
+    std::fprintf(stderr, "vofusion: %s is kept: --resume it with --save-volume to write the map without tracking the "
+                         "frames again\n", plan.checkpoint_path.c_str());
+  else if (!loop.interrupted() && ours)
+    std::filesystem::remove(plan.checkpoint_path, ec);
   std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
 }
 
@@ -388,7 +395,8 @@ int body(int argc, char** argv) {
     std::fprintf(stderr, "vofusion: loops corrected the trajectory, but the run was stopped before the map was fused "
                          "again at the corrected poses: the mesh keeps the tracked poses\n");
   printOutcome(loop, rec, summary);
-  removeSpentFiles(plan, loop);
+  removeSpentFiles(plan, loop, run.mapFailure() != nullptr);
+  if (run.mapFailure()) std::rethrow_exception(run.mapFailure());  // one line naming the map; exit 2
   return loop.interrupted() ? 128 + loop.stop_signal : 0;  // as the shell reports a signal: 130, 143
 }
 

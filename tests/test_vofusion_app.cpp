@@ -513,6 +513,39 @@ TEST(VofusionApp, ARunWhoseOutputsFailKeepsTheEarlierMap) {
     EXPECT_TRUE(e.path() == map || e.path() == cfg || e.path() == out) << "left behind: " << e.path();
 }
 
+// A map that cannot be saved keeps the checkpoint the run went on from (said in a line), and ends the run
+// after its own ending (its outcome line; exit 2 naming the map): resumed from it again with room for the
+// map, the run writes the map and the checkpoint goes. The run ended at the map's error before: no outcome,
+// the spent files left without a word.
+TEST(VofusionApp, AMapThatCannotBeSavedKeepsTheCheckpointToWriteItFrom) {
+  const std::string dir = test::tempDir("vofusion_app_map_fails_checkpoint_kept");
+  const std::string cfg = dir + "/path_only.ini", out = dir + "/out", map = dir + "/map.bin";
+  std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  const std::string run = test::app("vofusion") + " synthetic:room --max-frames 12 --out " + out + " --config " + cfg;
+  std::string log;
+  // An interrupted run keeps its checkpoint.
+  test::run("(" + run + " --checkpoint-every 0.000001 > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 3000); do [ -e " +
+                out + "/checkpoint ] && break; sleep 0.01; done; kill -TERM $pid; wait $pid; echo rc=$?)",
+            &log);
+  if (log != "rc=143\n" || !fs::exists(out + "/checkpoint")) GTEST_SKIP() << "the run ended before the stop: " << log;
+  // Resumed with a map that cannot be written (a file size limit, as a full disk).
+  test::run("{ trap '' XFSZ; ulimit -f 1024; " + run + " --resume " + out + "/checkpoint --save-volume " + map +
+                " 2>&1 >/dev/null; echo rc=$?; }",
+            &log);
+  const std::vector<std::string> lines = test::lines(log);
+  ASSERT_GE(lines.size(), 4u) << log;
+  EXPECT_EQ(lines.end()[-1], "rc=2");
+  EXPECT_EQ(lines.end()[-2], "vofusion: error: " + map + ": cannot write the map: write failed (disk full?)");
+  EXPECT_EQ(lines.end()[-3], "vofusion: " + out + "/checkpoint is kept: --resume it with --save-volume to write the map "
+                             "without tracking the frames again");
+  EXPECT_EQ(lines.end()[-4].rfind("vofusion: 12 frames,", 0), 0u) << log;
+  ASSERT_TRUE(fs::exists(out + "/checkpoint"));
+  EXPECT_FALSE(fs::exists(map));
+  EXPECT_EQ(test::run(run + " --resume " + out + "/checkpoint --save-volume " + map + " 2>&1", &log), 0) << log;
+  EXPECT_TRUE(fs::exists(map));
+  EXPECT_FALSE(fs::exists(out + "/checkpoint"));
+}
+
 // A checkpoint that cannot be written (a file size limit, as a full disk) is one warning naming the
 // checkpoint, and costs the checkpoints only: the run goes on and writes its outputs, summary.json
 // saying why. It was the run's end (exit 2, nothing written), a stop's checkpoint too.

@@ -360,10 +360,9 @@ nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std:
   rec_.finish();
   if (premesher_) premesher_->stop();  // before the map is fused again or released
   if (write_mesh_ || save_volume) refuse(info, reopen);  // the map is not used otherwise
-  // A map that cannot be written costs the map, not the run's other outputs: its error comes after them.
-  // It is written before them (the meshing releases the map) but put in place after them: a run whose
+  // A map that cannot be written costs the map, not the run's other outputs (mapFailure()). It is
+  // written before them (the meshing releases the map) but put in place after them: a run whose
   // outputs failed replaced the earlier map, the map it resumed from too.
-  std::exception_ptr map_failed;
   std::optional<AtomicPath> map;
   if (save_volume) {
     try {
@@ -371,13 +370,18 @@ nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std:
       saveMapTo(*map);
     } catch (const std::exception& e) {
       map.reset();
-      map_failed = std::current_exception();
+      map_failure_ = std::current_exception();
       info.extra["save_volume_error"] = oneLineMessage(e);
     }
   }
   nlohmann::json summary = recorder_.finish(rec_, info, stderr, premesher_.get());
-  if (map) map->commit();
-  if (map_failed) std::rethrow_exception(map_failed);
+  if (map) {
+    try {
+      map->commit();
+    } catch (const std::exception&) {
+      map_failure_ = std::current_exception();  // the rename, after summary.json: said on the way out
+    }
+  }
   return summary;
 }
 

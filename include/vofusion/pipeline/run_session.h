@@ -7,6 +7,7 @@
 //   RunSession run(cfg, TrackingMode::Joint, "out", out_params, mesh_params);
 //   while (source.next(frame)) run.process(frame);
 //   json summary = run.finish(info, [&] { return openFrameSource(input); });
+#include <exception>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -43,7 +44,10 @@ class RunSession {
   // loops moved them (from reopen(); without one the mesh keeps the tracked poses),
   // saved to save_volume when given (put in place after the other outputs: a run whose outputs fail
   // leaves an earlier map as it was), and every output written. Returns summary.json's content.
+  // A map that cannot be saved costs the map only: its error is mapFailure(), for the caller to end
+  // with once the run's own ending is done (its outcome said, its spent files removed).
   nlohmann::json finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume = std::nullopt);
+  std::exception_ptr mapFailure() const { return map_failure_; }
 
   // Checkpoints (vofusion --checkpoint-every, --resume <checkpoint>; vofusion-grab --live). `origin`
   // names what the run reads (checkpointOrigin); a checkpoint made by another run is refused.
@@ -97,6 +101,7 @@ class RunSession {
   std::vector<SavedReport> reports_;
   std::size_t resumed_frames_ = 0, replayed_ = 0;
   std::string resumed_from_;
+  std::exception_ptr map_failure_;
 };
 
 }  // namespace vofusion
