@@ -71,7 +71,9 @@ Args parseArgs(const CommandLine& cl) {
 // sections only (nothing else is run).
 OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known) {
   auto cfg = loadConfig(a.config);
-  checkConfigKeys(cfg, a.config, vofusionConfigSections());  // a whole vofusion config is fine
+  // A whole vofusion config is fine; a vofusion-grab one is checked in our sections, as vofusion-grab did.
+  if (isGrabberConfig(cfg)) checkKnownSections(cfg, a.config, vofusionConfigSections());
+  else checkConfigKeys(cfg, a.config, vofusionConfigSections());
   OdometryParams params;
   loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
   if (a.sets.empty()) return params;

@@ -396,6 +396,20 @@ TEST(RgbdOdometryApp, TakesAWholeVofusionConfig) {
                       &log),
             2);
   EXPECT_EQ(log, "rgbd-odometry: error: " + dir + "/typo.ini: unknown key 'voxel_sise' in section [kinfu]\n");
+  // vofusion-grab's (its own section and rawlog-grabber's key beside ours) as vofusion-grab reads it;
+  // it was refused for its [vofusion-grab] section. Ours are still checked.
+  std::ofstream(dir + "/grab.ini") << "[vofusion-grab]\nrawlog-grabber-ignore = true\nqueue_capacity = 4\n[odometry]\nreferences = 2\n";
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --max-frames 2 --no-rawlog --out " + dir + "/out3 --config " +
+                          dir + "/grab.ini 2>&1",
+                      &log),
+            0)
+      << log;
+  std::ofstream(dir + "/grab.ini", std::ios::app) << "[odometry]\nreferencs = 2\n";
+  EXPECT_EQ(test::run(test::app("rgbd-odometry") + " synthetic --max-frames 2 --no-rawlog --out " + dir + "/out4 --config " +
+                          dir + "/grab.ini",
+                      &log),
+            2);
+  EXPECT_EQ(log, "rgbd-odometry: error: " + dir + "/grab.ini: unknown key 'referencs' in section [odometry]\n");
 }
 
 TEST(OdometryParams, ShareIniHoldsEveryKeyWithTheDefaults) {

@@ -196,7 +196,7 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
 
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user) {
   for (const auto& [s, keys] : sectionsWithKeys(user)) {
-    if (keyName(s) == "global") return true;
+    if (keyName(s) == "global" || keyName(s) == "vofusion-grab") return true;
     for (const auto& k : keys)
       if (keyName(k) == "driver") return true;
   }

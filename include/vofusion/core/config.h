@@ -36,7 +36,8 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
                         const std::vector<ConfigSection>& known);
 
 // True for a rawlog-grabber configuration such as vofusion-grab's --config: it has rawlog-grabber's
-// [global] section or a sensor section (one with a `driver` key).
+// [global] section, a sensor section (one with a `driver` key) or vofusion-grab's own [vofusion-grab]
+// (a --replay --live run's, checked in our sections by vofusion-grab, as by the apps reading it again).
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user);
 // A free-text value as the config file gives it (a folder: [kinfu] work_dir): MRPT's INI reader keeps
 // quotes, and a '#' or ';' comment after a value, as part of the value (only ' //' starts a comment
