@@ -389,6 +389,8 @@ int body(int argc, char** argv) {
     reopen = [&]() -> std::unique_ptr<FrameSource> { return openInput(plan, false).source; };
   else
     info.no_rereading = "interrupted";
+  // A stop asked for now has no frame in hand: the outputs are written whatever it says.
+  const ScopedStoppingMessage writing("\nthe frames are done and their outputs are being written (Ctrl-C again to kill)\n");
   const auto summary = run.finish(info, reopen, plan.save_volume);
   const Reconstruction& rec = run.reconstruction();
   if (plan.out_params.write_mesh && rec.mapNeedsReintegration() && !rec.reintegrated() && loop.interrupted())

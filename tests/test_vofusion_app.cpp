@@ -655,6 +655,28 @@ TEST(VofusionApp, CtrlCStopsAndWritesWhatWasBuilt) {
   expectAnInterruptedRunsOutputs(test::tempDir("vofusion_app_sigint"), "INT", 130);
 }
 
+// Ctrl-C pressed twice kills at once, however soon the second comes: here 0.3 s apart on a terminal
+// (script(1)'s), the second while the stopped run writes its mesh. The second was taken for the first
+// delivered again (as a batch system's signals are: sent by a process) and did nothing, unsaid.
+TEST(VofusionApp, CtrlCPressedTwiceKillsHoweverSoon) {
+  if (test::run("command -v script >/dev/null") != 0) GTEST_SKIP() << "no script(1) (bsdutils) for a terminal";
+  const std::string dir = test::tempDir("vofusion_app_ctrl_c_twice");
+  const std::string out = dir + "/out", log = dir + "/log.txt";
+  // The keys go to the terminal once the run is on its frames, and again as soon as it meshes.
+  const std::string keys = "( until grep -q '/300 frames' " + log + " 2>/dev/null; do sleep 0.05; done; printf '\\003'; "
+                           "for i in $(seq 1 200); do grep -q 'meshing' " + log + " && break; sleep 0.05; done; printf '\\003'; "
+                           "sleep 2 )";
+  std::string said;
+  test::run(keys + " | timeout 120 script -qec '" + test::app("vofusion") + " synthetic:room --max-frames 300 --out " + out +
+                "' /dev/null > " + log + " 2>&1",
+            &said);
+  std::ifstream in(log);
+  const std::string text(std::istreambuf_iterator<char>(in), {});
+  ASSERT_NE(text.find("stopping after the frame in hand"), std::string::npos) << text;
+  ASSERT_NE(text.find("meshing"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(out + "/summary.json")) << "the second Ctrl-C did not kill: " << text;
+}
+
 // A batch system's time limit (Slurm's, before its SIGKILL) sends SIGTERM: the same as Ctrl-C, so
 // an hour's run is not lost, and with --checkpoint-every it leaves a checkpoint at the last frame.
 TEST(VofusionApp, SigtermStopsAsCtrlCDoesAndLeavesACheckpointToResume) {

@@ -31,7 +31,9 @@ constexpr char kStopping[] = "\nstopping after the frame in hand; what was done 
 std::atomic<const char*> g_stopping{kStopping};
 
 // Only async-signal-safe work: lock-free atomics, clock_gettime(), write(), signal() and raise().
-void onStopSignal(int signal) {
+// `sent`: by a process (kill, raise, sigqueue: si_code <= 0), not by the terminal's keys (SI_KERNEL).
+void onStopSignal(int signal, siginfo_t* info, void*) {
+  const bool sent = info && info->si_code <= 0;
   const int saved_errno = errno;  // the interrupted code may be about to read its own (a failed pwrite's)
   struct RestoreErrno {
     int value;
@@ -54,8 +56,10 @@ void onStopSignal(int signal) {
     return;
   }
   // One request can come twice at once: Slurm signals every process of a job, a terminal's Ctrl-C
-  // reaches batch-job too, and batch-job passes it on (an INT as TERM).
-  if (now - g_first_ns < std::int64_t(kSameRequestSeconds * 1e9)) return;
+  // reaches batch-job too, and batch-job passes it on (an INT as TERM). Those are sent; a second
+  // Ctrl-C pressed is the user's own, and kills however soon it comes (one 0.3 s after the first did
+  // nothing, unsaid).
+  if (sent && now - g_first_ns < std::int64_t(kSameRequestSeconds * 1e9)) return;
   std::signal(signal, SIG_DFL);  // the second: what the signal does without a handler, now
   std::raise(signal);
 }
@@ -65,8 +69,12 @@ void onStopSignal(int signal) {
 void installStopSignals(const char* stopping) {
   static_assert(std::atomic<const char*>::is_always_lock_free);
   if (stopping) g_stopping = stopping;
-  std::signal(SIGINT, onStopSignal);  // also where a background job started with SIGINT ignored
-  std::signal(SIGTERM, onStopSignal);
+  struct sigaction on_stop {};
+  on_stop.sa_sigaction = onStopSignal;
+  on_stop.sa_flags = SA_SIGINFO | SA_RESTART;  // SA_RESTART: as std::signal installs a handler (glibc)
+  sigemptyset(&on_stop.sa_mask);
+  sigaction(SIGINT, &on_stop, nullptr);  // also where a background job started with SIGINT ignored
+  sigaction(SIGTERM, &on_stop, nullptr);
   // "vofusion ... | tee run.log" and Ctrl-C: tee exits too, and a write to stderr after it (the stop
   // message, a progress line) ended the run by SIGPIPE before it wrote what it had. A closed pipe is
   // then only a failed write.
