@@ -183,6 +183,9 @@ int body(int argc, char** argv) {
   if (out.empty()) throw InputError("usage", "--out <dir | file.rawlog> is required");
 
   const bool rawlog = fs::path(out).extension() == ".rawlog";
+  if (cl.flag("--overwrite") && !rawlog)
+    throw InputError("--overwrite", "takes effect with a .rawlog --out only (a folder rgbd-simulate wrote is replaced "
+                                    "without it, any other never)");
   if (!rawlog && o.trajectory == "shake") requireColourOffsetsATumFolderPairs(o);
   const sim::SyntheticSequence seq(o);  // validates the scene before any output exists
   installStopSignals(kStoppingWithNothingWritten);

@@ -139,6 +139,8 @@ void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
     checkReconstructionValues(cfg);
     LiveOptions().loadFromConfigFile(cfg, "vofusion-grab");  // unused here, its values checked as vofusion-grab does
   });
+  if (cl.flag("--raw-mesh") && !plan.out_params.write_mesh)  // it was left out without a word
+    throw InputError("--raw-mesh", "takes effect with [output] mesh = true only (" + plan.config_path + " has mesh = false)");
   if (cl.flag("--raw-mesh")) plan.out_params.save_raw_mesh = true;
 }
 

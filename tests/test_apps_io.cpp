@@ -87,6 +87,18 @@ TEST(AppsIo, SimulateIntoTheFolderItRunsInIsRefusedAtOnce) {
   }
 }
 
+// --overwrite replaces a rawlog; a folder rgbd-simulate wrote is replaced without it and any other never,
+// so beside a folder it would change nothing: refused, not ignored (a user expecting a folder replaced
+// was told "refusing to replace it" without the option named).
+TEST(AppsIo, SimulateRefusesOverwriteForAFolder) {
+  const std::string dir = test::tempDir("simulate_overwrite_folder");
+  std::string log;
+  EXPECT_EQ(run("{ " + app("rgbd-simulate") + " --out " + dir + "/tum --frames 2 --size 160x120 --overwrite 2>&1 >/dev/null; }", &log), 2);
+  EXPECT_EQ(log, "rgbd-simulate: error: --overwrite: takes effect with a .rawlog --out only (a folder rgbd-simulate wrote is "
+                 "replaced without it, any other never)\n");
+  EXPECT_FALSE(fs::exists(dir + "/tum"));
+}
+
 // A ground truth already beside the rawlog to write is an earlier recording's too: refused without
 // --overwrite, as the rawlog and its images are (it was replaced silently).
 TEST(AppsIo, SimulateKeepsAGroundTruthBesideTheRawlogWithoutOverwrite) {

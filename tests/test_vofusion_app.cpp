@@ -421,6 +421,22 @@ TEST(VofusionApp, SaveVolumeToAFolderFailsBeforeTheRun) {
   EXPECT_FALSE(fs::exists(dir + "/out/summary.json"));
 }
 
+// A mesh file asked for beside [output] mesh = false (--raw-mesh, save_raw_mesh, save_full_mesh) is
+// refused, naming where it was asked for: it was left out without a word (exit 0).
+TEST(VofusionApp, AMeshFileAskedForBesideNoMeshIsRefused) {
+  const std::string dir = test::tempDir("vofusion_app_mesh_file_no_mesh");
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\n";
+  std::ofstream(dir + "/full.ini") << "[output]\nmesh = false\nsave_full_mesh = true\n";
+  std::string log;
+  const std::string run = test::app("vofusion") + " synthetic:room --max-frames 2 --out " + dir + "/out";
+  EXPECT_EQ(test::run(run + " --raw-mesh --config " + dir + "/nomesh.ini 2>&1", &log), 2);
+  EXPECT_EQ(log, "vofusion: error: --raw-mesh: takes effect with [output] mesh = true only (" + dir + "/nomesh.ini has mesh = false)\n");
+  EXPECT_EQ(test::run(run + " --config " + dir + "/full.ini 2>&1", &log), 2);
+  EXPECT_EQ(log, "vofusion: error: " + dir + "/full.ini: [output] save_full_mesh: takes effect with mesh = true only (mesh = false "
+                 "writes no mesh)\n");
+  EXPECT_FALSE(fs::exists(dir + "/out"));
+}
+
 // Nothing the run writes lands on its input: the map saved over the recording (or its ground truth), or
 // over one of the run's own outputs (which then replaced it), and a recording read from the folder the
 // run writes its poses.rawlog into, were all replaced without a word (exit 0).

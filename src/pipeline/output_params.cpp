@@ -28,6 +28,9 @@ std::vector<ConfigKey> outputKeys(OutputParams& p) {
 
 void OutputParams::loadFromConfigFile(const mrpt::config::CConfigFileBase& c, const std::string& s) {
   loadKeys(c, s, outputKeys(*this));  // the table's ranges are the ones checked (and the ones --dump-config shows)
+  // A mesh file asked for beside no mesh at all was left out without a word.
+  for (const auto& [key, on] : {std::pair{"save_raw_mesh", save_raw_mesh}, std::pair{"save_full_mesh", save_full_mesh}})
+    if (on && !write_mesh) throw InputError("[" + s + "] " + key, "takes effect with mesh = true only (mesh = false writes no mesh)");
 }
 
 void OutputParams::saveToConfigFile(mrpt::config::CConfigFileBase& c, const std::string& s) const {
