@@ -1,6 +1,8 @@
 // The whole per-frame pipeline (odometry -> KinFu): fusing frame k on another thread while the
 // odometry of frame k+1 runs must not change a single pose, and runs must repeat exactly.
 #include <cstdint>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 
 #include <mrpt/config/CConfigFileMemory.h>
@@ -423,6 +425,34 @@ TEST(Reconstruction, ReintegrationKeepsTheMapTheRunWentOnFrom) {
   EXPECT_FALSE(third.reintegrated());
   const KinFuStats kept = third.fusionStats();
   EXPECT_GE(kept.bricks_in_volume + kept.bricks_in_world_model, saved_bricks) << "the earlier session was lost";
+
+  // Unchanged by its size and time but unreadable since (a byte flipped on a failing disk): found before
+  // the tracked map goes. The frames were fused without it, and --save-volume wrote that over the file.
+  const std::string damaged_file = test::tempDir("reintegrate_resumed_damaged") + "/first.vfmap";
+  {
+    Reconstruction first(test::quickRoomConfig(), TrackingMode::Joint);
+    for (std::size_t i = 0; i < first_session; ++i) first.process(seq.render(i));
+    first.finish();
+    first.saveVolume(damaged_file);
+  }
+  Reconstruction fourth(test::quickRoomConfig(), TrackingMode::Joint);
+  fourth.resumeVolume(damaged_file);
+  for (std::size_t i = first_session; i < frames; ++i) fourth.process(seq.render(i));
+  const auto written = std::filesystem::last_write_time(damaged_file);
+  {
+    std::fstream f(damaged_file, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(200);
+    const char c = char(f.get());
+    f.seekp(200);
+    f.put(char(c ^ 0x10));
+  }
+  std::filesystem::last_write_time(damaged_file, written);
+  ASSERT_TRUE(fourth.reintegrationBlocked().has_value());
+  EXPECT_NE(fourth.reintegrationBlocked()->find("truncated or corrupt map"), std::string::npos) << *fourth.reintegrationBlocked();
+  next = first_session;
+  EXPECT_EQ(fourth.reintegrate([&](Frame& f) { return next < frames ? (f = seq.render(next++), true) : false; }), 0u);
+  const KinFuStats tracked = fourth.fusionStats();
+  EXPECT_GE(tracked.bricks_in_volume + tracked.bricks_in_world_model, saved_bricks) << "the earlier session was lost";
 }
 
 // A depth image of odd width or height: halved for tracking, its odd column and row are dropped, and

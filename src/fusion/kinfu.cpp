@@ -186,16 +186,23 @@ void KinFu::save(const std::string& path, const Eigen::Isometry3d& pose) const {
   out.commit();
 }
 
-Eigen::Isometry3d KinFu::resume(const std::string& path) {
-  Impl& s = *impl_;
+std::string KinFu::savedMapProblem(const std::string& path) {
   std::ifstream is(path, std::ios::binary);
-  if (!is) throw InputError(path, "cannot open the saved map");
+  if (!is) return "cannot open the saved map";
   char magic[sizeof(kMapMagic)];
   if (!is.read(magic, sizeof(magic)) ||
       (std::memcmp(magic, kMapMagic, sizeof(kMapMagic)) != 0 && std::memcmp(magic, kMapMagicV1, sizeof(kMapMagicV1)) != 0))
-    throw InputError(path, "not a vofusion map (written by --save-volume)");
+    return "not a vofusion map (written by --save-volume)";
   if (std::string why; std::memcmp(magic, kMapMagic, sizeof(kMapMagic)) == 0 && !fileChecksumHolds(path, why))
-    throw InputError(path, "truncated or corrupt map: " + why);
+    return "truncated or corrupt map: " + why;
+  return {};
+}
+
+Eigen::Isometry3d KinFu::resume(const std::string& path) {
+  Impl& s = *impl_;
+  if (const std::string why = savedMapProblem(path); !why.empty()) throw InputError(path, why);
+  std::ifstream is(path, std::ios::binary);
+  if (!is || !is.seekg(std::streamoff(sizeof(kMapMagic)))) throw InputError(path, "cannot open the saved map");
   Eigen::Matrix4d T;
   if (!is.read(reinterpret_cast<char*>(T.data()), sizeof(double) * 16) || !isRigid(T))
     throw InputError(path, "truncated or corrupt map (camera pose)");

@@ -324,9 +324,16 @@ bool Reconstruction::mapNeedsReintegration() const {
 
 std::optional<std::string> Reconstruction::reintegrationBlocked() const {
   const Impl& m = *impl_;
-  if (m.resumed_map.empty() || mapStamp(m.resumed_map) == m.resumed_map_stamp) return std::nullopt;
-  return m.resumed_map + ": changed or gone since the run went on from it (saved over by an interrupted run?): "
-                         "fused again without it, the map would lose the sessions before this one";
+  if (m.resumed_map.empty()) return std::nullopt;
+  if (mapStamp(m.resumed_map) != m.resumed_map_stamp)
+    return m.resumed_map + ": changed or gone since the run went on from it (saved over by an interrupted run?): "
+                           "fused again without it, the map would lose the sessions before this one";
+  // Unreadable now (its disk failing, a byte flipped): found before the tracked map goes, which holds
+  // them. Fused without it, the map lost them, and --save-volume wrote that over the file.
+  if (const std::string why = KinFu::savedMapProblem(m.resumed_map); !why.empty())
+    return m.resumed_map + ": " + why + " since the run went on from it: fused again without it, the map would lose the "
+                           "sessions before this one";
+  return std::nullopt;
 }
 
 std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
@@ -345,9 +352,8 @@ std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
   m.kinfu = std::make_unique<TrackedMap>(m.kinfu_params, m.mode, poses.empty() ? mrpt::poses::CPose3D() : poses[0].pose);
   TrackedMap& map = *m.kinfu;
   // A run that went on from a saved map fuses its frames into that map again, not into an empty one:
-  // the earlier sessions' surfaces are the map's too (one changed since blocked this above). Unchanged
-  // since it was read but unreadable now (its disk failing) is not checked before the tracked map goes:
-  // said, and the frames fused without it.
+  // the earlier sessions' surfaces are the map's too (one changed or unreadable since blocked this above;
+  // one that fails to load all the same is said, and the frames fused without it).
   if (!m.resumed_map.empty()) {
     try {
       map.resume(m.resumed_map);

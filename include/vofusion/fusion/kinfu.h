@@ -82,6 +82,9 @@ class KinFu final : public ModelSource {
   // Replaces the map by a saved one and returns its camera pose; the model is predicted again before
   // the next frame is tracked (predictIfStale). Throws InputError(path, ...) for a bad or truncated file.
   Eigen::Isometry3d resume(const std::string& path);
+  // What resume() would find wrong with the file before loading it ("" when nothing): it cannot be
+  // opened, is no map, or its checksum fails (a map of the first format has none).
+  static std::string savedMapProblem(const std::string& path);
   // Checkpoints: the map and the model last predicted from it (surfaces, intensity, the ray cast's
   // depth), so the next frame is tracked exactly as it would have been without the interruption.
   void saveState(std::ostream& os) const;

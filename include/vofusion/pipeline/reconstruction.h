@@ -86,8 +86,9 @@ class Reconstruction {
   // (fused at the tracked poses) should be fused again at the corrected ones.
   bool mapNeedsReintegration() const;
   // Why the map cannot be fused again, if so: the saved map the run went on from (resumeVolume) changed
-  // since (an interrupted run saved over it), so it holds some of these frames already, and fusing them
-  // again without it would lose the sessions before this one. reintegrate() then leaves the map as tracked.
+  // since (an interrupted run saved over it), so it holds some of these frames already, or cannot be read
+  // again (KinFu::savedMapProblem: a failing disk), and fusing them again without it would lose the
+  // sessions before this one. reintegrate() then leaves the map as tracked.
   std::optional<std::string> reintegrationBlocked() const;
   double maxLoopCorrection() const;  // after finish(): largest distance the loops moved a fused pose, m
   // Fuses the frames again, from the first (next(frame) gives them in the order processed), into a
