@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "support.h"
+#include "vofusion/core/state_archive.h"
 #include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/deflate.h"
 #include "vofusion/core/errors.h"
@@ -222,6 +223,27 @@ TEST(Checkpoint, BricksAndKeyframesLostBeforeACheckpointStayCountedAfterTheResum
 
 // A setting that differs past its sixth decimal is another run: the origin wrote both as 0.003000, and
 // a run resumed with the other value went on with it.
+// What a checkpoint writes it reads: a frame's descriptors of over 65536 keypoints (one row each) were
+// written whole and refused at --resume ("bad image size"), after the run that made them. Past what a
+// checkpoint holds, the write fails (the run goes on without checkpoints), not the resume.
+TEST(Checkpoint, AnImageACheckpointWritesItReads) {
+  cv::Mat descriptors(70000, 32, CV_8U);
+  cv::randu(descriptors, 0, 255);
+  std::stringstream ss;
+  {
+    auto out = state::archiveOf(static_cast<std::ostream&>(ss));
+    state::write(out, descriptors);
+  }
+  cv::Mat back;
+  auto in = state::archiveOf(static_cast<std::istream&>(ss));
+  state::read(in, back);
+  EXPECT_EQ(cv::norm(back, descriptors, cv::NORM_INF), 0.0);
+  std::stringstream none;
+  auto out = state::archiveOf(static_cast<std::ostream&>(none));
+  EXPECT_THROW(state::write(out, cv::Mat(1, (1 << 24) + 1, CV_8U)), std::runtime_error);
+  EXPECT_EQ(none.str().size(), 0u);
+}
+
 TEST(Checkpoint, AnOriginTellsSettingsApartPastTheSixthDecimal) {
   mrpt::config::CConfigFileMemory a, b;
   a.write("kinfu", "joint_icp_sigma", std::string("0.0030001"));

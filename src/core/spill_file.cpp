@@ -66,7 +66,7 @@ std::optional<SpillFile::Record> SpillFile::append(const std::vector<std::uint8_
     const ssize_t w = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(at + done));
     if (w < 0 && errno == EINTR) continue;
     if (w <= 0) {
-      const std::string why = std::strerror(errno);
+      const std::string why = w == 0 ? "nothing written (disk full?)" : std::strerror(errno);  // errno is set only below 0
       Record lost;
       lost.offset = at;
       lost.length = bytes.size();

@@ -1,6 +1,8 @@
 #include "vofusion/core/state_archive.h"
 
+#include <cstdint>
 #include <stdexcept>
+#include <string>
 
 namespace vofusion::state {
 
@@ -12,7 +14,22 @@ void expectTag(Archive& a, const std::string& name) {
   if (got != name) throw std::runtime_error("checkpoint section '" + name + "' expected, found '" + got.substr(0, 40) + "'");
 }
 
+namespace {
+// An image a checkpoint holds: one row a keypoint (2^24, as their own list allows) or an image's, at
+// most 1 GiB, of a type OpenCV makes. Written and read by the same rule: a frame of over 65536 keypoints
+// was written whole and refused at --resume, after the run that made it.
+bool storable(std::int64_t rows, std::int64_t cols, int type) {
+  constexpr std::int64_t kMostSide = std::int64_t(1) << 24, kMostBytes = std::int64_t(1) << 30;
+  if (rows < 0 || cols < 0 || rows > kMostSide || cols > kMostSide) return false;
+  if (CV_MAT_DEPTH(type) > CV_16F || CV_MAT_CN(type) > 4 || type != CV_MAT_TYPE(type)) return false;
+  return rows * cols * std::int64_t(CV_ELEM_SIZE(type)) <= kMostBytes;
+}
+}  // namespace
+
 void write(Archive& a, const cv::Mat& m) {
+  if (!storable(m.rows, m.cols, m.type()))
+    throw std::runtime_error("checkpoint: an image of " + std::to_string(m.rows) + "x" + std::to_string(m.cols) +
+                             " is more than a checkpoint holds");
   const cv::Mat c = m.isContinuous() ? m : m.clone();
   a << static_cast<int32_t>(c.rows) << static_cast<int32_t>(c.cols) << static_cast<int32_t>(c.type());
   if (!c.empty()) a.WriteBuffer(c.data, c.total() * c.elemSize());
@@ -21,7 +38,7 @@ void write(Archive& a, const cv::Mat& m) {
 void read(Archive& a, cv::Mat& m) {
   int32_t rows = 0, cols = 0, type = 0;
   a >> rows >> cols >> type;
-  if (rows < 0 || cols < 0 || rows > (1 << 16) || cols > (1 << 16)) throw std::runtime_error("checkpoint: bad image size");
+  if (!storable(rows, cols, type)) throw std::runtime_error("checkpoint: bad image size");
   if (rows == 0 || cols == 0) {
     m = cv::Mat();
     return;

@@ -35,7 +35,9 @@ inline auto archiveOf(std::istream& is) { return mrpt::serialization::archiveFro
 void tag(Archive& a, const std::string& name);
 void expectTag(Archive& a, const std::string& name);
 
-void write(Archive& a, const cv::Mat& m);  // any type and size, continuous or not; empty kept empty
+// Any OpenCV type (up to 4 channels), continuous or not, empty kept empty; up to 2^24 rows or columns
+// and 1 GiB, written and read by the same rule (beyond: std::runtime_error when written).
+void write(Archive& a, const cv::Mat& m);
 void read(Archive& a, cv::Mat& m);
 void write(Archive& a, const std::vector<cv::Mat>& v);
 void read(Archive& a, std::vector<cv::Mat>& v);
