@@ -105,10 +105,15 @@ TEST(SevenScenes, BadPoseFileNamesTheFileAndCostsItsFrame) {
   for (int n = 0; n < 3; ++n) writeFrame(dir, n, poseOf(n));
   { std::ofstream(stem(dir, 0) + ".pose.txt") << "1 0 0 0\n0 1 0 0\n0 0 1 0\n"; }
   { std::ofstream(stem(dir, 2) + ".pose.txt") << "2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"; }  // not a rotation
+  // A pose file that never ends (it grew without bound) is a damaged one.
+  for (int n = 3; n < 5; ++n) writeFrame(dir, n, poseOf(n));
+  std::filesystem::remove(stem(dir, 3) + ".pose.txt");
+  std::filesystem::create_symlink("/dev/zero", stem(dir, 3) + ".pose.txt");
   testing::internal::CaptureStderr();
   SevenScenesSource src(dir, {});
   const std::string log = testing::internal::GetCapturedStderr();
-  EXPECT_EQ(src.groundTruth().size(), 1u);
+  EXPECT_EQ(src.groundTruth().size(), 2u);
+  EXPECT_NE(log.find(stem(dir, 3) + ".pose.txt: goes on past 64 KiB"), std::string::npos) << log;
   EXPECT_NE(log.find(stem(dir, 0) + ".pose.txt: holds 12 numbers, expected 16 (4x4 matrix) (frame not evaluated)"),
             std::string::npos) << log;
   EXPECT_NE(log.find(stem(dir, 2) + ".pose.txt: not a rigid camera-to-world transform"), std::string::npos) << log;
@@ -153,6 +158,17 @@ TEST(SevenScenes, AMissingOrDamagedColourImageCostsItsFrame) {
   // More digits than a frame number has is no frame (std::stoi threw out_of_range, unnamed).
   writeFrame(dir, 4, poseOf(4));
   std::filesystem::rename(stem(dir, 4) + ".depth.png", dir + "/frame-99999999999.depth.png");
+  // Frame 4 is still listed by its colour image and pose: its missing depth image costs it, named (listed
+  // by depth images alone, it vanished unsaid).
+  const SevenScenesSource listed(dir, {});
+  ASSERT_EQ(listed.size(), 5u);
+  try {
+    listed.read(4);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), stem(dir, 4) + ".depth.png: depth image is missing");
+  }
+  for (const char* ext : {".color.png", ".pose.txt"}) std::filesystem::remove(stem(dir, 4) + ext);
   EXPECT_EQ(SevenScenesSource(dir, {}).size(), 4u);
   // No colour image to take the size from: one line naming the first.
   for (int n : {1, 3}) std::filesystem::remove(stem(dir, n) + ".color.png");

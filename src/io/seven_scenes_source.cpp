@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <sstream>
 
@@ -14,6 +15,7 @@
 
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
+#include "vofusion/core/text_file.h"
 #include "vofusion/io/tum_source.h"
 
 namespace fs = std::filesystem;
@@ -23,6 +25,9 @@ namespace vofusion {
 namespace {
 
 const std::regex kDepthName(R"(frame-(\d{1,9})\.depth\.png)");  // 7-Scenes: 6 digits; more than an int holds is no frame
+// Any of a frame's files: a frame is listed by whichever is there, so one whose depth image is missing
+// is a damaged frame, skipped and counted (listed by its depth image alone, it vanished unsaid).
+const std::regex kFrameFile(R"(frame-(\d{1,9})\.(depth\.png|color\.png|color\.jpg|pose\.txt))");
 
 // Colour image beside a frame stem: PNG first, then JPEG (both occur in 7-Scenes mirrors).
 std::string colourFor(const std::string& stem) {
@@ -108,19 +113,27 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
 }
 
 void SevenScenesSource::listFrames(const SourceOptions& opts) {
+  std::map<std::string, Entry> by_stem;
   try {
     for (const auto& e : fs::directory_iterator(folder_)) {
       const std::string n = e.path().filename().string();
       std::smatch m;
-      if (!std::regex_match(n, m, kDepthName)) continue;
-      Entry en;
-      en.stem = (fs::path(folder_) / n.substr(0, n.find('.'))).string();
+      if (!std::regex_match(n, m, kFrameFile)) continue;
+      const std::string stem = (fs::path(folder_) / n.substr(0, n.find('.'))).string();
+      Entry& en = by_stem[stem];
+      en.stem = stem;
       en.number = std::stoi(m[1].str());
-      en.colour = colourFor(en.stem);  // empty: missing, that frame's problem when it is read
-      frames_.push_back(std::move(en));
+      en.has_depth = en.has_depth || m[2].str() == "depth.png";
     }
   } catch (const fs::filesystem_error& e) {  // a folder that can be stat'ed but not listed
     throw InputError(folder_, "folder cannot be read (" + e.code().message() + ")");
+  }
+  const bool any_depth = std::any_of(by_stem.begin(), by_stem.end(), [](const auto& kv) { return kv.second.has_depth; });
+  if (any_depth) {
+    for (auto& [stem, en] : by_stem) {
+      en.colour = colourFor(en.stem);  // empty: missing, that frame's problem when it is read
+      frames_.push_back(std::move(en));
+    }
   }
   if (frames_.empty()) throw InputError(folder_, "folder holds no 7-Scenes frames (frame-XXXXXX.depth.png)");
   std::sort(frames_.begin(), frames_.end(), [](const Entry& a, const Entry& b) { return a.number < b.number; });
@@ -141,11 +154,11 @@ void SevenScenesSource::readPoses(const SourceOptions& opts) {
     const std::string pose_file = frames_[i].stem + ".pose.txt";
     std::ifstream f(pose_file);
     if (!f) continue;  // no pose: the frame is simply not evaluated
-    std::ostringstream ss;
-    ss << f.rdbuf();
     mrpt::poses::CPose3D p;
     try {
-      if (!parseSevenScenesPose(ss.str(), pose_file, p)) continue;
+      // A 4x4 matrix is under 1 kB: a link to /dev/zero grew without bound.
+      const std::string text = readCapped(f, pose_file, std::size_t(64) << 10, "64 KiB", "a 7-Scenes pose file");
+      if (!parseSevenScenesPose(text, pose_file, p)) continue;
     } catch (const InputError& e) {
       if (opts.strict) throw;
       if (++damaged_poses <= kPoseLines) printWarning(std::string(e.what()) + " (frame not evaluated)");
@@ -160,6 +173,7 @@ void SevenScenesSource::readPoses(const SourceOptions& opts) {
 
 Frame SevenScenesSource::read(std::size_t i) const {
   const Entry& e = frames_.at(i);
+  if (!e.has_depth) throw InputError(e.stem + ".depth.png", "depth image is missing");
   if (e.colour.empty()) throw InputError(e.stem + ".color.png", "colour image is missing");
   Frame f;
   f.index = i;
