@@ -221,6 +221,11 @@ GrabSource openGrabSource(const Args& args, const GrabPlan& plan, std::string& l
   }
   const std::string section = findSensorSection(plan.cfg, args.sensor, plan.config);
   label = plan.cfg.read_string(section, "sensorLabel", label);
+  // It names the recording's image files: a '/' would put them in folders, a long one past a file
+  // name's 255 bytes.
+  if (label.find('/') != std::string::npos || label.size() > 100)
+    throw InputError(plan.config, "[" + section + "] sensorLabel: '" + label.substr(0, 40) + (label.size() > 40 ? "...'" : "'") +
+                                      " cannot name the recording's image files (no '/', at most 100 characters)");
   src.live = std::make_unique<SensorSource>(plan.cfg, section, plan.opts.sensor_timeout, plan.config, args.verbose);
   return src;
 }

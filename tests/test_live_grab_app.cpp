@@ -113,6 +113,13 @@ TEST(GrabApp, NoSensorFailsInOneLineQuicklyWithNonZeroExit) {
             2)
       << log;
   EXPECT_FALSE(fs::exists(out + "/new")) << log;
+  // A sensor label that cannot name the recording's image files is refused before the sensor is opened.
+  std::ofstream(out + "/label.ini") << std::regex_replace(config, std::regex(R"(\nsensorLabel *= *\S+)"), "\nsensorLabel = cam/left");
+  EXPECT_EQ(test::run("timeout 60 " + test::app("vofusion-grab") + " --config " + out + "/label.ini --out " + out + "/l --no-gui", &log),
+            2);
+  EXPECT_NE(log.find("sensorLabel: 'cam/left' cannot name the recording's image files (no '/', at most 100 characters)"),
+            std::string::npos)
+      << log;
 }
 
 TEST(GrabApp, UsageErrorsExitTwo) {

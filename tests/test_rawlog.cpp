@@ -137,6 +137,19 @@ TEST(Rawlog, RoundTripObservationsExternalImages) {
   expectSameFrames(frames, beside, 1e-4 + 1e-6);
 }
 
+// A long sensor label names each frame's images whole: cut to a fixed buffer, every frame's images had
+// one name, and each frame's replaced those of the frames recorded before it.
+TEST(Rawlog, ALongSensorLabelGivesEachFrameItsOwnImages) {
+  const auto frames = simFrames(3);
+  const std::string dir = test::tempDir("rawlog_long_label");
+  RawlogWriterOptions o;
+  o.sensor_label = std::string(121, 'A');  // the frame number was cut at its last digit
+  const std::string path = writeRawlog(dir + "/seq.rawlog", frames, o);
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir + "/seq_Images"), fs::directory_iterator{}), 6);
+  RawlogSource src(path, {});
+  expectSameFrames(frames, src, 1e-4 + 1e-6);
+}
+
 // A rawlog of several cameras (a rig; Robot@Home records four) is read as the first camera's: the
 // others' scans, read as its frames, were views from cameras facing elsewhere tracked as one path.
 TEST(Rawlog, ARawlogOfSeveralCamerasIsReadAsTheFirstOnes) {

@@ -791,9 +791,12 @@ std::vector<mrpt::obs::CObservation::Ptr> withCompanions(const Frame& frame, con
 }  // namespace
 
 std::optional<RecordedFiles> RawlogWriter::writeImagesBeside(const Frame& frame, CObservation3DRangeScan& obs) {
-  char stem[128];
-  std::snprintf(stem, sizeof stem, "%s_%06zu_%.6f", opts_.sensor_label.c_str(), frames_, frame.timestamp);
-  const std::string png = std::string(stem) + "_INTENSITY.png", bin = std::string(stem) + "_DEPTH.bin";
+  // Whole whatever the label's length: cut to a fixed buffer, a long label's frames shared one name and
+  // each replaced the images of the frames recorded before it.
+  char number_and_time[64];
+  std::snprintf(number_and_time, sizeof number_and_time, "_%06zu_%.6f", frames_, frame.timestamp);
+  const std::string stem = opts_.sensor_label + number_and_time;
+  const std::string png = stem + "_INTENSITY.png", bin = stem + "_DEPTH.bin";
   const std::string dir = impl_->images_dir, shown = imagesDirFor(path_) + "/";
   // The files the frame came from (a recording's linked, others copied), else written.
   writeColourPng(frame, dir + "/" + png, shown + png);
