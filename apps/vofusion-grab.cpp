@@ -329,6 +329,8 @@ void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, c
   if (const Trajectory* gt = source.recordedGroundTruth()) info.recorded_ground_truth = *gt;
   info.extra = {{"live", {{"played", stats.played}, {"processed", stats.processed}, {"dropped", stats.dropped},
                           {"queue_capacity", plan.opts.queue_capacity}, {"stop", stopReasonName(stats.stop)}}}};
+  // As vofusion's summary says it; a window closed stops the run with no signal.
+  if (stats.stop == StopReason::Interrupted && stopSignal() != 0) info.extra["stop_signal"] = signalName(stopSignal());
   if (checkpoints.every > 0)
     info.extra["checkpoints"] = {{"every_seconds", checkpoints.every}, {"written", checkpoints.written},
                                  {"seconds_writing", checkpoints.seconds_writing}};

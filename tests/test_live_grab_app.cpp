@@ -359,6 +359,24 @@ TEST(GrabApp, ReplaySkipsADamagedFrame) {
   EXPECT_EQ(summary["skipped_frames"][0].at("file"), depth[7].string());
 }
 
+// A live run stopped by a signal says which in summary.json, as vofusion's does (interrupted, stop_signal).
+TEST(GrabApp, ALiveRunStoppedByASignalSaysWhich) {
+  const std::string dir = test::tempDir("grab_app_live_signal");
+  ASSERT_EQ(simulatedRecording(dir + "/rec", 150).size(), 150u);
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  const std::string out = dir + "/out";
+  std::string log;
+  // 5 s at 30 Hz; SIGTERM once the recording has its first frame.
+  test::run("sh -c '" + test::app("vofusion-grab") + " --replay " + dir + "/rec --out " + out + " --live --no-gui --config " + dir +
+                "/nomesh.ini 2>/dev/null & pid=$!; i=0; while [ ! -s " + out + "/grab.rawlog ] && [ $i -lt 600 ]; do sleep 0.05; "
+                "i=$((i+1)); done; sleep 0.5; kill -TERM $pid; wait $pid; echo rc=$?'",
+            &log);
+  ASSERT_TRUE(fs::exists(out + "/summary.json")) << log;
+  const auto summary = nlohmann::json::parse(std::ifstream(out + "/summary.json"));
+  if (!summary.at("interrupted").get<bool>()) GTEST_SKIP() << "the replay had ended before the signal: " << log;
+  EXPECT_EQ(summary.value("stop_signal", ""), "SIGTERM") << summary.dump();
+}
+
 // A live run stopped by a failure (here a replay more than a fifth damaged) whose outputs then fail on
 // their own (a folder where trajectory.txt goes) says both in its stop line: the outputs are not
 // silently missing behind the first cause.
