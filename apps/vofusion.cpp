@@ -197,6 +197,9 @@ RunPlan planRun(const CommandLine& cl) {
 
 struct FrameLoop {
   std::size_t done = 0, frames_with_depth = 0;
+  // Positions of the input read: its frames processed, and those skipped as damaged or dropped live,
+  // which the progress counts against the input's length (done alone never reached its end).
+  std::size_t read = 0;
   int stop_signal = 0;   // SIGINT or SIGTERM when one stopped the loop before the input's end
   bool interrupted() const { return stop_signal != 0; }
   std::optional<std::size_t> stopped_at;  // interrupted: the frame read and not processed (its position)
@@ -229,6 +232,7 @@ FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession&
   while (run.replaying() && !stopRequested()) {
     if (!source.next(frame))
       throw InputError(*plan.resume, "the input ends before frame " + std::to_string(c.frames) + ", where the checkpoint was made");
+    loop.read = std::max(loop.read, std::size_t(frame.index) + 1);
     if (!run.replay(frame)) continue;
     if (cv::countNonZero(frame.depth > 0) > 0) ++loop.frames_with_depth;
     progress.update(++loop.done);
@@ -243,7 +247,7 @@ FrameLoop resumeCheckpoint(const RunPlan& plan, FrameSource& source, RunSession&
 void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run, FrameLoop& loop) {
   const Reconstruction& rec = run.reconstruction();
   Progress progress("vofusion [" + toString(plan.mode) + "]", source.size());
-  progress.startAt(loop.done);
+  progress.startAt(std::max(loop.done, loop.read));
   const double before = loop.seconds;
   double last_checkpoint = 0.0;
   // Frames done at the last checkpoint: a resumed run's checkpoint holds those it went on from.
@@ -267,7 +271,12 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   };
   Frame frame;
   while (true) {
-    if (!source.next(frame)) break;  // read first: a stop during the last frame is no interruption
+    if (!source.next(frame)) {  // read first: a stop during the last frame is no interruption
+      loop.read = std::max(loop.read, source.size());  // the input's end: every frame read, the damaged last ones too
+      progress.update(std::max(loop.done, loop.read));
+      break;
+    }
+    loop.read = std::max(loop.read, std::size_t(frame.index) + 1);
     if (stopRequested()) {
       loop.stop_signal = stopSignal();
       loop.stopped_at = frame.index;
@@ -279,7 +288,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (plan.checkpoint_every > 0 && progress.elapsedSeconds() - last_checkpoint >= plan.checkpoint_every) checkpoint();
     std::string status = "fallbacks " + std::to_string(rec.fallbacks()) + "  lost " + std::to_string(rec.lostFrames());
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
-    progress.update(loop.done, status);
+    progress.update(std::max(loop.done, loop.read), status);
   }
   const bool built = loop.interrupted() && loop.done > 0;
   const double frame_loop_seconds = progress.elapsedSeconds();  // the last checkpoint's writing is no frame's

@@ -421,6 +421,24 @@ TEST(VofusionApp, SaveVolumeToAFolderFailsBeforeTheRun) {
   EXPECT_FALSE(fs::exists(dir + "/out/summary.json"));
 }
 
+// The progress counts the input's frames read, those skipped as damaged too: it reaches the input's
+// length (it ended at 11/12 with the last frame damaged, as if the run stopped short).
+TEST(VofusionApp, TheProgressReachesTheEndPastASkippedFrame) {
+  const std::string dir = test::tempDir("vofusion_app_progress_skipped");
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 12 --size 160x120 2>&1", &log), 0) << log;
+  std::vector<fs::path> depth;
+  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
+  std::sort(depth.begin(), depth.end());
+  ASSERT_EQ(depth.size(), 12u);
+  std::ofstream(depth.back()) << "garbage";
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  ASSERT_EQ(test::run(test::app("vofusion") + " " + dir + "/rec --out " + dir + "/out --config " + dir + "/nomesh.ini 2>&1", &log), 0)
+      << log;
+  EXPECT_NE(log.find("vofusion [joint] 12 frames in"), std::string::npos) << log;
+  EXPECT_NE(log.find("vofusion: 11 frames,"), std::string::npos) << log;
+}
+
 // A mesh file asked for beside [output] mesh = false (--raw-mesh, save_raw_mesh, save_full_mesh) is
 // refused, naming where it was asked for: it was left out without a word (exit 0).
 TEST(VofusionApp, AMeshFileAskedForBesideNoMeshIsRefused) {
