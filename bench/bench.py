@@ -405,15 +405,16 @@ def main():
         if not os.access(exe, os.X_OK):
             ap.error("%s is not built (ninja -C %s vofusion rgbd-eval)" % (exe, args.build))
     args.work = args.work or os.path.join(args.build, "bench-runs")
+    shared = os.path.join(ROOT, "..", "shared", "data", "tum")
+    # Without ../shared the default run lacks the TUM rows: partial, or it replaced the committed summary.
     partial = (args.max_frames or not set(DEFAULT_MODES) <= set(args.modes) or args.synthetic_frames != 300
-               or args.no_synthetic)
+               or args.no_synthetic or (not args.sequences and not os.path.isdir(shared)))
     if args.results is None:
         args.results = os.path.join(args.work, "results") if partial else COMMITTED_RESULTS
         if partial:
-            log("a partial run (--quick, --max-frames, a --modes subset, --no-synthetic): tables go to %s, "
+            log("a partial run (--quick, --max-frames, a --modes subset, --no-synthetic, no ../shared): tables go to %s, "
                 "not bench/results (--results DIR to choose)" % args.results)
-    seqs = args.sequences or sorted(d for d in glob.glob(os.path.join(ROOT, "..", "shared", "data", "tum", "*"))
-                                    if os.path.isdir(d))
+    seqs = args.sequences or sorted(d for d in glob.glob(os.path.join(shared, "*")) if os.path.isdir(d))
     if not args.sequences and not args.no_synthetic:
         seqs += synthetic_sequences(args)
     if not seqs:

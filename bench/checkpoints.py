@@ -96,7 +96,7 @@ def main():
     ap = argparse.ArgumentParser(prog="bench/run --checkpoints", allow_abbrev=False)
     ap.add_argument("--checkpoints", action="store_true")
     ap.add_argument("--sequence", default=os.path.join(root, "..", "shared", "data", "tum", "rgbd_dataset_freiburg1_xyz_first300"))
-    ap.add_argument("--build", default=os.path.join(root, "build"))
+    ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(root, "build")))
     ap.add_argument("--every", default="5", help="s between checkpoints in the cost comparison")
     a = ap.parse_args(sys.argv[1:])
     seq, build, every = a.sequence, os.path.abspath(a.build), a.every

@@ -164,7 +164,7 @@ def main(argv):
     ap.add_argument("--loops", action="store_true")
     ap.add_argument("--seeds", default="1,2,3,4,5")
     ap.add_argument("--lengths", default="300,900")
-    ap.add_argument("--build", default=os.path.join(os.path.dirname(here), "build"))
+    ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(os.path.dirname(here), "build")))
     ap.add_argument("--config", default=None, help="an INI whose sections are added to the benchmark's own")
     ap.add_argument("--results", default=os.path.join(here, "results"))
     ap.add_argument("--name", default="loops", help="results file name (bench/results/<name>.md)")
