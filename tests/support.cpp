@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cerrno>
 #include <csignal>
 #include <cstdio>
@@ -35,9 +36,13 @@ std::string tumFirst300() {
 
 bool dataPresent(const std::string& path) { return fs::exists(path); }
 
+// As CI systems set it: "true" (GitHub, GitLab), "1", "True"; unset, empty, "0" or "false" is no CI.
 bool inCi() {
   const char* ci = std::getenv("CI");
-  return ci && std::string(ci) == "true";
+  if (!ci) return false;
+  std::string v(ci);
+  std::transform(v.begin(), v.end(), v.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return !v.empty() && v != "0" && v != "false";
 }
 
 std::string tempDir(const std::string& name) {
