@@ -1,5 +1,7 @@
 #include <algorithm>
 #include <filesystem>
+#include <iterator>
+#include <fstream>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <tuple>
@@ -551,6 +553,36 @@ TEST(Sim, DistanceToTheNearestSurface) {
   EXPECT_NEAR(room.distanceToSurface({1.15, 0.0, 0.40}), 0.05, 1e-12); // inside that box, under its top
   const SyntheticSequence wall(test::quickSim("bare_wall", 2));
   EXPECT_NEAR(wall.distanceToSurface({0.3, 1.0, 1.0}), kBareWallY - 1.0, 1e-12);
+}
+
+// The default recording is rendered again when another simulator made it (its scene, noise or path
+// changed since): kept after such a change, it was every later default run's input, without a word.
+TEST(Sim, ARecordingIsRenderedAgainWhenAnotherSimulatorMadeIt) {
+  const std::string path = test::tempDir("rendered_by") + "/room.rawlog", stamp = path + ".made-by";
+  const auto stampText = [&] {
+    std::ifstream in(stamp);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const sim::SyntheticSequence seq(test::quickSim("room", 5));
+  ASSERT_EQ(recordingRenderedBy(seq, path), path);
+  const std::string made_by = stampText();
+  ASSERT_FALSE(made_by.empty());
+  const auto written = std::filesystem::last_write_time(path);
+  EXPECT_EQ(recordingRenderedBy(seq, path), path);
+  EXPECT_EQ(std::filesystem::last_write_time(path), written) << "rendered again by the same simulator";
+  // Another simulator's render (here: other noise).
+  sim::SimOptions other = test::quickSim("room", 5);
+  other.seed += 1;
+  EXPECT_EQ(recordingRenderedBy(sim::SyntheticSequence(other), path), path);
+  EXPECT_NE(stampText(), made_by);
+  const Frame first = sim::SyntheticSequence(other).render(0);
+  Frame read;
+  ASSERT_TRUE(openFrameSource(path)->next(read));
+  EXPECT_LT(cv::norm(read.depth, first.depth, cv::NORM_INF), 1e-3);
+  // One with no fingerprint beside it (an older vofusion's): rendered again.
+  std::filesystem::remove(stamp);
+  EXPECT_EQ(recordingRenderedBy(seq, path), path);
+  EXPECT_EQ(stampText(), made_by);
 }
 
 // A stop (Ctrl-C) while the default recording is rendered leaves nothing: the render went on to the

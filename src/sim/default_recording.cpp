@@ -1,8 +1,14 @@
 #include "vofusion/sim/default_recording.h"
 
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 
+#include <mrpt/math/CMatrixFixed.h>
+
+#include "vofusion/core/atomic_file.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/core/stop_signals.h"
 #include "vofusion/io/rawlog.h"
@@ -11,13 +17,55 @@ namespace fs = std::filesystem;
 
 namespace vofusion {
 
+namespace {
+// FNV-1a over the first and last frames' pixels, stamps and poses: what a change of the simulator
+// changes (two frames' renders, ~0.1 s, against the whole recording's).
+std::string fingerprint(const sim::SyntheticSequence& seq) {
+  std::uint64_t h = 1469598103934665603ull;
+  const auto mix = [&h](const void* data, std::size_t n) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  };
+  for (const std::size_t i : {std::size_t(0), seq.size() - 1}) {
+    const Frame f = seq.render(i);
+    for (const cv::Mat& m : {f.rgb, f.depth}) {
+      const cv::Mat c = m.isContinuous() ? m : m.clone();
+      mix(c.data, c.total() * c.elemSize());
+    }
+    mix(&f.timestamp, sizeof f.timestamp);
+    if (f.groundTruth) {
+      const Eigen::Matrix4d T = f.groundTruth->getHomogeneousMatrixVal<mrpt::math::CMatrixDouble44>().asEigen();
+      mix(T.data(), sizeof(double) * 16);
+    }
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return std::string(hex) + " " + std::to_string(seq.size()) + " frames\n";
+}
+
+std::string fileText(const fs::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+}  // namespace
+
+std::string recordingRenderedBy(const sim::SyntheticSequence& seq, const std::string& path) {
+  const fs::path stamp = path + ".made-by";
+  const std::string made_by = fingerprint(seq);
+  std::error_code ec;
+  const bool there = fs::exists(path, ec);
+  if (there && fileText(stamp) == made_by) return path;
+  if (!fs::path(path).parent_path().empty()) fs::create_directories(fs::path(path).parent_path());
+  std::fprintf(stderr, "vofusion: rendering the recording %s (%s)\n", path.c_str(),
+               there ? "the one there was another simulator's" : "first run only");
+  if (!renderRecording(seq, path, there)) return {};
+  writeFileAtomically(stamp.string(), made_by);
+  return path;
+}
+
 std::string defaultRecording() {
   const fs::path path = fs::path(VOFUSION_SOURCE_DIR) / "rawlogs" / "generated" / "synthetic_room.rawlog";
-  if (fs::exists(path)) return path.string();
-  fs::create_directories(path.parent_path());
-  std::fprintf(stderr, "vofusion: rendering the default recording %s (first run only)\n", path.c_str());
-  const sim::SyntheticSequence room{sim::SimOptions{}};  // room, 300 frames, Kinect-like noise
-  return renderRecording(room, path.string()) ? path.string() : std::string();
+  return recordingRenderedBy(sim::SyntheticSequence{sim::SimOptions{}}, path.string());  // room, 300 frames, Kinect-like noise
 }
 
 bool renderRecording(const sim::SyntheticSequence& seq, const std::string& path, bool replace) {

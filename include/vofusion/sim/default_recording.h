@@ -8,9 +8,15 @@
 
 namespace vofusion {
 
-// Path of the default rawlog, rendering it first (with a progress line) if it does not exist yet;
-// empty when a stop was asked for (stopRequested()) while rendering: nothing is left of it.
+// Path of the default rawlog, rendering it first (with a progress line) if it does not exist yet or
+// another simulator rendered it (renderedBy); empty when a stop was asked for (stopRequested()) while
+// rendering: nothing is left of it.
 std::string defaultRecording();
+// The rawlog at `path` as `seq` renders it: rendered (again) unless the fingerprint of seq's first and
+// last frames (images, stamps, poses) beside it (<path>.made-by) is seq's. A recording kept after the
+// simulator changed (its scene, noise or path) was every later default run's input, without a word.
+// Empty when a stop was asked for while rendering.
+std::string recordingRenderedBy(const sim::SyntheticSequence& seq, const std::string& path);
 // The synthetic recording `seq` rendered into the rawlog at `path` (images and ground truth beside it;
 // an existing rawlog replaced only with `replace`), with a progress line; false, and nothing left, when
 // a stop was asked for (stopRequested()) before its end.
