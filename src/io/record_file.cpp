@@ -40,6 +40,10 @@ size_t RecordFile::Read(void*, size_t) { throw std::logic_error("RecordFile is w
 uint64_t RecordFile::Seek(int64_t, TSeekOrigin) { throw std::logic_error("RecordFile cannot seek"); }
 
 void RecordFile::endRecord() {
+  if (!torn_.empty()) {
+    record_.clear();
+    throw InputError(path_, torn_);
+  }
   std::size_t done = 0;
   while (done < record_.size()) {
     const ssize_t n = ::write(fd_, record_.data() + done, record_.size() - done);
@@ -47,9 +51,11 @@ void RecordFile::endRecord() {
     if (n <= 0) {
       const int err = errno;
       // A partial record would make the file unreadable from there: cut it back to the last whole one.
-      if (done > 0 && ::ftruncate(fd_, off_t(written_)) == 0) ::lseek(fd_, off_t(written_), SEEK_SET);
+      const std::string why = std::string("cannot write: ") + std::strerror(n < 0 ? err : ENOSPC);
+      if (done > 0 && (::ftruncate(fd_, off_t(written_)) != 0 || ::lseek(fd_, off_t(written_), SEEK_SET) < 0))
+        torn_ = why + "; its last record could not be cut back (" + std::strerror(errno) + "): nothing more is recorded";
       record_.clear();
-      throw InputError(path_, std::string("cannot write: ") + std::strerror(n < 0 ? err : ENOSPC));
+      throw InputError(path_, torn_.empty() ? why : torn_);
     }
     done += std::size_t(n);
   }

@@ -27,7 +27,8 @@ class RecordFile : public mrpt::io::CStream {
   uint64_t getPosition() const override { return written_ + record_.size(); }
 
   // Appends the record gathered since the last call; throws InputError (a full disk) with the file
-  // left at its last whole record.
+  // left at its last whole record. A partial record that cannot be cut back ends the file: every
+  // later record throws (appended after it, they were written but unreadable).
   void endRecord();
   void sync();  // to the disk now; throws InputError (an I/O error)
   // sync() when the last was over a second ago. Apart from endRecord(): a record appended is in the
@@ -43,6 +44,7 @@ class RecordFile : public mrpt::io::CStream {
   std::string path_, record_;
   int fd_ = -1;
   uint64_t written_ = 0;
+  std::string torn_;  // why a partial record stays at the end: no record can follow it
   std::chrono::steady_clock::time_point last_sync_;
 };
 
