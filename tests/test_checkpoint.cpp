@@ -221,6 +221,40 @@ TEST(Checkpoint, BricksAndKeyframesLostBeforeACheckpointStayCountedAfterTheResum
   EXPECT_EQ(third.loopCloser()->storeStats().lost, keyframes_lost);
 }
 
+// Why a spill file could not be written before a checkpoint is still said after the resume: it left
+// summary.json with the run resumed (a full disk before the checkpoint, bricks kept in RAM since).
+TEST(Checkpoint, ASpillErrorBeforeACheckpointIsStillSaidAfterTheResume) {
+  const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(test::quickSim("corridor", 24)));
+  const std::string dir = test::tempDir("checkpoint_spill_error");
+  std::ofstream(dir + "/a_file") << "not a folder";
+  auto cfg = roomConfig();
+  cfg.write("kinfu", "volume_voxels", 128);
+  cfg.write("kinfu", "shift_threshold", 0.05);
+  cfg.write("kinfu", "world_cache_mib", 0);
+  cfg.write("kinfu", "work_dir", dir + "/a_file/spill");
+  cfg.write("loop", "keyframe_cache_mib", 0);
+  std::stringstream saved;
+  std::string world_error, keyframe_error;
+  {
+    testing::internal::CaptureStderr();
+    Reconstruction first(cfg, TrackingMode::Joint);
+    feed(first, frames, 0, 20);
+    first.saveState(saved);
+    testing::internal::GetCapturedStderr();
+    world_error = first.fusionStats().world.spill_error;
+    keyframe_error = first.loopCloser()->storeStats().spill_error;
+    ASSERT_NE(world_error.find("cannot create the world model's spill file"), std::string::npos) << world_error;
+    ASSERT_NE(keyframe_error.find("cannot create the keyframes' spill file"), std::string::npos) << keyframe_error;
+  }
+  cfg.write("kinfu", "work_dir", dir);  // the disk usable again
+  Reconstruction second(cfg, TrackingMode::Joint);
+  second.loadState(saved);
+  feed(second, frames, 20, frames.size());
+  second.finish();
+  EXPECT_EQ(second.fusionStats().world.spill_error, world_error);
+  EXPECT_EQ(second.loopCloser()->storeStats().spill_error, keyframe_error);
+}
+
 // A setting that differs past its sixth decimal is another run: the origin wrote both as 0.003000, and
 // a run resumed with the other value went on with it.
 // What a checkpoint writes it reads: a frame's descriptors of over 65536 keypoints (one row each) were

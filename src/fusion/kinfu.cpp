@@ -26,8 +26,10 @@ struct KinFu::Impl {
   ModelPrediction model;     // ray cast after the last fusion, for the next frame's tracking
   bool have_model = false;   // a frame was fused: the next one is tracked against the map
   bool model_stale = false;  // resumed from a file: the model is ray cast (unhinted) before tracking
-  // Resumed from a checkpoint: the world model's bricks lost before it (held there as never observed).
+  // Resumed from a checkpoint: the world model's bricks lost before it (held there as never observed),
+  // and why its spill file could not be written then (the disk that filled before the checkpoint).
   std::size_t bricks_lost_before = 0;
+  std::string spill_error_before;
 
   Eigen::Vector3f focusPoint(const Eigen::Isometry3d& T) const {
     return (T.translation() + T.linear().col(2) * params.focus_distance).cast<float>();
@@ -241,7 +243,8 @@ void KinFu::saveState(std::ostream& os) const {
   s.volume->save(os);  // finds the bricks whose spill records cannot be read any more
   auto a = state::archiveOf(os);
   state::tag(a, "map losses");
-  a << uint64_t(stats().world.lost);
+  const WorldModelStats world = stats().world;
+  a << uint64_t(world.lost) << world.spill_error;
 }
 
 void KinFu::loadState(std::istream& is) {
@@ -268,7 +271,7 @@ void KinFu::loadState(std::istream& is) {
   auto a = state::archiveOf(is);
   state::expectTag(a, "map losses");
   uint64_t lost = 0;
-  a >> lost;
+  a >> lost >> s.spill_error_before;
   s.bricks_lost_before = lost;
   if (s.on_shift) s.on_shift(*s.volume, std::nullopt);
 }
@@ -306,6 +309,7 @@ MapStats KinFu::stats() const {
   st.memory_bytes = impl_->volume->memoryBytes();
   st.world = impl_->volume->worldModel().stats();
   st.world.lost += impl_->bricks_lost_before;
+  if (st.world.spill_error.empty()) st.world.spill_error = impl_->spill_error_before;
   return st;
 }
 

@@ -72,6 +72,7 @@ struct LoopCloser::Impl {
   double cpu_seconds = 0.0;  // the thread's CPU time in process()
   KeyframeStoreStats store;
   std::size_t keyframes_lost_before = 0;  // resumed from a checkpoint: those lost before it (held without features)
+  std::string spill_error_before;         // and why the spill file could not be written before it
   std::exception_ptr failure;  // what ended the thread (guarded by mu): rethrown on the caller's thread
   std::thread worker;
 
@@ -374,12 +375,14 @@ void LoopCloser::saveState(std::ostream& os) const {
     a << m.keyframes.data(id);
   }
   uint64_t lost = 0;
+  std::string spill_error;
   {
     std::lock_guard<std::mutex> lock(m.mu);
     m.store = m.keyframes.stats();  // with the keyframes data() found lost just now
     lost = m.store.lost + m.keyframes_lost_before;
+    spill_error = m.store.spill_error.empty() ? m.spill_error_before : m.store.spill_error;
   }
-  a << lost;  // one lost again after a resume (its new record damaged too) counts again: it lost more
+  a << lost << spill_error;  // one lost again after a resume (its new record damaged too) counts again: it lost more
 }
 
 void LoopCloser::loadState(std::istream& is) {
@@ -416,11 +419,13 @@ void LoopCloser::loadState(std::istream& is) {
     m.enqueue(std::move(k), false);
   }
   uint64_t lost = 0;
-  a >> lost;
+  std::string spill_error;
+  a >> lost >> spill_error;
   std::lock_guard<std::mutex> lock(m.mu);  // the run's, not the replay's (which does not count them)
   m.max_queued = max_queued;
   m.frame_loop_waits = waits;
   m.keyframes_lost_before = lost;
+  m.spill_error_before = spill_error;
 }
 
 void LoopCloser::setAfterIndexingHook(std::function<void(std::size_t)> hook) {
@@ -522,6 +527,7 @@ KeyframeStoreStats LoopCloser::storeStats() const {
   std::lock_guard<std::mutex> lock(impl_->mu);
   KeyframeStoreStats s = impl_->store;
   s.lost += impl_->keyframes_lost_before;
+  if (s.spill_error.empty()) s.spill_error = impl_->spill_error_before;
   return s;
 }
 double LoopCloser::threadCpuSeconds() const {
