@@ -271,7 +271,19 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   };
   Frame frame;
   while (true) {
-    if (!source.next(frame)) {  // read first: a stop during the last frame is no interruption
+    bool more = false;
+    try {
+      more = source.next(frame);
+    } catch (const InputError& e) {
+      // --strict ends the run at a damaged frame; one met after a stop is past the frame the stop ends
+      // at, and the stop writes what was built (it ended the run with nothing written).
+      if (!stopRequested()) throw;
+      printWarning(std::string(e.what()) + " (read after the stop, which ends the run before it)");
+      loop.stop_signal = stopSignal();
+      loop.stopped_at = loop.read;
+      break;
+    }
+    if (!more) {  // read first: a stop during the last frame is no interruption
       loop.read = std::max(loop.read, source.size());  // the input's end: every frame read, the damaged last ones too
       progress.update(std::max(loop.done, loop.read));
       break;

@@ -439,6 +439,32 @@ TEST(VofusionApp, TheProgressReachesTheEndPastASkippedFrame) {
   EXPECT_NE(log.find("vofusion: 11 frames,"), std::string::npos) << log;
 }
 
+// Under --strict a damaged frame ends the run; one read after a stop is past the frame the stop ends at:
+// the stop writes what was built (exit 143). The damage ended the run with nothing written (exit 2).
+TEST(VofusionApp, ADamagedFrameReadAfterAStopIsNoFailureUnderStrict) {
+  const std::string dir = test::tempDir("vofusion_app_strict_after_stop");
+  std::string log;
+  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 4 2>&1", &log), 0) << log;
+  std::vector<fs::path> depth;
+  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
+  std::sort(depth.begin(), depth.end());
+  ASSERT_EQ(depth.size(), 4u);
+  for (std::size_t i = 2; i < 4; ++i) std::ofstream(depth[i]) << "garbage";
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  const std::string out = dir + "/out";
+  // The checkpoint shows once frame 0 is done; the signal comes while frame 1 and its checkpoint are.
+  test::run("(" + test::app("vofusion") + " " + dir + "/rec --strict --out " + out + " --config " + dir +
+                "/nomesh.ini --checkpoint-every 0.000001 > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 3000); do [ -e " +
+                out + "/checkpoint ] && break; sleep 0.01; done; kill -TERM $pid; wait $pid; echo rc=$?)",
+            &log);
+  std::ifstream in(dir + "/log.txt");
+  const std::string said(std::istreambuf_iterator<char>(in), {});
+  if (said.find("stopping after the frame in hand") == std::string::npos)
+    GTEST_SKIP() << "the run met the damage before the signal came: " << said;
+  EXPECT_EQ(log, "rc=143\n") << said;
+  EXPECT_TRUE(fs::exists(out + "/trajectory.txt")) << said;
+}
+
 // A mesh file asked for beside [output] mesh = false (--raw-mesh, save_raw_mesh, save_full_mesh) is
 // refused, naming where it was asked for: it was left out without a word (exit 0).
 TEST(VofusionApp, AMeshFileAskedForBesideNoMeshIsRefused) {
