@@ -169,18 +169,26 @@ TEST(Checkpoint, MemoryRunningOutCostsTheCheckpointOnly) {
   EXPECT_EQ(RunSession::peek(path)->frames, 6u);
 }
 
+namespace {
+// A volume that shifts often and spills every brick and keyframe it can into `work_dir`.
+mrpt::config::CConfigFileMemory spillingConfig(const std::string& work_dir) {
+  auto cfg = roomConfig();
+  cfg.write("kinfu", "volume_voxels", 128);
+  cfg.write("kinfu", "shift_threshold", 0.05);
+  cfg.write("kinfu", "world_cache_mib", 0);
+  cfg.write("kinfu", "work_dir", work_dir);
+  cfg.write("loop", "keyframe_cache_mib", 0);
+  return cfg;
+}
+}  // namespace
+
 // Bricks and keyframes whose spill records could not be read back are held in the checkpoint as never
 // observed / without features: the resumed run still counts them (summary.json's bricks_lost and
 // keyframes_lost said 0 after a resume, under a mesh with holes).
 TEST(Checkpoint, BricksAndKeyframesLostBeforeACheckpointStayCountedAfterTheResume) {
   const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(test::quickSim("corridor", 30)));
   const std::string dir = test::tempDir("checkpoint_lost_records");
-  auto cfg = roomConfig();
-  cfg.write("kinfu", "volume_voxels", 128);
-  cfg.write("kinfu", "shift_threshold", 0.05);
-  cfg.write("kinfu", "world_cache_mib", 0);
-  cfg.write("kinfu", "work_dir", dir);
-  cfg.write("loop", "keyframe_cache_mib", 0);
+  auto cfg = spillingConfig(dir);
   std::stringstream saved;
   std::size_t bricks_lost = 0, keyframes_lost = 0;
   {
@@ -227,12 +235,7 @@ TEST(Checkpoint, ASpillErrorBeforeACheckpointIsStillSaidAfterTheResume) {
   const std::vector<Frame> frames = test::renderFrames(sim::SyntheticSequence(test::quickSim("corridor", 24)));
   const std::string dir = test::tempDir("checkpoint_spill_error");
   std::ofstream(dir + "/a_file") << "not a folder";
-  auto cfg = roomConfig();
-  cfg.write("kinfu", "volume_voxels", 128);
-  cfg.write("kinfu", "shift_threshold", 0.05);
-  cfg.write("kinfu", "world_cache_mib", 0);
-  cfg.write("kinfu", "work_dir", dir + "/a_file/spill");
-  cfg.write("loop", "keyframe_cache_mib", 0);
+  auto cfg = spillingConfig(dir + "/a_file/spill");
   std::stringstream saved;
   std::string world_error, keyframe_error;
   {
@@ -255,8 +258,6 @@ TEST(Checkpoint, ASpillErrorBeforeACheckpointIsStillSaidAfterTheResume) {
   EXPECT_EQ(second.loopCloser()->storeStats().spill_error, keyframe_error);
 }
 
-// A setting that differs past its sixth decimal is another run: the origin wrote both as 0.003000, and
-// a run resumed with the other value went on with it.
 // What a checkpoint writes it reads: a frame's descriptors of over 65536 keypoints (one row each) were
 // written whole and refused at --resume ("bad image size"), after the run that made them. Past what a
 // checkpoint holds, the write fails (the run goes on without checkpoints), not the resume.
@@ -278,6 +279,8 @@ TEST(Checkpoint, AnImageACheckpointWritesItReads) {
   EXPECT_EQ(none.str().size(), 0u);
 }
 
+// A setting that differs past its sixth decimal is another run: the origin wrote both as 0.003000, and
+// a run resumed with the other value went on with it.
 TEST(Checkpoint, AnOriginTellsSettingsApartPastTheSixthDecimal) {
   mrpt::config::CConfigFileMemory a, b;
   a.write("kinfu", "joint_icp_sigma", std::string("0.0030001"));

@@ -421,18 +421,28 @@ TEST(VofusionApp, SaveVolumeToAFolderFailsBeforeTheRun) {
   EXPECT_FALSE(fs::exists(dir + "/out/summary.json"));
 }
 
+namespace {
+// <dir>/rec: rgbd-simulate's `frames` frames (its `options` added), the depth images from `damaged_from`
+// on damaged; <dir>/nomesh.ini: the path only. False when the recording could not be made.
+bool recordingDamagedFrom(const std::string& dir, std::size_t frames, std::size_t damaged_from, const std::string& options) {
+  if (test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames " + std::to_string(frames) + options + " 2>&1") != 0)
+    return false;
+  std::vector<fs::path> depth;
+  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
+  std::sort(depth.begin(), depth.end());
+  if (depth.size() != frames) return false;
+  for (std::size_t i = damaged_from; i < frames; ++i) std::ofstream(depth[i]) << "garbage";
+  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
+  return true;
+}
+}  // namespace
+
 // The progress counts the input's frames read, those skipped as damaged too: it reaches the input's
 // length (it ended at 11/12 with the last frame damaged, as if the run stopped short).
 TEST(VofusionApp, TheProgressReachesTheEndPastASkippedFrame) {
   const std::string dir = test::tempDir("vofusion_app_progress_skipped");
+  ASSERT_TRUE(recordingDamagedFrom(dir, 12, 11, " --size 160x120"));
   std::string log;
-  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 12 --size 160x120 2>&1", &log), 0) << log;
-  std::vector<fs::path> depth;
-  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
-  std::sort(depth.begin(), depth.end());
-  ASSERT_EQ(depth.size(), 12u);
-  std::ofstream(depth.back()) << "garbage";
-  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
   ASSERT_EQ(test::run(test::app("vofusion") + " " + dir + "/rec --out " + dir + "/out --config " + dir + "/nomesh.ini 2>&1", &log), 0)
       << log;
   EXPECT_NE(log.find("vofusion [joint] 12 frames in"), std::string::npos) << log;
@@ -443,14 +453,8 @@ TEST(VofusionApp, TheProgressReachesTheEndPastASkippedFrame) {
 // the stop writes what was built (exit 143). The damage ended the run with nothing written (exit 2).
 TEST(VofusionApp, ADamagedFrameReadAfterAStopIsNoFailureUnderStrict) {
   const std::string dir = test::tempDir("vofusion_app_strict_after_stop");
+  ASSERT_TRUE(recordingDamagedFrom(dir, 4, 2, ""));
   std::string log;
-  ASSERT_EQ(test::run(test::app("rgbd-simulate") + " --out " + dir + "/rec --frames 4 2>&1", &log), 0) << log;
-  std::vector<fs::path> depth;
-  for (const auto& e : fs::directory_iterator(dir + "/rec/depth")) depth.push_back(e.path());
-  std::sort(depth.begin(), depth.end());
-  ASSERT_EQ(depth.size(), 4u);
-  for (std::size_t i = 2; i < 4; ++i) std::ofstream(depth[i]) << "garbage";
-  std::ofstream(dir + "/nomesh.ini") << "[output]\nmesh = false\nwrite_rawlog = false\n";
   const std::string out = dir + "/out";
   // The checkpoint shows once frame 0 is done; the signal comes while frame 1 and its checkpoint are.
   test::run("(" + test::app("vofusion") + " " + dir + "/rec --strict --out " + out + " --config " + dir +
