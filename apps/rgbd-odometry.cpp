@@ -14,6 +14,7 @@
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/cli.h"
 #include "vofusion/core/config.h"
+#include "vofusion/live/live_loop.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/core/stop_signals.h"
@@ -71,9 +72,13 @@ Args parseArgs(const CommandLine& cl) {
 // sections only (nothing else is run).
 OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known) {
   auto cfg = loadConfig(a.config);
-  // A whole vofusion config is fine; a vofusion-grab one is checked in our sections, as vofusion-grab did.
-  if (isGrabberConfig(cfg)) checkKnownSections(cfg, a.config, vofusionConfigSections());
-  else checkConfigKeys(cfg, a.config, vofusionConfigSections());
+  // A whole vofusion config is fine, vofusion-grab's section too; a sensor config is checked in our
+  // sections, as vofusion-grab checks it.
+  static const LiveOptions grab;
+  auto known_here = vofusionConfigSections();
+  known_here.push_back({"vofusion-grab", &grab});
+  if (isGrabberConfig(cfg)) checkKnownSections(cfg, a.config, known_here);
+  else checkConfigKeys(cfg, a.config, known_here);
   OdometryParams params;
   loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
   if (a.sets.empty()) return params;

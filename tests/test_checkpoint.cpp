@@ -337,8 +337,8 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
   // matches (so that the reader's own guard is what is tested): refused, not first zero-filled (4 GiB).
   {
     std::string huge = bytes;
-    const std::size_t at = std::string("VOFUSION-CHECKPOINT-7\n").size();
-    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-7\n"), 0);
+    const std::size_t at = std::string("VOFUSION-CHECKPOINT-8\n").size();
+    ASSERT_EQ(huge.compare(0, at, "VOFUSION-CHECKPOINT-8\n"), 0);
     huge.replace(at, 4, "\xff\xff\xff\xff");
     const std::size_t body = huge.size() - 20;  // the trailer: "CHECKSUM", CRC-32, length
     ASSERT_EQ(huge.compare(body, 8, "CHECKSUM"), 0);
@@ -362,8 +362,9 @@ TEST(Checkpoint, ACheckpointOfAnotherRunOrADamagedOneIsRefusedInOneLine) {
     EXPECT_EQ(refusal(dir + "/flipped", "input room\n"), "truncated or corrupt checkpoint: its checksum does not match (a damaged byte)");
   }
   // Ones of earlier layouts (1 had no resumed map's name, 2 no checksum, 3 no frame indices, 4 no loop
-  // closer's last well-tracked frame, 5 no last measured frame): said so, not misread as corrupt.
-  for (const char* version : {"1", "2", "3", "4", "5"}) {
+  // closer's last well-tracked frame, 5 no last measured frame, 7 no spill errors): said so, not misread
+  // as corrupt.
+  for (const char* version : {"1", "2", "3", "4", "5", "6", "7"}) {
     std::ofstream(dir + "/old", std::ios::binary) << "VOFUSION-CHECKPOINT-" << version << "\n" << bytes.substr(22);
     EXPECT_TRUE(RunSession::isCheckpoint(dir + "/old"));
     EXPECT_FALSE(RunSession::peek(dir + "/old").has_value());

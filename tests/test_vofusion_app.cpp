@@ -378,6 +378,10 @@ TEST(VofusionApp, AReplayedLiveRunsConfigIsRead) {
   std::ofstream(cfg, std::ios::app) << "[vofusion-grab]\nqueue_capacty = 4\n";
   EXPECT_EQ(runThreeFrames(cfg, dir + "/out2", log), 2) << log;
   EXPECT_NE(log.find("replay.ini: unknown key 'queue_capacty' in section [vofusion-grab]"), std::string::npos) << log;
+  // A misspelt section too (no sensor section: the whole file is ours).
+  std::ofstream(cfg) << "[vofusion-grab]\nrawlog-grabber-ignore = true\n[kinfuu]\nvoxel_size = 0.01\n[output]\nmesh = false\n";
+  EXPECT_EQ(runThreeFrames(cfg, dir + "/out4", log), 2) << log;
+  EXPECT_NE(log.find("replay.ini: unknown section [kinfuu]"), std::string::npos) << log;
   // Its values too, as vofusion-grab checks them.
   std::ofstream(cfg) << "[vofusion-grab]\nqueue_capacity = 0\n[output]\nmesh = false\n";
   EXPECT_EQ(runThreeFrames(cfg, dir + "/out3", log), 2) << log;

@@ -172,6 +172,8 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
     defaults.getAllKeys(s, valid);
     for (auto& v : valid) v = keyName(v);
     for (const auto& key : keys) {
+      // rawlog-grabber's own, read in every section (share/grab-openni2.ini's [vofusion-grab] has it).
+      if (keyName(key) == "rawlog-grabber-ignore") continue;
       if (std::find(valid.begin(), valid.end(), keyName(key)) == valid.end())
         throw InputError(origin, unknownKeyMessage(s, trimmed(key)));
     }
@@ -196,7 +198,7 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
 
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user) {
   for (const auto& [s, keys] : sectionsWithKeys(user)) {
-    if (keyName(s) == "global" || keyName(s) == "vofusion-grab") return true;
+    if (keyName(s) == "global") return true;
     for (const auto& k : keys)
       if (keyName(k) == "driver") return true;
   }

@@ -25,9 +25,10 @@ namespace vofusion {
 namespace {
 
 const std::regex kDepthName(R"(frame-(\d{1,9})\.depth\.png)");  // 7-Scenes: 6 digits; more than an int holds is no frame
-// Any of a frame's files: a frame is listed by whichever is there, so one whose depth image is missing
-// is a damaged frame, skipped and counted (listed by its depth image alone, it vanished unsaid).
-const std::regex kFrameFile(R"(frame-(\d{1,9})\.(depth\.png|color\.png|color\.jpg|pose\.txt))");
+// A frame's images: a frame is listed by either, so one whose depth image is missing is a damaged frame,
+// skipped and counted (listed by its depth image alone, it vanished unsaid). A pose alone is no frame (a
+// sequence thinned by deleting images keeps its small pose files).
+const std::regex kFrameFile(R"(frame-(\d{1,9})\.(depth\.png|color\.png|color\.jpg))");
 
 // Colour image beside a frame stem: PNG first, then JPEG (both occur in 7-Scenes mirrors).
 std::string colourFor(const std::string& stem) {

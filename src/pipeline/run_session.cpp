@@ -32,7 +32,7 @@ namespace {
 
 // 2: the resumed map's name; 3: the checksum; 4: frame indices; 5: the loop closer's last well-tracked frame;
 // 6: the tracker's last measured frame; 7: the bricks and keyframes lost so far (their spill records unreadable)
-constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-7\n";
+constexpr char kCheckpointMagic[] = "VOFUSION-CHECKPOINT-8\n";
 
 // A checkpoint ends with its own checksum (core/file_checksum.h): a flipped byte in a pose or a
 // descriptor is refused, not resumed from.

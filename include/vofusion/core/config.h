@@ -23,7 +23,8 @@ using ConfigSection = std::pair<std::string, const mrpt::config::CLoadableOption
 mrpt::config::CConfigFileMemory loadConfig(const std::string& path);
 
 // Throws InputError(origin, "unknown key 'x' in section [s]" / "unknown section [s]") for the first
-// key or section of `user` that none of `known` writes. A key an earlier version read and whose value
+// key or section of `user` that none of `known` writes (rawlog-grabber-ignore, which rawlog-grabber
+// reads in every section, is one of every known section's). A key an earlier version read and whose value
 // is now fixed in code is refused as such ("'k' in section [s] is no longer a key: ..."), not as a typo.
 void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                      const std::vector<ConfigSection>& known);
@@ -36,8 +37,7 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
                         const std::vector<ConfigSection>& known);
 
 // True for a rawlog-grabber configuration such as vofusion-grab's --config: it has rawlog-grabber's
-// [global] section, a sensor section (one with a `driver` key) or vofusion-grab's own [vofusion-grab]
-// (a --replay --live run's, checked in our sections by vofusion-grab, as by the apps reading it again).
+// [global] section or a sensor section (one with a `driver` key).
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user);
 // A free-text value as the config file gives it (a folder: [kinfu] work_dir): MRPT's INI reader keeps
 // quotes, and a '#' or ';' comment after a value, as part of the value (only ' //' starts a comment
