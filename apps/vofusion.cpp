@@ -358,10 +358,14 @@ void removeSpentFiles(const RunPlan& plan, const FrameLoop& loop, bool map_faile
   std::error_code ec;
   const bool resumed_from_it = plan.resume && std::filesystem::equivalent(*plan.resume, plan.checkpoint_path, ec);
   const bool ours = loop.checkpoints > 0 || resumed_from_it;
-  if (ours && map_failed && std::filesystem::exists(plan.checkpoint_path, ec))
-    std::fprintf(stderr, "vofusion: %s is kept: --resume it with --save-volume to write the map without tracking the "
-                         "frames again\n", plan.checkpoint_path.c_str());
-  else if (!loop.interrupted() && ours)
+  if (ours && map_failed && std::filesystem::exists(plan.checkpoint_path, ec)) {
+    const std::optional<RunSession::Checkpoint> kept = RunSession::peek(plan.checkpoint_path);
+    const std::string again = kept && kept->frames == loop.done
+                                  ? "without tracking the frames again"
+                                  : "(the frames after its " + std::to_string(kept ? kept->frames : 0) + " are tracked again)";
+    std::fprintf(stderr, "vofusion: %s is kept: --resume it with --save-volume to write the map %s\n",
+                 plan.checkpoint_path.c_str(), again.c_str());
+  } else if (!loop.interrupted() && ours)
     std::filesystem::remove(plan.checkpoint_path, ec);
   std::filesystem::remove(plan.default_work, ec);  // only when empty: the spill file was never a name there
 }

@@ -28,8 +28,7 @@ bool storable(std::int64_t rows, std::int64_t cols, int type) {
 
 void write(Archive& a, const cv::Mat& m) {
   if (!storable(m.rows, m.cols, m.type()))
-    throw std::runtime_error("checkpoint: an image of " + std::to_string(m.rows) + "x" + std::to_string(m.cols) +
-                             " is more than a checkpoint holds");
+    throw NotStorable("an image of " + std::to_string(m.rows) + "x" + std::to_string(m.cols) + " is more than a checkpoint holds");
   const cv::Mat c = m.isContinuous() ? m : m.clone();
   a << static_cast<int32_t>(c.rows) << static_cast<int32_t>(c.cols) << static_cast<int32_t>(c.type());
   if (!c.empty()) a.WriteBuffer(c.data, c.total() * c.elemSize());

@@ -158,6 +158,8 @@ void RunSession::saveCheckpoint(const std::string& path, const std::string& orig
     if (std::string why; !appendFileChecksum(out.tmp(), why)) throw InputError(path, "cannot write the checkpoint (" + why + ")");
   } catch (const InputError&) {
     throw;
+  } catch (const state::NotStorable& e) {
+    throw InputError(path, std::string("cannot write the checkpoint: ") + e.what());  // the checkpoints', not the run's
   } catch (const std::exception& e) {
     // A write that failed under a part of the state (the map's "write failed (disk full?)", MRPT's
     // archive) or memory that ran out for the copies it is written from is said of the checkpoint,

@@ -49,17 +49,27 @@ std::string fileText(const fs::path& path) {
 }
 }  // namespace
 
+// The rawlog's size and time: a recording rendered over it by hand (rgbd-simulate --overwrite, other
+// options) is not the one the fingerprint was taken of.
+std::string fileStamp(const std::string& path) {
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) return {};
+  const auto time = fs::last_write_time(path, ec);
+  return ec ? std::string() : std::to_string(size) + " bytes, written " + std::to_string(time.time_since_epoch().count()) + "\n";
+}
+
 std::string recordingRenderedBy(const sim::SyntheticSequence& seq, const std::string& path) {
   const fs::path stamp = path + ".made-by";
   const std::string made_by = fingerprint(seq);
   std::error_code ec;
   const bool there = fs::exists(path, ec);
-  if (there && fileText(stamp) == made_by) return path;
+  if (there && fileText(stamp) == made_by + fileStamp(path)) return path;
   if (!fs::path(path).parent_path().empty()) fs::create_directories(fs::path(path).parent_path());
   std::fprintf(stderr, "vofusion: rendering the recording %s (%s)\n", path.c_str(),
-               there ? "the one there was another simulator's" : "first run only");
+               there ? "the one there is not this simulator's render" : "first run only");
   if (!renderRecording(seq, path, there)) return {};
-  writeFileAtomically(stamp.string(), made_by);
+  writeFileAtomically(stamp.string(), made_by + fileStamp(path));
   return path;
 }
 

@@ -9,6 +9,7 @@
 #include <istream>
 #include <optional>
 #include <ostream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -35,8 +36,12 @@ inline auto archiveOf(std::istream& is) { return mrpt::serialization::archiveFro
 void tag(Archive& a, const std::string& name);
 void expectTag(Archive& a, const std::string& name);
 
+// What a checkpoint cannot hold (an image past the rule below): the checkpoint's failure, not the run's.
+struct NotStorable : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 // Any OpenCV type (up to 4 channels), continuous or not, empty kept empty; up to 2^24 rows or columns
-// and 1 GiB, written and read by the same rule (beyond: std::runtime_error when written).
+// and 1 GiB, written and read by the same rule (beyond: NotStorable when written).
 void write(Archive& a, const cv::Mat& m);
 void read(Archive& a, cv::Mat& m);
 void write(Archive& a, const std::vector<cv::Mat>& v);

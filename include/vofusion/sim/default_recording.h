@@ -12,8 +12,9 @@ namespace vofusion {
 // another simulator rendered it (renderedBy); empty when a stop was asked for (stopRequested()) while
 // rendering: nothing is left of it.
 std::string defaultRecording();
-// The rawlog at `path` as `seq` renders it: rendered (again) unless the fingerprint of seq's first and
-// last frames (images, stamps, poses) beside it (<path>.made-by) is seq's. A recording kept after the
+// The rawlog at `path` as `seq` renders it: rendered (again) unless the fingerprint beside it
+// (<path>.made-by) is seq's (its first and last frames: images, stamps, poses) and the rawlog's (size,
+// time: not rendered over by hand since). A recording kept after the
 // simulator changed (its scene, noise or path) was every later default run's input, without a word.
 // Empty when a stop was asked for while rendering.
 std::string recordingRenderedBy(const sim::SyntheticSequence& seq, const std::string& path);
