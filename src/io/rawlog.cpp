@@ -158,20 +158,22 @@ std::string colourSizeMismatch(cv::Size got, const CameraIntrinsics& colour_cam)
          std::to_string(colour_cam.width) + "x" + std::to_string(colour_cam.height);
 }
 
-// A registered colour image is at most this many times the depth image's pixels (1280x960 over 320x240).
+// A registered colour image has at most this many times the depth image's pixels (1280x960 over
+// 320x240), or kMostColourPixels where that is more (1280x720 over a 224x171 time-of-flight camera).
 constexpr int kMostColourPixelsPerDepthPixel = 16;
+constexpr double kMostColourPixels = double(1 << 22);
 
 // Refuses a colour file's stated size (before any decoder allocates its pixels) unless it is its own
-// camera's, or, registered, at most kMostColourPixelsPerDepthPixel times the depth image's pixels: a
-// crafted 3 MB PNG stating 32768x32768 was two 3.2 GB buffers a frame, and a failed allocation ended
-// the run naming no file.
+// camera's, or, registered, within the bound above: a crafted 3 MB PNG stating 32768x32768 was two
+// 3.2 GB buffers a frame, and a failed allocation ended the run naming no file.
 void refuseColourSize(const std::string& file, cv::Size stated, const CameraIntrinsics* colour_cam, cv::Size depth) {
   if (colour_cam && stated != cv::Size(colour_cam->width, colour_cam->height))
     throw InputError(file, colourSizeMismatch(stated, *colour_cam));
-  if (!colour_cam && double(stated.area()) > double(kMostColourPixelsPerDepthPixel) * depth.area())
+  const double most = std::max(kMostColourPixels, double(kMostColourPixelsPerDepthPixel) * depth.area());
+  if (!colour_cam && double(stated.area()) > most)
     throw InputError(file, "colour image is " + std::to_string(stated.width) + "x" + std::to_string(stated.height) +
-                               ", over " + std::to_string(kMostColourPixelsPerDepthPixel) + " times the " +
-                               std::to_string(depth.width) + "x" + std::to_string(depth.height) + " depth image's pixels");
+                               ": more pixels than a colour image registered to a " + std::to_string(depth.width) + "x" +
+                               std::to_string(depth.height) + " depth image may have (" + cv::format("%.0f", most) + ")");
 }
 
 // `colour_cam`: the colour camera the image must fit (not registered to the depth), else nullptr;
