@@ -523,9 +523,9 @@ bool RawlogSource::next(Frame& frame) {
     throw DamagedFrame(e);  // this record's images; the next record is read as usual
   } catch (const std::bad_alloc&) {
     // An image no check above bounds (another format, decoded by MRPT's CImage): its frame, not the run.
-    throw DamagedFrame(InputError(path_, "record " + std::to_string(index) + ": its images need more memory than there is"));
+    throw DamagedFrame(InputError(path_, "frame " + std::to_string(index) + ": its images need more memory than there is"));
   } catch (const cv::Exception& e) {
-    throw DamagedFrame(InputError(path_, "record " + std::to_string(index) + ": its images cannot be decoded (" + e.err + ")"));
+    throw DamagedFrame(InputError(path_, "frame " + std::to_string(index) + ": its images cannot be decoded (" + e.err + ")"));
   }
   frame.index = index;
   if (index < colour_offsets_.size()) frame.colour_offset = colour_offsets_[index];

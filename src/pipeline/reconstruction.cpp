@@ -94,6 +94,8 @@ struct Reconstruction::Impl {
   double max_correction = 0.0;              // m, largest move of a fused pose by the loops (finish())
   std::string resumed_map;                  // resumeVolume()'s file: reintegrate() fuses into it again,
   std::string resumed_map_stamp;            // if it is still as it was read (mapStamp)
+  mutable std::optional<std::optional<std::string>> blocked;  // reintegrationBlocked(), once finished
+  std::optional<std::string> resumedMapProblem() const;
   bool finished = false, reintegrated = false;
   KinFuStats tracking_stats;                // of the tracking run, once the map was fused again
   KinFuStats released_stats;                // fusionStats() when releaseMap() freed the map
@@ -322,9 +324,9 @@ bool Reconstruction::mapNeedsReintegration() const {
   return m.finished && m.loops && m.loops->activeLoops() > 0 && m.max_correction > m.loop_params.reintegrate_min_correction;
 }
 
-std::optional<std::string> Reconstruction::reintegrationBlocked() const {
-  const Impl& m = *impl_;
-  if (m.resumed_map.empty()) return std::nullopt;
+// reintegrationBlocked()'s judgement, made each time it is called.
+std::optional<std::string> Reconstruction::Impl::resumedMapProblem() const {
+  const Impl& m = *this;
   if (mapStamp(m.resumed_map) != m.resumed_map_stamp)
     return m.resumed_map + ": changed or gone since the run went on from it (saved over by an interrupted run?): "
                            "fused again without it, the map would lose the sessions before this one";
@@ -335,6 +337,17 @@ std::optional<std::string> Reconstruction::reintegrationBlocked() const {
                            "sessions before this one";
   return std::nullopt;
 }
+
+std::optional<std::string> Reconstruction::reintegrationBlocked() const {
+  const Impl& m = *impl_;
+  if (m.resumed_map.empty()) return std::nullopt;
+  // Judged once at the end (the checksum reads the whole map, and reintegrate() asks again).
+  if (m.finished && m.blocked) return *m.blocked;
+  const std::optional<std::string> why = m.resumedMapProblem();
+  if (m.finished) m.blocked = why;
+  return why;
+}
+
 
 std::size_t Reconstruction::reintegrate(const std::function<bool(Frame&)>& next,
                                         const std::function<void(std::size_t)>& progress) {
