@@ -18,7 +18,9 @@ static_assert(std::atomic<bool>::is_always_lock_free && std::atomic<int>::is_alw
 
 std::atomic<bool> g_stop{false};
 std::atomic<int> g_signal{0};
-std::atomic<std::int64_t> g_first_ns{0};  // when the signal that asked to stop came
+// When the signal that asked to stop came, and whether it was sent by a process: (ns << 1) | sent, in
+// one word, so that a second handler running at once sees both of the first's.
+std::atomic<std::int64_t> g_first{0};
 
 std::int64_t monotonicNs() {
   timespec t{};
@@ -43,7 +45,7 @@ void onStopSignal(int signal, siginfo_t* info, void*) {
   // Its time before the flag: a second signal that sees the flag set sees the first one's time too.
   if (!g_stop.load()) {
     std::int64_t unset = 0;
-    g_first_ns.compare_exchange_strong(unset, now);
+    g_first.compare_exchange_strong(unset, (now << 1) | std::int64_t(sent));
   }
   // The first request's signal before the flag: whoever sees the flag sees which signal it was.
   int none = 0;
@@ -56,10 +58,12 @@ void onStopSignal(int signal, siginfo_t* info, void*) {
     return;
   }
   // One request can come twice at once: Slurm signals every process of a job, a terminal's Ctrl-C
-  // reaches batch-job too, and batch-job passes it on (an INT as TERM). Those are sent; a second
-  // Ctrl-C pressed is the user's own, and kills however soon it comes (one 0.3 s after the first did
-  // nothing, unsaid).
-  if (sent && now - g_first_ns < std::int64_t(kSameRequestSeconds * 1e9)) return;
+  // reaches batch-job too, and batch-job passes it on (an INT as TERM), in either order when both are
+  // pending at once. One of the two is sent; a second Ctrl-C pressed after a first pressed is the
+  // user's own, and kills however soon it comes (one 0.3 s after the first did nothing, unsaid).
+  const std::int64_t first = g_first.load();
+  const bool first_sent = (first & 1) != 0;
+  if ((sent || first_sent) && now - (first >> 1) < std::int64_t(kSameRequestSeconds * 1e9)) return;
   std::signal(signal, SIG_DFL);  // the second: what the signal does without a handler, now
   std::raise(signal);
 }

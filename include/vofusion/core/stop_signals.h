@@ -3,10 +3,10 @@
 // the first stop request (a signal, or requestStop(): vofusion-grab's window closed) sets the stop
 // flag (a signal also prints "stopping after the frame in hand ..." on stderr at once), and the app
 // finishes the frame in hand and writes what it has; a signal after that kills at
-// once, as without a handler. A stop signal sent by a process within kSameRequestSeconds of the one
-// that asked is the same request delivered twice, not a second one: a batch system signals the job's
-// processes, a terminal's Ctrl-C reaches batch-job and vofusion alike, and batch-job passes it on (as
-// SIGTERM). A second Ctrl-C from the terminal kills however soon it comes.
+// once, as without a handler. A stop signal within kSameRequestSeconds of the one that asked, where
+// either was sent by a process, is the same request delivered twice, not a second one: a batch system
+// signals the job's processes, a terminal's Ctrl-C reaches batch-job and vofusion alike, and batch-job
+// passes it on (as SIGTERM). A second Ctrl-C from the terminal after a first kills however soon it comes.
 // For long-running apps (vofusion, vofusion-grab, rgbd-odometry, tum2rawlog, rgbd-simulate), installed
 // from main's thread once the command line is read:
 //
