@@ -326,15 +326,14 @@ bool Reconstruction::mapNeedsReintegration() const {
 
 // reintegrationBlocked()'s judgement, made each time it is called.
 std::optional<std::string> Reconstruction::Impl::resumedMapProblem() const {
-  const Impl& m = *this;
-  if (mapStamp(m.resumed_map) != m.resumed_map_stamp)
-    return m.resumed_map + ": changed or gone since the run went on from it (saved over by an interrupted run?): "
-                           "fused again without it, the map would lose the sessions before this one";
+  if (mapStamp(resumed_map) != resumed_map_stamp)
+    return resumed_map + ": changed or gone since the run went on from it (saved over by an interrupted run?): "
+                         "fused again without it, the map would lose the sessions before this one";
   // Unreadable now (its disk failing, a byte flipped): found before the tracked map goes, which holds
   // them. Fused without it, the map lost them, and --save-volume wrote that over the file.
-  if (const std::string why = KinFu::savedMapProblem(m.resumed_map); !why.empty())
-    return m.resumed_map + ": " + why + " since the run went on from it: fused again without it, the map would lose the "
-                           "sessions before this one";
+  if (const std::string why = KinFu::savedMapProblem(resumed_map); !why.empty())
+    return resumed_map + ": " + why + " since the run went on from it: fused again without it, the map would lose the "
+                         "sessions before this one";
   return std::nullopt;
 }
 

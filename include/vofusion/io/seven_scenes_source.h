@@ -39,7 +39,7 @@ class SevenScenesSource : public IndexedFrameSource {
     std::string stem;    // "<folder>/frame-000000"
     std::string colour;  // ".color.png" or ".color.jpg" path
     int number = 0;      // the XXXXXX of the file name
-    bool has_depth = false;  // its ".depth.png" is there (listed by any of its files)
+    bool has_depth = false;  // its ".depth.png" is there (listed by either image)
   };
   void listFrames(const SourceOptions& opts);  // frames_ in number order (at most opts.max_frames)
   void readPoses(const SourceOptions& opts);   // gt_ and gt_index_ from the frames' pose files

@@ -8,9 +8,9 @@
 
 namespace vofusion {
 
-// Path of the default rawlog, rendering it first (with a progress line) if it does not exist yet or
-// another simulator rendered it (renderedBy); empty when a stop was asked for (stopRequested()) while
-// rendering: nothing is left of it.
+// Path of the default rawlog, rendering it first (with a progress line) if it does not exist yet or is
+// not this simulator's render (recordingRenderedBy); empty when a stop was asked for (stopRequested())
+// while rendering: nothing is left of it.
 std::string defaultRecording();
 // The rawlog at `path` as `seq` renders it: rendered (again) unless the fingerprint beside it
 // (<path>.made-by) is seq's (its first and last frames: images, stamps, poses) and the rawlog's (size,
