@@ -67,4 +67,13 @@ std::vector<TextLine> dataLines(const std::string& text) {
   return lines;
 }
 
+std::string fileStamp(const std::string& path) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) return "";
+  const auto time = std::filesystem::last_write_time(path, ec);
+  if (ec) return "";
+  return std::to_string(size) + " bytes, written " + std::to_string(time.time_since_epoch().count());
+}
+
 }  // namespace vofusion

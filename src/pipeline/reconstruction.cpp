@@ -3,6 +3,7 @@
 #include "vofusion/core/pose_eigen.h"
 #include "vofusion/core/progress.h"  // printWarning
 #include "vofusion/core/state_archive.h"
+#include "vofusion/core/text_file.h"
 #include "vofusion/io/png_decode.h"  // asBgr8
 
 #include <algorithm>
@@ -46,18 +47,6 @@ void checkReconstructionValues(const mrpt::config::CConfigFileBase& cfg) {
 }
 
 namespace {
-// A saved map file as it is now: its size and modification time ("" when it cannot be read).
-std::string mapStamp(const std::string& path) {
-  std::error_code ec;
-  const auto size = std::filesystem::file_size(path, ec);
-  if (ec) return "";
-  const auto time = std::filesystem::last_write_time(path, ec);
-  if (ec) return "";
-  return std::to_string(size) + " bytes, written " + std::to_string(time.time_since_epoch().count());
-}
-}  // namespace
-
-namespace {
 // The images, copied once for all that keeps them past process(): the caller may refill its frame's
 // buffers for the next one (the apps reuse one Frame), while the fusion beside the next frame reads
 // both and the odometry's held frames read their depth again (colour time: the current frame's
@@ -93,7 +82,7 @@ struct Reconstruction::Impl {
   Trajectory optimised_as_tracked;          // the same corrections on the poses as tracked: reintegrate() fuses there
   double max_correction = 0.0;              // m, largest move of a fused pose by the loops (finish())
   std::string resumed_map;                  // resumeVolume()'s file: reintegrate() fuses into it again,
-  std::string resumed_map_stamp;            // if it is still as it was read (mapStamp)
+  std::string resumed_map_stamp;            // if it is still as it was read (fileStamp)
   mutable std::optional<std::optional<std::string>> blocked;  // reintegrationBlocked(), once finished
   std::optional<std::string> resumedMapProblem() const;
   bool finished = false, reintegrated = false;
@@ -326,7 +315,7 @@ bool Reconstruction::mapNeedsReintegration() const {
 
 // reintegrationBlocked()'s judgement, made each time it is called.
 std::optional<std::string> Reconstruction::Impl::resumedMapProblem() const {
-  if (mapStamp(resumed_map) != resumed_map_stamp)
+  if (fileStamp(resumed_map) != resumed_map_stamp)
     return resumed_map + ": changed or gone since the run went on from it (saved over by an interrupted run?): "
                          "fused again without it, the map would lose the sessions before this one";
   // Unreadable now (its disk failing, a byte flipped): found before the tracked map goes, which holds
@@ -403,7 +392,7 @@ void Reconstruction::resumeVolume(const std::string& path) {
   if (impl_->frames > 0 || impl_->finished) throw std::logic_error("Reconstruction::resumeVolume after the first frame");
   impl_->map().resume(path);
   impl_->resumed_map = std::filesystem::absolute(path).string();
-  impl_->resumed_map_stamp = mapStamp(path);
+  impl_->resumed_map_stamp = fileStamp(path);
 }
 void Reconstruction::saveState(std::ostream& os) const {
   Impl& m = *impl_;

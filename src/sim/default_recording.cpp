@@ -3,14 +3,13 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 
 #include <mrpt/math/CMatrixFixed.h>
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/progress.h"
 #include "vofusion/core/stop_signals.h"
+#include "vofusion/core/text_file.h"
 #include "vofusion/io/rawlog.h"
 
 namespace fs = std::filesystem;
@@ -43,33 +42,21 @@ std::string fingerprint(const sim::SyntheticSequence& seq) {
   return std::string(hex) + " " + std::to_string(seq.size()) + " frames\n";
 }
 
-std::string fileText(const fs::path& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
+// The fingerprint beside a recording ("" when there is none).
+std::string madeBy(const std::string& stamp) { return entryExists(stamp) ? readTextFile(stamp) : std::string(); }
 }  // namespace
 
-// The rawlog's size and time: a recording rendered over it by hand (rgbd-simulate --overwrite, other
-// options) is not the one the fingerprint was taken of.
-std::string fileStamp(const std::string& path) {
-  std::error_code ec;
-  const auto size = fs::file_size(path, ec);
-  if (ec) return {};
-  const auto time = fs::last_write_time(path, ec);
-  return ec ? std::string() : std::to_string(size) + " bytes, written " + std::to_string(time.time_since_epoch().count()) + "\n";
-}
-
 std::string recordingRenderedBy(const sim::SyntheticSequence& seq, const std::string& path) {
-  const fs::path stamp = path + ".made-by";
+  const std::string stamp = path + ".made-by";
   const std::string made_by = fingerprint(seq);
   std::error_code ec;
   const bool there = fs::exists(path, ec);
-  if (there && fileText(stamp) == made_by + fileStamp(path)) return path;
+  if (there && madeBy(stamp) == made_by + fileStamp(path) + "\n") return path;
   if (!fs::path(path).parent_path().empty()) fs::create_directories(fs::path(path).parent_path());
   std::fprintf(stderr, "vofusion: rendering the recording %s (%s)\n", path.c_str(),
                there ? "the one there is not this simulator's render" : "first run only");
   if (!renderRecording(seq, path, there)) return {};
-  writeFileAtomically(stamp.string(), made_by + fileStamp(path));
+  writeFileAtomically(stamp, made_by + fileStamp(path) + "\n");  // the rawlog's: not rendered over since
   return path;
 }
 

@@ -14,6 +14,9 @@ std::string readTextFile(const std::string& path);
 // and its reader names the problem in one line (std::filesystem::exists threw on a link to itself,
 // and the run ended with its error). Never throws.
 bool entryExists(const std::string& path);
+// A file as it is now: its size and last write time as text ("N bytes, written T"; "" when it cannot be
+// stat'ed), to tell whether it was replaced since (a saved map a run went on from, a rendered recording).
+std::string fileStamp(const std::string& path);
 // Why the file at `path` cannot be opened for reading, as the system says it ("Permission denied",
 // "No such file or directory"); empty when it can. A reader that fails on a file names this cause
 // first, rather than calling an unreadable file corrupt. Never throws.
