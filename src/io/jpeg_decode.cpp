@@ -139,7 +139,7 @@ bool startsAsJpeg(const std::uint8_t* p, std::size_t n) { return n >= 3 && p[0] 
 
 }  // namespace
 
-JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expect) {
+JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expect, double most_pixels) {
   JpegDecode out;
   if (!startsAsJpeg(data, size)) return out;
   Decompressor d;
@@ -150,6 +150,7 @@ JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expec
   }
   out.header = cv::Size(d.cols(), d.rows());
   if (!expect.empty() && out.header != expect) return out;
+  if (most_pixels > 0 && double(out.header.area()) > most_pixels) return out;
   if (expect.empty() && double(d.cols()) * d.rows() > kMaxPixels) {
     out.damage = "its header states " + std::to_string(d.cols()) + "x" + std::to_string(d.rows()) + " pixels, more than any image";
     return out;
@@ -170,13 +171,13 @@ JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expec
   return out;
 }
 
-JpegDecode readJpeg(const std::string& path, cv::Size expect) {
+JpegDecode readJpeg(const std::string& path, cv::Size expect, double most_pixels) {
   // Its first bytes first: a PNG is not read whole again to be told apart.
   std::uint8_t head[3];
   if (!readFileStart(path, head, sizeof head) || !startsAsJpeg(head, sizeof head)) return {};
   thread_local std::vector<std::uint8_t> bytes;
   if (!readWholeFile(path, bytes)) return {};
-  return decodeJpeg(bytes.data(), bytes.size(), expect);
+  return decodeJpeg(bytes.data(), bytes.size(), expect, most_pixels);
 }
 
 }  // namespace vofusion

@@ -202,13 +202,14 @@ bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
   return read;
 }
 
-cv::Mat readPlainPng(const std::string& path, cv::Size expect, cv::Size* header) {
+cv::Mat readPlainPng(const std::string& path, cv::Size expect, cv::Size* header, double most_pixels) {
   std::vector<std::uint8_t>& bytes = buffers().file;
   if (header) *header = cv::Size();
   if (!readWholeFile(path, bytes)) return {};
   const cv::Size stated = headerSizeOf(bytes.data(), bytes.size());
   if (header) *header = stated;
   if (!expect.empty() && !stated.empty() && stated != expect) return {};
+  if (most_pixels > 0 && double(stated.area()) > most_pixels) return {};
   return decodePlainPng(bytes.data(), bytes.size());
 }
 

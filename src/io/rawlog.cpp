@@ -163,13 +163,19 @@ std::string colourSizeMismatch(cv::Size got, const CameraIntrinsics& colour_cam)
 constexpr int kMostColourPixelsPerDepthPixel = 16;
 constexpr double kMostColourPixels = double(1 << 22);
 
-// Refuses a colour file's stated size (before any decoder allocates its pixels) unless it is its own
-// camera's, or, registered, within the bound above: a crafted 3 MB PNG stating 32768x32768 was two
-// 3.2 GB buffers a frame, and a failed allocation ended the run naming no file.
+// The most pixels a colour image registered to a depth image of size `depth` may have.
+double mostRegisteredColourPixels(cv::Size depth) {
+  return std::max(kMostColourPixels, double(kMostColourPixelsPerDepthPixel) * depth.area());
+}
+
+// Refuses a colour file's stated size unless it is its own camera's, or, registered, within the bound
+// above. The decoders refuse such a header before they allocate its pixels: a crafted 3 MB PNG stating
+// 32768x32768 was two 3.2 GB buffers a frame, and a failed allocation ended the run naming no file.
 void refuseColourSize(const std::string& file, cv::Size stated, const CameraIntrinsics* colour_cam, cv::Size depth) {
+  if (stated.empty()) return;
   if (colour_cam && stated != cv::Size(colour_cam->width, colour_cam->height))
     throw InputError(file, colourSizeMismatch(stated, *colour_cam));
-  const double most = std::max(kMostColourPixels, double(kMostColourPixelsPerDepthPixel) * depth.area());
+  const double most = mostRegisteredColourPixels(depth);
   if (!colour_cam && double(stated.area()) > most)
     throw InputError(file, "colour image is " + std::to_string(stated.width) + "x" + std::to_string(stated.height) +
                                ": more pixels than a colour image registered to a " + std::to_string(depth.width) + "x" +
@@ -184,14 +190,12 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
   const std::string file = external ? obs.intensityImage.getExternalStorageFileAbsolutePath() : origin;
   plain = false;
   if (external) {
-    // Decoded at the size it should have; a file stating another is judged by its header first.
-    const cv::Size want = colour_cam ? cv::Size(colour_cam->width, colour_cam->height) : depth;
+    // Decoded only at a size it may have: its camera's, or a registered image's bound.
+    const cv::Size expect = colour_cam ? cv::Size(colour_cam->width, colour_cam->height) : cv::Size();
+    const double most = colour_cam ? 0.0 : mostRegisteredColourPixels(depth);
     cv::Size stated;
-    cv::Mat decoded = readPlainPng(file, want, &stated);
-    if (decoded.empty() && !stated.empty() && stated != want) {
-      refuseColourSize(file, stated, colour_cam, depth);
-      decoded = readPlainPng(file, stated);
-    }
+    const cv::Mat decoded = readPlainPng(file, expect, &stated, most);
+    refuseColourSize(file, stated, colour_cam, depth);
     if (decoded.type() == CV_8UC3) {
       plain = true;
       return decoded;
@@ -201,11 +205,8 @@ cv::Mat colourOf(const CObservation3DRangeScan& obs, const std::string& origin, 
       throw InputError(file, "cannot load intensity image (" + why + ")");
     if (const std::string damage = imageFileDamage(file); !damage.empty())
       throw InputError(file, "cannot load intensity image (" + damage + ")");
-    JpegDecode jpeg = readJpeg(file, want);
-    if (jpeg.image.empty() && jpeg.damage.empty() && !jpeg.header.empty() && jpeg.header != want) {
-      refuseColourSize(file, jpeg.header, colour_cam, depth);
-      jpeg = readJpeg(file, jpeg.header);
-    }
+    const JpegDecode jpeg = readJpeg(file, expect, most);
+    refuseColourSize(file, jpeg.header, colour_cam, depth);
     if (!jpeg.damage.empty()) throw InputError(file, "cannot load intensity image (" + jpeg.damage + ")");
     if (!jpeg.image.empty()) return asBgr8(jpeg.image);
   }

@@ -29,10 +29,11 @@ struct JpegDecode {
 // Empty image and empty damage for what is no JPEG or a colour space other than grey, YCbCr and RGB
 // (CMYK): the caller decodes it with cv::imread. A damaged file gives damage and no image; so does
 // one libjpeg refuses (its error message as damage). A header stating another size than `expect`
-// (when given) is not decoded, so the caller refuses it before its pixels are allocated; without
-// `expect`, more pixels than OpenCV's decoders allow (2^30) are damage.
-JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expect = {});
+// (when given), or more pixels than `most_pixels` (when given), is not decoded, so the caller refuses
+// it before its pixels are allocated; without either, more pixels than OpenCV's decoders allow (2^30)
+// are damage.
+JpegDecode decodeJpeg(const std::uint8_t* data, std::size_t size, cv::Size expect = {}, double most_pixels = 0);
 // The same for a file (nothing for one that cannot be read).
-JpegDecode readJpeg(const std::string& path, cv::Size expect = {});
+JpegDecode readJpeg(const std::string& path, cv::Size expect = {}, double most_pixels = 0);
 
 }  // namespace vofusion

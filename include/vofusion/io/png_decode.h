@@ -20,8 +20,9 @@ namespace vofusion {
 cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size);
 // The same for a file (empty also when it cannot be read). header: the size its PNG header states
 // (empty for a file that is no PNG), from the same bytes; a PNG stating another size than `expect`
-// (when given) is not decoded, so the caller refuses it before any decoder allocates its pixels.
-cv::Mat readPlainPng(const std::string& path, cv::Size expect = {}, cv::Size* header = nullptr);
+// (when given), or more pixels than `most_pixels` (when given), is not decoded, so the caller refuses
+// it before any decoder allocates its pixels.
+cv::Mat readPlainPng(const std::string& path, cv::Size expect = {}, cv::Size* header = nullptr, double most_pixels = 0);
 
 // The file's bytes into `bytes` (its storage reused); false when it cannot be read, is no regular file or
 // is larger than any image (256 MiB).
