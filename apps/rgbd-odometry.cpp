@@ -72,13 +72,7 @@ Args parseArgs(const CommandLine& cl) {
 // sections only (nothing else is run).
 OdometryParams loadParams(const Args& a, const std::vector<ConfigSection>& known) {
   auto cfg = loadConfig(a.config);
-  // A whole vofusion config is fine, vofusion-grab's section too; a sensor config is checked in our
-  // sections, as vofusion-grab checks it.
-  static const LiveOptions grab;
-  auto known_here = vofusionConfigSections();
-  known_here.push_back({"vofusion-grab", &grab});
-  if (isGrabberConfig(cfg)) checkKnownSections(cfg, a.config, known_here);
-  else checkConfigKeys(cfg, a.config, known_here);
+  checkConfigFile(cfg, a.config, withGrabSection(vofusionConfigSections()));  // a whole vofusion or vofusion-grab config is fine
   OdometryParams params;
   loadNamingOrigin(a.config, [&] { params.loadFromConfigFile(cfg, "odometry"); });
   if (a.sets.empty()) return params;

@@ -138,13 +138,6 @@ Args parseArgs(int argc, char** argv) {
   return a;
 }
 
-// Our sections are checked for typos; the sensor sections belong to MRPT's drivers.
-std::vector<ConfigSection> ownSections(const LiveOptions& live) {
-  auto sections = vofusionConfigSections();
-  sections.push_back({kSection, &live});
-  return sections;
-}
-
 std::string summaryText(const LiveStats& s, const std::string& source, std::size_t recorded, std::size_t queue,
                         std::size_t skipped) {
   std::ostringstream o;
@@ -181,7 +174,7 @@ GrabPlan planGrab(const Args& args) {
   if (plan.config.empty() && args.replay.empty()) plan.config = std::string(VOFUSION_SHARE_DIR) + "/grab-openni2.ini";
   plan.cfg = loadConfig(plan.config);
   loadNamingOrigin(plan.config, [&] { checkBareValue(plan.cfg, "kinfu", "work_dir"); });
-  checkKnownSections(plan.cfg, plan.config, ownSections(LiveOptions()));
+  checkKnownSections(plan.cfg, plan.config, withGrabSection(vofusionConfigSections()));  // the sensor sections are MRPT's drivers'
   loadNamingOrigin(plan.config, [&] {
     plan.opts.loadFromConfigFile(plan.cfg, kSection);
     plan.out_params.loadFromConfigFile(plan.cfg, "output");
@@ -421,7 +414,7 @@ std::unique_ptr<RawlogWriter> openRecording(const std::string& out, const std::s
 
 int run(const Args& args) {
   if (args.dump) {
-    std::fputs(dumpConfig(ownSections(LiveOptions())).c_str(), stdout);
+    std::fputs(dumpConfig(withGrabSection(vofusionConfigSections())).c_str(), stdout);
     return 0;
   }
   const GrabPlan plan = planGrab(args);

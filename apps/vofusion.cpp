@@ -107,23 +107,12 @@ Input openInput(const RunPlan& plan, bool warn) {
   return in;
 }
 
-// Our sections and vofusion-grab's own: a --replay --live run's --config (no sensor section) is read
-// whole, as vofusion-grab read it, when the run resumes from its checkpoint.
-std::vector<ConfigSection> withGrabSection() {
-  static const LiveOptions grab;
-  auto sections = vofusionConfigSections();
-  sections.push_back({"vofusion-grab", &grab});
-  return sections;
-}
-
 // The configuration file with the command line's overrides; out-of-range values name the file.
 void loadConfiguration(const CommandLine& cl, RunPlan& plan) {
   plan.cfg = loadConfig(plan.config_path);
   // A live run's --config (rawlog-grabber's sections beside ours) is checked in our sections, as
   // vofusion-grab checked it: the run resumes from its checkpoint with the file it was started with.
-  const std::vector<ConfigSection> ours = withGrabSection();
-  if (isGrabberConfig(plan.cfg)) checkKnownSections(plan.cfg, plan.config_path, ours);
-  else checkConfigKeys(plan.cfg, plan.config_path, ours);
+  checkConfigFile(plan.cfg, plan.config_path, withGrabSection(vofusionConfigSections()));
   auto& cfg = plan.cfg;
   if (cl.flag("--no-loop-closure")) cfg.write("loop", "enabled", false);
   // The world model's spill file: --work-dir, else [kinfu] work_dir, else <out>/.tmp.

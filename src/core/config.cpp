@@ -196,6 +196,12 @@ void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::st
   checkConfigKeys(ours, origin, known);
 }
 
+void checkConfigFile(const mrpt::config::CConfigFileBase& user, const std::string& origin,
+                     const std::vector<ConfigSection>& known) {
+  if (isGrabberConfig(user)) checkKnownSections(user, origin, known);
+  else checkConfigKeys(user, origin, known);
+}
+
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user) {
   for (const auto& [s, keys] : sectionsWithKeys(user)) {
     if (keyName(s) == "global") return true;

@@ -13,6 +13,12 @@
 
 namespace vofusion {
 
+std::vector<ConfigSection> withGrabSection(std::vector<ConfigSection> ours) {
+  static const LiveOptions defaults;
+  ours.push_back({"vofusion-grab", &defaults});
+  return ours;
+}
+
 void LiveOptions::loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& s) {
   const double queue = readNumber(cfg, s, "queue_capacity", double(queue_capacity), true);
   sensor_timeout = readNumber(cfg, s, "sensor_timeout", sensor_timeout);

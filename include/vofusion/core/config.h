@@ -36,6 +36,11 @@ void checkConfigKeys(const mrpt::config::CConfigFileBase& user, const std::strin
 void checkKnownSections(const mrpt::config::CConfigFileBase& user, const std::string& origin,
                         const std::vector<ConfigSection>& known);
 
+// A config file as the apps that read vofusion-grab's check it: a rawlog-grabber configuration
+// (isGrabberConfig) in our sections (checkKnownSections: its sensor sections are MRPT's drivers'), any
+// other whole (checkConfigKeys).
+void checkConfigFile(const mrpt::config::CConfigFileBase& user, const std::string& origin,
+                     const std::vector<ConfigSection>& known);
 // True for a rawlog-grabber configuration such as vofusion-grab's --config: it has rawlog-grabber's
 // [global] section or a sensor section (one with a `driver` key).
 bool isGrabberConfig(const mrpt::config::CConfigFileBase& user);

@@ -10,10 +10,12 @@
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include <mrpt/config/CLoadableOptions.h>
 #include <mrpt/obs/CObservation3DRangeScan.h>
 
+#include "vofusion/core/config.h"
 #include "vofusion/core/frame.h"
 #include "vofusion/live/live_source.h"
 
@@ -35,6 +37,10 @@ struct LiveOptions : public mrpt::config::CLoadableOptions {
   void loadFromConfigFile(const mrpt::config::CConfigFileBase& cfg, const std::string& section) override;
   void saveToConfigFile(mrpt::config::CConfigFileBase& cfg, const std::string& section) const override;
 };
+
+// `ours` and vofusion-grab's own section, [vofusion-grab] (LiveOptions' defaults): what vofusion-grab's
+// --config holds of ours, which vofusion and rgbd-odometry read again (a live run resumed offline).
+std::vector<ConfigSection> withGrabSection(std::vector<ConfigSection> ours);
 
 enum class StopReason { EndOfStream, MaxFrames, Interrupted, SourceError, RecorderError, ConsumerError };
 std::string stopReasonName(StopReason r);
