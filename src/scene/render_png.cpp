@@ -143,17 +143,24 @@ void aimCamera(mrpt::opengl::COpenGLScene& scene, const Bounds& b, const Eigen::
 // Renders the scene off-screen through its viewport's camera and writes it to `png`.
 void writeRenderedPng(const std::string& png, mrpt::opengl::COpenGLScene& scene, int width, int height) {
   const auto& cam = scene.getViewport()->getCamera();
+  // CFBORender reads the pixels back at OpenGL's default row alignment (4 bytes) into an image with
+  // packed rows: a width whose 3 bytes a pixel are not a multiple of 4 came out sheared, and its last
+  // rows were written past the image. Rendered a few columns wider (the field of view is vertical:
+  // they only add at the sides) and cut back to the width asked for, centred.
+  const int rendered_width = (width + 3) / 4 * 4;
   mrpt::img::CImage img;
   try {
-    mrpt::opengl::CFBORender fbo(static_cast<unsigned>(width), static_cast<unsigned>(height));
+    mrpt::opengl::CFBORender fbo(static_cast<unsigned>(rendered_width), static_cast<unsigned>(height));
     fbo.setCamera(scene, cam);
     fbo.render_RGB(scene, img);
   } catch (const std::exception& e) {
     throw InputError(png, "off-screen rendering failed (no OpenGL device?): " + oneLineMessage(e));
   }
   cv::Mat m = img.asCvMat<cv::Mat>(mrpt::img::SHALLOW_COPY);
+  if (m.cols == rendered_width && m.rows == height) m = m(cv::Rect((rendered_width - width) / 2, 0, width, height));
   std::vector<uchar> bytes;
-  if (m.empty() || !cv::imencode(".png", m, bytes)) throw InputError(png, "cannot encode the rendered image");
+  if (m.cols != width || m.rows != height || !cv::imencode(".png", m, bytes))
+    throw InputError(png, "cannot encode the rendered image");
   writeFileAtomically(png, std::string(bytes.begin(), bytes.end()));
 }
 
