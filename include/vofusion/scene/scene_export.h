@@ -41,7 +41,9 @@ struct SceneOptions {
   double frustum_depth = 0.15;       // m, distance of the frustum's far plane
   // With a path given: draw only the side of the surface that faces the cameras (decided by an
   // area-weighted vote of the faces; a mesh wound away from them is turned to face them), so a room
-  // scanned from inside can be seen into from outside.
+  // scanned from inside can be seen into from outside: in mesh.png and a scene drawn in this process.
+  // A saved .3Dscene loads with both sides drawn (MRPT 2.5's CSetOfTriangles does not store its
+  // culling); its faces still face the cameras.
   bool cull_hidden_side = true;
   // Faces per MRPT object: one sizes its GL buffer in an int of bytes (108 a face), which 19.9 M faces
   // overflow; more faces are drawn as several objects ("mesh", "mesh.1", ...).
