@@ -172,6 +172,11 @@ TEST(Ply, MalformedFilesAreInputErrors) {
                           "property list uchar float extra\nend_header\n0 0 0 inf\n"},
       {"vertexlistneg", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
                         "property list int float extra\nend_header\n0 0 0 -1\n"},
+      // An integer packed colour that no integer holds (the cast to one was undefined).
+      {"packednan", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                    "property uint rgb\nend_header\n0 0 0 nan\n"},
+      {"packedhuge", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                     "property uint rgb\nend_header\n0 0 0 1e30\n"},
       // A second vertex element after the faces shrank the vertices under them.
       {"twovertex", head.substr(0, head.size() - 11) + "element vertex 1\nproperty float x\nproperty float y\n"
                         "property float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n0 0 0\n"},
@@ -206,6 +211,22 @@ TEST(Ply, MalformedFilesAreInputErrors) {
   writeText(dir + "/empty_elements.ply", head.substr(0, head.size() - 11) + "element edge 1000000000000000000\nend_header\n" +
                                              "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
   EXPECT_EQ(readPly(dir + "/empty_elements.ply").faces.size(), 1u);
+}
+
+// Tools write NaN normals for unreferenced vertices (MeshLab): the file's normals are dropped, for
+// whoever needs them to compute from the faces; a NaN normal shaded its vertex black in the scene.
+TEST(Ply, ANonFiniteNormalDropsTheFilesNormals) {
+  const std::string dir = test::tempDir("ply_nan_normal");
+  writeText(dir + "/n.ply", "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                            "property float nx\nproperty float ny\nproperty float nz\nproperty uint rgb\n"
+                            "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                            "0 0 0 0 0 1 16711680\n1 0 0 0 0 1 65280\n0 1 0 0 0 1 255\n5 5 5 nan nan nan 0\n3 0 1 2\n");
+  const TriangleMesh m = readPly(dir + "/n.ply");
+  EXPECT_EQ(m.vertices.size(), 4u);
+  EXPECT_TRUE(m.normals.empty());
+  ASSERT_EQ(m.colors.size(), 4u);
+  EXPECT_EQ(m.colors[0], (std::array<std::uint8_t, 3>{255, 0, 0}));
+  EXPECT_EQ(m.colors[2], (std::array<std::uint8_t, 3>{0, 0, 255}));
 }
 
 // PLY puts elements in any order. Faces before the vertices they name were refused as "references vertex

@@ -15,6 +15,7 @@
 
 #include "vofusion/core/atomic_file.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/core/text_file.h"
 #include "vofusion/mesh/mesh_io.h"
 
@@ -329,6 +330,7 @@ struct BodyParser {
     if (l.colors) mesh.colors.resize(e.count);
     std::vector<double> v(e.props.size());
     std::optional<std::uint32_t> packed_bits;  // a binary float packed colour's own bits
+    std::optional<std::size_t> bad_normal;      // the first vertex whose normal is not finite
     for (std::size_t i = 0; i < e.count; ++i) {
       for (std::size_t k = 0; k < e.props.size(); ++k) {
         const Property& p = e.props[k];
@@ -345,7 +347,19 @@ struct BodyParser {
       if (!mesh.vertices[i].allFinite())
         throw InputError(path, "vertex " + std::to_string(i) + " has a non-finite coordinate");
       if (l.normals) mesh.normals[i] = Eigen::Vector3f(float(v[l.inx]), float(v[l.iny]), float(v[l.inz]));
+      if (l.normals && !mesh.normals[i].allFinite() && !bad_normal) bad_normal = i;
+      // An integer packed colour written as text can be anything ("nan", "1e30"): cast, undefined.
+      if (l.colors && l.packed && !packed_bits && e.props[l.ipacked].type != Scalar::Float32 &&
+          !(v[l.ipacked] >= -2147483648.0 && v[l.ipacked] <= 4294967295.0))
+        throw InputError(path, "vertex " + std::to_string(i) + " has a packed colour out of range (" +
+                                   numberText(v[l.ipacked]) + ")");
       if (l.colors) mesh.colors[i] = vertexColour(e, l, v, packed_bits);
+    }
+    // Tools write NaN normals for unreferenced or degenerate vertices: the normals are dropped, and
+    // whoever needs them computes them from the faces (a NaN normal shaded its vertex black).
+    if (bad_normal) {
+      printWarning(path + ": vertex " + std::to_string(*bad_normal) + " has a non-finite normal: the file's normals are not used");
+      mesh.normals.clear();
     }
     have_vertices = true;
   }
