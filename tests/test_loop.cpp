@@ -259,6 +259,12 @@ TEST(LoopPlaceIndex, APlaceIsAKeyframeWithItsNeighboursInTheIndex) {
   EXPECT_TRUE(together[0].keyframe == 110 || together[0].keyframe == 111) << together[0].keyframe;
   EXPECT_GE(together[0].votes, P.min_votes);
   EXPECT_LE(together[0].votes, 32);
+  // Split either side of a keyframe that got none (blurred, or turned a little away): one place still,
+  // the one centred on it (each side's own window held 16).
+  const auto around = query(10, 12);
+  ASSERT_FALSE(around.empty());
+  EXPECT_TRUE(around[0].keyframe == 110 || around[0].keyframe == 112) << around[0].keyframe;
+  EXPECT_GE(around[0].votes, P.min_votes);
   EXPECT_TRUE(query(10, 30).empty());
 }
 

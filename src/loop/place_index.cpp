@@ -124,13 +124,14 @@ std::vector<PlaceCandidate> PlaceIndex::placesByVotes(const std::vector<int>& vo
   const std::size_t n = votes.size();
   std::vector<Place> places;
   for (std::size_t i = 0; i < n; ++i) {
-    if (votes[i] == 0) continue;
+    // Centred on a keyframe without votes too: a place's votes may fall on either side of it alone.
+    // A window with votes names one of its keyframes that has some.
     Place p{i, 0};
     for (std::size_t j = i > 0 ? i - 1 : 0; j <= std::min(n - 1, i + 1); ++j) {
       p.votes += votes[j];
       if (votes[j] > votes[p.best]) p.best = j;
     }
-    if (p.votes >= params_.min_votes) places.push_back(p);
+    if (p.votes > 0 && p.votes >= params_.min_votes) places.push_back(p);
   }
   // Most votes first; ties: the better best keyframe, then the older.
   std::sort(places.begin(), places.end(), [&](const Place& a, const Place& b) {
