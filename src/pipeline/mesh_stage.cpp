@@ -53,7 +53,9 @@ TriangleMesh meshRegionByRegion(Reconstruction& rec, const OutputParams& p, cons
   RegionMeshResult r = meshByRegion(source, mesh_params, p.save_raw_mesh ? out.path("mesh_raw.ply") : "", std::ref(progress),
                                     release_map, premeshed ? premeshed->lookup() : PremeshedLookup());
   if (premeshed)
-    s["mesh_while_tracking"] = {{"regions_meshed", premeshed->regionsMeshed()}, {"regions_reused", r.regions_premeshed}};
+    s["mesh_while_tracking"] = {{"regions_meshed", premeshed->regionsMeshed()},
+                                {"regions_reused", r.regions_premeshed},
+                                {"regions_failed", premeshed->regionsFailed()}};
   progress.finish();
   s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
   if (p.save_raw_mesh) streamed_raw = std::to_string(r.raw_faces) + " faces, streamed region by region";

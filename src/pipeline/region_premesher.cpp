@@ -11,6 +11,8 @@
 
 #include <tbb/task_arena.h>
 
+#include "vofusion/core/errors.h"
+#include "vofusion/core/progress.h"
 #include "vofusion/core/thread_name.h"
 
 #include "union_find.h"
@@ -96,7 +98,8 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std:
   // region of the map it does not reach.
   bool queued = false;
   const auto queueIfFinal = [&](const Key& k) {
-    if (reaches(k, origin_)) return;
+    // Once in the queue at most: a box swinging over a boundary left the same regions again and again.
+    if (reaches(k, origin_) || !queued_.insert(k).second) return;
     queue_.push_back(k);
     queued = true;
   };
@@ -115,6 +118,7 @@ void RegionPremesher::stop() {
     const std::lock_guard<std::mutex> lock(mutex_);
     stopping_ = true;
     queue_.clear();
+    queued_.clear();
   }
   wake_.notify_one();
   idle_.notify_all();
@@ -140,8 +144,10 @@ void RegionPremesher::run() {
       if (stopping_) return;
       region = queue_.front();
       queue_.pop_front();
+      queued_.erase(region);
       in_hand_ = true;
     }
+    std::string failure;
     try {
       alone.execute([&] {
         summarise(region);
@@ -149,10 +155,15 @@ void RegionPremesher::run() {
         simplifyIfReady(region);
         for (const Key& n : neighboursOf(region)) simplifyIfReady(n);
       });
+    } catch (const std::exception& e) {
+      failure = oneLineMessage(e);
     } catch (...) {
-      // No memory (a spilled brick that does not read back comes as never observed, no failure):
-      // the end meshes this region and reports what is wrong with it there.
+      failure = "unknown error";
     }
+    // The end meshes such a region (and its neighbours, which waited for it) and reports what is wrong
+    // there (a spilled brick that does not read back comes as never observed, no failure). Said once.
+    if (!failure.empty() && failed_.fetch_add(1) == 0)
+      printWarning("meshing while tracking: a region failed (" + failure + "): it and its neighbours are meshed at the end");
     const std::lock_guard<std::mutex> lock(mutex_);
     in_hand_ = false;
     if (queue_.empty()) idle_.notify_all();
@@ -195,7 +206,8 @@ void RegionPremesher::summarise(const Key& region) {
   std::uint64_t generation;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
-    if (stopping_ || !finalNow(region)) return;
+    // Summarised already (what is made of a region goes when the volume reaches it again).
+    if (stopping_ || !finalNow(region) || pieces_.count(region) || empty_.count(region)) return;
     generation = generation_[region];
   }
   bool ok = false;
@@ -223,7 +235,7 @@ void RegionPremesher::summarise(const Key& region) {
 // would cost more memory than marching again costs time.
 void RegionPremesher::simplifyIfReady(const Key& region) {
   const int rb = params_.region_bricks;
-  std::uint64_t generation;
+  std::vector<std::uint64_t> generations;  // the region's and its neighbours': what the judgement rests on
   std::vector<std::shared_ptr<const SeamPieces>> neighbours;
   std::vector<Key> unknown;  // final neighbours neither summarised nor known empty
   const fusion::WorldModel* world;
@@ -235,7 +247,7 @@ void RegionPremesher::simplifyIfReady(const Key& region) {
       if (const auto it = pieces_.find(n); it != pieces_.end()) neighbours.push_back(it->second);
       else if (!empty_.count(n)) unknown.push_back(n);
     }
-    generation = generation_[region];
+    generations = generationsAround(region);
     world = world_;
   }
   if (!unknown.empty()) {
@@ -246,6 +258,7 @@ void RegionPremesher::simplifyIfReady(const Key& region) {
     for (const Eigen::Vector3i& b : world->coordsInBox((vectorOf(region) - Eigen::Vector3i::Ones()) * rb, 3 * rb))
       with_bricks.insert(keyOf(fusion::regionOf(b, rb)));
     const std::lock_guard<std::mutex> lock(mutex_);
+    if (generationsAround(region) != generations) return;  // the scan may be of bricks since taken back
     for (const Key& n : unknown) {
       if (with_bricks.count(n) || !finalNow(n)) return;  // to be summarised, or reached again meanwhile
       empty_.insert(n);
@@ -266,9 +279,21 @@ void RegionPremesher::simplifyIfReady(const Key& region) {
   done.mesh = std::move(r.mesh);
   done.on_seam = std::move(r.on_seam);
   const std::lock_guard<std::mutex> lock(mutex_);
-  if (generation_[region] != generation) return;
+  // The volume came back to it or to a neighbour meanwhile: judged with pieces that are gone. Kept, it
+  // would also stop the redo (done_ is what simplifyIfReady skips).
+  if (generationsAround(region) != generations) return;
   done_[region] = std::move(done);
   ++meshed_;
+}
+
+std::vector<std::uint64_t> RegionPremesher::generationsAround(const Key& region) const {
+  const auto of = [&](const Key& k) {  // without an entry for a region never reached
+    const auto it = generation_.find(k);
+    return it == generation_.end() ? std::uint64_t(0) : it->second;
+  };
+  std::vector<std::uint64_t> g{of(region)};
+  for (const Key& n : neighboursOf(region)) g.push_back(of(n));
+  return g;
 }
 
 bool RegionPremesher::judge(const fusion::RegionMesh& r, const RegionComponents& c,
@@ -342,6 +367,8 @@ std::size_t RegionPremesher::regionsHeld() const {
   const std::lock_guard<std::mutex> lock(mutex_);
   return done_.size();
 }
+
+std::size_t RegionPremesher::regionsFailed() const { return failed_.load(); }
 
 std::size_t RegionPremesher::regionsMeshed() const {
   const std::lock_guard<std::mutex> lock(mutex_);

@@ -14,6 +14,7 @@
 //   rec.finish(); pre.stop();          // before the map is fused again, released or replaced
 //   meshByRegion(..., pre.lookup());
 #include <array>
+#include <atomic>
 #include <condition_variable>
 #include <deque>
 #include <map>
@@ -57,6 +58,7 @@ class RegionPremesher {
   void discard();
   std::size_t regionsMeshed() const;  // simplified during the run (a region made again counts again)
   std::size_t regionsHeld() const;    // simplified and not yet handed over or discarded
+  std::size_t regionsFailed() const;  // whose work failed here (no memory): left to the end
 
  private:
   using Key = std::array<int, 3>;
@@ -73,6 +75,8 @@ class RegionPremesher {
   bool finalNow(const Key& region) const;  // under mutex_
   bool reaches(const Key& region, const Eigen::Vector3i& origin) const;
   fusion::RegionMesh march(const Key& region, bool& ok);
+  std::vector<std::uint64_t> generationsAround(const Key& region) const;  // under mutex_: its own, then its neighbours'
+
   // Which of the region's components are fragments, those on seams judged with the neighbours'
   // pieces; false when one cannot be judged here (then the end does it).
   bool judge(const fusion::RegionMesh& r, const RegionComponents& c,
@@ -83,6 +87,7 @@ class RegionPremesher {
   mutable std::mutex mutex_;
   std::condition_variable wake_, idle_;
   std::deque<Key> queue_;                   // regions to summarise
+  std::set<Key> queued_;                    // those in queue_
   bool in_hand_ = false;                    // the thread is working on a region taken from queue_
   bool stopping_ = false;
   const fusion::WorldModel* world_ = nullptr;
@@ -94,6 +99,7 @@ class RegionPremesher {
   std::set<Key> empty_;                      // final regions without bricks
   std::map<Key, PremeshedRegion> done_;
   std::size_t meshed_ = 0;
+  std::atomic<std::size_t> failed_{0};
   std::vector<fusion::Brick> scratch_;       // the thread's, kept from region to region
   std::thread thread_;
 };
