@@ -559,6 +559,20 @@ TEST(LoopKeyframeStore, SpilledKeyframesComeBackWhole) {
   const std::uint64_t fewer = npoints - 1;
   std::memcpy(bytes.data() + at, &fewer, sizeof(fewer));
   EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
+  // Descriptors of another width than 32 bytes (the place index threw on them, ending the loop thread),
+  // and bytes past the record's end (another layout under the same tag).
+  bytes = encodeKeyframeData(made[0]);
+  const std::size_t dcols_at = bytes.size() - npoints * sizeof(Eigen::Vector3d) - sizeof(std::uint64_t) -
+                               npoints * 32 - 2 * sizeof(std::int32_t);
+  std::int32_t dcols = 0;
+  std::memcpy(&dcols, bytes.data() + dcols_at, sizeof dcols);
+  ASSERT_EQ(dcols, 32);
+  dcols = 16;
+  std::memcpy(bytes.data() + dcols_at, &dcols, sizeof dcols);
+  EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
+  bytes = encodeKeyframeData(made[0]);
+  bytes.push_back(0);
+  EXPECT_THROW(decodeKeyframeData(bytes, k), std::runtime_error);
   // And a depth size its compressed bytes cannot hold, before it asks for the memory.
   bytes = encodeKeyframeData(made[0]);
   const std::int32_t huge = 1 << 30;

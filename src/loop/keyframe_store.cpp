@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "vofusion/core/deflate.h"
+#include "vofusion/core/errors.h"
 
 namespace vofusion::loop {
 
@@ -95,7 +96,9 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
   if (r.get<std::uint8_t>() == 0) return;
   auto f = std::make_shared<DescribedKeypoints>();
   const auto drows = r.get<std::int32_t>(), dcols = r.get<std::int32_t>(), dtype = r.get<std::int32_t>();
-  if (drows < 0 || dcols < 0 || dtype != CV_8U || std::uint64_t(drows) * std::uint64_t(dcols) > bytes.size())
+  // 32 bytes a row, as the place index and the matcher read them (another width ended the loop thread).
+  if (drows < 0 || (drows > 0 && dcols != 32) || dcols < 0 || dtype != CV_8U ||
+      std::uint64_t(drows) * std::uint64_t(dcols) > bytes.size())
     throw std::runtime_error("corrupt descriptors in the keyframes' spill file");
   f->descriptors.create(drows, dcols, dtype);
   std::memcpy(f->descriptors.data, r.take(f->descriptors.total()), f->descriptors.total());
@@ -108,6 +111,7 @@ void decodeKeyframeData(const std::vector<std::uint8_t>& bytes, Keyframe& k) {
   // Three doubles each, no padding (Eigen::Vector3d is not vectorised): the bytes encode wrote.
   static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double));
   std::memcpy(static_cast<void*>(f->points.data()), r.take(npoints * sizeof(Eigen::Vector3d)), npoints * sizeof(Eigen::Vector3d));
+  if (r.at != bytes.size()) throw std::runtime_error("corrupt record in the keyframes' spill file (bytes past its end)");
   k.features = std::move(f);
 }
 
@@ -149,6 +153,8 @@ bool KeyframeStore::readBack(std::size_t id, std::vector<std::uint8_t>& bytes, K
     why = e.cause;
   } catch (const std::runtime_error& e) {  // decoding refused it (a CRC that held over damage)
     why = e.what();
+  } catch (const cv::Exception& e) {  // OpenCV could not make the depth image it states
+    why = oneLineMessage(e);
   }
   k.features.reset();
   k.depth.release();
