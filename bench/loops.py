@@ -166,9 +166,14 @@ def main(argv):
     ap.add_argument("--lengths", default="300,900")
     ap.add_argument("--build", default=os.environ.get("VOFUSION_BUILD", os.path.join(os.path.dirname(here), "build")))
     ap.add_argument("--config", default=None, help="an INI whose sections are added to the benchmark's own")
-    ap.add_argument("--results", default=os.path.join(here, "results"))
+    ap.add_argument("--results", default=None,
+                    help="where the tables go (default: bench/results for the full run; <build>/bench-runs/results "
+                         "for a subset of seeds or lengths or with --config, which must not replace the committed tables)")
     ap.add_argument("--name", default="loops", help="results file name (bench/results/<name>.md)")
     args = ap.parse_args(argv)
+    if args.results is None:
+        full = args.seeds == ap.get_default("seeds") and args.lengths == ap.get_default("lengths") and not args.config
+        args.results = os.path.join(here, "results") if full else os.path.join(args.build, "bench-runs", "results")
     root = os.path.join(args.build, "bench-synthetic")
     work = os.path.join(args.build, "bench-loops")
     os.makedirs(root, exist_ok=True)
@@ -196,6 +201,7 @@ def main(argv):
             f.write(text)
         os.replace(tmp, path)
     print(md)
+    log("tables written to " + args.results)
     failed = [r for r in rows if "error" in r]
     if failed:  # the table lists them; the exit code tells a script
         log("%d of %d runs failed" % (len(failed), len(rows)))

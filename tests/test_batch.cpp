@@ -450,6 +450,28 @@ TEST(Batch, BenchTablesNameTheSceneAndAPartialRunLeavesTheCommittedOnesAlone) {
     EXPECT_FALSE(fs::exists(test::sourceDir() + "/bench/results/" + name)) << name;
 }
 
+// bench/run --loops on a subset of seeds writes its tables beside its runs: it replaced the committed
+// bench/results/loops.md (five seeds, two lengths) with one seed's. Stubs stand in for the apps (the
+// run fails: its row says so, and where the table went is what is tested).
+TEST(Batch, ALoopsBenchOnASubsetLeavesTheCommittedTableAlone) {
+  const std::string dir = test::tempDir("bench_loops_subset");
+  fs::create_directories(dir + "/build/bin");
+  {
+    std::ofstream(dir + "/build/bin/rgbd-simulate")
+        << "#!/bin/sh\nwhile [ $# -gt 0 ]; do [ \"$1\" = --out ] && out=$2; shift; done\n: > \"$out\"\n";
+    std::ofstream(dir + "/build/bin/vofusion") << "#!/bin/sh\nexit 1\n";
+  }
+  for (const char* exe : {"/build/bin/vofusion", "/build/bin/rgbd-simulate"})
+    fs::permissions(dir + exe, fs::perms::owner_all, fs::perm_options::add);
+  const std::string committed = test::sourceDir() + "/bench/results/loops.md";
+  const auto before = fs::exists(committed) ? fs::last_write_time(committed) : fs::file_time_type{};
+  std::string log;
+  EXPECT_NE(test::run("python3 " + test::sourceDir() + "/bench/loops.py --seeds 1 --lengths 10 --build " + dir + "/build", &log), 0);
+  EXPECT_TRUE(fs::exists(dir + "/build/bench-runs/results/loops.md")) << log;
+  EXPECT_NE(log.find("tables written to " + dir + "/build/bench-runs/results"), std::string::npos) << log;
+  if (fs::exists(committed)) EXPECT_EQ(fs::last_write_time(committed), before);
+}
+
 // OMP_NUM_THREADS=1 (many clusters export it) is what GNU nproc answers when it is set: the batch took
 // it for the machine's CPUs and ran its recordings one at a time. A stub vofusion stands in.
 TEST(Batch, OmpNumThreadsDoesNotShrinkTheBatch) {
