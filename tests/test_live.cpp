@@ -155,7 +155,9 @@ TEST(LiveLoop, SensorErrorMidRunIsACleanStop) {
 }
 
 TEST(LiveLoop, ConsumerExceptionStopsWithoutLosingCount) {
-  FakeSource src(1000, 1);  // long enough that a late consumer still stops it before its end
+  // Long enough that a late consumer still stops it before its end (1000 frames were a second: a
+  // consumer thread started later than that on a loaded machine failed the test).
+  FakeSource src(100000, 1);
   const LiveStats s = runLive(src,
                               [](const Frame& f) {
                                 // From frame 10 on: frame 10 itself may be dropped when this thread is late.
@@ -164,7 +166,7 @@ TEST(LiveLoop, ConsumerExceptionStopsWithoutLosingCount) {
                               queueOf(2));
   EXPECT_EQ(s.stop, StopReason::ConsumerError);
   EXPECT_EQ(s.error, "boom");
-  EXPECT_LT(s.played, 1000u);
+  EXPECT_LT(s.played, 100000u);
   EXPECT_EQ(s.processed + s.dropped, s.played);
 }
 
@@ -406,18 +408,18 @@ std::pair<int, double> playToTheEnd(ReplaySource& src, const std::atomic<bool>& 
 }
 
 // Frames that cost nothing to read play at the speed asked for: four times as fast takes a quarter of
-// the recorded span, and a replay that ignored the speed (the whole second) is caught, with 0.5 s left
-// for a loaded machine's late wake-ups. The play is scheduled against the first frame's time, so
-// lateness does not add up.
+// the recorded span (0.5 s of 2 s), and a replay that ignored the speed (the whole 2 s) is caught, with
+// 1 s left for a loaded machine's late wake-ups (0.5 s was left of a 1 s span: ctest runs app tests
+// beside this one). The play is scheduled against the first frame's time, so lateness does not add up.
 TEST(LiveReplay, PlaysAtTheSpeedAskedFor) {
   std::vector<double> stamps;
-  for (int i = 0; i < 31; ++i) stamps.push_back(i / 30.0);
+  for (int i = 0; i < 61; ++i) stamps.push_back(i / 30.0);
   ReplaySource src(std::make_unique<StampedFrames>(stamps), 4.0);
   const std::atomic<bool> stop{false};
   const auto [frames, seconds] = playToTheEnd(src, stop);
-  EXPECT_EQ(frames, 31);
-  EXPECT_GE(seconds, 0.25 - 0.01);
-  EXPECT_LT(seconds, 0.75);
+  EXPECT_EQ(frames, 61);
+  EXPECT_GE(seconds, 0.5 - 0.01);
+  EXPECT_LT(seconds, 1.5);
 }
 
 // A recording whose clock jumps (an NTP step mid-recording: a day here) or steps back is played on as

@@ -461,6 +461,7 @@ TEST(MeshClean, WithoutRepairCopiesAtOnePositionKeepTheirColours) {
   m.colors.push_back(red);
   ASSERT_TRUE(cleanMesh(m, p).success);
   EXPECT_EQ(m.vertices.size(), 6u);
+  ASSERT_EQ(m.normals.size(), m.vertices.size());
   for (const auto& n : m.normals) EXPECT_GT(n.norm(), 0.5f);
   // Points alone close nothing (it said closed, as a mesh without borders).
   TriangleMesh points;

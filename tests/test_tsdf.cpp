@@ -766,7 +766,11 @@ TEST(MarchingCubes, MeshByRegionOnEveryCoreGivesTheSingleCoreMesh) {
     return meshByRegion([&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); },
                         params, "", nullptr, nullptr);
   };
-  const RegionMeshResult parallel = mesh();
+  // Four threads, whatever the machine gives (on one CPU the default arena is one thread: the test
+  // compared a single core with itself).
+  RegionMeshResult parallel;
+  tbb::task_arena four(4);
+  four.execute([&] { parallel = mesh(); });
   RegionMeshResult single;
   tbb::task_arena one(1);
   one.execute([&] { single = mesh(); });
