@@ -458,17 +458,23 @@ TEST(VofusionApp, TheProgressReachesTheEndPastASkippedFrame) {
 TEST(VofusionApp, ADamagedFrameReadAfterAStopIsNoFailureUnderStrict) {
   const std::string dir = test::tempDir("vofusion_app_strict_after_stop");
   ASSERT_TRUE(recordingDamagedFrom(dir, 4, 2, ""));
-  std::string log;
+  std::string log, said;
   const std::string out = dir + "/out";
   // The checkpoint shows once frame 0 is done; the signal comes while frame 1 and its checkpoint are.
-  test::run("(" + test::app("vofusion") + " " + dir + "/rec --strict --out " + out + " --config " + dir +
-                "/nomesh.ini --checkpoint-every 0.000001 > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 3000); do [ -e " +
-                out + "/checkpoint ] && break; sleep 0.01; done; kill -TERM $pid; wait $pid; echo rc=$?)",
-            &log);
-  std::ifstream in(dir + "/log.txt");
-  const std::string said(std::istreambuf_iterator<char>(in), {});
-  if (said.find("stopping after the frame in hand") == std::string::npos)
+  // A few tries for that window; missing it every time is a failure in CI, where a skip goes unseen.
+  for (int attempt = 0; attempt < 3 && said.find("stopping after the frame in hand") == std::string::npos; ++attempt) {
+    fs::remove_all(out);
+    test::run("(" + test::app("vofusion") + " " + dir + "/rec --strict --out " + out + " --config " + dir +
+                  "/nomesh.ini --checkpoint-every 0.000001 > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 3000); do [ -e " +
+                  out + "/checkpoint ] && break; sleep 0.01; done; kill -TERM $pid; wait $pid; echo rc=$?)",
+              &log);
+    std::ifstream in(dir + "/log.txt");
+    said.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  if (said.find("stopping after the frame in hand") == std::string::npos) {
+    if (test::inCi()) FAIL() << "three runs met the damage before the signal came: " << said;
     GTEST_SKIP() << "the run met the damage before the signal came: " << said;
+  }
   EXPECT_EQ(log, "rc=143\n") << said;
   EXPECT_TRUE(fs::exists(out + "/trajectory.txt")) << said;
 }
@@ -653,19 +659,29 @@ TEST(VofusionApp, AStopDuringTheLastFrameIsNoInterruption) {
   const std::string dir = test::tempDir("vofusion_app_stop_at_the_end");
   const std::string cfg = dir + "/path_only.ini", out = dir + "/out";
   std::ofstream(cfg) << "[output]\nmesh = false\nwrite_rawlog = false\n";
-  std::string log;
-  // The checkpoint shows once frame 1 is done; frame 2 and its checkpoint take a few hundred ms.
-  test::run("(" + test::app("vofusion") + " synthetic:room --max-frames 2 --out " + out + " --config " + cfg +
-                " --checkpoint-every 0.000001 > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 3000); do [ -e " + out +
-                "/checkpoint ] && break; sleep 0.01; done; kill -TERM $pid; wait $pid; echo rc=$?)",
-            &log);
-  const auto summary = readJson(out + "/summary.json");
-  if (summary["frames"].get<int>() < 2) GTEST_SKIP() << "the stop came before frame 2 was read";
-  // The stop was taken (a run that had ended before it came would pass every check below).
-  std::ifstream run_log(dir + "/log.txt");
-  const std::string said(std::istreambuf_iterator<char>(run_log), {});
-  if (said.find("stopping after the frame in hand") == std::string::npos)
-    GTEST_SKIP() << "the run had ended before the stop came: " << said;
+  std::string log, said, missed;
+  nlohmann::json summary;
+  // The checkpoint shows once frame 1 is done; frame 2 and its checkpoint take a few hundred ms. A few
+  // tries for that window; missing it every time is a failure in CI, where a skip goes unseen.
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    fs::remove_all(out);
+    test::run("(" + test::app("vofusion") + " synthetic:room --max-frames 2 --out " + out + " --config " + cfg +
+                  " --checkpoint-every 0.000001 > " + dir + "/log.txt 2>&1 & pid=$!; for i in $(seq 1 3000); do [ -e " + out +
+                  "/checkpoint ] && break; sleep 0.01; done; kill -TERM $pid; wait $pid; echo rc=$?)",
+              &log);
+    summary = readJson(out + "/summary.json");
+    std::ifstream run_log(dir + "/log.txt");
+    said.assign(std::istreambuf_iterator<char>(run_log), {});
+    // The stop was taken, during frame 2 (a run that had ended before it came would pass every check below).
+    if (summary["frames"].get<int>() < 2) missed = "the stop came before frame 2 was read";
+    else if (said.find("stopping after the frame in hand") == std::string::npos) missed = "the run had ended before the stop came: " + said;
+    else missed.clear();
+    if (missed.empty()) break;
+  }
+  if (!missed.empty()) {
+    if (test::inCi()) FAIL() << "three tries: " << missed;
+    GTEST_SKIP() << missed;
+  }
   EXPECT_NE(log.find("rc=0"), std::string::npos) << log;
   EXPECT_FALSE(summary["interrupted"].get<bool>());
   EXPECT_FALSE(summary.contains("stop_signal"));
