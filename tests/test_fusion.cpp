@@ -11,6 +11,7 @@
 #include <mrpt/config/CConfigFileMemory.h>
 
 #include "support.h"
+#include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/point_maps.h"
 #include "vofusion/features/brand.h"
@@ -449,6 +450,26 @@ TEST(KinFu, RegionsMeshedWhileTrackingGiveTheMeshOfMeshingAtTheEnd) {
   EXPECT_EQ(meshByRegion(changed, c.mesh, "", {}, {}, premesher.lookup()).regions_premeshed, 0u);
   EXPECT_EQ(premesher.regionsHeld(), held);
   EXPECT_GE(c.expectTheMeshOfMeshingAtTheEnd(kf, premesher), 2u);
+}
+
+// Meshing while tracking only saves time: without memory for its lists at a shift (on the fusion thread)
+// it stops, and the run goes on; the mesh is the one meshing at the end gives. The bad_alloc was the
+// fusion's error, and the run's.
+TEST(KinFu, MeshingWhileTrackingWithoutMemoryStopsInsteadOfFailingTheRun) {
+  const PremeshingCorridor c;
+  RegionPremesher premesher(c.mesh);
+  int shifts = 0;
+  std::unique_ptr<TrackedMap> kf = c.newTrackedMap();
+  kf->setShiftObserver([&](const fusion::TsdfVolume& v, const std::optional<Eigen::Vector3i>& old) {
+    std::optional<ScopedAllocationLimit> none;
+    if (++shifts >= 3) none.emplace(1, 1);  // from the third shift on, not a byte
+    premesher.volumeShifted(v, old);
+  });
+  ASSERT_NO_THROW(c.track(*kf));
+  premesher.waitIdle();
+  premesher.stop();
+  EXPECT_GT(shifts, 3);
+  c.expectTheMeshOfMeshingAtTheEnd(*kf, premesher);
 }
 
 // A run resumed from a checkpoint or a saved map: the regions the volume had left before it are queued

@@ -61,6 +61,25 @@ bool RegionPremesher::reaches(const Key& region, const Eigen::Vector3i& origin) 
 bool RegionPremesher::finalNow(const Key& region) const { return box_bricks_ > 0 && !reaches(region, origin_); }
 
 void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin) {
+  try {
+    followShift(volume, old_origin);
+  } catch (const std::bad_alloc&) {
+    // Meshing while tracking only saves time: without memory for its lists it stops, rather than fail
+    // the fusion it was called from. What it made stays, and is taken only where its input matches.
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      if (stopping_) return;
+      stopping_ = true;
+      queue_.clear();
+      queued_.clear();
+    }
+    wake_.notify_one();
+    idle_.notify_all();
+    printWarning("meshing while tracking: no memory to follow the volume: the rest of the mesh is made at the end");
+  }
+}
+
+void RegionPremesher::followShift(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin) {
   const int rb = params_.region_bricks;
   // After a load, the regions of the whole map: listed before the lock, which the fusion thread takes.
   std::set<Key> loaded;

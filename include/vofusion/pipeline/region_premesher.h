@@ -42,6 +42,7 @@ class RegionPremesher {
   // region of the world model outside the box is queued; a load after a shift or another load throws
   // std::logic_error (what was made and what is being read belong to the map it replaced). The volume's
   // world model is read from this object's thread until stop(): the map must not be replaced before.
+  // Without memory for its lists it stops meshing (said once) instead of failing the caller.
   void volumeShifted(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin);
   // Returns once every region queued so far has been summarised and, where ready, simplified (tests:
   // the thread's share of CPU is whatever the frame loop leaves).
@@ -70,6 +71,7 @@ class RegionPremesher {
   };
 
   void run();
+  void followShift(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin);  // volumeShifted's work
   void summarise(const Key& region);
   void simplifyIfReady(const Key& region);
   bool finalNow(const Key& region) const;  // under mutex_
