@@ -365,7 +365,9 @@ bool icpIteration(const IcpLevel& L, IcpResult& res) {
     xs = stepOverWellPosed(es, emax, b_icp, L.params.degenerate_ratio, degenerate);
     if (L.level == 0) res.degenerate_dims = degenerate;
   } else {
-    if (!L.weak->decided) decideWeakDirections(es, emax, L.params.degenerate_ratio, *L.weak);
+    // Not on fewer than 6 points (a coarse level the guess left nearly empty): their system has rank
+    // below 6 by count alone, and 6 - n directions would stay with the prior for the whole frame.
+    if (!L.weak->decided && total.n >= 6) decideWeakDirections(es, emax, L.params.degenerate_ratio, *L.weak);
     if (L.level == 0) res.degenerate_dims = L.weak->belowRatio();
     if (!jointStepBesideWeak(L, ps, M, D, b_icp, res, xs)) {
       res.solved = false;
