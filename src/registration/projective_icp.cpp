@@ -168,7 +168,8 @@ struct StrongDirections {
   int degenerate = 0;
 };
 
-// Mode joint's weak directions of ICP, decided once per call at its first iteration and kept (why:
+// Mode joint's weak directions of ICP, decided once per call at its first iteration with 6 inliers
+// (the finest level's first, whatever its count, if none before) and kept (why:
 // JointTerms in the header). Each is a unit vector in that iteration's scaled coordinates with the
 // share of its step solved as strong: 0 under half of degenerate_ratio, 1 from twice it (not kept),
 // log-linear between (half and half at the ratio).
@@ -365,9 +366,10 @@ bool icpIteration(const IcpLevel& L, IcpResult& res) {
     xs = stepOverWellPosed(es, emax, b_icp, L.params.degenerate_ratio, degenerate);
     if (L.level == 0) res.degenerate_dims = degenerate;
   } else {
-    // Not on fewer than 6 points (a coarse level the guess left nearly empty): their system has rank
-    // below 6 by count alone, and 6 - n directions would stay with the prior for the whole frame.
-    if (!L.weak->decided && total.n >= 6) decideWeakDirections(es, emax, L.params.degenerate_ratio, *L.weak);
+    // Not on fewer than 6 points on a coarse level the guess left nearly empty: their system has rank
+    // below 6 by count alone, and 6 - n directions would stay with the prior for the whole frame. The
+    // finest level decides whatever its count (undecided, the anchor would hold no direction).
+    if (!L.weak->decided && (total.n >= 6 || L.level == 0)) decideWeakDirections(es, emax, L.params.degenerate_ratio, *L.weak);
     if (L.level == 0) res.degenerate_dims = L.weak->belowRatio();
     if (!jointStepBesideWeak(L, ps, M, D, b_icp, res, xs)) {
       res.solved = false;

@@ -82,7 +82,8 @@ struct PhotometricTerms {
 // the matches, the motion model and the photometric term together (ICP residuals then need their
 // weight, params.point_to_plane_sigma > 0); its weak directions (see degenerate_ratio) move to weak_anchor
 // (the prior's pose) when given, else they keep the initial guess. The weak directions are decided
-// once, at the frame's first iteration (coarsest level, initial guess), and kept: decided at each
+// once, at the frame's first iteration with 6 inliers (coarsest level, initial guess, as a rule; the
+// finest level's first whatever its count, when none had 6), and kept: decided at each
 // iterate, a direction left to the anchor looked weaker from there and stayed left, so the pose
 // jumped when a frame's ratio crossed the cut. A direction between half and twice the ratio takes
 // both steps mixed, on a log scale of its eigenvalue (half and half at the ratio).
