@@ -469,6 +469,7 @@ TEST(KinFu, MeshingWhileTrackingWithoutMemoryStopsInsteadOfFailingTheRun) {
   premesher.waitIdle();
   premesher.stop();
   EXPECT_GT(shifts, 3);
+  EXPECT_TRUE(premesher.stoppedWithoutMemory());
   c.expectTheMeshOfMeshingAtTheEnd(*kf, premesher);
 }
 

@@ -56,6 +56,7 @@ TriangleMesh meshRegionByRegion(Reconstruction& rec, const OutputParams& p, cons
     s["mesh_while_tracking"] = {{"regions_meshed", premeshed->regionsMeshed()},
                                 {"regions_reused", r.regions_premeshed},
                                 {"regions_failed", premeshed->regionsFailed()}};
+  if (premeshed && premeshed->stoppedWithoutMemory()) s["mesh_while_tracking"]["stopped"] = "no memory to follow the volume";
   progress.finish();
   s["mesh_raw"] = {{"vertices", r.raw_vertices}, {"faces", r.raw_faces}, {"regions", r.regions}};
   if (p.save_raw_mesh) streamed_raw = std::to_string(r.raw_faces) + " faces, streamed region by region";

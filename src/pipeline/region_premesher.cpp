@@ -70,6 +70,7 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std:
       const std::lock_guard<std::mutex> lock(mutex_);
       if (stopping_) return;
       stopping_ = true;
+      out_of_memory_ = true;
       queue_.clear();
       queued_.clear();
     }
@@ -166,7 +167,6 @@ void RegionPremesher::run() {
       queued_.erase(region);
       in_hand_ = true;
     }
-    std::string failure;
     try {
       alone.execute([&] {
         summarise(region);
@@ -174,15 +174,11 @@ void RegionPremesher::run() {
         simplifyIfReady(region);
         for (const Key& n : neighboursOf(region)) simplifyIfReady(n);
       });
-    } catch (const std::exception& e) {
-      failure = oneLineMessage(e);
     } catch (...) {
-      failure = "unknown error";
+      // The end meshes such a region (and its neighbours, which waited for it) and reports what is
+      // wrong there (a spilled brick that does not read back comes as never observed, no failure).
+      if (failed_.fetch_add(1) == 0) warnOfFailure(std::current_exception());
     }
-    // The end meshes such a region (and its neighbours, which waited for it) and reports what is wrong
-    // there (a spilled brick that does not read back comes as never observed, no failure). Said once.
-    if (!failure.empty() && failed_.fetch_add(1) == 0)
-      printWarning("meshing while tracking: a region failed (" + failure + "): it and its neighbours are meshed at the end");
     const std::lock_guard<std::mutex> lock(mutex_);
     in_hand_ = false;
     if (queue_.empty()) idle_.notify_all();
@@ -388,6 +384,24 @@ std::size_t RegionPremesher::regionsHeld() const {
 }
 
 std::size_t RegionPremesher::regionsFailed() const { return failed_.load(); }
+
+bool RegionPremesher::stoppedWithoutMemory() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return out_of_memory_;
+}
+
+void RegionPremesher::warnOfFailure(const std::exception_ptr& failure) noexcept {
+  try {  // the message is built with memory too: without it, the count says it
+    try {
+      std::rethrow_exception(failure);
+    } catch (const std::exception& e) {
+      printWarning("meshing while tracking: a region failed (" + oneLineMessage(e) + "): it and its neighbours are meshed at the end");
+    } catch (...) {
+      printWarning("meshing while tracking: a region failed (unknown error): it and its neighbours are meshed at the end");
+    }
+  } catch (...) {
+  }
+}
 
 std::size_t RegionPremesher::regionsMeshed() const {
   const std::lock_guard<std::mutex> lock(mutex_);

@@ -17,6 +17,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <deque>
+#include <exception>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -59,7 +60,8 @@ class RegionPremesher {
   void discard();
   std::size_t regionsMeshed() const;  // simplified during the run (a region made again counts again)
   std::size_t regionsHeld() const;    // simplified and not yet handed over or discarded
-  std::size_t regionsFailed() const;  // whose work failed here (no memory): left to the end
+  std::size_t regionsFailed() const;  // attempts whose work failed here (no memory): left to the end
+  bool stoppedWithoutMemory() const;  // it had no memory to follow a shift, and stopped
 
  private:
   using Key = std::array<int, 3>;
@@ -71,6 +73,7 @@ class RegionPremesher {
   };
 
   void run();
+  static void warnOfFailure(const std::exception_ptr& failure) noexcept;  // once, on this object's thread
   void followShift(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin);  // volumeShifted's work
   void summarise(const Key& region);
   void simplifyIfReady(const Key& region);
@@ -92,6 +95,7 @@ class RegionPremesher {
   std::set<Key> queued_;                    // those in queue_
   bool in_hand_ = false;                    // the thread is working on a region taken from queue_
   bool stopping_ = false;
+  bool out_of_memory_ = false;  // why it stopped before stop()
   const fusion::WorldModel* world_ = nullptr;
   float voxel_size_ = 0.f;
   Eigen::Vector3i origin_ = Eigen::Vector3i::Zero();  // the volume's box now
