@@ -475,7 +475,6 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
     const LoopCheck check = verifyRelocalisation(known, view, m.params, pyramids);
     if (!check.accepted) continue;
     const Eigen::Isometry3d placed = known.tracked * check.T_old_new;
-    if (!placed.matrix().allFinite()) continue;  // the reach check below is false for NaN
     // Both poses are the tracker's, which drifts along the path between the two keyframes.
     const double reach = kMaxCameraSpeed * lost_seconds + m.params.max_drift_translation +
                          m.params.max_drift_rate * std::abs(last.path_length - known.path_length);

@@ -96,11 +96,12 @@ bool refineIcp(const Keyframe& older, const Keyframe& newer, const LoopParams& P
   c.icp_overlap = r.valid_pixels > 0 ? double(r.inliers) / r.valid_pixels : 0.0;
   c.icp_rms = r.rms;
   c.icp_condition = r.condition;
-  if (!r.solved) return c.reason = "ICP not solved", false;
+  // The bounds written to fail on NaN too: a pose that is not finite is no loop and no relocalisation.
+  if (!r.solved || !r.pose.matrix().allFinite()) return c.reason = "ICP not solved", false;
   if (c.icp_overlap < P.min_icp_overlap) return c.reason = "ICP overlap too small", false;
-  if (c.icp_rms > P.max_icp_rms) return c.reason = "ICP residual too large", false;
+  if (!(c.icp_rms <= P.max_icp_rms)) return c.reason = "ICP residual too large", false;
   const auto [dt, dr] = poseDifference(c.T_old_new, r.pose);
-  if (dt > P.max_icp_change_translation || dr > P.max_icp_change_rotation)
+  if (!(dt <= P.max_icp_change_translation) || !(dr <= P.max_icp_change_rotation))
     return c.reason = "ICP disagrees with the features", false;
   c.T_old_new = r.pose;
   return true;
