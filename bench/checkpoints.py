@@ -209,13 +209,14 @@ def main():
         lines.append("| %s | %s | %.1f | %d | %.2f |" % (label, frames, secs, written, writing))
     lines += ["", "A checkpoint at frame %d holds %.1f MiB." % (total - 1, size_mib)]
     # Another sequence or spacing than the committed table's: beside the run, not over the table.
-    full = a.sequence == ap.get_default("sequence") and a.every == ap.get_default("every")
+    full = (os.path.realpath(a.sequence) == os.path.realpath(ap.get_default("sequence")) and
+            float(a.every) == float(ap.get_default("every")))
     results = os.path.join(HERE, "results") if full else os.path.join(build, "bench-runs", "results")
     os.makedirs(results, exist_ok=True)
     with open(os.path.join(results, "checkpoints.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
-    print("[bench checkpoints] table written to " + os.path.join(results, "checkpoints.md"), file=sys.stderr)
+    log("table written to " + os.path.join(results, "checkpoints.md"))
     if not all(all(same.values()) for _, _, same in rows):
         sys.exit(1)
 

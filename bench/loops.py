@@ -172,7 +172,9 @@ def main(argv):
     ap.add_argument("--name", default="loops", help="results file name (bench/results/<name>.md)")
     args = ap.parse_args(argv)
     if args.results is None:
-        full = args.seeds == ap.get_default("seeds") and args.lengths == ap.get_default("lengths") and not args.config
+        ints = lambda text: sorted(int(x) for x in text.split(","))
+        full = (ints(args.seeds) == ints(ap.get_default("seeds")) and ints(args.lengths) == ints(ap.get_default("lengths"))
+                and not args.config)
         args.results = os.path.join(here, "results") if full else os.path.join(args.build, "bench-runs", "results")
     root = os.path.join(args.build, "bench-synthetic")
     work = os.path.join(args.build, "bench-loops")

@@ -275,8 +275,11 @@ def main():
                       fmt4(b["rpe_p95"]), fmt4(t["rpe_p95"]), ratio("rpe_p95")),
                   "| peak RSS, MiB | %.0f | %.0f | | <= 700 |" % (b["rss"], t["rss"]), ""]
     # Another baseline, round count or sequence list than the committed table's: beside the run.
-    full = (a.baseline == ap.get_default("baseline") and a.rounds == ap.get_default("rounds") and
-            a.sequences == ap.get_default("sequences"))
+    commit = lambda rev: subprocess.run(["git", "-C", ROOT, "rev-parse", "--verify", rev + "^{commit}"],
+                                        capture_output=True, text=True).stdout.strip()
+    paths = lambda text: [os.path.realpath(x) for x in text.split(",")]
+    full = (commit(a.baseline) == commit(ap.get_default("baseline")) and a.rounds == ap.get_default("rounds") and
+            paths(a.sequences) == paths(ap.get_default("sequences")))
     results = os.path.join(HERE, "results") if full else os.path.join(build, "bench-runs", "results")
     os.makedirs(results, exist_ok=True)
     with open(os.path.join(results, "realtime.md"), "w") as f:

@@ -424,6 +424,7 @@ TEST(GrabApp, AFullDiskStopsTheRecordingAndKeepsWhatWasWritten) {
   if (!tmpfs.mounted()) GTEST_SKIP() << "cannot mount a tmpfs here";
   std::string log;
   // The app's own status, kept past the pipe (sh has no pipefail): a crash after its line was grep's 0.
+  std::filesystem::remove(mnt + "/../grab_status");
   EXPECT_EQ(test::run("(" + test::app("vofusion-grab") + " --replay " + tum + " --out " + mnt + "/g --no-gui; echo $? > " +
                           mnt + "/../grab_status) 2>&1 | grep -v '^recording '",
                       &log),
