@@ -136,7 +136,8 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
                                      : res.guess == InitialGuess::ConstantVelocity ? s.velocity_pose
                                                                                    : history.pose();
   // Added to the noise, not in quadrature: the readout's skew is one error over the whole frame, not
-  // noise of each point (in quadrature every shared half was worse, by 0.15-0.86 mm: journal 2026-12-07b).
+  // noise of each point (in quadrature every shared half was worse, by 0.15-0.86 mm:
+  // bench/results/2026-12-07-thirteenth-session.md).
   if (s.joint) ip.point_to_plane_sigma += tracking::rollingShutterSigma(P, history, levels, initial, frame.timestamp);
   res.icp_sigma = ip.point_to_plane_sigma;
   const auto t0 = std::chrono::steady_clock::now();
