@@ -265,6 +265,22 @@ TEST(LoopPlaceIndex, APlaceIsAKeyframeWithItsNeighboursInTheIndex) {
   ASSERT_FALSE(around.empty());
   EXPECT_TRUE(around[0].keyframe == 110 || around[0].keyframe == 112) << around[0].keyframe;
   EXPECT_GE(around[0].votes, P.min_votes);
+  // A keyframe lost from the spill file names no place: its neighbour with votes does (it named the
+  // place, and every visit spent a candidate on reading it again and refusing it).
+  const std::size_t named = around[0].keyframe, other = named == 110 ? 112 : 110;
+  const auto without = [&](int a, int b) {
+    cv::Mat d = cv::Mat(300, 32, CV_8U);
+    for (int i = 0; i < d.rows; ++i)
+      for (int j = 0; j < 32; ++j) d.at<uchar>(i, j) = uchar(byte(rng));
+    for (int i = 0; i < 32; ++i) kf[std::size_t(i < 16 ? a : b)].row(i * 7).copyTo(d.row(i * 9));
+    return index.query(d, [&](std::size_t k) { return k != named; });
+  };
+  const auto usable = without(10, 12);
+  ASSERT_FALSE(usable.empty());
+  EXPECT_EQ(usable[0].keyframe, other);
+  // A place whose only keyframe with votes is lost is none.
+  ASSERT_FALSE(index.query(kf[10].rowRange(0, 40).clone()).empty());
+  EXPECT_TRUE(index.query(kf[10].rowRange(0, 40).clone(), [](std::size_t k) { return k != 110; }).empty());
   EXPECT_TRUE(query(10, 30).empty());
 }
 

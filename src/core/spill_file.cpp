@@ -106,6 +106,11 @@ void SpillFile::lost(std::uint64_t id, const std::string& warning) const {
   if (first) printWarning(warning);  // outside the lock: stderr may be slow
 }
 
+bool SpillFile::isLost(std::uint64_t id) const {
+  const std::lock_guard<std::mutex> lock(lost_mu_);
+  return lost_.count(id) != 0;
+}
+
 std::size_t SpillFile::lostCount() const {
   const std::lock_guard<std::mutex> lock(lost_mu_);
   return lost_.size();

@@ -174,7 +174,7 @@ struct LoopCloser::Impl {
     {
       ScopedStageTimer timer(t, "place_recognition");
       if (cur.features && !cur.features->descriptors.empty() && spacedFrom(last_queried, cur.tracked)) {
-        candidates = index.query(cur.features->descriptors);
+        candidates = index.query(cur.features->descriptors, [this](std::size_t k) { return !keyframes.lost(k); });
         last_queried = cur.tracked;
       }
     }
@@ -458,7 +458,7 @@ std::optional<Relocalisation> LoopCloser::relocalise(const Frame& frame, std::sh
     candidates.push_back(k);
     last_taken = pose;
   }
-  for (const PlaceCandidate& c : m.index.query(features->descriptors))
+  for (const PlaceCandidate& c : m.index.query(features->descriptors, [&m](std::size_t k) { return !m.keyframes.lost(k); }))
     if (std::find(candidates.begin(), candidates.end(), c.keyframe) == candidates.end()) candidates.push_back(c.keyframe);
   // Where and when the camera was last known: the last well-tracked frame (the newest keyframe may be
   // much older: a camera standing still, tracked, makes none, and its seconds there widened the reach).

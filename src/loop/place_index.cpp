@@ -98,7 +98,7 @@ std::pair<int, int> PlaceIndex::nearest(const std::uint8_t* descriptor) const {
   return {best_row, best_row < 0 ? -1 : best};
 }
 
-std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all) const {
+std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all, const std::function<bool(std::size_t)>& usable) const {
   checkDescriptors(all);
   if (keyframes_.empty() || all.empty()) return {};
   const cv::Mat descriptors = spreadRows(all, params_.place_descriptors);
@@ -107,7 +107,7 @@ std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all) const {
     const auto [row, dist] = nearest(descriptors.ptr<std::uint8_t>(i));
     if (row >= 0 && dist <= params_.max_hamming) ++votes[owner_[std::size_t(row)]];
   }
-  return placesByVotes(votes);
+  return placesByVotes(votes, usable);
 }
 
 // Indexed keyframes are index_spacing apart along the path and see much of the same scene, so each
@@ -116,7 +116,8 @@ std::vector<PlaceCandidate> PlaceIndex::query(const cv::Mat& all) const {
 // had 20). As ORB-SLAM scores a loop candidate with its covisible keyframes (DBoW2's islands), a
 // place is an indexed keyframe with its neighbours in the index, scored by their votes together, and
 // verified through its best-voted keyframe.
-std::vector<PlaceCandidate> PlaceIndex::placesByVotes(const std::vector<int>& votes) const {
+std::vector<PlaceCandidate> PlaceIndex::placesByVotes(const std::vector<int>& votes,
+                                                     const std::function<bool(std::size_t)>& usable) const {
   struct Place {
     std::size_t best;  // position in the index of the place's best-voted keyframe
     int votes;         // the place's: the keyframe's and its two neighbours'
@@ -125,13 +126,20 @@ std::vector<PlaceCandidate> PlaceIndex::placesByVotes(const std::vector<int>& vo
   std::vector<Place> places;
   for (std::size_t i = 0; i < n; ++i) {
     // Centred on a keyframe without votes too: a place's votes may fall on either side of it alone.
-    // A window with votes names one of its keyframes that has some.
+    // A window with votes names one of its usable keyframes that has some (a lost one wasted a
+    // candidate at every visit: read from disk again, and refused again).
+    // Ties go to the centre, then to the older neighbour.
     Place p{i, 0};
-    for (std::size_t j = i > 0 ? i - 1 : 0; j <= std::min(n - 1, i + 1); ++j) {
+    bool named = false;
+    const auto consider = [&](std::size_t j) {
       p.votes += votes[j];
-      if (votes[j] > votes[p.best]) p.best = j;
-    }
-    if (p.votes > 0 && p.votes >= params_.min_votes) places.push_back(p);
+      if (votes[j] == 0 || (usable && !usable(keyframes_[j]))) return;
+      if (!named || votes[j] > votes[p.best]) p.best = j, named = true;
+    };
+    consider(i);
+    if (i > 0) consider(i - 1);
+    if (i + 1 < n) consider(i + 1);
+    if (named && p.votes >= params_.min_votes) places.push_back(p);
   }
   // Most votes first; ties: the better best keyframe, then the older.
   std::sort(places.begin(), places.end(), [&](const Place& a, const Place& b) {

@@ -58,6 +58,7 @@ class SpillFile {
   // often it is met again, and `warning` printed for the first item lost (once per file). Any thread.
   void lost(std::uint64_t id, const std::string& warning) const;
   std::size_t lostCount() const;
+  bool isLost(std::uint64_t id) const;  // lost() was called for it
   // r's place may be written again: only once nothing will read r (the world model releases a brick
   // when it takes it back, on the thread that appends).
   void release(Record r);

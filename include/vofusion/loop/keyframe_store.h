@@ -43,6 +43,8 @@ class KeyframeStore {
   // damaged on the disk) comes back without features and depth, from load and data alike: it is no
   // place to close a loop or relocalise at any more, and the run goes on. Said once, counted in stats().lost.
   Keyframe load(std::size_t id) const;
+  // Its record could not be read back (load() gives it without features): no place any more.
+  bool lost(std::size_t id) const { return spill_.isLost(id); }
   // Its depth and features as encodeKeyframeData() gives them: a spilled keyframe's record as stored,
   // not read back, decoded and encoded again (a checkpoint does so for every keyframe of the run).
   std::vector<std::uint8_t> data(std::size_t id) const;

@@ -11,6 +11,7 @@
 // of 300 descriptors at 24-bit keys, 8x this index's 20 KB, and the only part of the keyframe
 // database that must stay in RAM (tests/test_loop.cpp checks both find the same neighbours).
 #include <array>
+#include <functional>
 #include <cstddef>
 #include <cstdint>
 #include <utility>
@@ -37,8 +38,10 @@ class PlaceIndex {
   std::size_t descriptors() const { return owner_.size(); }
   // Places with at least min_votes votes from `descriptors` (nearest neighbours within max_hamming)
   // on an indexed keyframe and its two neighbours in the index, most votes first, at most `candidates`
-  // of them; each names its best-voted keyframe and the place's votes.
-  std::vector<PlaceCandidate> query(const cv::Mat& descriptors) const;
+  // of them; each names its best-voted keyframe and the place's votes. A keyframe `usable` says no to
+  // (lost from the spill file) names no place: its place is named by its best usable neighbour, if any.
+  std::vector<PlaceCandidate> query(const cv::Mat& descriptors,
+                                    const std::function<bool(std::size_t keyframe)>& usable = nullptr) const;
   // The indexed row nearest to a 32-byte descriptor found through the tables (LSH: may miss the
   // true nearest), as (row, Hamming distance); row -1 when no table's bucket held any.
   std::pair<int, int> nearest(const std::uint8_t* descriptor) const;
@@ -51,7 +54,7 @@ class PlaceIndex {
   std::uint32_t keyOf(const Bits& d, std::size_t table) const;
   template <class Visit> void probe(std::uint32_t key, int flips, int from, Visit&& visit) const;
   // votes: per position in the index. Candidates as query() returns them.
-  std::vector<PlaceCandidate> placesByVotes(const std::vector<int>& votes) const;
+  std::vector<PlaceCandidate> placesByVotes(const std::vector<int>& votes, const std::function<bool(std::size_t)>& usable) const;
 
   LoopParams params_;
   std::vector<std::vector<int>> table_bits_;  // per table: the descriptor bits its key is made of
