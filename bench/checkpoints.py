@@ -27,6 +27,8 @@ import threading
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import tables  # noqa: E402
 KIND = b"VOFUSION-CHECKPOINT-"
 
 
@@ -211,7 +213,7 @@ def main():
     # Another sequence or spacing than the committed table's: beside the run, not over the table.
     full = (os.path.realpath(a.sequence) == os.path.realpath(ap.get_default("sequence")) and
             float(a.every) == float(ap.get_default("every")))
-    results = os.path.join(HERE, "results") if full else os.path.join(build, "bench-runs", "results")
+    results = tables.results_dir(full, build)
     os.makedirs(results, exist_ok=True)
     with open(os.path.join(results, "checkpoints.md"), "w") as f:
         f.write("\n".join(lines) + "\n")

@@ -20,6 +20,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import machine  # noqa: E402
+import tables  # noqa: E402
 
 
 def log(msg):
@@ -175,7 +176,7 @@ def main(argv):
         ints = lambda text: sorted(int(x) for x in text.split(","))
         full = (ints(args.seeds) == ints(ap.get_default("seeds")) and ints(args.lengths) == ints(ap.get_default("lengths"))
                 and not args.config)
-        args.results = os.path.join(here, "results") if full else os.path.join(args.build, "bench-runs", "results")
+        args.results = tables.results_dir(full, args.build)
     root = os.path.join(args.build, "bench-synthetic")
     work = os.path.join(args.build, "bench-loops")
     os.makedirs(root, exist_ok=True)

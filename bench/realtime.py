@@ -34,6 +34,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import machine  # noqa: E402
+import tables  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -280,7 +281,7 @@ def main():
     paths = lambda text: [os.path.realpath(x) for x in text.split(",")]
     full = (commit(a.baseline) == commit(ap.get_default("baseline")) and a.rounds == ap.get_default("rounds") and
             paths(a.sequences) == paths(ap.get_default("sequences")))
-    results = os.path.join(HERE, "results") if full else os.path.join(build, "bench-runs", "results")
+    results = tables.results_dir(full, build)
     os.makedirs(results, exist_ok=True)
     with open(os.path.join(results, "realtime.md"), "w") as f:
         f.write("\n".join(lines))
