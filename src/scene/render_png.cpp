@@ -178,6 +178,9 @@ void renderMeshPng(const std::string& png, const TriangleMesh& mesh, const Traje
   // Look at the centre of the mesh (or of the path) from above and behind the cameras: azimuth
   // along the cameras' mean viewing direction projected on the ground, 40 deg elevation.
   const mrpt::poses::CPose3D up = sceneUpRotation(traj, &mesh, opt.up, opt.up_vector);
+  // The scene is drawn with this "up": judged again on the mesh without its ceiling, it could differ
+  // from the one the picture is framed and cut by (and the plane search ran twice).
+  opt.up_vector = up.getRotationMatrix().asEigen().row(2).transpose();
   const std::optional<TriangleMesh> cut = withoutCeiling(mesh, traj, up);  // a copy only when there is a ceiling
   const auto scene = buildScene(cut ? *cut : mesh, traj, nullptr, CameraIntrinsics{}, opt);
   scene->getViewport()->setCustomBackgroundColor(mrpt::img::TColorf(1.f, 1.f, 1.f));
