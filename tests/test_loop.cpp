@@ -242,7 +242,7 @@ TEST(LoopPlaceIndex, APlaceIsAKeyframeWithItsNeighboursInTheIndex) {
     index.add(std::size_t(100 + k), kf.back());
   }
   // 16 re-observed descriptors (3 bits flipped) of each of two keyframes, the rest unrelated.
-  const auto query = [&](int a, int b) {
+  const auto query = [&](int a, int b, const std::function<bool(std::size_t)>& usable = nullptr) {
     cv::Mat q = random(300);
     for (int i = 0; i < 32; ++i) {
       const cv::Mat& from = kf[std::size_t(i < 16 ? a : b)];
@@ -252,7 +252,7 @@ TEST(LoopPlaceIndex, APlaceIsAKeyframeWithItsNeighboursInTheIndex) {
         q.at<uchar>(i * 9, x / 8) ^= uchar(1 << (x % 8));
       }
     }
-    return index.query(q);
+    return index.query(q, usable);
   };
   const auto together = query(10, 11);
   ASSERT_FALSE(together.empty());
@@ -268,14 +268,7 @@ TEST(LoopPlaceIndex, APlaceIsAKeyframeWithItsNeighboursInTheIndex) {
   // A keyframe lost from the spill file names no place: its neighbour with votes does (it named the
   // place, and every visit spent a candidate on reading it again and refusing it).
   const std::size_t named = around[0].keyframe, other = named == 110 ? 112 : 110;
-  const auto without = [&](int a, int b) {
-    cv::Mat d = cv::Mat(300, 32, CV_8U);
-    for (int i = 0; i < d.rows; ++i)
-      for (int j = 0; j < 32; ++j) d.at<uchar>(i, j) = uchar(byte(rng));
-    for (int i = 0; i < 32; ++i) kf[std::size_t(i < 16 ? a : b)].row(i * 7).copyTo(d.row(i * 9));
-    return index.query(d, [&](std::size_t k) { return k != named; });
-  };
-  const auto usable = without(10, 12);
+  const auto usable = query(10, 12, [&](std::size_t k) { return k != named; });
   ASSERT_FALSE(usable.empty());
   EXPECT_EQ(usable[0].keyframe, other);
   // A place whose only keyframe with votes is lost is none.
