@@ -14,6 +14,7 @@
 #include "vofusion/core/allocation_limit.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/point_maps.h"
+#include "vofusion/core/pose_eigen.h"
 #include "vofusion/features/brand.h"
 #include "vofusion/fusion/tracked_map.h"
 #include "vofusion/pipeline/mesh_by_region.h"
@@ -21,6 +22,7 @@
 #include "vofusion/registration/rigid_motion.h"
 #include "vofusion/sim/synthetic_sequence.h"
 #include "vofusion/tracking/motion_history.h"
+#include "vofusion/tracking/tracker.h"
 #include "vofusion/tracking/tracker_params.h"
 
 using namespace vofusion;
@@ -307,6 +309,36 @@ TEST(KinFu, PredictionFollowsAPanWhileFramesAreNotFused) {
     EXPECT_GT(predicted, 0.97 * there) << "frame " << k << ": the prediction has " << predicted << " surface pixels, the volume "
                                        << there;
   }
+}
+
+// A frame ICP rejects with no prior is posed by constant velocity, a guess: it hands the map no
+// intensity, so the next frame's photometric term has no reference seen from where the camera was not
+// (its pixels were paired with model points through the guessed pose). A measured frame hands it over.
+TEST(Tracker, AGuessedFrameLeavesNoPhotometricReference) {
+  const sim::SyntheticSequence seq(simOpts("room", 3));
+  const KinFuParams params = testParams();
+  const Eigen::Isometry3d start = toEigen(seq.groundTruth(0));
+  KinFu map(params, start, {true, true});
+  Tracker tracker(params, TrackingMode::Joint, start);
+  StageTimes times;
+  const auto trackAndFuse = [&](const Frame& frame) {
+    const FusionResult r = tracker.track(frame, nullptr, nullptr, map);
+    const FrameToFuse* f = tracker.frameToFuse();
+    const bool handed_intensity = f && !f->intensity.empty();
+    if (f) tracker.fused(map.fuse(*f, times), times);
+    return std::make_pair(r, handed_intensity);
+  };
+  ASSERT_TRUE(trackAndFuse(seq.render(0)).first.tracked);
+  const auto [measured, measured_intensity] = trackAndFuse(seq.render(1));
+  ASSERT_TRUE(measured.tracked && !measured.predicted) << measured.reason;
+  EXPECT_TRUE(measured_intensity) << "a measured frame is the photometric term's next reference";
+  EXPECT_FALSE(map.model().intensity.empty());
+  Frame wall = seq.render(2);  // a board 0.4 m before the lens, far in front of every modelled wall: no pair
+  wall.depth.setTo(0.4f);
+  const auto [guessed, guessed_intensity] = trackAndFuse(wall);
+  ASSERT_TRUE(guessed.predicted) << "rejection: " << guessed.reason;
+  EXPECT_FALSE(guessed_intensity);
+  EXPECT_TRUE(map.model().intensity.empty()) << "the next frame would be paired through the guessed pose";
 }
 
 // A checkpoint holds the tracker and the map together: between track() and fuse() the tracker has posed

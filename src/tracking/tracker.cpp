@@ -297,7 +297,12 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
     new_pose = s.trackIcp(frame, prior, levels, intensity, map.model(), res);
   }
   if (res.tracked) s.history.remember(frame.index, frame.timestamp, new_pose, !res.predicted);
-  if (s.mode == TrackingMode::Joint) s.reference = res.tracked ? std::optional(tracking::ReferenceFrame{levels, new_pose}) : std::nullopt;
+  // A frame at a constant-velocity guess is no reference for the next one: neither its depth (the
+  // frame check would pull the next frame onto the guess) nor its intensity (the photometric term would
+  // pair the next frame's pixels with model points seen from where the camera was not).
+  const bool measured = res.tracked && !res.predicted;
+  if (s.mode == TrackingMode::Joint) s.reference = measured ? std::optional(tracking::ReferenceFrame{levels, new_pose}) : std::nullopt;
+  if (!measured) intensity.clear();
   res.pose = toMrpt(s.history.pose());
   s.placed.reset();
   s.count(res, had_model);
