@@ -33,6 +33,16 @@ TEST(TumList, LinesEndedByCarriageReturnsAlone) {
   EXPECT_EQ(l[1].file, "rgb/b.png");
 }
 
+// Comma-separated lists are read as TUM's associate.py reads them: a comma parts the fields. The file
+// was ",rgb/a.png", and the error named an image that does not exist instead of the list.
+TEST(TumList, CommasPartFieldsAsTumsToolsRead) {
+  const auto l = parseTumList("1.0,rgb/a.png\n2.5, rgb/b.png\n", "x");
+  ASSERT_EQ(l.size(), 2u);
+  EXPECT_EQ(l[0].file, "rgb/a.png");
+  EXPECT_DOUBLE_EQ(l[1].timestamp, 2.5);
+  EXPECT_EQ(l[1].file, "rgb/b.png");
+}
+
 TEST(TumList, MalformedLineNamesFileAndLine) {
   try {
     parseTumList("1.0 a.png\nnot-a-number b.png\n", "rgb.txt");
@@ -219,6 +229,28 @@ TEST(TumFolder, TheImageSizeIsTheOneMostHeadersState) {
   std::thread([probe, fifo, a = paths[2]] { probe->set_value(recordingImageSize({fifo, a})); }).detach();
   ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
   EXPECT_EQ(result.get(), std::optional<cv::Size>(cv::Size(64, 48)));
+}
+
+// JPEGs vote by their headers too: the first readable JPEG was decoded and set the size, so one odd
+// first frame (720x477 before 16x16 ones) made every later frame "the wrong size".
+TEST(TumFolder, TheImageSizeIsTheOneMostJpegHeadersState) {
+  const std::string dir = test::tempDir("image_size_vote_jpeg");
+  const auto jpeg = [&](const std::string& name, int w, int h) {
+    const std::string path = dir + "/" + name;
+    EXPECT_TRUE(cv::imwrite(path, cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 120, 200))));
+    return path;
+  };
+  const std::vector<std::string> paths{jpeg("odd.jpg", 720, 477), jpeg("a.jpg", 16, 16), jpeg("b.jpg", 16, 16)};
+  EXPECT_EQ(recordingImageSize(paths), std::optional<cv::Size>(cv::Size(16, 16)));
+  // The most stated size whose files are all damaged gives way to the next one with a whole file.
+  std::vector<std::uint8_t> whole;
+  ASSERT_TRUE(cv::imencode(".jpg", cv::Mat(16, 16, CV_8UC3, cv::Scalar(1, 2, 3)), whole));
+  std::vector<std::string> cut{paths[0]};
+  for (const char* name : {"cut_a.jpg", "cut_b.jpg"}) {
+    cut.push_back(dir + "/" + name);
+    std::ofstream(cut.back(), std::ios::binary).write(reinterpret_cast<const char*>(whole.data()), std::streamsize(whole.size() / 2));
+  }
+  EXPECT_EQ(recordingImageSize(cut), std::optional<cv::Size>(cv::Size(720, 477)));
 }
 
 // An image that exists but cannot be opened (its permissions) says so: it was "cannot decode ...

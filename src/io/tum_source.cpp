@@ -25,7 +25,8 @@ namespace vofusion {
 
 namespace {
 // What is wrong with a list line on its own ("" when nothing is); e parsed from it.
-std::string listLineProblem(const std::string& line, TumEntry& e) {
+std::string listLineProblem(std::string line, TumEntry& e) {
+  std::replace(line.begin(), line.end(), ',', ' ');  // as TUM's associate.py reads a list (and our trajectories)
   std::istringstream ls(line);
   if (!(ls >> e.timestamp) || !std::isfinite(e.timestamp) || !(ls >> e.file)) return "expected 'timestamp filename'";
   std::string extra;
@@ -367,36 +368,58 @@ double medianRaw(const cv::Mat& raw) {
 
 }  // namespace
 
+namespace {
+// The size a colour file's header states, without decoding it: a PNG's IHDR, a JPEG's frame header
+// (empty for neither, or an unreadable header).
+cv::Size headerSize(const std::string& path) {
+  const cv::Size png = pngHeaderSize(path);
+  if (!png.empty()) return png;
+  return readJpeg(path, {}, 1.0).header;  // more than one pixel: not decoded, its header said
+}
+
+// Whether the file decodes whole at `size`, as loadColour would read it.
+bool wholeAt(const std::string& path, cv::Size size) {
+  if (!imageFileDamage(path).empty()) return false;
+  if (!pngHeaderSize(path).empty()) return true;  // a PNG's data is checked whole by imageFileDamage
+  const JpegDecode jpeg = readJpeg(path, size);
+  if (!jpeg.damage.empty()) return false;
+  if (!jpeg.image.empty()) return true;
+  try {  // a colour space libjpeg leaves to OpenCV (CMYK)
+    return readImage(path, cv::IMREAD_UNCHANGED, "colour").size() == size;
+  } catch (const InputError&) {
+    return false;
+  }
+}
+}  // namespace
+
 std::optional<cv::Size> recordingImageSize(const std::vector<std::string>& paths) {
   const auto regular = [](const std::string& path) {
     std::error_code ec;  // a file that cannot be stat'ed (a symlink loop) is its own frame's damage, not the run's
     return !path.empty() && fs::is_regular_file(path, ec);  // and no FIFO is opened (it would block)
   };
-  std::vector<cv::Size> headers;  // each path's, empty for no PNG
+  // PNGs and JPEGs vote by their headers, nothing decoded: one odd or crafted first frame (a JPEG
+  // stating 32768 x 32767 was decoded whole to learn its size) sets no recording's size.
+  std::vector<cv::Size> headers;  // each path's, empty for neither
   std::vector<std::pair<cv::Size, int>> votes;  // in the order first seen: a tie goes to the earlier
   for (const std::string& path : paths) {
-    const cv::Size header = headers.emplace_back(regular(path) ? pngHeaderSize(path) : cv::Size());
+    const cv::Size header = headers.emplace_back(regular(path) ? headerSize(path) : cv::Size());
     if (header.empty()) continue;
     const auto it = std::find_if(votes.begin(), votes.end(), [&](const auto& v) { return v.first == header; });
     if (it == votes.end()) votes.emplace_back(header, 1);
     else ++it->second;
   }
   if (!votes.empty()) {
-    const cv::Size size =
-        std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) { return a.second < b.second; })->first;
-    // One of them whole, at least: with every one cut short the recording is refused at once (as when
-    // none decodes), not frame by frame.
-    for (std::size_t i = 0; i < paths.size(); ++i)
-      if (headers[i] == size && imageFileDamage(paths[i]).empty()) return size;
+    // The most voted size with a file of it that is whole; with none whole the recording is refused
+    // at once (as when none decodes), not frame by frame.
+    std::stable_sort(votes.begin(), votes.end(), [](const auto& a, const auto& b) { return a.second > b.second; });
+    for (const auto& [size, count] : votes)
+      for (std::size_t i = 0; i < paths.size(); ++i)
+        if (headers[i] == size && wholeAt(paths[i], size)) return size;
     return std::nullopt;
   }
+  // Other formats (BMP, TIFF): OpenCV decodes the first readable one.
   for (const std::string& path : paths) {
     if (!regular(path) || !imageFileDamage(path).empty()) continue;
-    // A JPEG as loadColour decodes it: one whose data libjpeg finds corrupt gives no size (nor a line
-    // of libjpeg's own).
-    const JpegDecode jpeg = readJpeg(path);
-    if (!jpeg.image.empty()) return jpeg.image.size();
-    if (!jpeg.damage.empty()) continue;
     try {
       // As loadColour reads it (IMREAD_UNCHANGED ignores an EXIF orientation): IMREAD_COLOR turned a
       // JPEG tagged "rotate 90" to 480x640, and every 640x480 frame was then refused as the wrong size.
