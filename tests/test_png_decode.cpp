@@ -4,7 +4,13 @@
 // decode, by OpenCV and by decodePlainPng, to exactly the pixels encoded.
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
+#include <chrono>
 #include <filesystem>
+#include <future>
+#include <memory>
+#include <thread>
 #include <vector>
 
 #include <opencv2/imgcodecs.hpp>
@@ -13,6 +19,8 @@
 
 #include "support.h"
 #include "vofusion/core/errors.h"
+#include "vofusion/core/text_file.h"
+#include "vofusion/io/jpeg_decode.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/io/png_encode.h"
 #include "vofusion/io/tum_source.h"
@@ -355,4 +363,23 @@ TEST(PngDecode, AnImageOfAnotherSizeIsRefusedByItsHeader) {
   EXPECT_EQ(loadRawDepthPng(other, 32, 24).size(), cv::Size(32, 24));
   EXPECT_TRUE(pngHeaderSize(write("text.png", {'n', 'o', 't'})).empty());
   EXPECT_TRUE(pngHeaderSize(dir + "/missing.png").empty());
+}
+
+// A FIFO named as an image (a rawlog's external colour file) is not opened: opening it waits for a
+// writer, and the reader hung instead of saying one line. Each reader gives up at once, and the
+// cause is said.
+TEST(PngDecode, AFifoNamedAsAnImageIsNeverOpened) {
+  const std::string fifo = test::tempDir("png_fifo") + "/colour.png";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  auto probe = std::make_shared<std::promise<std::string>>();
+  auto result = probe->get_future();
+  std::thread([probe, fifo] {
+    cv::Size stated;
+    const bool nothing = readPlainPng(fifo, {}, &stated).empty() && stated.empty() && pngHeaderSize(fifo).empty() &&
+                         imageFileDamage(fifo).empty() && readJpeg(fifo).header.empty();
+    probe->set_value(nothing ? whyUnreadable(fifo) : "a reader got something from it");
+  }).detach();
+  ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
+  EXPECT_EQ(result.get(), "not a regular file (a FIFO or a device?)");
+  EXPECT_EQ(whyUnreadable(test::tempDir("png_fifo")), "a folder, not a file");
 }

@@ -1,5 +1,7 @@
 #include "vofusion/core/text_file.h"
 
+#include <sys/stat.h>
+
 #include <array>
 #include <cerrno>
 #include <cstdio>
@@ -28,6 +30,10 @@ std::string readTextFile(const std::string& path) {
 }
 
 std::string whyUnreadable(const std::string& path) {
+  // Not opened unless a file: opening a FIFO waits for a writer (for ever), a folder opens as if readable.
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+    return S_ISDIR(st.st_mode) ? "a folder, not a file" : "not a regular file (a FIFO or a device?)";
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return std::generic_category().message(errno);  // strerror is not for reader threads
   std::fclose(f);

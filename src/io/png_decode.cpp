@@ -186,7 +186,16 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
 // reports, such a file was a gigabyte allocation whose failure (std::bad_alloc) ended the run.
 constexpr long kMaxImageFileBytes = 256L << 20;
 
+namespace {
+// Only a regular file is opened: a FIFO named as an image (a rawlog's external file) waited for a writer.
+bool isRegularFile(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode);
+}
+}  // namespace
+
 bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
+  if (!isRegularFile(path)) return false;
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
   // A folder opens too, and seeks to a huge "end" on some file systems (ext4: LLONG_MAX).
@@ -220,6 +229,7 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
 }
 
 bool readFileStart(const std::string& path, std::uint8_t* out, std::size_t n) {
+  if (!isRegularFile(path)) return false;
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
   const bool read = std::fread(out, 1, n, f) == n;
