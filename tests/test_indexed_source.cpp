@@ -4,8 +4,11 @@
 
 #include <unistd.h>
 
+#include <new>
 #include <set>
 #include <vector>
+
+#include <opencv2/core.hpp>
 
 #include "vofusion/core/errors.h"
 #include "vofusion/io/frame_source.h"
@@ -51,6 +54,36 @@ TEST(IndexedFrameSource, NextWalksEveryIndexOnceAndRewindStartsOver) {
   Counting empty(0);
   EXPECT_FALSE(empty.next(f));
   EXPECT_TRUE(empty.reads.empty());
+}
+
+// A frame whose images need more memory than there is, or that OpenCV cannot decode (a TUM list naming
+// a huge TIFF), costs that frame as any damage does, named by its source and index: it ended the run
+// with a message naming no file. The next frame is read as usual.
+TEST(IndexedFrameSource, OutOfMemoryOrAnOpenCvErrorCostsTheFrameOnly) {
+  class Failing : public Counting {
+   public:
+    Failing() : Counting(3) {}
+    Frame read(std::size_t i) const override {
+      if (i == 0) throw std::bad_alloc();
+      if (i == 1) cv::error(cv::Error::StsBadArg, "no decoder", "read", "here", 1);
+      return Counting::read(i);
+    }
+  } src;
+  Frame f;
+  try {
+    src.next(f);
+    FAIL() << "no error";
+  } catch (const DamagedFrame& e) {
+    EXPECT_EQ(std::string(e.what()), "counting: frame 0: its images need more memory than there is");
+  }
+  try {
+    src.next(f);
+    FAIL() << "no error";
+  } catch (const DamagedFrame& e) {
+    EXPECT_NE(std::string(e.what()).find("counting: frame 1: its images cannot be decoded ("), std::string::npos) << e.what();
+  }
+  ASSERT_TRUE(src.next(f));
+  EXPECT_EQ(f.timestamp, 20.0);
 }
 
 TEST(IndexedFrameSource, SyntheticSourceNextMatchesRead) {

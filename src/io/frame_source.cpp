@@ -2,15 +2,26 @@
 
 #include "vofusion/core/progress.h"
 
+#include <new>
+
+#include <opencv2/core.hpp>
+
 namespace vofusion {
 
 bool IndexedFrameSource::next(Frame& frame) {
   if (pos_ >= size()) return false;
+  const std::size_t index = pos_++;
   try {
-    frame = read(pos_++);
+    frame = read(index);
   } catch (const InputError& e) {
     // The folder and its lists were checked when the source opened: what fails now is this frame's.
     throw DamagedFrame(e);
+  } catch (const std::bad_alloc&) {
+    // An image no check bounds (another format, decoded by OpenCV): its frame, not the run, as a
+    // rawlog's.
+    throw DamagedFrame(InputError(name(), "frame " + std::to_string(index) + ": its images need more memory than there is"));
+  } catch (const cv::Exception& e) {
+    throw DamagedFrame(InputError(name(), "frame " + std::to_string(index) + ": its images cannot be decoded (" + e.err + ")"));
   }
   return true;
 }

@@ -243,12 +243,12 @@ cv::Mat loadColour(const std::string& path, int expect_w, int expect_h) {
     // A depth map read as colour gave a grey picture of the depths, tracked as if it were colour.
     if (img.type() == CV_16UC1)
       throw InputError(path, "colour image is 16-bit single channel, as depth images are (a depth file in rgb.txt?)");
-    if (!img.empty()) img = asBgr8(img);
   }
   if (img.empty()) throw InputError(path, "cannot decode colour image (corrupt or truncated?)");
+  // The size before any conversion: an image of another size is not converted to be refused.
   if (img.cols != expect_w || img.rows != expect_h)
     throw InputError(path, sizeMismatch("colour", img.size(), expect_w, expect_h));
-  return img;
+  return img.type() == CV_8UC3 ? img : asBgr8(img);
 }
 
 CameraFile readIntrinsicsFile(const std::string& path) {
