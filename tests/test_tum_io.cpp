@@ -192,13 +192,17 @@ TEST(TumFolder, TheImageSizeIsTheFramesWhateverAnExifOrientationSays) {
 // The recording's image size is the one most of its first PNGs' headers state, nothing decoded: an odd
 // first image set the size of the whole recording (each later frame refused as the wrong size), and a
 // crafted 30000x30000 one was decoded (1.8 GB) to find its size.
+namespace {
+// A flat w x h colour image at `path`, in the format its name's extension says; the path back.
+std::string writeImage(const std::string& path, int w, int h) {
+  EXPECT_TRUE(cv::imwrite(path, cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 120, 200))));
+  return path;
+}
+}  // namespace
+
 TEST(TumFolder, TheImageSizeIsTheOneMostHeadersState) {
   const std::string dir = test::tempDir("image_size_vote");
-  const auto png = [&](const std::string& name, int w, int h) {
-    const std::string path = dir + "/" + name;
-    EXPECT_TRUE(cv::imwrite(path, cv::Mat(h, w, CV_8UC3, cv::Scalar(1, 2, 3))));
-    return path;
-  };
+  const auto png = [&](const std::string& name, int w, int h) { return writeImage(dir + "/" + name, w, h); };
   std::vector<std::uint8_t> bytes;
   ASSERT_TRUE(cv::imencode(".png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(4, 5, 6)), bytes));
   for (const int at : {16, 20}) bytes[at] = 0, bytes[at + 1] = 0, bytes[at + 2] = 0x75, bytes[at + 3] = 0x30;  // 30000
@@ -235,11 +239,7 @@ TEST(TumFolder, TheImageSizeIsTheOneMostHeadersState) {
 // first frame (720x477 before 16x16 ones) made every later frame "the wrong size".
 TEST(TumFolder, TheImageSizeIsTheOneMostJpegHeadersState) {
   const std::string dir = test::tempDir("image_size_vote_jpeg");
-  const auto jpeg = [&](const std::string& name, int w, int h) {
-    const std::string path = dir + "/" + name;
-    EXPECT_TRUE(cv::imwrite(path, cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 120, 200))));
-    return path;
-  };
+  const auto jpeg = [&](const std::string& name, int w, int h) { return writeImage(dir + "/" + name, w, h); };
   const std::vector<std::string> paths{jpeg("odd.jpg", 720, 477), jpeg("a.jpg", 16, 16), jpeg("b.jpg", 16, 16)};
   EXPECT_EQ(recordingImageSize(paths), std::optional<cv::Size>(cv::Size(16, 16)));
   // The most stated size whose files are all damaged gives way to the next one with a whole file.
