@@ -774,23 +774,6 @@ TEST(Rawlog, AFrameWhoseSyncFailsIsStillCountedAndKept) {
   EXPECT_TRUE(std::filesystem::exists(path)) << "a recording holding a whole frame was removed";
 }
 
-// An empty recording without its images folder (a kill between making the file and the folder, a
-// recorder that could not make the folder, or one without external images killed before its first
-// frame) holds nothing either: the next recording in place replaces it. It was refused for good ("a
-// recording is already there").
-TEST(Rawlog, AnEmptyRecordingWithoutItsImagesFolderDoesNotBlockTheFolder) {
-  const auto frames = simFrames(1);
-  const std::string dir = test::tempDir("rawlog_empty_no_images");
-  std::ofstream(dir + "/grab.rawlog").close();
-  RawlogWriterOptions o;
-  o.in_place = true;
-  {
-    RawlogWriter w(dir + "/grab.rawlog", o);
-    w.write(frames[0]);
-  }
-  EXPECT_EQ(RawlogSource(dir + "/grab.rawlog", {}).size(), 1u);
-}
-
 // A recording in place never takes a ground truth it did not write: one left beside no recording (an
 // earlier replay's, its recording deleted) is refused, naming it; one left by a recording killed before
 // its first record goes with that empty recording.

@@ -646,14 +646,13 @@ struct RawlogWriter::Impl {
     if (!gz.open(rawlog_file, 1, err)) throw InputError(path, "cannot write: " + err);
     arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<mrpt::io::CFileGZOutputStream>>(gz);
   }
-  // An empty recording file beside its empty images folder or none, which no recorder holds (what a
-  // kill before the first frame leaves, or between making the file and the folder, or a recorder that
-  // could not make the folder), holds nothing: it goes, rather than refuse the folder to every later
-  // recording. One another recorder is making now (it holds the file's lock) stays.
+  // An empty recording file beside its empty images folder, which no recorder holds (what a kill
+  // before the first frame leaves), holds nothing: it goes, rather than refuse the folder to every
+  // later recording. One another recorder is making now (it holds the file's lock) stays.
   void removeEmptyRecording() const {
     std::error_code ec;
     const bool no_records = fs::is_regular_file(rawlog_file, ec) && fs::file_size(rawlog_file, ec) == 0;
-    const bool no_images = !fs::exists(fs::symlink_status(images_dir, ec)) || (fs::is_directory(images_dir, ec) && fs::is_empty(images_dir, ec));
+    const bool no_images = fs::is_directory(images_dir, ec) && fs::is_empty(images_dir, ec);
     if (!no_records || !no_images || RecordFile::heldByAnother(rawlog_file)) return;
     fs::remove(rawlog_file, ec);
     fs::remove(images_dir, ec);
