@@ -13,6 +13,7 @@
 #include "support.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/core/trajectory.h"
+#include "vofusion/io/jpeg_decode.h"
 #include "vofusion/io/png_decode.h"
 #include "vofusion/io/tum_source.h"
 
@@ -41,6 +42,11 @@ TEST(TumList, CommasPartFieldsAsTumsToolsRead) {
   EXPECT_EQ(l[0].file, "rgb/a.png");
   EXPECT_DOUBLE_EQ(l[1].timestamp, 2.5);
   EXPECT_EQ(l[1].file, "rgb/b.png");
+  // A file name with a comma cannot be listed; the line says why.
+  TumListDamage damage;
+  parseTumList("1.0 rgb/a,b.png\n2.0 rgb/c.png\n", "x", &damage);
+  ASSERT_EQ(damage.problems.size(), 1u);
+  EXPECT_NE(damage.problems[0].find("a comma parts fields"), std::string::npos) << damage.problems[0];
 }
 
 TEST(TumList, MalformedLineNamesFileAndLine) {
@@ -248,8 +254,10 @@ TEST(TumFolder, TheImageSizeIsTheOneMostJpegHeadersState) {
   std::vector<std::string> cut{paths[0]};
   for (const char* name : {"cut_a.jpg", "cut_b.jpg"}) {
     cut.push_back(dir + "/" + name);
-    std::ofstream(cut.back(), std::ios::binary).write(reinterpret_cast<const char*>(whole.data()), std::streamsize(whole.size() / 2));
+    // Cut in the image data: its header still votes for 16x16.
+    std::ofstream(cut.back(), std::ios::binary).write(reinterpret_cast<const char*>(whole.data()), std::streamsize(whole.size() - 4));
   }
+  ASSERT_EQ(readJpeg(cut[1]).header, cv::Size(16, 16)) << "the cut files must vote";
   EXPECT_EQ(recordingImageSize(cut), std::optional<cv::Size>(cv::Size(720, 477)));
 }
 

@@ -26,11 +26,13 @@ namespace vofusion {
 namespace {
 // What is wrong with a list line on its own ("" when nothing is); e parsed from it.
 std::string listLineProblem(std::string line, TumEntry& e) {
+  const bool commas = line.find(',') != std::string::npos;
   std::replace(line.begin(), line.end(), ',', ' ');  // as TUM's associate.py reads a list (and our trajectories)
   std::istringstream ls(line);
   if (!(ls >> e.timestamp) || !std::isfinite(e.timestamp) || !(ls >> e.file)) return "expected 'timestamp filename'";
   std::string extra;
-  if (ls >> extra) return "unexpected extra field '" + extra + "'";
+  if (ls >> extra)
+    return "unexpected extra field '" + extra + "'" + (commas ? " (a comma parts fields, as in TUM's tools: a file name cannot hold one)" : "");
   // Seconds past any clock's end are another unit: every frame interval would be a billion times too
   // long (the motion model's velocities), and no rawlog could hold the stamp.
   if (!rawlogCanHold(e.timestamp))
@@ -381,7 +383,10 @@ cv::Size headerSize(const std::string& path) {
 bool wholeAt(const std::string& path, cv::Size size) {
   if (!imageFileDamage(path).empty()) return false;
   if (!pngHeaderSize(path).empty()) return true;  // a PNG's data is checked whole by imageFileDamage
-  const JpegDecode jpeg = readJpeg(path, size);
+  // A crafted header that won the vote (a short list) is not decoded past any colour camera's size.
+  constexpr double kMostColourPixels = 64e6;  // 16x a Kinect v2's 2 megapixels, 4x a 4K camera's
+  const JpegDecode jpeg = readJpeg(path, size, kMostColourPixels);
+  if (jpeg.image.empty() && double(size.area()) > kMostColourPixels) return false;
   if (!jpeg.damage.empty()) return false;
   if (!jpeg.image.empty()) return true;
   try {  // a colour space libjpeg leaves to OpenCV (CMYK)

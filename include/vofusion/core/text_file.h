@@ -18,8 +18,10 @@ bool entryExists(const std::string& path);
 // stat'ed), to tell whether it was replaced since (a saved map a run went on from, a rendered recording).
 std::string fileStamp(const std::string& path);
 // Why the file at `path` cannot be opened for reading, as the system says it ("Permission denied",
-// "No such file or directory"); empty when it can. A reader that fails on a file names this cause
-// first, rather than calling an unreadable file corrupt. Never throws.
+// "No such file or directory"), or "a folder, not a file" / "not a regular file (a FIFO or a
+// device?)" for what is no regular file (never opened: a FIFO would wait for a writer); empty when it
+// can. A reader that fails on a file names this cause first, rather than calling an unreadable file
+// corrupt. Never throws.
 std::string whyUnreadable(const std::string& path);
 // Everything `stream` gives, read in 64 KiB pieces; InputError(path, "goes on past <what>: too large
 // for <kind> here") once it is longer than max_bytes (a pipe or a device has no size to check first).
