@@ -1,6 +1,8 @@
 #include "vofusion/core/text_file.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <array>
 #include <cerrno>
@@ -29,15 +31,36 @@ std::string readTextFile(const std::string& path) {
   return readCapped(f, path, kMaxBytes, "256 MiB", "a text file");
 }
 
-std::string whyUnreadable(const std::string& path) {
-  // Not opened unless a file: opening a FIFO waits for a writer (for ever), a folder opens as if readable.
+std::FILE* openRegularFile(const std::string& path, std::string* why) {
+  const auto fail = [&](std::string reason) -> std::FILE* {
+    if (why) *why = std::move(reason);
+    return nullptr;
+  };
+  // O_NONBLOCK: a FIFO opens at once instead of waiting for a writer; a regular file reads as usual.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return fail(std::generic_category().message(errno));  // strerror is not for reader threads
   struct stat st {};
-  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
-    return S_ISDIR(st.st_mode) ? "a folder, not a file" : "not a regular file (a FIFO or a device?)";
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return std::generic_category().message(errno);  // strerror is not for reader threads
-  std::fclose(f);
-  return {};
+  const bool stated = ::fstat(fd, &st) == 0;
+  const int stat_errno = errno;
+  if (!stated || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    if (!stated) return fail(std::generic_category().message(stat_errno));
+    return fail(S_ISDIR(st.st_mode) ? "a folder, not a file" : "not a regular file (a FIFO or a device?)");
+  }
+  std::FILE* f = ::fdopen(fd, "rb");
+  if (!f) {
+    const int open_errno = errno;
+    ::close(fd);
+    return fail(std::generic_category().message(open_errno));
+  }
+  if (why) why->clear();
+  return f;
+}
+
+std::string whyUnreadable(const std::string& path) {
+  std::string why;
+  if (std::FILE* f = openRegularFile(path, &why)) std::fclose(f);
+  return why;
 }
 
 bool entryExists(const std::string& path) {

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "vofusion/core/deflate.h"
+#include "vofusion/core/text_file.h"
 
 namespace vofusion {
 
@@ -186,22 +187,12 @@ cv::Mat decodePlainPng(const std::uint8_t* data, std::size_t size) {
 // reports, such a file was a gigabyte allocation whose failure (std::bad_alloc) ended the run.
 constexpr long kMaxImageFileBytes = 256L << 20;
 
-namespace {
-// Only a regular file is opened: a FIFO named as an image (a rawlog's external file) waited for a writer.
-bool isRegularFile(const std::string& path) {
-  struct stat st {};
-  return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode);
-}
-}  // namespace
-
+// Only regular files are opened (openRegularFile): a FIFO named as an image (a rawlog's external file)
+// waited for a writer, and a folder seeks to a huge "end" on some file systems (ext4: LLONG_MAX).
 bool readWholeFile(const std::string& path, std::vector<std::uint8_t>& bytes) {
-  if (!isRegularFile(path)) return false;
-  std::FILE* f = std::fopen(path.c_str(), "rb");
+  std::FILE* f = openRegularFile(path);
   if (!f) return false;
-  // A folder opens too, and seeks to a huge "end" on some file systems (ext4: LLONG_MAX).
-  struct stat st {};
-  const bool regular = fstat(fileno(f), &st) == 0 && S_ISREG(st.st_mode);
-  const long size = regular && std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
+  const long size = std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
   bool read = size >= 0 && size <= kMaxImageFileBytes && std::fseek(f, 0, SEEK_SET) == 0;
   if (read) {
     bytes.resize(std::size_t(size));
@@ -229,8 +220,7 @@ bool isRgb8Png(const std::vector<std::uint8_t>& bytes, int width, int height) {
 }
 
 bool readFileStart(const std::string& path, std::uint8_t* out, std::size_t n) {
-  if (!isRegularFile(path)) return false;
-  std::FILE* f = std::fopen(path.c_str(), "rb");
+  std::FILE* f = openRegularFile(path);
   if (!f) return false;
   const bool read = std::fread(out, 1, n, f) == n;
   std::fclose(f);

@@ -2,6 +2,7 @@
 // Small text inputs (TUM lists and trajectories, intrinsics.txt): whole-file reads and the data lines
 // of a '#'-commented format, with line numbers for error messages.
 #include <cstddef>
+#include <cstdio>
 #include <istream>
 #include <string>
 #include <vector>
@@ -17,11 +18,15 @@ bool entryExists(const std::string& path);
 // A file as it is now: its size and last write time as text ("N bytes, written T"; "" when it cannot be
 // stat'ed), to tell whether it was replaced since (a saved map a run went on from, a rendered recording).
 std::string fileStamp(const std::string& path);
-// Why the file at `path` cannot be opened for reading, as the system says it ("Permission denied",
-// "No such file or directory"), or "a folder, not a file" / "not a regular file (a FIFO or a
-// device?)" for what is no regular file (never opened: a FIFO would wait for a writer); empty when it
-// can. A reader that fails on a file names this cause first, rather than calling an unreadable file
-// corrupt. Never throws.
+// `path` opened for reading ("rb") if it is a regular file, else nullptr with `why` (when given) set:
+// the system's words ("Permission denied", "No such file or directory"), "a folder, not a file" or
+// "not a regular file (a FIFO or a device?)". Opened without waiting, then judged by what was opened:
+// a FIFO is never waited on (fopen waits for a writer, for ever), and nothing can be swapped in between
+// a check and the open. The caller closes the file. Never throws.
+std::FILE* openRegularFile(const std::string& path, std::string* why = nullptr);
+// Why the file at `path` cannot be opened for reading (openRegularFile's `why`); empty when it can. A
+// reader that fails on a file names this cause first, rather than calling an unreadable file corrupt.
+// Never throws.
 std::string whyUnreadable(const std::string& path);
 // Everything `stream` gives, read in 64 KiB pieces; InputError(path, "goes on past <what>: too large
 // for <kind> here") once it is longer than max_bytes (a pipe or a device has no size to check first).
