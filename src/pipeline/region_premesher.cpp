@@ -66,18 +66,23 @@ void RegionPremesher::volumeShifted(const fusion::TsdfVolume& volume, const std:
   } catch (const std::bad_alloc&) {
     // Meshing while tracking only saves time: without memory for its lists it stops, rather than fail
     // the fusion it was called from. What it made stays, and is taken only where its input matches.
-    {
-      const std::lock_guard<std::mutex> lock(mutex_);
-      if (stopping_) return;
-      stopping_ = true;
-      out_of_memory_ = true;
-      queue_.clear();
-      queued_.clear();
-    }
-    wake_.notify_one();
-    idle_.notify_all();
-    printWarning("meshing while tracking: no memory to follow the volume: the rest of the mesh is made at the end");
+    if (halt(true))
+      printWarning("meshing while tracking: no memory to follow the volume: the rest of the mesh is made at the end");
   }
+}
+
+bool RegionPremesher::halt(bool out_of_memory) {
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (stopping_) return false;
+    stopping_ = true;
+    out_of_memory_ = out_of_memory;
+    queue_.clear();
+    queued_.clear();
+  }
+  wake_.notify_one();
+  idle_.notify_all();
+  return true;
 }
 
 void RegionPremesher::followShift(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin) {
@@ -134,14 +139,7 @@ void RegionPremesher::waitIdle() {
 }
 
 void RegionPremesher::stop() {
-  {
-    const std::lock_guard<std::mutex> lock(mutex_);
-    stopping_ = true;
-    queue_.clear();
-    queued_.clear();
-  }
-  wake_.notify_one();
-  idle_.notify_all();
+  halt(false);  // already halted for want of memory: it stays so
   if (thread_.joinable()) thread_.join();
   // What only the thread needed, before the end's meshing (the run's peak) begins.
   pieces_.clear();

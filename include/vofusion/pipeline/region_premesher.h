@@ -75,6 +75,7 @@ class RegionPremesher {
   void run();
   static void warnOfFailure(const std::exception_ptr& failure) noexcept;  // once, on this object's thread
   void followShift(const fusion::TsdfVolume& volume, const std::optional<Eigen::Vector3i>& old_origin);  // volumeShifted's work
+  bool halt(bool out_of_memory);  // stops taking regions and wakes the thread; false when already stopping
   void summarise(const Key& region);
   void simplifyIfReady(const Key& region);
   bool finalNow(const Key& region) const;  // under mutex_
