@@ -46,11 +46,44 @@ TEST(CameraFiles, IntrinsicsOfALargerCameraParseAndAreCheckedAgainstItsSize) {
   CameraIntrinsics c;
   EXPECT_NO_THROW(c = CameraIntrinsics::parse("915,915,640.3,360.1"));
   EXPECT_DOUBLE_EQ(c.cx, 640.3);
-  c.width = 1280, c.height = 720;
-  EXPECT_NO_THROW(c.validate("--intrinsics"));
-  c.width = 640, c.height = 480;
-  EXPECT_THROW(c.validate("--intrinsics"), InputError);
+  EXPECT_EQ(c.width, 0);  // four numbers state no size: they are the recording's, never scaled
+  CameraIntrinsics sized;
+  EXPECT_NO_THROW(sized = c.forImage(1280, 720, "--intrinsics"));
+  EXPECT_DOUBLE_EQ(sized.fx, 915);
+  EXPECT_DOUBLE_EQ(sized.cx, 640.3);
+  EXPECT_EQ(sized.width, 1280);
+  EXPECT_THROW(c.forImage(640, 480, "--intrinsics"), InputError);
   EXPECT_THROW(CameraIntrinsics::parse("915,915,-3,360.1"), InputError);  // negative: outside any image
+}
+
+// A preset is a 640x480 calibration. Given a recording of the same shape at another size, it is
+// scaled (pixel centres kept); left as it was, `ros` on a 320x240 shake put the principal point in
+// the image's corner and tracked at 0.146 m ATE against 0.013. Another shape is refused, named.
+TEST(CameraFiles, APresetIsScaledToARecordingOfItsShape) {
+  const CameraIntrinsics half = CameraIntrinsics::parse("ros").forImage(320, 240, "--intrinsics");
+  EXPECT_DOUBLE_EQ(half.fx, 262.5);
+  EXPECT_DOUBLE_EQ(half.fy, 262.5);
+  EXPECT_DOUBLE_EQ(half.cx, 159.5);
+  EXPECT_DOUBLE_EQ(half.cy, 119.5);
+  const CameraIntrinsics fr1 = CameraIntrinsics::parse("fr1"), fr1_vga = fr1.forImage(640, 480, "--intrinsics");
+  EXPECT_DOUBLE_EQ(fr1_vga.fx, fr1.fx);
+  EXPECT_DOUBLE_EQ(fr1_vga.cy, fr1.cy);
+  EXPECT_EQ(fr1.forImage(1280, 960, "--intrinsics").dist, fr1.dist);  // distortion is in normalised coordinates
+  try {
+    fr1.forImage(1280, 720, "--intrinsics");
+    ADD_FAILURE() << "a 640x480 preset was taken for 1280x720 images";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "--intrinsics: a calibration of 640x480 images, this recording's are 1280x720 "
+                                     "(another shape): give its camera as fx,fy,cx,cy");
+  }
+  // Through a TUM folder, as `vofusion --intrinsics ros` reads one.
+  const std::string dir = oneFrameFolder(test::tempDir("cam_preset_scaled") + "/seq", 320, 240, 1200);
+  SourceOptions given;
+  given.intrinsics = "ros";
+  TumFolderSource src(dir, given);
+  EXPECT_DOUBLE_EQ(src.camera().fx, 262.5);
+  EXPECT_DOUBLE_EQ(src.camera().cx, 159.5);
+  EXPECT_EQ(src.camera().width, 320);
 }
 
 // A focal length under a pixel became 0 in the float maths (1e-50: vofusion's ray cast never ended);

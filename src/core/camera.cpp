@@ -1,6 +1,7 @@
 #include "vofusion/core/camera.h"
 
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <limits>
 #include <sstream>
@@ -41,11 +42,28 @@ CameraIntrinsics CameraIntrinsics::parse(const std::string& spec, const std::str
   if (v.size() != 4)
     throw InputError(origin, "unknown intrinsics '" + spec + "' (expected fr1, fr2, fr3, ros or fx,fy,cx,cy)");
   CameraIntrinsics c = make(v[0], v[1], v[2], v[3]);
-  // What the four numbers say alone. The image's size is the recording's, which the caller sets and
-  // validates against: checked here against 640x480, a 1280x720 camera's centre was refused.
+  c.width = c.height = 0;  // the recording's: forImage() sets it and validates the centre against it
+  // What the four numbers say alone: checked here against 640x480, a 1280x720 camera's centre was refused.
   CameraIntrinsics unsized = c;
   unsized.width = unsized.height = std::numeric_limits<int>::max();
   unsized.validate(origin);
+  return c;
+}
+
+CameraIntrinsics CameraIntrinsics::forImage(int cols, int rows, const std::string& origin) const {
+  CameraIntrinsics c = *this;
+  if (width > 0 && height > 0 && (width != cols || height != rows)) {
+    // Scaled unasked only where nothing else can be meant: a 640x480 preset given a 320x240 recording
+    // would put its centre in the image's corner (ATE 0.146 m against 0.013 on a synthetic shake).
+    if (std::int64_t(cols) * height != std::int64_t(rows) * width)
+      throw InputError(origin, "a calibration of " + std::to_string(width) + "x" + std::to_string(height) +
+                                   " images, this recording's are " + std::to_string(cols) + "x" + std::to_string(rows) +
+                                   " (another shape): give its camera as fx,fy,cx,cy");
+    c = resizedTo(cols, rows);
+  }
+  c.width = cols;
+  c.height = rows;
+  c.validate(origin);
   return c;
 }
 

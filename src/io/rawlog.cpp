@@ -326,7 +326,7 @@ Frame frameFromObservation(const CObservation3DRangeScan& obs, const std::string
   // line is. It ended rgbd-odometry's whole run at its rawlog output, with a message naming no file.
   if (!rawlogCanHold(f.timestamp))
     throw InputError(origin, "timestamp " + cv::format("%.10g", f.timestamp) + " s is beyond any sensor's clock (a damaged record?)");
-  f.camera = override_camera ? *override_camera : depthCameraOf(obs, cols, rows, origin);
+  f.camera = override_camera ? override_camera->forImage(cols, rows, "--intrinsics") : depthCameraOf(obs, cols, rows, origin);
   f.camera.width = cols;
   f.camera.height = rows;
   f.camera.validate(override_camera ? "--intrinsics" : origin);

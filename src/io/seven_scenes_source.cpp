@@ -106,7 +106,8 @@ SevenScenesSource::SevenScenesSource(const std::string& folder, const SourceOpti
     throw InputError(colours.front().empty() ? frames_.front().stem + ".color.png" : colours.front(),
                      "colour image cannot be read, nor can any of the first " + std::to_string(colours.size()) + " frames'");
   // The published intrinsics are for 640x480; resized copies of the dataset get them scaled.
-  camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics) : defaultIntrinsics().scaled(size->width / 640.0);
+  camera_ = opts.intrinsics ? CameraIntrinsics::parse(*opts.intrinsics).forImage(size->width, size->height, "--intrinsics")
+                            : defaultIntrinsics().scaled(size->width / 640.0);
   camera_.width = size->width;
   camera_.height = size->height;
   camera_.validate(opts.intrinsics ? "--intrinsics" : folder);

@@ -542,8 +542,8 @@ CameraIntrinsics cameraOf(const std::string& folder, const SourceOptions& opts, 
   const std::string size = std::to_string(image.width) + "x" + std::to_string(image.height);
   CameraIntrinsics camera;
   if (opts.intrinsics) {
-    camera = CameraIntrinsics::parse(*opts.intrinsics);
     origin = "--intrinsics";
+    camera = CameraIntrinsics::parse(*opts.intrinsics).forImage(image.width, image.height, origin);
   } else if (file) {
     camera = file->camera;
     if (file->has_size && (camera.width != image.width || camera.height != image.height))

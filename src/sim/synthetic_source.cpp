@@ -24,7 +24,7 @@ SimOptions SyntheticSource::optionsFromSpec(const std::string& spec, const Sourc
                                "' (expected room, corridor, bare_wall, loop, lookalike or longwalk)");
   if (opts.max_frames > 0) s.frames = opts.max_frames;
   if (opts.intrinsics) {
-    const CameraIntrinsics c = CameraIntrinsics::parse(*opts.intrinsics);
+    const CameraIntrinsics c = CameraIntrinsics::parse(*opts.intrinsics).forImage(s.camera.width, s.camera.height, "--intrinsics");
     s.camera.fx = c.fx; s.camera.fy = c.fy; s.camera.cx = c.cx; s.camera.cy = c.cy;
     s.camera.validate("--intrinsics");
   }

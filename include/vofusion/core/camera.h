@@ -14,8 +14,14 @@ struct CameraIntrinsics {
   std::array<double, 5> dist{};      // k1 k2 p1 p2 k3 (informative: TUM depth is already registered)
 
   // "fr1", "fr2", "fr3", "ros" (fx=fy=525) or "fx,fy,cx,cy". Throws InputError(origin, ...) if unknown.
-  // The size stays 640x480: the caller sets the recording's and validates the centre against it.
+  // A preset states the size it was calibrated at (640x480); four numbers state none (width = height
+  // = 0): they are the recording's own. forImage() then fits either to the recording.
   static CameraIntrinsics parse(const std::string& spec, const std::string& origin = "--intrinsics");
+  // These intrinsics for the recording's cols x rows images, validated against that size: a stated size
+  // other than the recording's is scaled to it when the shape is the same (a 320x240 copy of a TUM
+  // recording keeps its camera, halved), refused when it is not; no stated size is the recording's.
+  // Throws InputError(origin, ...).
+  CameraIntrinsics forImage(int cols, int rows, const std::string& origin) const;
   // The TUM preset matching the folder's own name containing "freiburg1/2/3", else the ROS default.
   static CameraIntrinsics forTumFolder(const std::string& folder);
   // Whether the folder's own name (not a parent's: /data/freiburg1_runs/my_take is no TUM recording)
