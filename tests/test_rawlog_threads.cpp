@@ -5,6 +5,8 @@
 #include <cstring>
 #include <limits>
 #include <filesystem>
+#include <future>
+#include <memory>
 #include <tuple>
 #include <fstream>
 #include <thread>
@@ -14,6 +16,7 @@
 #include <mrpt/io/CFileGZInputStream.h>
 #include <mrpt/io/lazy_load_path.h>
 #include <opencv2/core.hpp>
+#include <sys/stat.h>
 
 #include "support.h"
 #include "vofusion/core/deflate.h"
@@ -229,6 +232,27 @@ TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
         }
       },
       InputError);
+}
+
+// A FIFO named as a text range image (MRPT's EXTERNALS_AS_TEXT) is not handed to MRPT's load(), which
+// opens it as it is and waited for a writer for ever: the frame's error names it and says why.
+TEST(RawlogThreads, AFifoNamedAsATextRangeImageIsNeverOpened) {
+  const std::string fifo = test::tempDir("range_image_fifo") + "/t_DEPTH.txt";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  auto probe = std::make_shared<std::promise<std::string>>();
+  auto result = probe->get_future();
+  std::thread([probe, fifo] {
+    auto obs = observationFromFrame(markedFrame(5, 3));
+    useExternalRangeImage(*obs, fifo);
+    try {
+      loadExternalRangeImage(*obs);
+      probe->set_value("no error");
+    } catch (const InputError& e) {
+      probe->set_value(e.what());
+    }
+  }).detach();
+  ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
+  EXPECT_EQ(result.get(), fifo + ": cannot load external range image (not a regular file (a FIFO or a device?))");
 }
 
 // What is not MRPT's gzip .bin of rows, cols and readings is left to MRPT's load(): a .txt

@@ -73,7 +73,12 @@ std::optional<DepthFile> loadExternalRangeImage(CObservation3DRangeScan& obs) {
   // serialisation v9 hold floats) is left to MRPT's load().
   std::string extension = fs::path(path).extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (extension == ".txt") return std::nullopt;
+  if (extension == ".txt") {
+    // MRPT's load() opens it as it is: a FIFO there waited for a writer for ever (openRegularFile's check).
+    if (const std::string why = whyUnreadable(path); !why.empty())
+      throw InputError(path, "cannot load external range image (" + why + ")");
+    return std::nullopt;
+  }
   constexpr std::uint32_t kLargestSide = 8192;
   constexpr std::size_t kLargest = 8 + std::size_t(kLargestSide) * kLargestSide * 2;  // rows, cols and 8192 x 8192 readings
   std::error_code ec;
