@@ -808,6 +808,44 @@ TEST(Rawlog, InPlaceRecordingTakesNoGroundTruthLeftBesideNoRecording) {
   for (std::size_t i = 0; i < 2; ++i) EXPECT_LT(truth[i].pose.distanceTo(*frames[i].groundTruth), 1e-4) << i;
 }
 
+// An empty recording no recorder holds is a killed one's, with its images folder or without it (a kill
+// before the folder was made): the next recording replaces it. One a recorder is still making is never
+// taken for it, even before its folder is made: the file is locked before it appears (made under a name of
+// its own, then linked into place), where once a second recorder could find it empty and unlocked and
+// remove it under the first.
+TEST(Rawlog, InPlaceRecordingReplacesOnlyAnAbandonedEmptyOne) {
+  const auto frames = simFrames(1);
+  const std::string dir = test::tempDir("rawlog_abandoned");
+  const std::string path = dir + "/grab.rawlog", images = dir + "/grab_Images";
+  RawlogWriterOptions o;
+  o.in_place = true;
+  std::ofstream(path).close();  // killed before its folder was made
+  {
+    RawlogWriter w(path, o);
+    w.write(frames[0]);
+    w.commit();
+  }
+  EXPECT_EQ(RawlogSource(path, {}).size(), 1u);
+  fs::remove(path);
+  fs::remove_all(images);
+  {
+    RawlogWriter first(path, o);
+    EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator{}), 2) << "a staged name was left";
+    fs::remove(images);  // as the first recorder is between making its file and its folder
+    try {
+      RawlogWriter second(path, o);
+      ADD_FAILURE() << "a recording being made was replaced";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("a recording is already there"), std::string::npos) << e.what();
+    }
+    EXPECT_TRUE(fs::exists(path)) << "the first recorder's file was removed";
+  }
+  // One with something in it is never replaced.
+  std::ofstream(path) << "x";
+  EXPECT_THROW(RawlogWriter(path, o), InputError);
+  EXPECT_EQ(fs::file_size(path), 1u);
+}
+
 TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {
   const auto frames = simFrames(3);
   const std::string dir = test::tempDir("rawlog_torn");

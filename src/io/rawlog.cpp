@@ -646,17 +646,18 @@ struct RawlogWriter::Impl {
     if (!gz.open(rawlog_file, 1, err)) throw InputError(path, "cannot write: " + err);
     arch = std::make_unique<mrpt::serialization::CArchiveStreamBase<mrpt::io::CFileGZOutputStream>>(gz);
   }
-  // An empty recording file beside its empty images folder, which no recorder holds (what a kill
-  // before the first frame leaves), holds nothing: it goes, rather than refuse the folder to every
-  // later recording. One another recorder is making now (it holds the file's lock) stays.
+  // An empty recording file with no images beside it (an empty folder or none), which no recorder
+  // holds, is what a kill before the first frame leaves (or one before the folder was made): it holds
+  // nothing and goes, rather than refuse the folder to every later recording. One another recorder
+  // is making now holds its file's lock (RecordFile locks it before it appears) and stays.
   void removeEmptyRecording() const {
-    std::error_code ec;
-    const bool no_records = fs::is_regular_file(rawlog_file, ec) && fs::file_size(rawlog_file, ec) == 0;
-    const bool no_images = fs::is_directory(images_dir, ec) && fs::is_empty(images_dir, ec);
-    if (!no_records || !no_images || RecordFile::heldByAnother(rawlog_file)) return;
-    fs::remove(rawlog_file, ec);
-    fs::remove(images_dir, ec);
-    fs::remove(RawlogWriter::groundTruthPathFor(rawlog_file), ec);  // written with the first frame, before its record
+    RecordFile::removeIfAbandoned(rawlog_file, [&] {
+      std::error_code ec;
+      if (fs::exists(images_dir, ec) && !(fs::is_directory(images_dir, ec) && fs::is_empty(images_dir, ec))) return false;
+      fs::remove(images_dir, ec);
+      fs::remove(RawlogWriter::groundTruthPathFor(rawlog_file), ec);  // written with the first frame, before its record
+      return true;
+    });
   }
   void openInPlace(const std::string& path) {
     rawlog_file = path;

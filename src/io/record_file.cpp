@@ -2,8 +2,10 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
@@ -13,22 +15,59 @@
 
 namespace vofusion {
 
+namespace {
+// Where link(2) cannot make a file appear (FAT, some FUSE file systems), not whether it could here.
+bool noHardLinks(int err) { return err == EPERM || err == EOPNOTSUPP || err == ENOSYS; }
+}  // namespace
+
 RecordFile::RecordFile(const std::string& path) : path_(path), last_sync_(std::chrono::steady_clock::now()) {
-  fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd_ < 0) throw InputError(path, std::string("cannot create: ") + std::strerror(errno));
-  ::flock(fd_, LOCK_EX | LOCK_NB);  // held while recording: another recorder leaves this file alone
+  // Created under its own name and locked there first: created in place and locked after, another
+  // recorder could find it empty and unlocked in between, take it for an abandoned one and remove it.
+  static std::atomic<unsigned> made{0};
+  const std::string staged = path + "." + std::to_string(::getpid()) + "." + std::to_string(made++) + ".new";
+  lock_fd_ = ::open(staged.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (lock_fd_ < 0) throw InputError(path, std::string("cannot create: ") + std::strerror(errno));
+  ::flock(lock_fd_, LOCK_EX | LOCK_NB);  // no other process knows the file yet (a file system without locks: unheld)
+  const int linked = ::link(staged.c_str(), path.c_str()), err = errno;
+  ::unlink(staged.c_str());
+  if (linked != 0) {
+    ::close(lock_fd_);
+    lock_fd_ = -1;
+    if (!noHardLinks(err)) throw InputError(path, std::string("cannot create: ") + std::strerror(err));
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);  // unlocked for a moment
+    if (fd_ < 0) throw InputError(path, std::string("cannot create: ") + std::strerror(errno));
+    ::flock(fd_, LOCK_EX | LOCK_NB);
+    return;
+  }
+  // Written through its own name (what /proc and the sync calls name); the lock stays with the first open.
+  fd_ = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  struct stat locked, opened;
+  if (fd_ < 0 || ::fstat(fd_, &opened) != 0 || ::fstat(lock_fd_, &locked) != 0 || opened.st_ino != locked.st_ino ||
+      opened.st_dev != locked.st_dev) {
+    const std::string why = fd_ < 0 ? std::strerror(errno) : "replaced as it was made";
+    if (fd_ >= 0) ::close(fd_);
+    ::close(lock_fd_);
+    fd_ = lock_fd_ = -1;
+    throw InputError(path, "cannot create: " + why);
+  }
 }
 
-bool RecordFile::heldByAnother(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+bool RecordFile::removeIfAbandoned(const std::string& path, const std::function<bool()>& also_remove) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
   if (fd < 0) return false;
-  const bool held = ::flock(fd, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK;
-  ::close(fd);  // and with it the lock taken here, if it was free
-  return held;
+  struct stat opened, named;
+  // Locked here until the file is gone: a second process probing it meanwhile finds it held.
+  const bool abandoned = ::fstat(fd, &opened) == 0 && S_ISREG(opened.st_mode) && opened.st_size == 0 &&
+                         ::flock(fd, LOCK_EX | LOCK_NB) == 0 && ::stat(path.c_str(), &named) == 0 &&
+                         named.st_dev == opened.st_dev && named.st_ino == opened.st_ino && also_remove() &&
+                         ::unlink(path.c_str()) == 0;
+  ::close(fd);
+  return abandoned;
 }
 
 RecordFile::~RecordFile() {
   if (fd_ >= 0) ::close(fd_);  // an unfinished record is not appended: the file ends at a whole one
+  if (lock_fd_ >= 0) ::close(lock_fd_);
 }
 
 size_t RecordFile::Write(const void* bytes, size_t n) {

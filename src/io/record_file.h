@@ -9,6 +9,7 @@
 // at most once a second (fdatasync), and with their images when the recording ends (syncfs). Plain, not gzip: a
 // gzip stream is only readable up to its last flush, and a record without its images is small.
 #include <chrono>
+#include <functional>
 #include <string>
 
 #include <mrpt/io/CStream.h>
@@ -17,7 +18,9 @@ namespace vofusion {
 
 class RecordFile : public mrpt::io::CStream {
  public:
-  explicit RecordFile(const std::string& path);  // created (an existing file is an error); throws InputError
+  // Created (an existing file is an error; throws InputError) and locked (flock) while it lives: made
+  // under a name of its own, locked, then linked into place, so no other process ever sees it unlocked.
+  explicit RecordFile(const std::string& path);
   ~RecordFile() override;
 
   size_t Write(const void* bytes, size_t n) override;
@@ -34,8 +37,11 @@ class RecordFile : public mrpt::io::CStream {
   // sync() when the last was over a second ago. Apart from endRecord(): a record appended is in the
   // file, counted by its writer, even when the sync after it fails.
   void syncIfDue();
-  // Whether a recorder (RecordFile holds an flock on its file while it lives) is writing `path` now.
-  static bool heldByAnother(const std::string& path);
+  // Removes the recording at `path` if its recorder left it empty and is gone (a kill before the first
+  // frame): an empty regular file no process holds. `also_remove` runs first, while this holds the file's
+  // lock and the file is still in place (so no recorder can start there meanwhile), for what was made
+  // beside it; it returns false to keep everything. False: nothing was removed. Never throws.
+  static bool removeIfAbandoned(const std::string& path, const std::function<bool()>& also_remove);
   // The file and everything written beside it (the images its records name, the folders' entries):
   // syncfs(), one call for all of them.
   void syncWithItsFolder();
@@ -43,6 +49,7 @@ class RecordFile : public mrpt::io::CStream {
  private:
   std::string path_, record_;
   int fd_ = -1;
+  int lock_fd_ = -1;  // holds the flock (the file as made, before it was linked into place); -1 without one
   uint64_t written_ = 0;
   std::string torn_;  // why a partial record stays at the end: no record can follow it
   std::chrono::steady_clock::time_point last_sync_;
