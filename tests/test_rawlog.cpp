@@ -844,6 +844,14 @@ TEST(Rawlog, InPlaceRecordingReplacesOnlyAnAbandonedEmptyOne) {
   std::ofstream(path) << "x";
   EXPECT_THROW(RawlogWriter(path, o), InputError);
   EXPECT_EQ(fs::file_size(path), 1u);
+  // A name too long for a staged name beside it (the staged one past 255 characters) records as before.
+  const std::string longest = dir + "/" + std::string(239, 'r') + ".rawlog";
+  {
+    RawlogWriter w(longest, o);
+    w.write(frames[0]);
+    w.commit();
+  }
+  EXPECT_EQ(RawlogSource(longest, {}).size(), 1u);
 }
 
 TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {

@@ -18,6 +18,14 @@ namespace vofusion {
 namespace {
 // Where link(2) cannot make a file appear (FAT, some FUSE file systems), not whether it could here.
 bool noHardLinks(int err) { return err == EPERM || err == EOPNOTSUPP || err == ENOSYS; }
+
+// The old order, where no name of its own can be made or linked: created in place, unlocked for a moment.
+int createInPlace(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) throw InputError(path, std::string("cannot create: ") + std::strerror(errno));
+  ::flock(fd, LOCK_EX | LOCK_NB);
+  return fd;
+}
 }  // namespace
 
 RecordFile::RecordFile(const std::string& path) : path_(path), last_sync_(std::chrono::steady_clock::now()) {
@@ -26,6 +34,10 @@ RecordFile::RecordFile(const std::string& path) : path_(path), last_sync_(std::c
   static std::atomic<unsigned> made{0};
   const std::string staged = path + "." + std::to_string(::getpid()) + "." + std::to_string(made++) + ".new";
   lock_fd_ = ::open(staged.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (lock_fd_ < 0 && errno == ENAMETOOLONG) {  // the recording's name is near the longest a file's may be
+    fd_ = createInPlace(path);
+    return;
+  }
   if (lock_fd_ < 0) throw InputError(path, std::string("cannot create: ") + std::strerror(errno));
   ::flock(lock_fd_, LOCK_EX | LOCK_NB);  // no other process knows the file yet (a file system without locks: unheld)
   const int linked = ::link(staged.c_str(), path.c_str()), err = errno;
@@ -34,9 +46,7 @@ RecordFile::RecordFile(const std::string& path) : path_(path), last_sync_(std::c
     ::close(lock_fd_);
     lock_fd_ = -1;
     if (!noHardLinks(err)) throw InputError(path, std::string("cannot create: ") + std::strerror(err));
-    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);  // unlocked for a moment
-    if (fd_ < 0) throw InputError(path, std::string("cannot create: ") + std::strerror(errno));
-    ::flock(fd_, LOCK_EX | LOCK_NB);
+    fd_ = createInPlace(path);
     return;
   }
   // Written through its own name (what /proc and the sync calls name); the lock stays with the first open.
