@@ -6,7 +6,6 @@
 
 #include "support.h"
 #include "vofusion/core/cpu_features.h"
-#include "vofusion/core/point_maps.h"
 #include "vofusion/registration/preprocess.h"
 
 using namespace vofusion;
@@ -187,31 +186,4 @@ TEST(Pyramid, DownsampleAveragesOnlyConsistentReadings) {
   ASSERT_EQ(h.cols, 2);
   EXPECT_NEAR(h.at<float>(0, 0), (1.0f + 1.02f + 1.0f) / 3, 1e-6);  // 2.0 is another surface
   EXPECT_NEAR(h.at<float>(0, 1), 3.0f, 1e-6);                       // the only valid reading
-}
-
-// The pyramid from a frame's shared point maps halves them as downsampleDepth halves depth: a block
-// across a depth edge keeps its near surface. Averaged whole, it made a point half way between a desk
-// edge and the floor behind it, on neither surface, with a normal from both.
-TEST(Pyramid, SharedMapsKeepTheNearSurfaceOfABlockAcrossAnEdge) {
-  const int w = 4, h = 2;
-  cv::Mat depth(h, w, CV_32F);
-  FrameGeometry g{cv::Mat(h, w, CV_32FC3), cv::Mat(h, w, CV_32FC3)};
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const float z = x < 3 ? 1.0f : 3.0f;  // the edge inside the second block
-      depth.at<float>(y, x) = z;
-      g.points.at<cv::Vec3f>(y, x) = cv::Vec3f(0.01f * x * z, 0.01f * y * z, z);
-      g.normals.at<cv::Vec3f>(y, x) = x < 3 ? cv::Vec3f(0, 0, -1) : cv::Vec3f(0, -1, 0);
-    }
-  CameraIntrinsics cam;
-  cam.width = w, cam.height = h, cam.fx = cam.fy = 100, cam.cx = 1.5, cam.cy = 0.5;
-  PreprocessParams p;
-  p.levels = 1;
-  const std::vector<DepthLevel> levels = levelsFromGeometry(g, depth, cam, 2, p);
-  ASSERT_EQ(levels[0].vertices.cols, 2);
-  const cv::Vec3f across = levels[0].vertices.at<cv::Vec3f>(0, 1), normal = levels[0].normals.at<cv::Vec3f>(0, 1);
-  EXPECT_FLOAT_EQ(across[2], 1.0f);                   // the near surface's two points, not (1 + 1 + 3 + 3) / 4
-  EXPECT_FLOAT_EQ(across[2], levels[0].depth.at<float>(0, 1));  // as the level's depth has it
-  EXPECT_FLOAT_EQ(normal[2], -1.0f);
-  EXPECT_FLOAT_EQ(levels[0].vertices.at<cv::Vec3f>(0, 0)[2], 1.0f);  // a block on one surface: its mean
 }

@@ -231,46 +231,6 @@ std::vector<DepthLevel> preprocessDepth(const cv::Mat& depth, const CameraIntrin
   return levels;
 }
 
-namespace {
-// Camera-frame point and normal maps halved as downsampleDepth halves depth: of each 2x2 block, the
-// points within `band` in depth of its nearest are averaged and their normals summed and normalised.
-// Averaged whole, a block across an edge made a point between the two surfaces, on neither, and the
-// level's vertices disagreed with its depth.
-void downsampleCameraMaps(const cv::Mat& vertices, const cv::Mat& normals, float band, cv::Mat& vertices_out,
-                          cv::Mat& normals_out) {
-  const int w = vertices.cols / 2, h = vertices.rows / 2;
-  vertices_out.create(h, w, CV_32FC3);
-  normals_out.create(h, w, CV_32FC3);
-  parallelFor(0, h, [&](int y) {
-    cv::Vec3f* vo = vertices_out.ptr<cv::Vec3f>(y);
-    cv::Vec3f* no = normals_out.ptr<cv::Vec3f>(y);
-    for (int x = 0; x < w; ++x) {
-      const cv::Vec3f* v[4];
-      const cv::Vec3f* n[4];
-      float nearest = std::numeric_limits<float>::max();
-      for (int k = 0; k < 4; ++k) {
-        const int yy = 2 * y + (k >> 1), xx = 2 * x + (k & 1);
-        v[k] = &vertices.ptr<cv::Vec3f>(yy)[xx];
-        n[k] = &normals.ptr<cv::Vec3f>(yy)[xx];
-        if (std::isnan((*v[k])[0]) || std::isnan((*n[k])[0])) v[k] = nullptr;
-        else nearest = std::min(nearest, (*v[k])[2]);
-      }
-      cv::Vec3f vs(0, 0, 0), ns(0, 0, 0);
-      int count = 0;
-      for (int k = 0; k < 4; ++k)
-        if (v[k] && (*v[k])[2] - nearest <= band) vs += *v[k], ns += *n[k], ++count;
-      const float len = count ? std::sqrt(ns.dot(ns)) : 0.f;
-      if (count == 0 || !(len > 0.f)) {
-        vo[x] = no[x] = cv::Vec3f(kNaN, kNaN, kNaN);
-      } else {
-        vo[x] = vs * (1.f / count);
-        no[x] = ns * (1.f / len);
-      }
-    }
-  }, 1, vertices.total() >= kParallelMinPixels);
-}
-}  // namespace
-
 std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat& depth, const CameraIntrinsics& cam,
                                            int downsample, const PreprocessParams& p) {
   std::vector<DepthLevel> levels(std::max(1, p.levels));
@@ -281,7 +241,7 @@ std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat
   for (int k = 1; k < downsample; ++k) {
     clipped = downsampleDepth(clipped, p.sigma_depth);
     cv::Mat v, n;
-    downsampleCameraMaps(vertices, normals, 3.f * p.sigma_depth, v, n);
+    downsampleMaps(vertices, normals, v, n);
     vertices = v, normals = n;
     c = c.scaled(0.5);
   }
@@ -289,7 +249,7 @@ std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& g, const cv::Mat
     if (l > 0) {
       clipped = downsampleDepth(clipped, p.sigma_depth);
       cv::Mat v, n;
-      downsampleCameraMaps(levels[l - 1].vertices, levels[l - 1].normals, 3.f * p.sigma_depth, v, n);
+      downsampleMaps(levels[l - 1].vertices, levels[l - 1].normals, v, n);
       vertices = v, normals = n;
       c = c.scaled(0.5);
     } else {

@@ -44,8 +44,7 @@ std::vector<DepthLevel> preprocessDepth(const cv::Mat& depth, const CameraIntrin
                                         const PreprocessParams& p);
 // The pyramid from a frame's shared geometry (core/point_maps.h) instead of filtering again: the full
 // resolution point and normal maps averaged over 2x2 blocks `downsample - 1` times for level 0, then
-// once per level (as downsampleDepth: a block's points within 3 sigma_depth in depth of its nearest);
-// readings outside [min_depth, max_depth] are dropped. `depth` is the frame's raw depth
+// once per level; readings outside [min_depth, max_depth] are dropped. `depth` is the frame's raw depth
 // (the levels' depth images), cam its full-resolution camera.
 std::vector<DepthLevel> levelsFromGeometry(const FrameGeometry& geometry, const cv::Mat& depth, const CameraIntrinsics& cam,
                                            int downsample, const PreprocessParams& p);
