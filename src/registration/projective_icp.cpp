@@ -43,7 +43,8 @@ Accum accumulate(const DepthLevel& lv, const cv::Mat& mv, const cv::Mat& mn, con
 
 // Every valid point of a block, also across an occlusion edge (downsampleDepth keeps a band around
 // the nearest): keeping the band here was measured and did not carry over (loop seed 5 +3.7 mm, shake
-// seed 3 +2.1 mm; bench/results/2026-12-05-pyramid-block-band.md).
+// seed 3 +2.1 mm; bench/results/2026-12-05-pyramid-block-band.md); for the frame's pyramid alone it won
+// nowhere (rpy +0.21 mm, the rest within 0.03; 2026-12-07-fifteenth-session.md).
 void downsampleMaps(const cv::Mat& vertices, const cv::Mat& normals, cv::Mat& vertices_out, cv::Mat& normals_out) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const int w = vertices.cols / 2, h = vertices.rows / 2;
