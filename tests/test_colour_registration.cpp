@@ -158,6 +158,15 @@ TEST(ColourRegistration, RegisteredCamerasKeepTheirPixels) {
   const Frame same = frameFromObservation(*obs, "registered.rawlog");
   EXPECT_GT(agreement(same, rig), 0.99);
   EXPECT_GT(coverage(same, rig), 0.99);
+  // A driver that filled in the camera for these images but left MRPT's default size (640x480): the
+  // camera is the images' own, never scaled again (only an --intrinsics preset is fitted to the images).
+  const auto stale = observe(rig);
+  stale->cameraParamsIntensity.ncols = 640;
+  stale->cameraParamsIntensity.nrows = 480;
+  const CameraIntrinsics as_given = sensorObservationToFrame(*stale, "sensor").camera;
+  EXPECT_NEAR(as_given.fx, rig.depth_cam.fx, 1e-9);
+  EXPECT_NEAR(as_given.cx, rig.depth_cam.cx, 1e-9);
+  EXPECT_EQ(as_given.width, rig.depth_cam.width);
   // The same camera at twice the resolution (a registered 640x480 colour over 320x240 depth). A sensor
   // takes the colour camera's parameters for the depth too: scaled to the depth image (they were taken
   // at twice its focal length).

@@ -854,6 +854,25 @@ TEST(Rawlog, InPlaceRecordingReplacesOnlyAnAbandonedEmptyOne) {
   EXPECT_EQ(RawlogSource(longest, {}).size(), 1u);
 }
 
+// A staged name a killed recorder left (this process's pid again: pids are reused) is passed over, not
+// reported as "cannot create: File exists" for a recording that is not there. Run in a process of its
+// own (ctest), so the first names tried are the ones left.
+TEST(Rawlog, InPlaceRecordingPassesOverAStagedNameLeftBehind) {
+  const auto frames = simFrames(1);
+  const std::string dir = test::tempDir("rawlog_staged_left");
+  const std::string path = dir + "/grab.rawlog";
+  for (int n = 0; n < 10; ++n) std::ofstream(path + "." + std::to_string(::getpid()) + "." + std::to_string(n) + ".new").close();
+  RawlogWriterOptions o;
+  o.in_place = true;
+  {
+    RawlogWriter w(path, o);
+    w.write(frames[0]);
+    w.commit();
+  }
+  EXPECT_EQ(RawlogSource(path, {}).size(), 1u);
+  EXPECT_TRUE(fs::exists(path + "." + std::to_string(::getpid()) + ".0.new")) << "another's file was removed";
+}
+
 TEST(Rawlog, InPlaceRecordingEndingInsideItsLastRecordReadsToTheFrameBefore) {
   const auto frames = simFrames(3);
   const std::string dir = test::tempDir("rawlog_torn");

@@ -26,14 +26,27 @@ int createInPlace(const std::string& path) {
   ::flock(fd, LOCK_EX | LOCK_NB);
   return fd;
 }
+
+// An empty file beside `path` under a name of its own (set in `staged`), open for writing; -1 (errno)
+// when none can be made. A name a killed process with this pid left is passed over.
+int createStaged(const std::string& path, std::string& staged) {
+  static std::atomic<unsigned> made{0};
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    staged = path + "." + std::to_string(::getpid()) + "." + std::to_string(made++) + ".new";
+    const int fd = ::open(staged.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd >= 0 || errno != EEXIST) return fd;
+  }
+  return -1;
+}
+
+bool sameFile(const struct stat& a, const struct stat& b) { return a.st_dev == b.st_dev && a.st_ino == b.st_ino; }
 }  // namespace
 
 RecordFile::RecordFile(const std::string& path) : path_(path), last_sync_(std::chrono::steady_clock::now()) {
   // Created under its own name and locked there first: created in place and locked after, another
   // recorder could find it empty and unlocked in between, take it for an abandoned one and remove it.
-  static std::atomic<unsigned> made{0};
-  const std::string staged = path + "." + std::to_string(::getpid()) + "." + std::to_string(made++) + ".new";
-  lock_fd_ = ::open(staged.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  std::string staged;
+  lock_fd_ = createStaged(path, staged);
   if (lock_fd_ < 0 && errno == ENAMETOOLONG) {  // the recording's name is near the longest a file's may be
     fd_ = createInPlace(path);
     return;
@@ -51,15 +64,16 @@ RecordFile::RecordFile(const std::string& path) : path_(path), last_sync_(std::c
   }
   // Written through its own name (what /proc and the sync calls name); the lock stays with the first open.
   fd_ = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
-  struct stat locked, opened;
-  if (fd_ < 0 || ::fstat(fd_, &opened) != 0 || ::fstat(lock_fd_, &locked) != 0 || opened.st_ino != locked.st_ino ||
-      opened.st_dev != locked.st_dev) {
-    const std::string why = fd_ < 0 ? std::strerror(errno) : "replaced as it was made";
-    if (fd_ >= 0) ::close(fd_);
-    ::close(lock_fd_);
-    fd_ = lock_fd_ = -1;
-    throw InputError(path, "cannot create: " + why);
-  }
+  const std::string why = fd_ < 0 ? std::strerror(errno) : "replaced as it was made";
+  struct stat locked, opened, named;
+  const bool have_locked = ::fstat(lock_fd_, &locked) == 0;
+  if (fd_ >= 0 && have_locked && ::fstat(fd_, &opened) == 0 && sameFile(opened, locked)) return;
+  // Not left behind empty where it was linked (the next recorder would take it for an abandoned one).
+  if (have_locked && ::stat(path.c_str(), &named) == 0 && sameFile(named, locked)) ::unlink(path.c_str());
+  if (fd_ >= 0) ::close(fd_);
+  ::close(lock_fd_);
+  fd_ = lock_fd_ = -1;
+  throw InputError(path, "cannot create: " + why);
 }
 
 bool RecordFile::removeIfAbandoned(const std::string& path, const std::function<bool()>& also_remove) {
@@ -69,8 +83,7 @@ bool RecordFile::removeIfAbandoned(const std::string& path, const std::function<
   // Locked here until the file is gone: a second process probing it meanwhile finds it held.
   const bool abandoned = ::fstat(fd, &opened) == 0 && S_ISREG(opened.st_mode) && opened.st_size == 0 &&
                          ::flock(fd, LOCK_EX | LOCK_NB) == 0 && ::stat(path.c_str(), &named) == 0 &&
-                         named.st_dev == opened.st_dev && named.st_ino == opened.st_ino && also_remove() &&
-                         ::unlink(path.c_str()) == 0;
+                         sameFile(named, opened) && also_remove() && ::unlink(path.c_str()) == 0;
   ::close(fd);
   return abandoned;
 }

@@ -109,6 +109,10 @@ Frame sensorObservationToFrame(const mrpt::obs::CObservation3DRangeScan& obs, co
     // the depth image, axis by axis; taken as it was, the depth was tracked at twice its focal length.
     const int cols = static_cast<int>(obs.rangeImage.cols()), rows = static_cast<int>(obs.rangeImage.rows());
     if (!camera->writtenFor(cols, rows)) camera = camera->resizedTo(cols, rows);
+    // Now the camera of these images, whatever size the driver left in it (forImage scales only a
+    // stated size that is not the images').
+    camera->width = cols;
+    camera->height = rows;
   }
   try {
     return frameFromObservation(obs, origin, camera);
