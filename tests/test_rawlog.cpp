@@ -25,6 +25,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "support.h"
+#include "link_watch.h"
 #include "sync_watch.h"
 #include "vofusion/core/errors.h"
 #include "vofusion/io/rawlog.h"
@@ -852,6 +853,23 @@ TEST(Rawlog, InPlaceRecordingReplacesOnlyAnAbandonedEmptyOne) {
     w.commit();
   }
   EXPECT_EQ(RawlogSource(longest, {}).size(), 1u);
+}
+
+// An in-place recording is locked before it has its name: made under a name of its own, locked, then
+// linked into place. Made in place and locked after, a second recorder could find it empty and unlocked
+// between the two and remove it as a killed recorder's.
+TEST(Rawlog, AnInPlaceRecordingIsLockedBeforeItHasItsName) {
+  const std::string dir = test::tempDir("rawlog_locked_first");
+  const std::string path = dir + "/grab.rawlog";
+  RawlogWriterOptions o;
+  o.in_place = true;
+  test::LinkWatch watch;
+  RawlogWriter w(path, o);
+  const auto linked = watch.linked();
+  ASSERT_EQ(linked.size(), 1u) << "the recording got its name by no link";
+  EXPECT_EQ(linked[0].to, path);
+  EXPECT_TRUE(linked[0].locked) << "named before it was locked";
+  EXPECT_FALSE(fs::exists(linked[0].from)) << "its staged name was left";
 }
 
 // A staged name a killed recorder left (this process's pid again: pids are reused) is passed over, not
