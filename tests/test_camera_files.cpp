@@ -253,6 +253,14 @@ TEST(CameraFiles, TheFreiburgCameraIsTheFoldersOwn) {
   fs::current_path(before);
   EXPECT_DOUBLE_EQ(fx, 517.3);
   EXPECT_TRUE(named);
+  // A half-size copy of a TUM recording keeps its camera, halved (as --intrinsics fr1 would); another
+  // shape is still no guess.
+  const std::string half = oneFrameFolder(test::tempDir("cam_own_half") + "/rgbd_dataset_freiburg1_half", 320, 240, 5000);
+  TumFolderSource src(half, {});
+  EXPECT_DOUBLE_EQ(src.camera().fx, 517.3 / 2);
+  EXPECT_DOUBLE_EQ(src.camera().cx, (318.6 + 0.5) / 2 - 0.5);
+  const std::string wide = oneFrameFolder(test::tempDir("cam_own_wide") + "/rgbd_dataset_freiburg1_wide", 1280, 720, 5000);
+  EXPECT_NE(errorOf(wide).find("no intrinsics for its 1280x720 images"), std::string::npos) << errorOf(wide);
 }
 
 // Without a camera file, only a 640x480 recording gets a guess, and the guess is said; another size

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <tuple>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <optional>
 #include <filesystem>
@@ -551,10 +552,15 @@ CameraIntrinsics cameraOf(const std::string& folder, const SourceOptions& opts, 
                                    " images, this recording's are " + size);
   } else {
     camera = CameraIntrinsics::forTumFolder(folder);
-    if (image.width != 640 || image.height != 480)
+    const bool tum = CameraIntrinsics::namesAFreiburgCamera(folder);
+    // A TUM recording's own camera fits a copy of another size and the same shape, as its preset given
+    // by hand does; the ROS default is a guess only at the size it was made for.
+    if (tum && std::int64_t(image.width) * 3 == std::int64_t(image.height) * 4)
+      camera = camera.forImage(image.width, image.height, folder);
+    else if (image.width != 640 || image.height != 480)
       throw InputError(folder, "no intrinsics for its " + size + " images: give --intrinsics fx,fy,cx,cy or put an "
                                "intrinsics.txt ('fx fy cx cy') or camera.yaml beside rgb.txt");
-    if (!CameraIntrinsics::namesAFreiburgCamera(folder))
+    if (!tum)
       warn(folder, "no intrinsics.txt or camera.yaml and no --intrinsics: assuming fx = fy = 525, cx = 319.5, cy = 239.5");
   }
   camera.width = image.width;
