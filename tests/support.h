@@ -2,8 +2,13 @@
 // Shared helpers for the test suite.
 #include <cstddef>
 #include <cstdint>
+#include <chrono>
 #include <functional>
+#include <future>
+#include <memory>
+#include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -93,5 +98,16 @@ Frame deepCopy(const Frame& frame);
 // The pipeline's settings for quickSim's room: 1 cm voxels in a 2.56 m volume, the odometry on STAR
 // keypoints only (PCL's NARF is not the question).
 mrpt::config::CConfigFileMemory quickRoomConfig();
+
+// What fn returns, if it returns within `seconds`; nullopt if it does not (it runs on a thread of its
+// own, left behind when it blocks for good: a reader waiting for a FIFO's writer).
+template <class T>
+std::optional<T> resultWithin(double seconds, std::function<T()> fn) {
+  auto promise = std::make_shared<std::promise<T>>();
+  auto result = promise->get_future();
+  std::thread([promise, fn = std::move(fn)] { promise->set_value(fn()); }).detach();
+  if (result.wait_for(std::chrono::duration<double>(seconds)) != std::future_status::ready) return std::nullopt;
+  return result.get();
+}
 
 }  // namespace vofusion::test

@@ -371,15 +371,13 @@ TEST(PngDecode, AnImageOfAnotherSizeIsRefusedByItsHeader) {
 TEST(PngDecode, AFifoNamedAsAnImageIsNeverOpened) {
   const std::string fifo = test::tempDir("png_fifo") + "/colour.png";
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
-  auto probe = std::make_shared<std::promise<std::string>>();
-  auto result = probe->get_future();
-  std::thread([probe, fifo] {
+  const std::optional<std::string> said = test::resultWithin<std::string>(10, [fifo] {
     cv::Size stated;
     const bool nothing = readPlainPng(fifo, {}, &stated).empty() && stated.empty() && pngHeaderSize(fifo).empty() &&
                          imageFileDamage(fifo).empty() && readJpeg(fifo).header.empty();
-    probe->set_value(nothing ? whyUnreadable(fifo) : "a reader got something from it");
-  }).detach();
-  ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
-  EXPECT_EQ(result.get(), "not a regular file (a FIFO or a device?)");
+    return nothing ? whyUnreadable(fifo) : std::string("a reader got something from it");
+  });
+  ASSERT_TRUE(said.has_value()) << "blocked opening the FIFO";
+  EXPECT_EQ(*said, "not a regular file (a FIFO or a device?)");
   EXPECT_EQ(whyUnreadable(test::tempDir("png_fifo")), "a folder, not a file");
 }

@@ -5,8 +5,6 @@
 #include <cstring>
 #include <limits>
 #include <filesystem>
-#include <future>
-#include <memory>
 #include <tuple>
 #include <fstream>
 #include <thread>
@@ -239,20 +237,18 @@ TEST(RawlogThreads, RangeImageFileIsReadCheckedWhole) {
 TEST(RawlogThreads, AFifoNamedAsATextRangeImageIsNeverOpened) {
   const std::string fifo = test::tempDir("range_image_fifo") + "/t_DEPTH.txt";
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
-  auto probe = std::make_shared<std::promise<std::string>>();
-  auto result = probe->get_future();
-  std::thread([probe, fifo] {
+  const std::optional<std::string> said = test::resultWithin<std::string>(10, [fifo] {
     auto obs = observationFromFrame(markedFrame(5, 3));
     useExternalRangeImage(*obs, fifo);
     try {
       loadExternalRangeImage(*obs);
-      probe->set_value("no error");
+      return std::string("no error");
     } catch (const InputError& e) {
-      probe->set_value(e.what());
+      return std::string(e.what());
     }
-  }).detach();
-  ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
-  EXPECT_EQ(result.get(), fifo + ": cannot load external range image (not a regular file (a FIFO or a device?))");
+  });
+  ASSERT_TRUE(said.has_value()) << "blocked opening the FIFO";
+  EXPECT_EQ(*said, fifo + ": cannot load external range image (not a regular file (a FIFO or a device?))");
 }
 
 // What is not MRPT's gzip .bin of rows, cols and readings is left to MRPT's load(): a .txt

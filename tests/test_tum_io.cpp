@@ -234,11 +234,9 @@ TEST(TumFolder, TheImageSizeIsTheOneMostHeadersState) {
   // A FIFO listed as an image is passed over, never opened (opening it would wait for a writer).
   const std::string fifo = dir + "/fifo.png";
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
-  auto probe = std::make_shared<std::promise<std::optional<cv::Size>>>();
-  auto result = probe->get_future();
-  std::thread([probe, fifo, a = paths[2]] { probe->set_value(recordingImageSize({fifo, a})); }).detach();
-  ASSERT_EQ(result.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "blocked opening the FIFO";
-  EXPECT_EQ(result.get(), std::optional<cv::Size>(cv::Size(64, 48)));
+  const auto found = test::resultWithin<std::optional<cv::Size>>(10, [fifo, a = paths[2]] { return recordingImageSize({fifo, a}); });
+  ASSERT_TRUE(found.has_value()) << "blocked opening the FIFO";
+  EXPECT_EQ(*found, std::optional<cv::Size>(cv::Size(64, 48)));
 }
 
 // JPEGs vote by their headers too: the first readable JPEG was decoded and set the size, so one odd
