@@ -1,7 +1,6 @@
 #include "vofusion/core/camera.h"
 
 #include <cmath>
-#include <cstdint>
 #include <filesystem>
 #include <limits>
 #include <sstream>
@@ -55,7 +54,7 @@ CameraIntrinsics CameraIntrinsics::forImage(int cols, int rows, const std::strin
   if (width > 0 && height > 0 && (width != cols || height != rows)) {
     // Scaled unasked only where nothing else can be meant: a 640x480 preset given a 320x240 recording
     // would put its centre in the image's corner (ATE 0.146 m against 0.013 on a synthetic shake).
-    if (std::int64_t(cols) * height != std::int64_t(rows) * width)
+    if (!fitsShapeOf(cols, rows))
       throw InputError(origin, "a calibration of " + std::to_string(width) + "x" + std::to_string(height) +
                                    " images, this recording's are " + std::to_string(cols) + "x" + std::to_string(rows) +
                                    " (another shape): give its camera as fx,fy,cx,cy");

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <tuple>
 #include <cmath>
-#include <cstdint>
 #include <cstdio>
 #include <optional>
 #include <filesystem>
@@ -555,7 +554,7 @@ CameraIntrinsics cameraOf(const std::string& folder, const SourceOptions& opts, 
     const bool tum = CameraIntrinsics::namesAFreiburgCamera(folder);
     // A TUM recording's own camera fits a copy of another size and the same shape, as its preset given
     // by hand does; the ROS default is a guess only at the size it was made for.
-    if (tum && std::int64_t(image.width) * 3 == std::int64_t(image.height) * 4)
+    if (tum && camera.fitsShapeOf(image.width, image.height))
       camera = camera.forImage(image.width, image.height, folder);
     else if (image.width != 640 || image.height != 480)
       throw InputError(folder, "no intrinsics for its " + size + " images: give --intrinsics fx,fy,cx,cy or put an "

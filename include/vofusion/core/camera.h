@@ -1,6 +1,7 @@
 #pragma once
 // Pinhole intrinsics of the (registered) depth + colour camera.
 #include <array>
+#include <cstdint>
 #include <string>
 
 #include <mrpt/img/TCamera.h>
@@ -22,6 +23,10 @@ struct CameraIntrinsics {
   // recording keeps its camera, halved), refused when it is not; no stated size is the recording's.
   // Throws InputError(origin, ...).
   CameraIntrinsics forImage(int cols, int rows, const std::string& origin) const;
+  // Whether the size these state (none counts as any) has the shape of cols x rows: forImage fits them.
+  bool fitsShapeOf(int cols, int rows) const {
+    return width <= 0 || height <= 0 || std::int64_t(cols) * height == std::int64_t(rows) * width;
+  }
   // The TUM preset matching the folder's own name containing "freiburg1/2/3", else the ROS default.
   static CameraIntrinsics forTumFolder(const std::string& folder);
   // Whether the folder's own name (not a parent's: /data/freiburg1_runs/my_take is no TUM recording)
