@@ -110,7 +110,19 @@ struct OdometryResult {
   // frame better (unset when not compared), and the recording's votes so far (ColourTimeEvidence).
   bool colour_time_capture = false;
   std::optional<bool> capture_fitted_better;
+  // The frame's colour camera in its depth camera, once the motion after the frame is known too
+  // (refitPrevious; Reconstruction::push sets it): the tracker places the colour image there.
+  std::optional<Eigen::Isometry3d> colour_motion;
   int colour_time_votes = 0, colour_time_capture_votes = 0;
+};
+
+// The previous frame's motion fitted again once the frame after it has been (RgbdOdometry::refitPrevious).
+struct OdometryRefit {
+  mrpt::poses::CPose3D motion;             // as OdometryResult::motion, relative to the same reference
+  mrpt::math::CMatrixDouble66 covariance;  // of motion
+  Points3 inlier_current, inlier_reference;  // the same inliers, the current ones placed again
+  double rms_error = 0.0;                  // m, over them
+  Eigen::Isometry3d colour_motion;         // the frame's colour camera in its depth camera, as placed
 };
 
 class RgbdOdometry {
@@ -125,6 +137,14 @@ class RgbdOdometry {
   // The frames (Frame::index) a later result's reference_index may name (the reference, the last frame
   // with a pose, the last failed frame), with the older references matched beside them. However old.
   std::vector<std::size_t> heldFrames() const;
+  // Capture mode: a frame's colour image taken after its depth has its keypoints placed at a velocity
+  // extrapolated from the motion before it, until the next frame's motion is known. Called after
+  // process(next), the motion process() returned for frame `index` (the frame before next), fitted again
+  // on its inliers with them placed at that frame's velocity interpolated between both motions: the
+  // velocity its keypoints are placed at as next's reference, so the two motions agree on where they
+  // were. nullopt when there is nothing to refit (another mode, no colour offsets, a failed fit, next
+  // not matched against it, keyframes, the paper's fit).
+  std::optional<OdometryRefit> refitPrevious(std::size_t index) const;
   void reset();
   // Checkpoints: what the next frame is matched against (the reference, the older frames, the last
   // failed frame, their velocities) and the colour-time votes. An odometry with the same parameters
