@@ -234,14 +234,15 @@ struct LiveCheckpoints {
   double seconds_writing = 0.0;
   std::string error;  // why one could not be written: no more are tried
 
-  void maybeWrite(const RunSession& run) {
+  void maybeWrite(RunSession& run) {
     const auto now = std::chrono::steady_clock::now();
     if (every <= 0 || !error.empty() || std::chrono::duration<double>(now - last).count() < every) return;
     write(run, now);
   }
   // After the session's last frame, before its end phase (the map fused again, the meshing): a crash
   // there is resumed at the end phase instead of tracking again every frame since the last one.
-  void writeLast(const RunSession& run) {
+  void writeLast(RunSession& run) {
+    run.flush();  // the last frame taken: tracked without a next one
     if (every <= 0 || !error.empty() || run.reconstruction().framesProcessed() <= frames_at_last) return;
     try {
       write(run, std::chrono::steady_clock::now());
@@ -252,7 +253,7 @@ struct LiveCheckpoints {
   }
 
  private:
-  void write(const RunSession& run, std::chrono::steady_clock::time_point now) {
+  void write(RunSession& run, std::chrono::steady_clock::time_point now) {
     try {
       // The frames it covers were recorded before they came here: on the disk first (records and
       // images), or after a power cut the checkpoint would name frames the recording lost.
@@ -284,10 +285,10 @@ struct LiveConsumer {
   void operator()(const Frame& frame) {
     if (args.work_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(args.work_ms));
     if (!run) return;
-    const FrameReport r = run->process(frame);
+    const std::optional<FrameReport> r = run->process(frame);  // the frame before this one
     try {
       checkpoints.maybeWrite(*run);
-      if (viewer) show(frame, r);
+      if (viewer && r) show(frame, *r);
     } catch (const std::exception& e) {
       throw FrameDoneError(oneLineMessage(e));  // the frame is in the reconstruction (and summary.json): processed
     }
@@ -312,6 +313,7 @@ struct LiveConsumer {
 // loops moved the poses and the run recorded.
 void finishLive(RunSession& run, const LiveStats& stats, const GrabPlan& plan, const GrabSource& source,
                 const std::string& out, std::size_t recorded, const LiveCheckpoints& checkpoints) {
+  run.flush();  // the last frame taken: tracked without a next one
   if (run.reconstruction().framesProcessed() == 0) return;
   RunInfo info;
   info.app = "vofusion-grab";

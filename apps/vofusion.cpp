@@ -291,6 +291,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
     progress.update(std::max(loop.done, loop.read), status);
   }
+  run.flush();  // the last frame read: tracked without a next one
   const bool built = loop.interrupted() && loop.done > 0;
   const double frame_loop_seconds = progress.elapsedSeconds();  // the last checkpoint's writing is no frame's
   // --resume goes on from here: after a stop, and after the last frame, where the loop-closed

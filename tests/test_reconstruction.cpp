@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <sstream>
 
 #include <mrpt/config/CConfigFileMemory.h>
 #include <opencv2/imgproc.hpp>
@@ -266,31 +267,86 @@ TEST(Reconstruction, ColourOfAnotherPixelTypeIsTrackedAndFusedAsEightBitBgr) {
 // its held frames, and read the current frame's depths at the reference's pixels.
 TEST(Reconstruction, ARefilledFrameGivesTheFreshFramesPoses) {
   const sim::SyntheticSequence seq(test::quickSim("room", 12, "shake"));  // colour up to 15 ms off the depth
-  const auto run = [&](bool refill, bool overlap) {
+  // late: push() (the held frame's images read after the caller refilled its buffer), else process().
+  const auto run = [&](bool refill, bool overlap, bool late) {
     mrpt::config::CConfigFileMemory cfg = test::quickRoomConfig();
     cfg.write("kinfu", "overlap_fusion", overlap);
     Reconstruction rec(cfg, TrackingMode::Joint);
+    const auto give = [&](const Frame& f) { late ? void(rec.push(f)) : void(rec.process(f)); };
     Frame frame;
     for (std::size_t i = 0; i < seq.size(); ++i) {
       const Frame f = seq.render(i);
       if (!refill) {
-        rec.process(f);
+        give(f);
         continue;
       }
       if (frame.depth.empty()) frame = test::deepCopy(f);
       f.depth.copyTo(frame.depth);
       f.rgb.copyTo(frame.rgb);
       frame.index = f.index, frame.timestamp = f.timestamp, frame.colour_offset = f.colour_offset;
-      rec.process(frame);
+      give(frame);
     }
+    rec.flush();
     return rec.trajectory();
   };
-  for (const bool overlap : {true, false}) {
-    const Trajectory fresh = run(false, overlap), refilled = run(true, overlap);
-    ASSERT_EQ(refilled.size(), fresh.size());
-    for (std::size_t i = 0; i < fresh.size(); ++i)
-      EXPECT_EQ(refilled[i].pose.asVectorVal(), fresh[i].pose.asVectorVal()) << "overlap " << overlap << " frame " << i;
+  for (const bool overlap : {true, false})
+    for (const bool late : {false, true}) {
+      const Trajectory fresh = run(false, overlap, late), refilled = run(true, overlap, late);
+      ASSERT_EQ(refilled.size(), fresh.size());
+      for (std::size_t i = 0; i < fresh.size(); ++i)
+        EXPECT_EQ(refilled[i].pose.asVectorVal(), fresh[i].pose.asVectorVal())
+            << "overlap " << overlap << " late " << late << " frame " << i;
+    }
+}
+
+// push() is the frame loop one frame late: each frame's report comes when the next frame is pushed, the
+// last one's from flush() (or finish(), which tracks it too). Without capture mode's refit (interval
+// mode) nothing else changes: the poses are process()'s, bit for bit.
+TEST(Reconstruction, PushReportsEachFrameWhenTheNextIsPushed) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 8, "shake"));
+  mrpt::config::CConfigFileMemory cfg = test::quickRoomConfig();
+  cfg.write("odometry", "colour_time_velocity", "interval");
+  Reconstruction at_once(cfg, TrackingMode::Joint), late(cfg, TrackingMode::Joint);
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const Frame f = seq.render(i);
+    at_once.process(f);
+    const std::optional<FrameReport> r = late.push(f);
+    ASSERT_EQ(r.has_value(), i > 0) << "frame " << i;
+    if (r) EXPECT_EQ(r->index, seq.render(i - 1).index);
+    EXPECT_EQ(late.framesProcessed(), i);
+    std::ostringstream state;
+    EXPECT_THROW(late.saveState(state), std::logic_error) << "a checkpoint with a frame held";
   }
+  EXPECT_THROW(late.process(seq.render(0)), std::logic_error);
+  const std::optional<FrameReport> last = late.flush();
+  ASSERT_TRUE(last);
+  EXPECT_EQ(last->index, seq.render(seq.size() - 1).index);
+  EXPECT_FALSE(late.flush());
+  ASSERT_EQ(late.trajectory().size(), at_once.trajectory().size());
+  for (std::size_t i = 0; i < seq.size(); ++i)
+    EXPECT_EQ(late.trajectory()[i].pose.asVectorVal(), at_once.trajectory()[i].pose.asVectorVal()) << "frame " << i;
+
+  Reconstruction ended(cfg, TrackingMode::Joint);
+  for (std::size_t i = 0; i < 3; ++i) ended.push(seq.render(i));
+  ended.finish();
+  EXPECT_EQ(ended.trajectory().size(), 3u) << "finish() tracks the held frame";
+}
+
+// In capture mode a frame held back is fitted again with the motion after it: its colour camera is
+// placed from both sides (the tracker's colour pose too). process() has no next motion to refit with.
+TEST(Reconstruction, AHeldFrameIsRefittedInCaptureMode) {
+  const sim::SyntheticSequence seq(test::quickSim("room", 8, "shake"));
+  mrpt::config::CConfigFileMemory cfg = test::quickRoomConfig();
+  cfg.write("odometry", "colour_time_velocity", "capture");
+  Reconstruction at_once(cfg, TrackingMode::Joint), late(cfg, TrackingMode::Joint);
+  int refitted = 0;
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const Frame f = seq.render(i);
+    EXPECT_FALSE(at_once.process(f).odometry.colour_motion) << "frame " << i;
+    if (const std::optional<FrameReport> r = late.push(f); r && r->odometry.colour_motion) ++refitted;
+  }
+  EXPECT_FALSE(late.flush()->odometry.colour_motion) << "the last frame has no next one";
+  EXPECT_GE(refitted, int(seq.size()) - 3);  // not the first frame, nor the one it starts from
 }
 
 // A frame whose every reading is NaN has no depth, as one of zeros: lost with the pose held, in every

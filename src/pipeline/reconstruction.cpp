@@ -32,6 +32,7 @@ fusion::MotionPrior motionPriorOf(const OdometryResult& o) {
   p.covariance = o.covariance.asEigen();
   p.current_points = o.inlier_current;
   p.reference_points = o.inlier_reference;
+  p.colour_motion = o.colour_motion;
   return p;
 }
 }  // namespace
@@ -107,6 +108,34 @@ struct Reconstruction::Impl {
   bool fusing_pending = false;
   FusionResult fusing_result;
   Frame fusing_frame;
+  // push()'s frame: its odometry has run, and it is tracked once the next frame's has (one frame late),
+  // or by flush(). odometry_held: the frames its odometry result may name (RgbdOdometry::heldFrames then).
+  struct Held {
+    Frame frame;
+    FrameReport report;
+    std::vector<std::size_t> odometry_held;
+    double odometry_seconds = 0.0;
+  };
+  std::optional<Held> held;
+  // The held frame's motion fitted again now that the next frame's odometry has run (capture mode's
+  // refit: RgbdOdometry::refitPrevious).
+  void refitHeld() {
+    OdometryResult& o = held->report.odometry;
+    if (!odometry || !o.success) return;
+    const auto t0 = std::chrono::steady_clock::now();
+    std::optional<OdometryRefit> refit = odometry->refitPrevious(held->frame.index);
+    if (!refit) return;
+    o.motion = refit->motion;
+    o.covariance = refit->covariance;
+    o.inlier_current = std::move(refit->inlier_current);
+    o.inlier_reference = std::move(refit->inlier_reference);
+    o.rms_error = refit->rms_error;
+    o.colour_motion = refit->colour_motion;
+    const double seconds = secondsSince(t0);
+    held->report.times.add("odometry_refit", seconds);
+    held->odometry_seconds += seconds;
+  }
+  FrameReport trackHeld();
 
   TrackedMap& map() const {
     if (!kinfu) throw std::logic_error("Reconstruction: the map was released (releaseMap)");
@@ -244,32 +273,66 @@ Reconstruction::Reconstruction(const mrpt::config::CConfigFileBase& cfg, Trackin
 
 Reconstruction::~Reconstruction() = default;
 
-FrameReport Reconstruction::process(const Frame& in) {
+std::optional<FrameReport> Reconstruction::push(const Frame& in) {
   Impl& m = *impl_;
-  const Frame frame = ownedCopy(in);
-  m.checkNext(frame);
-  const auto start = std::chrono::steady_clock::now();
-  FrameReport r;
-  r.index = frame.index;
-  r.timestamp = frame.timestamp;
+  Impl::Held next{ownedCopy(in), {}, {}, 0.0};
+  m.checkNext(next.frame);
+  FrameReport& r = next.report;
+  r.index = next.frame.index;
+  r.timestamp = next.frame.timestamp;
   if (m.odometry) {
-    ScopedStageTimer t(r.times, "odometry");
-    r.odometry = m.runOdometry(frame);
+    const auto t0 = std::chrono::steady_clock::now();
+    {
+      ScopedStageTimer t(r.times, "odometry");
+      r.odometry = m.runOdometry(next.frame);
+    }
+    next.odometry_held = m.odometry->heldFrames();
+    next.odometry_seconds = secondsSince(t0);
   }
-  m.waitFusion();
+  std::optional<FrameReport> done;
+  if (m.held) {
+    m.refitHeld();
+    done = m.trackHeld();
+  }
+  m.held = std::move(next);
+  return done;
+}
+
+std::optional<FrameReport> Reconstruction::flush() {
+  if (!impl_->held) return std::nullopt;
+  return impl_->trackHeld();
+}
+
+FrameReport Reconstruction::process(const Frame& frame) {
+  if (impl_->held) throw std::logic_error("Reconstruction::process while push() holds a frame: flush() it first");
+  push(frame);
+  return *flush();
+}
+
+FrameReport Reconstruction::Impl::trackHeld() {
+  Held h = std::move(*held);
+  held.reset();
+  const auto start = std::chrono::steady_clock::now();
+  FrameReport& r = h.report;
+  waitFusion();
   // The frames a later prior may name keep their poses, however old: the odometry matches against its
   // last good frame after any number of failed ones (ICP tracked a covered lens on; past 32 frames the
-  // match that came back had no reference pose, and the frame was guessed).
-  if (m.odometry) m.kinfu->holdFrames(m.odometry->heldFrames());
-  const FusionResult f = m.trackOrRelocalise(frame, r.odometry);
-  r.times.merge(f.times);
-  m.record(frame, f, r);
-  if (m.loops) {
-    ScopedStageTimer t(r.times, "keyframes");
-    m.loops->addFrame(frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, f.icp_rms, r.odometry.features);
+  // match that came back had no reference pose, and the frame was guessed). The held frame's own result
+  // names one of those its odometry held then; the next frame's, one of those held now.
+  if (odometry) {
+    std::vector<std::size_t> frames = odometry->heldFrames();
+    frames.insert(frames.end(), h.odometry_held.begin(), h.odometry_held.end());
+    kinfu->holdFrames(std::move(frames));
   }
-  r.times.add("total", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-  m.times.merge(r.times);
+  const FusionResult f = trackOrRelocalise(h.frame, r.odometry);
+  r.times.merge(f.times);
+  record(h.frame, f, r);
+  if (loops) {
+    ScopedStageTimer t(r.times, "keyframes");
+    loops->addFrame(h.frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, f.icp_rms, r.odometry.features);
+  }
+  r.times.add("total", h.odometry_seconds + secondsSince(start));
+  times.merge(r.times);
   return r;
 }
 
@@ -289,6 +352,7 @@ const PathSmoothing& Reconstruction::pathSmoothing() const { return impl_->smoot
 void Reconstruction::finish() {
   Impl& m = *impl_;
   if (m.finished) return;
+  if (m.held) m.trackHeld();
   m.waitFusion();
   // The frames fused into the map are the measurements; lost, predicted and unfused frames end a run.
   m.smoothed = smoothPath(m.trajectory, m.fused, &m.smoothing);
@@ -397,6 +461,8 @@ void Reconstruction::resumeVolume(const std::string& path) {
 void Reconstruction::saveState(std::ostream& os) const {
   Impl& m = *impl_;
   if (m.finished) throw std::logic_error("Reconstruction::saveState after finish()");
+  // Between frames: a held frame (its odometry run, its tracking not) is no state a checkpoint keeps.
+  if (m.held) throw std::logic_error("Reconstruction::saveState while push() holds a frame: flush() it first");
   m.waitFusion();
   {
     auto a = state::archiveOf(os);
@@ -427,7 +493,7 @@ void Reconstruction::saveState(std::ostream& os) const {
 
 void Reconstruction::loadState(std::istream& is) {
   Impl& m = *impl_;
-  if (m.frames > 0 || m.finished) throw std::logic_error("Reconstruction::loadState after the first frame");
+  if (m.frames > 0 || m.held || m.finished) throw std::logic_error("Reconstruction::loadState after the first frame");
   {
     auto a = state::archiveOf(is);
     state::expectTag(a, "reconstruction");

@@ -131,15 +131,31 @@ RunSession::~RunSession() {
   if (premesher_) premesher_->stop();  // no more reads of the map rec_ is about to free
 }
 
-FrameReport RunSession::process(const Frame& frame) {
+std::optional<FrameReport> RunSession::process(const Frame& frame) {
   if (replaying()) throw std::logic_error("RunSession::process before the checkpoint's frames were replayed");
-  const FrameReport report = rec_.process(frame);
-  recorder_.add(frame, report);
-  reports_.push_back(saved(report));
-  return report;
+  std::optional<FrameReport> done = rec_.push(frame);
+  if (done) record(*held_, *done);
+  // The caller may refill its frame's buffers for the next one (the apps reuse one Frame).
+  held_ = frame;
+  held_->depth = frame.depth.clone();
+  held_->rgb = frame.rgb.clone();
+  return done;
 }
 
-void RunSession::saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const {
+std::optional<FrameReport> RunSession::flush() {
+  std::optional<FrameReport> done = rec_.flush();
+  if (done) record(*held_, *done);
+  held_.reset();
+  return done;
+}
+
+void RunSession::record(const Frame& frame, const FrameReport& report) {
+  recorder_.add(frame, report);
+  reports_.push_back(saved(report));
+}
+
+void RunSession::saveCheckpoint(const std::string& path, const std::string& origin, double seconds) {
+  flush();  // a checkpoint is taken between tracked frames
   AtomicPath out(path);
   std::ofstream os(out.tmp(), std::ios::binary);
   try {
@@ -359,6 +375,7 @@ void RunSession::refuse(RunInfo& info, const Reopen& reopen) {
 
 nlohmann::json RunSession::finish(RunInfo info, const Reopen& reopen, const std::optional<std::string>& save_volume) {
   if (replaying()) throw std::logic_error("RunSession::finish before the checkpoint's frames were replayed");
+  flush();
   rec_.finish();
   if (premesher_) premesher_->stop();  // before the map is fused again or released
   if (write_mesh_ || save_volume) refuse(info, reopen);  // the map is not used otherwise

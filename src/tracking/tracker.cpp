@@ -32,8 +32,11 @@ struct Tracker::Impl {
   Impl(const TrackerParams& p, TrackingMode m, const Eigen::Isometry3d& initial) : params(p), mode(m), history(initial) {}
 
   // Where the colour camera was relative to the depth camera (mode joint's photometric term).
-  Eigen::Isometry3d colourMotion(double offset) const {
-    return params.joint_photometric_colour_time ? history.motionOver(offset) : Eigen::Isometry3d::Identity();
+  // The estimator's, when it knew the motion after the frame too; else the last motion's velocity.
+  Eigen::Isometry3d colourMotion(const Frame& frame, const MotionPrior* prior) const {
+    if (!params.joint_photometric_colour_time) return Eigen::Isometry3d::Identity();
+    if (prior && prior->colour_motion) return *prior->colour_motion;
+    return history.motionOver(frame.colour_offset);
   }
   std::vector<DepthLevel> trackingLevels(const Frame& frame, const FrameGeometry* geometry, const CameraIntrinsics& cam,
                                          CameraIntrinsics& track_cam) const;
@@ -51,7 +54,7 @@ struct Tracker::Impl {
   // Why a first frame with this depth (the tracking level's) cannot start the map; None when it can.
   Rejection cannotStartMap(const cv::Mat& depth, const ModelSource& map) const;
   void count(const FusionResult& res, bool had_model);
-  void keepForFusion(const Frame& frame, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
+  void keepForFusion(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
                      const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity, const FusionResult& res);
 };
 
@@ -149,7 +152,7 @@ Eigen::Isometry3d Tracker::Impl::trackIcp(const Frame& frame, const MotionPrior*
     if (s.have_prior) terms.weak_anchor = &s.prior_pose;
   }
   PhotometricTerms photometric = tracking::photometricTerms(P, model, intensity, levels);
-  photometric.colour_motion = colourMotion(frame.colour_offset);
+  photometric.colour_motion = colourMotion(frame, prior);
   photometric.rotation_only = P.joint_photometric_rotation_only;
   if (!photometric.levels.empty()) terms.photometric = &photometric;
   const IcpResult icp = projectiveIcp(levels, model.vertices, model.normals, model.pose, initial, ip, terms);
@@ -210,7 +213,7 @@ void Tracker::Impl::count(const FusionResult& res, bool had_model) {
   stats.times.merge(res.times);
 }
 
-void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
+void Tracker::Impl::keepForFusion(const Frame& frame, const MotionPrior* prior, const std::vector<DepthLevel>& levels, const CameraIntrinsics& cam,
                                   const CameraIntrinsics& track_cam, std::vector<IntensityLevel> intensity,
                                   const FusionResult& res) {
   FrameToFuse f;
@@ -227,7 +230,7 @@ void Tracker::Impl::keepForFusion(const Frame& frame, const std::vector<DepthLev
   f.pose = history.pose();
   f.intensity = std::move(intensity);
   for (const DepthLevel& l : levels) f.level_cams.push_back(l.camera);
-  f.colour_pose = history.pose() * colourMotion(frame.colour_offset);  // at the velocity this frame's motion updated
+  f.colour_pose = history.pose() * colourMotion(frame, prior);  // the prior's, else at the velocity this frame's motion updated
   pending = std::move(f);
 }
 
@@ -309,7 +312,7 @@ FusionResult Tracker::track(const Frame& frame, const MotionPrior* prior, const 
   res.pose = toMrpt(s.history.pose());
   s.placed.reset();
   s.count(res, had_model);
-  if (res.tracked) s.keepForFusion(frame, levels, cam, track_cam, std::move(intensity), res);
+  if (res.tracked) s.keepForFusion(frame, prior, levels, cam, track_cam, std::move(intensity), res);
   return res;
 }
 

@@ -38,8 +38,12 @@ class RunSession {
 
   Reconstruction& reconstruction() { return rec_; }
   const Reconstruction& reconstruction() const { return rec_; }
-  // The frame through the reconstruction, then queued for poses.rawlog.
-  FrameReport process(const Frame& frame);
+  // The frame into the reconstruction (Reconstruction::push: one frame late); the frame before it, now
+  // tracked, queued for poses.rawlog and returned (none for the first).
+  std::optional<FrameReport> process(const Frame& frame);
+  // The frame process() holds, tracked and queued now (none if none): the end of the frames. finish()
+  // and saveCheckpoint() call it.
+  std::optional<FrameReport> flush();
   // The end of the run, once: loop closure finished, the map fused again at the corrected poses when
   // loops moved them (from reopen(); without one the mesh keeps the tracked poses),
   // saved to save_volume when given (put in place after the other outputs: a run whose outputs fail
@@ -57,7 +61,9 @@ class RunSession {
   };
   // Between frames: the run so far (every stage's state and each frame's report for the outputs) to
   // `path`, atomically: an earlier checkpoint there is replaced only by a whole new one.
-  void saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const;
+  // The frame process() holds is tracked first (flush()): a run that checkpoints tracks that one frame
+  // without the next one's refit, which the run it resumes goes on from, so both go on alike.
+  void saveCheckpoint(const std::string& path, const std::string& origin, double seconds);
   // The recording (its absolute path), the tracking mode and the settings that decide what is computed
   // from it: [odometry] (and the detectors' sections), [kinfu] and [loop] as the stages read them,
   // defaults included, the scratch folder left out. vofusion-grab --live and vofusion reading its
@@ -89,6 +95,7 @@ class RunSession {
 
  private:
   void refuse(RunInfo& info, const Reopen& reopen);
+  void record(const Frame& frame, const FrameReport& report);  // a tracked frame into the outputs' queue
   // The map into map's temporary, on the disk; an InputError names map's path.
   void saveMapTo(AtomicPath& map) const;
 
@@ -99,6 +106,7 @@ class RunSession {
   RunRecorder recorder_;
   bool write_mesh_;  // the map is used at all after the frame loop
   std::vector<SavedReport> reports_;
+  std::optional<Frame> held_;  // the frame rec_ holds (Reconstruction::push), with its own images
   std::size_t resumed_frames_ = 0, replayed_ = 0;
   std::string resumed_from_;
   std::exception_ptr map_failure_;

@@ -56,7 +56,7 @@ class MotionHistory {
   // A new start at T (a resumed map): no recent frames, no motion.
   void restart(const Eigen::Isometry3d& T);
   // Checkpoints: all of it but the held frames, which the caller hands over again before each frame
-  // (Reconstruction::process calls holdFrames before tracking).
+  // (Reconstruction calls holdFrames before it tracks a frame).
   void saveState(state::Archive& a) const;
   void loadState(state::Archive& a);
 
