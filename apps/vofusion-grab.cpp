@@ -234,17 +234,19 @@ struct LiveCheckpoints {
   double seconds_writing = 0.0;
   std::string error;  // why one could not be written: no more are tried
 
-  void maybeWrite(RunSession& run) {
+  void maybeWrite(const RunSession& run) {
     const auto now = std::chrono::steady_clock::now();
     if (every <= 0 || !error.empty() || std::chrono::duration<double>(now - last).count() < every) return;
+    if (run.reconstruction().framesProcessed() <= frames_at_last) return;  // nothing tracked since (one is held back)
     write(run, now);
   }
   // After the session's last frame, before its end phase (the map fused again, the meshing): a crash
   // there is resumed at the end phase instead of tracking again every frame since the last one.
   void writeLast(RunSession& run) {
-    run.flush();  // the last frame taken: tracked without a next one
-    if (every <= 0 || !error.empty() || run.reconstruction().framesProcessed() <= frames_at_last) return;
+    if (every <= 0 || !error.empty()) return;
     try {
+      run.flush();  // the last frame taken: tracked without a next one, so that the checkpoint holds it
+      if (run.reconstruction().framesProcessed() <= frames_at_last) return;
       write(run, std::chrono::steady_clock::now());
     } catch (const std::exception& e) {  // a spare: the outputs come whatever it meets
       error = oneLineMessage(e);
@@ -253,7 +255,7 @@ struct LiveCheckpoints {
   }
 
  private:
-  void write(RunSession& run, std::chrono::steady_clock::time_point now) {
+  void write(const RunSession& run, std::chrono::steady_clock::time_point now) {
     try {
       // The frames it covers were recorded before they came here: on the disk first (records and
       // images), or after a power cut the checkpoint would name frames the recording lost.
@@ -290,7 +292,7 @@ struct LiveConsumer {
       checkpoints.maybeWrite(*run);
       if (viewer && r) show(frame, *r);
     } catch (const std::exception& e) {
-      throw FrameDoneError(oneLineMessage(e));  // the frame is in the reconstruction (and summary.json): processed
+      throw FrameDoneError(oneLineMessage(e));  // the frame is in the reconstruction (held, tracked next): processed
     }
   }
 

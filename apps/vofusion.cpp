@@ -239,10 +239,13 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   progress.startAt(std::max(loop.done, loop.read));
   const double before = loop.seconds;
   double last_checkpoint = 0.0;
-  // Frames done at the last checkpoint: a resumed run's checkpoint holds those it went on from.
-  std::size_t checkpointed_at = loop.done > 0 ? loop.done : std::size_t(-1);
+  // Frames tracked at the last checkpoint (the frame held back is not in one): a resumed run's
+  // checkpoint holds those it went on from.
+  std::size_t checkpointed_at = loop.done > 0 ? rec.framesProcessed() : std::size_t(-1);
   const auto checkpoint = [&] {
-    if (!loop.checkpoint_error.empty()) return;
+    // Not before the first tracked frame, nor twice over the same ones (the frame held back is in none).
+    const std::size_t tracked = rec.framesProcessed();
+    if (!loop.checkpoint_error.empty() || tracked == 0 || tracked == checkpointed_at) return;
     const double start = progress.elapsedSeconds();
     try {
       run.saveCheckpoint(plan.checkpoint_path, plan.origin, before + start);
@@ -253,7 +256,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
       printWarning(loop.checkpoint_error + "; no more checkpoints this run, which goes on without them");
       return;
     }
-    checkpointed_at = loop.done;
+    checkpointed_at = rec.framesProcessed();
     last_checkpoint = progress.elapsedSeconds();
     loop.checkpoint_seconds += last_checkpoint - start;
     ++loop.checkpoints;
@@ -298,7 +301,8 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   // re-fusion and the meshing still come (a crash or a batch system's kill there would otherwise cost
   // every frame since the last periodic checkpoint; resumed, the run goes straight to its end phase).
   // Not after a run that fails there.
-  if (loop.done > 0 && !failsAfterItsFrames(loop, rec) && plan.checkpoint_every > 0 && loop.done != checkpointed_at)
+  if (loop.done > 0 && !failsAfterItsFrames(loop, rec) && plan.checkpoint_every > 0 &&
+      rec.framesProcessed() != checkpointed_at)
     checkpoint();
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + frame_loop_seconds;

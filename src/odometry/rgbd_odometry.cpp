@@ -65,8 +65,9 @@ struct FrameFeatures {
   double colour_offset = 0.0;  // s, colour capture minus depth capture
   cv::Mat depth;               // kept (shared) to re-read depths at colour-time-corrected pixels
   CameraIntrinsics camera;
-  // The mean velocity since the frame before it (set once its motion is known), and its velocity at
-  // its own capture: that mean at first, interpolated once the next frame's motion is known (final).
+  // The mean velocity since the frame before it (set once its motion is known), and the velocity its
+  // colour-time drift is taken at (the mean over its colour offset): that mean at first, interpolated once
+  // the next frame's motion is known (final).
   std::optional<CameraVelocity> arrival, velocity;
   double arrival_seconds = 0.0;  // the interval `arrival` is the mean over
   bool velocity_final = false;
@@ -270,6 +271,19 @@ struct RgbdOdometry::Impl {
   std::optional<Refittable> previous;  // the frame before it, final_velocity set: what refitPrevious() fits
   // process()'s bookkeeping for them: `mo` is frame cur's motion against `reference`.
   void keepRefittable(const FrameFeatures& cur, const Motion& mo, const OdometryResult& r);
+
+  // What the next frame is matched against: what a checkpoint keeps (the refits need none of it: after
+  // a checkpoint no frame waits for one).
+  struct MatchingState {
+    ColourTimeEvidence evidence;
+    std::optional<FrameFeatures> reference, last, failed;
+    std::deque<std::pair<FrameFeatures, Eigen::Isometry3d>> older;
+    Eigen::Isometry3d T_kf_last = Eigen::Isometry3d::Identity();
+  };
+  MatchingState matchingState() const { return {evidence, reference, last, failed, older, T_kf_last}; }
+  // As it was before the last process() (saveStateBeforeLastFrame); copies share the images.
+  std::optional<MatchingState> before_last;
+  static void writeState(std::ostream& os, const MatchingState& s);
 };
 
 FrameFeatures RgbdOdometry::Impl::begin(const Frame& frame, Extraction& ex, StageTimes& times) const {
@@ -792,6 +806,16 @@ OdometryResult RgbdOdometry::process(const Frame& frame) {
   r.covariance.setIdentity();
   const OdometryParams& P = impl_->params;
   Impl& m = *impl_;
+  // The state this frame is matched against, kept once the frame is done (not when it threw: the state
+  // before it is then the one kept already).
+  struct KeepBefore {
+    Impl& m;
+    Impl::MatchingState before;
+    const int exceptions = std::uncaught_exceptions();
+    ~KeepBefore() {
+      if (std::uncaught_exceptions() == exceptions) m.before_last = std::move(before);
+    }
+  } keep_before{m, m.matchingState()};
   if (!frame.valid()) return failed(r, "empty frame");
   requireRegisteredDepth(frame);
   // Frame to frame, the frames before the previous one join the fit (references > 1).
@@ -880,8 +904,7 @@ void readFeatures(state::Archive& a, FrameFeatures& f) {
 
 }  // namespace
 
-void RgbdOdometry::saveState(std::ostream& os) const {
-  const Impl& s = *impl_;
+void RgbdOdometry::Impl::writeState(std::ostream& os, const MatchingState& s) {
   auto a = state::archiveOf(os);
   state::tag(a, "odometry");
   s.evidence.saveState(a);
@@ -895,12 +918,19 @@ void RgbdOdometry::saveState(std::ostream& os) const {
   state::write(a, s.T_kf_last);
 }
 
+void RgbdOdometry::saveState(std::ostream& os) const { Impl::writeState(os, impl_->matchingState()); }
+
+void RgbdOdometry::saveStateBeforeLastFrame(std::ostream& os) const {
+  Impl::writeState(os, impl_->before_last ? *impl_->before_last : Impl::MatchingState());
+}
+
 void RgbdOdometry::loadState(std::istream& is) {
   Impl& s = *impl_;
   auto a = state::archiveOf(is);
   state::expectTag(a, "odometry");
   s.newest.reset();  // a checkpoint is taken between frames: no frame waits for its refit
   s.previous.reset();
+  s.before_last.reset();
   s.evidence.loadState(a);
   for (auto* f : {&s.reference, &s.last, &s.failed})
     state::readOptional(a, *f, [&](FrameFeatures& x) { readFeatures(a, x); });

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <utility>
 
 #include <tbb/task_group.h>
 
@@ -110,20 +111,25 @@ struct Reconstruction::Impl {
   Frame fusing_frame;
   // push()'s frame: its odometry has run, and it is tracked once the next frame's has (one frame late),
   // or by flush(). odometry_held: the frames its odometry result may name (RgbdOdometry::heldFrames then).
+  // A checkpoint taken while it is held is the state before its odometry (the input gives the frame
+  // again): the counts its odometry changed are kept as they were.
   struct Held {
     Frame frame;
     FrameReport report;
     std::vector<std::size_t> odometry_held;
     double odometry_seconds = 0.0;
+    std::size_t odo_failures_before = 0;
+    ColourTimeStats colour_time_before;
   };
   std::optional<Held> held;
+  Frame last_tracked;  // trackedFrame(): the frame track() reported last
   // The held frame's motion fitted again now that the next frame's odometry has run (capture mode's
   // refit: RgbdOdometry::refitPrevious).
-  void refitHeld() {
-    OdometryResult& o = held->report.odometry;
+  void refit(Held& h) {
+    OdometryResult& o = h.report.odometry;
     if (!odometry || !o.success) return;
     const auto t0 = std::chrono::steady_clock::now();
-    std::optional<OdometryRefit> refit = odometry->refitPrevious(held->frame.index);
+    std::optional<OdometryRefit> refit = odometry->refitPrevious(h.frame.index);
     if (!refit) return;
     o.motion = refit->motion;
     o.covariance = refit->covariance;
@@ -132,10 +138,10 @@ struct Reconstruction::Impl {
     o.rms_error = refit->rms_error;
     o.colour_motion = refit->colour_motion;
     const double seconds = secondsSince(t0);
-    held->report.times.add("odometry_refit", seconds);
-    held->odometry_seconds += seconds;
+    h.report.times.add("odometry_refit", seconds);
+    h.odometry_seconds += seconds;
   }
-  FrameReport trackHeld();
+  FrameReport track(Held h);
 
   TrackedMap& map() const {
     if (!kinfu) throw std::logic_error("Reconstruction: the map was released (releaseMap)");
@@ -275,7 +281,7 @@ Reconstruction::~Reconstruction() = default;
 
 std::optional<FrameReport> Reconstruction::push(const Frame& in) {
   Impl& m = *impl_;
-  Impl::Held next{ownedCopy(in), {}, {}, 0.0};
+  Impl::Held next{ownedCopy(in), {}, {}, 0.0, m.odo_failures, m.colour_time};
   m.checkNext(next.frame);
   FrameReport& r = next.report;
   r.index = next.frame.index;
@@ -289,18 +295,19 @@ std::optional<FrameReport> Reconstruction::push(const Frame& in) {
     next.odometry_held = m.odometry->heldFrames();
     next.odometry_seconds = secondsSince(t0);
   }
-  std::optional<FrameReport> done;
-  if (m.held) {
-    m.refitHeld();
-    done = m.trackHeld();
-  }
-  m.held = std::move(next);
-  return done;
+  // Held before the previous one is tracked: a failure there costs that frame, not this one too.
+  std::optional<Impl::Held> previous = std::exchange(m.held, std::move(next));
+  if (!previous) return std::nullopt;
+  m.refit(*previous);
+  return m.track(std::move(*previous));
 }
 
+const Frame& Reconstruction::trackedFrame() const { return impl_->last_tracked; }
+
 std::optional<FrameReport> Reconstruction::flush() {
-  if (!impl_->held) return std::nullopt;
-  return impl_->trackHeld();
+  std::optional<Impl::Held> h = std::exchange(impl_->held, std::nullopt);
+  if (!h) return std::nullopt;
+  return impl_->track(std::move(*h));
 }
 
 FrameReport Reconstruction::process(const Frame& frame) {
@@ -309,9 +316,7 @@ FrameReport Reconstruction::process(const Frame& frame) {
   return *flush();
 }
 
-FrameReport Reconstruction::Impl::trackHeld() {
-  Held h = std::move(*held);
-  held.reset();
+FrameReport Reconstruction::Impl::track(Held h) {
   const auto start = std::chrono::steady_clock::now();
   FrameReport& r = h.report;
   waitFusion();
@@ -320,8 +325,9 @@ FrameReport Reconstruction::Impl::trackHeld() {
   // match that came back had no reference pose, and the frame was guessed). The held frame's own result
   // names one of those its odometry held then; the next frame's, one of those held now.
   if (odometry) {
-    std::vector<std::size_t> frames = odometry->heldFrames();
-    frames.insert(frames.end(), h.odometry_held.begin(), h.odometry_held.end());
+    std::vector<std::size_t> frames = h.odometry_held;
+    for (const std::size_t f : odometry->heldFrames())
+      if (std::find(frames.begin(), frames.end(), f) == frames.end()) frames.push_back(f);
     kinfu->holdFrames(std::move(frames));
   }
   const FusionResult f = trackOrRelocalise(h.frame, r.odometry);
@@ -333,6 +339,7 @@ FrameReport Reconstruction::Impl::trackHeld() {
   }
   r.times.add("total", h.odometry_seconds + secondsSince(start));
   times.merge(r.times);
+  last_tracked = std::move(h.frame);
   return r;
 }
 
@@ -352,7 +359,8 @@ const PathSmoothing& Reconstruction::pathSmoothing() const { return impl_->smoot
 void Reconstruction::finish() {
   Impl& m = *impl_;
   if (m.finished) return;
-  if (m.held) m.trackHeld();
+  // Its report would be lost to the caller (RunSession queues every report for the outputs).
+  if (m.held) throw std::logic_error("Reconstruction::finish while push() holds a frame: flush() it first");
   m.waitFusion();
   // The frames fused into the map are the measurements; lost, predicted and unfused frames end a run.
   m.smoothed = smoothPath(m.trajectory, m.fused, &m.smoothing);
@@ -461,9 +469,11 @@ void Reconstruction::resumeVolume(const std::string& path) {
 void Reconstruction::saveState(std::ostream& os) const {
   Impl& m = *impl_;
   if (m.finished) throw std::logic_error("Reconstruction::saveState after finish()");
-  // Between frames: a held frame (its odometry run, its tracking not) is no state a checkpoint keeps.
-  if (m.held) throw std::logic_error("Reconstruction::saveState while push() holds a frame: flush() it first");
   m.waitFusion();
+  // A held frame (its odometry run, its tracking not) is not in the checkpoint: it is the state before
+  // it, and the frame comes again from the input after loadState.
+  const std::size_t odo_failures = m.held ? m.held->odo_failures_before : m.odo_failures;
+  const ColourTimeStats colour_time = m.held ? m.held->colour_time_before : m.colour_time;
   {
     auto a = state::archiveOf(os);
     state::tag(a, "reconstruction");
@@ -473,8 +483,8 @@ void Reconstruction::saveState(std::ostream& os) const {
       state::write(a, toEigen(p.pose));
     }
     a << m.fused << m.indices;
-    for (std::size_t n : {m.frames, m.fallbacks, m.predicted, m.lost, m.odo_failures}) a << uint64_t(n);
-    a << m.colour_time.known << m.colour_time.capture << int32_t(m.colour_time.compared) << int32_t(m.colour_time.capture_better);
+    for (std::size_t n : {m.frames, m.fallbacks, m.predicted, m.lost, odo_failures}) a << uint64_t(n);
+    a << colour_time.known << colour_time.capture << int32_t(colour_time.compared) << int32_t(colour_time.capture_better);
     std::map<int32_t, uint64_t> rejections;
     for (const auto& [why, n] : m.rejections) rejections[int32_t(why)] = n;
     a << rejections;
@@ -486,7 +496,7 @@ void Reconstruction::saveState(std::ostream& os) const {
     }
     a << bool(m.odometry) << bool(m.loops) << m.resumed_map << m.resumed_map_stamp;
   }
-  if (m.odometry) m.odometry->saveState(os);
+  if (m.odometry) m.held ? m.odometry->saveStateBeforeLastFrame(os) : m.odometry->saveState(os);
   m.map().saveState(os);
   if (m.loops) m.loops->saveState(os);
 }

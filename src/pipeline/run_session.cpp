@@ -134,28 +134,22 @@ RunSession::~RunSession() {
 std::optional<FrameReport> RunSession::process(const Frame& frame) {
   if (replaying()) throw std::logic_error("RunSession::process before the checkpoint's frames were replayed");
   std::optional<FrameReport> done = rec_.push(frame);
-  if (done) record(*held_, *done);
-  // The caller may refill its frame's buffers for the next one (the apps reuse one Frame).
-  held_ = frame;
-  held_->depth = frame.depth.clone();
-  held_->rgb = frame.rgb.clone();
+  if (done) record(*done);
   return done;
 }
 
 std::optional<FrameReport> RunSession::flush() {
   std::optional<FrameReport> done = rec_.flush();
-  if (done) record(*held_, *done);
-  held_.reset();
+  if (done) record(*done);
   return done;
 }
 
-void RunSession::record(const Frame& frame, const FrameReport& report) {
-  recorder_.add(frame, report);
+void RunSession::record(const FrameReport& report) {
+  recorder_.add(rec_.trackedFrame(), report);
   reports_.push_back(saved(report));
 }
 
-void RunSession::saveCheckpoint(const std::string& path, const std::string& origin, double seconds) {
-  flush();  // a checkpoint is taken between tracked frames
+void RunSession::saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const {
   AtomicPath out(path);
   std::ofstream os(out.tmp(), std::ios::binary);
   try {

@@ -150,6 +150,10 @@ class RgbdOdometry {
   // failed frame, their velocities) and the colour-time votes. An odometry with the same parameters
   // that loads the state continues exactly as the saved one would have.
   void saveState(std::ostream& os) const;
+  // The state as it was before the last process(): what a reconstruction holding that frame back
+  // (Reconstruction::push) saves, so that the frame is processed again after loadState. Before any
+  // frame, the fresh state.
+  void saveStateBeforeLastFrame(std::ostream& os) const;
   void loadState(std::istream& is);
 
  private:

@@ -70,11 +70,13 @@ class Reconstruction {
   // its keypoints and the tracker's colour alike. The 320x240 shake's ATE, seeds 1-5: mean 0.0246 ->
   // 0.0214 m; seeds 6-10: 0.0236 -> 0.0208 (docs/tracking.md). Interval mode: the same poses as process().
   std::optional<FrameReport> push(const Frame& frame);
-  // The frame push() holds, tracked now without the next one (none if none is held): the input's end,
-  // before a checkpoint.
+  // The frame push() holds, tracked now without the next one (none if none is held): the input's end.
   std::optional<FrameReport> flush();
   // The frame tracked at once (push() then flush()): its own report. Not while push() holds a frame.
   FrameReport process(const Frame& frame);
+  // The frame the last report is of, with the reconstruction's own copy of its images (the caller's may
+  // have been refilled since), until the next push() or flush(). Empty before the first report.
+  const Frame& trackedFrame() const;
 
   TrackingMode mode() const;
   // One pose per processed frame (held pose when lost): after finish(), the loop-closed poses when
@@ -88,8 +90,8 @@ class Reconstruction {
   const PathSmoothing& pathSmoothing() const;  // after finish(): what smoothed the tracked path, how far
   // KinFu::setShiftObserver on the tracking map (not on the volume reintegrate() fuses anew).
   void setShiftObserver(KinFu::ShiftObserver observer);
-  // End of the frames (a frame push() holds is tracked first; its report: flush()): waits for the fusion
-  // and the loop-closure thread, smooths the tracked path's
+  // End of the frames (not while push() holds one: flush() it first): waits for the fusion and the
+  // loop-closure thread, smooths the tracked path's
   // centres, then corrects it (every pose follows its keyframe). Idempotent; process() must not be
   // called afterwards.
   void finish();
@@ -119,9 +121,11 @@ class Reconstruction {
   // reads the file again and fuses the frames into it (a checkpoint keeps its name); changed or gone
   // since, it blocks re-fusion (reintegrationBlocked).
   void resumeVolume(const std::string& path);
-  // Checkpoints, between frames (none held: flush()): every stage's state (odometry, tracker and map, loop closer) and the
+  // Checkpoints, between frames: every stage's state (odometry, tracker and map, loop closer) and the
   // run's poses and counts so far. A reconstruction made with the same configuration and mode that
-  // loads it (before its first frame) goes on exactly as the saved one would have.
+  // loads it (before its first frame) goes on exactly as the saved one would have. A frame push() holds
+  // is not in it (its odometry is undone: the state is the one before it), so the loading one is given
+  // that frame next: the frame after the framesProcessed() ones it tracked.
   void saveState(std::ostream& os) const;
   void loadState(std::istream& is);
   TriangleMesh extractMesh() const;      // raw marching-cubes mesh of the whole world model

@@ -61,9 +61,9 @@ class RunSession {
   };
   // Between frames: the run so far (every stage's state and each frame's report for the outputs) to
   // `path`, atomically: an earlier checkpoint there is replaced only by a whole new one.
-  // The frame process() holds is tracked first (flush()): a run that checkpoints tracks that one frame
-  // without the next one's refit, which the run it resumes goes on from, so both go on alike.
-  void saveCheckpoint(const std::string& path, const std::string& origin, double seconds);
+  // The frame the reconstruction holds (Reconstruction::push) is not in it: the resumed run reads it
+  // again, as the frame after the checkpoint's reports.
+  void saveCheckpoint(const std::string& path, const std::string& origin, double seconds) const;
   // The recording (its absolute path), the tracking mode and the settings that decide what is computed
   // from it: [odometry] (and the detectors' sections), [kinfu] and [loop] as the stages read them,
   // defaults included, the scratch folder left out. vofusion-grab --live and vofusion reading its
@@ -95,7 +95,7 @@ class RunSession {
 
  private:
   void refuse(RunInfo& info, const Reopen& reopen);
-  void record(const Frame& frame, const FrameReport& report);  // a tracked frame into the outputs' queue
+  void record(const FrameReport& report);  // the frame just tracked into the outputs' queue
   // The map into map's temporary, on the disk; an InputError names map's path.
   void saveMapTo(AtomicPath& map) const;
 
@@ -106,7 +106,6 @@ class RunSession {
   RunRecorder recorder_;
   bool write_mesh_;  // the map is used at all after the frame loop
   std::vector<SavedReport> reports_;
-  std::optional<Frame> held_;  // the frame rec_ holds (Reconstruction::push), with its own images
   std::size_t resumed_frames_ = 0, replayed_ = 0;
   std::string resumed_from_;
   std::exception_ptr map_failure_;
