@@ -2,6 +2,7 @@
 
 #include "vofusion/core/config.h"
 #include "vofusion/core/depth_image.h"
+#include "vofusion/core/pose_eigen.h"
 
 #include <algorithm>
 #include <chrono>
@@ -625,12 +626,8 @@ OdometryResult failed(OdometryResult& r, const std::string& why) {
 // r with the motion found, as an MRPT pose, and the covariance of the fit that gave it
 // (keyframe-to-current when a keyframe was kept: an upper bound on the frame-to-frame uncertainty).
 OdometryResult succeeded(OdometryResult& r, const Eigen::Isometry3d& T_last_cur, const Eigen::Matrix<double, 6, 6>& covariance) {
-  mrpt::math::CMatrixDouble44 Mm;
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) Mm(i, j) = T_last_cur.matrix()(i, j);
-  r.motion = mrpt::poses::CPose3D(Mm);
-  for (int i = 0; i < 6; ++i)
-    for (int j = 0; j < 6; ++j) r.covariance(i, j) = covariance(i, j);
+  r.motion = toMrpt(T_last_cur);
+  r.covariance = mrpt::math::CMatrixDouble66(covariance);
   r.failure.clear();
   r.success = true;
   return r;
@@ -783,12 +780,8 @@ std::optional<OdometryRefit> RgbdOdometry::refitPrevious(std::size_t index) cons
   double sq = 0.0;
   for (std::size_t i = 0; i < all.size(); ++i) sq += (T * out.inlier_current[i] - out.inlier_reference[i]).squaredNorm();
   out.rms_error = all.empty() ? 0.0 : std::sqrt(sq / double(all.size()));
-  mrpt::math::CMatrixDouble44 Mm;
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) Mm(i, j) = T.matrix()(i, j);
-  out.motion = mrpt::poses::CPose3D(Mm);
-  for (int i = 0; i < 6; ++i)
-    for (int j = 0; j < 6; ++j) out.covariance(i, j) = covariance(i, j);
+  out.motion = toMrpt(T);
+  out.covariance = mrpt::math::CMatrixDouble66(covariance);
   return out;
 }
 
