@@ -242,11 +242,11 @@ struct LiveCheckpoints {
   }
   // After the session's last frame, before its end phase (the map fused again, the meshing): a crash
   // there is resumed at the end phase instead of tracking again every frame since the last one.
-  void writeLast(RunSession& run) {
-    if (every <= 0 || !error.empty()) return;
+  void writeLast(const RunSession& run) {
+    // The last frame taken is still held back (finishLive tracks it): not in the checkpoint, which a
+    // resumed run goes on from by reading it again from the recording, with the frames after it.
+    if (every <= 0 || !error.empty() || run.reconstruction().framesProcessed() <= frames_at_last) return;
     try {
-      run.flush();  // the last frame taken: tracked without a next one, so that the checkpoint holds it
-      if (run.reconstruction().framesProcessed() <= frames_at_last) return;
       write(run, std::chrono::steady_clock::now());
     } catch (const std::exception& e) {  // a spare: the outputs come whatever it meets
       error = oneLineMessage(e);

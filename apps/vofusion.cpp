@@ -294,7 +294,10 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
     if (rec.loopCloser()) status += "  loops " + std::to_string(rec.loopCloser()->activeLoops());
     progress.update(std::max(loop.done, loop.read), status);
   }
-  run.flush();  // the last frame read: tracked without a next one
+  // The last frame given is held back (Reconstruction::push). At the input's end it is tracked now, without
+  // a next one, before the last checkpoint; after a stop the checkpoint comes first and leaves it out, so
+  // that the resumed run reads it again and refits it with the frame after it, as an uninterrupted run does.
+  if (!loop.interrupted()) run.flush();
   const bool built = loop.interrupted() && loop.done > 0;
   const double frame_loop_seconds = progress.elapsedSeconds();  // the last checkpoint's writing is no frame's
   // --resume goes on from here: after a stop, and after the last frame, where the loop-closed
@@ -304,6 +307,7 @@ void reconstructFrames(const RunPlan& plan, FrameSource& source, RunSession& run
   if (loop.done > 0 && !failsAfterItsFrames(loop, rec) && plan.checkpoint_every > 0 &&
       rec.framesProcessed() != checkpointed_at)
     checkpoint();
+  run.flush();  // after a stop: the outputs written now hold it
   progress.finish(built ? std::string("(") + signalName(loop.stop_signal) + ": writing what was built so far)" : "");
   loop.seconds = before + frame_loop_seconds;
 }

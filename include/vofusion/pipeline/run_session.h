@@ -42,7 +42,7 @@ class RunSession {
   // tracked, queued for poses.rawlog and returned (none for the first).
   std::optional<FrameReport> process(const Frame& frame);
   // The frame process() holds, tracked and queued now (none if none): the end of the frames. finish()
-  // and saveCheckpoint() call it.
+  // calls it; saveCheckpoint() leaves the held frame out instead.
   std::optional<FrameReport> flush();
   // The end of the run, once: loop closure finished, the map fused again at the corrected poses when
   // loops moved them (from reopen(); without one the mesh keeps the tracked poses),
