@@ -264,7 +264,9 @@ TEST(Batch, ATermToAJobLetsVofusionWriteWhatItBuiltAndTheJobRunAgainResumes) {
   const auto resumed = nlohmann::json::parse(slurp(out + "/xyz/summary.json"));
   EXPECT_FALSE(resumed["interrupted"].get<bool>());
   EXPECT_EQ(resumed["frames"].get<int>(), 300);
-  EXPECT_EQ(resumed["checkpoints"]["resumed_at_frame"].get<int>(), frames);
+  // The last frame the stopped run read was held back for the one after it (Reconstruction::push): not in
+  // its checkpoint, so the resumed run reads it again.
+  EXPECT_EQ(resumed["checkpoints"]["resumed_at_frame"].get<int>(), frames - 1);
   EXPECT_FALSE(fs::exists(out + "/xyz/checkpoint")) << "a finished run leaves no checkpoint";
 }
 
