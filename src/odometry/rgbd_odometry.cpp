@@ -771,15 +771,13 @@ std::optional<OdometryRefit> RgbdOdometry::refitPrevious(std::size_t index) cons
   out.inlier_current.resize(p.query.size());
   for (std::size_t i = 0; i < p.query.size(); ++i) out.inlier_current[i] = m.atDepthTime(p.frame, p.query[i], drift);
   out.inlier_reference = p.reference;
-  std::vector<int> all(p.query.size());
-  for (std::size_t i = 0; i < all.size(); ++i) all[i] = int(i);
   const RobustFitOptions& o = m.params.robust;
   Eigen::Matrix<double, 6, 6> covariance;
-  const Eigen::Isometry3d T = refineGaussNewton(out.inlier_current, out.inlier_reference, all, p.T,
+  const Eigen::Isometry3d T = refineGaussNewton(out.inlier_current, out.inlier_reference, {}, p.T,
                                                 std::max(1, o.gauss_newton_iterations), &covariance, o.ray_noise, o.cauchy);
   double sq = 0.0;
-  for (std::size_t i = 0; i < all.size(); ++i) sq += (T * out.inlier_current[i] - out.inlier_reference[i]).squaredNorm();
-  out.rms_error = all.empty() ? 0.0 : std::sqrt(sq / double(all.size()));
+  for (std::size_t i = 0; i < p.query.size(); ++i) sq += (T * out.inlier_current[i] - out.inlier_reference[i]).squaredNorm();
+  out.rms_error = p.query.empty() ? 0.0 : std::sqrt(sq / double(p.query.size()));
   out.motion = toMrpt(T);
   out.covariance = mrpt::math::CMatrixDouble66(covariance);
   return out;

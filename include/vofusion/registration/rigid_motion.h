@@ -57,10 +57,10 @@ RigidFit fitRobust(const Points3& src, const Points3& dst, const RobustFitOption
 // points are (nearly) collinear or coincident and a rotation about their line is unobservable.
 double secondaryExtent(const Points3& pts, const std::vector<int>& subset = {});
 
-// Gauss-Newton on weighted point residuals, parameters (x y z yaw pitch roll); returns the refined T and
-// fills the covariance (inverse Hessian scaled by the reduced chi-square). cauchy > 0: iteratively
-// reweighted with a Cauchy kernel of that scale on the whitened residuals. Without a covariance the
-// Hessian at the solution is not evaluated.
+// Gauss-Newton on weighted point residuals over the subset (all if empty), parameters (x y z yaw pitch
+// roll); returns the refined T and fills the covariance (inverse Hessian scaled by the reduced
+// chi-square). cauchy > 0: iteratively reweighted with a Cauchy kernel of that scale on the whitened
+// residuals. Without a covariance the Hessian at the solution is not evaluated.
 Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, const std::vector<int>& subset,
                                     const Eigen::Isometry3d& T0, int iterations,
                                     Eigen::Matrix<double, 6, 6>* covariance, bool ray_noise = false,
