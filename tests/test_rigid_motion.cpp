@@ -223,15 +223,13 @@ TEST(RigidMotion, CauchyKernelResistsInliersWithWrongDepth) {
 
 // Gauss-Newton's Jacobian is written in closed form: its covariance (H^-1 chi^2 / dof at the solution)
 // must be the one a central-difference Jacobian of the same whitened residuals gives, in the same
-// (x y z yaw pitch roll) parameters, and the solution a minimum (no step of either Jacobian lowers it).
+// (x y z yaw pitch roll) parameters, with the Cauchy kernel's weights as the last pass left them; and
+// without the kernel the solution is a minimum (no step of either Jacobian lowers it).
 TEST(RigidMotion, GaussNewtonCovarianceMatchesNumericDifferentiation) {
   Points3 s, d;
   makeCorrespondences(150, 0.004, 0.0, s, d, 7);
   Eigen::Isometry3d T0 = knownMotion();
   T0.translation() += Eigen::Vector3d(0.01, -0.02, 0.005);
-  Eigen::Matrix<double, 6, 6> cov;
-  const Eigen::Isometry3d T = refineGaussNewton(s, d, {}, T0, 8, &cov, true);
-
   // MRPT's convention, as the fit's parameters: R = Rz(yaw) Ry(pitch) Rx(roll).
   const auto pose = [](const Eigen::Matrix<double, 6, 1>& p) {
     Eigen::Isometry3d P = Eigen::Isometry3d::Identity();
@@ -240,41 +238,55 @@ TEST(RigidMotion, GaussNewtonCovarianceMatchesNumericDifferentiation) {
     P.translation() = p.head<3>();
     return P;
   };
-  const Eigen::Matrix3d R = T.linear();
-  Eigen::Matrix<double, 6, 1> p;
-  p.head<3>() = T.translation();
-  p[4] = std::atan2(-R(2, 0), std::hypot(R(0, 0), R(1, 0)));
-  p[3] = std::atan2(R(1, 0), R(0, 0));
-  p[5] = std::atan2(R(2, 1), R(2, 2));
-  ASSERT_LT((pose(p).matrix() - T.matrix()).norm(), 1e-12);
-
   // The whitening the fit uses: both points' Kinect ray noise, the source's turned by the initial guess.
   std::vector<Eigen::Matrix3d> w;
   for (std::size_t k = 0; k < s.size(); ++k) {
     const Eigen::Matrix3d C = T0.linear() * rayCovariance(s[k]) * T0.linear().transpose() + rayCovariance(d[k]);
     w.push_back(Eigen::Matrix3d(C.llt().matrixL()).inverse());
   }
-  const auto residuals = [&](const Eigen::Matrix<double, 6, 1>& q) {
-    Eigen::VectorXd r(3 * s.size());
-    for (std::size_t k = 0; k < s.size(); ++k) r.segment<3>(3 * k) = w[k] * (pose(q) * s[k] - d[k]);
-    return r;
-  };
-  Eigen::MatrixXd J(3 * s.size(), 6);
-  for (int j = 0; j < 6; ++j) {
-    Eigen::Matrix<double, 6, 1> q = p;
-    const double h = 1e-6;
-    q[j] += h;
-    const Eigen::VectorXd rp = residuals(q);
-    q[j] -= 2 * h;
-    J.col(j) = (rp - residuals(q)) / (2 * h);
+  for (const double cauchy : {0.0, 1.0}) {
+    SCOPED_TRACE(cauchy);
+    Eigen::Matrix<double, 6, 6> cov;
+    const Eigen::Isometry3d T = refineGaussNewton(s, d, {}, T0, 8, &cov, true, cauchy);
+    const Eigen::Matrix3d R = T.linear();
+    Eigen::Matrix<double, 6, 1> p;
+    p.head<3>() = T.translation();
+    p[4] = std::atan2(-R(2, 0), std::hypot(R(0, 0), R(1, 0)));
+    p[3] = std::atan2(R(1, 0), R(0, 0));
+    p[5] = std::atan2(R(2, 1), R(2, 2));
+    ASSERT_LT((pose(p).matrix() - T.matrix()).norm(), 1e-12);
+    // The kernel's weights at the solution, held fixed as the fit holds them.
+    std::vector<double> sw(s.size(), 1.0);
+    if (cauchy > 0)
+      for (std::size_t k = 0; k < s.size(); ++k) {
+        const double e = (w[k] * (T * s[k] - d[k])).norm() / cauchy;
+        sw[k] = 1.0 / std::sqrt(1.0 + e * e);
+      }
+    const auto residuals = [&](const Eigen::Matrix<double, 6, 1>& q) {
+      Eigen::VectorXd r(3 * s.size());
+      for (std::size_t k = 0; k < s.size(); ++k) r.segment<3>(3 * k) = sw[k] * (w[k] * (pose(q) * s[k] - d[k]));
+      return r;
+    };
+    Eigen::MatrixXd J(3 * s.size(), 6);
+    for (int j = 0; j < 6; ++j) {
+      Eigen::Matrix<double, 6, 1> q = p;
+      const double h = 1e-6;
+      q[j] += h;
+      const Eigen::VectorXd rp = residuals(q);
+      q[j] -= 2 * h;
+      J.col(j) = (rp - residuals(q)) / (2 * h);
+    }
+    const Eigen::VectorXd r = residuals(p);
+    const Eigen::Matrix<double, 6, 6> H = J.transpose() * J;
+    const Eigen::Matrix<double, 6, 6> numeric = H.inverse() * (r.squaredNorm() / (3.0 * double(s.size()) - 6.0));
+    EXPECT_LT((cov - numeric).norm(), 1e-5 * numeric.norm()) << cov << "\n\n" << numeric;
+    // Without the kernel the gradient vanishes at the solution against the Hessian's scale (with it,
+    // reweighting leaves the last step's weights a pass behind).
+    if (cauchy == 0) {
+      EXPECT_LT((J.transpose() * r).norm(), 1e-6 * H.norm());
+    }
+    // Still the known motion, within the noise.
+    EXPECT_LT((T.translation() - knownMotion().translation()).norm(), 0.003);
+    EXPECT_LT(rotationErrorDeg(T, knownMotion()), 0.15);
   }
-  const Eigen::VectorXd r = residuals(p);
-  const Eigen::Matrix<double, 6, 6> H = J.transpose() * J;
-  const Eigen::Matrix<double, 6, 6> numeric = H.inverse() * (r.squaredNorm() / (3.0 * double(s.size()) - 6.0));
-  EXPECT_LT((cov - numeric).norm(), 1e-5 * numeric.norm()) << cov << "\n\n" << numeric;
-  // At the minimum the gradient vanishes against the Hessian's scale.
-  EXPECT_LT((J.transpose() * r).norm(), 1e-6 * H.norm());
-  // Still the known motion, within the noise.
-  EXPECT_LT((T.translation() - knownMotion().translation()).norm(), 0.003);
-  EXPECT_LT(rotationErrorDeg(T, knownMotion()), 0.15);
 }

@@ -154,9 +154,9 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
   std::vector<double> sw(idx.size(), 1.0);
   auto cost = [&](const Eigen::Matrix<double, 6, 1>& q) {
     const Eigen::Isometry3d T = fromVector(q);
-    double chi2 = 0;
-    for (std::size_t k = 0; k < idx.size(); ++k) chi2 += (sw[k] * (w[k] * (T * src[idx[k]] - dst[idx[k]]))).squaredNorm();
-    return chi2;
+    double sum = 0;
+    for (std::size_t k = 0; k < idx.size(); ++k) sum += (sw[k] * (w[k] * (T * src[idx[k]] - dst[idx[k]]))).squaredNorm();
+    return sum;
   };
   auto reweight = [&](const Eigen::Matrix<double, 6, 1>& q) {
     if (cauchy <= 0) return;
@@ -168,12 +168,12 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
   };
   // The normal equations, summed point by point with the Jacobian in closed form: chi^2, H = J^T J
   // and g = J^T r at q.
-  auto normalEquations = [&](const Eigen::Matrix<double, 6, 1>& q, Eigen::Matrix<double, 6, 6>& H, Eigen::Matrix<double, 6, 1>& g) {
+  auto normalEquations = [&](const Eigen::Matrix<double, 6, 1>& q, Eigen::Matrix<double, 6, 6>& JtJ, Eigen::Matrix<double, 6, 1>& Jtr) {
     const Eigen::Isometry3d T = fromVector(q);
     const AngleAxes axes(q);
-    H.setZero();
-    g.setZero();
-    double chi2 = 0;
+    JtJ.setZero();
+    Jtr.setZero();
+    double sum = 0;
     for (std::size_t k = 0; k < idx.size(); ++k) {
       const Eigen::Vector3d Rs = T.linear() * src[idx[k]];
       const Eigen::Matrix3d W = sw[k] * w[k];
@@ -183,11 +183,11 @@ Eigen::Isometry3d refineGaussNewton(const Points3& src, const Points3& dst, cons
       J.col(3) = W * axes.yaw.cross(Rs);
       J.col(4) = W * axes.pitch.cross(Rs);
       J.col(5) = W * axes.roll.cross(Rs);
-      H.noalias() += J.transpose() * J;
-      g.noalias() += J.transpose() * r;
-      chi2 += r.squaredNorm();
+      JtJ.noalias() += J.transpose() * J;
+      Jtr.noalias() += J.transpose() * r;
+      sum += r.squaredNorm();
     }
-    return chi2;
+    return sum;
   };
   Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Identity();
   Eigen::Matrix<double, 6, 1> g;
