@@ -410,6 +410,7 @@ RgbdOdometry::~RgbdOdometry() = default;
 void RgbdOdometry::reset() {
   impl_->newest.reset();
   impl_->previous.reset();
+  impl_->before_last.reset();
   impl_->reference.reset();
   impl_->last.reset();
   impl_->failed.reset();

@@ -117,7 +117,6 @@ struct Reconstruction::Impl {
     Frame frame;
     FrameReport report;
     std::vector<std::size_t> odometry_held;
-    double odometry_seconds = 0.0;
     std::size_t odo_failures_before = 0;
     ColourTimeStats colour_time_before;
   };
@@ -137,9 +136,7 @@ struct Reconstruction::Impl {
     o.inlier_reference = std::move(refit->inlier_reference);
     o.rms_error = refit->rms_error;
     o.colour_motion = refit->colour_motion;
-    const double seconds = secondsSince(t0);
-    h.report.times.add("odometry_refit", seconds);
-    h.odometry_seconds += seconds;
+    h.report.times.add("odometry_refit", secondsSince(t0));
   }
   FrameReport track(Held h);
 
@@ -281,19 +278,17 @@ Reconstruction::~Reconstruction() = default;
 
 std::optional<FrameReport> Reconstruction::push(const Frame& in) {
   Impl& m = *impl_;
-  Impl::Held next{ownedCopy(in), {}, {}, 0.0, m.odo_failures, m.colour_time};
+  Impl::Held next{ownedCopy(in), {}, {}, m.odo_failures, m.colour_time};
   m.checkNext(next.frame);
   FrameReport& r = next.report;
   r.index = next.frame.index;
   r.timestamp = next.frame.timestamp;
   if (m.odometry) {
-    const auto t0 = std::chrono::steady_clock::now();
     {
       ScopedStageTimer t(r.times, "odometry");
       r.odometry = m.runOdometry(next.frame);
     }
     next.odometry_held = m.odometry->heldFrames();
-    next.odometry_seconds = secondsSince(t0);
   }
   // Held before the previous one is tracked: a failure there costs that frame, not this one too.
   std::optional<Impl::Held> previous = std::exchange(m.held, std::move(next));
@@ -319,6 +314,10 @@ FrameReport Reconstruction::process(const Frame& frame) {
 FrameReport Reconstruction::Impl::track(Held h) {
   const auto start = std::chrono::steady_clock::now();
   FrameReport& r = h.report;
+  // What the frame cost before it was tracked: its odometry and refit, already in its report.
+  double before = 0.0;
+  for (const char* stage : {"odometry", "odometry_refit"})
+    if (const auto it = r.times.seconds.find(stage); it != r.times.seconds.end()) before += it->second;
   waitFusion();
   // The frames a later prior may name keep their poses, however old: the odometry matches against its
   // last good frame after any number of failed ones (ICP tracked a covered lens on; past 32 frames the
@@ -337,7 +336,7 @@ FrameReport Reconstruction::Impl::track(Held h) {
     ScopedStageTimer t(r.times, "keyframes");
     loops->addFrame(h.frame, toEigen(f.pose), r.tracked && !r.fell_back && !r.predicted, f.icp_rms, r.odometry.features);
   }
-  r.times.add("total", h.odometry_seconds + secondsSince(start));
+  r.times.add("total", before + secondsSince(start));
   times.merge(r.times);
   last_tracked = std::move(h.frame);
   return r;
