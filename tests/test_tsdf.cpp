@@ -196,6 +196,44 @@ TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
   EXPECT_GT(hits, 0.8 * c.width * c.height / 4);
 }
 
+// A tracking cast (hinted_only) whose hint lies behind the surface searches again from `reach` in front
+// of the hint, not from min_depth: a plane 5 cm in front of its readings is found, one 30 cm in front
+// (beyond a 10 cm reach) is not; with no reach it is.
+TEST(Tsdf, ATrackingRaySearchesNoFartherThanItsReachInFrontOfItsHint) {
+  const TsdfParams p = smallParams();
+  const float plane_z = 0.0f;
+  TsdfVolume vol(p, Eigen::Vector3f(0, 0, 0));
+  const CameraIntrinsics c = smallCam();
+  for (int k = 0; k < 5; ++k) {
+    const Eigen::Isometry3f T = lookAt(Eigen::Vector3f(-0.3f + 0.15f * k, 0.1f, 1.1f), Eigen::Vector3f(0.05f * k, 0, 0));
+    vol.integrate(renderDepth(c, T, nullptr, 0, &plane_z), cv::Mat(), c, T);
+  }
+  const Eigen::Isometry3f view = lookAt(Eigen::Vector3f(0.1f, -0.1f, 0.9f), Eigen::Vector3f(0, 0.05f, 0));
+  const cv::Mat truth = renderDepth(c, view, nullptr, 0, &plane_z);
+  // Hits on the plane (within a voxel of its depth) among the pixels that see it.
+  auto hitsOnThePlane = [&](float behind, float reach) {
+    cv::Mat hint = truth.clone();
+    hint.setTo(cv::Scalar(0), truth <= 0);
+    hint += behind;
+    hint.setTo(cv::Scalar(0), truth <= 0);
+    const RaycastMaps maps = vol.raycast(view, c, &hint, false, true, reach);
+    int hits = 0, seen = 0;
+    for (int v = 0; v < c.height; ++v)
+      for (int u = 0; u < c.width; ++u) {
+        if (truth.at<float>(v, u) <= 0.f) continue;
+        ++seen;
+        const float z = maps.depth.at<float>(v, u);
+        hits += z > 0.f && std::fabs(z - truth.at<float>(v, u)) < p.voxel_size;
+      }
+    EXPECT_GT(seen, c.width * c.height / 2);
+    return static_cast<double>(hits) / seen;
+  };
+  const float inf = std::numeric_limits<float>::infinity();
+  EXPECT_GT(hitsOnThePlane(0.05f, 0.1f), 0.9) << "the hinted band starts inside the plane's back: searched again";
+  EXPECT_LT(hitsOnThePlane(0.3f, 0.1f), 0.01) << "the plane lies beyond the reach";
+  EXPECT_GT(hitsOnThePlane(0.3f, inf), 0.9) << "no reach: searched from min_depth";
+}
+
 // The ray cast marches several rays side by side: each pixel must come out as it does cast alone. A
 // partly observed, coloured sphere, a hint with holes (0 and NaN) and with readings off the surface,
 // both ray-cast modes, a view from inside the volume and one from outside it whose rays partly miss the

@@ -76,7 +76,7 @@ struct KinFu::Impl {
         h[x] = z >= lo && z <= hi ? z : (m ? m[x] : 0.f);
       }
     }
-    RaycastMaps maps = hinted ? volume->raycast(from.cast<float>(), cam, &hint, false, true)
+    RaycastMaps maps = hinted ? volume->raycast(from.cast<float>(), cam, &hint, false, true, params.icp.max_distance)
                               : volume->raycast(from.cast<float>(), cam, nullptr, false, false);
     model_depth = maps.depth;
     const int levels = std::max(1, params.preprocess.levels);

@@ -108,8 +108,9 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   m.prev_z = m.z;
   m.prev_ok = true;
   m.first = false;
-  // f * trunc is a projective (depth) distance to the surface; 0.8 of it rarely crosses it.
-  m.z += std::max(ray.min_step, 0.8f * f * trunc);
+  // f * trunc is a projective (depth) distance to the surface: the step lands about on it. Past it is
+  // fine, the bracket then holds the crossing; 0.8 of it (rarely past) cost the ray cast 5-12 % more.
+  m.z += std::max(ray.min_step, f * trunc);
   return true;
 }
 
@@ -140,7 +141,7 @@ bool TsdfVolume::normalAt(PendingRay& r) const {
 
 // Each ray's surface in [z0, z1]: first the hinted bands, then the full search for what they did not
 // settle, each stage's rays marched side by side; the hits go into row y of the maps.
-void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only, RaycastMaps& maps, int y) const {
+void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only, float reach, RaycastMaps& maps, int y) const {
   assert(n <= kRaysSideBySide);
   const float trunc = params_.truncation;
   Marcher march[kRaysSideBySide];
@@ -168,9 +169,13 @@ void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only, RaycastMaps
       settled = hinted_only && march[i].result == March::Miss;
     }
     // Whatever the hinted search could not settle, the full search decides; for tracking only up to
-    // the hint's band (a surface farther behind the reading is hidden by it and would not pair).
+    // the hint's band (a surface farther behind the reading is hidden by it and would not pair), and
+    // from `reach` in front of it: these rays were 3-8 % of the cast and 21-38 % of its samples,
+    // marching from min_depth through free space, and 13-14 % of what they found lay beyond ICP's reach.
     searching[i] = going[i] = !r.found && !settled;
-    if (going[i]) march[i] = Marcher{&r.ray, r.z0, hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1, false};
+    if (going[i])
+      march[i] = hinted_only ? Marcher{&r.ray, std::max(r.z0, r.hint - reach), std::min(r.z1, r.hint + 2.f * trunc), false}
+                             : Marcher{&r.ray, r.z0, r.z1, false};
   }
   marchSideBySide(march, going, n);
   for (int i = 0; i < n; ++i) {
@@ -228,7 +233,7 @@ void TsdfVolume::storeHits(PendingRay* rays, int n, RaycastMaps& maps, int y) co
 }
 
 RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const CameraIntrinsics& cam,
-                                const cv::Mat* depth_hint, bool with_colour, bool hinted_only) const {
+                                const cv::Mat* depth_hint, bool with_colour, bool hinted_only, float reach) const {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const int w = cam.width, h = cam.height;
   RaycastMaps maps;
@@ -270,10 +275,10 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
       r.hint = use_hint ? hrow[x] : 0.f;
       if (!clipToBox(oq, r.ray.dq, lo, hi, r.z0, r.z1)) continue;
       if (++pending < kRaysSideBySide) continue;
-      castRays(batch, pending, hinted_only, maps, y);
+      castRays(batch, pending, hinted_only, reach, maps, y);
       pending = 0;
     }
-    castRays(batch, pending, hinted_only, maps, y);
+    castRays(batch, pending, hinted_only, reach, maps, y);
   }, 4);
   return maps;
 }
