@@ -7,7 +7,6 @@
 #include <cstdint>
 #include <functional>
 #include <iosfwd>
-#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -57,14 +56,15 @@ class TsdfVolume {
 
   // depth_hint (optional, CV_32F, same size): where the surface is expected along each ray (the depth
   // frame last fused from this pose, holes filled from the previous ray cast); rays then start just
-  // before it instead of marching from min_depth (and fall back to that when it is inconsistent).
-  // hinted_only: rays without a hint are not cast, and none marches past its hint's band nor starts more
-  // than `reach` (m of depth) in front of its hint: for tracking, where only model pixels close to
-  // readings find partners (ICP's correspondence distance: a surface farther in front of a reading on
-  // its own ray is farther from it than that).
+  // before it instead of marching from min_depth. When that start is not observed free space, the ray is
+  // searched again from min_depth, or, with `reach` (CV_32F, same size, m of depth per pixel), from
+  // that far in front of its hint.
+  // hinted_only: rays without a hint are not cast, and none marches past its hint's band: for
+  // tracking, where only model pixels close to readings find partners (a surface more than ICP's
+  // correspondence distance in front of a reading, on its own ray, is farther from it than that).
   RaycastMaps raycast(const Eigen::Isometry3f& cam_to_world, const CameraIntrinsics& cam,
                       const cv::Mat* depth_hint = nullptr, bool with_colour = false, bool hinted_only = false,
-                      float reach = std::numeric_limits<float>::infinity()) const;
+                      const cv::Mat* reach = nullptr) const;
 
   // Re-centres the volume on `point` if it is farther than `threshold` (m) from the centre.
   bool shiftIfNeeded(const Eigen::Vector3f& point, float threshold);
@@ -153,7 +153,7 @@ class TsdfVolume {
   // bench/results/2026-11-28-raycast-side-by-side.md
   static constexpr int kRaysSideBySide = 4;
   struct PendingRay;
-  void castRays(PendingRay* rays, int n, bool hinted_only, float reach, RaycastMaps& maps, int y) const;  // n <= kRaysSideBySide
+  void castRays(PendingRay* rays, int n, bool hinted_only, RaycastMaps& maps, int y) const;  // n <= kRaysSideBySide
   bool normalAt(PendingRay& r) const;
   void storeHits(PendingRay* rays, int n, RaycastMaps& maps, int y) const;
   cv::Vec3b colourAt(const Eigen::Vector3f& q) const;  // the nearest voxel's colour (BGR), black when none
