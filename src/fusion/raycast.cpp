@@ -110,7 +110,8 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   m.prev_ok = true;
   m.first = false;
   // f * trunc is a projective (depth) distance to the surface: the step lands about on it. Past it, the
-  // bracket holds the crossing (its end observed: the band behind a surface is); 0.8 of it (rarely past)
+  // bracket holds the crossing, since the band behind a surface is observed too (thin behind one seen
+  // only at grazing angles: a step past that creeps and may end as a back face). 0.8 of it (rarely past)
   // made the tracking ray cast 5-14 % dearer.
   m.z += std::max(ray.min_step, f * trunc);
   return true;
@@ -177,8 +178,10 @@ void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only, RaycastMaps
     // 3-8 % of the cast and 21-38 % of its samples, and 13-14 % of what they found lay beyond ICP's
     // reach (xyz_first300, rpy_first100).
     searching[i] = going[i] = !r.found && !settled;
+    const float from = r.hint - r.reach;  // not finite (no hint or no reach): from min_depth
     if (going[i])
-      march[i] = Marcher{&r.ray, std::max(r.z0, r.hint - r.reach), hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1, false};
+      march[i] = Marcher{&r.ray, std::isfinite(from) ? std::max(r.z0, from) : r.z0,
+                         hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1, false};
   }
   marchSideBySide(march, going, n);
   for (int i = 0; i < n; ++i) {
