@@ -196,48 +196,6 @@ TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
   EXPECT_GT(hits, 0.8 * c.width * c.height / 4);
 }
 
-// A tracking cast (hinted_only) whose hint lies behind the surface searches again from its reach in
-// front of the hint, not from min_depth: a plane 5 cm in front of its readings is found with a 10 cm
-// reach, one 15 or 30 cm in front is not; with a 20 cm reach the plane 15 cm in front is, and with no
-// reach (none given, or an infinite one) every one is.
-TEST(Tsdf, ATrackingRaySearchesNoFartherThanItsReachInFrontOfItsHint) {
-  const TsdfParams p = smallParams();
-  const float plane_z = 0.0f;
-  TsdfVolume vol(p, Eigen::Vector3f(0, 0, 0));
-  const CameraIntrinsics c = smallCam();
-  for (int k = 0; k < 5; ++k) {
-    const Eigen::Isometry3f T = lookAt(Eigen::Vector3f(-0.3f + 0.15f * k, 0.1f, 1.1f), Eigen::Vector3f(0.05f * k, 0, 0));
-    vol.integrate(renderDepth(c, T, nullptr, 0, &plane_z), cv::Mat(), c, T);
-  }
-  const Eigen::Isometry3f view = lookAt(Eigen::Vector3f(0.1f, -0.1f, 0.9f), Eigen::Vector3f(0, 0.05f, 0));
-  const cv::Mat truth = renderDepth(c, view, nullptr, 0, &plane_z);
-  const float none = -1.f;  // no reach map at all
-  // The share of the pixels that see the plane whose ray hits it (within a voxel of its depth).
-  auto hitsOnThePlane = [&](float behind, float reach) {
-    cv::Mat hint = truth + behind;
-    hint.setTo(cv::Scalar(0), truth <= 0);
-    const cv::Mat reach_map(truth.size(), CV_32F, cv::Scalar(reach));
-    const RaycastMaps maps = vol.raycast(view, c, &hint, false, true, reach == none ? nullptr : &reach_map);
-    int hits = 0, seen = 0;
-    for (int v = 0; v < c.height; ++v)
-      for (int u = 0; u < c.width; ++u) {
-        if (truth.at<float>(v, u) <= 0.f) continue;
-        ++seen;
-        const float z = maps.depth.at<float>(v, u);
-        hits += z > 0.f && std::fabs(z - truth.at<float>(v, u)) < p.voxel_size;
-      }
-    EXPECT_GT(seen, c.width * c.height / 2);
-    return static_cast<double>(hits) / seen;
-  };
-  const float inf = std::numeric_limits<float>::infinity();
-  EXPECT_GT(hitsOnThePlane(0.05f, 0.1f), 0.9) << "the hinted band starts inside the plane's back: searched again";
-  EXPECT_LT(hitsOnThePlane(0.15f, 0.1f), 0.01) << "the plane lies beyond the reach";
-  EXPECT_LT(hitsOnThePlane(0.3f, 0.1f), 0.01) << "the plane lies beyond the reach";
-  EXPECT_GT(hitsOnThePlane(0.15f, 0.2f), 0.9) << "the plane lies within the reach";
-  EXPECT_GT(hitsOnThePlane(0.3f, inf), 0.9) << "an infinite reach: searched from min_depth";
-  EXPECT_GT(hitsOnThePlane(0.3f, none), 0.9) << "no reach: searched from min_depth";
-}
-
 // The ray cast marches several rays side by side: each pixel must come out as it does cast alone. A
 // partly observed, coloured sphere, a hint with holes (0 and NaN) and with readings off the surface,
 // both ray-cast modes, a view from inside the volume and one from outside it whose rays partly miss the
@@ -283,19 +241,16 @@ TEST(Tsdf, RaysCastSideBySideGiveWhatEachGivesAlone) {
         else if ((u + 5 * v) % 11 == 0) h = std::numeric_limits<float>::quiet_NaN();
         else if ((2 * u + v) % 13 == 0 && h > 0.f) h += 0.1f;  // a reading behind the surface
       }
-    // Searched again from 5 cm in front of the hint, or from min_depth where the reach is infinite.
-    cv::Mat reach(hint.size(), CV_32F, cv::Scalar(0.05f));
-    for (int v = 0; v < reach.rows; v += 2) reach.row(v).setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
     for (const bool hinted_only : {false, true}) {
-      const RaycastMaps all = vol.raycast(view, c, &hint, true, hinted_only, &reach);
+      const RaycastMaps all = vol.raycast(view, c, &hint, true, hinted_only);
       ASSERT_EQ(all.colours.size(), all.vertices.size());
       int hits = 0;
       for (int u = 0; u < c.width; ++u) {
         CameraIntrinsics one = c;
         one.width = 1;
         one.cx = c.cx - u;  // the same rays: (0 - (cx - u)) is (u - cx) exactly
-        const cv::Mat column = hint.col(u).clone(), column_reach = reach.col(u).clone();
-        const RaycastMaps alone = vol.raycast(view, one, &column, true, hinted_only, &column_reach);
+        const cv::Mat column = hint.col(u).clone();
+        const RaycastMaps alone = vol.raycast(view, one, &column, true, hinted_only);
         for (int v = 0; v < c.height; ++v) {
           ASSERT_EQ(std::memcmp(&alone.vertices.at<cv::Vec3f>(v, 0), &all.vertices.at<cv::Vec3f>(v, u), sizeof(cv::Vec3f)), 0)
               << "pixel " << u << ", " << v << (hinted_only ? " (hinted only)" : "");

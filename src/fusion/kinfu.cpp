@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
-#include <limits>
 
 #include <Eigen/Dense>
 
@@ -58,35 +57,26 @@ struct KinFu::Impl {
   // moved a little since, so it is only a starting point (the ray cast checks and falls back).
   cv::Mat model_depth;
 
-  // fused: this frame was just fused at `from`, so its readings lie on the surface the ray cast finds.
   void raycastModel(const Eigen::Isometry3d& from, const cv::Mat& frame_depth, const CameraIntrinsics& cam,
-                    StageTimes& times, bool hinted = true, bool fused = false) {
+                    StageTimes& times, bool hinted = true) {
     const auto t0 = std::chrono::steady_clock::now();
     // Only rays with a hint are cast: ICP pairs the next frame's readings with model pixels next to
     // where this frame had readings (or the last prediction had a surface). Rays without one marched
     // from min_depth through partly observed bricks, three quarters of all ray-cast samples, mostly
     // to find nothing. Hints outside the fused depth range have no surface to find.
     cv::Mat hint(cam.height, cam.width, CV_32F);
-    // A ray hinted by a reading just fused from here searches again from no farther in front of it than
-    // ICP pairs (raycast's reach); one hinted by the last prediction, or by a frame not fused, from
-    // min_depth: the surface on its ray may have moved in front of the hint.
-    cv::Mat reach;
     const bool have_frame = frame_depth.size() == hint.size(), have_last = model_depth.size() == hint.size();
-    if (fused && have_frame) reach.create(hint.size(), CV_32F);
-    const float lo = params.tsdf.min_depth, hi = params.tsdf.max_depth, inf = std::numeric_limits<float>::infinity();
+    const float lo = params.tsdf.min_depth, hi = params.tsdf.max_depth;
     for (int y = 0; y < hint.rows; ++y) {
       const float* d = have_frame ? frame_depth.ptr<float>(y) : nullptr;
       const float* m = have_last ? model_depth.ptr<float>(y) : nullptr;
       float* h = hint.ptr<float>(y);
-      float* r = reach.empty() ? nullptr : reach.ptr<float>(y);
       for (int x = 0; x < hint.cols; ++x) {
         const float z = d ? d[x] : 0.f;
-        const bool reading = z >= lo && z <= hi;
-        h[x] = reading ? z : (m ? m[x] : 0.f);
-        if (r) r[x] = reading ? params.icp.max_distance : inf;
+        h[x] = z >= lo && z <= hi ? z : (m ? m[x] : 0.f);
       }
     }
-    RaycastMaps maps = hinted ? volume->raycast(from.cast<float>(), cam, &hint, false, true, reach.empty() ? nullptr : &reach)
+    RaycastMaps maps = hinted ? volume->raycast(from.cast<float>(), cam, &hint, false, true)
                               : volume->raycast(from.cast<float>(), cam, nullptr, false, false);
     model_depth = maps.depth;
     const int levels = std::max(1, params.preprocess.levels);
@@ -135,7 +125,7 @@ bool KinFu::fuse(const FrameToFuse& f, StageTimes& times) {
   bool shifted = false;
   if (f.integrate) {
     shifted = s.integrate(f.depth, f.rgb, f.cam, f.pose, times);
-    if (s.predict.surfaces) s.raycastModel(f.pose, f.hint, f.track_cam, times, true, true);
+    if (s.predict.surfaces) s.raycastModel(f.pose, f.hint, f.track_cam, times);
   } else if (s.predict.surfaces) {
     // Not fused (fallback or predicted pose): re-predict the model from the new pose so ICP keeps up,
     // looking where this frame has readings (hinted by the last prediction alone, the predicted surface

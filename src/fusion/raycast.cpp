@@ -88,9 +88,8 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   }
   if (f < 0.f) {
     if (!m.prev_ok) return m.end(m.first && m.need_free_start ? March::Untrusted : March::Miss);  // back face
-    // Regula falsi on the bracket [prev_z (f >= 0), z (f < 0)]. One step: the bracket lies inside the
-    // band, ending just past the root, where the field is nearly linear (3 steps cost 6 % more CPU in
-    // mode kinfu, same ATE on fr1_xyz).
+    // Regula falsi on the bracket [prev_z (f >= 0), z (f < 0)]. One step: over a bracket this
+    // short the field is nearly linear (3 steps cost 6 % more CPU in mode kinfu, same ATE on fr1_xyz).
     float za = m.prev_z, fa = m.prev_f, zb = m.z, fb = f;
     constexpr int kRefineSteps = 1;
     for (int k = 0; k < kRefineSteps && zb - za > 0.05f * ray.min_step; ++k) {
@@ -109,11 +108,8 @@ bool TsdfVolume::marchStep(Marcher& m) const {
   m.prev_z = m.z;
   m.prev_ok = true;
   m.first = false;
-  // f * trunc is a projective (depth) distance to the surface: the step lands about on it. Past it, the
-  // bracket holds the crossing, since the band behind a surface is observed too (thin behind one seen
-  // only at grazing angles: a step past that creeps and may end as a back face). 0.8 of it (rarely past)
-  // made the tracking ray cast 5-14 % dearer.
-  m.z += std::max(ray.min_step, f * trunc);
+  // f * trunc is a projective (depth) distance to the surface; 0.8 of it rarely crosses it.
+  m.z += std::max(ray.min_step, 0.8f * f * trunc);
   return true;
 }
 
@@ -127,12 +123,11 @@ void TsdfVolume::marchSideBySide(Marcher* marches, bool* going, int n) const {
 }
 
 // A ray about to be cast: its pixel's column, its band, its hint (the depth where the surface is
-// expected, 0 = none) and how far in front of it a search again starts, and once cast, its surface zs
-// and the field's gradient g there.
+// expected, 0 = none), and once cast, its surface zs and the field's gradient g there.
 struct TsdfVolume::PendingRay {
   int x;
   Ray ray;
-  float z0, z1, hint, reach;
+  float z0, z1, hint;
   bool found;
   float zs;
   Eigen::Vector3f g;
@@ -173,15 +168,9 @@ void TsdfVolume::castRays(PendingRay* rays, int n, bool hinted_only, RaycastMaps
       settled = hinted_only && march[i].result == March::Miss;
     }
     // Whatever the hinted search could not settle, the full search decides; for tracking only up to
-    // the hint's band (a surface farther behind the reading is hidden by it and would not pair), and
-    // from the ray's reach in front of it: searched from min_depth through free space, these rays were
-    // 3-8 % of the cast and 21-38 % of its samples, and 13-14 % of what they found lay beyond ICP's
-    // reach (xyz_first300, rpy_first100).
+    // the hint's band (a surface farther behind the reading is hidden by it and would not pair).
     searching[i] = going[i] = !r.found && !settled;
-    const float from = r.hint - r.reach;  // not finite (no hint or no reach): from min_depth
-    if (going[i])
-      march[i] = Marcher{&r.ray, std::isfinite(from) ? std::max(r.z0, from) : r.z0,
-                         hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1, false};
+    if (going[i]) march[i] = Marcher{&r.ray, r.z0, hinted_only ? std::min(r.z1, r.hint + 2.f * trunc) : r.z1, false};
   }
   marchSideBySide(march, going, n);
   for (int i = 0; i < n; ++i) {
@@ -239,7 +228,7 @@ void TsdfVolume::storeHits(PendingRay* rays, int n, RaycastMaps& maps, int y) co
 }
 
 RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const CameraIntrinsics& cam,
-                                const cv::Mat* depth_hint, bool with_colour, bool hinted_only, const cv::Mat* reach) const {
+                                const cv::Mat* depth_hint, bool with_colour, bool hinted_only) const {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const int w = cam.width, h = cam.height;
   RaycastMaps maps;
@@ -248,7 +237,6 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
   maps.depth.create(h, w, CV_32FC1);
   if (with_colour) maps.colours = cv::Mat::zeros(h, w, CV_8UC3);
   const bool use_hint = depth_hint && !depth_hint->empty() && depth_hint->size() == cv::Size(w, h);
-  const bool use_reach = use_hint && reach && reach->type() == CV_32F && reach->size() == cv::Size(w, h);
 
   const float vs = params_.voxel_size, inv_vs = 1.f / vs, trunc = params_.truncation;
   const Eigen::Matrix3f R = cam_to_world.linear();
@@ -262,7 +250,6 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
     cv::Vec3f* vrow = maps.vertices.ptr<cv::Vec3f>(y);
     cv::Vec3f* nrow = maps.normals.ptr<cv::Vec3f>(y);
     const float* hrow = use_hint ? depth_hint->ptr<float>(y) : nullptr;
-    const float* reach_row = use_reach ? reach->ptr<float>(y) : nullptr;
     float* zrow = maps.depth.ptr<float>(y);
     PendingRay batch[kRaysSideBySide];
     int pending = 0;
@@ -281,7 +268,6 @@ RaycastMaps TsdfVolume::raycast(const Eigen::Isometry3f& cam_to_world, const Cam
       r.ray.inv_dq = r.ray.dq.cwiseInverse();
       r.z0 = z_near, r.z1 = z_far;
       r.hint = use_hint ? hrow[x] : 0.f;
-      r.reach = reach_row ? reach_row[x] : std::numeric_limits<float>::infinity();
       if (!clipToBox(oq, r.ray.dq, lo, hi, r.z0, r.z1)) continue;
       if (++pending < kRaysSideBySide) continue;
       castRays(batch, pending, hinted_only, maps, y);

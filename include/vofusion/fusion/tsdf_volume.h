@@ -56,15 +56,11 @@ class TsdfVolume {
 
   // depth_hint (optional, CV_32F, same size): where the surface is expected along each ray (the depth
   // frame last fused from this pose, holes filled from the previous ray cast); rays then start just
-  // before it instead of marching from min_depth. When that start is not observed free space, the ray is
-  // searched again from min_depth, or, with `reach` (CV_32F, same size, m of depth per pixel), from
-  // that far in front of its hint.
+  // before it instead of marching from min_depth (and fall back to that when it is inconsistent).
   // hinted_only: rays without a hint are not cast, and none marches past its hint's band: for
-  // tracking, where only model pixels close to readings find partners (a surface more than ICP's
-  // correspondence distance in front of a reading, on its own ray, is farther from it than that).
+  // tracking, where only model pixels close to readings find partners.
   RaycastMaps raycast(const Eigen::Isometry3f& cam_to_world, const CameraIntrinsics& cam,
-                      const cv::Mat* depth_hint = nullptr, bool with_colour = false, bool hinted_only = false,
-                      const cv::Mat* reach = nullptr) const;
+                      const cv::Mat* depth_hint = nullptr, bool with_colour = false, bool hinted_only = false) const;
 
   // Re-centres the volume on `point` if it is farther than `threshold` (m) from the centre.
   bool shiftIfNeeded(const Eigen::Vector3f& point, float threshold);
