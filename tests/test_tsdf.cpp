@@ -827,11 +827,49 @@ TEST(MarchingCubes, MeshByRegionMeshesARegionThatChangedBetweenPasses) {
           sink(region);
         });
       },
-      MeshCleanParams{}, "");
+      MeshCleanParams{}, "", {}, {}, {}, /*keep_bytes=*/0);  // marched again in pass 2, as a map too large to keep is
   ASSERT_EQ(pass, 2);  // fragments judged: min_component_faces is on by default
   ASSERT_GT(moved, 0u);
   EXPECT_TRUE(r.report.success) << r.report.failure;
   EXPECT_GT(r.mesh.faces.size(), 1000u);
+}
+
+// Pass 1's regions are kept for pass 2 when they fit, so the map is marched once; a map too large to
+// keep is marched again, and either way the mesh is the same, bit for bit.
+TEST(MarchingCubes, MeshByRegionMarchesOnceWhenItsRegionsFit) {
+  const SphereBricks sphere(Eigen::Vector3f(-0.05f, 0.13f, 0.02f), 0.3f, 0.01f, 0.04f);
+  MeshCleanParams params;
+  params.max_simplify_error = 0.003;
+  ASSERT_GT(params.min_component_faces, 0);  // pass 1 runs: fragments are judged
+  std::size_t raw_bytes = 0;
+  marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, [&](RegionMesh& r) {
+    raw_bytes += r.mesh.vertices.size() * (2 * sizeof(Eigen::Vector3f) + 3 + 1) + r.mesh.faces.size() * 12;
+  });
+  const auto mesh = [&](std::size_t keep_bytes, int& marched) {
+    return meshByRegion(
+        [&](const std::function<void(RegionMesh&)>& sink) {
+          ++marched;
+          marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink);
+        },
+        params, "", {}, {}, {}, keep_bytes);
+  };
+  int once = 0, limit = 0, never = 0;
+  const RegionMeshResult kept = mesh(raw_bytes, once);
+  const RegionMeshResult over = mesh(raw_bytes / 2, limit);  // runs out half way: nothing kept
+  const RegionMeshResult again = mesh(0, never);
+  EXPECT_EQ(once, 1);
+  EXPECT_EQ(limit, 2);
+  EXPECT_EQ(never, 2);
+  ASSERT_GT(kept.regions, 20u);
+  ASSERT_TRUE(kept.report.success) << kept.report.failure;
+  for (const RegionMeshResult* r : {&over, &again}) {
+    EXPECT_EQ(r->regions, kept.regions);
+    EXPECT_EQ(r->raw_faces, kept.raw_faces);
+    EXPECT_TRUE(r->mesh.faces == kept.mesh.faces);
+    EXPECT_TRUE(r->mesh.vertices == kept.mesh.vertices);
+    EXPECT_TRUE(r->mesh.colors == kept.mesh.colors);
+    EXPECT_EQ(r->report.components_removed, kept.report.components_removed);
+  }
 }
 
 // The ray cast's floor (OpenCV's cvFloor) must be the integer std::floor gives, or the ray cast's bytes

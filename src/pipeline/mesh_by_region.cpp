@@ -456,9 +456,49 @@ class FaceBudget {
 };
 
 namespace {
+// Pass 1's regions, kept for pass 2 while all of them fit in `limit` bytes: then pass 2 does not march
+// them again. A larger raw mesh is marched twice, and none is kept.
+class KeptRegions {
+ public:
+  explicit KeptRegions(std::size_t limit) : limit_(limit) {}
+  void keep(fusion::RegionMesh& r) {
+    if (!complete_) return;
+    bytes_ += bytesOf(r);
+    if (bytes_ > limit_) {
+      complete_ = false;
+      regions_ = {};
+      return;
+    }
+    regions_.push_back(std::move(r));
+  }
+  // Pass 2's source: the kept regions (handed over, each once) when every region was kept, else `marched`.
+  RegionSource secondPass(const RegionSource& marched) {
+    if (!complete_) return marched;
+    return [this](const std::function<void(fusion::RegionMesh&)>& sink) {
+      for (fusion::RegionMesh& r : regions_) {
+        fusion::RegionMesh handed = std::move(r);
+        sink(handed);
+      }
+      regions_ = {};
+    };
+  }
+
+ private:
+  static std::size_t bytesOf(const fusion::RegionMesh& r) {
+    const TriangleMesh& m = r.mesh;
+    return m.vertices.size() * sizeof(m.vertices[0]) + m.normals.size() * sizeof(m.normals[0]) +
+           m.colors.size() * sizeof(m.colors[0]) + m.faces.size() * sizeof(m.faces[0]) + r.on_seam.size();
+  }
+  std::size_t limit_;
+  std::vector<fusion::RegionMesh> regions_;
+  std::size_t bytes_ = 0;
+  bool complete_ = true;
+};
+
 // Pass 1 of meshByRegion (marching cubes only): each region's raw components into `fragments` (when
-// fragments are judged) and its faces into the budget; returns the number of regions (0 if none).
-std::size_t firstPass(const RegionSource& regions, RawComponents* fragments, FaceBudget& budget,
+// fragments are judged) and its faces into the budget, the region itself into `kept`; returns the
+// number of regions (0 if none).
+std::size_t firstPass(const RegionSource& regions, RawComponents* fragments, FaceBudget& budget, KeptRegions& kept,
                       const std::function<void(int, const fusion::RegionMesh&)>& told) {
   std::size_t region_count = 0;
   regions([&](fusion::RegionMesh& r) {
@@ -466,6 +506,7 @@ std::size_t firstPass(const RegionSource& regions, RawComponents* fragments, Fac
     budget.add(r);
     told(1, r);
     region_count = r.regions;
+    kept.keep(r);
   });
   return region_count;
 }
@@ -485,7 +526,7 @@ void closeRegionsStep(RegionMeshResult& out, const RegionMerge& merge, MeshClean
 
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply,
                               const MeshProgress& progress, const std::function<void(std::size_t)>& regions_done,
-                              const PremeshedLookup& premeshed) {
+                              const PremeshedLookup& premeshed, std::size_t keep_bytes) {
   const auto told = [&](int pass, const fusion::RegionMesh& r) {
     if (progress) progress(pass, r.ordinal + 1, r.regions);
   };
@@ -503,20 +544,24 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   if (params.min_component_faces > 0 || params.min_component_area > 0)
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
   FaceBudget budget(params.target_faces);
-  if (fragments || budget.active()) {
-    const std::size_t region_count = firstPass(regions, fragments.get(), budget, told);
+  KeptRegions kept(keep_bytes);
+  const bool two_passes = fragments || budget.active();
+  if (two_passes) {
+    const std::size_t region_count = firstPass(regions, fragments.get(), budget, kept, told);
     if (fragments) out.report.components_removed = fragments->judge();
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
     if (progress && region_count) progress(2, 0, region_count);
   }
-  // Pass 2: the same regions again, each simplified on a task of its own as soon as it is made (CGAL
-  // works on the region's own mesh) while the next regions are marched, and welded in region order,
+  // Pass 2: the same regions again (kept from pass 1, or marched again), each simplified on a task of its
+  // own as soon as it is made (CGAL works on the region's own mesh) while the next ones are marched, and
+  // welded in region order,
   // so the mesh is the one a single core gives.
   OrderedRegionSimplifier simplifier(region_params, [&](fusion::RegionMesh& r, const MeshCleanReport& report) {
     merge.add(r, report);
     told(2, r);
   });
-  regions([&](fusion::RegionMesh& r) {
+  const RegionSource second = two_passes ? kept.secondPass(regions) : regions;
+  second([&](fusion::RegionMesh& r) {
     ++out.regions;
     if (raw) raw->add(r);
     else raw_count.add(r.mesh, r.on_seam, [](std::size_t) {});

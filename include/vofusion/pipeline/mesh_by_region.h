@@ -13,7 +13,8 @@
 
 namespace vofusion {
 
-// Calls its argument once per region (as fusion::marchingCubesByRegion does).
+// Calls its argument once per region (as fusion::marchingCubesByRegion does), made anew at each call:
+// the argument may take the region it is given (move from it).
 using RegionSource = std::function<void(const std::function<void(fusion::RegionMesh&)>&)>;
 
 struct RegionMeshResult {
@@ -56,6 +57,11 @@ std::uint64_t regionInputHash(const fusion::RegionMesh& r);
 // Told after each region: pass 1 finds fragments (marching cubes only), pass 2 simplifies.
 using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t regions)>;
 
+// Pass 1's raw regions kept for pass 2 up to this size, so that they are marched once: the shared
+// sequences' raw meshes (20-40 MB) are; a long recording's (up to 6 M raw vertices, ~300 MB) is
+// marched twice, so the mesh stage's peak grows by at most this, a tenth of the 700 MiB ceiling.
+inline constexpr std::size_t kKeptRawRegionBytes = std::size_t(64) << 20;
+
 // raw_ply non-empty: the raw marching-cubes mesh is also streamed there (vertices shared across
 // seams, welded by exact position: seam vertices that coincide, crossings exactly at a voxel, become
 // one; a seam vertex's normal is over the faces of every region using it, as for the whole mesh).
@@ -64,10 +70,12 @@ using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t 
 // `regions_done` runs once the last region was read, before the welded mesh is cleaned, told its faces
 // (simplified): the caller can free what the regions came from. `premeshed`: a region it has, made
 // from the same input, is taken instead of simplifying it again (the result is the same:
-// simplifyRegion is deterministic).
+// simplifyRegion is deterministic). `keep_bytes`: when pass 1 runs (fragments judged, or a face
+// budget), its regions are kept for pass 2 if all of them fit in this many bytes, and `regions` is
+// called once; else (0: never) pass 2 calls it again. The mesh is the same either way.
 RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams& params, const std::string& raw_ply = "",
                               const MeshProgress& progress = {},
                               const std::function<void(std::size_t welded_faces)>& regions_done = {},
-                              const PremeshedLookup& premeshed = {});
+                              const PremeshedLookup& premeshed = {}, std::size_t keep_bytes = kKeptRawRegionBytes);
 
 }  // namespace vofusion
