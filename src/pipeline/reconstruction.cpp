@@ -25,6 +25,10 @@ const KinFuParams& defaultKinFu() { static const KinFuParams p; return p; }
 const loop::LoopParams& defaultLoop() { static const loop::LoopParams p; return p; }
 
 
+// The stages a frame goes through before it is tracked, as its report's times name them.
+constexpr const char* kOdometryStage = "odometry";
+constexpr const char* kRefitStage = "odometry_refit";
+
 // What fusion is told about the odometry's motion: pose, covariance and inlier matches.
 fusion::MotionPrior motionPriorOf(const OdometryResult& o) {
   fusion::MotionPrior p;
@@ -136,7 +140,7 @@ struct Reconstruction::Impl {
     o.inlier_reference = std::move(refit->inlier_reference);
     o.rms_error = refit->rms_error;
     o.colour_motion = refit->colour_motion;
-    h.report.times.add("odometry_refit", secondsSince(t0));
+    h.report.times.add(kRefitStage, secondsSince(t0));
   }
   FrameReport track(Held h);
 
@@ -285,7 +289,7 @@ std::optional<FrameReport> Reconstruction::push(const Frame& in) {
   r.timestamp = next.frame.timestamp;
   if (m.odometry) {
     {
-      ScopedStageTimer t(r.times, "odometry");
+      ScopedStageTimer t(r.times, kOdometryStage);
       r.odometry = m.runOdometry(next.frame);
     }
     next.odometry_held = m.odometry->heldFrames();
@@ -316,7 +320,7 @@ FrameReport Reconstruction::Impl::track(Held h) {
   FrameReport& r = h.report;
   // What the frame cost before it was tracked: its odometry and refit, already in its report.
   double before = 0.0;
-  for (const char* stage : {"odometry", "odometry_refit"})
+  for (const char* stage : {kOdometryStage, kRefitStage})
     if (const auto it = r.times.seconds.find(stage); it != r.times.seconds.end()) before += it->second;
   waitFusion();
   // The frames a later prior may name keep their poses, however old: the odometry matches against its
