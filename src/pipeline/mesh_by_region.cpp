@@ -10,7 +10,9 @@
 #include <atomic>
 #include <exception>
 #include <functional>
+#include <limits>
 #include <memory>
+#include <mutex>
 #include <unordered_map>
 
 #include <tbb/task_arena.h>
@@ -344,42 +346,49 @@ std::uint64_t regionInputHash(const fusion::RegionMesh& r) {
 }
 
 // Simplifies regions on every core as they come and hands them to `weld` in region order. Only
-// regions not simplified yet count against the limit (two per core), so a large region on one core
-// does not hold up the smaller ones behind it on the other: waiting for the oldest in order left a
-// core idle for seconds (xyz_first300: 4.3 s for its largest region, with four regions in flight).
+// regions not simplified yet count against the limit, so a large region on one core does not hold up
+// the smaller ones behind it on the other: waiting for the oldest in order left a core idle for
+// seconds (xyz_first300: 4.3 s for its largest region, with four regions in flight). Each task takes
+// the largest region waiting, whichever added it: the last region left on one core is then a small
+// one (rpy_first100's largest, a quarter of its faces, came ninth of fourteen).
 class OrderedRegionSimplifier {
  public:
   using Weld = std::function<void(fusion::RegionMesh&, const MeshCleanReport&)>;
-  OrderedRegionSimplifier(const MeshCleanParams& params, Weld weld)
-      : params_(params), weld_(std::move(weld)),
-        limit_(2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()))) {}
+  // `limit`: regions added but not simplified yet, at most (add() waits).
+  OrderedRegionSimplifier(const MeshCleanParams& params, Weld weld, std::size_t limit)
+      : params_(params), weld_(std::move(weld)), limit_(std::max<std::size_t>(1, limit)) {}
   ~OrderedRegionSimplifier() {
-    for (auto& item : queue_) item->task.wait();  // no task outlives the region it reads
+    for (auto& t : tasks_) t->group.wait();  // no task outlives the regions it reads
   }
+  // Two per core: a streamed map holds no more regions than that unsimplified.
+  static std::size_t perCoreLimit() { return 2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency())); }
 
-  // Starts simplifying r (to `target_faces`, its share of the mesh's budget); meanwhile welds what is
-  // ready, and waits while `limit_` regions are unsimplified.
+  // Queues r for simplifying (to `target_faces`, its share of the mesh's budget); meanwhile welds what
+  // is ready, and waits while `limit_` regions are unsimplified.
   void add(fusion::RegionMesh r, int target_faces) {
     queue_.push_back(std::make_unique<Item>());
     Item& item = *queue_.back();
     item.region = std::move(r);
     item.params = params_;
     item.params.target_faces = target_faces;
-    item.task.run([&item] {
-      try {
-        item.report = simplifyRegion(item.region.mesh, item.region.on_seam, item.params);
-      } catch (...) {
-        item.error = std::current_exception();
-      }
-      item.done.store(true, std::memory_order_release);
+    {
+      std::lock_guard<std::mutex> lk(waiting_m_);
+      waiting_.push_back(&item);
+    }
+    // One task per region added; each simplifies the largest region waiting when it starts.
+    tasks_.push_back(std::make_unique<Task>());
+    Task& task = *tasks_.back();
+    task.group.run([this, &task] {
+      simplify(takeLargest());
+      task.finished.store(true, std::memory_order_release);
     });
     weldReady();
     while (unsimplified() >= limit_) {
-      // The newest unfinished one: this thread simplifies queued regions while it waits (TBB), and
-      // returns as soon as that one is done, not when the slowest is.
-      for (auto it = queue_.rbegin(); it != queue_.rend(); ++it)
-        if (!(*it)->done.load(std::memory_order_acquire)) {
-          (*it)->task.wait();
+      // The newest unfinished task: this thread simplifies waiting regions while it waits (TBB), and
+      // returns as soon as that task is done, not when the slowest is.
+      for (auto it = tasks_.rbegin(); it != tasks_.rend(); ++it)
+        if (!(*it)->finished.load(std::memory_order_acquire)) {
+          (*it)->group.wait();
           break;
         }
       weldReady();
@@ -396,10 +405,8 @@ class OrderedRegionSimplifier {
   }
   // Waits for every region and welds the rest; rethrows what a region's simplification threw.
   void finish() {
-    while (!queue_.empty()) {
-      queue_.front()->task.wait();
-      weldReady();
-    }
+    for (auto& t : tasks_) t->group.wait();  // each task simplified one region: all are done
+    weldReady();
   }
 
  private:
@@ -408,9 +415,30 @@ class OrderedRegionSimplifier {
     MeshCleanParams params;
     MeshCleanReport report;
     std::exception_ptr error;
-    std::atomic<bool> done{false};
-    tbb::task_group task;
+    std::atomic<bool> done{false};  // simplified (or failed): no task reads it any more
   };
+  struct Task {
+    tbb::task_group group;
+    std::atomic<bool> finished{false};
+  };
+  Item& takeLargest() {
+    std::lock_guard<std::mutex> lk(waiting_m_);
+    // The first of the largest, so that one core simplifies them in the same order on every run.
+    const auto it = std::max_element(waiting_.begin(), waiting_.end(), [](const Item* a, const Item* b) {
+      return a->region.mesh.faces.size() < b->region.mesh.faces.size();
+    });
+    Item& item = **it;
+    waiting_.erase(it);
+    return item;
+  }
+  static void simplify(Item& item) {
+    try {
+      item.report = simplifyRegion(item.region.mesh, item.region.on_seam, item.params);
+    } catch (...) {
+      item.error = std::current_exception();
+    }
+    item.done.store(true, std::memory_order_release);
+  }
   std::size_t unsimplified() const {
     return std::size_t(std::count_if(queue_.begin(), queue_.end(),
                                      [](const auto& i) { return !i->done.load(std::memory_order_acquire); }));
@@ -419,7 +447,6 @@ class OrderedRegionSimplifier {
     while (!queue_.empty() && queue_.front()->done.load(std::memory_order_acquire)) {
       std::unique_ptr<Item> item = std::move(queue_.front());
       queue_.pop_front();
-      item->task.wait();  // done: returns at once
       if (item->error) std::rethrow_exception(item->error);
       weld_(item->region, item->report);
     }
@@ -429,6 +456,9 @@ class OrderedRegionSimplifier {
   Weld weld_;
   std::size_t limit_;
   std::deque<std::unique_ptr<Item>> queue_;  // region order; the front is welded next
+  std::mutex waiting_m_;
+  std::vector<Item*> waiting_;               // added, not taken by a task yet
+  std::deque<std::unique_ptr<Task>> tasks_;  // one per region added, all kept to the end (small)
 };
 
 // The whole mesh's face budget (target_faces) shared among the regions by their raw faces.
@@ -471,6 +501,8 @@ class KeptRegions {
     }
     regions_.push_back(std::move(r));
   }
+  // Whether every region of pass 1 is kept (none marched yet: true).
+  bool complete() const { return complete_; }
   // Pass 2's source: the kept regions (handed over, each once) when every region was kept, else `marched`.
   RegionSource secondPass(const RegionSource& marched) {
     if (!complete_) return marched;
@@ -552,15 +584,17 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
     if (progress && region_count) progress(2, 0, region_count);
   }
-  // Pass 2: the same regions again (kept from pass 1, or marched again), each simplified on a task of its
-  // own as soon as it is made (CGAL works on the region's own mesh) while the next ones are marched, and
-  // welded in region order,
-  // so the mesh is the one a single core gives.
+  // Pass 2: the same regions again (kept from pass 1, or marched again), each simplified on a task while
+  // the next ones come (CGAL works on the region's own mesh), and welded in region order, so the mesh is
+  // the one a single core gives. Kept regions are in memory already: all may wait unsimplified, so the
+  // largest of them go first.
+  const bool all_kept = two_passes && kept.complete();
+  const std::size_t in_flight = all_kept ? std::numeric_limits<std::size_t>::max() : OrderedRegionSimplifier::perCoreLimit();
   OrderedRegionSimplifier simplifier(region_params, [&](fusion::RegionMesh& r, const MeshCleanReport& report) {
     merge.add(r, report);
     told(2, r);
-  });
-  const RegionSource second = two_passes ? kept.secondPass(regions) : regions;
+  }, in_flight);
+  const RegionSource second = all_kept ? kept.secondPass(regions) : regions;
   second([&](fusion::RegionMesh& r) {
     ++out.regions;
     if (raw) raw->add(r);
