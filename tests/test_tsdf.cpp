@@ -762,24 +762,28 @@ TEST(MarchingCubes, MeshByRegionOnEveryCoreGivesTheSingleCoreMesh) {
   const SphereBricks sphere(Eigen::Vector3f(-0.05f, 0.13f, 0.02f), 0.3f, 0.01f, 0.04f);
   MeshCleanParams params;
   params.max_simplify_error = 0.003;
-  const auto mesh = [&] {
-    return meshByRegion([&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); },
-                        params, "", nullptr, nullptr);
-  };
-  // Four threads, whatever the machine gives (on one CPU the default arena is one thread: the test
-  // compared a single core with itself).
-  RegionMeshResult parallel;
-  tbb::task_arena four(4);
-  four.execute([&] { parallel = mesh(); });
-  RegionMeshResult single;
-  tbb::task_arena one(1);
-  one.execute([&] { single = mesh(); });
-  ASSERT_GT(parallel.regions, 20u);
-  ASSERT_EQ(parallel.mesh.faces.size(), single.mesh.faces.size());
-  ASSERT_EQ(parallel.mesh.vertices.size(), single.mesh.vertices.size());
-  EXPECT_TRUE(parallel.mesh.faces == single.mesh.faces);
-  EXPECT_TRUE(parallel.mesh.vertices == single.mesh.vertices);
-  EXPECT_EQ(parallel.report.simplification.faces_after, single.report.simplification.faces_after);
+  // Kept from pass 1 (all at once, the largest first), and marched again (as they come, a few at a time).
+  for (const std::size_t keep_bytes : {kKeptRawRegionBytes, std::size_t(0)}) {
+    SCOPED_TRACE("keep_bytes " + std::to_string(keep_bytes));
+    const auto mesh = [&] {
+      return meshByRegion([&](const std::function<void(RegionMesh&)>& sink) { marchingCubesByRegion(sphere.refs, 0.01f, 1, 2, sink); },
+                          params, "", nullptr, nullptr, {}, keep_bytes);
+    };
+    // Four threads, whatever the machine gives (on one CPU the default arena is one thread: the test
+    // compared a single core with itself).
+    RegionMeshResult parallel;
+    tbb::task_arena four(4);
+    four.execute([&] { parallel = mesh(); });
+    RegionMeshResult single;
+    tbb::task_arena one(1);
+    one.execute([&] { single = mesh(); });
+    ASSERT_GT(parallel.regions, 20u);
+    ASSERT_EQ(parallel.mesh.faces.size(), single.mesh.faces.size());
+    ASSERT_EQ(parallel.mesh.vertices.size(), single.mesh.vertices.size());
+    EXPECT_TRUE(parallel.mesh.faces == single.mesh.faces);
+    EXPECT_TRUE(parallel.mesh.vertices == single.mesh.vertices);
+    EXPECT_EQ(parallel.report.simplification.faces_after, single.report.simplification.faces_after);
+  }
 }
 
 // Fragments are judged whole across regions: a sphere that is only a few hundred faces in each region
@@ -854,8 +858,9 @@ TEST(MarchingCubes, MeshByRegionMarchesOnceWhenItsRegionsFit) {
         params, "", {}, {}, {}, keep_bytes);
   };
   int once = 0, limit = 0, never = 0;
-  const RegionMeshResult kept = mesh(raw_bytes, once);
-  const RegionMeshResult over = mesh(raw_bytes / 2, limit);  // runs out half way: nothing kept
+  const RegionMeshResult kept = mesh(kKeptRawRegionBytes, once);
+  ASSERT_LT(raw_bytes, kKeptRawRegionBytes / 4);
+  const RegionMeshResult over = mesh(raw_bytes / 2, limit);  // runs out half way (allocated >= used): nothing kept
   const RegionMeshResult again = mesh(0, never);
   EXPECT_EQ(once, 1);
   EXPECT_EQ(limit, 2);

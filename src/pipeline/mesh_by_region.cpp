@@ -345,23 +345,25 @@ std::uint64_t regionInputHash(const fusion::RegionMesh& r) {
   return h;
 }
 
-// Simplifies regions on every core as they come and hands them to `weld` in region order. Only
-// regions not simplified yet count against the limit, so a large region on one core does not hold up
-// the smaller ones behind it on the other: waiting for the oldest in order left a core idle for
-// seconds (xyz_first300: 4.3 s for its largest region, with four regions in flight). Each task takes
-// the largest region waiting, whichever added it: the last region left on one core is then a small
-// one (rpy_first100's largest, a quarter of its faces, came ninth of fourteen).
+// Simplifies regions on every core as they come and hands them to `weld` in region order. Streamed
+// regions (marched now) are taken as they come, at most two per core unsimplified; only those count,
+// so a large region on one core does not hold up the smaller ones behind it on the other: waiting for
+// the oldest in order left a core idle for seconds (xyz_first300: 4.3 s for its largest region, with
+// four regions in flight). Regions all in memory already (kept from pass 1) all wait at once, and each
+// task takes the largest: the last one left on one core is then a small one (rpy_first100's largest,
+// a quarter of its faces, came ninth of fourteen).
 class OrderedRegionSimplifier {
  public:
   using Weld = std::function<void(fusion::RegionMesh&, const MeshCleanReport&)>;
-  // `limit`: regions added but not simplified yet, at most (add() waits).
-  OrderedRegionSimplifier(const MeshCleanParams& params, Weld weld, std::size_t limit)
-      : params_(params), weld_(std::move(weld)), limit_(std::max<std::size_t>(1, limit)) {}
+  OrderedRegionSimplifier(const MeshCleanParams& params, Weld weld, bool all_in_memory)
+      : params_(params), weld_(std::move(weld)), largest_first_(all_in_memory),
+        limit_(all_in_memory ? std::numeric_limits<std::size_t>::max()
+                             : 2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()))) {}
   ~OrderedRegionSimplifier() {
-    for (auto& t : tasks_) t->group.wait();  // no task outlives the regions it reads
+    // No task outlives the regions it reads; after a failure, those not started yet are not run.
+    for (auto& t : tasks_) t->group.cancel();
+    for (auto& t : tasks_) t->group.wait();
   }
-  // Two per core: a streamed map holds no more regions than that unsimplified.
-  static std::size_t perCoreLimit() { return 2 * std::size_t(std::max(1, tbb::this_task_arena::max_concurrency())); }
 
   // Queues r for simplifying (to `target_faces`, its share of the mesh's budget); meanwhile welds what
   // is ready, and waits while `limit_` regions are unsimplified.
@@ -375,11 +377,11 @@ class OrderedRegionSimplifier {
       std::lock_guard<std::mutex> lk(waiting_m_);
       waiting_.push_back(&item);
     }
-    // One task per region added; each simplifies the largest region waiting when it starts.
+    // One task per region added; each simplifies the next region waiting when it starts.
     tasks_.push_back(std::make_unique<Task>());
     Task& task = *tasks_.back();
     task.group.run([this, &task] {
-      simplify(takeLargest());
+      simplify(takeNext());
       task.finished.store(true, std::memory_order_release);
     });
     weldReady();
@@ -405,8 +407,10 @@ class OrderedRegionSimplifier {
   }
   // Waits for every region and welds the rest; rethrows what a region's simplification threw.
   void finish() {
-    for (auto& t : tasks_) t->group.wait();  // each task simplified one region: all are done
-    weldReady();
+    for (auto& t : tasks_) {  // each task simplifies one region: once all are done, so are the regions
+      t->group.wait();
+      weldReady();
+    }
   }
 
  private:
@@ -421,12 +425,11 @@ class OrderedRegionSimplifier {
     tbb::task_group group;
     std::atomic<bool> finished{false};
   };
-  Item& takeLargest() {
+  // The first of the largest, or the oldest.
+  Item& takeNext() {
     std::lock_guard<std::mutex> lk(waiting_m_);
-    // The first of the largest, so that one core simplifies them in the same order on every run.
-    const auto it = std::max_element(waiting_.begin(), waiting_.end(), [](const Item* a, const Item* b) {
-      return a->region.mesh.faces.size() < b->region.mesh.faces.size();
-    });
+    const auto largest = [](const Item* a, const Item* b) { return a->region.mesh.faces.size() < b->region.mesh.faces.size(); };
+    const auto it = largest_first_ ? std::max_element(waiting_.begin(), waiting_.end(), largest) : waiting_.begin();
     Item& item = **it;
     waiting_.erase(it);
     return item;
@@ -454,7 +457,8 @@ class OrderedRegionSimplifier {
 
   const MeshCleanParams& params_;
   Weld weld_;
-  std::size_t limit_;
+  bool largest_first_;
+  std::size_t limit_;  // regions added but not simplified yet, at most (add() waits)
   std::deque<std::unique_ptr<Item>> queue_;  // region order; the front is welded next
   std::mutex waiting_m_;
   std::vector<Item*> waiting_;               // added, not taken by a task yet
@@ -516,10 +520,10 @@ class KeptRegions {
   }
 
  private:
-  static std::size_t bytesOf(const fusion::RegionMesh& r) {
+  static std::size_t bytesOf(const fusion::RegionMesh& r) {  // as allocated, not as used
     const TriangleMesh& m = r.mesh;
-    return m.vertices.size() * sizeof(m.vertices[0]) + m.normals.size() * sizeof(m.normals[0]) +
-           m.colors.size() * sizeof(m.colors[0]) + m.faces.size() * sizeof(m.faces[0]) + r.on_seam.size();
+    return m.vertices.capacity() * sizeof(m.vertices[0]) + m.normals.capacity() * sizeof(m.normals[0]) +
+           m.colors.capacity() * sizeof(m.colors[0]) + m.faces.capacity() * sizeof(m.faces[0]) + r.on_seam.capacity();
   }
   std::size_t limit_;
   std::vector<fusion::RegionMesh> regions_;
@@ -586,14 +590,12 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   }
   // Pass 2: the same regions again (kept from pass 1, or marched again), each simplified on a task while
   // the next ones come (CGAL works on the region's own mesh), and welded in region order, so the mesh is
-  // the one a single core gives. Kept regions are in memory already: all may wait unsimplified, so the
-  // largest of them go first.
+  // the one a single core gives.
   const bool all_kept = two_passes && kept.complete();
-  const std::size_t in_flight = all_kept ? std::numeric_limits<std::size_t>::max() : OrderedRegionSimplifier::perCoreLimit();
   OrderedRegionSimplifier simplifier(region_params, [&](fusion::RegionMesh& r, const MeshCleanReport& report) {
     merge.add(r, report);
     told(2, r);
-  }, in_flight);
+  }, all_kept);
   const RegionSource second = all_kept ? kept.secondPass(regions) : regions;
   second([&](fusion::RegionMesh& r) {
     ++out.regions;
