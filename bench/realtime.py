@@ -137,7 +137,7 @@ def live(bin_dir, seq, out, rerun_failed=False):
     cmd = [os.path.join(bin_dir, "vofusion-grab"), "--replay", seq, "--out", out, "--live", "--no-gui"]
     rc, _, _ = run_timed(cmd, out + ".log")
     if rc != 0 and rerun_failed:
-        failed_log = out + ".failed.log"
+        failed_log = "%s.failed-%d.log" % (out, len(baseline_reruns) + 1)
         shutil.copyfile(out + ".log", failed_log)
         baseline_reruns.append(failed_log)
         log("%s failed (see %s): run again" % (" ".join(cmd[:3]), failed_log))

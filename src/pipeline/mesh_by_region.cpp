@@ -349,9 +349,9 @@ std::uint64_t regionInputHash(const fusion::RegionMesh& r) {
 // regions (marched now) are taken as they come, at most two per core unsimplified; only those count,
 // so a large region on one core does not hold up the smaller ones behind it on the other: waiting for
 // the oldest in order left a core idle for seconds (xyz_first300: 4.3 s for its largest region, with
-// four regions in flight). Regions all in memory already (kept from pass 1) all wait at once, and each
-// task takes the largest: the last one left on one core is then a small one (rpy_first100's largest,
-// a quarter of its faces, came ninth of fourteen).
+// four regions in flight). Regions already in memory (kept from pass 1) are queued without a limit
+// (waiting costs no memory), and each task takes the largest waiting when it starts: the last one left
+// on one core is then a small one (rpy_first100's largest, a quarter of its faces, came ninth of fourteen).
 class OrderedRegionSimplifier {
  public:
   using Weld = std::function<void(fusion::RegionMesh&, const MeshCleanReport&)>;

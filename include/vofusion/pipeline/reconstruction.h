@@ -67,8 +67,8 @@ class Reconstruction {
   // its report returned (none for the first). Held back a frame, a frame's motion is fitted again once
   // the next frame's is known: in the odometry's capture mode its colour camera is placed from the
   // motions on both sides of it, not extrapolated from the one before (RgbdOdometry::refitPrevious), for
-  // its keypoints and the tracker's colour alike (the shake's ATE 12-13 % lower when it came, on seeds 1-5
-  // and 6-10 alike: docs/tracking.md). Interval mode: the same poses as process().
+  // its keypoints and the tracker's colour alike (the shake's ATE 12-13 % lower on seeds 1-5 and 6-10 when
+  // it came; with a 30 ms depth readout, mixed: docs/tracking.md). Interval mode: the same poses as process().
   std::optional<FrameReport> push(const Frame& frame);
   // The frame push() holds, tracked now without the next one (none if none is held): the input's end.
   std::optional<FrameReport> flush();
