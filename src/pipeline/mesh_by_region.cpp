@@ -496,20 +496,20 @@ class KeptRegions {
  public:
   explicit KeptRegions(std::size_t limit) : limit_(limit) {}
   void keep(fusion::RegionMesh& r) {
-    if (!complete_) return;
+    if (dropped_) return;
     bytes_ += bytesOf(r);
     if (bytes_ > limit_) {
-      complete_ = false;
+      dropped_ = true;
       regions_ = {};
       return;
     }
     regions_.push_back(std::move(r));
   }
-  // Whether every region of pass 1 is kept (none marched yet: true).
-  bool complete() const { return complete_; }
-  // Pass 2's source: the kept regions (handed over, each once) when every region was kept, else `marched`.
+  // Whether pass 2 takes its regions from here: pass 1 kept every region it made (and made some).
+  bool complete() const { return !dropped_ && !regions_.empty(); }
+  // Pass 2's source: the kept regions (handed over, each once) when complete, else `marched`.
   RegionSource secondPass(const RegionSource& marched) {
-    if (!complete_) return marched;
+    if (!complete()) return marched;
     return [this](const std::function<void(fusion::RegionMesh&)>& sink) {
       for (fusion::RegionMesh& r : regions_) {
         fusion::RegionMesh handed = std::move(r);
@@ -528,7 +528,7 @@ class KeptRegions {
   std::size_t limit_;
   std::vector<fusion::RegionMesh> regions_;
   std::size_t bytes_ = 0;
-  bool complete_ = true;
+  bool dropped_ = false;  // the limit ran out: none is kept
 };
 
 // Pass 1 of meshByRegion (marching cubes only): each region's raw components into `fragments` (when
@@ -581,8 +581,7 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
     fragments = std::make_unique<RawComponents>(params.min_component_faces, params.min_component_area);
   FaceBudget budget(params.target_faces);
   KeptRegions kept(keep_bytes);
-  const bool two_passes = fragments || budget.active();
-  if (two_passes) {
+  if (fragments || budget.active()) {
     const std::size_t region_count = firstPass(regions, fragments.get(), budget, kept, told);
     if (fragments) out.report.components_removed = fragments->judge();
     // Pass 2 shows from its start, not from its first welded region (seconds later when that is large).
@@ -591,12 +590,12 @@ RegionMeshResult meshByRegion(const RegionSource& regions, const MeshCleanParams
   // Pass 2: the same regions again (kept from pass 1, or marched again), each simplified on a task while
   // the next ones come (CGAL works on the region's own mesh), and welded in region order, so the mesh is
   // the one a single core gives.
-  const bool all_kept = two_passes && kept.complete();
+  const bool all_kept = kept.complete();  // false without pass 1
   OrderedRegionSimplifier simplifier(region_params, [&](fusion::RegionMesh& r, const MeshCleanReport& report) {
     merge.add(r, report);
     told(2, r);
   }, all_kept);
-  const RegionSource second = all_kept ? kept.secondPass(regions) : regions;
+  const RegionSource second = kept.secondPass(regions);
   second([&](fusion::RegionMesh& r) {
     ++out.regions;
     if (raw) raw->add(r);

@@ -57,9 +57,10 @@ std::uint64_t regionInputHash(const fusion::RegionMesh& r);
 // Told after each region: pass 1 finds fragments (marching cubes only), pass 2 simplifies.
 using MeshProgress = std::function<void(int pass, std::size_t done, std::size_t regions)>;
 
-// Pass 1's raw regions kept for pass 2 up to this many allocated bytes, so that they are marched once: the shared
-// sequences' raw meshes (20-40 MB) are; a long recording's (up to 6 M raw vertices, ~300 MB) is
-// marched twice, so the mesh stage's peak grows by at most this, a tenth of the 700 MiB ceiling.
+// Pass 1's raw regions kept for pass 2 up to this many allocated bytes, so that they are marched
+// once: the shared sequences' raw meshes (20-40 MB) are; a long recording's (up to 6 M raw vertices,
+// ~300 MB) is marched twice, so the mesh stage's peak grows by at most this, a tenth of the 700 MiB
+// ceiling.
 inline constexpr std::size_t kKeptRawRegionBytes = std::size_t(64) << 20;
 
 // raw_ply non-empty: the raw marching-cubes mesh is also streamed there (vertices shared across
