@@ -287,7 +287,7 @@ def main():
                   "| RPE over 50 ms, translation p95, m (summary.json rpe_50ms) | %s | %s | %s | |" % (
                       fmt4(b["rpe_p95"]), fmt4(t["rpe_p95"]), ratio("rpe_p95")),
                   "| peak RSS, MiB | %.0f | %.0f | | <= 700 |" % (b["rss"], t["rss"]), ""]
-    if baseline_reruns:  # said in the table, with the failed runs' logs
+    if baseline_reruns:  # said below the tables, with the failed runs' logs
         lines += ["Live runs of %s that failed and were run again: %d (%s)." % (
             rev, len(baseline_reruns), ", ".join(os.path.relpath(x, build) for x in baseline_reruns)), ""]
     # Another baseline, round count or sequence list than the committed table's: beside the run.
