@@ -457,8 +457,8 @@ class OrderedRegionSimplifier {
 
   const MeshCleanParams& params_;
   Weld weld_;
-  bool largest_first_;
-  std::size_t limit_;  // regions added but not simplified yet, at most (add() waits)
+  const bool largest_first_;
+  const std::size_t limit_;  // regions added but not simplified yet, at most (add() waits)
   std::deque<std::unique_ptr<Item>> queue_;  // region order; the front is welded next
   std::mutex waiting_m_;
   std::vector<Item*> waiting_;               // added, not taken by a task yet
@@ -496,17 +496,13 @@ class KeptRegions {
  public:
   explicit KeptRegions(std::size_t limit) : limit_(limit) {}
   void keep(fusion::RegionMesh& r) {
-    if (dropped_) return;
+    if (dropped()) return;
     bytes_ += bytesOf(r);
-    if (bytes_ > limit_) {
-      dropped_ = true;
-      regions_ = {};
-      return;
-    }
-    regions_.push_back(std::move(r));
+    if (dropped()) regions_ = {};
+    else regions_.push_back(std::move(r));
   }
   // Whether pass 2 takes its regions from here: pass 1 kept every region it made (and made some).
-  bool complete() const { return !dropped_ && !regions_.empty(); }
+  bool complete() const { return !dropped() && !regions_.empty(); }
   // Pass 2's source: the kept regions (handed over, each once) when complete, else `marched`.
   RegionSource secondPass(const RegionSource& marched) {
     if (!complete()) return marched;
@@ -527,8 +523,8 @@ class KeptRegions {
   }
   std::size_t limit_;
   std::vector<fusion::RegionMesh> regions_;
-  std::size_t bytes_ = 0;
-  bool dropped_ = false;  // the limit ran out: none is kept
+  std::size_t bytes_ = 0;  // of the regions met so far, kept or not
+  bool dropped() const { return bytes_ > limit_; }  // the limit ran out: none is kept
 };
 
 // Pass 1 of meshByRegion (marching cubes only): each region's raw components into `fragments` (when
