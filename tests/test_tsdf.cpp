@@ -196,6 +196,43 @@ TEST(Tsdf, PlaneMeshWithinOneVoxelAndRaycastMatchesDepth) {
   EXPECT_GT(hits, 0.8 * c.width * c.height / 4);
 }
 
+// For tracking, a ray whose hint lies more than half the truncation behind the fused surface (its band
+// starts behind it) still finds that surface: the same pixels and depths as with the exact hint.
+TEST(Tsdf, AHintBehindTheSurfaceFindsTheSurfaceInFrontOfIt) {
+  const TsdfParams p = smallParams();
+  const float plane_z = 0.0f;
+  TsdfVolume vol(p, Eigen::Vector3f(0, 0, 0));
+  const CameraIntrinsics c = smallCam();
+  const cv::Mat rgb(c.height, c.width, CV_8UC3, cv::Scalar(10, 100, 200));
+  for (int k = 0; k < 5; ++k) {
+    const Eigen::Isometry3f T = lookAt(Eigen::Vector3f(-0.3f + 0.15f * k, 0.1f, 1.1f), Eigen::Vector3f(0.05f * k, 0, 0));
+    vol.integrate(renderDepth(c, T, nullptr, 0, &plane_z), rgb, c, T);
+  }
+  const Eigen::Isometry3f view = lookAt(Eigen::Vector3f(0.1f, -0.1f, 0.9f), Eigen::Vector3f(0, 0.05f, 0));
+  const cv::Mat truth = renderDepth(c, view, nullptr, 0, &plane_z);
+  for (const float behind : {0.6f, 1.0f, 1.5f}) {  // truncations behind the surface
+    cv::Mat far = truth.clone();
+    far.setTo(0.f, truth <= 0.f);
+    far += cv::Scalar(behind * p.truncation);
+    far.setTo(0.f, truth <= 0.f);
+    const RaycastMaps exact = vol.raycast(view, c, &truth, false, true);
+    const RaycastMaps walked = vol.raycast(view, c, &far, false, true);
+    int hits = 0, found = 0;
+    for (int v = 0; v < c.height; ++v)
+      for (int u = 0; u < c.width; ++u) {
+        const float z = exact.depth.at<float>(v, u), zw = walked.depth.at<float>(v, u);
+        if (!(z > 0.f)) continue;
+        ++hits;
+        if (!(zw > 0.f)) continue;  // a few along the observed border, where no search finds the surface
+        ++found;
+        ASSERT_NEAR(zw, z, 0.1f * p.voxel_size) << "pixel " << u << ", " << v << ", " << behind << " truncations";
+        ASSERT_GT(walked.normals.at<cv::Vec3f>(v, u)[2], 0.999f);
+      }
+    EXPECT_GT(hits, 0.8 * c.width * c.height);
+    EXPECT_GT(found, 0.99 * hits) << behind << " truncations";
+  }
+}
+
 // The ray cast marches several rays side by side: each pixel must come out as it does cast alone. A
 // partly observed, coloured sphere, a hint with holes (0 and NaN) and with readings off the surface,
 // both ray-cast modes, a view from inside the volume and one from outside it whose rays partly miss the
