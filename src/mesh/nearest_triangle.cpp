@@ -64,13 +64,16 @@ NearestTriangle::NearestTriangle(const std::vector<Eigen::Vector3d>& points,
   }
   origin_ = lo;
   const Eigen::Vector3d extent = hi - lo;
-  std::uint64_t listings = 0;
-  cell_ = cellSize(extent, edge_sum / double(tris_.size()), listings);
-  for (int i = 0; i < 3; ++i) dims_[i] = std::int64_t(std::floor(extent[i] / cell_)) + 1;
-  listTriangles(listings);
+  cell_ = cellSize(extent, edge_sum / double(tris_.size()));
+  // Long triangles among short ones are listed in every cell their box covers: a few hundred slivers
+  // across a mesh of a million small faces asked for ~4e9 listings (16 GB, or the 2^32 refusal, which
+  // failed the whole cleaning over its distance measurement). Larger cells then, at most 32 listings a
+  // triangle on average: the search is exact at any cell size.
+  const std::uint64_t budget = 32 * std::uint64_t(tris_.size()) + 1000000;
+  while (!listTriangles(extent, budget)) cell_ *= 1.25;
 }
 
-double NearestTriangle::cellSize(const Eigen::Vector3d& extent, double mean_longest_edge, std::uint64_t& listings) const {
+double NearestTriangle::cellSize(const Eigen::Vector3d& extent, double mean_longest_edge) const {
   // Twice the mean longest edge: a triangle spans one or two cells a side, and a query near the
   // surface usually ends after its own cell and a few of its neighbours. A whole room's mesh, or a
   // flat one, would need too many such cells: then larger ones, at most eight cells per triangle.
@@ -81,29 +84,11 @@ double NearestTriangle::cellSize(const Eigen::Vector3d& extent, double mean_long
   };
   double cell = std::max({2.0 * mean_longest_edge, extent.maxCoeff() * 1e-6, 1e-12});
   while (cellsOf(cell) > 8.0 * double(tris_.size()) + 64.0) cell *= 1.25;
-  // Long triangles among short ones are listed in every cell their box covers: a few hundred slivers
-  // across a mesh of a million small faces asked for ~4e9 listings (16 GB, or the 2^32 refusal, which
-  // failed the whole cleaning over its distance measurement). Larger cells then, at most 32 listings a
-  // triangle on average: the search is exact at any cell size.
-  const auto listingsAt = [&](double c) {
-    std::uint64_t n = 0;
-    for (const auto& v : tris_) {
-      std::uint64_t k = 1;
-      for (int i = 0; i < 3; ++i) {
-        const double a = std::min({v[0][i], v[1][i], v[2][i]}) - origin_[i], b = std::max({v[0][i], v[1][i], v[2][i]}) - origin_[i];
-        k *= std::uint64_t(std::floor(b / c) - std::floor(a / c)) + 1;
-      }
-      n += k;
-    }
-    return n;
-  };
-  const std::uint64_t budget = 32 * std::uint64_t(tris_.size()) + 1000000;
-  listings = listingsAt(cell);
-  while (listings > budget) cell *= 1.25, listings = listingsAt(cell);
   return cell;
 }
 
-void NearestTriangle::listTriangles(std::uint64_t listings) {
+bool NearestTriangle::listTriangles(const Eigen::Vector3d& extent, std::uint64_t budget) {
+  for (int i = 0; i < 3; ++i) dims_[i] = std::int64_t(std::floor(extent[i] / cell_)) + 1;
   const auto index = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return std::size_t((z * dims_[1] + y) * dims_[0] + x); };
   // The cells a triangle's bounding box covers, clamped to the grid: first and last per axis.
   const auto cellBox = [&](const std::array<Eigen::Vector3d, 3>& v) {
@@ -112,22 +97,30 @@ void NearestTriangle::listTriangles(std::uint64_t listings) {
     for (int i = 0; i < 3; ++i) box.first[i] = std::max<std::int64_t>(a[i], 0), box.second[i] = std::min(b[i], dims_[i] - 1);
     return box;
   };
-  const auto forEachCell = [&](const std::array<Eigen::Vector3d, 3>& v, const auto& visit) {
-    const auto [a, b] = cellBox(v);
+  const auto forEachCell = [&](const std::pair<Cell, Cell>& box, const auto& visit) {
+    const auto& [a, b] = box;
     for (std::int64_t z = a[2]; z <= b[2]; ++z)
       for (std::int64_t y = a[1]; y <= b[1]; ++y)
         for (std::int64_t x = a[0]; x <= b[0]; ++x) visit(index(x, y, z));
   };
-  // Counting sort into cells: counts, their running sum, then the ids. More listings than 32-bit
-  // offsets hold (beyond ~130 million triangles) is refused.
+  // Counting sort into cells: counts (stopped once over the budget), their running sum, then the ids.
+  // More listings than 32-bit offsets hold (beyond ~130 million triangles) is refused.
+  begin_.assign(std::size_t(dims_[0] * dims_[1] * dims_[2]) + 1, 0);
+  std::uint64_t listings = 0;
+  for (const auto& v : tris_) {
+    const auto box = cellBox(v);
+    const auto& [a, b] = box;
+    listings += std::uint64_t(b[0] - a[0] + 1) * std::uint64_t(b[1] - a[1] + 1) * std::uint64_t(b[2] - a[2] + 1);
+    if (listings > budget) return false;
+    forEachCell(box, [&](std::size_t c) { ++begin_[c + 1]; });
+  }
   if (listings > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error("NearestTriangle: " + std::to_string(listings) + " cell listings, more than 2^32");
-  begin_.assign(std::size_t(dims_[0] * dims_[1] * dims_[2]) + 1, 0);
-  for (const auto& v : tris_) forEachCell(v, [&](std::size_t c) { ++begin_[c + 1]; });
   for (std::size_t c = 1; c < begin_.size(); ++c) begin_[c] += begin_[c - 1];
   listed_.resize(begin_.back());
   std::vector<std::uint32_t> next(begin_.begin(), begin_.end() - 1);
-  for (std::uint32_t id = 0; id < tris_.size(); ++id) forEachCell(tris_[id], [&](std::size_t c) { listed_[next[c]++] = id; });
+  for (std::uint32_t id = 0; id < tris_.size(); ++id) forEachCell(cellBox(tris_[id]), [&](std::size_t c) { listed_[next[c]++] = id; });
+  return true;
 }
 
 NearestTriangle::Cell NearestTriangle::cellOf(const Eigen::Vector3d& p) const {

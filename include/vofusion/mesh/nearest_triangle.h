@@ -30,10 +30,11 @@ class NearestTriangle {
  private:
   using Cell = std::array<std::int64_t, 3>;
   Cell cellOf(const Eigen::Vector3d& p) const;
-  // The grid's cell edge for triangles spanning `extent` from origin_, and the listings it makes.
-  double cellSize(const Eigen::Vector3d& extent, double mean_longest_edge, std::uint64_t& listings) const;
-  // Each triangle listed in the cells its box covers (begin_, listed_), once cell_ and dims_ are set.
-  void listTriangles(std::uint64_t listings);
+  // The grid's first cell edge for triangles spanning `extent` from origin_.
+  double cellSize(const Eigen::Vector3d& extent, double mean_longest_edge) const;
+  // Each triangle listed in the cells its box covers (dims_, begin_, listed_) at cell_; false, with
+  // nothing listed, when that takes more than `budget` listings.
+  bool listTriangles(const Eigen::Vector3d& extent, std::uint64_t budget);
   // Tests the triangles listed in cell c (inside the grid) against p unless the cell's box is
   // farther than `best_sq`, keeping the nearest point in `best` (squared distance `best_sq`).
   void searchCell(const Cell& c, const Eigen::Vector3d& p, Eigen::Vector3d& best, double& best_sq) const;
