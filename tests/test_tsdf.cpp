@@ -211,22 +211,20 @@ TEST(Tsdf, AHintBehindTheSurfaceFindsTheSurfaceInFrontOfIt) {
   const Eigen::Isometry3f view = lookAt(Eigen::Vector3f(0.1f, -0.1f, 0.9f), Eigen::Vector3f(0, 0.05f, 0));
   const cv::Mat truth = renderDepth(c, view, nullptr, 0, &plane_z);
   for (const float behind : {0.6f, 1.0f, 1.5f}) {  // truncations behind the surface
-    cv::Mat far = truth.clone();
-    far.setTo(0.f, truth <= 0.f);
-    far += cv::Scalar(behind * p.truncation);
-    far.setTo(0.f, truth <= 0.f);
+    cv::Mat late_hint = truth + cv::Scalar(behind * p.truncation);
+    late_hint.setTo(0.f, truth <= 0.f);  // no reading where the plane is not in view
     const RaycastMaps exact = vol.raycast(view, c, &truth, false, true);
-    const RaycastMaps walked = vol.raycast(view, c, &far, false, true);
+    const RaycastMaps late = vol.raycast(view, c, &late_hint, false, true);
     int hits = 0, found = 0;
     for (int v = 0; v < c.height; ++v)
       for (int u = 0; u < c.width; ++u) {
-        const float z = exact.depth.at<float>(v, u), zw = walked.depth.at<float>(v, u);
+        const float z = exact.depth.at<float>(v, u), z_late = late.depth.at<float>(v, u);
         if (!(z > 0.f)) continue;
         ++hits;
-        if (!(zw > 0.f)) continue;  // a few along the observed border, where no search finds the surface
+        if (!(z_late > 0.f)) continue;  // a few along the observed border, where no search finds the surface
         ++found;
-        ASSERT_NEAR(zw, z, 0.1f * p.voxel_size) << "pixel " << u << ", " << v << ", " << behind << " truncations";
-        ASSERT_GT(walked.normals.at<cv::Vec3f>(v, u)[2], 0.999f);
+        ASSERT_NEAR(z_late, z, 0.1f * p.voxel_size) << "pixel " << u << ", " << v << ", " << behind << " truncations";
+        ASSERT_GT(late.normals.at<cv::Vec3f>(v, u)[2], 0.999f);
       }
     EXPECT_GT(hits, 0.8 * c.width * c.height);
     EXPECT_GT(found, 0.99 * hits) << behind << " truncations";

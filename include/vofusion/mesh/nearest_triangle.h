@@ -32,8 +32,8 @@ class NearestTriangle {
   Cell cellOf(const Eigen::Vector3d& p) const;
   // The grid's first cell edge for triangles spanning `extent` from origin_.
   double cellSize(const Eigen::Vector3d& extent, double mean_longest_edge) const;
-  // Each triangle listed in the cells its box covers (dims_, begin_, listed_) at cell_; false, with
-  // nothing listed, when that takes more than `budget` listings.
+  // Each triangle listed in the cells its box covers (dims_, begin_, listed_) at cell_; false, the grid
+  // left unmade, when that takes more than `budget` listings.
   bool listTriangles(const Eigen::Vector3d& extent, std::uint64_t budget);
   // Tests the triangles listed in cell c (inside the grid) against p unless the cell's box is
   // farther than `best_sq`, keeping the nearest point in `best` (squared distance `best_sq`).
